@@ -1,0 +1,27 @@
+"""The exception hierarchy: one base class, one subclass per kind of failure."""
+
+from __future__ import annotations
+
+
+class RwlabError(Exception):
+    """Base class of every error rwlab raises on purpose."""
+
+
+class DataError(RwlabError, ValueError):
+    """Input data are unusable: NaN/Inf, wrong shapes, missing sample time, too short."""
+
+
+class EstimationError(RwlabError):
+    """An estimator cannot produce a model from the data and orders it was given."""
+
+
+class ModelError(RwlabError, ValueError):
+    """A model is malformed, or an operation is undefined for it."""
+
+
+class ConfigError(RwlabError, ValueError):
+    """A configuration value or option is invalid."""
+
+
+class FileFormatError(RwlabError):
+    """A file is truncated, of the wrong kind, or lacks required fields."""
