@@ -1,0 +1,413 @@
+"""Sampled input/output records (``IOData``) and their file formats.
+
+``IOData`` is the one container every identification function takes. It plays
+the role of MATLAB's ``iddata``: inputs ``u`` (N×nu), outputs ``y`` (N×ny), an
+explicit sample time ``Ts`` in seconds, channel names and units. The sample
+time is required and never defaulted: paper A's continuous-time model is wrong
+precisely because its data silently carried MATLAB's default ``Ts = 1``.
+
+Preprocessing (``detrend``, ``normalize``) returns a new record and keeps what
+it removed in a :class:`Trend`, so results can be reported in physical units.
+Nothing here modifies the caller's arrays.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import signal as sps
+
+from rwlab.errors import DataError, FileFormatError
+
+__all__ = ["IOData", "Trend", "load", "merge"]
+
+
+@dataclass(frozen=True)
+class Trend:
+    """Affine map from stored (preprocessed) values back to physical values.
+
+    ``physical = scale * stored + offset + slope * t`` per channel, with ``t``
+    the sample time stamp in seconds. MATLAB's ``TrendInfo`` plus a scale.
+
+    Attributes
+    ----------
+    input_offset, input_slope, input_scale : numpy.ndarray, shape (nu,)
+        Input offset (input unit), slope (input unit per s) and scale.
+    output_offset, output_slope, output_scale : numpy.ndarray, shape (ny,)
+        The same for the outputs.
+    """
+
+    input_offset: np.ndarray
+    input_slope: np.ndarray
+    input_scale: np.ndarray
+    output_offset: np.ndarray
+    output_slope: np.ndarray
+    output_scale: np.ndarray
+
+    @classmethod
+    def identity(cls, nu: int, ny: int) -> Trend:
+        """The trend of a record that has not been preprocessed."""
+        return cls(np.zeros(nu), np.zeros(nu), np.ones(nu), np.zeros(ny), np.zeros(ny), np.ones(ny))
+
+    def then(self, offset_u, slope_u, scale_u, offset_y, slope_y, scale_y) -> Trend:
+        """Compose with a further step ``stored_old = scale*stored_new + offset + slope*t``."""
+        return Trend(
+            self.input_scale * offset_u + self.input_offset,
+            self.input_scale * slope_u + self.input_slope,
+            self.input_scale * scale_u,
+            self.output_scale * offset_y + self.output_offset,
+            self.output_scale * slope_y + self.output_slope,
+            self.output_scale * scale_y,
+        )
+
+    def output_to_physical(self, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Map stored outputs ``y`` (N×ny or N) at times ``t`` (s) to physical units."""
+        y2 = np.asarray(y, dtype=float)
+        t2 = np.asarray(t, dtype=float)
+        if y2.ndim == 1:
+            return self.output_scale[0] * y2 + self.output_offset[0] + self.output_slope[0] * t2
+        return self.output_scale * y2 + self.output_offset + np.outer(t2, self.output_slope)
+
+    def input_to_physical(self, u: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Map stored inputs ``u`` (N×nu or N) at times ``t`` (s) to physical units."""
+        u2 = np.asarray(u, dtype=float)
+        t2 = np.asarray(t, dtype=float)
+        if u2.ndim == 1:
+            return self.input_scale[0] * u2 + self.input_offset[0] + self.input_slope[0] * t2
+        return self.input_scale * u2 + self.input_offset + np.outer(t2, self.input_slope)
+
+    def to_dict(self) -> dict:
+        """Plain-JSON form."""
+        return {k: np.asarray(v).tolist() for k, v in self.__dict__.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Trend:
+        """Inverse of :meth:`to_dict`."""
+        return cls(**{k: np.asarray(d[k], dtype=float) for k in cls.__dataclass_fields__})
+
+
+def _as_matrix(x, what: str) -> np.ndarray:
+    """Copy ``x`` to a float (N, n) array, rejecting anything that is not finite numbers."""
+    try:
+        arr = np.array(x, dtype=float, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{what} must be numeric: {exc}") from None
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise DataError(f"{what} must be 1-D (N,) or 2-D (N, channels); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise DataError(
+            f"{what} contains NaN or Inf (first at sample {bad[0]}, channel {bad[1]}); "
+            "remove or interpolate the bad samples before identification"
+        )
+    return arr
+
+
+def _names(names, n: int, prefix: str) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{prefix}{i + 1}" for i in range(n))
+    names = (names,) if isinstance(names, str) else tuple(str(s) for s in names)
+    if len(names) != n:
+        raise DataError(f"{len(names)} {prefix}-names given for {n} channels")
+    return names
+
+
+def check_Ts(Ts) -> float:
+    """Validate a sample time in seconds: required, finite and > 0."""
+    if Ts is None:
+        raise DataError(
+            "the sample time Ts is required (seconds); rwlab never assumes Ts = 1 "
+            "because a wrong Ts silently corrupts every continuous-time result"
+        )
+    try:
+        value = float(Ts)
+    except (TypeError, ValueError):
+        raise DataError(f"Ts must be a number of seconds, got {Ts!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise DataError(f"Ts must be finite and > 0 seconds, got {Ts!r}")
+    return value
+
+
+class IOData:
+    """A sampled input/output record with an explicit sample time.
+
+    Parameters
+    ----------
+    u : array_like, shape (N,) or (N, nu)
+        Input samples. ``nu`` may be 0 for time series (pass an (N, 0) array).
+    y : array_like, shape (N,) or (N, ny)
+        Output samples.
+    Ts : float
+        Sample time in seconds; required, > 0.
+    input_names, output_names : sequence of str, optional
+        Channel names (default ``u1..``, ``y1..``).
+    input_units, output_units : sequence of str, optional
+        Channel units, free text (default empty).
+    tstart : float, optional
+        Time stamp of the first sample in seconds (default 0).
+    trend : Trend, optional
+        What preprocessing removed (default: nothing).
+    name : str, optional
+        A label for reports.
+
+    Notes
+    -----
+    The arrays are copied; the caller's arrays are never modified. NaN, Inf,
+    unequal lengths and a missing or non-positive ``Ts`` raise ``DataError``.
+    """
+
+    def __init__(
+        self,
+        u,
+        y,
+        Ts,
+        *,
+        input_names=None,
+        output_names=None,
+        input_units=None,
+        output_units=None,
+        tstart: float = 0.0,
+        trend: Trend | None = None,
+        name: str = "",
+    ) -> None:
+        self.Ts = check_Ts(Ts)
+        self.u = _as_matrix(u, "u")
+        self.y = _as_matrix(y, "y")
+        if self.u.shape[0] != self.y.shape[0]:
+            raise DataError(
+                f"u has {self.u.shape[0]} samples but y has {self.y.shape[0]}; "
+                "input and output must have the same length"
+            )
+        if self.y.shape[1] == 0:
+            raise DataError("y must have at least one output channel")
+        self.u.setflags(write=False)
+        self.y.setflags(write=False)
+        self.input_names = _names(input_names, self.nu, "u")
+        self.output_names = _names(output_names, self.ny, "y")
+        self.input_units = _names(input_units or [""] * self.nu, self.nu, "unit")
+        self.output_units = _names(output_units or [""] * self.ny, self.ny, "unit")
+        self.tstart = float(tstart)
+        self.trend = trend if trend is not None else Trend.identity(self.nu, self.ny)
+        self.name = name
+
+    # -- shape ---------------------------------------------------------------
+    @property
+    def N(self) -> int:
+        """Number of samples."""
+        return self.y.shape[0]
+
+    @property
+    def nu(self) -> int:
+        """Number of inputs."""
+        return self.u.shape[1]
+
+    @property
+    def ny(self) -> int:
+        """Number of outputs."""
+        return self.y.shape[1]
+
+    @property
+    def time(self) -> np.ndarray:
+        """Sample time stamps in seconds, shape (N,)."""
+        return self.tstart + self.Ts * np.arange(self.N)
+
+    def __len__(self) -> int:
+        return self.N
+
+    def __repr__(self) -> str:
+        return (
+            f"IOData(N={self.N}, nu={self.nu}, ny={self.ny}, Ts={self.Ts:g} s, "
+            f"inputs={list(self.input_names)}, outputs={list(self.output_names)})"
+        )
+
+    def _with(self, u, y, **changes) -> IOData:
+        kwargs = dict(
+            input_names=self.input_names,
+            output_names=self.output_names,
+            input_units=self.input_units,
+            output_units=self.output_units,
+            tstart=self.tstart,
+            trend=self.trend,
+            name=self.name,
+        )
+        kwargs.update(changes)
+        Ts = kwargs.pop("Ts", self.Ts)
+        return IOData(u, y, Ts, **kwargs)
+
+    # -- selection -----------------------------------------------------------
+    def __getitem__(self, index) -> IOData:
+        """Select samples with a slice: ``data[100:500]``, ``data[::2]`` (Ts doubles)."""
+        if not isinstance(index, slice):
+            raise DataError("IOData supports slicing by samples only, e.g. data[100:500]")
+        start, _, step = index.indices(self.N)
+        if step <= 0:
+            raise DataError("IOData slices must step forward")
+        return self._with(
+            self.u[index], self.y[index], Ts=self.Ts * step, tstart=self.tstart + start * self.Ts
+        )
+
+    def split(self, fraction: float = 0.7) -> tuple[IOData, IOData]:
+        """Split into estimation and validation records at ``fraction`` of the samples.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples, in (0, 1), that goes to the first (estimation) part.
+        """
+        if not 0 < fraction < 1:
+            raise DataError(f"split fraction must be in (0, 1), got {fraction}")
+        k = int(round(fraction * self.N))
+        if k < 1 or k >= self.N:
+            raise DataError(f"cannot split {self.N} samples at {fraction}")
+        return self[:k], self[k:]
+
+    # -- preprocessing ---------------------------------------------------------
+    def detrend(self, kind: str = "constant") -> IOData:
+        """Remove the mean (``kind='constant'``) or a straight line (``'linear'``).
+
+        The removed offsets and slopes are kept in ``trend`` (MATLAB's TrendInfo).
+        """
+        if kind not in ("constant", "linear"):
+            raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
+        t = self.time
+
+        def fit(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if kind == "constant" or self.N < 2:
+                return x.mean(axis=0), np.zeros(x.shape[1])
+            coef = np.polyfit(t, x, 1) if x.shape[1] else np.zeros((2, 0))
+            return coef[1], coef[0]
+
+        ou, su = fit(self.u)
+        oy, sy = fit(self.y)
+        u = self.u - ou - np.outer(t, su)
+        y = self.y - oy - np.outer(t, sy)
+        trend = self.trend.then(ou, su, np.ones(self.nu), oy, sy, np.ones(self.ny))
+        return self._with(u, y, trend=trend)
+
+    def normalize(self) -> IOData:
+        """Scale every channel to [0, 1] (min → 0, max → 1), as paper A does.
+
+        Raises ``DataError`` for a constant channel, whose range is zero.
+        """
+
+        def span(x: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
+            lo, hi = x.min(axis=0), x.max(axis=0)
+            flat = np.flatnonzero(hi - lo <= 0)
+            if flat.size:
+                raise DataError(f"channel {names[flat[0]]!r} is constant; it cannot be normalised")
+            return lo, hi - lo
+
+        lu, ru = span(self.u, self.input_names) if self.nu else (np.zeros(0), np.ones(0))
+        ly, ry = span(self.y, self.output_names)
+        trend = self.trend.then(lu, np.zeros(self.nu), ru, ly, np.zeros(self.ny), ry)
+        return self._with((self.u - lu) / ru, (self.y - ly) / ry, trend=trend)
+
+    def resample(self, p: int, q: int) -> IOData:
+        """Resample by the rational factor ``p/q`` with an anti-aliasing filter.
+
+        The new sample time is ``Ts * q / p`` (MATLAB's ``resample(data, P, Q)``).
+        """
+        if int(p) != p or int(q) != q or p < 1 or q < 1:
+            raise DataError(f"resample factors must be positive integers, got {p}/{q}")
+        u = sps.resample_poly(self.u, p, q, axis=0) if self.nu else np.zeros((0, 0))
+        y = sps.resample_poly(self.y, p, q, axis=0)
+        if not self.nu:
+            u = np.zeros((y.shape[0], 0))
+        return self._with(u, y, Ts=self.Ts * q / p)
+
+    # -- files -----------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Metadata as plain JSON types (no samples)."""
+        return {
+            "Ts": self.Ts,
+            "tstart": self.tstart,
+            "input_names": list(self.input_names),
+            "output_names": list(self.output_names),
+            "input_units": list(self.input_units),
+            "output_units": list(self.output_units),
+            "name": self.name,
+            "trend": self.trend.to_dict(),
+        }
+
+    def write(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write to ``.csv``, ``.parquet`` or ``.mat`` (chosen by suffix), atomically.
+
+        The file appears complete or not at all. An existing file is an error
+        unless ``overwrite=True``.
+        """
+        from rwlab import _io
+
+        return _io.write(self, Path(path), overwrite=overwrite)
+
+
+def merge(*datasets: IOData) -> list[IOData]:
+    """Combine several experiments for joint estimation (MATLAB's ``merge``).
+
+    Every estimator in ``rwlab.ident`` accepts the returned list: regressions and
+    prediction errors are formed per experiment and never cross a boundary.
+    """
+    if not datasets:
+        raise DataError("merge needs at least one IOData")
+    first = datasets[0]
+    for d in datasets:
+        if not isinstance(d, IOData):
+            raise DataError(f"merge takes IOData records, got {type(d).__name__}")
+        if (d.nu, d.ny) != (first.nu, first.ny):
+            raise DataError("merged experiments must have the same numbers of inputs and outputs")
+        if not math.isclose(d.Ts, first.Ts, rel_tol=1e-9):
+            raise DataError(f"merged experiments must share Ts ({first.Ts} s vs {d.Ts} s)")
+    return list(datasets)
+
+
+def as_experiments(data: IOData | Sequence[IOData]) -> list[IOData]:
+    """Normalise an estimator's ``data`` argument to a list of experiments."""
+    if isinstance(data, IOData):
+        return [data]
+    if isinstance(data, Sequence) and data and all(isinstance(d, IOData) for d in data):
+        return merge(*data)
+    raise DataError(
+        f"expected IOData or a list of IOData, got {type(data).__name__}; "
+        "wrap arrays with rwlab.data.IOData(u, y, Ts)"
+    )
+
+
+def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
+    """Read a record from ``.csv``, ``.dat``/``.txt``, ``.parquet`` or ``.mat``.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    Ts : float, optional
+        Sample time in seconds; required when the file does not carry one
+        (a CSV without a time column, a .mat without ``Ts``).
+    **options
+        ``input_columns``/``output_columns`` (names or indices) for tables;
+        ``u``/``y`` variable names for .mat files.
+    """
+    from rwlab import _io
+
+    return _io.read(Path(path), Ts, **options)
+
+
+def atomic_write_bytes(path: Path, writer) -> Path:
+    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        writer(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,83 @@
+"""Real identification data shipped with rwlab, as MATLAB ships ``dryer2``.
+
+Origins are listed in ``ORIGIN.md`` beside this file.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+import numpy as np
+from scipy.io import loadmat
+
+from rwlab.data import IOData, load
+from rwlab.errors import DataError
+
+__all__ = ["NAMES", "cascaded_tanks", "drive", "dryer", "gas_furnace", "get"]
+
+
+def _path(name: str):
+    return resources.files(__package__).joinpath(name)
+
+
+def dryer() -> IOData:
+    """Feedback PT326 hair dryer (DaISy 96-006, MATLAB ``dryer2``): 1000 samples, Ts = 0.08 s.
+
+    Input: heater voltage (V); output: thermocouple voltage (V). Not detrended.
+    """
+    with resources.as_file(_path("daisy_dryer.dat")) as p:
+        d = load(p, Ts=0.08)
+    return IOData(
+        d.u, d.y, d.Ts, input_names=["power"], output_names=["temperature"],
+        input_units=["V"], output_units=["V"], name="dryer",
+    )
+
+
+def gas_furnace() -> IOData:
+    """Box & Jenkins Series J gas furnace: 296 samples, Ts = 9 s.
+
+    Input: gas feed rate (scaled ft³/min); output: CO2 in outlet gas (%).
+    """
+    with resources.as_file(_path("bj_gas_furnace.csv")) as p:
+        d = load(p, Ts=9.0)
+    return IOData(
+        d.u, d.y, d.Ts, input_names=["gas_rate"], output_names=["co2"],
+        output_units=["%"], name="gas_furnace",
+    )
+
+
+def cascaded_tanks() -> tuple[IOData, IOData]:
+    """Cascaded tanks benchmark (Schoukens et al. 2016): estimation and validation, Ts = 4 s."""
+    with resources.as_file(_path("cascaded_tanks_dataBenchmark.csv")) as p:
+        est = load(p, Ts=4.0, input_columns="uEst", output_columns="yEst")
+        val = load(p, Ts=4.0, input_columns="uVal", output_columns="yVal")
+    kw = dict(input_names=["pump"], output_names=["level"], input_units=["V"], output_units=["V"])
+    return (
+        IOData(est.u, est.y, 4.0, name="cascaded_tanks_est", **kw),
+        IOData(val.u, val.y, 4.0, name="cascaded_tanks_val", **kw),
+    )
+
+
+def drive(experiment: int = 1) -> IOData:
+    """Coupled electric drives, PRBS experiment 1, 2 or 3 (Wigren & Schoukens 2017), Ts = 0.02 s.
+
+    The speed sensor is insensitive to sign: the system is nonlinear in sign.
+    """
+    if experiment not in (1, 2, 3):
+        raise DataError(f"drive experiment must be 1, 2 or 3, got {experiment}")
+    with resources.as_file(_path("drive.mat")) as p:
+        mat = loadmat(p)
+    return IOData(
+        np.asarray(mat[f"u{experiment}"], float), np.asarray(mat[f"z{experiment}"], float), 0.02,
+        input_names=["voltage"], output_names=["speed"], name=f"drive{experiment}",
+    )
+
+
+NAMES = {"dryer": dryer, "gas_furnace": gas_furnace, "drive": drive}
+
+
+def get(name: str) -> IOData:
+    """A bundled single-record dataset by name (see ``NAMES``)."""
+    if name not in NAMES:
+        raise DataError(f"no bundled dataset {name!r}; choose from {sorted(NAMES)}")
+    return NAMES[name]()

@@ -1,0 +1,33 @@
+"""System identification with MATLAB System Identification Toolbox semantics.
+
+Estimators: :func:`arx`, :func:`armax`, :func:`oe`, :func:`bj`, :func:`pem`.
+Structure: :func:`delayest`, :func:`delay_scan`, :func:`arxstruc`, :func:`selstruc`.
+Validation: :func:`compare`, :func:`resid`, :func:`fit_percent`, :func:`mse`.
+Models: :class:`PolyModel` (``idpoly``) and :func:`c2d`.
+"""
+
+from rwlab.ident.arx import arx
+from rwlab.ident.models import PolyModel, c2d
+from rwlab.ident.pem import armax, bj, oe, pem
+from rwlab.ident.structure import arxstruc, delay_scan, delayest, selstruc, struc
+from rwlab.ident.validation import compare, fit_percent, fpe, mse, resid
+
+__all__ = [
+    "PolyModel",
+    "armax",
+    "arx",
+    "arxstruc",
+    "bj",
+    "c2d",
+    "compare",
+    "delay_scan",
+    "delayest",
+    "fit_percent",
+    "fpe",
+    "mse",
+    "oe",
+    "pem",
+    "resid",
+    "selstruc",
+    "struc",
+]

@@ -1,0 +1,159 @@
+"""ARX estimation by linear least squares (MATLAB ``arx``).
+
+``A(q) y(t) = B₁(q) u₁(t−nk₁) + … + e(t)``, solved with a QR factorisation of
+the regressor matrix (no normal equations).
+
+Pre-sample values: the regression uses only the rows for which every lagged
+sample exists, i.e. t = n₀ … N−1 with n₀ = max(na, nkᵢ + nbᵢ − 1). Nothing is
+assumed about the signals before the record starts. With several experiments
+(``rwlab.data.merge``) each contributes its own rows; no row spans two.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import linalg
+
+from rwlab.data import IOData, as_experiments
+from rwlab.errors import DataError, EstimationError
+from rwlab.ident.models import PolyModel
+from rwlab.ident.validation import estimation_report
+
+__all__ = ["arx", "arx_loss", "check_order"]
+
+
+def check_order(name: str, value, minimum: int = 0) -> int:
+    """Validate one model order: an integer ≥ ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise DataError(f"order {name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise DataError(f"order {name} must be ≥ {minimum}, got {value}")
+    return int(value)
+
+
+def _per_input(name: str, value, nu: int, minimum: int) -> list[int]:
+    values = list(value) if isinstance(value, Sequence) else [value] * nu
+    if len(values) != nu:
+        raise DataError(f"{name} needs one value per input ({nu}), got {values}")
+    return [check_order(name, v, minimum) for v in values]
+
+
+def regression(data: IOData, na: int, nb: list[int], nk: list[int], n0: int):
+    """Regressor matrix Φ (rows t = n0..N−1) and target y(t) for one experiment."""
+    y = data.y[:, 0]
+    N = data.N
+    rows = N - n0
+    cols = [-y[n0 - i : N - i] for i in range(1, na + 1)]
+    for j, (b, k) in enumerate(zip(nb, nk, strict=True)):
+        u = data.u[:, j]
+        cols += [u[n0 - k - i : N - k - i] for i in range(b)]
+    phi = np.empty((rows, len(cols)))
+    for c, col in enumerate(cols):
+        phi[:, c] = col
+    return phi, y[n0:]
+
+
+def _check_excitation(experiments: list[IOData], nb: list[int]) -> None:
+    for j, b in enumerate(nb):
+        if b and all(np.ptp(d.u[:, j]) == 0 for d in experiments):
+            raise EstimationError(
+                f"input {experiments[0].input_names[j]!r} is constant: it is not persistently "
+                "exciting, so B cannot be identified; use a PRBS, chirp or multisine input"
+            )
+
+
+def first_row(na: int, nb: list[int], nk: list[int]) -> int:
+    """First sample index at which every ARX regressor is available."""
+    return max([na, *[k + b - 1 for b, k in zip(nb, nk, strict=True)], 0])
+
+
+def _solve(experiments, na, nb, nk, n0=None):
+    """QR least squares over all experiments. Returns θ, R11, sum of squares, rows."""
+    n0 = first_row(na, nb, nk) if n0 is None else n0
+    d = na + sum(nb)
+    parts = [regression(e, na, nb, nk, n0) for e in experiments if e.N > n0]
+    rows = sum(len(t) for _, t in parts)
+    if rows < d + 1:
+        raise DataError(
+            f"too few samples: ARX with {d} parameters needs more than {n0 + d} samples "
+            f"(got {max(e.N for e in experiments)}); use lower orders or more data"
+        )
+    M = np.vstack([np.column_stack([phi, t]) for phi, t in parts])
+    R = np.linalg.qr(M, mode="r")
+    R11, r12, r22 = R[:d, :d], R[:d, d], abs(R[d, d]) if R.shape[0] > d else 0.0
+    diag = np.abs(np.diag(R11))
+    if d and (diag.min() <= 1e-11 * max(diag.max(), 1e-300)):
+        raise EstimationError(
+            "the regression is rank deficient: the data do not excite all parameters "
+            "(constant or too-slow input, or orders too high for this record)"
+        )
+    theta = linalg.solve_triangular(R11, r12) if d else np.zeros(0)
+    return theta, R11, float(r22**2), rows
+
+
+def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
+    """Estimate an ARX model by least squares (MATLAB ``arx(data, [na nb nk])``).
+
+    Parameters
+    ----------
+    data : IOData or list of IOData
+        Single-output record(s); several experiments are estimated jointly.
+    na : int
+        Order of A (≥ 0).
+    nb : int or sequence of int
+        Number of B coefficients per input (≥ 0).
+    nk : int or sequence of int
+        Input delay in samples per input (≥ 0).
+
+    Returns
+    -------
+    PolyModel
+        With ``noise_variance`` = SSE/(rows − d) and the parameter covariance
+        ``noise_variance · (ΦᵀΦ)⁻¹``.
+    """
+    experiments = as_experiments(data)
+    first = experiments[0]
+    if first.ny != 1 or first.nu < 1:
+        raise DataError("arx needs one output and at least one input channel")
+    na = check_order("na", na)
+    nb = _per_input("nb", nb, first.nu, 0)
+    nk = _per_input("nk", nk, first.nu, 0)
+    _check_excitation(experiments, nb)
+    theta, R11, sse, rows = _solve(experiments, na, nb, nk)
+    d = len(theta)
+    lam = sse / (rows - d)
+    Rinv = linalg.solve_triangular(R11, np.eye(d)) if d else np.zeros((0, 0))
+    cov = lam * Rinv @ Rinv.T
+    A = np.concatenate([[1.0], theta[:na]])
+    width = max([k + b for b, k in zip(nb, nk, strict=True)] + [1])
+    B = np.zeros((first.nu, width))
+    pos = na
+    for j, (b, k) in enumerate(zip(nb, nk, strict=True)):
+        B[j, k : k + b] = theta[pos : pos + b]
+        pos += b
+    model = PolyModel(
+        A, B if first.nu != 1 else B[0], Ts=first.Ts, nk=nk,
+        noise_variance=lam, covariance=cov,
+        input_name=first.input_names[0] if first.nu == 1 else first.input_names,
+        output_name=first.output_names[0],
+    )
+    model.report.update(
+        estimation_report(model, experiments, method="arx (QR least squares)", loss=sse / rows)
+    )
+    return model
+
+
+def arx_loss(est: IOData, val: IOData | None, na: int, nb: int, nk: int, n0: int) -> float:
+    """Mean squared one-step prediction error of ARX(na, nb, nk) fitted on ``est``.
+
+    Rows start at the common index ``n0`` so losses over a scan of orders or
+    delays are computed on exactly the same samples.
+    """
+    theta, _, sse, rows = _solve([est], na, [nb], [nk], n0)
+    if val is None:
+        return sse / rows
+    phi, t = regression(val, na, [nb], [nk], n0)
+    e = t - phi @ theta
+    return float(e @ e / len(e))

@@ -1,0 +1,543 @@
+"""The polynomial model ``A(q) y(t) = [B(q)/F(q)] u(t−nk) + [C(q)/D(q)] e(t)``.
+
+``PolyModel`` is MATLAB's ``idpoly``: ARX, ARMAX, OE and BJ are special cases.
+Polynomials are in q⁻¹ with MATLAB's layout: ``A = [1, a1, ..., a_na]`` and
+``B`` carrying ``nk`` leading zeros (``B = [0, b1, b2]`` for nk = 1).
+
+Several inputs (MISO) are supported with ``F = 1``: then ``B`` is a 2-D array
+with one row per input (rows padded with trailing zeros).
+
+The sample time ``Ts`` (seconds) is required. Continuous-time conversion
+(:meth:`PolyModel.d2c`) is written here because python-control has no d2c.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import control
+import numpy as np
+from scipy import linalg
+from scipy import signal as sps
+
+from rwlab.data import IOData, atomic_write_bytes, check_Ts
+from rwlab.errors import DataError, FileFormatError, ModelError
+from rwlab.ident.polynomials import is_stable, roots_z, to_z
+
+__all__ = ["PolyModel", "c2d"]
+
+_FORMAT = "rwlab.PolyModel/1"
+
+
+def _monic(p, name: str) -> np.ndarray:
+    arr = np.atleast_1d(np.array(1.0 if p is None else p, dtype=float))
+    if arr.ndim != 1 or arr.size == 0 or not np.all(np.isfinite(arr)):
+        raise ModelError(f"{name} must be a finite 1-D coefficient array")
+    if arr[0] != 1.0:
+        raise ModelError(f"{name} must be monic ({name}[0] = 1), got {name}[0] = {arr[0]}")
+    return arr
+
+
+def _leading_zeros(row: np.ndarray) -> int:
+    nz = np.flatnonzero(row)
+    return int(nz[0]) if nz.size else len(row)
+
+
+class PolyModel:
+    """Discrete-time polynomial input/output model (MATLAB ``idpoly``).
+
+    Parameters
+    ----------
+    A, C, D, F : array_like, optional
+        Monic polynomials in q⁻¹ (default 1). ``F`` must be 1 for several inputs.
+    B : array_like
+        Shape (nb_total,) for one input, (nu, L) for several; ``nk`` leading zeros.
+    Ts : float
+        Sample time in seconds (required, > 0).
+    nk : int or sequence of int, optional
+        Input delay in samples per input (default: B's leading zeros).
+    noise_variance : float, optional
+        Variance of the innovation e(t).
+    covariance : array_like, shape (d, d), optional
+        Covariance of the free parameters, in :attr:`parameter_names` order.
+    report : dict, optional
+        Estimation report (method, loss, fit, iterations, ...).
+    input_name, output_name : str, optional
+        Channel labels for printouts.
+    """
+
+    def __init__(
+        self,
+        A=None,
+        B=None,
+        C=None,
+        D=None,
+        F=None,
+        *,
+        Ts,
+        nk=None,
+        noise_variance: float | None = None,
+        covariance=None,
+        report: dict | None = None,
+        input_name: str | tuple[str, ...] = "u",
+        output_name: str = "y",
+    ) -> None:
+        self.Ts = check_Ts(Ts)
+        self.A = _monic(A, "A")
+        self.C = _monic(C, "C")
+        self.D = _monic(D, "D")
+        self.F = _monic(F, "F")
+        if B is None:
+            raise ModelError("B is required (use B=[0, b1, ...] with nk leading zeros)")
+        B2 = np.atleast_2d(np.array(B, dtype=float))
+        if B2.ndim != 2 or not np.all(np.isfinite(B2)):
+            raise ModelError("B must be a finite 1-D array, or 2-D with one row per input")
+        self._B = B2
+        self.nu = B2.shape[0]
+        if self.nu > 1 and len(self.F) > 1:
+            raise ModelError("several inputs are supported with F = 1 only (ARX/ARMAX form)")
+        if nk is None:
+            nk = [_leading_zeros(r) for r in B2]
+        nk = [int(k) for k in np.atleast_1d(nk)]
+        if len(nk) != self.nu or any(k < 0 for k in nk):
+            raise ModelError(f"nk must give one non-negative delay per input, got {nk}")
+        for row, k in zip(B2, nk, strict=True):
+            if np.any(row[: min(k, len(row))] != 0):
+                raise ModelError(f"B must start with nk = {k} zeros, got {row}")
+        self.nk = tuple(nk)
+        self.nb = tuple(max(B2.shape[1] - k, 0) for k in nk)
+        self.noise_variance = None if noise_variance is None else float(noise_variance)
+        self.covariance = None if covariance is None else np.array(covariance, dtype=float)
+        if self.covariance is not None and self.covariance.shape != (self.n_params,) * 2:
+            raise ModelError(
+                f"covariance must be {self.n_params}×{self.n_params} for this structure, "
+                f"got {self.covariance.shape}"
+            )
+        self.report = dict(report or {})
+        self.input_name = input_name
+        self.output_name = output_name
+        for arr in (self.A, self.C, self.D, self.F, self._B):
+            arr.setflags(write=False)
+
+    # -- structure ---------------------------------------------------------------
+    @property
+    def B(self) -> np.ndarray:
+        """B in MATLAB layout: 1-D for one input, (nu, L) for several."""
+        return self._B[0] if self.nu == 1 else self._B
+
+    @property
+    def na(self) -> int:
+        return len(self.A) - 1
+
+    @property
+    def nc(self) -> int:
+        return len(self.C) - 1
+
+    @property
+    def nd(self) -> int:
+        return len(self.D) - 1
+
+    @property
+    def nf(self) -> int:
+        return len(self.F) - 1
+
+    @property
+    def structure(self) -> str:
+        """MATLAB-style name of the structure and orders, e.g. ``ARX221`` or ``BJ22221``."""
+        nb = "".join(map(str, self.nb)) if self.nu == 1 else str(list(self.nb))
+        nk = "".join(map(str, self.nk)) if self.nu == 1 else str(list(self.nk))
+        if self.nf == 0 and self.nd == 0:
+            if self.nc == 0:
+                return f"ARX{self.na}{nb}{nk}"
+            return f"ARMAX{self.na}{nb}{self.nc}{nk}"
+        if self.na == 0 and self.nc == 0 and self.nd == 0:
+            return f"OE{nb}{self.nf}{nk}"
+        if self.na == 0:
+            return f"BJ{nb}{self.nc}{self.nd}{self.nf}{nk}"
+        return f"POLY{self.na}{nb}{self.nc}{self.nd}{self.nf}{nk}"
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """Free parameters: a…, b… (per input, from b_nk), c…, d…, f… (MATLAB order)."""
+        bs = [row[k : k + n] for row, k, n in zip(self._B, self.nk, self.nb, strict=True)]
+        return np.concatenate([self.A[1:], *bs, self.C[1:], self.D[1:], self.F[1:]])
+
+    @property
+    def parameter_names(self) -> list[str]:
+        names = [f"a{i}" for i in range(1, self.na + 1)]
+        for j, (k, n) in enumerate(zip(self.nk, self.nb, strict=True)):
+            tag = "" if self.nu == 1 else f"[{j + 1}]"
+            names += [f"b{tag}{i}" for i in range(k, k + n)]
+        names += [f"c{i}" for i in range(1, self.nc + 1)]
+        names += [f"d{i}" for i in range(1, self.nd + 1)]
+        names += [f"f{i}" for i in range(1, self.nf + 1)]
+        return names
+
+    @property
+    def n_params(self) -> int:
+        return self.na + sum(self.nb) + self.nc + self.nd + self.nf
+
+    @property
+    def parameter_std(self) -> np.ndarray | None:
+        """One standard deviation per free parameter, or None without a covariance."""
+        if self.covariance is None:
+            return None
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    # -- time responses ------------------------------------------------------------
+    def _inputs(self, u) -> np.ndarray:
+        if isinstance(u, IOData):
+            u = u.u
+        arr = np.asarray(u, dtype=float)
+        if arr.ndim == 1:
+            arr = arr[:, None]
+        if arr.ndim != 2 or arr.shape[1] != self.nu:
+            raise DataError(f"u must have shape (N,) or (N, {self.nu}); got {np.shape(u)}")
+        if not np.all(np.isfinite(arr)):
+            raise DataError("u contains NaN or Inf")
+        return arr
+
+    def simulate(self, u) -> np.ndarray:
+        """Noise-free output ``y = B/(A F) u`` from rest (zero initial conditions).
+
+        Parameters
+        ----------
+        u : array_like, shape (N,) or (N, nu), or IOData
+            Input samples.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N,)
+        """
+        u2 = self._inputs(u)
+        den = np.convolve(self.A, self.F)
+        return sum(sps.lfilter(b, den, u2[:, j]) for j, b in enumerate(self._B))
+
+    def predict(self, data: IOData, horizon: float = 1) -> np.ndarray:
+        """k-step-ahead prediction ŷ(t | t−k) from measured inputs and outputs.
+
+        Uses ``ŷ = H̄ₖ D B/(C F) u + (1 − H̄ₖ A D / C) y`` where ``H̄ₖ`` holds the
+        first k impulse-response coefficients of the noise model ``C/(A D)``.
+        Zero initial conditions. ``horizon=numpy.inf`` is pure simulation.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N,)
+        """
+        if not isinstance(data, IOData):
+            raise DataError("predict needs an IOData (it uses the measured outputs)")
+        if data.ny != 1:
+            raise DataError("PolyModel is single-output; data must have one output")
+        if horizon != np.inf and (int(horizon) != horizon or horizon < 1):
+            raise DataError(f"horizon must be a positive integer or inf, got {horizon}")
+        if horizon == np.inf or horizon >= data.N:
+            return self.simulate(data)
+        k = int(horizon)
+        AD = np.convolve(self.A, self.D)
+        impulse = np.zeros(k)
+        impulse[0] = 1.0
+        hk = sps.lfilter(self.C, AD, impulse)
+        y = data.y[:, 0]
+        u = self._inputs(data)
+        num_u = np.convolve(hk, self.D)
+        den_u = np.convolve(self.C, self.F)
+        yhat = y - sps.lfilter(np.convolve(hk, AD), self.C, y)
+        for j, b in enumerate(self._B):
+            yhat = yhat + sps.lfilter(np.convolve(num_u, b), den_u, u[:, j])
+        return yhat
+
+    def step_response(self, n: int, input_index: int = 0) -> np.ndarray:
+        """Response to a unit step on one input, ``n`` samples from rest, shape (n,)."""
+        u = np.zeros((n, self.nu))
+        u[:, input_index] = 1.0
+        return self.simulate(u)
+
+    def impulse_response(self, n: int, input_index: int = 0) -> np.ndarray:
+        """Response to a unit pulse at t = 0 on one input, shape (n,)."""
+        u = np.zeros((n, self.nu))
+        u[0, input_index] = 1.0
+        return self.simulate(u)
+
+    # -- frequency domain, poles, zeros ----------------------------------------------
+    def frequency_response(self, omega) -> np.ndarray:
+        """G(e^{jωTs}) at angular frequencies ``omega`` (rad/s); shape (nu, len(omega)) or (len,)."""
+        w = np.atleast_1d(np.asarray(omega, dtype=float))
+        zinv = np.exp(-1j * w * self.Ts)
+        den = np.polyval(np.convolve(self.A, self.F)[::-1], zinv)
+        out = np.array([np.polyval(b[::-1], zinv) / den for b in self._B])
+        return out[0] if self.nu == 1 else out
+
+    def poles(self) -> np.ndarray:
+        """Poles of the input–output part B/(A F), in z."""
+        return roots_z(np.convolve(self.A, self.F))
+
+    def zeros(self, input_index: int = 0) -> np.ndarray:
+        """Finite nonzero-delay zeros of B for one input, in z."""
+        row = self._B[input_index]
+        return roots_z(row[self.nk[input_index] :]) if row.any() else np.zeros(0)
+
+    def dc_gain(self) -> np.ndarray | float:
+        """Static gain B(1)/(A(1) F(1)) per input."""
+        den = np.sum(self.A) * np.sum(self.F)
+        if abs(den) < 1e-14:
+            return np.inf if self.nu == 1 else np.full(self.nu, np.inf)
+        g = self._B.sum(axis=1) / den
+        return float(g[0]) if self.nu == 1 else g
+
+    def is_stable(self) -> bool:
+        """True when every pole of B/(A F) is strictly inside the unit circle."""
+        return is_stable(np.convolve(self.A, self.F))
+
+    # -- python-control ----------------------------------------------------------
+    def to_tf(self) -> control.TransferFunction:
+        """G(z) = B/(A F) as a discrete ``control.TransferFunction`` (dt = Ts), 1×nu."""
+        den = np.convolve(self.A, self.F)
+        nums, dens = [], []
+        for b in self._B:
+            n, d = to_z(b, den)
+            nums.append(n)
+            dens.append(d)
+        return control.tf([nums], [dens], self.Ts)
+
+    def noise_tf(self) -> control.TransferFunction:
+        """H(z) = C/(A D) as a discrete ``control.TransferFunction`` (dt = Ts)."""
+        n, d = to_z(self.C, np.convolve(self.A, self.D))
+        return control.tf(n, d, self.Ts)
+
+    def to_ss(self) -> control.StateSpace:
+        """G(z) as a discrete ``control.StateSpace`` (dt = Ts)."""
+        return control.tf2ss(self.to_tf())
+
+    @property
+    def input_delay_s(self) -> float:
+        """Pure input delay beyond the one sample a ZOH already implies, in seconds."""
+        return max(min(self.nk) - 1, 0) * self.Ts
+
+    def d2c(self, method: str = "zoh", *, pade_order: int | None = None) -> control.TransferFunction:
+        """Continuous-time equivalent G(s) of the input–output part.
+
+        Parameters
+        ----------
+        method : {'zoh', 'tustin'}
+            Zero-order hold (exact for piecewise-constant inputs; inverse of
+            ``c2d(..., 'zoh')``) or the bilinear transform s = (2/Ts)(z−1)/(z+1).
+        pade_order : int, optional
+            ZOH only: a delay of nk−1 > 0 samples cannot be held by a rational
+            transfer function; give a Padé order to approximate it. Without
+            it such a model raises ``ModelError`` (``input_delay_s`` says the delay).
+
+        Returns
+        -------
+        control.TransferFunction
+            Continuous time (dt = 0), 1×nu.
+        """
+        if self.nu != 1:
+            raise ModelError("d2c supports single-input models; convert each input separately")
+        den = np.convolve(self.A, self.F)
+        if method == "tustin":
+            num_s, den_s = _inverse_bilinear(*to_z(self.B, den), self.Ts)
+            return control.tf(num_s, den_s)
+        if method != "zoh":
+            raise ModelError(f"d2c method must be 'zoh' or 'tustin', got {method!r}")
+        delay = max(self.nk[0] - 1, 0)
+        tf = _inverse_zoh(*to_z(self.B[delay:], den), self.Ts)
+        if delay:
+            if pade_order is None:
+                raise ModelError(
+                    f"the model has an input delay of {delay} samples ({delay * self.Ts:g} s) "
+                    "that a rational G(s) cannot hold; pass pade_order=N to approximate it, "
+                    "or use method='tustin'"
+                )
+            tf = tf * control.tf(*control.pade(delay * self.Ts, int(pade_order)))
+        return tf
+
+    # -- files ---------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Plain-JSON form (lossless for float64 values)."""
+        return {
+            "format": _FORMAT,
+            "structure": self.structure,
+            "Ts": self.Ts,
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "F": self.F.tolist(),
+            "nk": list(self.nk),
+            "noise_variance": self.noise_variance,
+            "covariance": None if self.covariance is None else self.covariance.tolist(),
+            "parameter_names": self.parameter_names,
+            "input_name": self.input_name,
+            "output_name": self.output_name,
+            "report": self.report,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PolyModel:
+        """Inverse of :meth:`to_dict`; raises ``FileFormatError`` when fields are missing."""
+        if not isinstance(d, dict) or d.get("format") != _FORMAT:
+            raise FileFormatError(f"not an rwlab PolyModel (expected format {_FORMAT!r})")
+        try:
+            return cls(
+                d["A"], d["B"], d["C"], d["D"], d["F"], Ts=d["Ts"], nk=d["nk"],
+                noise_variance=d.get("noise_variance"), covariance=d.get("covariance"),
+                report=d.get("report"), input_name=d.get("input_name", "u"),
+                output_name=d.get("output_name", "y"),
+            )
+        except KeyError as exc:
+            raise FileFormatError(f"PolyModel JSON lacks field {exc}") from None
+
+    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write JSON atomically; refuses to replace a file unless ``overwrite``."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        text = json.dumps(self.to_dict(), indent=2, default=_json_default)
+        return atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> PolyModel:
+        """Read a model written by :meth:`save`."""
+        try:
+            d = json.loads(Path(path).read_text())
+        except json.JSONDecodeError as exc:
+            raise FileFormatError(f"{path}: not JSON ({exc})") from None
+        return cls.from_dict(d)
+
+    # -- printing ------------------------------------------------------------------
+    def __repr__(self) -> str:
+        return f"<PolyModel {self.structure} Ts={self.Ts:g} s>"
+
+    def __str__(self) -> str:
+        std = self.parameter_std
+        names = self.parameter_names
+        sd = dict(zip(names, std, strict=True)) if std is not None else {}
+
+        def poly(letter: str, coeffs: np.ndarray, first: int, tag: str = "") -> str:
+            terms = []
+            for i, c in enumerate(coeffs):
+                if i < first or (i == 0 and letter != "B"):
+                    if i == 0 and letter != "B":
+                        terms.append("1")
+                    continue
+                pm = sd.get(f"{letter.lower()}{tag}{i}")
+                pm_s = f" (+/- {pm:.4g})" if pm is not None else ""
+                power = "" if i == 0 else f" z^-{i}"
+                sign = "-" if c < 0 else "+"
+                terms.append(f"{sign} {abs(c):.4g}{pm_s}{power}")
+            s = " ".join(terms)
+            return s[2:] if s.startswith("+ ") else ("-" + s[2:] if s.startswith("- ") else s)
+
+        kinds = {"A": self.na, "C": self.nc, "D": self.nd, "F": self.nf}
+        lines = [f"Discrete-time {self.structure} model (Ts = {self.Ts:g} s)"]
+        if self.na:
+            lines.append(f"  A(z) = {poly('A', self.A, 0)}")
+        for j, (row, k) in enumerate(zip(self._B, self.nk, strict=True)):
+            tag = "" if self.nu == 1 else f"[{j + 1}]"
+            label = "B(z)" if self.nu == 1 else f"B{j + 1}(z)"
+            lines.append(f"  {label} = {poly('B', row, k, tag)}")
+        for letter in "CDF":
+            if kinds[letter]:
+                lines.append(f"  {letter}(z) = {poly(letter, getattr(self, letter), 0)}")
+        if self.noise_variance is not None:
+            lines.append(f"  noise variance: {self.noise_variance:.4g}")
+        rep = self.report
+        if "fit_percent" in rep:
+            lines.append(
+                f"  fit to estimation data: {rep['fit_percent']:.2f} % ({rep.get('focus', '')}), "
+                f"MSE {rep.get('mse', float('nan')):.4g}, FPE {rep.get('fpe', float('nan')):.4g}"
+            )
+        return "\n".join(lines)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"cannot store {type(obj).__name__} in JSON")
+
+
+def _inverse_bilinear(num_z, den_z, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """Substitute z = (1 + sTs/2)/(1 − sTs/2) into num(z)/den(z) (descending powers)."""
+    n = len(den_z) - 1
+    plus, minus = np.array([Ts / 2, 1.0]), np.array([-Ts / 2, 1.0])
+
+    def substitute(p):
+        out = np.zeros(n + 1)
+        for k, c in enumerate(p):  # c multiplies z^(n-k)
+            term = c * np.polymul(_polypow(plus, n - k), _polypow(minus, k))
+            out[-len(term) :] += term
+        return out
+
+    num_s, den_s = substitute(num_z), substitute(den_z)
+    if abs(den_s[0]) < 1e-300:
+        raise ModelError("the model has a pole at z = −1; it has no Tustin equivalent")
+    return num_s / den_s[0], den_s / den_s[0]
+
+
+def _polypow(p: np.ndarray, k: int) -> np.ndarray:
+    out = np.array([1.0])
+    for _ in range(k):
+        out = np.polymul(out, p)
+    return out
+
+
+def _inverse_zoh(num_z, den_z, Ts: float) -> control.TransferFunction:
+    """Continuous G(s) whose ZOH sampling at Ts is num(z)/den(z) (matrix logarithm)."""
+    num_z = np.trim_zeros(np.asarray(num_z, float), "f")
+    if num_z.size == 0:
+        return control.tf([0.0], [1.0])
+    if len(num_z) > len(den_z):
+        raise ModelError("improper discrete model: more zeros than poles")
+    Ad, Bd, Cd, Dd = sps.tf2ss(num_z, den_z)
+    n = Ad.shape[0]
+    if n == 0:
+        return control.tf(Dd.ravel(), [1.0])
+    eig = np.linalg.eigvals(Ad)
+    if np.any(np.abs(eig) < 1e-12) or np.any((np.abs(eig.imag) < 1e-12) & (eig.real < 0)):
+        raise ModelError(
+            "the model has a pole at z = 0 or on the negative real axis, which no "
+            "continuous system sampled with a ZOH produces; use method='tustin'"
+        )
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n:] = Ad, Bd
+    M[n, n] = 1.0
+    L = linalg.logm(M) / Ts
+    if np.max(np.abs(np.imag(L))) > 1e-8 * max(1.0, np.max(np.abs(L))):
+        raise ModelError("the matrix logarithm is complex: no real ZOH equivalent exists")
+    L = np.real(L)
+    num_s, den_s = sps.ss2tf(L[:n, :n], L[:n, n:], Cd, Dd)
+    return control.tf(np.atleast_2d(num_s)[0], den_s)
+
+
+def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyModel:
+    """Discretise a continuous SISO transfer function into a ``PolyModel`` (B/A form).
+
+    Parameters
+    ----------
+    sys : control.TransferFunction or control.StateSpace
+        Continuous-time (dt = 0) SISO system.
+    Ts : float
+        Sample time in seconds.
+    method : {'zoh', 'tustin'}
+        Zero-order hold or bilinear transform.
+    """
+    Ts = check_Ts(Ts)
+    if method not in ("zoh", "tustin"):
+        raise ModelError(f"c2d method must be 'zoh' or 'tustin', got {method!r}")
+    tf = control.tf(sys)
+    if not control.isctime(tf, strict=True):
+        raise ModelError("c2d needs a continuous-time system (dt = 0)")
+    if tf.ninputs != 1 or tf.noutputs != 1:
+        raise ModelError("c2d supports SISO systems")
+    num, den = np.asarray(tf.num[0][0], float), np.asarray(tf.den[0][0], float)
+    numd, dend, _ = sps.cont2discrete((num, den), Ts, method="zoh" if method == "zoh" else "bilinear")
+    numd = np.atleast_2d(numd)[0]
+    numd = np.concatenate([np.zeros(len(dend) - len(numd)), numd])  # align powers of z
+    scale = dend[0]
+    B = numd / scale
+    B[np.abs(B) < 1e-14 * max(1.0, np.max(np.abs(B)))] = 0.0
+    return PolyModel(dend / scale, B, Ts=Ts)

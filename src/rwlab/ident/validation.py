@@ -1,0 +1,233 @@
+"""Model quality: fit %, MSE, FPE, AIC, ``compare`` and ``resid`` (MATLAB semantics).
+
+Definitions (N samples, d free parameters, V the loss = mean squared one-step
+prediction error on the estimation data):
+
+- fit % = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖)            (NRMSE, MATLAB ``compare``)
+- FPE   = V·(1 + d/N)/(1 − d/N)                          (Akaike, MATLAB ``fpe``)
+- AIC   = N·log V + 2d + N·(log 2π + 1)                  (raw, MATLAB ``aic(m,'aic')``)
+- nAIC  = log V + 2d/N                                    (MATLAB ``aic(m)`` and ``selstruc``)
+- BIC   = N·log V + d·log N + N·(log 2π + 1)
+
+Simulations and predictions start from zero initial conditions (the testbed's
+records start at rest, where this is exact).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+from rwlab.data import IOData
+from rwlab.errors import DataError
+
+__all__ = [
+    "CompareResult",
+    "ResidResult",
+    "compare",
+    "estimation_report",
+    "fit_percent",
+    "fpe",
+    "mse",
+    "resid",
+]
+
+
+def fit_percent(y, yhat) -> float:
+    """NRMSE fit in percent: 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖)."""
+    y = np.asarray(y, float).ravel()
+    yhat = np.asarray(yhat, float).ravel()
+    if y.shape != yhat.shape:
+        raise DataError(f"y and yhat differ in length ({y.size} vs {yhat.size})")
+    den = np.linalg.norm(y - y.mean())
+    if den == 0:
+        raise DataError("fit % is undefined for a constant output")
+    return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / den))
+
+
+def mse(y, yhat) -> float:
+    """Mean squared error (1/N) Σ (y − ŷ)² (paper A, eq. 4)."""
+    e = np.asarray(y, float).ravel() - np.asarray(yhat, float).ravel()
+    return float(e @ e / e.size)
+
+
+def fpe(loss: float, n_params: int, n_samples: int) -> float:
+    """Akaike's final prediction error V·(1 + d/N)/(1 − d/N)."""
+    if n_params >= n_samples:
+        return math.inf
+    return loss * (1 + n_params / n_samples) / (1 - n_params / n_samples)
+
+
+def estimation_report(model, experiments: list[IOData], *, method: str, loss: float, **extra) -> dict:
+    """The numbers MATLAB puts in ``Report.Fit``: one-step prediction fit on the estimation data."""
+    y = np.concatenate([d.y[:, 0] for d in experiments])
+    yhat = np.concatenate([model.predict(d, 1) for d in experiments])
+    N = y.size
+    d = model.n_params
+    V = max(float(loss), np.finfo(float).tiny)
+    const = N * (math.log(2 * math.pi) + 1)
+    report = {
+        "method": method,
+        "focus": "prediction",
+        "initial_conditions": "zero",
+        "n_samples": N,
+        "n_params": d,
+        "loss": float(loss),
+        "mse": mse(y, yhat),
+        "fit_percent": fit_percent(y, yhat) if np.ptp(y) > 0 else float("nan"),
+        "fpe": fpe(V, d, N),
+        "aic": N * math.log(V) + 2 * d + const,
+        "naic": math.log(V) + 2 * d / N,
+        "bic": N * math.log(V) + d * math.log(N) + const,
+    }
+    report.update(extra)
+    return report
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Model output against measured output (MATLAB ``compare``).
+
+    Attributes
+    ----------
+    y : numpy.ndarray, shape (N,)
+        Measured output.
+    yhat : numpy.ndarray, shape (N,)
+        Simulated (``horizon=inf``) or k-step-predicted model output.
+    fit_percent : float
+        NRMSE fit in percent.
+    mse : float
+        Mean squared error.
+    horizon : float
+        Prediction horizon in samples (inf = simulation).
+    """
+
+    y: np.ndarray
+    yhat: np.ndarray
+    fit_percent: float
+    mse: float
+    horizon: float
+
+
+def compare(model, data: IOData, horizon: float = np.inf) -> CompareResult:
+    """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``."""
+    yhat = model.predict(data, horizon)
+    y = data.y[:, 0]
+    return CompareResult(y.copy(), yhat, fit_percent(y, yhat), mse(y, yhat), float(horizon))
+
+
+@dataclass(frozen=True)
+class ResidResult:
+    """Residual analysis (MATLAB ``resid``).
+
+    Attributes
+    ----------
+    residuals : numpy.ndarray, shape (N,)
+        One-step prediction errors e(t).
+    lags : numpy.ndarray, shape (M+1,)
+        0..M for the autocorrelation.
+    acf : numpy.ndarray, shape (M+1,)
+        Normalised autocorrelation of e (acf[0] = 1).
+    acf_bound : float
+        Confidence bound z/√N for acf at lags ≥ 1.
+    ccf_lags : numpy.ndarray, shape (2M+1,)
+        −M..M; r_ue(τ) correlates u(t) with e(t+τ) (negative τ: e leads u, feedback).
+    ccf : numpy.ndarray, shape (2M+1,)
+        Normalised input–residual cross-correlation.
+    ccf_bound : float
+        Confidence bound z·sqrt(Σₖ r_e(k) r_u(k))/√N.
+    confidence : float
+        Confidence level of the bounds (0.99 = MATLAB's default).
+    whiteness_p : float
+        Ljung–Box portmanteau p-value for lags 1..M.
+    independence_p : float
+        χ² p-value of Σ (r_ue/σ)² over all 2M+1 lags.
+    """
+
+    residuals: np.ndarray
+    lags: np.ndarray
+    acf: np.ndarray
+    acf_bound: float
+    ccf_lags: np.ndarray
+    ccf: np.ndarray
+    ccf_bound: float
+    confidence: float
+    whiteness_p: float
+    independence_p: float
+
+    @property
+    def white(self) -> bool:
+        """True when the Ljung–Box test does not reject whiteness at 1 − confidence."""
+        return self.whiteness_p >= 1 - self.confidence
+
+    @property
+    def independent(self) -> bool:
+        """True when the residuals show no significant correlation with the input."""
+        return self.independence_p >= 1 - self.confidence
+
+    def to_dict(self) -> dict:
+        d = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
+        d.pop("residuals")
+        d.update(white=self.white, independent=self.independent)
+        return d
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
+    """r(τ) = Σₜ a(t+τ) b(t) / N for τ = −max_lag..max_lag (biased estimate, FFT)."""
+    n = a.size
+    size = 1 << int(math.ceil(math.log2(2 * n)))
+    full = np.fft.irfft(np.fft.rfft(a, size) * np.conj(np.fft.rfft(b, size)), size)
+    return np.concatenate([full[-max_lag:], full[: max_lag + 1]]) / n if max_lag else full[:1] / n
+
+
+def resid(model, data: IOData, max_lag: int = 25, confidence: float = 0.99) -> ResidResult:
+    """Residual whiteness and input independence tests with confidence bounds.
+
+    Parameters
+    ----------
+    model : PolyModel
+        The model to test.
+    data : IOData
+        Usually the validation record.
+    max_lag : int
+        Largest lag M in samples (MATLAB default 25).
+    confidence : float
+        Level of the bounds and tests (MATLAB default 0.99).
+    """
+    if not 0 < confidence < 1:
+        raise DataError(f"confidence must be in (0, 1), got {confidence}")
+    if max_lag < 1 or max_lag >= data.N // 2:
+        raise DataError(f"max_lag must be in 1..{data.N // 2 - 1}, got {max_lag}")
+    e = data.y[:, 0] - model.predict(data, 1)
+    u = data.u[:, 0] - data.u[:, 0].mean()
+    N = e.size
+    z = stats.norm.ppf(0.5 + confidence / 2)
+    ree = _xcorr(e, e, max_lag)
+    r0 = ree[max_lag]
+    if r0 <= 0:
+        raise DataError("the residuals are identically zero; nothing to test")
+    acf = ree[max_lag:] / r0
+    ruu = _xcorr(u, u, max_lag)
+    su = ruu[max_lag]
+    ccf = _xcorr(e, u, max_lag) / math.sqrt(r0 * su) if su > 0 else np.zeros(2 * max_lag + 1)
+    rho_u = ruu / su if su > 0 else np.zeros_like(ruu)
+    rho_e = ree / r0
+    var_ccf = max(float(np.sum(rho_e * rho_u)), 1e-12) / N
+    k = np.arange(1, max_lag + 1)
+    q_lb = N * (N + 2) * np.sum(acf[1:] ** 2 / (N - k))
+    q_ind = float(np.sum(ccf**2) / var_ccf)
+    return ResidResult(
+        residuals=e,
+        lags=np.arange(max_lag + 1),
+        acf=acf,
+        acf_bound=float(z / math.sqrt(N)),
+        ccf_lags=np.arange(-max_lag, max_lag + 1),
+        ccf=ccf,
+        ccf_bound=float(z * math.sqrt(var_ccf)),
+        confidence=confidence,
+        whiteness_p=float(stats.chi2.sf(q_lb, max_lag)),
+        independence_p=float(stats.chi2.sf(q_ind, 2 * max_lag + 1)),
+    )
