@@ -1,0 +1,234 @@
+"""The ``rwlab`` command line."""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from pathlib import Path
+
+import click
+import numpy as np
+
+from rwlab import __version__
+from rwlab.errors import RwlabError
+
+# -- shared plumbing -------------------------------------------------------------------
+
+
+def _friendly_errors(func):
+    """Turn rwlab's typed errors into a one-line message and exit status 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except (RwlabError, FileNotFoundError, FileExistsError) as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+
+    return wrapper
+
+
+def _data_options(func):
+    """Options every identification command takes to load and preprocess a record."""
+    options = [
+        click.argument("file"),
+        click.option("--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."),
+        click.option("--input", "input_col", help="Input column name (tables) or variable (.mat)."),
+        click.option("--output", "output_col", help="Output column name (tables) or variable (.mat)."),
+        click.option(
+            "--detrend", type=click.Choice(["none", "constant", "linear"]), default="none",
+            show_default=True, help="Remove means or lines before estimation (MATLAB habit).",
+        ),
+        click.option("--normalize", is_flag=True, help="Scale every channel to [0, 1] (paper A)."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _load(file, Ts, input_col, output_col, detrend, normalize):
+    from rwlab import datasets
+    from rwlab.data import load
+
+    if not Path(file).exists() and file in datasets.NAMES:
+        data = datasets.get(file)
+    else:
+        opts = {}
+        if Path(file).suffix.lower() == ".mat":
+            opts = {k: v for k, v in (("u", input_col), ("y", output_col)) if v}
+        else:
+            opts = {k: v for k, v in (("input_columns", input_col), ("output_columns", output_col)) if v}
+        data = load(file, Ts, **opts)
+    if detrend != "none":
+        data = data.detrend(detrend)
+    if normalize:
+        data = data.normalize()
+    return data
+
+
+def _echo_json(obj) -> None:
+    click.echo(json.dumps(obj, indent=2, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+# -- commands --------------------------------------------------------------------------
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="rwlab")
+def main() -> None:
+    """rwlab: test a reaction wheel, identify it, and control a satellite with it."""
+
+
+@main.group()
+def ident() -> None:
+    """System identification (MATLAB System Identification Toolbox semantics).
+
+    FILE is a .csv, .dat, .parquet or .mat record, or the name of a bundled
+    data set (see `rwlab datasets`).
+    """
+
+
+def _estimate_command(name: str, order_names: list[str], estimator_name: str, doc: str):
+    @_friendly_errors
+    def command(file, Ts, input_col, output_col, detrend, normalize, split, as_json, save, force,
+                **orders):
+        from rwlab import ident as idm
+
+        data = _load(file, Ts, input_col, output_col, detrend, normalize)
+        est, val = (data, None) if split >= 1 else data.split(split)
+        model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names])
+        result = {"model": model.to_dict()}
+        if val is not None:
+            cmp = idm.compare(model, val)
+            res = idm.resid(model, val, max_lag=min(25, val.N // 2 - 1))
+            result["validation"] = {
+                "fit_percent": cmp.fit_percent, "mse": cmp.mse,
+                "residuals_white": res.white, "whiteness_p": res.whiteness_p,
+                "residuals_independent_of_input": res.independent,
+                "independence_p": res.independence_p,
+            }
+        if save:
+            model.save(save, overwrite=force)
+        if as_json:
+            _echo_json(result)
+            return
+        click.echo(f"data: {data!r}, estimation {est.N} samples")
+        click.echo(str(model))
+        if val is not None:
+            v = result["validation"]
+            click.echo(
+                f"validation ({val.N} samples, simulation): fit {v['fit_percent']:.2f} %, "
+                f"MSE {v['mse']:.4g}; residuals {'white' if v['residuals_white'] else 'NOT white'} "
+                f"(p = {v['whiteness_p']:.3f}), "
+                f"{'independent of' if v['residuals_independent_of_input'] else 'CORRELATED with'} "
+                f"the input (p = {v['independence_p']:.3f})"
+            )
+        if save:
+            click.echo(f"model written to {save}")
+
+    for order in reversed(order_names):
+        command = click.argument(order, type=click.IntRange(min=0))(command)
+    command = click.option("--force", is_flag=True, help="Overwrite --save's file.")(command)
+    command = click.option("--save", type=click.Path(dir_okay=False),
+                           help="Write the model as JSON here.")(command)
+    command = click.option("--json", "as_json", is_flag=True,
+                           help="Print the model and scores as JSON.")(command)
+    command = click.option("--split", type=float, default=0.7, show_default=True,
+                           help="Estimation share; the rest validates (1: no validation).")(command)
+    command = _data_options(command)
+    command.__doc__ = doc
+    return ident.command(name)(command)
+
+
+_estimate_command("arx", ["na", "nb", "nk"], "arx",
+                  "Estimate ARX(NA, NB, NK) by least squares: A y = B u(t-NK) + e.")
+_estimate_command("armax", ["na", "nb", "nc", "nk"], "armax",
+                  "Estimate ARMAX(NA, NB, NC, NK) by prediction error: A y = B u + C e.")
+_estimate_command("oe", ["nb", "nf", "nk"], "oe",
+                  "Estimate output-error OE(NB, NF, NK): y = (B/F) u + e.")
+_estimate_command("bj", ["nb", "nc", "nd", "nf", "nk"], "bj",
+                  "Estimate Box-Jenkins BJ(NB, NC, ND, NF, NK): y = (B/F) u + (C/D) e.")
+
+
+@ident.command("delay")
+@_data_options
+@click.option("--na", type=int, default=2, show_default=True)
+@click.option("--nb", type=int, default=2, show_default=True)
+@click.option("--nk-min", type=int, default=0, show_default=True)
+@click.option("--nk-max", type=int, default=10, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print the losses as JSON.")
+@_friendly_errors
+def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, nk_max, as_json):
+    """Estimate the input delay by scanning ARX(NA, NB, nk) losses (MATLAB delayest)."""
+    from rwlab.ident import delay_scan
+
+    data = _load(file, Ts, input_col, output_col, detrend, normalize)
+    losses = delay_scan(data, na, nb, nk_min, nk_max)
+    best = min(losses, key=losses.get)
+    if as_json:
+        _echo_json({"nk": best, "losses": {str(k): v for k, v in losses.items()}})
+        return
+    click.echo(f"{'nk':>4}  {'loss':>12}")
+    for k, v in losses.items():
+        click.echo(f"{k:>4}  {v:12.6g}{'  <- minimum' if k == best else ''}")
+    click.echo(f"delay: nk = {best} samples ({best * data.Ts:g} s)")
+
+
+@ident.command("struct")
+@_data_options
+@click.option("--na", "na_range", default="1:10", show_default=True, help="Range lo:hi of na.")
+@click.option("--nb", "nb_range", default="1:10", show_default=True, help="Range lo:hi of nb.")
+@click.option("--nk", "nk_range", default=None, help="Range lo:hi of nk (default: delayest's).")
+@click.option("--split", type=float, default=0.5, show_default=True, help="Estimation share.")
+@click.option("--criterion", default="0", show_default=True,
+              help="0 (validation loss), aic, mdl, or a number c for V(1+c·d/N).")
+@click.option("--json", "as_json", is_flag=True)
+@_friendly_errors
+def struct_(file, Ts, input_col, output_col, detrend, normalize, na_range, nb_range, nk_range,
+            split, criterion, as_json):
+    """Compare ARX orders on validation data and select one (MATLAB arxstruc + selstruc)."""
+    from rwlab.ident import arxstruc, delayest, selstruc, struc
+
+    data = _load(file, Ts, input_col, output_col, detrend, normalize)
+    est, val = data.split(split)
+    nks = _range(nk_range) if nk_range else [delayest(est)]
+    table = arxstruc(est, val, struc(_range(na_range), _range(nb_range), nks))
+    crit = criterion if criterion in ("aic", "mdl") else float(criterion)
+    best = selstruc(table, crit)
+    if as_json:
+        _echo_json({"best": dict(zip(("na", "nb", "nk"), best, strict=True)),
+                    "losses": [s.__dict__ for s in table]})
+        return
+    click.echo(f"{'na':>3} {'nb':>3} {'nk':>3}  {'validation loss':>16}")
+    for s in sorted(table, key=lambda s: s.loss)[:15]:
+        mark = "  <- selected" if (s.na, s.nb, s.nk) == best else ""
+        click.echo(f"{s.na:>3} {s.nb:>3} {s.nk:>3}  {s.loss:16.6g}{mark}")
+    click.echo(f"selected (criterion {criterion}): na={best[0]} nb={best[1]} nk={best[2]}")
+
+
+def _range(text: str) -> list[int]:
+    try:
+        lo, _, hi = text.partition(":")
+        values = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise click.BadParameter(f"expected a range lo:hi, got {text!r}") from None
+    if not values:
+        raise click.BadParameter(f"empty range {text!r}")
+    return values
+
+
+@main.command("datasets")
+def datasets_cmd() -> None:
+    """List the identification data sets bundled with rwlab."""
+    from rwlab import datasets
+
+    for name, loader in datasets.NAMES.items():
+        data = loader()
+        summary = (loader.__doc__ or "").strip().splitlines()[0]
+        click.echo(f"{name:<12} N={data.N:<5} Ts={data.Ts:<5g} {summary}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
