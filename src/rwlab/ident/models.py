@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 
 import control
@@ -534,7 +535,11 @@ def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyMo
     if tf.ninputs != 1 or tf.noutputs != 1:
         raise ModelError("c2d supports SISO systems")
     num, den = np.asarray(tf.num[0][0], float), np.asarray(tf.den[0][0], float)
-    numd, dend, _ = sps.cont2discrete((num, den), Ts, method="zoh" if method == "zoh" else "bilinear")
+    tiny = 1e-14 * max(np.max(np.abs(num)), 1e-300)
+    num = num[np.argmax(np.abs(num) > tiny) :] if np.any(np.abs(num) > tiny) else np.zeros(1)
+    with warnings.catch_warnings():  # scipy flags |coefficient| < 1e-14 absolute, even when meaningful
+        warnings.simplefilter("ignore", sps.BadCoefficients)
+        numd, dend, _ = sps.cont2discrete((num, den), Ts, method="zoh" if method == "zoh" else "bilinear")
     numd = np.atleast_2d(numd)[0]
     numd = np.concatenate([np.zeros(len(dend) - len(numd)), numd])  # align powers of z
     scale = dend[0]

@@ -307,25 +307,33 @@ def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyMo
     theta, H, sse, iterations, reason = _minimize(orders, theta, series, max_iter, tol)
     N = sum(len(y) for y, _ in series)
     lam = sse / max(N - orders.d, 1)
-    try:
-        cov = lam * linalg.inv(H)
-    except linalg.LinAlgError:
-        raise EstimationError(
-            "the Hessian is singular at the optimum: some parameters are not identifiable "
-            "from these data (orders too high, or the input does not excite the system)"
-        ) from None
+    scale = sum(float(y @ y) for y, _ in series)
+    note = {}
+    if sse <= 1e-24 * max(scale, 1e-300):
+        # an exact fit: no noise to measure, and C and D are not identifiable from it
+        cov = None
+        note["note"] = "exact fit (noise-free data): noise model undetermined, no covariance"
+    else:
+        try:
+            cov = lam * linalg.inv(H)
+        except linalg.LinAlgError:
+            raise EstimationError(
+                "the Hessian is singular at the optimum: some parameters are not identifiable "
+                "from these data (orders too high, or the input does not excite the system)"
+            ) from None
+        cov = (cov + cov.T) / 2
     if not np.all(np.isfinite(theta)):
         raise EstimationError("the search diverged; try lower orders or detrended data")
     A, B, C, D, F = orders.unpack(theta)
     first = experiments[0]
     model = PolyModel(
-        A, B, C, D, F, Ts=first.Ts, nk=orders.nk, noise_variance=lam, covariance=(cov + cov.T) / 2,
+        A, B, C, D, F, Ts=first.Ts, nk=orders.nk, noise_variance=lam, covariance=cov,
         input_name=first.input_names[0], output_name=first.output_names[0],
     )
     model.report.update(
         estimation_report(
             model, experiments, method=method, loss=sse / N,
-            iterations=iterations, termination=reason,
+            iterations=iterations, termination=reason, **note,
         )
     )
     return model

@@ -1,0 +1,136 @@
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from rwlab import datasets
+from rwlab.data import IOData, merge
+from rwlab.errors import DataError, EstimationError
+from rwlab.ident import PolyModel, armax, arx, bj, oe, pem
+from rwlab.ident.pem import _jacobian_block, _Orders, _signals
+from rwlab.ident.polynomials import is_stable
+
+# Truths: (A, B, C, D, F), orders for the estimator, estimator
+ARMAX = ([1, -1.5, 0.7], [0, 1.0, 0.5], [1, -0.5], [1], [1])
+OE = ([1], [0, 1.0, 0.5], [1], [1], [1, -1.2, 0.5])
+BJ = ([1], [0, 1.0, 0.5], [1, 0.4], [1, -0.9], [1, -0.8])
+
+
+def _simulate(truth, N, seed, sigma=0.3):
+    A, B, C, D, F = truth
+    r = np.random.default_rng(seed)
+    u = r.standard_normal(N)
+    e = sigma * r.standard_normal(N)
+    y = lfilter(B, np.convolve(A, F), u) + lfilter(C, np.convolve(A, D), e)
+    return IOData(u, y, 0.5)
+
+
+def _fit(kind, data):
+    if kind == "armax":
+        return armax(data, 2, 2, 1, 1)
+    if kind == "oe":
+        return oe(data, 2, 2, 1)
+    return bj(data, 2, 1, 1, 1, 1)
+
+
+TRUTH = {"armax": ARMAX, "oe": OE, "bj": BJ}
+
+
+def _true_params(kind):
+    A, B, C, D, F = TRUTH[kind]
+    return np.concatenate([A[1:], B[1:], C[1:], D[1:], F[1:]])
+
+
+def _dynamics(m):
+    """The input-output parameters a, b, f (the noise parameters c, d excluded)."""
+    return np.concatenate([m.A[1:], m.B[1:], m.F[1:]])
+
+
+def _true_dynamics(kind):
+    A, B, _, _, F = TRUTH[kind]
+    return np.concatenate([A[1:], B[1:], F[1:]])
+
+
+@pytest.mark.parametrize("kind", ["armax", "oe", "bj"])
+def test_estimates_converge_to_the_truth_with_little_noise(kind):
+    m = _fit(kind, _simulate(TRUTH[kind], 3000, seed=1, sigma=1e-3))
+    assert np.allclose(_dynamics(m), _true_dynamics(kind), atol=2e-4)
+    # noise-model precision does not improve with less noise: judge it by its own σ
+    assert np.all(np.abs(m.parameters - _true_params(kind)) <= 4 * m.parameter_std)
+    assert m.report["termination"].startswith("converged")
+
+
+@pytest.mark.parametrize("kind", ["armax", "oe", "bj"])
+def test_noise_free_data_give_exact_dynamics(kind):
+    m = _fit(kind, _simulate(TRUTH[kind], 2000, seed=2, sigma=0.0))
+    assert np.allclose(_dynamics(m), _true_dynamics(kind), atol=1e-7)
+    assert m.noise_variance < 1e-20
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["armax", "oe", "bj"])
+def test_reported_covariance_is_honest_over_100_seeds(kind):
+    """Truth inside ±3 reported σ for ≥ 95 % of runs, for every parameter (N = 5000)."""
+    truth = _true_params(kind)
+    inside = []
+    for seed in range(100):
+        m = _fit(kind, _simulate(TRUTH[kind], 5000, seed=1000 + seed))
+        inside.append(np.abs(m.parameters - truth) <= 3 * m.parameter_std)
+    coverage = np.mean(inside, axis=0)
+    assert np.all(coverage >= 0.95), coverage
+
+
+def test_analytic_gradient_matches_finite_differences():
+    orders = _Orders(2, 2, 1, 1, 1, 1)
+    r = np.random.default_rng(3)
+    y, u = r.standard_normal(200), r.standard_normal(200)
+    theta = np.array([-0.5, 0.2, 1.0, 0.4, 0.3, -0.6, -0.4])
+    e, w, v = _signals(orders, theta, y, u)
+    psi = _jacobian_block(orders, theta, y, u, e, w, v)
+    h = 1e-6
+    for i in range(orders.d):
+        step = np.zeros_like(theta)
+        step[i] = h
+        numeric = (_signals(orders, theta + step, y, u)[0] - _signals(orders, theta - step, y, u)[0])
+        assert np.allclose(psi[:, i], numeric / (2 * h), atol=1e-6), orders.d
+
+
+def test_noise_and_denominator_polynomials_come_back_stable():
+    data = _simulate(BJ, 1500, seed=4)
+    start = PolyModel(None, [0, 1.0, 0.5], C=[1, 2.5], D=[1, -1.8], F=[1, -2.0], Ts=0.5)
+    m = pem(data, start)
+    assert is_stable(m.C) and is_stable(m.D) and is_stable(m.F)
+    assert np.allclose(m.parameters, _true_params("bj"), atol=0.1)
+
+
+def test_pem_from_an_arx_start_reaches_the_armax_optimum():
+    data = _simulate(ARMAX, 3000, seed=5)
+    start = arx(data, 2, 2, 1)
+    refined = pem(data, PolyModel(start.A, start.B, C=[1, 0.0], Ts=data.Ts))
+    direct = armax(data, 2, 2, 1, 1)
+    assert np.allclose(refined.parameters, direct.parameters, atol=1e-5)
+
+
+def test_gas_furnace_box_jenkins_model_matches_the_textbook():
+    """Box & Jenkins (1976) Series J: Y = −(0.53 + 0.37B + 0.51B²)/(1 − 0.57B) X(t−3) + N,
+    N = a/(1 − 1.53B + 0.63B²)."""
+    m = bj(datasets.gas_furnace().detrend(), 3, 0, 2, 1, 3)
+    assert np.allclose(m.B, [0, 0, 0, -0.53, -0.37, -0.51], atol=0.03)
+    assert np.allclose(m.F, [1, -0.57], atol=0.03)
+    assert np.allclose(m.D, [1, -1.53, 0.63], atol=0.03)
+
+
+def test_merged_experiments_are_estimated_jointly():
+    parts = [_simulate(OE, 800, seed=s, sigma=1e-3) for s in (6, 7)]
+    m = oe(merge(*parts), 2, 2, 1)
+    assert np.allclose(m.parameters, _true_params("oe"), atol=5e-3)
+
+
+def test_bad_inputs_are_typed_errors(rng):
+    with pytest.raises(EstimationError, match="persistently exciting"):
+        armax(IOData(np.zeros(200), rng.standard_normal(200), 1.0), 2, 2, 1, 1)
+    with pytest.raises(DataError, match="too few samples"):
+        bj(IOData(rng.standard_normal(8), rng.standard_normal(8), 1.0), 2, 2, 2, 2, 1)
+    with pytest.raises(DataError, match="single-input"):
+        oe(IOData(rng.standard_normal((50, 2)), rng.standard_normal(50), 1.0), 2, 2, 1)
+    with pytest.raises(DataError):
+        armax(IOData(rng.standard_normal(50), rng.standard_normal(50), 1.0), 2, 0, 1, 1)
