@@ -103,16 +103,26 @@ def test_merge_requires_matching_sample_times():
         merge(a, IOData(np.ones(5), np.ones(5), 2.0))
 
 
-finite = st.floats(allow_nan=False, allow_infinity=False, width=64, min_value=-1e300, max_value=1e300)
+finite = st.floats(
+    allow_nan=False, allow_infinity=False, width=64, min_value=-1e300, max_value=1e300
+)
 
 
 @settings(max_examples=40, deadline=None)
-@given(values=arrays(np.float64, st.tuples(st.integers(2, 30), st.just(3)), elements=finite),
-       suffix=st.sampled_from([".csv", ".parquet", ".mat"]),
-       Ts=st.floats(1e-4, 1e3))
+@given(
+    values=arrays(np.float64, st.tuples(st.integers(2, 30), st.just(3)), elements=finite),
+    suffix=st.sampled_from([".csv", ".parquet", ".mat"]),
+    Ts=st.floats(1e-4, 1e3),
+)
 def test_file_round_trip_is_exact(tmp_path_factory, values, suffix, Ts):
-    d = IOData(values[:, :2], values[:, 2], Ts, input_names=["cmd", "aux"], output_names=["speed"],
-               output_units=["rpm"])
+    d = IOData(
+        values[:, :2],
+        values[:, 2],
+        Ts,
+        input_names=["cmd", "aux"],
+        output_names=["speed"],
+        output_units=["rpm"],
+    )
     path = d.write(tmp_path_factory.mktemp("io") / f"rec{suffix}")
     back = load(path)
     assert np.array_equal(back.u, d.u) and np.array_equal(back.y, d.y)

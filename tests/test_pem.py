@@ -90,7 +90,7 @@ def test_analytic_gradient_matches_finite_differences():
     for i in range(orders.d):
         step = np.zeros_like(theta)
         step[i] = h
-        numeric = (_signals(orders, theta + step, y, u)[0] - _signals(orders, theta - step, y, u)[0])
+        numeric = _signals(orders, theta + step, y, u)[0] - _signals(orders, theta - step, y, u)[0]
         assert np.allclose(psi[:, i], numeric / (2 * h), atol=1e-6), orders.d
 
 

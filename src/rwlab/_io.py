@@ -98,14 +98,18 @@ def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns
     if time_col is not None and table.shape[0] >= 2:
         t = table[:, time_col]
         steps = np.diff(t)
-        file_Ts = float(np.median(steps))
+        file_Ts = float(f"{(t[-1] - t[0]) / (len(t) - 1):.12g}")  # drop float noise of the stamps
+        if meta is not None:
+            file_Ts = float(meta["Ts"])
         if file_Ts <= 0 or np.max(np.abs(steps - file_Ts)) > 1e-6 * max(file_Ts, 1e-12) + 1e-9:
             raise DataError(
                 f"{path}: the time column is not uniformly sampled; resample it first "
                 "(rwlab.testbed.load_record does this for testbed records)"
             )
         if Ts is not None and not np.isclose(check_Ts(Ts), file_Ts, rtol=1e-6):
-            raise DataError(f"{path}: Ts={Ts} s disagrees with the file's time column ({file_Ts} s)")
+            raise DataError(
+                f"{path}: Ts={Ts} s disagrees with the file's time column ({file_Ts} s)"
+            )
         Ts, tstart = file_Ts, float(t[0])
     kwargs = {}
     if meta is not None:
@@ -188,7 +192,9 @@ def _read_parquet(path: Path, Ts, **options) -> IOData:
     arrow = pq.read_table(path)
     raw = (arrow.schema.metadata or {}).get(b"rwlab")
     meta = json.loads(raw) if raw else None
-    table = np.column_stack([arrow.column(i).to_numpy().astype(float) for i in range(arrow.num_columns)])
+    table = np.column_stack(
+        [arrow.column(i).to_numpy().astype(float) for i in range(arrow.num_columns)]
+    )
     return _from_table(arrow.column_names, table, Ts, meta, path, **options)
 
 

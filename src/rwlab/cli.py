@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 import click
-import numpy as np
 
 from rwlab import __version__
 from rwlab.errors import RwlabError
@@ -34,12 +33,19 @@ def _data_options(func):
     """Options every identification command takes to load and preprocess a record."""
     options = [
         click.argument("file"),
-        click.option("--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."),
-        click.option("--input", "input_col", help="Input column name (tables) or variable (.mat)."),
-        click.option("--output", "output_col", help="Output column name (tables) or variable (.mat)."),
         click.option(
-            "--detrend", type=click.Choice(["none", "constant", "linear"]), default="none",
-            show_default=True, help="Remove means or lines before estimation (MATLAB habit).",
+            "--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."
+        ),
+        click.option("--input", "input_col", help="Input column name (tables) or variable (.mat)."),
+        click.option(
+            "--output", "output_col", help="Output column name (tables) or variable (.mat)."
+        ),
+        click.option(
+            "--detrend",
+            type=click.Choice(["none", "constant", "linear"]),
+            default="none",
+            show_default=True,
+            help="Remove means or lines before estimation (MATLAB habit).",
         ),
         click.option("--normalize", is_flag=True, help="Scale every channel to [0, 1] (paper A)."),
     ]
@@ -59,7 +65,9 @@ def _load(file, Ts, input_col, output_col, detrend, normalize):
         if Path(file).suffix.lower() == ".mat":
             opts = {k: v for k, v in (("u", input_col), ("y", output_col)) if v}
         else:
-            opts = {k: v for k, v in (("input_columns", input_col), ("output_columns", output_col)) if v}
+            opts = {
+                k: v for k, v in (("input_columns", input_col), ("output_columns", output_col)) if v
+            }
         data = load(file, Ts, **opts)
     if detrend != "none":
         data = data.detrend(detrend)
@@ -69,7 +77,9 @@ def _load(file, Ts, input_col, output_col, detrend, normalize):
 
 
 def _echo_json(obj) -> None:
-    click.echo(json.dumps(obj, indent=2, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+    click.echo(
+        json.dumps(obj, indent=2, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+    )
 
 
 # -- commands --------------------------------------------------------------------------
@@ -92,8 +102,9 @@ def ident() -> None:
 
 def _estimate_command(name: str, order_names: list[str], estimator_name: str, doc: str):
     @_friendly_errors
-    def command(file, Ts, input_col, output_col, detrend, normalize, split, as_json, save, force,
-                **orders):
+    def command(
+        file, Ts, input_col, output_col, detrend, normalize, split, as_json, save, force, **orders
+    ):
         from rwlab import ident as idm
 
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
@@ -104,8 +115,10 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
             cmp = idm.compare(model, val)
             res = idm.resid(model, val, max_lag=min(25, val.N // 2 - 1))
             result["validation"] = {
-                "fit_percent": cmp.fit_percent, "mse": cmp.mse,
-                "residuals_white": res.white, "whiteness_p": res.whiteness_p,
+                "fit_percent": cmp.fit_percent,
+                "mse": cmp.mse,
+                "residuals_white": res.white,
+                "whiteness_p": res.whiteness_p,
                 "residuals_independent_of_input": res.independent,
                 "independence_p": res.independence_p,
             }
@@ -131,25 +144,45 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     for order in reversed(order_names):
         command = click.argument(order, type=click.IntRange(min=0))(command)
     command = click.option("--force", is_flag=True, help="Overwrite --save's file.")(command)
-    command = click.option("--save", type=click.Path(dir_okay=False),
-                           help="Write the model as JSON here.")(command)
-    command = click.option("--json", "as_json", is_flag=True,
-                           help="Print the model and scores as JSON.")(command)
-    command = click.option("--split", type=float, default=0.7, show_default=True,
-                           help="Estimation share; the rest validates (1: no validation).")(command)
+    command = click.option(
+        "--save", type=click.Path(dir_okay=False), help="Write the model as JSON here."
+    )(command)
+    command = click.option(
+        "--json", "as_json", is_flag=True, help="Print the model and scores as JSON."
+    )(command)
+    command = click.option(
+        "--split",
+        type=float,
+        default=0.7,
+        show_default=True,
+        help="Estimation share; the rest validates (1: no validation).",
+    )(command)
     command = _data_options(command)
     command.__doc__ = doc
     return ident.command(name)(command)
 
 
-_estimate_command("arx", ["na", "nb", "nk"], "arx",
-                  "Estimate ARX(NA, NB, NK) by least squares: A y = B u(t-NK) + e.")
-_estimate_command("armax", ["na", "nb", "nc", "nk"], "armax",
-                  "Estimate ARMAX(NA, NB, NC, NK) by prediction error: A y = B u + C e.")
-_estimate_command("oe", ["nb", "nf", "nk"], "oe",
-                  "Estimate output-error OE(NB, NF, NK): y = (B/F) u + e.")
-_estimate_command("bj", ["nb", "nc", "nd", "nf", "nk"], "bj",
-                  "Estimate Box-Jenkins BJ(NB, NC, ND, NF, NK): y = (B/F) u + (C/D) e.")
+_estimate_command(
+    "arx",
+    ["na", "nb", "nk"],
+    "arx",
+    "Estimate ARX(NA, NB, NK) by least squares: A y = B u(t-NK) + e.",
+)
+_estimate_command(
+    "armax",
+    ["na", "nb", "nc", "nk"],
+    "armax",
+    "Estimate ARMAX(NA, NB, NC, NK) by prediction error: A y = B u + C e.",
+)
+_estimate_command(
+    "oe", ["nb", "nf", "nk"], "oe", "Estimate output-error OE(NB, NF, NK): y = (B/F) u + e."
+)
+_estimate_command(
+    "bj",
+    ["nb", "nc", "nd", "nf", "nk"],
+    "bj",
+    "Estimate Box-Jenkins BJ(NB, NC, ND, NF, NK): y = (B/F) u + (C/D) e.",
+)
 
 
 @ident.command("delay")
@@ -182,12 +215,28 @@ def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, n
 @click.option("--nb", "nb_range", default="1:10", show_default=True, help="Range lo:hi of nb.")
 @click.option("--nk", "nk_range", default=None, help="Range lo:hi of nk (default: delayest's).")
 @click.option("--split", type=float, default=0.5, show_default=True, help="Estimation share.")
-@click.option("--criterion", default="0", show_default=True,
-              help="0 (validation loss), aic, mdl, or a number c for V(1+c·d/N).")
+@click.option(
+    "--criterion",
+    default="0",
+    show_default=True,
+    help="0 (validation loss), aic, mdl, or a number c for V(1+c·d/N).",
+)
 @click.option("--json", "as_json", is_flag=True)
 @_friendly_errors
-def struct_(file, Ts, input_col, output_col, detrend, normalize, na_range, nb_range, nk_range,
-            split, criterion, as_json):
+def struct_(
+    file,
+    Ts,
+    input_col,
+    output_col,
+    detrend,
+    normalize,
+    na_range,
+    nb_range,
+    nk_range,
+    split,
+    criterion,
+    as_json,
+):
     """Compare ARX orders on validation data and select one (MATLAB arxstruc + selstruc)."""
     from rwlab.ident import arxstruc, delayest, selstruc, struc
 
@@ -198,8 +247,12 @@ def struct_(file, Ts, input_col, output_col, detrend, normalize, na_range, nb_ra
     crit = criterion if criterion in ("aic", "mdl") else float(criterion)
     best = selstruc(table, crit)
     if as_json:
-        _echo_json({"best": dict(zip(("na", "nb", "nk"), best, strict=True)),
-                    "losses": [s.__dict__ for s in table]})
+        _echo_json(
+            {
+                "best": dict(zip(("na", "nb", "nk"), best, strict=True)),
+                "losses": [s.__dict__ for s in table],
+            }
+        )
         return
     click.echo(f"{'na':>3} {'nb':>3} {'nk':>3}  {'validation loss':>16}")
     for s in sorted(table, key=lambda s: s.loss)[:15]:

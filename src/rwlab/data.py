@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal as sps
 
-from rwlab.errors import DataError, FileFormatError
+from rwlab.errors import DataError
 
 __all__ = ["IOData", "Trend", "load", "merge"]
 
@@ -264,7 +264,7 @@ class IOData:
         """
         if not 0 < fraction < 1:
             raise DataError(f"split fraction must be in (0, 1), got {fraction}")
-        k = int(round(fraction * self.N))
+        k = round(fraction * self.N)
         if k < 1 or k >= self.N:
             raise DataError(f"cannot split {self.N} samples at {fraction}")
         return self[:k], self[k:]

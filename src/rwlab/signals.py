@@ -40,7 +40,7 @@ def _count(duration: float, Ts: float) -> int:
     Ts = check_Ts(Ts)
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise ConfigError(f"duration must be a positive number of seconds, got {duration!r}")
-    n = int(round(duration / Ts))
+    n = round(duration / Ts)
     if n < 1:
         raise ConfigError(f"duration {duration} s is shorter than one sample ({Ts} s)")
     return n
@@ -52,8 +52,17 @@ def _positive(name: str, value) -> float:
     return float(value)
 
 
-def prbs(duration: float, Ts: float, amplitude: float, min_hold: float, max_hold: float | None = None,
-         *, levels: str = "random", offset: float = 0.0, seed=0) -> np.ndarray:
+def prbs(
+    duration: float,
+    Ts: float,
+    amplitude: float,
+    min_hold: float,
+    max_hold: float | None = None,
+    *,
+    levels: str = "random",
+    offset: float = 0.0,
+    seed=0,
+) -> np.ndarray:
     """Pseudo-random signal with random levels and random hold times (paper A, Fig. 14).
 
     Parameters
@@ -139,13 +148,21 @@ def rbs(n: int, amplitude: float, *, band: float = 1.0, seed=0) -> np.ndarray:
     if not 0 < band <= 1:
         raise ConfigError(f"band must be in (0, 1], got {band}")
     amplitude = _positive("amplitude", amplitude)
-    hold = max(1, int(round(1 / band)))
+    hold = max(1, round(1 / band))
     bits = _rng(seed).choice([-1.0, 1.0], size=math.ceil(n / hold))
     return np.repeat(bits, hold)[:n] * amplitude
 
 
-def chirp(duration: float, Ts: float, f0: float, f1: float, amplitude: float, *,
-          method: str = "logarithmic", offset: float = 0.0) -> np.ndarray:
+def chirp(
+    duration: float,
+    Ts: float,
+    f0: float,
+    f1: float,
+    amplitude: float,
+    *,
+    method: str = "logarithmic",
+    offset: float = 0.0,
+) -> np.ndarray:
     """Swept sine from ``f0`` to ``f1`` Hz over ``duration`` seconds (paper A, Fig. 15).
 
     ``method`` is 'linear' or 'logarithmic' (the paper's 0.0001–2 Hz sweep
@@ -176,8 +193,16 @@ def steps(levels, hold: float, Ts: float) -> np.ndarray:
     return np.repeat(values, _count(hold, Ts))
 
 
-def multisine(duration: float, Ts: float, f_min: float, f_max: float, amplitude: float, *,
-              n_freqs: int | None = None, seed=0) -> np.ndarray:
+def multisine(
+    duration: float,
+    Ts: float,
+    f_min: float,
+    f_max: float,
+    amplitude: float,
+    *,
+    n_freqs: int | None = None,
+    seed=0,
+) -> np.ndarray:
     """Sum of sines with Schroeder phases (low crest factor), peak-normalised to ``amplitude``.
 
     Frequencies are whole multiples of 1/duration between ``f_min`` and

@@ -28,8 +28,14 @@ def dryer() -> IOData:
     with resources.as_file(_path("daisy_dryer.dat")) as p:
         d = load(p, Ts=0.08)
     return IOData(
-        d.u, d.y, d.Ts, input_names=["power"], output_names=["temperature"],
-        input_units=["V"], output_units=["V"], name="dryer",
+        d.u,
+        d.y,
+        d.Ts,
+        input_names=["power"],
+        output_names=["temperature"],
+        input_units=["V"],
+        output_units=["V"],
+        name="dryer",
     )
 
 
@@ -41,8 +47,13 @@ def gas_furnace() -> IOData:
     with resources.as_file(_path("bj_gas_furnace.csv")) as p:
         d = load(p, Ts=9.0)
     return IOData(
-        d.u, d.y, d.Ts, input_names=["gas_rate"], output_names=["co2"],
-        output_units=["%"], name="gas_furnace",
+        d.u,
+        d.y,
+        d.Ts,
+        input_names=["gas_rate"],
+        output_names=["co2"],
+        output_units=["%"],
+        name="gas_furnace",
     )
 
 
@@ -68,8 +79,12 @@ def drive(experiment: int = 1) -> IOData:
     with resources.as_file(_path("drive.mat")) as p:
         mat = loadmat(p)
     return IOData(
-        np.asarray(mat[f"u{experiment}"], float), np.asarray(mat[f"z{experiment}"], float), 0.02,
-        input_names=["voltage"], output_names=["speed"], name=f"drive{experiment}",
+        np.asarray(mat[f"u{experiment}"], float),
+        np.asarray(mat[f"z{experiment}"], float),
+        0.02,
+        input_names=["voltage"],
+        output_names=["speed"],
+        name=f"drive{experiment}",
     )
 
 

@@ -134,8 +134,12 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
         B[j, k : k + b] = theta[pos : pos + b]
         pos += b
     model = PolyModel(
-        A, B if first.nu != 1 else B[0], Ts=first.Ts, nk=nk,
-        noise_variance=lam, covariance=cov,
+        A,
+        B if first.nu != 1 else B[0],
+        Ts=first.Ts,
+        nk=nk,
+        noise_variance=lam,
+        covariance=cov,
         input_name=first.input_names[0] if first.nu == 1 else first.input_names,
         output_name=first.output_names[0],
     )

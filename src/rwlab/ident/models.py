@@ -263,7 +263,7 @@ class PolyModel:
 
     # -- frequency domain, poles, zeros ----------------------------------------------
     def frequency_response(self, omega) -> np.ndarray:
-        """G(e^{jωTs}) at angular frequencies ``omega`` (rad/s); shape (nu, len(omega)) or (len,)."""
+        """G(e^{jωTs}) at ``omega`` (rad/s); shape (len(omega),), or (nu, len(omega))."""
         w = np.atleast_1d(np.asarray(omega, dtype=float))
         zinv = np.exp(-1j * w * self.Ts)
         den = np.polyval(np.convolve(self.A, self.F)[::-1], zinv)
@@ -316,7 +316,9 @@ class PolyModel:
         """Pure input delay beyond the one sample a ZOH already implies, in seconds."""
         return max(min(self.nk) - 1, 0) * self.Ts
 
-    def d2c(self, method: str = "zoh", *, pade_order: int | None = None) -> control.TransferFunction:
+    def d2c(
+        self, method: str = "zoh", *, pade_order: int | None = None
+    ) -> control.TransferFunction:
         """Continuous-time equivalent G(s) of the input–output part.
 
         Parameters
@@ -382,9 +384,17 @@ class PolyModel:
             raise FileFormatError(f"not an rwlab PolyModel (expected format {_FORMAT!r})")
         try:
             return cls(
-                d["A"], d["B"], d["C"], d["D"], d["F"], Ts=d["Ts"], nk=d["nk"],
-                noise_variance=d.get("noise_variance"), covariance=d.get("covariance"),
-                report=d.get("report"), input_name=d.get("input_name", "u"),
+                d["A"],
+                d["B"],
+                d["C"],
+                d["D"],
+                d["F"],
+                Ts=d["Ts"],
+                nk=d["nk"],
+                noise_variance=d.get("noise_variance"),
+                covariance=d.get("covariance"),
+                report=d.get("report"),
+                input_name=d.get("input_name", "u"),
                 output_name=d.get("output_name", "y"),
             )
         except KeyError as exc:
@@ -537,9 +547,13 @@ def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyMo
     num, den = np.asarray(tf.num[0][0], float), np.asarray(tf.den[0][0], float)
     tiny = 1e-14 * max(np.max(np.abs(num)), 1e-300)
     num = num[np.argmax(np.abs(num) > tiny) :] if np.any(np.abs(num) > tiny) else np.zeros(1)
-    with warnings.catch_warnings():  # scipy flags |coefficient| < 1e-14 absolute, even when meaningful
+    with (
+        warnings.catch_warnings()
+    ):  # scipy flags |coefficient| < 1e-14 absolute, even when meaningful
         warnings.simplefilter("ignore", sps.BadCoefficients)
-        numd, dend, _ = sps.cont2discrete((num, den), Ts, method="zoh" if method == "zoh" else "bilinear")
+        numd, dend, _ = sps.cont2discrete(
+            (num, den), Ts, method="zoh" if method == "zoh" else "bilinear"
+        )
     numd = np.atleast_2d(numd)[0]
     numd = np.concatenate([np.zeros(len(dend) - len(numd)), numd])  # align powers of z
     scale = dend[0]

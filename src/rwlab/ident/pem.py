@@ -1,4 +1,4 @@
-"""Prediction-error estimation of ARMAX, OE and BJ models (MATLAB ``armax``, ``oe``, ``bj``, ``pem``).
+"""Prediction-error estimation of ARMAX, OE and BJ models (MATLAB ``armax``, ``oe``, ``bj``).
 
 All three are cases of ``A y = (B/F) u + (C/D) e``; the prediction error is
 
@@ -98,7 +98,7 @@ def _sse(orders, theta, experiments) -> float:
 
 def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
     """ψ = ∂ε/∂θ for one experiment, shape (N, d)."""
-    A, B, C, D, F = orders.unpack(theta)
+    _A, _B, C, D, F = orders.unpack(theta)
     N = len(y)
     psi = np.empty((N, orders.d))
     col = 0
@@ -327,20 +327,42 @@ def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyMo
     A, B, C, D, F = orders.unpack(theta)
     first = experiments[0]
     model = PolyModel(
-        A, B, C, D, F, Ts=first.Ts, nk=orders.nk, noise_variance=lam, covariance=cov,
-        input_name=first.input_names[0], output_name=first.output_names[0],
+        A,
+        B,
+        C,
+        D,
+        F,
+        Ts=first.Ts,
+        nk=orders.nk,
+        noise_variance=lam,
+        covariance=cov,
+        input_name=first.input_names[0],
+        output_name=first.output_names[0],
     )
     model.report.update(
         estimation_report(
-            model, experiments, method=method, loss=sse / N,
-            iterations=iterations, termination=reason, **note,
+            model,
+            experiments,
+            method=method,
+            loss=sse / N,
+            iterations=iterations,
+            termination=reason,
+            **note,
         )
     )
     return model
 
 
-def armax(data: IOData | Sequence[IOData], na: int, nb: int, nc: int, nk: int = 1, *,
-          max_iter: int = 50, tol: float = 1e-8) -> PolyModel:
+def armax(
+    data: IOData | Sequence[IOData],
+    na: int,
+    nb: int,
+    nc: int,
+    nk: int = 1,
+    *,
+    max_iter: int = 50,
+    tol: float = 1e-8,
+) -> PolyModel:
     """Estimate an ARMAX model ``A y = B u(t−nk) + C e`` (MATLAB ``armax(data,[na nb nc nk])``).
 
     Parameters
@@ -354,35 +376,68 @@ def armax(data: IOData | Sequence[IOData], na: int, nb: int, nc: int, nk: int = 
     tol : float
         Stop when the relative decrease of Σε² falls below this.
     """
-    orders = _Orders(check_order("na", na), check_order("nb", nb, 1), check_order("nc", nc), 0, 0,
-                     check_order("nk", nk))
+    orders = _Orders(
+        check_order("na", na),
+        check_order("nb", nb, 1),
+        check_order("nc", nc),
+        0,
+        0,
+        check_order("nk", nk),
+    )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_armax(orders, _init_subset(series))
-    return _finish(orders, theta0, experiments, series, "armax (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, theta0, experiments, series, "armax (prediction error, LM)", max_iter, tol
+    )
 
 
-def oe(data: IOData | Sequence[IOData], nb: int, nf: int, nk: int = 1, *,
-       max_iter: int = 50, tol: float = 1e-8) -> PolyModel:
+def oe(
+    data: IOData | Sequence[IOData],
+    nb: int,
+    nf: int,
+    nk: int = 1,
+    *,
+    max_iter: int = 50,
+    tol: float = 1e-8,
+) -> PolyModel:
     """Estimate an output-error model ``y = (B/F) u(t−nk) + e`` (MATLAB ``oe(data,[nb nf nk])``)."""
-    orders = _Orders(0, check_order("nb", nb, 1), 0, 0, check_order("nf", nf), check_order("nk", nk))
+    orders = _Orders(
+        0, check_order("nb", nb, 1), 0, 0, check_order("nf", nf), check_order("nk", nk)
+    )
     experiments, series = _prepare(data, orders)
     B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
     theta0 = orders.pack(np.ones(1), B, np.ones(1), np.ones(1), F)
     return _finish(orders, theta0, experiments, series, "oe (prediction error, LM)", max_iter, tol)
 
 
-def bj(data: IOData | Sequence[IOData], nb: int, nc: int, nd: int, nf: int, nk: int = 1, *,
-       max_iter: int = 50, tol: float = 1e-8) -> PolyModel:
+def bj(
+    data: IOData | Sequence[IOData],
+    nb: int,
+    nc: int,
+    nd: int,
+    nf: int,
+    nk: int = 1,
+    *,
+    max_iter: int = 50,
+    tol: float = 1e-8,
+) -> PolyModel:
     """Estimate a Box–Jenkins model ``y = (B/F) u(t−nk) + (C/D) e`` (MATLAB ``bj``)."""
-    orders = _Orders(0, check_order("nb", nb, 1), check_order("nc", nc), check_order("nd", nd),
-                     check_order("nf", nf), check_order("nk", nk))
+    orders = _Orders(
+        0,
+        check_order("nb", nb, 1),
+        check_order("nc", nc),
+        check_order("nd", nd),
+        check_order("nf", nf),
+        check_order("nk", nk),
+    )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_bj(orders, _init_subset(series))
     return _finish(orders, theta0, experiments, series, "bj (prediction error, LM)", max_iter, tol)
 
 
-def pem(data: IOData | Sequence[IOData], init: PolyModel, *, max_iter: int = 50,
-        tol: float = 1e-8) -> PolyModel:
+def pem(
+    data: IOData | Sequence[IOData], init: PolyModel, *, max_iter: int = 50, tol: float = 1e-8
+) -> PolyModel:
     """Refine any SISO ``PolyModel`` structure by prediction-error minimisation from ``init``."""
     if init.nu != 1:
         raise DataError("pem refines single-input models")

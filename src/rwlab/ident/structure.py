@@ -25,8 +25,9 @@ def _siso(data: IOData, what: str) -> None:
         raise DataError(f"{what} works on single-input single-output IOData")
 
 
-def delay_scan(data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0,
-               nk_max: int = 10) -> dict[int, float]:
+def delay_scan(
+    data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0, nk_max: int = 10
+) -> dict[int, float]:
     """Loss of ARX(na, nb, nk) for every nk in nk_min..nk_max (paper A, Fig. 16).
 
     Returns
@@ -69,12 +70,15 @@ class StructureLoss:
         return self.na + self.nb
 
 
-def arxstruc(est: IOData, val: IOData, orders: Iterable[tuple[int, int, int]]) -> list[StructureLoss]:
-    """Validation loss of ARX models fitted on ``est`` for each (na, nb, nk) (MATLAB ``arxstruc``)."""
+def arxstruc(
+    est: IOData, val: IOData, orders: Iterable[tuple[int, int, int]]
+) -> list[StructureLoss]:
+    """Validation loss of ARX(na, nb, nk) models fitted on ``est`` (MATLAB ``arxstruc``)."""
     _siso(est, "arxstruc")
     _siso(val, "arxstruc")
-    orders = [(check_order("na", a), check_order("nb", b, 1), check_order("nk", k))
-              for a, b, k in orders]
+    orders = [
+        (check_order("na", a), check_order("nb", b, 1), check_order("nk", k)) for a, b, k in orders
+    ]
     if not orders:
         raise DataError("arxstruc needs at least one (na, nb, nk) structure")
     n0 = max(first_row(a, [b], [k]) for a, b, k in orders)

@@ -61,7 +61,9 @@ def fpe(loss: float, n_params: int, n_samples: int) -> float:
     return loss * (1 + n_params / n_samples) / (1 - n_params / n_samples)
 
 
-def estimation_report(model, experiments: list[IOData], *, method: str, loss: float, **extra) -> dict:
+def estimation_report(
+    model, experiments: list[IOData], *, method: str, loss: float, **extra
+) -> dict:
     """The numbers MATLAB puts in ``Report.Fit``: one-step prediction fit on the estimation data."""
     y = np.concatenate([d.y[:, 0] for d in experiments])
     yhat = np.concatenate([model.predict(d, 1) for d in experiments])
@@ -178,7 +180,7 @@ class ResidResult:
 def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     """r(τ) = Σₜ a(t+τ) b(t) / N for τ = −max_lag..max_lag (biased estimate, FFT)."""
     n = a.size
-    size = 1 << int(math.ceil(math.log2(2 * n)))
+    size = 1 << math.ceil(math.log2(2 * n))
     full = np.fft.irfft(np.fft.rfft(a, size) * np.conj(np.fft.rfft(b, size)), size)
     return np.concatenate([full[-max_lag:], full[: max_lag + 1]]) / n if max_lag else full[:1] / n
 
