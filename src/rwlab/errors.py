@@ -25,3 +25,19 @@ class ConfigError(RwlabError, ValueError):
 
 class FileFormatError(RwlabError):
     """A file is truncated, of the wrong kind, or lacks required fields."""
+
+
+class WheelTimeout(RwlabError, TimeoutError):
+    """The wheel did not answer within the time allowed."""
+
+
+class WheelFault(RwlabError):
+    """The wheel reports a latched fault; clear it with ``WheelClient.clear_fault()``."""
+
+    def __init__(self, message: str, faults: int = 0) -> None:
+        super().__init__(message)
+        self.faults = faults
+
+
+class WheelCommandError(RwlabError, ValueError):
+    """A command outside the wheel's limits, refused before it was sent."""

@@ -1,0 +1,279 @@
+"""A simulated reaction wheel that answers on any python-can bus.
+
+``WheelNode`` runs :class:`WheelPhysics` and speaks the protocol of
+``rw.dbc``: it applies commands (after the configured latency), sends
+telemetry at a fixed rate and a heartbeat at 1 Hz and whenever a fault
+latches, and idles the wheel with a WATCHDOG fault when valid commands stop.
+``FaultInjection`` makes it misbehave on purpose.
+
+On a :class:`SimClock` the node advances whenever the clock does; on the wall
+clock, :meth:`WheelNode.start` runs it in a background thread.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+
+from rwlab.errors import ConfigError
+from rwlab.wheel import protocol as proto
+from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
+
+__all__ = ["FaultInjection", "WheelNode"]
+
+
+@dataclass
+class FaultInjection:
+    """Ways to make the simulated wheel misbehave (all off by default).
+
+    Attributes
+    ----------
+    drop_rate : float
+        Fraction of outgoing frames silently dropped.
+    corrupt_rate : float
+        Fraction of outgoing frames with one byte altered (fails the checksum).
+    extra_delay : float
+        Seconds added before every outgoing frame.
+    silent : bool
+        The node sends nothing at all.
+    stuck_speed : bool
+        Reported speed frozen at its value when this was switched on.
+    overcurrent : bool
+        The motor driver draws a current above the fault threshold.
+    """
+
+    drop_rate: float = 0.0
+    corrupt_rate: float = 0.0
+    extra_delay: float = 0.0
+    silent: bool = False
+    stuck_speed: bool = False
+    overcurrent: bool = False
+    _stuck_value: float | None = field(default=None, repr=False)
+
+
+class WheelNode:
+    """A simulated wheel on a CAN bus.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        Any python-can bus (virtual, socketcan, udp_multicast, or the SLIP serial bus).
+    node_id : int
+        0..15; selects the frame ids.
+    params : WheelParams
+        Physics parameters (default RW90).
+    clock : WallClock or SimClock
+        Time source; a SimClock drives the node as it advances.
+    telemetry_rate : float
+        Telemetry frames per second, 2..1000 Hz.
+    latency : float
+        Seconds between a command's arrival and its effect (default 0.02, the paper's).
+    watchdog : float
+        Seconds without a valid command before a moving wheel is idled with a
+        WATCHDOG fault; 0 disables.
+    physics_dt : float
+        Largest physics step, s.
+    faults : FaultInjection, optional
+    seed : int
+        For measurement noise and fault injection.
+    """
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        node_id: int = 0,
+        params: WheelParams = RW90,
+        *,
+        clock: WallClock | SimClock | None = None,
+        telemetry_rate: float = 100.0,
+        latency: float = 0.02,
+        watchdog: float = 1.0,
+        physics_dt: float = 1e-3,
+        faults: FaultInjection | None = None,
+        seed: int = 0,
+    ) -> None:
+        if not 2.0 <= telemetry_rate <= 1000.0:
+            raise ConfigError(f"telemetry_rate must be 2..1000 Hz, got {telemetry_rate}")
+        for name, value in (("latency", latency), ("watchdog", watchdog)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ConfigError(f"{name} must be ≥ 0 s, got {value}")
+        if not 0 < physics_dt <= 0.01:
+            raise ConfigError(f"physics_dt must be in (0, 0.01] s, got {physics_dt}")
+        self.bus = bus
+        self.node_id = proto._check_node(node_id)
+        self.clock = clock or WallClock()
+        self.wheel = WheelPhysics(params, seed)
+        self.period = 1.0 / telemetry_rate
+        self.latency = latency
+        self.watchdog = watchdog
+        self.physics_dt = physics_dt
+        self.inject = faults or FaultInjection()
+        self.rng = np.random.default_rng(seed + 1)
+        self.t = self.clock.now()
+        self.t0 = self.t
+        self._next_telemetry = self.t
+        self._next_heartbeat = self.t
+        self._pending: list[tuple[float, proto.Command]] = []
+        self._outbox: list[tuple[float, can.Message]] = []
+        self._last_command = self.t
+        self._applied_seq = 0
+        self._counter = 0
+        self.commands_seen = 0
+        self.bad_frames = 0
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        if isinstance(self.clock, SimClock):
+            self.clock.attach(self.poll)
+
+    # -- running -------------------------------------------------------------------
+    def poll(self, now: float) -> None:
+        """Receive frames, then run physics and send frames up to time ``now``."""
+        with self._lock:
+            self._receive(now)
+            while True:
+                events = [now, self._next_telemetry, self._next_heartbeat]
+                events += [t for t, _ in self._pending[:1]]
+                events += [t for t, _ in self._outbox[:1]]
+                t_next = max(self.t, min(events))
+                self._advance(t_next)
+                self._handle_events()
+                if self.t >= now:
+                    break
+
+    def _receive(self, now: float) -> None:
+        simulated = isinstance(self.clock, SimClock)
+        while (msg := self.bus.recv(timeout=0)) is not None:
+            try:
+                frame = proto.decode(msg)
+            except proto.ProtocolError:
+                self.bad_frames += 1
+                continue
+            if not isinstance(frame, proto.Command) or frame.node_id != self.node_id:
+                continue
+            arrival = msg.timestamp if simulated else now
+            self._pending.append((max(arrival, self.t) + self.latency, frame))
+            self._pending.sort(key=lambda p: p[0])
+
+    def _advance(self, t_next: float) -> None:
+        span = t_next - self.t
+        if span > 0:
+            steps = max(1, math.ceil(span / self.physics_dt - 1e-9))
+            h = span / steps
+            for _ in range(steps):
+                self.wheel.step(h)
+        self.t = t_next
+
+    def _handle_events(self) -> None:
+        faults_before = self.wheel.faults
+        while self._pending and self._pending[0][0] <= self.t:
+            _, cmd = self._pending.pop(0)
+            self.commands_seen += 1
+            self._last_command = self.t
+            self._applied_seq = cmd.sequence
+            self.wheel.command(cmd.mode, cmd.setpoint)
+        if self.inject.overcurrent:
+            self.wheel.forced_current = 2 * self.wheel.params.overcurrent_fault
+        wd = self.watchdog
+        if wd and self.wheel.mode != Mode.IDLE and self.t - self._last_command > wd:
+            self.wheel.latch(Fault.WATCHDOG)
+        if self.t >= self._next_telemetry:
+            self._queue(proto.encode_telemetry(self._telemetry()))
+            self._next_telemetry += self.period
+            if self._next_telemetry <= self.t:  # fell behind (wall clock): do not burst
+                self._next_telemetry = self.t + self.period
+        if self.t >= self._next_heartbeat or self.wheel.faults != faults_before:
+            self._queue(
+                proto.encode_heartbeat(
+                    proto.Heartbeat(
+                        self.node_id,
+                        self.wheel.mode,
+                        self.wheel.faults,
+                        self.wheel.temperature,
+                        int(self.t - self.t0),
+                        self.commands_seen,
+                    )
+                )
+            )
+            if self.t >= self._next_heartbeat:
+                self._next_heartbeat += 1.0
+        self._flush()
+
+    def _telemetry(self) -> proto.Telemetry:
+        speed = self.wheel.measured_speed_rpm()
+        if self.inject.stuck_speed:
+            if self.inject._stuck_value is None:
+                self.inject._stuck_value = speed
+            speed = self.inject._stuck_value
+        self._counter = (self._counter + 1) & 0xFF
+        return proto.Telemetry(
+            self.node_id,
+            speed,
+            self.wheel.current,
+            self.wheel.mode,
+            bool(self.wheel.faults),
+            self.wheel.speed_limited,
+            self._applied_seq,
+            self._counter,
+        )
+
+    def _queue(self, msg: can.Message) -> None:
+        self._outbox.append((self.t + self.inject.extra_delay, msg))
+
+    def _flush(self) -> None:
+        while self._outbox and self._outbox[0][0] <= self.t:
+            release, msg = self._outbox.pop(0)
+            if self.inject.silent or self.rng.random() < self.inject.drop_rate:
+                continue
+            if self.rng.random() < self.inject.corrupt_rate:
+                data = bytearray(msg.data)
+                data[int(self.rng.integers(0, 7))] ^= 0xA5
+                msg = can.Message(
+                    arbitration_id=msg.arbitration_id, data=data, is_extended_id=False
+                )
+            msg.timestamp = release
+            try:
+                self.bus.send(msg)
+            except can.CanError:
+                self.bad_frames += 1  # a full or broken bus must not kill the wheel
+
+    # -- wall-clock thread -------------------------------------------------------------
+    def start(self, poll_period: float = 2e-4) -> WheelNode:
+        """Run on the wall clock in a background thread (not for a SimClock)."""
+        if isinstance(self.clock, SimClock):
+            raise ConfigError("a node on a SimClock runs when the clock advances; do not start it")
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(
+                target=self._run,
+                args=(poll_period,),
+                daemon=True,
+                name=f"wheel-node-{self.node_id}",
+            )
+            self._thread.start()
+        return self
+
+    def _run(self, poll_period: float) -> None:
+        while not self._stop.is_set():
+            self.poll(self.clock.now())
+            self._stop.wait(poll_period)
+
+    def stop(self) -> None:
+        """Stop the thread (if any) and detach from a SimClock."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if isinstance(self.clock, SimClock):
+            self.clock.detach(self.poll)
+
+    def __enter__(self) -> WheelNode:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,198 @@
+"""The wheel's CAN protocol: one DBC file (``rw.dbc``) for the simulated node and the driver.
+
+Frame ids carry the node id in their low 4 bits (``0x100 + node`` commands,
+``0x180 + node`` telemetry, ``0x700 + node`` heartbeat), so up to 16 wheels
+share a bus. Byte 7 of every frame is a checksum (sum of bytes 0..6 mod 256),
+so a corrupted payload is detected and dropped, never acted on.
+Encoding and decoding are cantools'; only the checksum and the node-id
+masking are written here.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+
+import can
+import cantools
+
+from rwlab.errors import RwlabError
+from rwlab.wheel.physics import Fault, Mode
+
+__all__ = [
+    "COMMAND_ID",
+    "HEARTBEAT_ID",
+    "TELEMETRY_ID",
+    "Command",
+    "Heartbeat",
+    "ProtocolError",
+    "Telemetry",
+    "dbc_sha256",
+    "decode",
+    "encode_command",
+    "encode_heartbeat",
+    "encode_telemetry",
+]
+
+COMMAND_ID, TELEMETRY_ID, HEARTBEAT_ID = 0x100, 0x180, 0x700
+BITRATE = 1_000_000
+MAX_NODE_ID = 15
+
+
+class ProtocolError(RwlabError):
+    """A frame that is not a valid wheel message (bad length, checksum or value)."""
+
+
+@cache
+def database() -> cantools.database.Database:
+    """The parsed ``rw.dbc``."""
+    text = resources.files(__package__).joinpath("rw.dbc").read_text()
+    return cantools.database.load_string(text, database_format="dbc")
+
+
+def dbc_sha256() -> str:
+    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol."""
+    return hashlib.sha256(resources.files(__package__).joinpath("rw.dbc").read_bytes()).hexdigest()
+
+
+@dataclass(frozen=True)
+class Command:
+    """A host command. ``setpoint`` is rpm (SPEED) or rpm/s (ACCELERATION)."""
+
+    node_id: int
+    mode: Mode
+    setpoint: float
+    sequence: int
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """A wheel's telemetry frame. Speed in rpm, current in A."""
+
+    node_id: int
+    speed_rpm: float
+    current: float
+    mode: Mode
+    fault_active: bool
+    speed_limited: bool
+    sequence_echo: int
+    counter: int
+
+
+@dataclass(frozen=True)
+class Heartbeat:
+    """A wheel's status frame: latched faults, temperature (°C), uptime (s)."""
+
+    node_id: int
+    mode: Mode
+    faults: Fault
+    temperature: float
+    uptime: int
+    commands_seen: int
+
+
+def _check_node(node_id: int) -> int:
+    if not isinstance(node_id, int) or not 0 <= node_id <= MAX_NODE_ID:
+        raise ProtocolError(f"node id must be an integer 0..{MAX_NODE_ID}, got {node_id!r}")
+    return node_id
+
+
+def _frame(base: int, node_id: int, name: str, signals: dict) -> can.Message:
+    data = bytearray(database().get_message_by_name(name).encode({**signals, "Checksum": 0}))
+    data[7] = sum(data[:7]) & 0xFF
+    return can.Message(arbitration_id=base + _check_node(node_id), data=data, is_extended_id=False)
+
+
+def encode_command(cmd: Command) -> can.Message:
+    """CAN frame for a command; raises ProtocolError for values the frame cannot carry."""
+    if not math.isfinite(cmd.setpoint) or abs(cmd.setpoint) > 1e6:
+        raise ProtocolError(f"setpoint must be finite and within ±1e6, got {cmd.setpoint}")
+    return _frame(
+        COMMAND_ID,
+        cmd.node_id,
+        "RW_Command",
+        {
+            "Setpoint": float(cmd.setpoint),
+            "Mode": int(cmd.mode),
+            "Sequence": cmd.sequence & 0xFF,
+        },
+    )
+
+
+def encode_telemetry(t: Telemetry) -> can.Message:
+    """CAN frame for telemetry (speed clipped to the field's range)."""
+    return _frame(
+        TELEMETRY_ID,
+        t.node_id,
+        "RW_Telemetry",
+        {
+            "Speed": max(-83886.08, min(83886.07, round(t.speed_rpm, 2))),
+            "Current": max(-2.048, min(2.047, round(t.current, 3))),
+            "Mode": int(t.mode) & 0x3,
+            "FaultActive": int(t.fault_active),
+            "SpeedLimited": int(t.speed_limited),
+            "SequenceEcho": t.sequence_echo & 0xFF,
+            "Counter": t.counter & 0xFF,
+        },
+    )
+
+
+def encode_heartbeat(h: Heartbeat) -> can.Message:
+    """CAN frame for a heartbeat."""
+    return _frame(
+        HEARTBEAT_ID,
+        h.node_id,
+        "RW_Heartbeat",
+        {
+            "Mode": int(h.mode) & 0x3,
+            "Faults": int(h.faults) & 0xFF,
+            "Temperature": max(-40.0, min(87.5, round(h.temperature * 2) / 2)),
+            "Uptime": min(int(h.uptime), 0xFFFF),
+            "CommandsSeen": int(h.commands_seen) & 0xFFFF,
+        },
+    )
+
+
+def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
+    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones."""
+    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
+        return None
+    base, node = msg.arbitration_id & ~0xF, msg.arbitration_id & 0xF
+    names = {COMMAND_ID: "RW_Command", TELEMETRY_ID: "RW_Telemetry", HEARTBEAT_ID: "RW_Heartbeat"}
+    if base not in names:
+        return None
+    data = bytes(msg.data)
+    if len(data) != 8:
+        raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} has {len(data)} bytes, expected 8")
+    if sum(data[:7]) & 0xFF != data[7]:
+        raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} fails its checksum")
+    s = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    try:
+        if base == COMMAND_ID:
+            if not math.isfinite(s["Setpoint"]):
+                raise ProtocolError("command setpoint is not a finite number")
+            return Command(node, Mode(s["Mode"]), float(s["Setpoint"]), int(s["Sequence"]))
+        if base == TELEMETRY_ID:
+            return Telemetry(
+                node,
+                float(s["Speed"]),
+                float(s["Current"]),
+                Mode(s["Mode"]),
+                bool(s["FaultActive"]),
+                bool(s["SpeedLimited"]),
+                int(s["SequenceEcho"]),
+                int(s["Counter"]),
+            )
+        return Heartbeat(
+            node,
+            Mode(s["Mode"]),
+            Fault(int(s["Faults"]) & 0xF),
+            float(s["Temperature"]),
+            int(s["Uptime"]),
+            int(s["CommandsSeen"]),
+        )
+    except ValueError as exc:  # an out-of-range enum value
+        raise ProtocolError(f"frame 0x{msg.arbitration_id:03X}: {exc}") from None

@@ -1,0 +1,142 @@
+"""RS-232 transport: the wheel's CAN frames over a serial line, as a python-can bus.
+
+Each frame travels as ``id (2 bytes, big-endian) | length (1) | data | CRC-16``
+inside SLIP framing (RFC 1055). The CRC is CRC-16/CCITT-FALSE (poly 0x1021,
+init 0xFFFF), the pair real wheels use. Frames whose CRC fails are dropped and
+counted, never delivered. Because :class:`SlipSerialBus` is a ``can.BusABC``,
+``WheelClient`` and ``WheelNode`` work over it unchanged.
+
+SLIP and the CRC are a few lines each and no maintained package provides the
+pair for pyserial, so they are written here.
+"""
+
+from __future__ import annotations
+
+import time
+
+import can
+
+__all__ = ["SlipSerialBus", "crc16_ccitt", "slip_decode", "slip_encode"]
+
+END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
+
+
+def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
+    """CRC-16/CCITT-FALSE of ``data``."""
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
+            crc &= 0xFFFF
+    return crc
+
+
+def slip_encode(payload: bytes) -> bytes:
+    """Frame ``payload`` with SLIP: END, escaped bytes, END."""
+    body = payload.replace(bytes([ESC]), bytes([ESC, ESC_ESC])).replace(
+        bytes([END]), bytes([ESC, ESC_END])
+    )
+    return bytes([END]) + body + bytes([END])
+
+
+def slip_decode(body: bytes) -> bytes:
+    """Undo SLIP escaping of one frame body (without its END bytes); ValueError if malformed."""
+    out = bytearray()
+    it = iter(body)
+    for byte in it:
+        if byte == ESC:
+            nxt = next(it, None)
+            if nxt == ESC_END:
+                out.append(END)
+            elif nxt == ESC_ESC:
+                out.append(ESC)
+            else:
+                raise ValueError("bad SLIP escape")
+        else:
+            out.append(byte)
+    return bytes(out)
+
+
+def pack(msg: can.Message) -> bytes:
+    """One CAN frame as a CRC-protected serial payload."""
+    head = msg.arbitration_id.to_bytes(2, "big") + bytes([len(msg.data)]) + bytes(msg.data)
+    return head + crc16_ccitt(head).to_bytes(2, "big")
+
+
+def unpack(payload: bytes) -> can.Message | None:
+    """Inverse of :func:`pack`; None when the length or the CRC is wrong."""
+    if len(payload) < 5 or len(payload) != 5 + payload[2] or payload[2] > 8:
+        return None
+    if crc16_ccitt(payload[:-2]) != int.from_bytes(payload[-2:], "big"):
+        return None
+    return can.Message(
+        arbitration_id=int.from_bytes(payload[:2], "big"), data=payload[3:-2], is_extended_id=False
+    )
+
+
+class SlipSerialBus(can.BusABC):
+    """A python-can bus over a serial port (pyserial) with SLIP framing and CRC-16.
+
+    Parameters
+    ----------
+    port : serial.Serial or str
+        An open pyserial port, or a pyserial URL/device name (``/dev/ttyUSB0``,
+        ``loop://``) opened at ``baudrate``.
+    baudrate : int
+        Line speed when ``port`` is a name (default 115200).
+    """
+
+    def __init__(self, port, baudrate: int = 115200, **kwargs) -> None:
+        import serial
+
+        if isinstance(port, str):
+            port = serial.serial_for_url(port, baudrate=baudrate, timeout=0)
+        self.port = port
+        self._buffer = bytearray()
+        self.bad_frames = 0
+        super().__init__(channel=getattr(port, "name", str(port)), **kwargs)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.port.write(slip_encode(pack(msg)))
+
+    def _recv_internal(self, timeout: float | None):
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            msg = self._next_frame()
+            if msg is not None:
+                msg.timestamp = time.time()
+                return msg, False
+            waiting = self.port.in_waiting
+            if waiting:
+                self._buffer += self.port.read(waiting)
+                continue
+            if deadline is not None and time.monotonic() >= deadline:
+                return None, False
+            time.sleep(1e-4)
+
+    def _next_frame(self) -> can.Message | None:
+        while True:
+            start = self._buffer.find(END)
+            if start < 0:
+                self._buffer.clear()
+                return None
+            end = self._buffer.find(END, start + 1)
+            if end < 0:
+                del self._buffer[:start]
+                return None
+            body = bytes(self._buffer[start + 1 : end])
+            del self._buffer[:end]  # keep the closing END: it may open the next frame
+            if not body:
+                continue
+            try:
+                msg = unpack(slip_decode(body))
+            except ValueError:
+                msg = None
+            if msg is None:
+                self.bad_frames += 1
+                continue
+            return msg
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.port.close()
