@@ -20,13 +20,15 @@ _META_PREFIX = "# rwlab "
 _TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
 
 
-def write(data: IOData, path: Path, *, overwrite: bool) -> Path:
+def write(data: IOData, path: Path, *, overwrite: bool, plain: bool = False) -> Path:
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
     suffix = path.suffix.lower()
     writers = {".csv": _write_csv, ".parquet": _write_parquet, ".mat": _write_mat}
     if suffix not in writers:
         raise DataError(f"unknown data file type {suffix!r}; use .csv, .parquet or .mat")
+    if suffix == ".csv":
+        return atomic_write_bytes(path, lambda tmp: _write_csv(data, tmp, plain=plain))
     return atomic_write_bytes(path, lambda tmp: writers[suffix](data, tmp))
 
 
@@ -133,10 +135,11 @@ def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns
 
 
 # -- CSV ----------------------------------------------------------------------------
-def _write_csv(data: IOData, tmp: Path) -> None:
+def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     names, table = _columns(data)
     with open(tmp, "w", newline="") as fh:
-        fh.write(_META_PREFIX + _meta(data) + "\n")
+        if not plain:
+            fh.write(_META_PREFIX + _meta(data) + "\n")
         writer = csv.writer(fh)
         writer.writerow(names)
         writer.writerows([[repr(float(v)) for v in row] for row in table])

@@ -442,3 +442,97 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
             node.stop()
             node.bus.shutdown()
         bus.shutdown()
+
+
+# -- the testbed ----------------------------------------------------------------------
+
+
+@main.command("experiment")
+@click.option("--config", "config_file", type=click.Path(dir_okay=False),
+              help="Experiment TOML file ([experiment] table); flags override it.")
+@click.option("--signal", type=click.Choice(["prbs", "chirp", "step", "multisine", "file"]))
+@click.option("--mode", type=click.Choice(["speed", "acceleration"]))
+@click.option("--amplitude", type=float, help="rpm in speed mode, rpm/s in acceleration mode.")
+@click.option("--duration", type=float, help="Seconds of signal.")
+@click.option("--Ts", "Ts", type=float, help="Command period, s.")
+@click.option("--out", type=click.Path(dir_okay=False), required=True, help="Record file (.mcap).")
+@click.option("--realtime", is_flag=True, default=None, help="Run on the wall clock.")
+@click.option("--telemetry-rate", type=float, help="Simulated wheel's telemetry rate, Hz.")
+@click.option("--seed", type=int)
+@click.option("--file", "setpoint_file", type=click.Path(dir_okay=False),
+              help="CSV of setpoints for --signal file.")
+@click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
+@click.option("--channel")
+@click.option("--node-id", type=click.IntRange(0, 15))
+@click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
+@click.option("--port", type=int, default=5006, show_default=True, help="Monitor port.")
+@click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
+@_friendly_errors
+def experiment(config_file, signal, mode, amplitude, duration, Ts, out, realtime, telemetry_rate,
+               seed, setpoint_file, interface, channel, node_id, raw_frames, monitor, port, force):
+    """Play a test signal into a wheel and record every command and telemetry frame.
+
+    With the default virtual interface a simulated RW90 answers, on a simulated
+    clock (a 20-minute experiment takes seconds) unless --realtime is given.
+    Ctrl-C or any error leaves the wheel idle and the record closed.
+    """
+    from rwlab.testbed import ExperimentConfig, run_experiment
+
+    overrides = dict(signal=signal, mode=mode, amplitude=amplitude, duration=duration, Ts=Ts,
+                     realtime=realtime, telemetry_rate=telemetry_rate, seed=seed,
+                     file=setpoint_file, interface=interface, channel=channel, node_id=node_id,
+                     raw_frames=raw_frames)
+    if config_file:
+        cfg = ExperimentConfig.from_toml(config_file, **overrides)
+    else:
+        cfg = ExperimentConfig(**{k: v for k, v in overrides.items() if v is not None})
+    from rwlab.wheel import RW90
+
+    cfg.check_limits(RW90)
+    if Path(out).exists() and not force:
+        raise FileExistsError(f"{out} exists; pass --force to overwrite it")
+    server = None
+    if monitor:
+        from rwlab.testbed.monitor import serve_in_thread
+
+        server = serve_in_thread(out, port=port, wait_for_file=True)
+        click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
+    n = int(round(cfg.duration / cfg.Ts))
+    label = f"{cfg.signal} ({cfg.mode}, {'real time' if cfg.realtime else 'simulated clock'})"
+    try:
+        with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
+            summary = run_experiment(cfg, out, force=force,
+                                     progress=lambda k, total: bar.update(1))
+    except KeyboardInterrupt:
+        click.echo(f"\ninterrupted: the wheel is idle and {out} is closed", err=True)
+        sys.exit(130)
+    finally:
+        if server is not None:
+            server.stop()
+    click.echo(f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
+               f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})")
+
+
+@main.command("export")
+@click.argument("record", type=click.Path(dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "mat"]), required=True)
+@click.option("--out", type=click.Path(dir_okay=False), required=True)
+@click.option("--Ts", "Ts", type=float, help="Sample time, s (default: the record's).")
+@click.option("--max-gap", type=float, default=None,
+              help="Accept telemetry gaps up to this many seconds (default Ts).")
+@click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
+@_friendly_errors
+def export(record, fmt, out, Ts, max_gap, force):
+    """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
+
+    Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a.
+    """
+    from rwlab.testbed import load_record
+
+    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
+    path = Path(out)
+    if path.suffix.lower() != f".{fmt}":
+        path = path.with_suffix(f".{fmt}") if not path.suffix else path
+    data.write(path, overwrite=force, plain=True)
+    click.echo(f"{path}: {data.N} samples at Ts = {data.Ts:g} s")

@@ -337,15 +337,17 @@ class IOData:
             "trend": self.trend.to_dict(),
         }
 
-    def write(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    def write(self, path: str | os.PathLike, *, overwrite: bool = False,
+              plain: bool = False) -> Path:
         """Write to ``.csv``, ``.parquet`` or ``.mat`` (chosen by suffix), atomically.
 
         The file appears complete or not at all. An existing file is an error
-        unless ``overwrite=True``.
+        unless ``overwrite=True``. ``plain=True`` leaves out rwlab's metadata
+        line at the top of a CSV, for tools that expect the header first.
         """
         from rwlab import _io
 
-        return _io.write(self, Path(path), overwrite=overwrite)
+        return _io.write(self, Path(path), overwrite=overwrite, plain=plain)
 
 
 def merge(*datasets: IOData) -> list[IOData]:

@@ -41,3 +41,7 @@ class WheelFault(RwlabError):
 
 class WheelCommandError(RwlabError, ValueError):
     """A command outside the wheel's limits, refused before it was sent."""
+
+
+class RecordGapError(DataError):
+    """A record has gaps in its telemetry longer than the caller accepts."""

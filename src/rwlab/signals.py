@@ -227,14 +227,18 @@ def multisine(
     return amplitude * x / np.max(np.abs(x))
 
 
-def rate_limit(x, max_rate: float, Ts: float) -> np.ndarray:
-    """Follow ``x`` with a slope of at most ``max_rate`` per second (a new array)."""
+def rate_limit(x, max_rate: float, Ts: float, initial: float | None = None) -> np.ndarray:
+    """Follow ``x`` with a slope of at most ``max_rate`` per second (a new array).
+
+    ``initial`` is the value before the first sample (default: ``x[0]``, no
+    initial jump limited); pass 0 for a wheel starting at rest.
+    """
     Ts = check_Ts(Ts)
     max_rate = _positive("max_rate", max_rate)
     src = np.asarray(x, dtype=float)
     out = np.empty_like(src)
     step = max_rate * Ts
-    prev = src[0] if src.size else 0.0
+    prev = (src[0] if src.size else 0.0) if initial is None else float(initial)
     for i, target in enumerate(src):
         prev += min(max(target - prev, -step), step)
         out[i] = prev

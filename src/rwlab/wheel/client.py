@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import can
 
@@ -65,6 +65,9 @@ class WheelClient:
         self.lost_frames = 0
         self._sequence = 0
         self._sent_at: dict[int, float] = {}
+        self._inbox: list[tuple[float, proto.Telemetry | proto.Heartbeat]] = []
+        self.frame_listener: Callable[[can.Message, str], None] | None = None
+        """Called with every raw frame and 'rx' or 'tx' (for recording the bus)."""
 
     # -- commands --------------------------------------------------------------------
     def set_speed(self, rpm: float) -> int:
@@ -105,6 +108,8 @@ class WheelClient:
         )
         msg.timestamp = self.clock.now()
         self.bus.send(msg)
+        if self.frame_listener:
+            self.frame_listener(msg, "tx")
         self._sent_at[self._sequence] = msg.timestamp
         return self._sequence
 
@@ -113,6 +118,8 @@ class WheelClient:
         """Read every frame waiting on the bus; returns the new telemetry with times (s)."""
         new = []
         while (msg := self.bus.recv(timeout=0)) is not None:
+            if self.frame_listener:
+                self.frame_listener(msg, "rx")
             try:
                 frame = proto.decode(msg)
             except proto.ProtocolError:
@@ -129,7 +136,18 @@ class WheelClient:
                 new.append((t, frame))
             elif isinstance(frame, proto.Heartbeat):
                 self.heartbeat = frame
+            self._inbox.append((t, frame))
         return new
+
+    def drain(self) -> list[tuple[float, proto.Telemetry | proto.Heartbeat]]:
+        """Every telemetry and heartbeat frame received since the last drain, in order.
+
+        Unlike :meth:`poll`, this includes frames read inside commands and waits,
+        so a recorder that drains loses nothing.
+        """
+        self.poll()
+        out, self._inbox = self._inbox, []
+        return out
 
     @property
     def faults(self) -> Fault:

@@ -1,0 +1,99 @@
+"""Turn an experiment record into an ``IOData`` on a uniform time grid."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from rwlab.data import IOData, check_Ts
+from rwlab.errors import DataError, RecordGapError
+from rwlab.testbed.record import read_record
+
+__all__ = ["load_record", "telemetry_gaps"]
+
+OUTPUTS = {
+    "speed": ("speed_rpm", "rpm"),
+    "acceleration": ("acceleration_rpm_s", "rpm/s"),
+    "current": ("current_a", "A"),
+}
+
+
+def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
+    """(start time, length) of every interval between telemetry frames longer than ``max_gap`` s."""
+    if times.size < 2:
+        return []
+    steps = np.diff(times)
+    idx = np.flatnonzero(steps > max_gap)
+    return [(float(times[i]), float(steps[i])) for i in idx]
+
+
+def load_record(path: str | os.PathLike, Ts: float | None = None, *,
+                outputs: tuple[str, ...] = ("speed",), max_gap: float | None = None) -> IOData:
+    """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
+
+    Parameters
+    ----------
+    path : path-like
+        An ``.mcap`` record written by ``rwlab experiment``.
+    Ts : float, optional
+        Sample time in seconds (default: the record's command period).
+    outputs : tuple of {'speed', 'acceleration', 'current'}
+        Output channels: measured speed (rpm), acceleration derived from it by a
+        backward difference over Ts (rpm/s), motor current (A).
+    max_gap : float, optional
+        Longest accepted interval between telemetry frames, s (default Ts).
+        Longer gaps raise ``RecordGapError`` listing them; pass ``numpy.inf``
+        to accept them.
+
+    Returns
+    -------
+    IOData
+        u = the command (rpm or rpm/s), y = the chosen outputs; sample k is the
+        last value received at or before t₀ + k·Ts, t₀ the first command.
+    """
+    record = read_record(path)
+    meta = record.metadata
+    if Ts is None:
+        Ts = meta.get("Ts")
+    Ts = check_Ts(Ts)
+    unknown = [o for o in outputs if o not in OUTPUTS]
+    if unknown or not outputs:
+        raise DataError(f"outputs must be chosen from {sorted(OUTPUTS)}, got {list(outputs)}")
+    commands = record.topic("/command")
+    telemetry = record.topic("/telemetry")
+    if not commands or len(telemetry) < 2:
+        raise DataError(f"{path}: the record holds no experiment (no commands or telemetry)")
+    tc = np.array([c["t"] for c in commands])
+    uc = np.array([c["setpoint"] for c in commands])
+    tt = np.array([m["t"] for m in telemetry])
+    gaps = telemetry_gaps(tt, Ts if max_gap is None else max_gap)
+    if gaps:
+        shown = ", ".join(f"{length:.3g} s at t = {start - tc[0]:.3g} s" for start, length in gaps[:5])
+        raise RecordGapError(
+            f"{path}: {len(gaps)} telemetry gap(s) longer than {max_gap or Ts:g} s ({shown}"
+            f"{', ...' if len(gaps) > 5 else ''}); frames were lost, so samples there are stale. "
+            "Pass max_gap to accept them.")
+    t0 = tc[0]
+    n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1
+    grid = t0 + Ts * np.arange(n)
+    eps = 1e-9 * max(1.0, abs(grid[-1]))
+    u = uc[np.searchsorted(tc, grid + eps, side="right") - 1]
+    last = np.searchsorted(tt, grid + eps, side="right") - 1
+    if last[0] < 0:  # no telemetry yet at the first command: start the grid at the first frame
+        keep = last >= 0
+        grid, u, last = grid[keep], u[keep], last[keep]
+    speed = np.array([m["speed_rpm"] for m in telemetry])[last]
+    columns = {
+        "speed": speed,
+        "acceleration": np.concatenate([[0.0], np.diff(speed) / Ts]),
+        "current": np.array([m["current_a"] for m in telemetry])[last],
+    }
+    mode = meta.get("mode", "speed")
+    return IOData(
+        u, np.column_stack([columns[o] for o in outputs]), Ts,
+        input_names=["command"], output_names=[OUTPUTS[o][0] for o in outputs],
+        input_units=["rpm" if mode == "speed" else "rpm/s"],
+        output_units=[OUTPUTS[o][1] for o in outputs], tstart=float(grid[0] - t0),
+        name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
+    )

@@ -1,0 +1,240 @@
+"""Experiment records: one append-only MCAP file per experiment.
+
+Why MCAP: it is an open, self-describing log format that common tools read
+(Foxglove, the ``mcap`` CLI, Python/C++/Rust/Go readers), and written
+*unchunked* every message lands in the file as soon as it is written. The
+writer flushes to the operating system at least every ``FLUSH_PERIOD`` s of
+wall time, so a recorder killed with SIGKILL loses at most the last 100 ms,
+and the partial file still opens (without its closing index). ``close()``
+writes the summary and footer.
+
+Channels (JSON messages, JSON-schema described):
+
+- ``/command``   — t (s), sequence, mode, setpoint (rpm or rpm/s)
+- ``/telemetry`` — t, speed_rpm, current_a, mode, fault_active, speed_limited,
+  sequence_echo, counter
+- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s
+- ``/event``     — t, kind, message (start, stop, fault, interrupt, error)
+- ``/can``       — t, id, data (hex), direction (only if raw frames are recorded)
+
+The ``rwlab`` metadata record holds the wheel parameters, the signal recipe,
+Ts, the rwlab version and the DBC's SHA-256.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Footer, Message, Metadata
+from mcap.stream_reader import StreamReader
+from mcap.writer import Writer
+
+from rwlab.errors import FileFormatError
+
+__all__ = ["CHANNELS", "Record", "RecordWriter", "read_record"]
+
+FLUSH_PERIOD = 0.05  # s of wall time between flushes to the OS (the promise is 100 ms)
+MAGIC = b"\x89MCAP0\r\n"
+
+_NUM = {"type": "number"}
+_INT = {"type": "integer"}
+CHANNELS: dict[str, dict] = {
+    "/command": {"t": _NUM, "sequence": _INT, "mode": {"type": "string"}, "setpoint": _NUM},
+    "/telemetry": {
+        "t": _NUM, "speed_rpm": _NUM, "current_a": _NUM, "mode": {"type": "string"},
+        "fault_active": {"type": "boolean"}, "speed_limited": {"type": "boolean"},
+        "sequence_echo": _INT, "counter": _INT,
+    },
+    "/heartbeat": {"t": _NUM, "mode": {"type": "string"}, "faults": _INT,
+                   "temperature_c": _NUM, "uptime_s": _INT},
+    "/event": {"t": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
+    "/can": {"t": _NUM, "id": _INT, "data": {"type": "string"}, "direction": {"type": "string"}},
+}
+
+
+def _schema(topic: str) -> bytes:
+    props = CHANNELS[topic]
+    return json.dumps({
+        "title": f"rwlab{topic.replace('/', '.')}",
+        "type": "object",
+        "properties": props,
+        "required": list(props),
+    }).encode()
+
+
+class RecordWriter:
+    """Write one experiment record.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.mcap`` file. An existing file is an error unless ``force``.
+    metadata : dict
+        JSON-serialisable description (wheel, signal, Ts, versions).
+    force : bool
+        Replace an existing file.
+    """
+
+    def __init__(self, path: str | os.PathLike, metadata: dict, *, force: bool = False) -> None:
+        self.path = Path(path)
+        if self.path.exists() and not force:
+            raise FileExistsError(f"{self.path} exists; use --force (force=True) to replace it")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
+        self._writer.start(profile="rwlab", library="rwlab")
+        self._channels = {}
+        for topic in CHANNELS:
+            sid = self._writer.register_schema(name=f"rwlab{topic.replace('/', '.')}",
+                                               encoding="jsonschema", data=_schema(topic))
+            self._channels[topic] = self._writer.register_channel(
+                topic=topic, message_encoding="json", schema_id=sid)
+        self._writer.add_metadata("rwlab", {"json": json.dumps(metadata)})
+        self._fh.flush()
+        self._last_flush = time.monotonic()
+        self.counts = dict.fromkeys(CHANNELS, 0)
+        self.closed = False
+
+    def write(self, topic: str, message: dict) -> None:
+        """Append one message; ``message['t']`` is its time in seconds."""
+        if self.closed:
+            raise FileFormatError(f"{self.path} is closed")
+        stamp = max(0, int(round(message["t"] * 1e9)))
+        self._writer.add_message(self._channels[topic], log_time=stamp, publish_time=stamp,
+                                 data=json.dumps(message, separators=(",", ":")).encode())
+        self.counts[topic] += 1
+        now = time.monotonic()
+        if now - self._last_flush >= FLUSH_PERIOD:
+            self._fh.flush()
+            self._last_flush = now
+
+    def event(self, t: float, kind: str, message: str = "") -> None:
+        """Record an event (start, stop, fault, interrupt, error, ...)."""
+        self.write("/event", {"t": t, "kind": kind, "message": message})
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file (safe to call twice)."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+
+    def __enter__(self) -> RecordWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class Record:
+    """An experiment record read back.
+
+    Attributes
+    ----------
+    metadata : dict
+        The ``rwlab`` metadata (empty if the file lost it).
+    messages : dict
+        topic → list of message dicts, in file order.
+    complete : bool
+        True when the file was closed properly (it has its footer).
+    problem : str
+        Why reading stopped early, when it did.
+    """
+
+    path: Path
+    metadata: dict = field(default_factory=dict)
+    messages: dict = field(default_factory=lambda: {t: [] for t in CHANNELS})
+    complete: bool = False
+    problem: str = ""
+
+    def topic(self, name: str) -> list[dict]:
+        return self.messages.get(name, [])
+
+
+def _parse(stream, record: Record, topics: dict[int, str]) -> None:
+    for r in StreamReader(stream, skip_magic=False).records:
+        if isinstance(r, Channel):
+            topics[r.id] = r.topic
+        elif isinstance(r, Message):
+            topic = topics.get(r.channel_id)
+            if topic in record.messages:
+                record.messages[topic].append(json.loads(r.data))
+        elif isinstance(r, Metadata) and r.name == "rwlab":
+            record.metadata = json.loads(r.metadata.get("json", "{}"))
+        elif isinstance(r, Footer):
+            record.complete = True
+
+
+def read_record(path: str | os.PathLike) -> Record:
+    """Read a record, tolerating a truncated end (a crashed recorder).
+
+    Raises ``FileFormatError`` for a file that is not an MCAP record at all.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such record: {path}")
+    data = path.read_bytes()
+    if not data.startswith(MAGIC):
+        raise FileFormatError(f"{path}: not an MCAP record (bad magic bytes)")
+    record = Record(path)
+    try:
+        _parse(io.BytesIO(data), record, {})
+    except (McapError, struct.error, EOFError, ValueError, json.JSONDecodeError) as exc:
+        record.problem = f"file ends early or is damaged ({type(exc).__name__}: {exc})"
+    if not record.metadata:
+        raise FileFormatError(f"{path}: an MCAP file, but not an rwlab record (no rwlab metadata)")
+    return record
+
+
+class RecordFollower:
+    """Read a record that is still being written, a little more on each call.
+
+    Only complete MCAP records are parsed, so a half-written message is never
+    seen; the writer is never blocked (this only reads the file).
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self._offset = len(MAGIC)
+        self._topics: dict[int, str] = {}
+        self.metadata: dict = {}
+        self.complete = False
+
+    def poll(self) -> dict[str, list[dict]]:
+        """New messages per topic since the last call."""
+        out = Record(self.path)
+        try:
+            with open(self.path, "rb") as fh:
+                fh.seek(self._offset)
+                data = fh.read()
+        except FileNotFoundError:
+            return out.messages
+        end = 0
+        while end + 9 <= len(data):  # opcode (1) + length (8) + body
+            length = struct.unpack_from("<Q", data, end + 1)[0]
+            if end + 9 + length > len(data):
+                break
+            end += 9 + length
+        if end:
+            out.metadata = self.metadata
+            try:
+                _parse(io.BytesIO(MAGIC + data[:end]), out, self._topics)
+            except EndOfFile:
+                pass  # the stream ends before the footer: expected while recording
+            self.metadata = out.metadata
+            self.complete = self.complete or out.complete
+            self._offset += end
+        return out.messages

@@ -1,0 +1,293 @@
+"""The experiment runner: play a test signal into a wheel and record everything.
+
+Commands go out at absolute times t₀ + k·Ts (never "sleep after work"), every
+command and every telemetry frame is written to the record with its time and
+sequence number, and whatever happens — the end of the signal, Ctrl-C, a
+wheel fault, any error — the wheel is left idle and the record is closed.
+
+Against the simulated wheel the experiment runs on the simulated clock by
+default (a 20-minute PRBS finishes in seconds, through real CAN frames);
+``realtime=True`` runs it on the wall clock. A real bus always runs in real time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from rwlab import __version__, signals
+from rwlab.data import load as load_data
+from rwlab.errors import ConfigError, WheelFault
+from rwlab.testbed.record import RecordWriter
+from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
+from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.protocol import Telemetry, dbc_sha256
+
+__all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_experiment"]
+
+SIGNALS = ("prbs", "chirp", "step", "multisine", "file")
+MODES = ("speed", "acceleration")
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """Everything that defines an experiment, so it can be repeated exactly.
+
+    Attributes
+    ----------
+    signal : {'prbs', 'chirp', 'step', 'multisine', 'file'}
+    mode : {'speed', 'acceleration'}
+    amplitude : float
+        rpm in speed mode, rpm/s in acceleration mode.
+    duration : float
+        Seconds of signal.
+    Ts : float
+        Command period, s.
+    seed : int
+        For random signals and the simulated wheel's noise.
+    telemetry_rate : float
+        Hz, for the simulated wheel.
+    realtime : bool
+        Run the simulated wheel on the wall clock.
+    interface, channel, node_id :
+        The bus. ``virtual`` starts a simulated RW90; other interfaces talk to a
+        wheel that is already there (and always run in real time).
+    latency : float
+        Simulated wheel's command latency, s.
+    min_hold, max_hold : float
+        PRBS hold times, s (paper A: ≥ 5 s).
+    rate_limit : bool
+        Limit the command's slope to the wheel's maximum acceleration (speed mode).
+    f0, f1 : float
+        Chirp / multisine band, Hz (f1 default: 0.4/Ts).
+    step_levels : tuple of float
+        Levels of the step signal, as fractions of the amplitude.
+    file : str
+        CSV of setpoints for ``signal = 'file'`` (one column, or ``time_s`` + a column).
+    raw_frames : bool
+        Also record every CAN frame.
+    """
+
+    signal: str = "prbs"
+    mode: str = "speed"
+    amplitude: float = 6000.0
+    duration: float = 1200.0
+    Ts: float = 0.5
+    seed: int = 0
+    telemetry_rate: float = 10.0
+    realtime: bool = False
+    interface: str = "virtual"
+    channel: str | None = None
+    node_id: int = 0
+    latency: float = 0.02
+    min_hold: float = 5.0
+    max_hold: float = 60.0
+    rate_limit: bool = True
+    f0: float = 0.0001
+    f1: float | None = None
+    step_levels: tuple[float, ...] = (0.0, 1.0, 0.0, -1.0, 0.0)
+    file: str | None = None
+    raw_frames: bool = False
+
+    def __post_init__(self) -> None:
+        if self.signal not in SIGNALS:
+            raise ConfigError(f"unknown signal {self.signal!r}; choose from {', '.join(SIGNALS)}")
+        if self.mode not in MODES:
+            raise ConfigError(f"unknown mode {self.mode!r}; choose 'speed' or 'acceleration'")
+        if self.interface not in INTERFACES:
+            raise ConfigError(f"unknown interface {self.interface!r}")
+        for name in ("amplitude", "duration", "Ts", "telemetry_rate", "min_hold", "max_hold"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ConfigError(f"{name} must be a positive number, got {value!r}")
+        if self.signal == "file" and not self.file:
+            raise ConfigError("signal 'file' needs file = a CSV of setpoints")
+        if self.duration < self.Ts:
+            raise ConfigError(f"duration {self.duration} s is shorter than Ts = {self.Ts} s")
+
+    def check_limits(self, params: WheelParams) -> None:
+        """Refuse amplitudes beyond the wheel's limits."""
+        limit, unit = ((params.max_speed_rpm, "rpm") if self.mode == "speed"
+                       else (params.max_accel_rpm_s, "rpm/s"))
+        if self.amplitude > limit:
+            raise ConfigError(
+                f"amplitude {self.amplitude:g} {unit} exceeds the wheel's {self.mode} limit "
+                f"of {limit:g} {unit}")
+
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike, **overrides) -> ExperimentConfig:
+        """Read an ``[experiment]`` table (or top-level keys); ``overrides`` win."""
+        try:
+            raw = tomllib.loads(Path(path).read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+        except FileNotFoundError:
+            raise ConfigError(f"no such experiment file: {path}") from None
+        table = dict(raw.get("experiment", raw))
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}")
+        table.update({k: v for k, v in overrides.items() if v is not None})
+        if "step_levels" in table:
+            table["step_levels"] = tuple(table["step_levels"])
+        return cls(**table)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray:
+    """The command samples, one per Ts, in rpm or rpm/s."""
+    n_rate = params.max_accel_rpm_s
+    if cfg.signal == "prbs":
+        x = signals.prbs(cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold,
+                         seed=cfg.seed)
+    elif cfg.signal == "chirp":
+        f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
+        x = signals.chirp(cfg.duration, cfg.Ts, cfg.f0, f1, cfg.amplitude)
+    elif cfg.signal == "multisine":
+        f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
+        x = signals.multisine(cfg.duration, cfg.Ts, max(cfg.f0, 1.0 / cfg.duration), f1,
+                              cfg.amplitude, seed=cfg.seed)
+    elif cfg.signal == "step":
+        hold = cfg.duration / len(cfg.step_levels)
+        x = signals.steps(np.asarray(cfg.step_levels) * cfg.amplitude, hold, cfg.Ts)
+    else:
+        x = _signal_from_file(cfg)
+    if cfg.rate_limit and cfg.mode == "speed" and cfg.signal != "file":
+        x = signals.rate_limit(x, n_rate, cfg.Ts, initial=0.0)  # the wheel starts at rest
+    limit = params.max_speed_rpm if cfg.mode == "speed" else params.max_accel_rpm_s
+    if np.max(np.abs(x)) > limit * (1 + 1e-9):
+        raise ConfigError(f"the signal reaches {np.max(np.abs(x)):g}, beyond the wheel's ±{limit:g}")
+    return x
+
+
+def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
+    data = load_data(cfg.file, Ts=cfg.Ts) if Path(cfg.file).suffix == ".csv" else None
+    if data is None:
+        raise ConfigError(f"setpoint file {cfg.file} must be a .csv")
+    x = data.y[:, 0]  # a one-column file is read as the output channel
+    if not math.isclose(data.Ts, cfg.Ts, rel_tol=1e-6):
+        raise ConfigError(f"{cfg.file} is sampled at {data.Ts} s, the experiment at {cfg.Ts} s")
+    return x[: int(round(cfg.duration / cfg.Ts))]
+
+
+@dataclass
+class RunSummary:
+    """What an experiment produced."""
+
+    path: Path
+    commands: int
+    telemetry: int
+    lost_frames: int
+    bad_frames: int
+    duration: float
+    status: str  # "completed", "interrupted", "fault", "error"
+
+
+def run_experiment(cfg: ExperimentConfig, out: str | os.PathLike, *, params: WheelParams = RW90,
+                   force: bool = False, progress: Callable[[int, int], None] | None = None,
+                   ) -> RunSummary:
+    """Run ``cfg`` and write the record to ``out`` (an ``.mcap`` file).
+
+    ``progress(k, n)`` is called after each command. KeyboardInterrupt and
+    errors idle the wheel, close the record (with an event saying why) and
+    are re-raised.
+    """
+    cfg.check_limits(params)
+    command = make_signal(cfg, params)
+    simulated = cfg.interface == "virtual"
+    realtime = cfg.realtime or not simulated
+    clock = WallClock() if realtime else SimClock()
+    host_bus = open_bus(cfg.interface, cfg.channel or f"rwlab-{os.getpid()}-{id(cfg)}",
+                        simulated_clock=not realtime)
+    node = None
+    if simulated:
+        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+        node = WheelNode(node_bus, cfg.node_id, params, clock=clock,
+                         telemetry_rate=cfg.telemetry_rate, latency=cfg.latency, seed=cfg.seed)
+        if realtime:
+            node.start()
+    metadata = {
+        "rwlab_version": __version__, "dbc_sha256": dbc_sha256(), "Ts": cfg.Ts, "mode": cfg.mode,
+        "experiment": cfg.to_dict(), "wheel": params.to_dict(),
+        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
+        "clock": "wall" if realtime else "simulated",
+    }
+    writer = RecordWriter(out, metadata, force=force)
+    client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
+    if cfg.raw_frames:
+        client.frame_listener = lambda msg, direction: writer.write("/can", {
+            "t": msg.timestamp if not realtime else clock.now(), "id": msg.arbitration_id,
+            "data": bytes(msg.data).hex(), "direction": direction})
+    send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
+    status, k = "error", 0
+    t0 = clock.now() + 0.01
+    try:
+        writer.event(t0, "start", f"{cfg.signal} in {cfg.mode} mode, {len(command)} commands")
+        for k, value in enumerate(command):
+            _record_until(client, writer, clock, t0 + k * cfg.Ts, realtime)
+            seq = send(float(value))
+            writer.write("/command", {"t": clock.now(), "sequence": seq, "mode": cfg.mode,
+                                      "setpoint": float(value)})
+            if progress:
+                progress(k + 1, len(command))
+        _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
+        status = "completed"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    except WheelFault as exc:
+        status = "fault"
+        writer.event(clock.now(), "fault", str(exc))
+        raise
+    except Exception as exc:
+        writer.event(clock.now(), "error", f"{type(exc).__name__}: {exc}")
+        raise
+    finally:
+        client.close()
+        _drain(client, writer, clock)
+        writer.event(clock.now(), "stop", status)
+        writer.close()
+        if node is not None:
+            node.stop()
+            node.bus.shutdown()
+        host_bus.shutdown()
+    return RunSummary(Path(out), writer.counts["/command"], writer.counts["/telemetry"],
+                      client.lost_frames, client.bad_frames, clock.now() - t0, status)
+
+
+def _record_until(client: WheelClient, writer: RecordWriter, clock, t_next: float,
+                  realtime: bool) -> None:
+    """Wait until ``t_next``, writing every frame that arrives meanwhile."""
+    if not realtime:
+        clock.sleep_until(t_next)
+        _drain(client, writer, clock)
+        return
+    while clock.now() < t_next:
+        _drain(client, writer, clock)
+        clock.sleep_until(min(t_next, clock.now() + 0.005))
+    _drain(client, writer, clock)
+
+
+def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
+    for t, frame in client.drain():
+        if isinstance(frame, Telemetry):
+            writer.write("/telemetry", {
+                "t": t, "speed_rpm": frame.speed_rpm, "current_a": frame.current,
+                "mode": frame.mode.name, "fault_active": frame.fault_active,
+                "speed_limited": frame.speed_limited, "sequence_echo": frame.sequence_echo,
+                "counter": frame.counter})
+        else:
+            writer.write("/heartbeat", {"t": t, "mode": frame.mode.name,
+                                        "faults": int(frame.faults),
+                                        "temperature_c": frame.temperature,
+                                        "uptime_s": frame.uptime})
