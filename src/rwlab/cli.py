@@ -283,10 +283,6 @@ def datasets_cmd() -> None:
         click.echo(f"{name:<12} N={data.N:<5} Ts={data.Ts:<5g} {summary}")
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()
-
-
 # -- the wheel ------------------------------------------------------------------------
 
 
@@ -448,8 +444,12 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 
 
 @main.command("experiment")
-@click.option("--config", "config_file", type=click.Path(dir_okay=False),
-              help="Experiment TOML file ([experiment] table); flags override it.")
+@click.option(
+    "--config",
+    "config_file",
+    type=click.Path(dir_okay=False),
+    help="Experiment TOML file ([experiment] table); flags override it.",
+)
 @click.option("--signal", type=click.Choice(["prbs", "chirp", "step", "multisine", "file"]))
 @click.option("--mode", type=click.Choice(["speed", "acceleration"]))
 @click.option("--amplitude", type=float, help="rpm in speed mode, rpm/s in acceleration mode.")
@@ -459,8 +459,12 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--realtime", is_flag=True, default=None, help="Run on the wall clock.")
 @click.option("--telemetry-rate", type=float, help="Simulated wheel's telemetry rate, Hz.")
 @click.option("--seed", type=int)
-@click.option("--file", "setpoint_file", type=click.Path(dir_okay=False),
-              help="CSV of setpoints for --signal file.")
+@click.option(
+    "--file",
+    "setpoint_file",
+    type=click.Path(dir_okay=False),
+    help="CSV of setpoints for --signal file.",
+)
 @click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
@@ -469,8 +473,26 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--port", type=int, default=5006, show_default=True, help="Monitor port.")
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def experiment(config_file, signal, mode, amplitude, duration, Ts, out, realtime, telemetry_rate,
-               seed, setpoint_file, interface, channel, node_id, raw_frames, monitor, port, force):
+def experiment(
+    config_file,
+    signal,
+    mode,
+    amplitude,
+    duration,
+    Ts,
+    out,
+    realtime,
+    telemetry_rate,
+    seed,
+    setpoint_file,
+    interface,
+    channel,
+    node_id,
+    raw_frames,
+    monitor,
+    port,
+    force,
+):
     """Play a test signal into a wheel and record every command and telemetry frame.
 
     With the default virtual interface a simulated RW90 answers, on a simulated
@@ -479,10 +501,21 @@ def experiment(config_file, signal, mode, amplitude, duration, Ts, out, realtime
     """
     from rwlab.testbed import ExperimentConfig, run_experiment
 
-    overrides = dict(signal=signal, mode=mode, amplitude=amplitude, duration=duration, Ts=Ts,
-                     realtime=realtime, telemetry_rate=telemetry_rate, seed=seed,
-                     file=setpoint_file, interface=interface, channel=channel, node_id=node_id,
-                     raw_frames=raw_frames)
+    overrides = dict(
+        signal=signal,
+        mode=mode,
+        amplitude=amplitude,
+        duration=duration,
+        Ts=Ts,
+        realtime=realtime,
+        telemetry_rate=telemetry_rate,
+        seed=seed,
+        file=setpoint_file,
+        interface=interface,
+        channel=channel,
+        node_id=node_id,
+        raw_frames=raw_frames,
+    )
     if config_file:
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:
@@ -494,24 +527,25 @@ def experiment(config_file, signal, mode, amplitude, duration, Ts, out, realtime
         raise FileExistsError(f"{out} exists; pass --force to overwrite it")
     server = None
     if monitor:
-        from rwlab.testbed.monitor import serve_in_thread
+        from rwlab.testbed.monitor import start_process
 
-        server = serve_in_thread(out, port=port, wait_for_file=True)
+        server = start_process(out, port=port)  # its own process: it can never slow the run
         click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
-    n = int(round(cfg.duration / cfg.Ts))
+    n = round(cfg.duration / cfg.Ts)
     label = f"{cfg.signal} ({cfg.mode}, {'real time' if cfg.realtime else 'simulated clock'})"
     try:
         with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
-            summary = run_experiment(cfg, out, force=force,
-                                     progress=lambda k, total: bar.update(1))
+            summary = run_experiment(cfg, out, force=force, progress=lambda k, total: bar.update(1))
     except KeyboardInterrupt:
         click.echo(f"\ninterrupted: the wheel is idle and {out} is closed", err=True)
         sys.exit(130)
     finally:
         if server is not None:
-            server.stop()
-    click.echo(f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
-               f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})")
+            server.terminate()
+    click.echo(
+        f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
+        f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
+    )
 
 
 @main.command("export")
@@ -519,8 +553,12 @@ def experiment(config_file, signal, mode, amplitude, duration, Ts, out, realtime
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "mat"]), required=True)
 @click.option("--out", type=click.Path(dir_okay=False), required=True)
 @click.option("--Ts", "Ts", type=float, help="Sample time, s (default: the record's).")
-@click.option("--max-gap", type=float, default=None,
-              help="Accept telemetry gaps up to this many seconds (default Ts).")
+@click.option(
+    "--max-gap",
+    type=float,
+    default=None,
+    help="Accept telemetry gaps up to this many seconds (default Ts).",
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
 def export(record, fmt, out, Ts, max_gap, force):
@@ -536,3 +574,34 @@ def export(record, fmt, out, Ts, max_gap, force):
         path = path.with_suffix(f".{fmt}") if not path.suffix else path
     data.write(path, overwrite=force, plain=True)
     click.echo(f"{path}: {data.N} samples at Ts = {data.Ts:g} s")
+
+
+@main.command("monitor")
+@click.argument("record", type=click.Path(dir_okay=False))
+@click.option(
+    "--host",
+    default="127.0.0.1",
+    show_default=True,
+    help="Address to serve on (0.0.0.0 exposes it to the network).",
+)
+@click.option("--port", type=int, default=5006, show_default=True)
+@click.option("--replay", is_flag=True, help="Play a finished record back instead of following it.")
+@click.option("--speed", type=float, default=1.0, show_default=True, help="Replay speed factor.")
+@_friendly_errors
+def monitor_cmd(record, host, port, replay, speed):
+    """Serve the live monitor page for a record that is being written (or replay one)."""
+    from rwlab.testbed.monitor import serve
+
+    if replay:
+        from rwlab.testbed import read_record
+
+        read_record(record)  # a clear error now rather than a blank page later
+    click.echo(f"rwlab monitor on http://{host}:{port}/ (Ctrl-C to stop)", err=True)
+    try:
+        serve(record, host=host, port=port, replay=replay, speed=speed)
+    except KeyboardInterrupt:
+        pass
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

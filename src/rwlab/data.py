@@ -337,8 +337,9 @@ class IOData:
             "trend": self.trend.to_dict(),
         }
 
-    def write(self, path: str | os.PathLike, *, overwrite: bool = False,
-              plain: bool = False) -> Path:
+    def write(
+        self, path: str | os.PathLike, *, overwrite: bool = False, plain: bool = False
+    ) -> Path:
         """Write to ``.csv``, ``.parquet`` or ``.mat`` (chosen by suffix), atomically.
 
         The file appears complete or not at all. An existing file is an error

@@ -28,8 +28,13 @@ def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float
     return [(float(times[i]), float(steps[i])) for i in idx]
 
 
-def load_record(path: str | os.PathLike, Ts: float | None = None, *,
-                outputs: tuple[str, ...] = ("speed",), max_gap: float | None = None) -> IOData:
+def load_record(
+    path: str | os.PathLike,
+    Ts: float | None = None,
+    *,
+    outputs: tuple[str, ...] = ("speed",),
+    max_gap: float | None = None,
+) -> IOData:
     """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
 
     Parameters
@@ -69,11 +74,14 @@ def load_record(path: str | os.PathLike, Ts: float | None = None, *,
     tt = np.array([m["t"] for m in telemetry])
     gaps = telemetry_gaps(tt, Ts if max_gap is None else max_gap)
     if gaps:
-        shown = ", ".join(f"{length:.3g} s at t = {start - tc[0]:.3g} s" for start, length in gaps[:5])
+        shown = ", ".join(
+            f"{length:.3g} s at t = {start - tc[0]:.3g} s" for start, length in gaps[:5]
+        )
         raise RecordGapError(
             f"{path}: {len(gaps)} telemetry gap(s) longer than {max_gap or Ts:g} s ({shown}"
             f"{', ...' if len(gaps) > 5 else ''}); frames were lost, so samples there are stale. "
-            "Pass max_gap to accept them.")
+            "Pass max_gap to accept them."
+        )
     t0 = tc[0]
     n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1
     grid = t0 + Ts * np.arange(n)
@@ -91,9 +99,13 @@ def load_record(path: str | os.PathLike, Ts: float | None = None, *,
     }
     mode = meta.get("mode", "speed")
     return IOData(
-        u, np.column_stack([columns[o] for o in outputs]), Ts,
-        input_names=["command"], output_names=[OUTPUTS[o][0] for o in outputs],
+        u,
+        np.column_stack([columns[o] for o in outputs]),
+        Ts,
+        input_names=["command"],
+        output_names=[OUTPUTS[o][0] for o in outputs],
         input_units=["rpm" if mode == "speed" else "rpm/s"],
-        output_units=[OUTPUTS[o][1] for o in outputs], tstart=float(grid[0] - t0),
+        output_units=[OUTPUTS[o][1] for o in outputs],
+        tstart=float(grid[0] - t0),
         name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
     )

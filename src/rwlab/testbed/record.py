@@ -48,12 +48,22 @@ _INT = {"type": "integer"}
 CHANNELS: dict[str, dict] = {
     "/command": {"t": _NUM, "sequence": _INT, "mode": {"type": "string"}, "setpoint": _NUM},
     "/telemetry": {
-        "t": _NUM, "speed_rpm": _NUM, "current_a": _NUM, "mode": {"type": "string"},
-        "fault_active": {"type": "boolean"}, "speed_limited": {"type": "boolean"},
-        "sequence_echo": _INT, "counter": _INT,
+        "t": _NUM,
+        "speed_rpm": _NUM,
+        "current_a": _NUM,
+        "mode": {"type": "string"},
+        "fault_active": {"type": "boolean"},
+        "speed_limited": {"type": "boolean"},
+        "sequence_echo": _INT,
+        "counter": _INT,
     },
-    "/heartbeat": {"t": _NUM, "mode": {"type": "string"}, "faults": _INT,
-                   "temperature_c": _NUM, "uptime_s": _INT},
+    "/heartbeat": {
+        "t": _NUM,
+        "mode": {"type": "string"},
+        "faults": _INT,
+        "temperature_c": _NUM,
+        "uptime_s": _INT,
+    },
     "/event": {"t": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
     "/can": {"t": _NUM, "id": _INT, "data": {"type": "string"}, "direction": {"type": "string"}},
 }
@@ -61,12 +71,14 @@ CHANNELS: dict[str, dict] = {
 
 def _schema(topic: str) -> bytes:
     props = CHANNELS[topic]
-    return json.dumps({
-        "title": f"rwlab{topic.replace('/', '.')}",
-        "type": "object",
-        "properties": props,
-        "required": list(props),
-    }).encode()
+    return json.dumps(
+        {
+            "title": f"rwlab{topic.replace('/', '.')}",
+            "type": "object",
+            "properties": props,
+            "required": list(props),
+        }
+    ).encode()
 
 
 class RecordWriter:
@@ -87,28 +99,37 @@ class RecordWriter:
         if self.path.exists() and not force:
             raise FileExistsError(f"{self.path} exists; use --force (force=True) to replace it")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._fh = open(self.path, "wb")
         self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
         self._writer.start(profile="rwlab", library="rwlab")
         self._channels = {}
         for topic in CHANNELS:
-            sid = self._writer.register_schema(name=f"rwlab{topic.replace('/', '.')}",
-                                               encoding="jsonschema", data=_schema(topic))
+            sid = self._writer.register_schema(
+                name=f"rwlab{topic.replace('/', '.')}", encoding="jsonschema", data=_schema(topic)
+            )
             self._channels[topic] = self._writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=sid)
+                topic=topic, message_encoding="json", schema_id=sid
+            )
         self._writer.add_metadata("rwlab", {"json": json.dumps(metadata)})
         self._fh.flush()
         self._last_flush = time.monotonic()
         self.counts = dict.fromkeys(CHANNELS, 0)
         self.closed = False
+        self.time_origin = 0.0
+        """Subtracted from every message's ``t`` (the runner sets it to its first command)."""
 
     def write(self, topic: str, message: dict) -> None:
-        """Append one message; ``message['t']`` is its time in seconds."""
+        """Append one message; ``message['t']`` is its clock time in seconds."""
         if self.closed:
             raise FileFormatError(f"{self.path} is closed")
-        stamp = max(0, int(round(message["t"] * 1e9)))
-        self._writer.add_message(self._channels[topic], log_time=stamp, publish_time=stamp,
-                                 data=json.dumps(message, separators=(",", ":")).encode())
+        message = {**message, "t": message["t"] - self.time_origin}
+        stamp = max(0, round(message["t"] * 1e9))
+        self._writer.add_message(
+            self._channels[topic],
+            log_time=stamp,
+            publish_time=stamp,
+            data=json.dumps(message, separators=(",", ":")).encode(),
+        )
         self.counts[topic] += 1
         now = time.monotonic()
         if now - self._last_flush >= FLUSH_PERIOD:

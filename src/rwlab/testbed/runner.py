@@ -18,6 +18,7 @@ import os
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +65,8 @@ class ExperimentConfig:
     min_hold, max_hold : float
         PRBS hold times, s (paper A: ≥ 5 s).
     rate_limit : bool
-        Limit the command's slope to the wheel's maximum acceleration (speed mode).
+        Limit a speed-mode PRBS's slope to the wheel's maximum acceleration, so the
+        identification signal is one the wheel can follow (steps stay steps).
     f0, f1 : float
         Chirp / multisine band, Hz (f1 default: 0.4/Ts).
     step_levels : tuple of float
@@ -114,12 +116,16 @@ class ExperimentConfig:
 
     def check_limits(self, params: WheelParams) -> None:
         """Refuse amplitudes beyond the wheel's limits."""
-        limit, unit = ((params.max_speed_rpm, "rpm") if self.mode == "speed"
-                       else (params.max_accel_rpm_s, "rpm/s"))
+        limit, unit = (
+            (params.max_speed_rpm, "rpm")
+            if self.mode == "speed"
+            else (params.max_accel_rpm_s, "rpm/s")
+        )
         if self.amplitude > limit:
             raise ConfigError(
                 f"amplitude {self.amplitude:g} {unit} exceeds the wheel's {self.mode} limit "
-                f"of {limit:g} {unit}")
+                f"of {limit:g} {unit}"
+            )
 
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides) -> ExperimentConfig:
@@ -134,7 +140,9 @@ class ExperimentConfig:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
-            raise ConfigError(f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}")
+            raise ConfigError(
+                f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}"
+            )
         table.update({k: v for k, v in overrides.items() if v is not None})
         if "step_levels" in table:
             table["step_levels"] = tuple(table["step_levels"])
@@ -148,25 +156,29 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
     """The command samples, one per Ts, in rpm or rpm/s."""
     n_rate = params.max_accel_rpm_s
     if cfg.signal == "prbs":
-        x = signals.prbs(cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold,
-                         seed=cfg.seed)
+        x = signals.prbs(
+            cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
+        )
     elif cfg.signal == "chirp":
         f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
         x = signals.chirp(cfg.duration, cfg.Ts, cfg.f0, f1, cfg.amplitude)
     elif cfg.signal == "multisine":
         f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
-        x = signals.multisine(cfg.duration, cfg.Ts, max(cfg.f0, 1.0 / cfg.duration), f1,
-                              cfg.amplitude, seed=cfg.seed)
+        x = signals.multisine(
+            cfg.duration, cfg.Ts, max(cfg.f0, 1.0 / cfg.duration), f1, cfg.amplitude, seed=cfg.seed
+        )
     elif cfg.signal == "step":
         hold = cfg.duration / len(cfg.step_levels)
         x = signals.steps(np.asarray(cfg.step_levels) * cfg.amplitude, hold, cfg.Ts)
     else:
         x = _signal_from_file(cfg)
-    if cfg.rate_limit and cfg.mode == "speed" and cfg.signal != "file":
+    if cfg.rate_limit and cfg.mode == "speed" and cfg.signal == "prbs":
         x = signals.rate_limit(x, n_rate, cfg.Ts, initial=0.0)  # the wheel starts at rest
     limit = params.max_speed_rpm if cfg.mode == "speed" else params.max_accel_rpm_s
     if np.max(np.abs(x)) > limit * (1 + 1e-9):
-        raise ConfigError(f"the signal reaches {np.max(np.abs(x)):g}, beyond the wheel's ±{limit:g}")
+        raise ConfigError(
+            f"the signal reaches {np.max(np.abs(x)):g}, beyond the wheel's ±{limit:g}"
+        )
     return x
 
 
@@ -177,7 +189,7 @@ def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
     x = data.y[:, 0]  # a one-column file is read as the output channel
     if not math.isclose(data.Ts, cfg.Ts, rel_tol=1e-6):
         raise ConfigError(f"{cfg.file} is sampled at {data.Ts} s, the experiment at {cfg.Ts} s")
-    return x[: int(round(cfg.duration / cfg.Ts))]
+    return x[: round(cfg.duration / cfg.Ts)]
 
 
 @dataclass
@@ -193,9 +205,14 @@ class RunSummary:
     status: str  # "completed", "interrupted", "fault", "error"
 
 
-def run_experiment(cfg: ExperimentConfig, out: str | os.PathLike, *, params: WheelParams = RW90,
-                   force: bool = False, progress: Callable[[int, int], None] | None = None,
-                   ) -> RunSummary:
+def run_experiment(
+    cfg: ExperimentConfig,
+    out: str | os.PathLike,
+    *,
+    params: WheelParams = RW90,
+    force: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunSummary:
     """Run ``cfg`` and write the record to ``out`` (an ``.mcap`` file).
 
     ``progress(k, n)`` is called after each command. KeyboardInterrupt and
@@ -207,37 +224,60 @@ def run_experiment(cfg: ExperimentConfig, out: str | os.PathLike, *, params: Whe
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
-    host_bus = open_bus(cfg.interface, cfg.channel or f"rwlab-{os.getpid()}-{id(cfg)}",
-                        simulated_clock=not realtime)
+    host_bus = open_bus(
+        cfg.interface, cfg.channel or f"rwlab-{os.getpid()}-{id(cfg)}", simulated_clock=not realtime
+    )
     node = None
     if simulated:
         node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
-        node = WheelNode(node_bus, cfg.node_id, params, clock=clock,
-                         telemetry_rate=cfg.telemetry_rate, latency=cfg.latency, seed=cfg.seed)
+        node = WheelNode(
+            node_bus,
+            cfg.node_id,
+            params,
+            clock=clock,
+            telemetry_rate=cfg.telemetry_rate,
+            latency=cfg.latency,
+            seed=cfg.seed,
+        )
         if realtime:
             node.start()
     metadata = {
-        "rwlab_version": __version__, "dbc_sha256": dbc_sha256(), "Ts": cfg.Ts, "mode": cfg.mode,
-        "experiment": cfg.to_dict(), "wheel": params.to_dict(),
+        "rwlab_version": __version__,
+        "dbc_sha256": dbc_sha256(),
+        "Ts": cfg.Ts,
+        "mode": cfg.mode,
+        "experiment": cfg.to_dict(),
+        "wheel": params.to_dict(),
         "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
         "clock": "wall" if realtime else "simulated",
+        "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
+        "time_origin": "s since the first command",
     }
     writer = RecordWriter(out, metadata, force=force)
     client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
     if cfg.raw_frames:
-        client.frame_listener = lambda msg, direction: writer.write("/can", {
-            "t": msg.timestamp if not realtime else clock.now(), "id": msg.arbitration_id,
-            "data": bytes(msg.data).hex(), "direction": direction})
+        client.frame_listener = lambda msg, direction: writer.write(
+            "/can",
+            {
+                "t": msg.timestamp if not realtime else clock.now(),
+                "id": msg.arbitration_id,
+                "data": bytes(msg.data).hex(),
+                "direction": direction,
+            },
+        )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
     t0 = clock.now() + 0.01
+    writer.time_origin = t0
     try:
         writer.event(t0, "start", f"{cfg.signal} in {cfg.mode} mode, {len(command)} commands")
         for k, value in enumerate(command):
             _record_until(client, writer, clock, t0 + k * cfg.Ts, realtime)
             seq = send(float(value))
-            writer.write("/command", {"t": clock.now(), "sequence": seq, "mode": cfg.mode,
-                                      "setpoint": float(value)})
+            writer.write(
+                "/command",
+                {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
+            )
             if progress:
                 progress(k + 1, len(command))
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
@@ -261,12 +301,20 @@ def run_experiment(cfg: ExperimentConfig, out: str | os.PathLike, *, params: Whe
             node.stop()
             node.bus.shutdown()
         host_bus.shutdown()
-    return RunSummary(Path(out), writer.counts["/command"], writer.counts["/telemetry"],
-                      client.lost_frames, client.bad_frames, clock.now() - t0, status)
+    return RunSummary(
+        Path(out),
+        writer.counts["/command"],
+        writer.counts["/telemetry"],
+        client.lost_frames,
+        client.bad_frames,
+        clock.now() - t0,
+        status,
+    )
 
 
-def _record_until(client: WheelClient, writer: RecordWriter, clock, t_next: float,
-                  realtime: bool) -> None:
+def _record_until(
+    client: WheelClient, writer: RecordWriter, clock, t_next: float, realtime: bool
+) -> None:
     """Wait until ``t_next``, writing every frame that arrives meanwhile."""
     if not realtime:
         clock.sleep_until(t_next)
@@ -281,13 +329,27 @@ def _record_until(client: WheelClient, writer: RecordWriter, clock, t_next: floa
 def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
     for t, frame in client.drain():
         if isinstance(frame, Telemetry):
-            writer.write("/telemetry", {
-                "t": t, "speed_rpm": frame.speed_rpm, "current_a": frame.current,
-                "mode": frame.mode.name, "fault_active": frame.fault_active,
-                "speed_limited": frame.speed_limited, "sequence_echo": frame.sequence_echo,
-                "counter": frame.counter})
+            writer.write(
+                "/telemetry",
+                {
+                    "t": t,
+                    "speed_rpm": frame.speed_rpm,
+                    "current_a": frame.current,
+                    "mode": frame.mode.name,
+                    "fault_active": frame.fault_active,
+                    "speed_limited": frame.speed_limited,
+                    "sequence_echo": frame.sequence_echo,
+                    "counter": frame.counter,
+                },
+            )
         else:
-            writer.write("/heartbeat", {"t": t, "mode": frame.mode.name,
-                                        "faults": int(frame.faults),
-                                        "temperature_c": frame.temperature,
-                                        "uptime_s": frame.uptime})
+            writer.write(
+                "/heartbeat",
+                {
+                    "t": t,
+                    "mode": frame.mode.name,
+                    "faults": int(frame.faults),
+                    "temperature_c": frame.temperature,
+                    "uptime_s": frame.uptime,
+                },
+            )

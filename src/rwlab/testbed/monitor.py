@@ -1,0 +1,246 @@
+"""The live monitor (the LabVIEW screen): a Bokeh server page on 127.0.0.1.
+
+The monitor is a separate consumer. It *reads the record file* that the
+recorder writes (flushed every ≤ 100 ms), so it can never block or slow the
+recorder; ``rwlab experiment --monitor`` even runs it in its own process. The
+page refreshes at 20 Hz and keeps only the last ``max_points`` samples per
+plot (drop-oldest, for the display only: the record keeps everything).
+
+It shows command vs speed, acceleration (derived from speed over 0.1 s),
+motor current, and the wheel's mode, faults and the experiment's events. Given
+a finished record with ``replay=True`` it plays the record back at ``speed``×.
+Bokeh serves its own JavaScript from the server: no CDN, works offline.
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+from rwlab.testbed.record import RecordFollower, read_record
+
+__all__ = ["free_port", "make_document", "serve", "serve_in_thread", "start_process"]
+
+REFRESH_MS = 50  # 20 Hz
+
+
+class _Feed:
+    """New messages per refresh: live from a growing file, or replayed from a finished one."""
+
+    def __init__(self, path: Path, replay: bool, speed: float) -> None:
+        self.replay = replay
+        if replay:
+            rec = read_record(path)
+            self.metadata = rec.metadata
+            self._pending = {k: deque(v) for k, v in rec.messages.items()}
+            starts = [v[0]["t"] for v in rec.messages.values() if v]
+            self._t0 = min(starts) if starts else 0.0
+            self._wall0 = time.monotonic()
+            self._speed = speed
+        else:
+            self._follower = RecordFollower(path)
+
+    @property
+    def meta(self) -> dict:
+        return self.metadata if self.replay else self._follower.metadata
+
+    def poll(self) -> dict[str, list[dict]]:
+        if not self.replay:
+            return self._follower.poll()
+        horizon = self._t0 + (time.monotonic() - self._wall0) * self._speed
+        out = {}
+        for topic, queue in self._pending.items():
+            batch = []
+            while queue and queue[0]["t"] <= horizon:
+                batch.append(queue.popleft())
+            out[topic] = batch
+        return out
+
+
+def make_document(
+    doc, path: str | Path, *, replay: bool = False, speed: float = 1.0, max_points: int = 20_000
+) -> None:
+    """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler)."""
+    from bokeh.layouts import column, row
+    from bokeh.models import ColumnDataSource, Div
+    from bokeh.plotting import figure
+
+    path = Path(path)
+    feed = _Feed(path, replay, speed)
+    cmd = ColumnDataSource({"t": [], "command": []}, name="command")
+    tel = ColumnDataSource(
+        {"t": [], "speed": [], "acceleration": [], "current": []}, name="telemetry"
+    )
+    opts = dict(height=260, sizing_mode="stretch_width", tools="pan,wheel_zoom,box_zoom,reset")
+    f_speed = figure(title="command and measured speed [rpm]", x_axis_label="t [s]", **opts)
+    f_speed.step("t", "command", source=cmd, mode="after", color="#d62728", legend_label="command")
+    f_speed.line("t", "speed", source=tel, color="#1f77b4", legend_label="speed")
+    f_speed.legend.location = "top_left"
+    f_acc = figure(title="acceleration from speed [rpm/s]", x_range=f_speed.x_range, **opts)
+    f_acc.line("t", "acceleration", source=tel, color="#2ca02c")
+    f_cur = figure(title="motor current [A]", x_range=f_speed.x_range, **opts)
+    f_cur.line("t", "current", source=tel, color="#9467bd")
+    title = Div(text=f"<h2>rwlab monitor — {path.name}{' (replay)' if replay else ''}</h2>")
+    status = Div(text="waiting for data…", name="status")
+    events = Div(text="", name="events")
+    doc.add_root(
+        column(title, row(status, events), f_speed, f_acc, f_cur, sizing_mode="stretch_width")
+    )
+    doc.title = f"rwlab monitor: {path.name}"
+    recent: deque[tuple[float, float]] = deque()
+    state = {"frames": 0, "lost": 0, "counter": None, "events": []}
+
+    def refresh() -> None:
+        new = feed.poll()
+        commands = new.get("/command", [])
+        if commands:
+            cmd.stream(
+                {"t": [c["t"] for c in commands], "command": [c["setpoint"] for c in commands]},
+                rollover=max_points,
+            )
+        frames = new.get("/telemetry", [])
+        if frames:
+            acc = []
+            for m in frames:
+                recent.append((m["t"], m["speed_rpm"]))
+                while recent and m["t"] - recent[0][0] > 0.1:
+                    recent.popleft()
+                dt = recent[-1][0] - recent[0][0]
+                acc.append((recent[-1][1] - recent[0][1]) / dt if dt > 0 else 0.0)
+                if state["counter"] is not None:
+                    state["lost"] += (m["counter"] - state["counter"] - 1) % 256
+                state["counter"] = m["counter"]
+            state["frames"] += len(frames)
+            tel.stream(
+                {
+                    "t": [m["t"] for m in frames],
+                    "speed": [m["speed_rpm"] for m in frames],
+                    "acceleration": acc,
+                    "current": [m["current_a"] for m in frames],
+                },
+                rollover=max_points,
+            )
+            last = frames[-1]
+            fault = "<b style='color:#c00'>FAULT</b>" if last["fault_active"] else "ok"
+            status.text = (
+                f"t = {last['t']:.2f} s &nbsp; mode <b>{last['mode']}</b> &nbsp; "
+                f"speed {last['speed_rpm']:.1f} rpm &nbsp; {fault} &nbsp; "
+                f"frames {state['frames']} (lost {state['lost']})"
+            )
+        beats = new.get("/heartbeat", [])
+        if beats and beats[-1]["faults"]:
+            status.text += f" &nbsp; fault bits {beats[-1]['faults']}"
+        for e in new.get("/event", []):
+            state["events"].append(f"{e['t']:.2f} s {e['kind']} {e['message']}")
+            events.text = "<br>".join(state["events"][-4:])
+
+    doc.add_periodic_callback(refresh, REFRESH_MS)
+
+
+def _application(path, replay, speed):
+    from bokeh.application import Application
+    from bokeh.application.handlers.function import FunctionHandler
+
+    return Application(
+        FunctionHandler(lambda doc: make_document(doc, path, replay=replay, speed=speed))
+    )
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free on ``host`` right now."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def serve(
+    path, *, host: str = "127.0.0.1", port: int = 5006, replay: bool = False, speed: float = 1.0
+) -> None:
+    """Serve the monitor until interrupted (blocking)."""
+    from bokeh.server.server import Server
+
+    server = Server(
+        {"/": _application(path, replay, speed)},
+        address=host,
+        port=port,
+        allow_websocket_origin=[f"{host}:{port}", f"localhost:{port}"],
+    )
+    server.start()
+    server.io_loop.start()
+
+
+class _ThreadedServer:
+    def __init__(self, server, loop, thread) -> None:
+        self._server, self._loop, self._thread = server, loop, thread
+
+    def stop(self) -> None:
+        self._loop.add_callback(self._server.stop)
+        self._loop.add_callback(self._loop.stop)
+        self._thread.join(timeout=5)
+
+
+def serve_in_thread(
+    path,
+    *,
+    host: str = "127.0.0.1",
+    port: int | None = None,
+    replay: bool = False,
+    speed: float = 1.0,
+    wait_for_file: bool = False,
+):
+    """Serve the monitor from a background thread; returns a handle with ``stop()`` and ``url``."""
+    import asyncio
+
+    from bokeh.server.server import Server
+    from tornado.ioloop import IOLoop
+
+    port = port or free_port(host)
+    ready = threading.Event()
+    holder = {}
+
+    def run() -> None:
+        asyncio.set_event_loop(asyncio.new_event_loop())
+        loop = IOLoop.current()
+        server = Server(
+            {"/": _application(path, replay, speed)},
+            address=host,
+            port=port,
+            io_loop=loop,
+            allow_websocket_origin=[f"{host}:{port}", f"localhost:{port}"],
+        )
+        server.start()
+        holder["server"], holder["loop"] = server, loop
+        ready.set()
+        loop.start()
+
+    thread = threading.Thread(target=run, daemon=True, name="rwlab-monitor")
+    thread.start()
+    if not ready.wait(15):
+        raise RuntimeError("the monitor server did not start")
+    handle = _ThreadedServer(holder["server"], holder["loop"], thread)
+    handle.url = f"http://{host}:{port}/"
+    return handle
+
+
+def start_process(path, *, host: str = "127.0.0.1", port: int = 5006) -> subprocess.Popen:
+    """Run the monitor in its own process (what ``rwlab experiment --monitor`` does)."""
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "rwlab.cli",
+            "monitor",
+            str(path),
+            "--host",
+            host,
+            "--port",
+            str(port),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
