@@ -79,8 +79,9 @@ def test_reported_covariance_is_honest_over_100_seeds(kind):
     assert np.all(coverage >= 0.95), coverage
 
 
-def test_analytic_gradient_matches_finite_differences():
-    orders = _Orders(2, 2, 1, 1, 1, 1)
+@pytest.mark.parametrize("steady", [False, True])
+def test_analytic_gradient_matches_finite_differences(steady):
+    orders = _Orders(2, 2, 1, 1, 1, 1, steady)
     r = np.random.default_rng(3)
     y, u = r.standard_normal(200), r.standard_normal(200)
     theta = np.array([-0.5, 0.2, 1.0, 0.4, 0.3, -0.6, -0.4])
@@ -145,3 +146,26 @@ def test_cascaded_tanks_output_error_model_simulates_better_than_arx():
     m_oe, m_arx = oe(est, 2, 2, 1), arx(est, 2, 2, 1)
     assert m_oe.is_stable() and m_oe.dc_gain() > 0
     assert compare(m_oe, val).fit_percent > compare(m_arx, val).fit_percent > 0
+
+
+@pytest.mark.parametrize("kind", ["armax", "oe", "bj"])
+def test_steady_initial_conditions_fit_offset_data_that_start_at_rest(kind):
+    """Data in offset units (like normalised data) that start in equilibrium: the 'steady'
+    convention is exact, zero initial conditions are not."""
+    A, B, C, D, F = TRUTH[kind]
+    r = np.random.default_rng(8)
+    u0 = 0.5
+    u = u0 + r.standard_normal(1500)
+    u[:1] = u0
+    gain = np.sum(B) / (np.sum(A) * np.sum(F))
+    y_dev = lfilter(B, np.convolve(A, F), u - u0)  # deviations from the equilibrium
+    data = IOData(u, gain * u0 + y_dev, 1.0)
+    est = {"armax": lambda i: armax(data, 2, 2, 1, 1, initial=i),
+           "oe": lambda i: oe(data, 2, 2, 1, initial=i),
+           "bj": lambda i: bj(data, 2, 1, 1, 1, 1, initial=i)}[kind]
+    steady = est("steady")
+    assert np.allclose(_dynamics(steady), _true_dynamics(kind), atol=1e-6)
+    assert steady.report["initial_conditions"] == "steady" and steady.report["loss"] < 1e-20
+    if kind == "oe":  # without a noise model nothing can absorb the zero-IC transient
+        zero = est("zero")
+        assert np.max(np.abs(_dynamics(zero) - _true_dynamics(kind))) > 1e-4

@@ -25,7 +25,7 @@ from scipy import signal as sps
 
 from rwlab.data import IOData, atomic_write_bytes, check_Ts
 from rwlab.errors import DataError, FileFormatError, ModelError
-from rwlab.ident.polynomials import is_stable, roots_z, to_z
+from rwlab.ident.polynomials import check_initial, filt, is_stable, roots_z, to_z
 
 __all__ = ["PolyModel", "c2d"]
 
@@ -200,28 +200,32 @@ class PolyModel:
             raise DataError("u contains NaN or Inf")
         return arr
 
-    def simulate(self, u) -> np.ndarray:
-        """Noise-free output ``y = B/(A F) u`` from rest (zero initial conditions).
+    def simulate(self, u, initial: str = "zero") -> np.ndarray:
+        """Noise-free output ``y = B/(A F) u``.
 
         Parameters
         ----------
         u : array_like, shape (N,) or (N, nu), or IOData
             Input samples.
+        initial : {'zero', 'steady'}
+            Pre-sample input: zero, or held at ``u[0]`` forever (start in equilibrium).
 
         Returns
         -------
         numpy.ndarray, shape (N,)
         """
+        steady = check_initial(initial) == "steady"
         u2 = self._inputs(u)
         den = np.convolve(self.A, self.F)
-        return sum(sps.lfilter(b, den, u2[:, j]) for j, b in enumerate(self._B))
+        return sum(filt(b, den, u2[:, j], steady) for j, b in enumerate(self._B))
 
-    def predict(self, data: IOData, horizon: float = 1) -> np.ndarray:
+    def predict(self, data: IOData, horizon: float = 1, initial: str = "zero") -> np.ndarray:
         """k-step-ahead prediction ŷ(t | t−k) from measured inputs and outputs.
 
         Uses ``ŷ = H̄ₖ D B/(C F) u + (1 − H̄ₖ A D / C) y`` where ``H̄ₖ`` holds the
         first k impulse-response coefficients of the noise model ``C/(A D)``.
-        Zero initial conditions. ``horizon=numpy.inf`` is pure simulation.
+        ``initial``: pre-sample values zero, or every signal held at its first
+        sample ('steady'). ``horizon=numpy.inf`` is pure simulation.
 
         Returns
         -------
@@ -233,8 +237,9 @@ class PolyModel:
             raise DataError("PolyModel is single-output; data must have one output")
         if horizon != np.inf and (int(horizon) != horizon or horizon < 1):
             raise DataError(f"horizon must be a positive integer or inf, got {horizon}")
+        steady = check_initial(initial) == "steady"
         if horizon == np.inf or horizon >= data.N:
-            return self.simulate(data)
+            return self.simulate(data, initial)
         k = int(horizon)
         AD = np.convolve(self.A, self.D)
         impulse = np.zeros(k)
@@ -244,9 +249,9 @@ class PolyModel:
         u = self._inputs(data)
         num_u = np.convolve(hk, self.D)
         den_u = np.convolve(self.C, self.F)
-        yhat = y - sps.lfilter(np.convolve(hk, AD), self.C, y)
+        yhat = y - filt(np.convolve(hk, AD), self.C, y, steady)
         for j, b in enumerate(self._B):
-            yhat = yhat + sps.lfilter(np.convolve(num_u, b), den_u, u[:, j])
+            yhat = yhat + filt(np.convolve(num_u, b), den_u, u[:, j], steady)
         return yhat
 
     def step_response(self, n: int, input_index: int = 0) -> np.ndarray:

@@ -20,8 +20,12 @@ from instrumental variables with simulated-output instruments. The start uses
 at most ``INIT_SAMPLES`` samples per experiment: it only needs to land in the
 basin of the optimum, which every later iteration refines on all data.
 
-Pre-sample values: all filters start from zero (MATLAB ``InitialCondition =
-'zero'``); ε is formed over every sample. The covariance is
+Pre-sample values (``initial=``): ``'zero'`` — all filters start from zero
+(MATLAB ``InitialCondition = 'zero'``); ``'steady'`` — every signal held its
+first value forever before the record (a record that starts at rest), i.e.
+filters start in that equilibrium and shifts pad with the first value. Under
+either convention the gradient formulas above are exact. ε is formed over
+every sample. The covariance is
 λ·(ψᵀψ)⁻¹ with λ = Σε²/(N − d), evaluated at the optimum.
 """
 
@@ -38,7 +42,7 @@ from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError
 from rwlab.ident.arx import check_order
 from rwlab.ident.models import PolyModel
-from rwlab.ident.polynomials import shift, stabilize
+from rwlab.ident.polynomials import check_initial, filt, shift, stabilize
 from rwlab.ident.validation import estimation_report
 
 __all__ = ["armax", "bj", "oe", "pem"]
@@ -54,6 +58,7 @@ class _Orders:
     nd: int
     nf: int
     nk: int
+    steady: bool = False  # pre-sample values: zero, or each signal's first value
 
     @property
     def d(self) -> int:
@@ -79,12 +84,10 @@ def _stabilized(orders: _Orders, theta: np.ndarray) -> np.ndarray:
 def _signals(orders: _Orders, theta, y, u):
     """ε, w = (B/F) u and v = A y − w for one experiment."""
     A, B, C, D, F = orders.unpack(theta)
-    w = sps.lfilter(B, F, u) if orders.nf else np.convolve(u, B)[: len(u)]
-    v = (np.convolve(y, A)[: len(y)] if orders.na else y) - w
-    if orders.nc or orders.nd:
-        e = sps.lfilter(D, C, v)
-    else:
-        e = v
+    st = orders.steady
+    w = filt(B, F, u, st)
+    v = (filt(A, [1.0], y, st) if orders.na else y) - w
+    e = filt(D, C, v, st) if (orders.nc or orders.nd) else v
     return e, w, v
 
 
@@ -108,22 +111,22 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
     def put(signal, first_lag, count, sign):
         nonlocal col
         for i in range(count):
-            psi[:, col] = shift(signal, first_lag + i)
+            psi[:, col] = shift(signal, first_lag + i, orders.steady)
             if sign < 0:
                 np.negative(psi[:, col], out=psi[:, col])
             col += 1
 
+    st = orders.steady
     if orders.na:
-        put(sps.lfilter(D, C, y) if noise else y, 1, orders.na, +1)
+        put(filt(D, C, y, st) if noise else y, 1, orders.na, +1)
     if orders.nb:
-        uf = sps.lfilter(D, CF, u) if (noise or orders.nf) else u
-        put(uf, orders.nk, orders.nb, -1)
+        put(filt(D, CF, u, st) if (noise or orders.nf) else u, orders.nk, orders.nb, -1)
     if orders.nc:
-        put(sps.lfilter([1.0], C, e), 1, orders.nc, -1)
+        put(filt([1.0], C, e, st), 1, orders.nc, -1)
     if orders.nd:
-        put(sps.lfilter([1.0], C, v), 1, orders.nd, +1)
+        put(filt([1.0], C, v, st), 1, orders.nd, +1)
     if orders.nf:
-        put(sps.lfilter(D, CF, w), 1, orders.nf, +1)
+        put(filt(D, CF, w, st), 1, orders.nf, +1)
     return psi
 
 
@@ -347,6 +350,7 @@ def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyMo
             loss=sse / N,
             iterations=iterations,
             termination=reason,
+            initial_conditions="steady" if orders.steady else "zero",
             **note,
         )
     )
@@ -362,6 +366,7 @@ def armax(
     *,
     max_iter: int = 50,
     tol: float = 1e-8,
+    initial: str = "zero",
 ) -> PolyModel:
     """Estimate an ARMAX model ``A y = B u(t−nk) + C e`` (MATLAB ``armax(data,[na nb nc nk])``).
 
@@ -375,6 +380,10 @@ def armax(
         Maximum Levenberg–Marquardt iterations.
     tol : float
         Stop when the relative decrease of Σε² falls below this.
+    initial : {'zero', 'steady'}
+        Pre-sample values: zero (MATLAB ``InitialCondition='zero'``), or every
+        signal held at its first sample (a record that starts at rest, in any
+        units: use it for normalised or offset data).
     """
     orders = _Orders(
         check_order("na", na),
@@ -383,6 +392,7 @@ def armax(
         0,
         0,
         check_order("nk", nk),
+        check_initial(initial) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_armax(orders, _init_subset(series))
@@ -399,10 +409,17 @@ def oe(
     *,
     max_iter: int = 50,
     tol: float = 1e-8,
+    initial: str = "zero",
 ) -> PolyModel:
     """Estimate an output-error model ``y = (B/F) u(t−nk) + e`` (MATLAB ``oe(data,[nb nf nk])``)."""
     orders = _Orders(
-        0, check_order("nb", nb, 1), 0, 0, check_order("nf", nf), check_order("nk", nk)
+        0,
+        check_order("nb", nb, 1),
+        0,
+        0,
+        check_order("nf", nf),
+        check_order("nk", nk),
+        check_initial(initial) == "steady",
     )
     experiments, series = _prepare(data, orders)
     B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
@@ -420,6 +437,7 @@ def bj(
     *,
     max_iter: int = 50,
     tol: float = 1e-8,
+    initial: str = "zero",
 ) -> PolyModel:
     """Estimate a Box–Jenkins model ``y = (B/F) u(t−nk) + (C/D) e`` (MATLAB ``bj``)."""
     orders = _Orders(
@@ -429,6 +447,7 @@ def bj(
         check_order("nd", nd),
         check_order("nf", nf),
         check_order("nk", nk),
+        check_initial(initial) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_bj(orders, _init_subset(series))
@@ -436,12 +455,28 @@ def bj(
 
 
 def pem(
-    data: IOData | Sequence[IOData], init: PolyModel, *, max_iter: int = 50, tol: float = 1e-8
+    data: IOData | Sequence[IOData],
+    init: PolyModel,
+    *,
+    max_iter: int = 50,
+    tol: float = 1e-8,
+    initial: str = "zero",
 ) -> PolyModel:
-    """Refine any SISO ``PolyModel`` structure by prediction-error minimisation from ``init``."""
+    """Refine any SISO ``PolyModel`` structure by prediction-error minimisation from ``init``.
+
+    ``max_iter``, ``tol`` and ``initial`` as for :func:`armax`.
+    """
     if init.nu != 1:
         raise DataError("pem refines single-input models")
-    orders = _Orders(init.na, init.nb[0], init.nc, init.nd, init.nf, init.nk[0])
+    orders = _Orders(
+        init.na,
+        init.nb[0],
+        init.nc,
+        init.nd,
+        init.nf,
+        init.nk[0],
+        check_initial(initial) == "steady",
+    )
     experiments, series = _prepare(data, orders)
     theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)
     return _finish(orders, theta0, experiments, series, "pem (prediction error, LM)", max_iter, tol)

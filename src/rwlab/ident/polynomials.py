@@ -8,8 +8,9 @@ A polynomial ``p = [p0, p1, ..., pn]`` means ``p0 + p1 q⁻¹ + ... + pn q⁻ⁿ
 from __future__ import annotations
 
 import numpy as np
+from scipy import signal as sps
 
-__all__ = ["is_stable", "shift", "stabilize", "to_z"]
+__all__ = ["filt", "is_stable", "shift", "stabilize", "to_z"]
 
 
 def to_z(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,11 +54,42 @@ def stabilize(p: np.ndarray) -> np.ndarray:
     return out
 
 
-def shift(x: np.ndarray, k: int) -> np.ndarray:
-    """``q⁻ᵏ x``: delay by ``k`` samples with zeros before the start."""
+INITIAL = ("zero", "steady")
+
+
+def check_initial(initial: str) -> str:
+    """Validate an initial-condition convention name."""
+    if initial not in INITIAL:
+        from rwlab.errors import DataError
+
+        raise DataError(f"initial must be 'zero' or 'steady', got {initial!r}")
+    return initial
+
+
+def shift(x: np.ndarray, k: int, steady: bool = False) -> np.ndarray:
+    """``q⁻ᵏ x``: delay by ``k`` samples, with zeros (or ``x[0]`` if ``steady``) before the start."""
     if k == 0:
         return x
-    out = np.zeros_like(x)
+    out = np.full_like(x, x[0] if steady and len(x) else 0.0)
     if k < len(x):
         out[k:] = x[: len(x) - k]
     return out
+
+
+def filt(b, a, x: np.ndarray, steady: bool = False) -> np.ndarray:
+    """``(b/a) x`` by ``scipy.signal.lfilter``.
+
+    ``steady=False``: zero initial conditions (the signals were 0 before t = 0).
+    ``steady=True``: the input held ``x[0]`` forever before t = 0, so the filter
+    starts in that equilibrium (``lfilter_zi``) — a record that starts at rest.
+    """
+    b = np.atleast_1d(np.asarray(b, float))
+    a = np.atleast_1d(np.asarray(a, float))
+    if len(a) == 1 and len(b) == 1:
+        return x * (b[0] / a[0])
+    if not steady or not len(x):
+        return sps.lfilter(b, a, x)
+    n = max(len(a), len(b))
+    b = np.concatenate([b, np.zeros(n - len(b))])
+    a = np.concatenate([a, np.zeros(n - len(a))])
+    return sps.lfilter(b, a, x, zi=sps.lfilter_zi(b, a) * x[0])[0]

@@ -66,7 +66,8 @@ def estimation_report(
 ) -> dict:
     """The numbers MATLAB puts in ``Report.Fit``: one-step prediction fit on the estimation data."""
     y = np.concatenate([d.y[:, 0] for d in experiments])
-    yhat = np.concatenate([model.predict(d, 1) for d in experiments])
+    initial = extra.get("initial_conditions", "zero")
+    yhat = np.concatenate([model.predict(d, 1, initial=initial) for d in experiments])
     N = y.size
     d = model.n_params
     V = max(float(loss), np.finfo(float).tiny)
@@ -74,7 +75,7 @@ def estimation_report(
     report = {
         "method": method,
         "focus": "prediction",
-        "initial_conditions": "zero",
+        "initial_conditions": initial,
         "n_samples": N,
         "n_params": d,
         "loss": float(loss),
@@ -114,9 +115,12 @@ class CompareResult:
     horizon: float
 
 
-def compare(model, data: IOData, horizon: float = np.inf) -> CompareResult:
-    """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``."""
-    yhat = model.predict(data, horizon)
+def compare(model, data: IOData, horizon: float = np.inf, initial: str = "zero") -> CompareResult:
+    """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``.
+
+    ``initial``: 'zero' or 'steady' pre-sample values (see ``PolyModel.simulate``).
+    """
+    yhat = model.predict(data, horizon, initial=initial)
     y = data.y[:, 0]
     return CompareResult(y.copy(), yhat, fit_percent(y, yhat), mse(y, yhat), float(horizon))
 
@@ -185,7 +189,9 @@ def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     return np.concatenate([full[-max_lag:], full[: max_lag + 1]]) / n if max_lag else full[:1] / n
 
 
-def resid(model, data: IOData, max_lag: int = 25, confidence: float = 0.99) -> ResidResult:
+def resid(
+    model, data: IOData, max_lag: int = 25, confidence: float = 0.99, initial: str = "zero"
+) -> ResidResult:
     """Residual whiteness and input independence tests with confidence bounds.
 
     Parameters
@@ -203,7 +209,7 @@ def resid(model, data: IOData, max_lag: int = 25, confidence: float = 0.99) -> R
         raise DataError(f"confidence must be in (0, 1), got {confidence}")
     if max_lag < 1 or max_lag >= data.N // 2:
         raise DataError(f"max_lag must be in 1..{data.N // 2 - 1}, got {max_lag}")
-    e = data.y[:, 0] - model.predict(data, 1)
+    e = data.y[:, 0] - model.predict(data, 1, initial=initial)
     u = data.u[:, 0] - data.u[:, 0].mean()
     N = e.size
     z = stats.norm.ppf(0.5 + confidence / 2)
