@@ -152,7 +152,7 @@ def test_cascaded_tanks_output_error_model_simulates_better_than_arx():
 def test_steady_initial_conditions_fit_offset_data_that_start_at_rest(kind):
     """Data in offset units (like normalised data) that start in equilibrium: the 'steady'
     convention is exact, zero initial conditions are not."""
-    A, B, C, D, F = TRUTH[kind]
+    A, B, _C, _D, F = TRUTH[kind]
     r = np.random.default_rng(8)
     u0 = 0.5
     u = u0 + r.standard_normal(1500)

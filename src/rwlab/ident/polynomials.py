@@ -67,7 +67,7 @@ def check_initial(initial: str) -> str:
 
 
 def shift(x: np.ndarray, k: int, steady: bool = False) -> np.ndarray:
-    """``q⁻ᵏ x``: delay by ``k`` samples, with zeros (or ``x[0]`` if ``steady``) before the start."""
+    """``q⁻ᵏ x``: delay by ``k`` samples; zeros (or ``x[0]`` if ``steady``) before the start."""
     if k == 0:
         return x
     out = np.full_like(x, x[0] if steady and len(x) else 0.0)
