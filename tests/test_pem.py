@@ -160,9 +160,11 @@ def test_steady_initial_conditions_fit_offset_data_that_start_at_rest(kind):
     gain = np.sum(B) / (np.sum(A) * np.sum(F))
     y_dev = lfilter(B, np.convolve(A, F), u - u0)  # deviations from the equilibrium
     data = IOData(u, gain * u0 + y_dev, 1.0)
-    est = {"armax": lambda i: armax(data, 2, 2, 1, 1, initial=i),
-           "oe": lambda i: oe(data, 2, 2, 1, initial=i),
-           "bj": lambda i: bj(data, 2, 1, 1, 1, 1, initial=i)}[kind]
+    est = {
+        "armax": lambda i: armax(data, 2, 2, 1, 1, initial=i),
+        "oe": lambda i: oe(data, 2, 2, 1, initial=i),
+        "bj": lambda i: bj(data, 2, 1, 1, 1, 1, initial=i),
+    }[kind]
     steady = est("steady")
     assert np.allclose(_dynamics(steady), _true_dynamics(kind), atol=1e-6)
     assert steady.report["initial_conditions"] == "steady" and steady.report["loss"] < 1e-20

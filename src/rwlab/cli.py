@@ -603,5 +603,57 @@ def monitor_cmd(record, host, port, replay, speed):
         pass
 
 
+@main.command("identify")
+@click.argument("file")
+@click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
+@click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@click.option(
+    "--preprocess",
+    type=click.Choice(["normalize", "detrend", "none"]),
+    default="normalize",
+    show_default=True,
+    help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
+)
+@click.option("--split", type=float, default=0.7, show_default=True, help="Estimation share.")
+@click.option(
+    "--tolerance",
+    type=float,
+    default=3.0,
+    show_default=True,
+    help="Fit points within which the simplest model is chosen.",
+)
+@click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_friendly_errors
+def identify(file, out, Ts, preprocess, split, tolerance, force):
+    """Run paper A's whole identification study on a record or data file.
+
+    Writes OUT/report.html (tables and figures, opens offline), OUT/study.json
+    (every number) and OUT/model.json (the chosen model in physical units with
+    the wheel's saturations, loadable by rwlab.wheel.IdentifiedWheel).
+    """
+    from rwlab.ident.study import identification_study, load_study_data, physical_model
+    from rwlab.report.identification import write_study
+
+    data, saturation = load_study_data(file, Ts)
+    click.echo(f"data: {data!r}", err=True)
+    result = identification_study(data, preprocess=preprocess, split=split, tolerance=tolerance)
+    model = physical_model(
+        result,
+        speed_limit_rpm=saturation["speed_limit_rpm"],
+        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
+        saturation_source=saturation["saturation_source"],
+    )
+    paths = write_study(result, model, out, force=force)
+    study = result.to_dict()
+    click.echo(f"delay nk = {study['delay']['nk']}")
+    click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
+    for row in study["orders"] + study["others"]:
+        fit = "unstable" if row["fit_percent"] is None else f"{row['fit_percent']:8.2f}"
+        mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
+        click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
+    click.echo(f"chosen: {study['chosen']['reason']}")
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

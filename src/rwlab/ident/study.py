@@ -117,7 +117,7 @@ class StudyResult:
         }
 
 
-INITIAL = "steady"  # every record starts at rest; the validation part starts where it is
+INITIAL = "steady"  # records start at rest; the validation part starts where it is
 
 
 def _row(model: PolyModel, val: IOData) -> dict:
@@ -370,3 +370,43 @@ def physical_model(
         "note": "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
         "saturation before the model and the acceleration limit to its output.",
     }
+
+
+def load_study_data(
+    path: str, Ts: float | None = None, *, max_orders: int = 5, nk_max: int = 10
+) -> tuple[IOData, dict]:
+    """Read a testbed record (``.mcap``) or a data file for the study.
+
+    Returns the data and the saturations to store with the model: from the
+    record's wheel parameters when present, else the RW90 defaults. A record
+    whose telemetry has a gap longer than the largest model's memory
+    (``max_orders + nk_max`` samples) is refused.
+    """
+    from pathlib import Path
+
+    from rwlab import datasets
+    from rwlab.data import load
+
+    saturation = {
+        "speed_limit_rpm": 7800.0,
+        "accel_limit_rpm_s": 314.0,
+        "saturation_source": "RW90 defaults (paper A)",
+    }
+    if Path(path).suffix.lower() == ".mcap":
+        from rwlab.testbed import load_record, read_record
+
+        meta = read_record(path).metadata
+        Ts_rec = Ts if Ts is not None else meta.get("Ts")
+        memory = (max_orders + nk_max) * (Ts_rec or 0.0)
+        data = load_record(path, Ts, max_gap=memory or None)
+        wheel = meta.get("wheel", {})
+        if "max_speed_rpm" in wheel:
+            saturation = {
+                "speed_limit_rpm": float(wheel["max_speed_rpm"]),
+                "accel_limit_rpm_s": float(wheel["max_accel_rpm_s"]),
+                "saturation_source": "the record's wheel parameters",
+            }
+        return data, saturation
+    if not Path(path).exists() and path in datasets.NAMES:
+        return datasets.get(path), saturation
+    return load(path, Ts), saturation

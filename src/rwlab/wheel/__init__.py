@@ -6,11 +6,13 @@
 - :class:`WheelClient` — the host driver.
 - :class:`SimClock`, :class:`WallClock` — time sources.
 - :class:`SlipSerialBus` — the same frames over RS-232 (SLIP + CRC-16).
+- :class:`IdentifiedWheel` — the model chosen by ``rwlab identify`` (``model.json``).
 """
 
 from rwlab.errors import WheelCommandError, WheelFault, WheelTimeout
 from rwlab.wheel.client import WheelClient
 from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.identified import IdentifiedWheel
 from rwlab.wheel.node import FaultInjection, WheelNode
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
 from rwlab.wheel.serial import SlipSerialBus
@@ -19,6 +21,7 @@ __all__ = [
     "RW90",
     "Fault",
     "FaultInjection",
+    "IdentifiedWheel",
     "Mode",
     "SimClock",
     "SlipSerialBus",

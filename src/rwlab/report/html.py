@@ -1,0 +1,107 @@
+"""A tiny HTML page builder for reports that open offline (no scripts, no links out).
+
+Figures are matplotlib figures rendered to PNG and embedded as base64 data
+URIs, each in a ``<figure id=...>`` so tests and readers can find them.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from rwlab.data import atomic_write_bytes
+
+__all__ = ["Page", "figure"]
+
+_STYLE = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;
+margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+h1{font-size:1.7em}h2{font-size:1.3em;margin-top:2em;border-bottom:1px solid #ddd}
+table{border-collapse:collapse;margin:1em 0;font-size:.92em}
+td,th{border:1px solid #ccc;padding:.3em .6em;text-align:left;vertical-align:top}
+th{background:#f3f3f3}tr.chosen{background:#eef7ee;font-weight:600}
+figure{margin:1.2em 0}figure img{max-width:100%}figcaption{font-size:.9em;color:#555}
+.note{background:#fff8e1;padding:.6em 1em;border-left:4px solid #f0c040}
+code{background:#f4f4f4;padding:0 .2em}
+"""
+
+
+def figure(width: float = 8.0, height: float = 3.2, nrows: int = 1, ncols: int = 1, **kw):
+    """A new matplotlib figure and axes with the report's size."""
+    return plt.subplots(nrows, ncols, figsize=(width, height), constrained_layout=True, **kw)
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+class Page:
+    """Collects sections, then writes one self-contained HTML file."""
+
+    def __init__(self, title: str) -> None:
+        self.title = title
+        self.parts: list[str] = [f"<h1>{html.escape(title)}</h1>"]
+
+    def heading(self, text: str, anchor: str | None = None) -> None:
+        ident = f' id="{anchor}"' if anchor else ""
+        self.parts.append(f"<h2{ident}>{html.escape(text)}</h2>")
+
+    def text(self, text: str, *, note: bool = False) -> None:
+        cls = ' class="note"' if note else ""
+        self.parts.append(f"<p{cls}>{html.escape(text)}</p>")
+
+    def html(self, raw: str) -> None:
+        """Insert trusted HTML written by rwlab itself."""
+        self.parts.append(raw)
+
+    def table(
+        self,
+        header: list[str],
+        rows: list[list],
+        *,
+        table_id: str | None = None,
+        highlight: int | None = None,
+    ) -> None:
+        ident = f' id="{table_id}"' if table_id else ""
+        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+        body = []
+        for i, row in enumerate(rows):
+            cls = ' class="chosen"' if i == highlight else ""
+            cells = "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row)
+            body.append(f"<tr{cls}>{cells}</tr>")
+        self.parts.append(f"<table{ident}><tr>{head}</tr>{''.join(body)}</table>")
+
+    def figure(self, fig, fig_id: str, caption: str) -> None:
+        self.parts.append(
+            f'<figure id="{fig_id}"><img alt="{html.escape(caption)}" src="{_png(fig)}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
+
+    def render(self) -> str:
+        return (
+            '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+            f"<title>{html.escape(self.title)}</title><style>{_STYLE}</style></head><body>"
+            + "\n".join(self.parts)
+            + "</body></html>"
+        )
+
+    def save(self, path: str | os.PathLike) -> Path:
+        text = self.render()
+        return atomic_write_bytes(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return "" if value is None else str(value)

@@ -1,0 +1,301 @@
+"""The identification report: paper A's tables and figures for one study.
+
+Figure ids follow the paper: ``fig16-delay``, ``fig17-orders``, ``fig18-steps``,
+``fig19-resid``, ``fig20-compare``, ``fig21-resid-armax``, ``fig22-compare-armax``,
+``fig-oe-bj``, ``fig23-continuous``, ``fig24-acceleration``; tables ``table2-orders``
+and ``table3-others``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from rwlab.data import atomic_write_bytes
+from rwlab.ident.study import INITIAL, StudyResult
+from rwlab.report.html import Page, figure
+
+__all__ = ["FIGURES", "write_study"]
+
+FIGURES = (
+    "fig16-delay",
+    "fig17-orders",
+    "fig18-steps",
+    "fig19-resid",
+    "fig20-compare",
+    "fig21-resid-armax",
+    "fig22-compare-armax",
+    "fig-oe-bj",
+    "fig23-continuous",
+    "fig24-acceleration",
+)
+
+
+def _poly(row: dict, letter: str) -> str:
+    coeffs = row[letter]
+    std = row.get("std") or {}
+    out = []
+    for i, c in enumerate(coeffs):
+        if i == 0 and letter != "B":
+            out.append("1")
+            continue
+        if c == 0 and letter == "B":
+            continue
+        s = std.get(f"{letter.lower()}{i}")
+        pm = f" (±{s:.2g})" if s is not None else ""
+        out.append(f"{c:+.4g}{pm} q⁻{i}" if i else f"{c:+.4g}{pm}")
+    return " ".join(out)
+
+
+def _resid_figure(page: Page, res: dict, fig_id: str, name: str) -> None:
+    fig, (a1, a2) = figure(9, 3.0, 1, 2)
+    a1.stem(res["lags"], res["acf"], basefmt=" ")
+    for sign in (1, -1):
+        a1.axhline(sign * res["acf_bound"], color="r", ls="--", lw=1)
+    a1.set_title(f"residual autocorrelation, {name}")
+    a1.set_xlabel("lag [samples]")
+    a2.stem(res["ccf_lags"], res["ccf"], basefmt=" ")
+    for sign in (1, -1):
+        a2.axhline(sign * res["ccf_bound"], color="r", ls="--", lw=1)
+    a2.set_title("input–residual cross-correlation")
+    a2.set_xlabel("lag [samples]")
+    verdict = (
+        "white" if res["white"] else "not white"
+    ) + f" (Ljung–Box p = {res['whiteness_p']:.3g})"
+    page.figure(
+        fig,
+        fig_id,
+        f"Residuals of {name} on validation data with "
+        f"{res['confidence']:.0%} bounds: {verdict}; independence p = "
+        f"{res['independence_p']:.3g}.",
+    )
+
+
+def _compare_figure(
+    page: Page, result: StudyResult, names: list[str], fig_id: str, caption: str
+) -> None:
+    val = result.val
+    t = val.time - val.time[0]
+    fig, ax = figure(9, 3.2)
+    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
+    for name in names:
+        m = result.models[name]
+        if not m.is_stable():
+            continue
+        ax.plot(t, m.simulate(val, initial=INITIAL), lw=1, label=name)
+    ax.set_xlabel("time in validation record [s]")
+    ax.set_ylabel(f"{val.output_names[0]} ({result.preprocess})")
+    ax.legend(loc="best", fontsize=8)
+    page.figure(fig, fig_id, caption)
+
+
+def write_study(
+    result: StudyResult, model_info: dict, out_dir: str | os.PathLike, *, force: bool = False
+) -> dict[str, Path]:
+    """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``."""
+    out = Path(out_dir)
+    targets = {name: out / name for name in ("report.html", "study.json", "model.json")}
+    existing = [str(p) for p in targets.values() if p.exists()]
+    if existing and not force:
+        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    study = result.to_dict()
+    study["model_file"] = "model.json"
+    for name, payload in (("study.json", study), ("model.json", model_info)):
+        text = json.dumps(payload, indent=2)
+        atomic_write_bytes(targets[name], lambda tmp, text=text: tmp.write_text(text))
+    _page(result, study, model_info).save(targets["report.html"])
+    return targets
+
+
+def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
+    d = study["data"]
+    page = Page(f"Identification study — {d['name'] or 'record'}")
+    page.text(
+        f"Record: {d['N']} samples at Ts = {d['Ts']:g} s "
+        f"(input {d['input']}, output {d['output']}), preprocessed: {d['preprocess']}; "
+        f"estimation {d['n_estimation']} samples, validation {d['n_validation']} samples. "
+        "Fit % is the NRMSE fit of the simulated output on the validation data "
+        "(MATLAB compare), in preprocessed units, as paper A reports it."
+    )
+    ch = study["chosen"]
+    page.html(
+        f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
+        f"{ch['fit_percent']:.2f} %. {ch['reason']}.</p>"
+    )
+
+    page.heading("1. Input delay (paper Fig. 16)", "delay")
+    nk = study["delay"]["nk"]
+    losses = {int(k): v for k, v in study["delay"]["losses"].items()}
+    fig, ax = figure(7, 2.8)
+    ax.bar(
+        list(losses),
+        list(losses.values()),
+        color=["#d62728" if k == nk else "#1f77b4" for k in losses],
+    )
+    ax.set_xlabel("delay nk [samples]")
+    ax.set_ylabel("ARX(2,2,nk) loss")
+    page.figure(
+        fig,
+        "fig16-delay",
+        f"Loss of ARX(2,2,nk) per delay; minimum at nk = {nk} ({nk * d['Ts']:g} s).",
+    )
+
+    page.heading("2. ARX orders (paper Table 2, Fig. 17, Fig. 18)", "orders")
+    rows = study["orders"]
+    page.table(
+        ["model", "fit %", "MSE", "FPE", "A(q)", "B(q)"],
+        [
+            [r["structure"], r["fit_percent"], r["mse"], r["fpe"], _poly(r, "A"), _poly(r, "B")]
+            for r in rows
+        ],
+        table_id="table2-orders",
+        highlight=next((i for i, r in enumerate(rows) if r["structure"] == ch["structure"]), None),
+    )
+    fig, ax = figure(7, 2.8)
+    ax.plot([r["na"] for r in rows], [r["mse"] for r in rows], "o-")
+    ax.set_xlabel("na = nb")
+    ax.set_ylabel("validation MSE")
+    page.figure(fig, "fig17-orders", "Validation error per ARX order.")
+    fig, ax = figure(8, 3.0)
+    n_step = max(40, int(60 / d["Ts"]))
+    for r in rows:
+        m = result.models[r["structure"]]
+        ax.plot(np.arange(n_step) * d["Ts"], m.step_response(n_step), label=r["structure"])
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("step response")
+    ax.legend(fontsize=8)
+    page.figure(fig, "fig18-steps", "Unit-step responses of the ARX models.")
+
+    page.heading("3. Validation of the chosen model (paper Fig. 19, Fig. 20)", "validation")
+    _resid_figure(page, study["residuals"][ch["structure"]], "fig19-resid", ch["structure"])
+    _compare_figure(
+        page,
+        result,
+        [ch["structure"]],
+        "fig20-compare",
+        f"Simulated vs measured output of {ch['structure']} on validation data.",
+    )
+
+    page.heading("4. ARMAX, OE and BJ (paper Table 3, Fig. 21, Fig. 22)", "others")
+    others = study["others"]
+    page.table(
+        ["model", "fit %", "MSE", "stable", "A", "B", "C", "D", "F"],
+        [
+            [
+                r["structure"],
+                r["fit_percent"],
+                r["mse"],
+                r["stable"],
+                _poly(r, "A"),
+                _poly(r, "B"),
+                _poly(r, "C"),
+                _poly(r, "D"),
+                _poly(r, "F"),
+            ]
+            for r in others
+        ],
+        table_id="table3-others",
+    )
+    armax = next((r["structure"] for r in others if r["structure"].startswith("ARMAX")), None)
+    if armax and armax in study["residuals"]:
+        _resid_figure(page, study["residuals"][armax], "fig21-resid-armax", armax)
+        _compare_figure(
+            page,
+            result,
+            [armax],
+            "fig22-compare-armax",
+            f"Simulated vs measured output of {armax} on validation data.",
+        )
+    else:
+        page.text("ARMAX(2,2,1) could not be estimated from these data.", note=True)
+    _compare_figure(
+        page,
+        result,
+        [r["structure"] for r in others],
+        "fig-oe-bj",
+        "All prediction-error models on validation data.",
+    )
+
+    page.heading("5. Continuous-time model (paper eq. 14, Fig. 23)", "continuous")
+    cont = study["continuous"]
+    lines = []
+    for method, info in cont["methods"].items():
+        if "error" in info:
+            lines.append([method, info["error"], "", ""])
+        else:
+            lines.append(
+                [
+                    method,
+                    _tf_text(info["num"], info["den"]),
+                    info["fit_to_discrete_percent"],
+                    info["max_abs_difference"],
+                ]
+            )
+    page.table(
+        ["method", "G(s)", "fit to discrete %", "max |difference|"],
+        lines,
+        table_id="table-continuous",
+    )
+    page.text(
+        f"Converted with the record's real sample time Ts = {d['Ts']:g} s (paper A's "
+        "eq. 14 used MATLAB's default Ts = 1 s by mistake)."
+    )
+    fig, ax = figure(9, 3.0)
+    t = np.arange(len(cont["discrete"])) * d["Ts"]
+    ax.plot(t, cont["discrete"], color="k", lw=1.5, label="discrete")
+    for method, info in cont["methods"].items():
+        if "y" in info:
+            ax.plot(info["t"], info["y"], lw=1, ls="--", label=method)
+    ax.set_xlabel("t [s]")
+    ax.legend(fontsize=8)
+    page.figure(
+        fig,
+        "fig23-continuous",
+        "Discrete and continuous models driven by a new piecewise-constant input.",
+    )
+
+    page.heading("6. Acceleration check (paper Fig. 24)", "acceleration")
+    acc = study["acceleration"]
+    val = result.val
+    y_sim = result.chosen.simulate(val, initial=INITIAL)
+    fig, ax = figure(9, 3.0)
+    tt = (val.time - val.time[0])[1:]
+    ax.plot(tt, np.diff(val.y[:, 0]) / val.Ts, color="k", lw=1, label="measured")
+    ax.plot(tt, np.diff(y_sim) / val.Ts, lw=1, label=ch["structure"])
+    ax.set_xlabel("time in validation record [s]")
+    ax.set_ylabel("rate of change per s")
+    ax.legend(fontsize=8)
+    page.figure(
+        fig,
+        "fig24-acceleration",
+        f"Speed change per second, model vs measured: correlation {acc['correlation']:.3f}.",
+    )
+
+    page.heading("7. The model for control (model.json)", "model")
+    sat = model_info["saturation"]
+    u_off, y_off = model_info["input"]["offset"], model_info["output"]["offset"]
+    page.text(
+        f"{model_info['structure']} in physical units: output − {y_off:.4g} "
+        f"= B/(A F)·(input − {u_off:.4g}), Ts = {model_info['Ts']:g} s. "
+        f"Wrap it with a speed-command saturation of ±{sat['speed_rpm']:g} rpm and an "
+        f"acceleration limit of ±{sat['accel_rpm_s']:g} rpm/s ({sat['source']}): the wheel "
+        "is linear only inside them (paper A, section 5)."
+    )
+    return page
+
+
+def _tf_text(num, den) -> str:
+    def poly(c):
+        n = len(c) - 1
+        terms = [
+            f"{v:+.4g}" + (f" s^{n - i}" if n - i > 1 else (" s" if n - i == 1 else ""))
+            for i, v in enumerate(c)
+            if abs(v) > 1e-14
+        ]
+        return " ".join(terms) or "0"
+
+    return f"({poly(num)}) / ({poly(den)})"
