@@ -1,0 +1,1 @@
+"""Geostationary attitude control with reaction wheels (paper B)."""
