@@ -34,7 +34,7 @@ __all__ = ["MEKF", "error_jacobian", "vector_jacobian"]
 @njit(cache=True)
 def error_jacobian(q, w, h, J, J_inv, n, gg_gain):
     """F (6×6) of the error dynamics at (q̂, ω̂) with wheel momentum h (body axes)."""
-    r = dcm(q)[:, 2]
+    r = dcm(q)[:, 2].copy()
     F = np.zeros((6, 6))
     F[:3, :3] = -skew(w)
     F[:3, 3:] = np.eye(3)
@@ -90,8 +90,9 @@ class MEKF:
         3n² (0 to leave gravity gradient out of the model).
     """
 
-    def __init__(self, J, q0, w0, P0, torque_psd: float, n: float = GEO_RATE,
-                 gg_gain: float | None = None) -> None:
+    def __init__(
+        self, J, q0, w0, P0, torque_psd: float, n: float = GEO_RATE, gg_gain: float | None = None
+    ) -> None:
         self.J = np.asarray(J, float)
         self.J_inv = np.linalg.inv(self.J)
         self.q = np.asarray(q0, float) / np.linalg.norm(q0)
@@ -104,8 +105,11 @@ class MEKF:
 
     def _discrete(self, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Φ and Q_d for this F over dt (Van Loan), cached while F barely changes."""
-        if self._cache is not None and self._cache[0] == dt and np.allclose(
-                self._cache[1], F, rtol=1e-3, atol=1e-12):
+        if (
+            self._cache is not None
+            and self._cache[0] == dt
+            and np.allclose(self._cache[1], F, rtol=1e-3, atol=1e-12)
+        ):
             return self._cache[2], self._cache[3]
         G = np.zeros((6, 3))
         G[3:] = self.J_inv
@@ -133,8 +137,9 @@ class MEKF:
 
     def update(self, b_meas: np.ndarray, ref: np.ndarray, sigma: float) -> None:
         """Fuse a unit-vector measurement ``b_meas`` (body) of ``ref`` (orbital), σ in rad."""
-        self.q, self.w, self.P = _update(self.q, self.w, self.P, np.asarray(b_meas, float),
-                                         np.asarray(ref, float), float(sigma))
+        self.q, self.w, self.P = _update(
+            self.q, self.w, self.P, np.asarray(b_meas, float), np.asarray(ref, float), float(sigma)
+        )
 
     def error(self, q_true: np.ndarray, w_true: np.ndarray) -> np.ndarray:
         """Estimation error δx = [δθ, δω] with A(q) = (I − [δθ×]) A(q̂), for NEES tests."""

@@ -51,7 +51,7 @@ def skew(v: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def dcm(q: np.ndarray) -> np.ndarray:
     """A(q): orbital → body direction-cosine matrix of a scalar-last unit quaternion."""
-    e = q[:3]
+    e = q[:3].copy()
     q4 = q[3]
     return (q4 * q4 - e @ e) * np.eye(3) + 2.0 * np.outer(e, e) - 2.0 * q4 * skew(e)
 
@@ -60,7 +60,7 @@ def dcm(q: np.ndarray) -> np.ndarray:
 def xi(q: np.ndarray) -> np.ndarray:
     """Ξ(q), shape (4, 3): ``q̇ = ½ Ξ(q) ω``."""
     out = np.empty((4, 3))
-    out[:3, :] = q[3] * np.eye(3) + skew(q[:3])
+    out[:3, :] = q[3] * np.eye(3) + skew(q[:3].copy())
     out[3, :] = -q[:3]
     return out
 
@@ -68,8 +68,8 @@ def xi(q: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Quaternion product p ⊗ q with ``A(p ⊗ q) = A(p) A(q)`` (scalar last)."""
-    pv, p4 = p[:3], p[3]
-    qv, q4 = q[:3], q[3]
+    pv, p4 = p[:3].copy(), p[3]
+    qv, q4 = q[:3].copy(), q[3]
     out = np.empty(4)
     out[:3] = p4 * qv + q4 * pv - np.cross(pv, qv)
     out[3] = p4 * q4 - pv @ qv

@@ -32,8 +32,9 @@ def seed(value):
 @njit(cache=True)
 def _sun(t, dec, phase, moving, n):
     theta = phase + (n * t if moving else 0.0)
-    return np.array([-math.sin(theta) * math.cos(dec), -math.sin(dec),
-                     -math.cos(theta) * math.cos(dec)])
+    return np.array(
+        [-math.sin(theta) * math.cos(dec), -math.sin(dec), -math.cos(theta) * math.cos(dec)]
+    )
 
 
 @njit(cache=True)
@@ -52,10 +53,45 @@ def _state(q, w, n):
 
 
 @njit(cache=True)
-def run_block(x, q_hat, w_hat, P, k0, steps, K, use_ekf, dt, sensor_every, log_every,
-              J, J_inv, G, G_pinv, h_max, tau_max, n, dist, dist_model, noise_sd, Qc,
-              sun_dec, sun_phase, sun_moving, sun_fov_cos, sig_sun, sig_earth, r_sun, r_earth,
-              moon, log_t, log_x, log_est, log_tau, log_nees, log_k):
+def run_block(
+    x,
+    q_hat,
+    w_hat,
+    P,
+    k0,
+    steps,
+    K,
+    use_ekf,
+    dt,
+    sensor_every,
+    log_every,
+    J,
+    J_inv,
+    G,
+    G_pinv,
+    h_max,
+    tau_max,
+    n,
+    dist,
+    dist_model,
+    noise_sd,
+    Qc,
+    sun_dec,
+    sun_phase,
+    sun_moving,
+    sun_fov_cos,
+    sig_sun,
+    sig_earth,
+    r_sun,
+    r_earth,
+    moon,
+    log_t,
+    log_x,
+    log_est,
+    log_tau,
+    log_nees,
+    log_k,
+):
     """Run ``steps`` steps from step index ``k0``; returns the new x, q̂, ŵ, P, log
     position and whether a wheel touched its momentum limit."""
     nadir = np.array([0.0, 0.0, 1.0])
@@ -70,8 +106,7 @@ def run_block(x, q_hat, w_hat, P, k0, steps, K, use_ekf, dt, sensor_every, log_e
             sun_b = C @ s_orb
             if -sun_b[0] >= sun_fov_cos:
                 q_hat, w_hat, P = _update(q_hat, w_hat, P, _noisy(sun_b, sig_sun), s_orb, r_sun)
-            q_hat, w_hat, P = _update(q_hat, w_hat, P, _noisy(C[:, 2], sig_earth), nadir,
-                                      r_earth)
+            q_hat, w_hat, P = _update(q_hat, w_hat, P, _noisy(C[:, 2], sig_earth), nadir, r_earth)
         if use_ekf:
             s = _state(q_hat, w_hat, n)
         else:

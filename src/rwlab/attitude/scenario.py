@@ -88,17 +88,30 @@ class Scenario:
         if ev[2] > ev[0] + ev[1] + 1e-9:
             raise ConfigError(f"{self.name}: inertia violates the triangle inequality")
         if self.wheel_axes not in ("orthogonal", "pyramid"):
-            raise ConfigError(f"wheel_axes must be 'orthogonal' or 'pyramid', got {self.wheel_axes!r}")
+            raise ConfigError(
+                f"wheel_axes must be 'orthogonal' or 'pyramid', got {self.wheel_axes!r}"
+            )
         if self.wheel_model not in ("ideal", "physics", "identified"):
-            raise ConfigError(f"wheel_model must be ideal, physics or identified, "
-                              f"got {self.wheel_model!r}")
+            raise ConfigError(
+                f"wheel_model must be ideal, physics or identified, got {self.wheel_model!r}"
+            )
         if self.wheel_model == "identified" and not self.wheel_model_file:
             raise ConfigError("wheel_model 'identified' needs wheel_model_file = model.json")
         if self.sun not in ("fixed", "moving"):
             raise ConfigError(f"sun must be 'fixed' or 'moving', got {self.sun!r}")
-        for name in ("wheel_inertia", "wheel_max_torque", "wheel_max_momentum",
-                     "wheel_max_speed_rpm", "sun_noise_deg", "earth_noise_deg", "noise_margin",
-                     "dt", "sensor_period", "duration", "sun_fov_deg"):
+        for name in (
+            "wheel_inertia",
+            "wheel_max_torque",
+            "wheel_max_momentum",
+            "wheel_max_speed_rpm",
+            "sun_noise_deg",
+            "earth_noise_deg",
+            "noise_margin",
+            "dt",
+            "sensor_period",
+            "duration",
+            "sun_fov_deg",
+        ):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{self.name}: {name} must be a positive number, got {value!r}")
@@ -134,11 +147,16 @@ class Scenario:
 
 SCENARIOS = {
     "geo-smallsat": Scenario(
-        name="geo-smallsat", inertia=(14.0, 12.0, 10.0), wheel_inertia=4.2e-4,
-        wheel_max_torque=0.015, wheel_max_momentum=4.2e-4 * 7800 * 2 * math.pi / 60,
+        name="geo-smallsat",
+        inertia=(14.0, 12.0, 10.0),
+        wheel_inertia=4.2e-4,
+        wheel_max_torque=0.015,
+        wheel_max_momentum=4.2e-4 * 7800 * 2 * math.pi / 60,
         wheel_max_speed_rpm=7800.0,
         disturbances=DisturbanceModel(srp_area=1.5, srp_offset=(0.05, -0.03, 0.08)),
-        process_noise_torque=2e-7, dt=0.1, sensor_period=0.5,
+        process_noise_torque=2e-7,
+        dt=0.1,
+        sensor_period=0.5,
     ),
     "geo-comsat": Scenario(name="geo-comsat"),
 }
@@ -151,8 +169,9 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
         return replace(base, **overrides) if overrides else base
     path = Path(name_or_path)
     if not path.is_file():
-        raise ConfigError(f"unknown scenario {name_or_path!r}: not one of "
-                          f"{sorted(SCENARIOS)} and no such file")
+        raise ConfigError(
+            f"unknown scenario {name_or_path!r}: not one of {sorted(SCENARIOS)} and no such file"
+        )
     try:
         raw = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
@@ -173,5 +192,10 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     for key in ("srp_offset", "constant_torque"):
         if key in dist:
             dist[key] = tuple(dist[key])
-    return replace(base, name=table.pop("name", path.stem),
-                   disturbances=replace(base.disturbances, **dist), **table, **overrides)
+    return replace(
+        base,
+        name=table.pop("name", path.stem),
+        disturbances=replace(base.disturbances, **dist),
+        **table,
+        **overrides,
+    )

@@ -77,10 +77,13 @@ class _Wheels:
         self.kind = sc.wheel_model
         n = sc.n_wheels
         if self.kind == "physics":
-            params = WheelParams(inertia=sc.wheel_inertia, max_speed_rpm=sc.wheel_max_speed_rpm,
-                                 overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
-                                 max_accel_rpm_s=rad_s_to_rpm(sc.wheel_max_torque / sc.wheel_inertia),
-                                 torque_constant=sc.wheel_max_torque / 0.7 * 1.05)
+            params = WheelParams(
+                inertia=sc.wheel_inertia,
+                max_speed_rpm=sc.wheel_max_speed_rpm,
+                overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
+                max_accel_rpm_s=rad_s_to_rpm(sc.wheel_max_torque / sc.wheel_inertia),
+                torque_constant=sc.wheel_max_torque / 0.7 * 1.05,
+            )
             self.units = [WheelPhysics(params, seed=i) for i in range(n)]
             for unit, h in zip(self.units, hw0, strict=True):
                 unit.speed = h / sc.wheel_inertia
@@ -149,9 +152,16 @@ def _w_bo(q, w, n=GEO_RATE):
     return w - dcm(q) @ np.array([0.0, -n, 0.0])
 
 
-def simulate(scenario: Scenario, controller, *, duration: float | None = None,
-             estimator: str = "ekf", log_every: int = 10, seed: int | None = None,
-             wheel_momentum0: np.ndarray | None = None) -> SimResult:
+def simulate(
+    scenario: Scenario,
+    controller,
+    *,
+    duration: float | None = None,
+    estimator: str = "ekf",
+    log_every: int = 10,
+    seed: int | None = None,
+    wheel_momentum0: np.ndarray | None = None,
+) -> SimResult:
     """Run the closed loop. ``estimator``: 'ekf' (LQG-style) or 'truth' (ideal LQR).
 
     Ideal wheels with a :class:`LinearController` run in the compiled kernel;
@@ -160,10 +170,24 @@ def simulate(scenario: Scenario, controller, *, duration: float | None = None,
     if estimator not in ("ekf", "truth"):
         raise ValueError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
     if scenario.wheel_model == "ideal" and isinstance(controller, LinearController):
-        return _simulate_compiled(scenario, controller, duration=duration, estimator=estimator,
-                                  log_every=log_every, seed=seed, wheel_momentum0=wheel_momentum0)
-    return _simulate_python(scenario, controller, duration=duration, estimator=estimator,
-                            log_every=log_every, seed=seed, wheel_momentum0=wheel_momentum0)
+        return _simulate_compiled(
+            scenario,
+            controller,
+            duration=duration,
+            estimator=estimator,
+            log_every=log_every,
+            seed=seed,
+            wheel_momentum0=wheel_momentum0,
+        )
+    return _simulate_python(
+        scenario,
+        controller,
+        duration=duration,
+        estimator=estimator,
+        log_every=log_every,
+        seed=seed,
+        wheel_momentum0=wheel_momentum0,
+    )
 
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
@@ -179,10 +203,14 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
 def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated) -> SimResult:
     q = np.where(q[:, 3:4] >= 0, q, -q)
     q_est = np.where(q_est[:, 3:4] >= 0, q_est, -q_est)
-    est_err = angle_deg(np.array([qmul(a, np.array([-b[0], -b[1], -b[2], b[3]]))
-                                  for a, b in zip(q, q_est, strict=True)]))
-    return SimResult(t, q, w_bo, q_est, w_est, torque, wheel, angle_deg(q), est_err, nees,
-                     bool(saturated))
+    est_err = angle_deg(
+        np.array(
+            [qmul(a, np.array([-b[0], -b[1], -b[2], b[3]])) for a, b in zip(q, q_est, strict=True)]
+        )
+    )
+    return SimResult(
+        t, q, w_bo, q_est, w_est, torque, wheel, angle_deg(q), est_err, nees, bool(saturated)
+    )
 
 
 def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, wheel_momentum0):
@@ -191,7 +219,7 @@ def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, 
     rng = np.random.default_rng(sc.seed if seed is None else seed)
     kernel.seed(int(rng.integers(2**31)))
     duration = sc.duration if duration is None else duration
-    steps = int(round(duration / sc.dt))
+    steps = round(duration / sc.dt)
     J = sc.inertia_matrix
     J_inv = np.linalg.inv(J)
     G = sc.wheel_matrix
@@ -209,40 +237,80 @@ def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, 
     m = sc.noise_margin
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
     period = controller.update_period
-    block = steps + 1 if not period else max(1, int(round(period / sc.dt)))
+    block = steps + 1 if not period else max(1, round(period / sc.dt))
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
         s_q, s_w = (q_hat, w_hat) if use_ekf else (x[:4], x[4:7])
-        K = np.ascontiguousarray(controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]),
-                                 dtype=float)
+        K = np.ascontiguousarray(
+            controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]), dtype=float
+        )
         x, q_hat, w_hat, P, log_k, sat = kernel.run_block(
-            x, q_hat, w_hat, P, k, n_steps, K, use_ekf, sc.dt,
-            int(round(sc.sensor_period / sc.dt)), log_every, J, J_inv, G, np.linalg.pinv(G),
-            np.full(sc.n_wheels, sc.wheel_max_momentum), sc.wheel_max_torque, GEO_RATE, dist,
-            dist, sc.process_noise_torque / math.sqrt(sc.dt), Qc,
-            math.radians(sc.sun_declination_deg), math.radians(sc.sun_phase_deg),
-            sc.sun == "moving", fov_cos, math.radians(sc.sun_noise_deg),
-            math.radians(sc.earth_noise_deg), math.radians(sc.sun_noise_deg) * m,
-            math.radians(sc.earth_noise_deg) * m, MOON_DIRECTION,
-            log_t, log_x, log_est, log_tau, log_nees, log_k)
+            x,
+            q_hat,
+            w_hat,
+            P,
+            k,
+            n_steps,
+            K,
+            use_ekf,
+            sc.dt,
+            round(sc.sensor_period / sc.dt),
+            log_every,
+            J,
+            J_inv,
+            G,
+            np.linalg.pinv(G),
+            np.full(sc.n_wheels, sc.wheel_max_momentum),
+            sc.wheel_max_torque,
+            GEO_RATE,
+            dist,
+            dist,
+            sc.process_noise_torque / math.sqrt(sc.dt),
+            Qc,
+            math.radians(sc.sun_declination_deg),
+            math.radians(sc.sun_phase_deg),
+            sc.sun == "moving",
+            fov_cos,
+            math.radians(sc.sun_noise_deg),
+            math.radians(sc.earth_noise_deg),
+            math.radians(sc.sun_noise_deg) * m,
+            math.radians(sc.earth_noise_deg) * m,
+            MOON_DIRECTION,
+            log_t,
+            log_x,
+            log_est,
+            log_tau,
+            log_nees,
+            log_k,
+        )
         saturated |= sat
         k += n_steps
     log_x, log_est = log_x[:log_k], log_est[:log_k]
     w_bo = np.array([_w_bo(r[:4], r[4:7]) for r in log_x])
     w_est = np.array([_w_bo(r[:4], r[4:7]) for r in log_est])
     wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheel_inertia)
-    return _result(log_t[:log_k], log_x[:, :4], w_bo, log_est[:, :4], w_est, log_tau[:log_k],
-                   wheel, log_nees[:log_k] if use_ekf else np.zeros(log_k), saturated)
+    return _result(
+        log_t[:log_k],
+        log_x[:, :4],
+        w_bo,
+        log_est[:, :4],
+        w_est,
+        log_tau[:log_k],
+        wheel,
+        log_nees[:log_k] if use_ekf else np.zeros(log_k),
+        saturated,
+    )
 
 
-def _simulate_python(scenario, controller, *, duration, estimator, log_every, seed,
-                     wheel_momentum0) -> SimResult:
+def _simulate_python(
+    scenario, controller, *, duration, estimator, log_every, seed, wheel_momentum0
+) -> SimResult:
     sc = scenario
     rng = np.random.default_rng(sc.seed if seed is None else seed)
     duration = sc.duration if duration is None else duration
-    steps = int(round(duration / sc.dt))
-    sensor_every = int(round(sc.sensor_period / sc.dt))
+    steps = round(duration / sc.dt)
+    sensor_every = round(sc.sensor_period / sc.dt)
     J = sc.inertia_matrix
     J_inv = np.linalg.inv(J)
     G = sc.wheel_matrix
@@ -260,9 +328,18 @@ def _simulate_python(scenario, controller, *, duration, estimator, log_every, se
     if use_ekf:
         ekf = MEKF(J, q_hat0, w_hat0, P0, sc.process_noise_torque**2)
     n_log = steps // log_every + 1
-    log = {k: np.zeros((n_log, m)) for k, m in
-           (("q", 4), ("w_bo", 3), ("q_est", 4), ("w_est", 3), ("torque", 3),
-            ("wheel", sc.n_wheels), ("nees", 1))}
+    log = {
+        k: np.zeros((n_log, m))
+        for k, m in (
+            ("q", 4),
+            ("w_bo", 3),
+            ("q_est", 4),
+            ("w_est", 3),
+            ("torque", 3),
+            ("wheel", sc.n_wheels),
+            ("nees", 1),
+        )
+    }
     t_log = np.zeros(n_log)
     saturated = False
     noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
@@ -297,13 +374,34 @@ def _simulate_python(scenario, controller, *, duration, estimator, log_every, se
             break
         dist = dist_true.copy()
         dist[7:10] += noise_sd * rng.standard_normal(3)
-        x_next = propagate(x, hw_dot, sc.dt, 1, J, J_inv, G, h_max, GEO_RATE, dist, s_orb,
-                           MOON_DIRECTION)
+        x_next = propagate(
+            x, hw_dot, sc.dt, 1, J, J_inv, G, h_max, GEO_RATE, dist, s_orb, MOON_DIRECTION
+        )
         if use_ekf:
-            model = propagate(np.concatenate([ekf.q, ekf.w, x[7:]]), hw_dot, sc.dt, 1, J, J_inv,
-                              G, h_max, GEO_RATE, dist_model, s_orb, MOON_DIRECTION)
+            model = propagate(
+                np.concatenate([ekf.q, ekf.w, x[7:]]),
+                hw_dot,
+                sc.dt,
+                1,
+                J,
+                J_inv,
+                G,
+                h_max,
+                GEO_RATE,
+                dist_model,
+                s_orb,
+                MOON_DIRECTION,
+            )
             ekf.predict(model, h_body, sc.dt)
         x = x_next
-    return _result(t_log[:k_log], log["q"][:k_log], log["w_bo"][:k_log], log["q_est"][:k_log],
-                   log["w_est"][:k_log], log["torque"][:k_log], log["wheel"][:k_log],
-                   log["nees"][:k_log, 0], saturated)
+    return _result(
+        t_log[:k_log],
+        log["q"][:k_log],
+        log["w_bo"][:k_log],
+        log["q_est"][:k_log],
+        log["w_est"][:k_log],
+        log["torque"][:k_log],
+        log["wheel"][:k_log],
+        log["nees"][:k_log, 0],
+        saturated,
+    )
