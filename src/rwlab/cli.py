@@ -655,5 +655,88 @@ def identify(file, out, Ts, preprocess, split, tolerance, force):
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
+# -- attitude control -----------------------------------------------------------------
+
+
+@main.group()
+def attitude() -> None:
+    """GEO attitude control with reaction wheels (paper B): LQR, LQG, LQG/LTR."""
+
+
+@attitude.command("compare")
+@click.option(
+    "--scenario",
+    default="geo-smallsat",
+    show_default=True,
+    help="geo-smallsat, geo-comsat, or a scenario TOML file.",
+)
+@click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--duration", type=float, default=1800.0, show_default=True, help="Seconds.")
+@click.option(
+    "--wheel-model",
+    type=click.Path(exists=True, dir_okay=False),
+    help="model.json from `rwlab identify`: also fly it as the actuator.",
+)
+@click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ.")
+@click.option("--seed", type=int, default=None)
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@_friendly_errors
+def attitude_compare(scenario, out, duration, wheel_model, rho, seed, force):
+    """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
+    from rwlab.attitude.control import compare, ltr_study
+    from rwlab.attitude.design import DesignError
+    from rwlab.attitude.scenario import load_scenario
+    from rwlab.report.attitude import write_comparison
+
+    if rho <= 0:
+        raise DesignError(f"ρ must be positive, got {rho}")
+    sc = load_scenario(scenario)
+    click.echo(
+        f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
+        f"{', identified wheel' if wheel_model else ''})...",
+        err=True,
+    )
+    comp = compare(sc, duration=duration, seed=seed, rho=rho, wheel_model_file=wheel_model)
+    paths = write_comparison(comp, out, force=force, ltr_result=ltr_study(sc))
+    click.echo(f"{'controller':<28} {'max err [deg]':>14} {'rms [deg]':>10} {'settle [s]':>10}")
+    for name, m in comp.metrics.items():
+        settle = "never" if m["settling_time_s"] is None else f"{m['settling_time_s']:.0f}"
+        click.echo(
+            f"{name:<28} {m['steady_max_error_deg']:14.4f} "
+            f"{m['steady_rms_error_deg']:10.4f} {settle:>10}"
+        )
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
+@attitude.command("ltr")
+@click.option("--scenario", default="geo-smallsat", show_default=True)
+@click.option(
+    "--rho",
+    type=float,
+    multiple=True,
+    default=(76.92, 7.692, 0.7692, 0.007692),
+    show_default=True,
+    help="Repeat for each ρ (paper B's four by default).",
+)
+@click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--force", is_flag=True)
+@_friendly_errors
+def attitude_ltr(scenario, rho, out, force):
+    """Loop singular values at the plant input for each ρ next to LQR's (paper Fig. 8)."""
+    from rwlab.attitude.control import ltr_study
+    from rwlab.attitude.scenario import load_scenario
+    from rwlab.report.attitude import write_ltr
+
+    sc = load_scenario(scenario)
+    res = ltr_study(sc, rhos=rho)
+    paths = write_ltr(res, sc.name, out, force=force)
+    for r in res.loops:
+        click.echo(
+            f"rho = {r:<10g} max gap to LQR (1e-3..1e-1 rad/s): "
+            f"{res.max_gap(r, (1e-3, 1e-1)):.3f} decades"
+        )
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -161,33 +161,30 @@ def simulate(
     log_every: int = 10,
     seed: int | None = None,
     wheel_momentum0: np.ndarray | None = None,
+    filter_torque_psd: float = 0.0,
+    filter_noise_scale: float = 1.0,
 ) -> SimResult:
     """Run the closed loop. ``estimator``: 'ekf' (LQG-style) or 'truth' (ideal LQR).
 
+    ``filter_torque_psd`` adds fictitious process noise (N²·m²·s) to the filter and
+    ``filter_noise_scale`` scales the σ it assumes for the sensors: the LTR tuning.
     Ideal wheels with a :class:`LinearController` run in the compiled kernel;
     other wheel models or controllers run step by step in Python (same physics).
     """
     if estimator not in ("ekf", "truth"):
         raise ValueError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
-    if scenario.wheel_model == "ideal" and isinstance(controller, LinearController):
-        return _simulate_compiled(
-            scenario,
-            controller,
-            duration=duration,
-            estimator=estimator,
-            log_every=log_every,
-            seed=seed,
-            wheel_momentum0=wheel_momentum0,
-        )
-    return _simulate_python(
-        scenario,
-        controller,
+    kw = dict(
         duration=duration,
         estimator=estimator,
         log_every=log_every,
         seed=seed,
         wheel_momentum0=wheel_momentum0,
+        filter_psd=scenario.process_noise_torque**2 + filter_torque_psd,
+        noise_scale=scenario.noise_margin * filter_noise_scale,
     )
+    if scenario.wheel_model == "ideal" and isinstance(controller, LinearController):
+        return _simulate_compiled(scenario, controller, **kw)
+    return _simulate_python(scenario, controller, **kw)
 
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
@@ -213,7 +210,18 @@ def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated) -> SimResu
     )
 
 
-def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, wheel_momentum0):
+def _simulate_compiled(
+    sc,
+    controller,
+    *,
+    duration,
+    estimator,
+    log_every,
+    seed,
+    wheel_momentum0,
+    filter_psd,
+    noise_scale,
+):
     from rwlab.attitude import kernel
 
     rng = np.random.default_rng(sc.seed if seed is None else seed)
@@ -233,8 +241,8 @@ def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, 
     log_est, log_tau, log_nees = np.zeros((n_log, 7)), np.zeros((n_log, 3)), np.zeros(n_log)
     dist = sc.disturbances.vector()
     Qc = np.zeros((6, 6))
-    Qc[3:, 3:] = sc.process_noise_torque**2 * J_inv @ J_inv.T
-    m = sc.noise_margin
+    Qc[3:, 3:] = filter_psd * J_inv @ J_inv.T
+    m = noise_scale
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
     period = controller.update_period
     block = steps + 1 if not period else max(1, round(period / sc.dt))
@@ -304,7 +312,16 @@ def _simulate_compiled(sc, controller, *, duration, estimator, log_every, seed, 
 
 
 def _simulate_python(
-    scenario, controller, *, duration, estimator, log_every, seed, wheel_momentum0
+    scenario,
+    controller,
+    *,
+    duration,
+    estimator,
+    log_every,
+    seed,
+    wheel_momentum0,
+    filter_psd,
+    noise_scale,
 ) -> SimResult:
     sc = scenario
     rng = np.random.default_rng(sc.seed if seed is None else seed)
@@ -326,7 +343,7 @@ def _simulate_python(
     nadir = np.array([0.0, 0.0, 1.0])
     use_ekf = estimator == "ekf"
     if use_ekf:
-        ekf = MEKF(J, q_hat0, w_hat0, P0, sc.process_noise_torque**2)
+        ekf = MEKF(J, q_hat0, w_hat0, P0, filter_psd)
     n_log = steps // log_every + 1
     log = {
         k: np.zeros((n_log, m))
@@ -351,8 +368,8 @@ def _simulate_python(
             C = dcm(x[:4])
             sun_b = C @ s_orb
             if math.degrees(math.acos(max(-1.0, min(1.0, -sun_b[0])))) <= sc.sun_fov_deg:
-                ekf.update(_noisy(sun_b, sig_sun, rng), s_orb, sig_sun * sc.noise_margin)
-            ekf.update(_noisy(C @ nadir, sig_earth, rng), nadir, sig_earth * sc.noise_margin)
+                ekf.update(_noisy(sun_b, sig_sun, rng), s_orb, sig_sun * noise_scale)
+            ekf.update(_noisy(C @ nadir, sig_earth, rng), nadir, sig_earth * noise_scale)
         q_hat, w_hat = (ekf.q, ekf.w) if use_ekf else (x[:4], x[4:7])
         h_body = G @ x[7:]
         tau_cmd = controller.torque(t, q_hat, _w_bo(q_hat, w_hat), h_body)
