@@ -738,5 +738,37 @@ def attitude_ltr(scenario, rho, out, force):
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
+@main.command("demo")
+@click.option("--out", type=click.Path(file_okay=False), default="rwlab-demo", show_default=True)
+@click.option("--realtime", is_flag=True, help="Run the experiments on the wall clock (slow).")
+@click.option("--monitor", is_flag=True, help="Serve the live monitor during the experiments.")
+@click.option("--quick", is_flag=True, help="Shortened records and runs (a quick look).")
+@click.option("--force", is_flag=True, help="Overwrite a previous demo in --out.")
+@_friendly_errors
+def demo(out, realtime, monitor, quick, force):
+    """The whole system: test a simulated wheel, identify it, fly it on a GEO satellite.
+
+    Writes OUT/index.html (start here) and OUT/summary.json.
+    """
+    import dataclasses
+
+    from rwlab.demo import DemoConfig, run_demo
+
+    cfg = DemoConfig.quick() if quick else DemoConfig()
+    cfg = dataclasses.replace(cfg, realtime=realtime, monitor=monitor)
+
+    def progress(label, n):
+        return click.progressbar(length=n, label=f"  {label}", show_eta=True, file=sys.stderr)
+
+    summary = run_demo(
+        out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
+    )
+    cm = summary["chosen_model"]
+    click.echo(f"wheel model: {cm['structure']} (validation fit {cm['fit_percent']:.2f} %)")
+    for name, m in summary["controllers"].items():
+        click.echo(f"  {name:<24} steady max error {m['steady_max_error_deg']:.4f} deg")
+    click.echo(f"open {Path(out) / 'index.html'}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -1,0 +1,95 @@
+import json
+import shutil
+from html.parser import HTMLParser
+
+import pytest
+from click.testing import CliRunner
+
+from rwlab.cli import main
+
+
+class _Links(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links = []
+
+    def handle_starttag(self, tag, attrs):
+        href = dict(attrs).get("href")
+        if href:
+            self.links.append(href)
+
+
+@pytest.fixture(scope="module")
+def demo_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "out"
+    r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.mark.slow
+def test_demo_writes_every_output_and_they_agree(demo_dir):
+    summary = json.loads((demo_dir / "summary.json").read_text())
+    study = json.loads((demo_dir / "identification" / "study.json").read_text())
+    model = json.loads((demo_dir / "identification" / "model.json").read_text())
+    metrics = json.loads((demo_dir / "attitude" / "metrics.json").read_text())
+    # the model flown in the attitude report is the one the identification chose
+    assert (
+        summary["chosen_model"]["structure"] == study["chosen"]["structure"] == model["structure"]
+    )
+    assert summary["chosen_model"]["fit_percent"] == pytest.approx(study["chosen"]["fit_percent"])
+    assert summary["chosen_model"]["delay_nk"] == study["delay"]["nk"] == 1
+    for ctl in ("lqr", "lqg", "lqg_ltr", "lqg_identified_wheel"):
+        assert summary["controllers"][ctl]["steady_max_error_deg"] == pytest.approx(
+            metrics[ctl]["steady_max_error_deg"]
+        )
+    assert summary["attitude_wheel_model"] == "identification/model.json"
+    assert [r["name"] for r in summary["records"]] == [
+        "speed_steps",
+        "acceleration",
+        "prbs",
+        "chirp",
+    ]
+    assert all(r["lost_frames"] == 0 and r["telemetry"] > r["commands"] for r in summary["records"])
+    parser = _Links()
+    parser.feed((demo_dir / "index.html").read_text())
+    assert parser.links and all((demo_dir / link).exists() for link in parser.links)
+
+
+@pytest.mark.slow
+def test_demo_refuses_to_overwrite_without_force(demo_dir):
+    r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(demo_dir)])
+    assert r.exit_code == 2 and "exists" in r.output
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not (shutil.which("chromium") and shutil.which("chromedriver")),
+    reason="needs Debian's chromium and chromium-driver (.ci/run installs)",
+)
+def test_demo_pages_open_offline_in_headless_chromium(demo_dir):
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = shutil.which("chromium")
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--proxy-server=127.0.0.1:9",
+        "--proxy-bypass-list=<-loopback>",
+    ):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
+    try:
+        driver.get((demo_dir / "index.html").as_uri())
+        assert "Identified wheel model" in driver.find_element("id", "summary").text
+        for page in ("identification/report.html", "attitude/report.html"):
+            driver.get((demo_dir / page).as_uri())
+            widths = driver.execute_script(
+                "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
+            )
+            assert len(widths) >= 5 and min(widths) > 100, page
+    finally:
+        driver.quit()
