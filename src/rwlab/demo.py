@@ -214,7 +214,8 @@ def _index(s: dict) -> str:
     cm = s["chosen_model"]
     rows = "".join(
         f"<tr><td>{esc(name)}</td><td>{m['steady_max_error_deg']:.4f}</td>"
-        f"<td>{m['steady_rms_error_deg']:.4f}</td><td>{'yes' if m['meets_requirement'] else 'NO'}</td></tr>"
+        f"<td>{m['steady_rms_error_deg']:.4f}</td>"
+        f"<td>{'yes' if m['meets_requirement'] else 'NO'}</td></tr>"
         for name, m in s["controllers"].items()
     )
     recs = "".join(
@@ -228,10 +229,13 @@ line-height:1.5;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px s
 padding:.3em .7em}}th{{background:#f3f3f3}}.box{{background:#eef7ee;padding:.8em 1em;
 border-left:4px solid #4a4}}</style></head><body>
 <h1>rwlab demo: a reaction wheel from the bench to the satellite</h1>
-<div class="box" id="summary"><p><b>Identified wheel model: {esc(cm["structure"])}</b>, validation
-fit {cm["fit_percent"]:.2f} % (delay nk = {cm["delay_nk"]}, Ts = {cm["Ts"]:g} s). {esc(cm["reason"])}.</p>
-<p>GEO smallsat ({esc(s["scenario"])}), steady-state pointing error against the ±0.1° requirement:</p>
-<table id="pointing"><tr><th>controller</th><th>max [°]</th><th>RMS [°]</th><th>meets ±0.1°</th></tr>
+<div class="box" id="summary"><p><b>Identified wheel model: {esc(cm["structure"])}</b>,
+validation fit {cm["fit_percent"]:.2f} % (delay nk = {cm["delay_nk"]}, Ts = {cm["Ts"]:g} s).
+{esc(cm["reason"])}.</p>
+<p>GEO smallsat ({esc(s["scenario"])}), steady-state pointing error against the ±0.1°
+requirement:</p>
+<table id="pointing"><tr><th>controller</th><th>max [°]</th><th>RMS [°]</th>
+<th>meets ±0.1°</th></tr>
 {rows}</table></div>
 <h2>1. Testbed (paper A: simulated RW90 on a virtual CAN bus)</h2><ul id="records">{recs}</ul>
 <p>Records are MCAP files (open with <code>rwlab monitor FILE --replay</code>, Foxglove, or
