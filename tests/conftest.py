@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -31,3 +32,43 @@ def arx_system(rng):
     e = 0.1 * rng.standard_normal(2000)
     y = simulate_poly(A, B, [1], [1], [1], u, e)
     return A, B, IOData(u, y, 0.1)
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+needs_chromium = pytest.mark.skipif(
+    not (CHROMIUM and CHROMEDRIVER),
+    reason="needs Debian's chromium and chromium-driver (.ci/run installs them)",
+)
+
+
+@pytest.fixture
+def browser():
+    """Factory for headless Chromium drivers; ``offline=True`` sends any network request to a
+    dead proxy, so a page that needs the network fails visibly."""
+    drivers = []
+
+    def make(offline: bool = False):
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+
+        options = webdriver.ChromeOptions()
+        options.binary_location = CHROMIUM
+        args = [
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--window-size=1200,1000",
+        ]
+        if offline:
+            args += ["--proxy-server=127.0.0.1:9", "--proxy-bypass-list=<-loopback>"]
+        for arg in args:
+            options.add_argument(arg)
+        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+        drivers.append(driver)
+        return driver
+
+    yield make
+    for driver in drivers:
+        driver.quit()

@@ -1,11 +1,11 @@
 import json
-import shutil
 from html.parser import HTMLParser
 
 import pytest
 from click.testing import CliRunner
 
 from rwlab.cli import main
+from tests.conftest import needs_chromium
 
 
 class _Links(HTMLParser):
@@ -63,33 +63,14 @@ def test_demo_refuses_to_overwrite_without_force(demo_dir):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(
-    not (shutil.which("chromium") and shutil.which("chromedriver")),
-    reason="needs Debian's chromium and chromium-driver (.ci/run installs)",
-)
-def test_demo_pages_open_offline_in_headless_chromium(demo_dir):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = shutil.which("chromium")
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--proxy-server=127.0.0.1:9",
-        "--proxy-bypass-list=<-loopback>",
-    ):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
-    try:
-        driver.get((demo_dir / "index.html").as_uri())
-        assert "Identified wheel model" in driver.find_element("id", "summary").text
-        for page in ("identification/report.html", "attitude/report.html"):
-            driver.get((demo_dir / page).as_uri())
-            widths = driver.execute_script(
-                "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
-            )
-            assert len(widths) >= 5 and min(widths) > 100, page
-    finally:
-        driver.quit()
+@needs_chromium
+def test_demo_pages_open_offline_in_headless_chromium(demo_dir, browser):
+    driver = browser(offline=True)
+    driver.get((demo_dir / "index.html").as_uri())
+    assert "Identified wheel model" in driver.find_element("id", "summary").text
+    for page in ("identification/report.html", "attitude/report.html"):
+        driver.get((demo_dir / page).as_uri())
+        widths = driver.execute_script(
+            "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
+        )
+        assert len(widths) >= 5 and min(widths) > 100, page

@@ -1,6 +1,5 @@
 """The live monitor in a real browser: headless Chromium (Debian's chromium + chromium-driver)."""
 
-import shutil
 import threading
 import time
 from pathlib import Path
@@ -9,18 +8,11 @@ import pytest
 
 from rwlab.testbed import ExperimentConfig, run_experiment
 from rwlab.testbed.monitor import serve_in_thread
+from tests.conftest import needs_chromium
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver")
 
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(
-        not (CHROMIUM and CHROMEDRIVER),
-        reason="needs Debian's chromium and chromium-driver (.ci/run installs them)",
-    ),
-]
+pytestmark = [pytest.mark.slow, needs_chromium]
 
 POINTS = """
 const doc = Bokeh.documents[0];
@@ -30,25 +22,6 @@ if (!src) return -1;
 const t = src.data instanceof Map ? src.data.get('t') : src.data.t;
 return t.length;
 """
-
-
-def _browser():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        "--window-size=1200,1000",
-        "--proxy-server=direct://",
-        "--proxy-bypass-list=*",
-    ):
-        options.add_argument(arg)
-    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
 
 
 def _wait_for(driver, script, predicate, timeout=20.0):
@@ -62,7 +35,7 @@ def _wait_for(driver, script, predicate, timeout=20.0):
     raise AssertionError(f"page never satisfied the condition; last value {value!r}")
 
 
-def test_monitor_page_shows_a_live_trace_that_updates(tmp_path):
+def test_monitor_page_shows_a_live_trace_that_updates(tmp_path, browser):
     record = tmp_path / "live.mcap"
     cfg = ExperimentConfig(
         signal="step", duration=12, Ts=0.1, realtime=True, telemetry_rate=50, amplitude=3000
@@ -72,7 +45,7 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path):
     while not record.exists():
         time.sleep(0.05)
     server = serve_in_thread(record)
-    driver = _browser()
+    driver = browser()
     try:
         driver.get(server.url)
         first = _wait_for(driver, POINTS, lambda n: n is not None and n > 10)
@@ -84,16 +57,15 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path):
         ARTIFACTS.mkdir(exist_ok=True)
         driver.save_screenshot(str(ARTIFACTS / "monitor.png"))
     finally:
-        driver.quit()
         server.stop()
         run.join(timeout=20)
 
 
-def test_monitor_replays_a_finished_record(tmp_path):
+def test_monitor_replays_a_finished_record(tmp_path, browser):
     record = tmp_path / "done.mcap"
     run_experiment(ExperimentConfig(signal="prbs", duration=120, Ts=0.5, telemetry_rate=20), record)
     server = serve_in_thread(record, replay=True, speed=40.0)
-    driver = _browser()
+    driver = browser()
     try:
         driver.get(server.url)
         first = _wait_for(driver, POINTS, lambda n: n is not None and n > 0)
@@ -102,5 +74,4 @@ def test_monitor_replays_a_finished_record(tmp_path):
         total = _wait_for(driver, POINTS, lambda n: n is not None and n >= 2400, timeout=30)
         assert total >= 2400  # the whole record, 120 s at 20 Hz, arrives
     finally:
-        driver.quit()
         server.stop()

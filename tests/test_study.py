@@ -1,6 +1,5 @@
 import json
 import re
-import shutil
 from html.parser import HTMLParser
 
 import numpy as np
@@ -17,6 +16,7 @@ from rwlab.signals import prbs, rate_limit
 from rwlab.testbed import ExperimentConfig, RecordWriter, run_experiment
 from rwlab.wheel import IdentifiedWheel
 from rwlab.wheel.physics import simulate_speed_command
+from tests.conftest import needs_chromium
 
 
 @pytest.fixture(scope="module")
@@ -163,31 +163,12 @@ def test_bad_inputs_give_clear_errors(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(
-    not (shutil.which("chromium") and shutil.which("chromedriver")),
-    reason="needs Debian's chromium and chromium-driver (.ci/run installs)",
-)
-def test_report_renders_in_headless_chromium_without_network(study_dir):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = shutil.which("chromium")
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--proxy-server=127.0.0.1:9",
-        "--proxy-bypass-list=<-loopback>",
-    ):
-        options.add_argument(arg)  # any network request would fail through the dead proxy
-    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
-    try:
-        driver.get((study_dir / "report.html").as_uri())
-        widths = driver.execute_script(
-            "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
-        )
-        assert len(widths) >= len(FIGURES) and min(widths) > 100
-        assert re.search(r"Chosen model: ARX221", driver.page_source)
-    finally:
-        driver.quit()
+@needs_chromium
+def test_report_renders_in_headless_chromium_without_network(study_dir, browser):
+    driver = browser(offline=True)
+    driver.get((study_dir / "report.html").as_uri())
+    widths = driver.execute_script(
+        "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
+    )
+    assert len(widths) >= len(FIGURES) and min(widths) > 100
+    assert re.search(r"Chosen model: ARX221", driver.page_source)
