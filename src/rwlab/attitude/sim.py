@@ -82,6 +82,7 @@ class _Wheels:
                 max_speed_rpm=sc.wheel_max_speed_rpm,
                 overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
                 max_accel_rpm_s=rad_s_to_rpm(sc.wheel_max_torque / sc.wheel_inertia),
+                # the 0.7 A current limit then allows 5 % more than the rated torque
                 torque_constant=sc.wheel_max_torque / 0.7 * 1.05,
             )
             self.units = [WheelPhysics(params, seed=i) for i in range(n)]

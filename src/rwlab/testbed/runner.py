@@ -154,7 +154,6 @@ class ExperimentConfig:
 
 def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray:
     """The command samples, one per Ts, in rpm or rpm/s."""
-    n_rate = params.max_accel_rpm_s
     if cfg.signal == "prbs":
         x = signals.prbs(
             cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
@@ -173,7 +172,7 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
     else:
         x = _signal_from_file(cfg)
     if cfg.rate_limit and cfg.mode == "speed" and cfg.signal == "prbs":
-        x = signals.rate_limit(x, n_rate, cfg.Ts, initial=0.0)  # the wheel starts at rest
+        x = signals.rate_limit(x, params.max_accel_rpm_s, cfg.Ts, initial=0.0)  # the wheel starts at rest
     limit = params.max_speed_rpm if cfg.mode == "speed" else params.max_accel_rpm_s
     if np.max(np.abs(x)) > limit * (1 + 1e-9):
         raise ConfigError(
