@@ -172,7 +172,8 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
     else:
         x = _signal_from_file(cfg)
     if cfg.rate_limit and cfg.mode == "speed" and cfg.signal == "prbs":
-        x = signals.rate_limit(x, params.max_accel_rpm_s, cfg.Ts, initial=0.0)  # the wheel starts at rest
+        # the wheel starts at rest, so the limited command starts from 0
+        x = signals.rate_limit(x, params.max_accel_rpm_s, cfg.Ts, initial=0.0)
     limit = params.max_speed_rpm if cfg.mode == "speed" else params.max_accel_rpm_s
     if np.max(np.abs(x)) > limit * (1 + 1e-9):
         raise ConfigError(
