@@ -175,10 +175,10 @@ def simulate(
     if estimator not in ("ekf", "truth"):
         raise ValueError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
     kw = dict(
-        duration=duration,
+        steps=round((scenario.duration if duration is None else duration) / scenario.dt),
+        rng=np.random.default_rng(scenario.seed if seed is None else seed),
         estimator=estimator,
         log_every=log_every,
-        seed=seed,
         wheel_momentum0=wheel_momentum0,
         filter_psd=scenario.process_noise_torque**2 + filter_torque_psd,
         noise_scale=scenario.noise_margin * filter_noise_scale,
@@ -215,20 +215,17 @@ def _simulate_compiled(
     sc,
     controller,
     *,
-    duration,
+    steps,
     estimator,
     log_every,
-    seed,
+    rng,
     wheel_momentum0,
     filter_psd,
     noise_scale,
 ):
     from rwlab.attitude import kernel
 
-    rng = np.random.default_rng(sc.seed if seed is None else seed)
     kernel.seed(int(rng.integers(2**31)))
-    duration = sc.duration if duration is None else duration
-    steps = round(duration / sc.dt)
     J = sc.inertia_matrix
     J_inv = np.linalg.inv(J)
     G = sc.wheel_matrix
@@ -316,18 +313,15 @@ def _simulate_python(
     scenario,
     controller,
     *,
-    duration,
+    steps,
     estimator,
     log_every,
-    seed,
+    rng,
     wheel_momentum0,
     filter_psd,
     noise_scale,
 ) -> SimResult:
     sc = scenario
-    rng = np.random.default_rng(sc.seed if seed is None else seed)
-    duration = sc.duration if duration is None else duration
-    steps = round(duration / sc.dt)
     sensor_every = round(sc.sensor_period / sc.dt)
     J = sc.inertia_matrix
     J_inv = np.linalg.inv(J)
