@@ -48,7 +48,7 @@ def test_input_ltr_gap_shrinks_monotonically_and_ends_small():
     res = ltr(sys, Q, np.eye(3) * 25, rhos, R0=np.eye(3) * 1e-7)
     gaps = [res.max_gap(r, (1e-3, 1e-1)) for r in rhos]
     assert all(b < a for a, b in itertools.pairwise(gaps))
-    assert gaps[-1] < 0.05  # within 12 % at every frequency of the band
+    assert gaps[-1] < 1.0  # dB: within 12 % at every frequency of the band
 
 
 def test_output_ltr_is_the_dual_and_converges_too():

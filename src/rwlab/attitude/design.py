@@ -25,10 +25,22 @@ from dataclasses import dataclass
 
 import control
 import numpy as np
+import scipy.linalg
 
 from rwlab.errors import RwlabError
 
-__all__ = ["DesignError", "LTRResult", "kalman", "lqg", "lqr", "ltr", "sigma"]
+__all__ = [
+    "DesignError",
+    "LTRResult",
+    "kalman",
+    "kalman_current",
+    "lqg",
+    "lqg_current",
+    "lqr",
+    "lqrd",
+    "ltr",
+    "sigma",
+]
 
 
 class DesignError(RwlabError, ValueError):
@@ -65,11 +77,62 @@ def _ss(sys) -> control.StateSpace:
     return control.ss(sys)
 
 
-def lqr(sys, Q, R) -> np.ndarray:
-    """State-feedback gain K for u = −Kx (``control.lqr`` / ``dlqr`` by ``sys.dt``).
+def _scales(Q: np.ndarray) -> np.ndarray:
+    """Diagonal scales d with dᵢ = 1/√Qᵢᵢ, so the scaled weight has a unit diagonal.
 
-    Raises ``DesignError`` for weights that are not (semi)definite or an
-    (A, B) pair that is not stabilisable.
+    States a weight leaves at zero take the geometric mean of the others' scales.
+    """
+    q = np.diag(Q).copy()
+    pos = q > 0
+    d = np.ones_like(q)
+    d[pos] = 1 / np.sqrt(q[pos])
+    if pos.any():
+        d[~pos] = np.exp(np.mean(np.log(d[pos])))
+    return d
+
+
+def _riccati_gain(A, B, Q, R, N, dt) -> np.ndarray:
+    """u = −K x for the (continuous or discrete) LQ problem, solved on a scaled problem.
+
+    The states are scaled by Q's diagonal and the inputs by R's, so the Riccati
+    equation sees unit weights: raw SI attitude problems (torques of 1e-2 N·m,
+    rates of 1e-4 rad/s, noise PSDs of 1e-12) otherwise make scipy's QZ
+    reordering fail. A solver failure is a :class:`DesignError`, never a traceback.
+    """
+    dx, du = _scales(Q), _scales(R)
+    As = A * dx[None, :] / dx[:, None]
+    Bs = B * du[None, :] / dx[:, None]
+    Qs, Rs = Q * np.outer(dx, dx), R * np.outer(du, du)
+    Ns = None if N is None else N * np.outer(dx, du)
+    try:
+        with np.errstate(all="raise"):
+            if dt:
+                X = scipy.linalg.solve_discrete_are(As, Bs, Qs, Rs, s=Ns)
+                Ks = np.linalg.solve(
+                    Rs + Bs.T @ X @ Bs, Bs.T @ X @ As + (0 if Ns is None else Ns.T)
+                )
+            else:
+                X = scipy.linalg.solve_continuous_are(As, Bs, Qs, Rs, s=Ns)
+                Ks = np.linalg.solve(Rs, Bs.T @ X + (0 if Ns is None else Ns.T))
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        raise DesignError(
+            f"the Riccati equation has no usable solution for these weights ({exc})"
+        ) from None
+    K = Ks * du[:, None] / dx[None, :]
+    closed = np.linalg.eigvals(A - B @ K)
+    stable = np.all(np.abs(closed) < 1) if dt else np.all(closed.real < 0)
+    if not np.all(np.isfinite(K)) or not stable:
+        raise DesignError(
+            "the Riccati solution does not stabilise the plant (ill-conditioned weights)"
+        )
+    return K
+
+
+def lqr(sys, Q, R) -> np.ndarray:
+    """State-feedback gain K for u = −Kx, continuous or discrete by ``sys.dt`` (``lqr``/``dlqr``).
+
+    Raises ``DesignError`` for weights that are not (semi)definite, an (A, B)
+    pair that is not stabilisable, or a Riccati equation without a stabilising solution.
     """
     ss = _ss(sys)
     A, B = np.asarray(ss.A), np.asarray(ss.B)
@@ -77,13 +140,62 @@ def lqr(sys, Q, R) -> np.ndarray:
     R = _check_weight("R", R, B.shape[1], definite=True)
     if _uncontrollable_unstable(A, B, ss.dt):
         raise DesignError("(A, B) is not stabilisable: an unstable mode is uncontrollable")
-    fn = control.dlqr if ss.isdtime(strict=True) else control.lqr
-    K, _, _ = fn(A, B, Q, R)
-    return np.asarray(K)
+    return _riccati_gain(A, B, Q, R, None, ss.isdtime(strict=True))
+
+
+def lqrd(sys, Q, R, Ts: float) -> tuple[np.ndarray, control.StateSpace]:
+    """Discrete gain for a continuous plant and cost under a zero-order hold (MATLAB ``lqrd``).
+
+    The continuous cost ∫ xᵀQx + uᵀRu over each period, with u held, becomes
+    the discrete weights Qd, Rd and cross term Nd (Van Loan's exponential).
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Continuous plant.
+    Q, R : array_like
+        Continuous weights, (n, n) and (m, m).
+    Ts : float
+        Sample period, s.
+
+    Returns
+    -------
+    K : (m, n) ndarray
+        Gain of u[k] = −K x[k].
+    sysd : control.StateSpace
+        The plant discretised with a zero-order hold at Ts.
+    """
+    ss = _ss(sys)
+    if ss.isdtime(strict=True):
+        raise DesignError("lqrd needs a continuous plant")
+    if not (np.isfinite(Ts) and Ts > 0):
+        raise DesignError(f"Ts must be a positive number of seconds, got {Ts}")
+    A, B = np.asarray(ss.A), np.asarray(ss.B)
+    n, m = B.shape
+    Q = _check_weight("Q", Q, n, definite=False)
+    R = _check_weight("R", R, m, definite=True)
+    # Van Loan: expm([[-Fᵀ, W], [0, F]]·Ts) with F = [[A, B], [0, 0]], W = blkdiag(Q, R)
+    F = np.zeros((n + m, n + m))
+    F[:n, :n], F[:n, n:] = A, B
+    W = scipy.linalg.block_diag(Q, R)
+    E = scipy.linalg.expm(np.block([[-F.T, W], [np.zeros_like(F), F]]) * Ts)
+    Phi = E[n + m :, n + m :]
+    Wd = Phi.T @ E[: n + m, n + m :]
+    Wd = 0.5 * (Wd + Wd.T)
+    Ad, Bd = Phi[:n, :n], Phi[:n, n:]
+    if _uncontrollable_unstable(Ad, Bd, Ts):
+        raise DesignError("(A, B) is not stabilisable: an unstable mode is uncontrollable")
+    K = _riccati_gain(Ad, Bd, Wd[:n, :n], Wd[n:, n:], Wd[:n, n:], Ts)
+    return K, control.ss(Ad, Bd, np.asarray(ss.C), np.asarray(ss.D), Ts)
 
 
 def kalman(sys, Qn, Rn, G=None) -> np.ndarray:
-    """Steady-state Kalman gain L (``control.lqe`` / ``dlqe``); G defaults to identity."""
+    """Steady-state Kalman gain L (MATLAB ``kalman``'s L); G defaults to identity.
+
+    Continuous: x̂̇ = A x̂ + B u + L (y − C x̂). Discrete: the predictor gain of
+    x̂[k+1] = A x̂[k] + B u[k] + L (y[k] − C x̂[k]); the current-estimate gain is
+    M = A⁻¹L (see :func:`kalman_current`).
+    """
     ss = _ss(sys)
     A, C = np.asarray(ss.A), np.asarray(ss.C)
     n = A.shape[0]
@@ -92,17 +204,44 @@ def kalman(sys, Qn, Rn, G=None) -> np.ndarray:
     Rn = _check_weight("Rn", Rn, C.shape[0], definite=True)
     if _uncontrollable_unstable(A.T, C.T, ss.dt):
         raise DesignError("(A, C) is not detectable: an unstable mode is unobservable")
-    fn = control.dlqe if ss.isdtime(strict=True) else control.lqe
-    L, _, _ = fn(A, G, C, Qn, Rn)
-    return np.asarray(L)
+    return _riccati_gain(A.T, C.T, G @ Qn @ G.T, Rn, None, ss.isdtime(strict=True)).T
+
+
+def kalman_current(sys, Qn, Rn, G=None) -> np.ndarray:
+    """Discrete current-estimate (filter) gain M: x̂[k|k] = x̄[k] + M (y[k] − C x̄[k]).
+
+    M = P̄ Cᵀ (C P̄ Cᵀ + Rn)⁻¹ with P̄ the steady predicted covariance; it is what
+    a sampled Kalman filter that measures, then controls, uses each period.
+    """
+    ss = _ss(sys)
+    if not ss.isdtime(strict=True):
+        raise DesignError("kalman_current needs a discrete plant")
+    L = kalman(ss, Qn, Rn, G)
+    return np.linalg.solve(np.asarray(ss.A), L)
 
 
 def lqg(sys, K, L) -> control.StateSpace:
-    """The LQG compensator K(s) = K (sI − A + BK + LC)⁻¹ L (from y to −u)."""
+    """The LQG compensator K(s) = K (sI − A + BK + LC)⁻¹ L (from y to −u), predictor form."""
     ss = _ss(sys)
     A, B, C = np.asarray(ss.A), np.asarray(ss.B), np.asarray(ss.C)
     K, L = np.atleast_2d(K), np.atleast_2d(L)
     return control.ss(A - B @ K - L @ C, L, K, np.zeros((K.shape[0], L.shape[1])), ss.dt)
+
+
+def lqg_current(sys, K, M) -> control.StateSpace:
+    """Discrete LQG compensator with the current estimate (from y to −u).
+
+    Each period: x̂ = x̄ + M (y − C x̄), u = −K x̂, x̄⁺ = A x̂ + B u, so
+    K(z) = K(I − MC) (zI − (A − BK)(I − MC))⁻¹ (A − BK) M + K M.
+    """
+    ss = _ss(sys)
+    if not ss.isdtime(strict=True):
+        raise DesignError("lqg_current needs a discrete plant")
+    A, B, C = np.asarray(ss.A), np.asarray(ss.B), np.asarray(ss.C)
+    K, M = np.atleast_2d(K), np.atleast_2d(M)
+    I_MC = np.eye(A.shape[0]) - M @ C
+    Acl = A - B @ K
+    return control.ss(Acl @ I_MC, Acl @ M, K @ I_MC, K @ M, ss.dt)
 
 
 def sigma(sys, omega) -> np.ndarray:
@@ -139,13 +278,13 @@ class LTRResult:
     side: str
 
     def max_gap(self, rho: float, band: tuple[float, float] | None = None) -> float:
-        """Largest |log10 σ_loop − log10 σ_target| over a frequency band (decades)."""
+        """Largest |20 log10 σᵢ_loop − 20 log10 σᵢ_target| over a frequency band, dB."""
         sel = (
             np.ones(self.omega.size, bool)
             if band is None
             else ((self.omega >= band[0]) & (self.omega <= band[1]))
         )
-        diff = np.log10(self.loops[rho][sel]) - np.log10(self.target[sel])
+        diff = 20 * (np.log10(self.loops[rho][sel]) - np.log10(self.target[sel]))
         return float(np.max(np.abs(diff)))
 
     def to_dict(self) -> dict:
@@ -159,14 +298,28 @@ class LTRResult:
 
 
 def ltr(
-    sys, Q, R, rhos, *, R0=None, Q0=None, q2: float = 1.0, side: str = "input", omega=None
+    sys,
+    Q,
+    R,
+    rhos,
+    *,
+    R0=None,
+    Q0=None,
+    q2: float = 1.0,
+    side: str = "input",
+    omega=None,
+    K=None,
 ) -> LTRResult:
     """Loop transfer recovery for a list of ρ (paper B: 76.92, 7.692, 0.7692, 0.007692).
+
+    Continuous plants use the classic compensator; discrete plants the
+    current-estimate one (:func:`lqg_current`), which recovers the target loop
+    exactly as ρ → 0 for a minimum-phase plant with CB of full rank.
 
     Parameters
     ----------
     sys : control.StateSpace
-        Plant G(s) = C (sI − A)⁻¹ B.
+        Plant G(s) = C (sI − A)⁻¹ B (or G(z)).
     Q, R : array_like
         Regulator weights (input LTR) or estimator weights (output LTR) of the target loop.
     rhos : sequence of float > 0
@@ -180,26 +333,37 @@ def ltr(
         Intensity q² of that fictitious term (Doyle–Stein); default 1.
     side : {'input', 'output'}
     omega : array_like, optional
-        Frequencies, rad/s (default 1e-4..1e2 log-spaced).
+        Frequencies, rad/s (default 1e-4..1e2 log-spaced, up to Nyquist for a discrete plant).
+    K : array_like, optional
+        Input LTR: the regulator gain of the target loop, when designed elsewhere
+        (e.g. :func:`lqrd`); Q and R are then not used.
     """
     ss = _ss(sys)
     A, B, C = np.asarray(ss.A), np.asarray(ss.B), np.asarray(ss.C)
     n = A.shape[0]
+    discrete = ss.isdtime(strict=True)
     rhos = [float(r) for r in rhos]
     if not rhos or any(not np.isfinite(r) or r <= 0 for r in rhos):
         raise DesignError(f"every ρ must be a positive finite number, got {rhos}")
     if side not in ("input", "output"):
         raise DesignError(f"side must be 'input' or 'output', got {side!r}")
-    w = np.logspace(-4, 2, 300) if omega is None else np.asarray(omega, float)
+    w_max = np.pi / ss.dt if discrete else 1e2
+    w = np.logspace(-4, np.log10(w_max) - 1e-9, 300) if omega is None else np.asarray(omega, float)
     loops, comps, Ls = {}, {}, {}
+
+    def compensator(Kr, Lf):
+        if discrete:
+            return lqg_current(ss, Kr, np.linalg.solve(A, Lf))
+        return lqg(ss, Kr, Lf)
+
     if side == "input":
-        K = lqr(ss, Q, R)
+        K = lqr(ss, Q, R) if K is None else np.atleast_2d(np.asarray(K, float))
         target = sigma(control.ss(A, B, K, 0 * K @ B, ss.dt), w)
         R0 = np.eye(C.shape[0]) if R0 is None else np.asarray(R0, float)
         Qf = (np.zeros((n, n)) if Q0 is None else np.asarray(Q0, float)) + q2 * B @ B.T
         for rho in rhos:
             L = kalman(ss, Qf, rho * R0)
-            Kc = lqg(ss, K, L)
+            Kc = compensator(K, L)
             Ls[rho], comps[rho] = L, Kc
             loops[rho] = sigma(control.series(ss, Kc), w)  # K(s) G(s): first G, then K
     else:
@@ -209,7 +373,7 @@ def ltr(
         Qr = (np.zeros((n, n)) if Q0 is None else np.asarray(Q0, float)) + q2 * C.T @ C
         for rho in rhos:
             Kr = lqr(ss, Qr, rho * R0)
-            Kc = lqg(ss, Kr, L)
+            Kc = compensator(Kr, L)
             Ls[rho], comps[rho] = L, Kc
             loops[rho] = sigma(control.series(Kc, ss), w)  # G(s) K(s)
         K = None

@@ -1,12 +1,25 @@
-"""The compiled closed loop: ideal wheels, a linear-gain controller and (optionally) the MEKF.
+"""The compiled closed loop: ideal wheels, a gain-matrix controller, the MEKF and thrusters.
 
 ``run_block`` advances the whole loop — sensors, filter, control law, wheel
-allocation and limits, RK4 plant, process noise, logging — for ``steps``
-steps without returning to Python, so a simulated GEO day at dt = 0.1 s costs
-seconds. Python (``sim.simulate``) calls it once per gain update.
+allocation and limits, thruster momentum unloading, RK4 plant, process noise,
+pointing statistics and logging — for ``steps`` steps without returning to
+Python. ``sim.simulate`` calls it once per block (a gain update, or an hour of
+simulated time), handing it that block's pre-drawn noise: every noise source has
+its own random stream, so every controller sees the same sensor noise and the
+same disturbances whatever else it does.
 
-The control law is τ = −K s with s = [2 q_v sign(q4), ω_bo] of the estimate
-(or of the truth when the filter is off): PD and LQR gains alike.
+The control law (shared with the Python path, :func:`control_torque`) is the
+saturation-aware form of a linear law τ = −K s, s = [θ, ω_bo], θ = 2 q_v sign(q4):
+
+    ω_cmd = sat_ω_max(−K_ω⁻¹ K_θ θ),    τ = −K_ω (ω_bo − ω_cmd)
+
+which is exactly −K s while |K_ω⁻¹ K_θ θ| ≤ ω_max, and a rate-limited eigenaxis
+slew beyond it, so a large error never asks the wheels for more than they have.
+
+Filter timing: the estimate is propagated with the plant model every step (the
+controller needs it); the covariance only once per sensor period, at the
+measurement, with Φ and Q_d expanded to third order in F·T (F's δθ̇ = δω block
+makes F·T of order 1 at T = 0.5 s, so the first-order form would not do).
 """
 
 from __future__ import annotations
@@ -16,17 +29,49 @@ import math
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.ekf import _update, error_jacobian, predict_covariance
+from rwlab.attitude.ekf import _update, error_jacobian
 from rwlab.attitude.frames import dcm, qmul
 from rwlab.attitude.plant import propagate
 
-__all__ = ["run_block", "seed"]
+__all__ = ["STATS", "control_torque", "new_stats", "run_block"]
+
+# Running statistics the kernel keeps over every step (not only the logged ones).
+STATS = (
+    "max_error_deg",
+    "steady_max_error_deg",
+    "steady_max_error_excl_desat_deg",
+    "max_error_in_desat_deg",
+    "steady_torque_saturated_steps",
+    "steady_steps",
+    "torque_peak_Nm",
+    "steady_torque_sq_sum",
+    "steady_error_sq_sum",
+    "momentum_peak_fraction",
+    "desaturation_count",
+    "unloading",
+    "unload_end_s",
+    "thruster_impulse_Nms",
+    "desat_window_steps",
+    "steady_excl_desat_steps",
+)
+MAX_ERR, STEADY_MAX, STEADY_EXCL, DESAT_MAX = 0, 1, 2, 3
+SAT_STEPS, STEADY_STEPS, TAU_PEAK, TAU_SQ, ERR_SQ = 4, 5, 6, 7, 8
+H_PEAK, DESAT_COUNT, UNLOADING, UNLOAD_END, IMPULSE, DESAT_STEPS, EXCL_STEPS = (
+    9,
+    10,
+    11,
+    12,
+    13,
+    14,
+    15,
+)
 
 
-@njit(cache=True)
-def seed(value):
-    """Seed numba's random generator (separate from numpy's)."""
-    np.random.seed(value)
+def new_stats() -> np.ndarray:
+    """A fresh statistics vector (see :data:`STATS`)."""
+    s = np.zeros(len(STATS))
+    s[UNLOAD_END] = -math.inf
+    return s
 
 
 @njit(cache=True)
@@ -38,8 +83,9 @@ def _sun(t, dec, phase, moving, n):
 
 
 @njit(cache=True)
-def _noisy(b, sigma):
-    v = b + sigma * np.cross(np.random.standard_normal(3), b)
+def _noisy(b, sigma, e):
+    """Unit vector b turned by a small angle: σ times the standard normals e (3,)."""
+    v = b + sigma * np.cross(e, b)
     return v / np.sqrt(v @ v)
 
 
@@ -53,6 +99,31 @@ def _state(q, w, n):
 
 
 @njit(cache=True)
+def control_torque(K, M, w_max, s):
+    """Body torque (3,) of the saturation-aware linear law for s = [θ, ω_bo] (module docstring).
+
+    K : (3, 6) gain [K_θ K_ω]; M : (3, 3) K_ω⁻¹ K_θ; w_max : rate limit, rad/s (inf: none).
+    """
+    w_cmd = -(M @ s[:3])
+    norm = math.sqrt(w_cmd @ w_cmd)
+    if norm > w_max:
+        w_cmd *= w_max / norm
+    return -(K[:, 3:] @ (s[3:] - w_cmd))
+
+
+@njit(cache=True)
+def _predict_covariance(P, F, Qc, T):
+    """P⁺ = Φ P Φᵀ + Q_d over T, Φ and Q_d to third order in F·T."""
+    FT = F * T
+    F2 = F @ F
+    Phi = np.eye(6) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)
+    FQ = F @ Qc
+    Qd = Qc * T + 0.5 * T * T * (FQ + FQ.T) + T**3 / 3.0 * (FQ @ F.T + 0.5 * (F2 @ Qc + Qc @ F2.T))
+    P = Phi @ P @ Phi.T + Qd
+    return 0.5 * (P + P.T)
+
+
+@njit(cache=True)
 def run_block(
     x,
     q_hat,
@@ -61,10 +132,13 @@ def run_block(
     k0,
     steps,
     K,
+    M,
+    w_max,
     use_ekf,
     dt,
     sensor_every,
     log_every,
+    steady_from,
     J,
     J_inv,
     G,
@@ -74,7 +148,8 @@ def run_block(
     n,
     dist,
     dist_model,
-    noise_sd,
+    process_noise,
+    sensor_noise,
     Qc,
     sun_dec,
     sun_phase,
@@ -85,6 +160,8 @@ def run_block(
     r_sun,
     r_earth,
     moon,
+    unload,
+    stats,
     log_t,
     log_x,
     log_est,
@@ -92,59 +169,128 @@ def run_block(
     log_nees,
     log_k,
 ):
-    """Run ``steps`` steps from step index ``k0``; returns the new x, q̂, ŵ, P, log
-    position and whether a wheel touched its momentum limit."""
+    """Run ``steps`` steps from step index ``k0``.
+
+    ``process_noise`` (steps, 3) is the white torque of each step, N·m;
+    ``sensor_noise`` (≥ sensor steps in the block, 6) the standard normals of
+    the sun and earth sensors. ``unload`` = [enabled, start fraction, stop
+    fraction, pulse torque N·m, pulse steps between pulses, recovery s];
+    ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
+    P, log position and whether a wheel touched its momentum limit.
+    """
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
     nw = h_max.shape[0]
+    T_sensor = sensor_every * dt
+    i_sensor = 0
+    tau_thr = np.zeros(3)
     for j in range(steps):
         k = k0 + j
         t = k * dt
         s_orb = _sun(t, sun_dec, sun_phase, sun_moving, n)
-        if use_ekf and k % sensor_every == 0:
+        measured = use_ekf and k % sensor_every == 0
+        if measured:
             C = dcm(x[:4])
             sun_b = C @ s_orb
+            e = sensor_noise[i_sensor]
+            i_sensor += 1
             if -sun_b[0] >= sun_fov_cos:
-                q_hat, w_hat, P = _update(q_hat, w_hat, P, _noisy(sun_b, sig_sun), s_orb, r_sun)
-            q_hat, w_hat, P = _update(q_hat, w_hat, P, _noisy(C[:, 2], sig_earth), nadir, r_earth)
-        if use_ekf:
-            s = _state(q_hat, w_hat, n)
-        else:
-            s = _state(x[:4], x[4:7], n)
-        tau = -(K @ s)
-        hw_dot = -(G_pinv @ tau)
+                q_hat, w_hat, P = _update(
+                    q_hat, w_hat, P, _noisy(sun_b, sig_sun, e[:3]), s_orb, r_sun
+                )
+            q_hat, w_hat, P = _update(
+                q_hat, w_hat, P, _noisy(C[:, 2].copy(), sig_earth, e[3:]), nadir, r_earth
+            )
+        s = _state(q_hat, w_hat, n) if use_ekf else _state(x[:4], x[4:7], n)
+        tau = control_torque(K, M, w_max, s)
+        hw_cmd = -(G_pinv @ tau)
+        at_limit = False
         for i in range(nw):
-            hw_dot[i] = min(max(hw_dot[i], -tau_max), tau_max)
-            if abs(x[7 + i]) >= 0.999 * h_max[i]:
+            if abs(hw_cmd[i]) >= tau_max:
+                at_limit = True
+            hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
+            stats[TAU_PEAK] = max(stats[TAU_PEAK], abs(hw_cmd[i]))
+            frac = abs(x[7 + i]) / h_max[i]
+            stats[H_PEAK] = max(stats[H_PEAK], frac)
+            if frac >= 0.999:
                 saturated = True
+
+        # momentum unloading: thruster pulses against the wheels' body momentum
+        h_body = G @ x[7:]
+        tau_thr[:] = 0.0
+        if unload[0] > 0:
+            h_frac = 0.0
+            for i in range(nw):
+                h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
+            if stats[UNLOADING] == 0 and h_frac > unload[1]:
+                stats[UNLOADING] = 1
+                stats[DESAT_COUNT] += 1
+            if stats[UNLOADING] == 1:
+                if h_frac <= unload[2]:
+                    stats[UNLOADING] = 0
+                    stats[UNLOAD_END] = t
+                elif k % int(unload[4]) == 0:
+                    fired = False
+                    for i in range(3):
+                        if abs(h_body[i]) > unload[2] * h_max.min():
+                            tau_thr[i] = -math.copysign(unload[3], h_body[i])
+                            stats[IMPULSE] += unload[3] * dt
+                            fired = True
+                    if not fired:  # what is left lies in the wheels' null space
+                        stats[UNLOADING] = 0
+                        stats[UNLOAD_END] = t
+
+        # pointing statistics on every step (the true error, target = orbital frame)
+        qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        err = math.degrees(2.0 * math.asin(min(1.0, qv)))
+        in_desat = stats[UNLOADING] == 1 or t - stats[UNLOAD_END] <= unload[5]
+        stats[MAX_ERR] = max(stats[MAX_ERR], err)
+        if in_desat:
+            stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
+            stats[DESAT_STEPS] += 1
+        if k >= steady_from:
+            stats[STEADY_MAX] = max(stats[STEADY_MAX], err)
+            stats[STEADY_STEPS] += 1
+            stats[ERR_SQ] += err * err
+            for i in range(nw):
+                stats[TAU_SQ] += hw_cmd[i] * hw_cmd[i] / nw
+            if at_limit:
+                stats[SAT_STEPS] += 1
+            if not in_desat:
+                stats[STEADY_EXCL] = max(stats[STEADY_EXCL], err)
+                stats[EXCL_STEPS] += 1
+
         if k % log_every == 0:
             log_t[log_k] = t
             log_x[log_k] = x
             log_est[log_k, :4] = q_hat if use_ekf else x[:4]
             log_est[log_k, 4:] = w_hat if use_ekf else x[4:7]
-            log_tau[log_k] = -(G @ hw_dot)
+            log_tau[log_k] = -(G @ hw_cmd)
             if use_ekf:
                 dq = qmul(x[:4], np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
                 if dq[3] < 0:
                     dq = -dq
-                e = np.empty(6)
-                e[:3] = 2 * dq[:3]
-                e[3:] = x[4:7] - w_hat
-                log_nees[log_k] = e @ np.linalg.solve(P, e)
+                ee = np.empty(6)
+                ee[:3] = 2 * dq[:3]
+                ee[3:] = x[4:7] - w_hat
+                log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
             log_k += 1
-        h_body = G @ x[7:]
+
         d = dist.copy()
-        d[7:10] += noise_sd * np.random.standard_normal(3)
-        x_next = propagate(x, hw_dot, dt, 1, J, J_inv, G, h_max, n, d, s_orb, moon)
+        d[7:10] += process_noise[j] + tau_thr
+        x_next = propagate(x, hw_cmd, dt, 1, J, J_inv, G, h_max, n, d, s_orb, moon)
         if use_ekf:
+            if measured:  # covariance to the next measurement, F at this estimate
+                F = error_jacobian(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0])
+                P = _predict_covariance(P, F, Qc, T_sensor)
             xm = np.empty_like(x)
             xm[:4] = q_hat
             xm[4:7] = w_hat
             xm[7:] = x[7:]
-            F = error_jacobian(q_hat, w_hat, h_body, J, J_inv, n, 3 * n * n)
-            xm = propagate(xm, hw_dot, dt, 1, J, J_inv, G, h_max, n, dist_model, s_orb, moon)
+            dm = dist_model.copy()
+            dm[7:10] += tau_thr  # the thruster command is known to the filter
+            xm = propagate(xm, hw_cmd, dt, 1, J, J_inv, G, h_max, n, dm, s_orb, moon)
             q_hat = xm[:4].copy()
             w_hat = xm[4:7].copy()
-            P = predict_covariance(P, F, Qc, dt)
         x = x_next
     return x, q_hat, w_hat, P, log_k, saturated

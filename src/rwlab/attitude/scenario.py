@@ -51,6 +51,28 @@ class Scenario:
     initial_error_deg, initial_axis : initial attitude error; initial_rate : rad/s (body-orbital).
     estimator_error_deg : initial error of the filter's estimate.
     duration : default run length, s.  seed : noise seed.
+
+    Design (paper B's weights, from the requirement and the actuator):
+    pointing_requirement_deg : the pointing requirement (paper B: ±0.1°).
+    lqr_attitude_deg, lqr_rate_deg_s : Bryson scales of the attitude and rate errors.
+    lqr_torque_fraction : Bryson torque scale as a fraction of the wheels' maximum
+        torque: the proportional torque at ``lqr_attitude_deg`` of error.
+    slew_torque_fraction, slew_momentum_fraction : the rate limit of a large-angle
+        slew leaves this share of the torque (and of the momentum) to the wheels.
+    disturbances_known_to_filter : False (paper B): SRP, tides and J2 are unknown
+        to the filter and enter as process noise.
+    filter_disturbance_budget_deg : the filter's lag on the worst-case unknown
+        torque allowed by its process noise (see ``sim.default_filter_psd``).
+    ltr_bandwidth_factor : LTR's fictitious noise puts the filter's bandwidth at
+        this multiple of the LQR loop's crossover at ρ = 1.
+
+    Momentum management (thrusters; magnetic torquers are too weak at GEO):
+    momentum_unloading : on/off.  thruster_torque : N·m about each axis.
+    thruster_min_pulse_s : minimum impulse bit as an on-time, s.
+    unload_start_fraction, unload_stop_fraction : wheel momentum (share of the
+        limit) that starts and ends an unloading window.
+    unload_pulse_period_s : s between pulses.  unload_recovery_s : s after a
+        window still counted as "during desaturation".
     """
 
     name: str = "custom"
@@ -79,44 +101,61 @@ class Scenario:
     estimator_error_deg: float = 1.0
     duration: float = 3600.0
     seed: int = 0
+    pointing_requirement_deg: float = 0.1
+    lqr_attitude_deg: float = 0.1
+    lqr_rate_deg_s: float = 0.05
+    lqr_torque_fraction: float = 0.1
+    slew_torque_fraction: float = 0.5
+    slew_momentum_fraction: float = 0.25
+    disturbances_known_to_filter: bool = False
+    filter_disturbance_budget_deg: float = 0.02
+    ltr_bandwidth_factor: float = 2.0
+    momentum_unloading: bool = True
+    thruster_torque: float = 12.0
+    thruster_min_pulse_s: float = 0.02
+    unload_start_fraction: float = 0.5
+    unload_stop_fraction: float = 0.1
+    unload_pulse_period_s: float = 20.0
+    unload_recovery_s: float = 300.0
 
     def __post_init__(self) -> None:
+        _check_types(self)
         J = self.inertia_matrix
         if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(J) <= 0):
             raise ConfigError(f"{self.name}: inertia must be symmetric positive definite")
         ev = np.linalg.eigvalsh(J)
         if ev[2] > ev[0] + ev[1] + 1e-9:
             raise ConfigError(f"{self.name}: inertia violates the triangle inequality")
-        if self.wheel_axes not in ("orthogonal", "pyramid"):
-            raise ConfigError(
-                f"wheel_axes must be 'orthogonal' or 'pyramid', got {self.wheel_axes!r}"
-            )
-        if self.wheel_model not in ("ideal", "physics", "identified"):
-            raise ConfigError(
-                f"wheel_model must be ideal, physics or identified, got {self.wheel_model!r}"
-            )
+        for name, allowed in (
+            ("wheel_axes", ("orthogonal", "pyramid")),
+            ("wheel_model", ("ideal", "physics", "identified")),
+            ("sun", ("fixed", "moving")),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(
+                    f"{self.name}: {name} must be one of {allowed}, got {getattr(self, name)!r}"
+                )
         if self.wheel_model == "identified" and not self.wheel_model_file:
             raise ConfigError("wheel_model 'identified' needs wheel_model_file = model.json")
-        if self.sun not in ("fixed", "moving"):
-            raise ConfigError(f"sun must be 'fixed' or 'moving', got {self.sun!r}")
-        for name in (
-            "wheel_inertia",
-            "wheel_max_torque",
-            "wheel_max_momentum",
-            "wheel_max_speed_rpm",
-            "sun_noise_deg",
-            "earth_noise_deg",
-            "noise_margin",
-            "dt",
-            "sensor_period",
-            "duration",
-            "sun_fov_deg",
-        ):
+        for name in _POSITIVE:
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            if not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{self.name}: {name} must be a positive number, got {value!r}")
-        if self.process_noise_torque < 0:
-            raise ConfigError("process_noise_torque must be ≥ 0")
+        for name in _FRACTIONS:
+            value = getattr(self, name)
+            if not 0 < value <= 1:
+                raise ConfigError(f"{self.name}: {name} must be in (0, 1], got {value!r}")
+        if not self.unload_stop_fraction < self.unload_start_fraction:
+            raise ConfigError(f"{self.name}: unload_stop_fraction must be < unload_start_fraction")
+        for name in ("process_noise_torque", "initial_error_deg", "estimator_error_deg"):
+            if not math.isfinite(getattr(self, name)) or getattr(self, name) < 0:
+                raise ConfigError(f"{self.name}: {name} must be ≥ 0")
+        if np.linalg.norm(self.initial_axis) == 0:
+            raise ConfigError(f"{self.name}: initial_axis must not be the zero vector")
+        if self.wheel_max_momentum > self.wheel_inertia * self.wheel_max_speed_rpm * math.pi / 30:
+            raise ConfigError(
+                f"{self.name}: wheel_max_momentum exceeds wheel_inertia × wheel_max_speed_rpm"
+            )
         if abs(self.sensor_period / self.dt - round(self.sensor_period / self.dt)) > 1e-9:
             raise ConfigError("sensor_period must be a whole number of dt")
 
@@ -145,6 +184,65 @@ class Scenario:
         return replace(self, **changes)
 
 
+_POSITIVE = (
+    "wheel_inertia",
+    "wheel_max_torque",
+    "wheel_max_momentum",
+    "wheel_max_speed_rpm",
+    "sun_noise_deg",
+    "earth_noise_deg",
+    "noise_margin",
+    "dt",
+    "sensor_period",
+    "duration",
+    "sun_fov_deg",
+    "pointing_requirement_deg",
+    "lqr_attitude_deg",
+    "lqr_rate_deg_s",
+    "filter_disturbance_budget_deg",
+    "ltr_bandwidth_factor",
+    "thruster_torque",
+    "thruster_min_pulse_s",
+    "unload_pulse_period_s",
+    "unload_recovery_s",
+)
+_FRACTIONS = (
+    "lqr_torque_fraction",
+    "slew_torque_fraction",
+    "slew_momentum_fraction",
+    "unload_start_fraction",
+    "unload_stop_fraction",
+)
+_VECTORS = {"inertia": (3, 9), "initial_axis": (3,), "initial_rate": (3,)}
+
+
+def _check_types(sc: Scenario) -> None:
+    """Every field of the type its default has (numbers finite), vectors of the right length."""
+    for f in fields(sc):
+        value, default = getattr(sc, f.name), f.default
+        if f.name in _VECTORS:
+            ok = isinstance(value, (tuple, list)) and len(value) in _VECTORS[f.name]
+            ok = ok and all(_is_number(v) for v in value)
+            if not ok:
+                sizes = " or ".join(str(n) for n in _VECTORS[f.name])
+                raise ConfigError(f"{sc.name}: {f.name} must be a list of {sizes} numbers")
+        elif isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise ConfigError(f"{sc.name}: {f.name} must be true or false, got {value!r}")
+        elif isinstance(default, float):
+            if not _is_number(value):
+                raise ConfigError(f"{sc.name}: {f.name} must be a number, got {value!r}")
+        elif isinstance(default, int):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"{sc.name}: {f.name} must be a whole number ≥ 0, got {value!r}")
+        elif isinstance(default, str) and not isinstance(value, str):
+            raise ConfigError(f"{sc.name}: {f.name} must be a string, got {value!r}")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 SCENARIOS = {
     "geo-smallsat": Scenario(
         name="geo-smallsat",
@@ -157,6 +255,8 @@ SCENARIOS = {
         process_noise_torque=2e-7,
         dt=0.1,
         sensor_period=0.5,
+        thruster_torque=0.02,  # 50 mN cold gas at 0.4 m
+        unload_pulse_period_s=10.0,
     ),
     "geo-comsat": Scenario(name="geo-comsat"),
 }
@@ -177,7 +277,10 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
     table = dict(raw.get("scenario", {}))
-    base = SCENARIOS.get(table.pop("base", ""), Scenario())
+    base_name = table.pop("base", None)
+    if base_name is not None and base_name not in SCENARIOS:
+        raise ConfigError(f"{path}: base = {base_name!r} is not one of {sorted(SCENARIOS)}")
+    base = SCENARIOS[base_name] if base_name else Scenario()
     known = {f.name for f in fields(Scenario)} - {"disturbances"}
     unknown = sorted(set(table) - known)
     dist = raw.get("disturbances", {})
@@ -187,14 +290,23 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     if unknown or extra:
         raise ConfigError(f"{path}: unknown key(s) {unknown + extra}")
     for key in ("inertia", "initial_axis", "initial_rate"):
-        if key in table:
+        if isinstance(table.get(key), list):
             table[key] = tuple(table[key])
     for key in ("srp_offset", "constant_torque"):
         if key in dist:
+            v = dist[key]
+            if not (isinstance(v, list) and len(v) == 3 and all(map(_is_number, v))):
+                raise ConfigError(f"{path}: disturbances.{key} must be a list of 3 numbers")
             dist[key] = tuple(dist[key])
+    for key, value in dist.items():
+        default = getattr(base.disturbances, key)
+        if isinstance(default, bool) and not isinstance(value, bool):
+            raise ConfigError(f"{path}: disturbances.{key} must be true or false")
+        if isinstance(default, float) and not (_is_number(value) and value >= 0):
+            raise ConfigError(f"{path}: disturbances.{key} must be a number ≥ 0")
     return replace(
         base,
-        name=table.pop("name", path.stem),
+        name=str(table.pop("name", path.stem)),
         disturbances=replace(base.disturbances, **dist),
         **table,
         **overrides,

@@ -17,13 +17,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwlab.attitude import kernel
 from rwlab.attitude.ekf import MEKF
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
+from rwlab.attitude.kernel import control_torque
 from rwlab.attitude.plant import propagate
 from rwlab.attitude.scenario import Scenario
+from rwlab.errors import ConfigError
 from rwlab.wheel.physics import Mode, WheelParams, WheelPhysics, rad_s_to_rpm, rpm_to_rad_s
 
-__all__ = ["LinearController", "PDController", "SimResult", "simulate", "sun_direction"]
+__all__ = [
+    "LinearController",
+    "PDController",
+    "SimResult",
+    "attitude_noise_psd",
+    "default_filter_psd",
+    "simulate",
+    "steady_start",
+    "sun_direction",
+]
 
 MOON_DIRECTION = np.array([0.6, -0.1, 0.79])  # orbital frame, slowly varying; fixed here
 
@@ -37,33 +49,44 @@ def sun_direction(scenario: Scenario, t: float) -> np.ndarray:
     return np.array([-math.sin(theta) * math.cos(d), -math.sin(d), -math.cos(theta) * math.cos(d)])
 
 
-def _noisy(b: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
-    """b turned by a small random angle of σ rad per axis (a unit-vector sensor)."""
-    v = b + sigma * np.cross(rng.standard_normal(3), b)
+def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
+    """b turned by a small angle: σ rad times the standard normals e per axis (a vector sensor)."""
+    v = b + sigma * np.cross(e, b)
     return v / np.linalg.norm(v)
 
 
 class LinearController:
-    """τ = −K(t) s with s = [2 q_v sign(q4), ω_bo]; subclasses say how K is chosen.
+    """τ = −K(t) s with s = [2 q_v sign(q4), ω_bo], in its saturation-aware form.
 
-    ``update_period`` (s): how often ``gain`` is asked again (None: once).
+    Subclasses say how K is chosen (``gain``). ``update_period`` (s): how often
+    ``gain`` is asked again (None: once). ``rate_limit`` (rad/s): the slew rate
+    beyond which the law stops asking for more rate (see ``kernel.control_torque``;
+    inf: the plain linear law).
     """
 
     update_period: float | None = None
+    rate_limit: float = math.inf
 
     def gain(self, t: float, q: np.ndarray, w_bo: np.ndarray, h_body: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
     def torque(self, t, q, w_bo, h_body) -> np.ndarray:
         s = np.concatenate([2 * q[:3] * math.copysign(1.0, q[3]), w_bo])
-        return -self.gain(t, q, w_bo, h_body) @ s
+        K = self.gain(t, q, w_bo, h_body)
+        return control_torque(K, _rate_map(K), self.rate_limit, s)
+
+
+def _rate_map(K: np.ndarray) -> np.ndarray:
+    """K_ω⁻¹ K_θ (3×3) of a gain K = [K_θ K_ω]."""
+    return np.ascontiguousarray(np.linalg.solve(K[:, 3:], K[:, :3]))
 
 
 class PDController(LinearController):
     """Quaternion PD law τ = −Kp·2q_v·sign(q4) − Kd·ω_bo (like Basilisk's MRP feedback)."""
 
-    def __init__(self, kp: float, kd: float) -> None:
+    def __init__(self, kp: float, kd: float, rate_limit: float = math.inf) -> None:
         self.K = np.hstack([kp * np.eye(3), kd * np.eye(3)])
+        self.rate_limit = rate_limit
 
     def gain(self, t, q, w_bo, h_body) -> np.ndarray:
         return self.K
@@ -126,14 +149,18 @@ class _Wheels:
 
 @dataclass
 class SimResult:
-    """Time histories of one run (rows are logged steps).
+    """Time histories of one run (rows are logged steps) and statistics over every step.
 
     Attributes
     ----------
     t : (K,) s; q : (K, 4) true attitude (orbital → body); w_bo : (K, 3) rad/s;
     q_est, w_est : the estimate; torque : (K, 3) body control torque, N·m;
     wheel_speed_rpm : (K, N); error_deg : (K,) true pointing error;
-    est_error_deg : (K,) estimation error; nees : (K,) normalised estimation error².
+    est_error_deg : (K,) estimation error; nees : (K,) normalised estimation error²
+    (at measurement steps; 0 without a filter).
+    wheel_saturated : a wheel touched its momentum limit.
+    stats : dict over every step (not only the logged ones), see ``kernel.STATS``.
+    steady_from_s : start of the steady-state window, s.
     """
 
     t: np.ndarray
@@ -147,10 +174,70 @@ class SimResult:
     est_error_deg: np.ndarray
     nees: np.ndarray
     wheel_saturated: bool
+    stats: dict
+    steady_from_s: float
 
 
 def _w_bo(q, w, n=GEO_RATE):
     return w - dcm(q) @ np.array([0.0, -n, 0.0])
+
+
+def steady_start(duration: float) -> float:
+    """Start of the steady-state window, s: half the run, at most its first hour."""
+    return min(duration / 2, 3600.0)
+
+
+def unknown_torque_bound(sc: Scenario) -> float:
+    """A bound on the disturbance torque the filter does not model, N·m.
+
+    SRP force times the centre-of-pressure offset, plus the Sun and Moon tides
+    on the inertia spread; J2 is part of the gravity gradient's 7e-5 margin.
+    """
+    d = sc.disturbances.vector()
+    J = sc.inertia_matrix
+    spread = float(np.ptp(np.linalg.eigvalsh(J)))
+    return float(d[1] * np.linalg.norm(d[2:5]) + (d[5] + d[6]) * spread / 2)
+
+
+def default_filter_psd(sc: Scenario) -> float:
+    """The torque PSD the filter assumes, N²·m²·s (paper B: SRP as process noise).
+
+    With the disturbances unknown to the filter, its process noise is sized so
+    that the estimate's lag on the worst-case unmodelled torque τ_u stays within
+    ``filter_disturbance_budget_deg``: a Kalman filter on J θ̈ = τ measuring θ
+    with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
+    """
+    q = sc.process_noise_torque**2
+    if not sc.disturbances_known_to_filter:
+        r = attitude_noise_psd(sc)
+        q += r * (unknown_torque_bound(sc) / math.radians(sc.filter_disturbance_budget_deg)) ** 2
+    return q
+
+
+def attitude_noise_psd(sc: Scenario) -> float:
+    """Attitude measurement noise as a continuous PSD, rad²·s: the sensors' mean σ (with the
+    filter's margin) squared, times the sensor period."""
+    sigma = math.radians((sc.sun_noise_deg + sc.earth_noise_deg) / 2) * sc.noise_margin
+    return sigma**2 * sc.sensor_period
+
+
+class _Streams:
+    """One independent random stream per noise source, all from one seed."""
+
+    def __init__(self, seed: int) -> None:
+        init, process, sensor = np.random.SeedSequence(seed).spawn(3)
+        self.init = np.random.default_rng(init)
+        self.process = np.random.default_rng(process)
+        self.sensor = np.random.default_rng(sensor)
+
+    def block(self, k: int, n_steps: int, sensor_every: int, noise_sd: float):
+        """Process torques (n_steps, 3) and sensor normals (sensor steps, 6) of steps k…"""
+        first = -(-k // sensor_every) * sensor_every
+        n_sensor = len(range(first, k + n_steps, sensor_every))
+        return (
+            self.process.standard_normal((n_steps, 3)) * noise_sd,
+            self.sensor.standard_normal((n_sensor, 6)),
+        )
 
 
 def simulate(
@@ -162,26 +249,59 @@ def simulate(
     log_every: int = 10,
     seed: int | None = None,
     wheel_momentum0: np.ndarray | None = None,
-    filter_torque_psd: float = 0.0,
+    filter_torque_psd: float | None = None,
     filter_noise_scale: float = 1.0,
+    progress=None,
 ) -> SimResult:
     """Run the closed loop. ``estimator``: 'ekf' (LQG-style) or 'truth' (ideal LQR).
 
-    ``filter_torque_psd`` adds fictitious process noise (N²·m²·s) to the filter and
-    ``filter_noise_scale`` scales the σ it assumes for the sensors: the LTR tuning.
+    Parameters
+    ----------
+    scenario : Scenario
+    controller : LinearController
+        Or any object with ``torque(t, q, w_bo, h_body)`` (Python path).
+    duration : float, optional
+        Seconds (the scenario's by default).
+    estimator : {'ekf', 'truth'}
+    log_every : int
+        Steps between logged rows (rounded up to whole sensor periods).
+    seed : int, optional
+        Seeds the independent noise streams (the scenario's by default).
+    wheel_momentum0 : (N,) array, optional
+        Initial wheel momenta, N·m·s.
+    filter_torque_psd : float, optional
+        Process noise the filter assumes, N²·m²·s (default :func:`default_filter_psd`);
+        LTR passes its fictitious noise here.
+    filter_noise_scale : float
+        Scales the sensor σ the filter assumes (√ρ for LTR).
+    progress : callable, optional
+        Called with the number of steps done after each block.
+
     Ideal wheels with a :class:`LinearController` run in the compiled kernel;
-    other wheel models or controllers run step by step in Python (same physics).
+    other wheel models or controllers run step by step in Python (same physics,
+    noise and law; no momentum unloading).
     """
     if estimator not in ("ekf", "truth"):
-        raise ValueError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
+        raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
+    duration = scenario.duration if duration is None else duration
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"duration must be a positive number of seconds, got {duration!r}")
+    steps = round(duration / scenario.dt)
+    if steps < 1:
+        raise ConfigError(f"duration {duration:g} s is shorter than one step ({scenario.dt:g} s)")
+    sensor_every = round(scenario.sensor_period / scenario.dt)
     kw = dict(
-        steps=round((scenario.duration if duration is None else duration) / scenario.dt),
-        rng=np.random.default_rng(scenario.seed if seed is None else seed),
+        steps=steps,
+        streams=_Streams(scenario.seed if seed is None else seed),
         estimator=estimator,
-        log_every=log_every,
+        log_every=-(-max(1, int(log_every)) // sensor_every) * sensor_every,
         wheel_momentum0=wheel_momentum0,
-        filter_psd=scenario.process_noise_torque**2 + filter_torque_psd,
+        filter_psd=default_filter_psd(scenario)
+        if filter_torque_psd is None
+        else scenario.process_noise_torque**2 + filter_torque_psd,
         noise_scale=scenario.noise_margin * filter_noise_scale,
+        steady_from=round(steady_start(steps * scenario.dt) / scenario.dt),
+        progress=progress,
     )
     if scenario.wheel_model == "ideal" and isinstance(controller, LinearController):
         return _simulate_compiled(scenario, controller, **kw)
@@ -198,7 +318,7 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     return q0, w0, hw0, qmul(dq, q0), w0 + 1e-5 * rng.standard_normal(3), P0
 
 
-def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated) -> SimResult:
+def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated, stats, steady_s):
     q = np.where(q[:, 3:4] >= 0, q, -q)
     q_est = np.where(q_est[:, 3:4] >= 0, q_est, -q_est)
     est_err = angle_deg(
@@ -207,7 +327,33 @@ def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated) -> SimResu
         )
     )
     return SimResult(
-        t, q, w_bo, q_est, w_est, torque, wheel, angle_deg(q), est_err, nees, bool(saturated)
+        t,
+        q,
+        w_bo,
+        q_est,
+        w_est,
+        torque,
+        wheel,
+        angle_deg(q),
+        est_err,
+        nees,
+        bool(saturated),
+        dict(zip(kernel.STATS, (float(v) for v in stats), strict=True)),
+        steady_s,
+    )
+
+
+def _unload_vector(sc: Scenario) -> np.ndarray:
+    """The kernel's unloading parameters (see ``kernel.run_block``)."""
+    return np.array(
+        [
+            float(sc.momentum_unloading),
+            sc.unload_start_fraction,
+            sc.unload_stop_fraction,
+            sc.thruster_torque * sc.thruster_min_pulse_s / sc.dt,  # one pulse's impulse in a step
+            max(1, round(sc.unload_pulse_period_s / sc.dt)),
+            sc.unload_recovery_s,
+        ]
     )
 
 
@@ -218,18 +364,17 @@ def _simulate_compiled(
     steps,
     estimator,
     log_every,
-    rng,
+    streams,
     wheel_momentum0,
     filter_psd,
     noise_scale,
+    steady_from,
+    progress,
 ):
-    from rwlab.attitude import kernel
-
-    kernel.seed(int(rng.integers(2**31)))
     J = sc.inertia_matrix
     J_inv = np.linalg.inv(J)
     G = sc.wheel_matrix
-    q0, w0, hw0, q_hat, w_hat, P = _initial(sc, rng, wheel_momentum0)
+    q0, w0, hw0, q_hat, w_hat, P = _initial(sc, streams.init, wheel_momentum0)
     x = np.concatenate([q0, w0, hw0])
     use_ekf = estimator == "ekf"
     if not use_ekf:
@@ -238,12 +383,19 @@ def _simulate_compiled(
     log_t, log_x = np.zeros(n_log), np.zeros((n_log, x.size))
     log_est, log_tau, log_nees = np.zeros((n_log, 7)), np.zeros((n_log, 3)), np.zeros(n_log)
     dist = sc.disturbances.vector()
+    dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
     Qc = np.zeros((6, 6))
     Qc[3:, 3:] = filter_psd * J_inv @ J_inv.T
     m = noise_scale
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
+    sensor_every = round(sc.sensor_period / sc.dt)
     period = controller.update_period
-    block = steps + 1 if not period else max(1, round(period / sc.dt))
+    block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.dt)))
+    noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
+    stats = kernel.new_stats()
+    unload = _unload_vector(sc)
+    G_pinv = np.linalg.pinv(G)
+    h_max = np.full(sc.n_wheels, sc.wheel_max_momentum)
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
@@ -251,6 +403,7 @@ def _simulate_compiled(
         K = np.ascontiguousarray(
             controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]), dtype=float
         )
+        process, sensor = streams.block(k, n_steps, sensor_every, noise_sd)
         x, q_hat, w_hat, P, log_k, sat = kernel.run_block(
             x,
             q_hat,
@@ -259,20 +412,24 @@ def _simulate_compiled(
             k,
             n_steps,
             K,
+            _rate_map(K),
+            float(controller.rate_limit),
             use_ekf,
             sc.dt,
-            round(sc.sensor_period / sc.dt),
+            sensor_every,
             log_every,
+            steady_from,
             J,
             J_inv,
             G,
-            np.linalg.pinv(G),
-            np.full(sc.n_wheels, sc.wheel_max_momentum),
+            G_pinv,
+            h_max,
             sc.wheel_max_torque,
             GEO_RATE,
             dist,
-            dist,
-            sc.process_noise_torque / math.sqrt(sc.dt),
+            dist_model,
+            process,
+            sensor,
             Qc,
             math.radians(sc.sun_declination_deg),
             math.radians(sc.sun_phase_deg),
@@ -283,6 +440,8 @@ def _simulate_compiled(
             math.radians(sc.sun_noise_deg) * m,
             math.radians(sc.earth_noise_deg) * m,
             MOON_DIRECTION,
+            unload,
+            stats,
             log_t,
             log_x,
             log_est,
@@ -292,6 +451,8 @@ def _simulate_compiled(
         )
         saturated |= sat
         k += n_steps
+        if progress is not None:
+            progress(min(k, steps))
     log_x, log_est = log_x[:log_k], log_est[:log_k]
     w_bo = np.array([_w_bo(r[:4], r[4:7]) for r in log_x])
     w_est = np.array([_w_bo(r[:4], r[4:7]) for r in log_est])
@@ -306,7 +467,21 @@ def _simulate_compiled(
         wheel,
         log_nees[:log_k] if use_ekf else np.zeros(log_k),
         saturated,
+        stats,
+        steady_from * sc.dt,
     )
+
+
+BLOCK_STEPS = 36_000  # steps per kernel call without re-linearisation (an hour at 0.1 s)
+
+
+def _known_only(sc: Scenario) -> np.ndarray:
+    """The disturbance vector the filter models in paper B's setting: gravity gradient only."""
+    d = sc.disturbances.vector()
+    known = np.zeros_like(d)
+    gg = 3 * GEO_RATE**2 * float(sc.disturbances.gravity_gradient)
+    known[0] = gg
+    return known
 
 
 def _simulate_python(
@@ -316,10 +491,12 @@ def _simulate_python(
     steps,
     estimator,
     log_every,
-    rng,
+    streams,
     wheel_momentum0,
     filter_psd,
     noise_scale,
+    steady_from,
+    progress,
 ) -> SimResult:
     sc = scenario
     sensor_every = round(sc.sensor_period / sc.dt)
@@ -329,8 +506,8 @@ def _simulate_python(
     G_pinv = np.linalg.pinv(G)
     h_max = np.full(sc.n_wheels, sc.wheel_max_momentum)
     dist_true = sc.disturbances.vector()
-    dist_model = dist_true  # the filter knows the deterministic environment; noise is unknown
-    q0, w0, hw0, q_hat0, w_hat0, P0 = _initial(sc, rng, wheel_momentum0)
+    dist_model = dist_true if sc.disturbances_known_to_filter else _known_only(sc)
+    q0, w0, hw0, q_hat0, w_hat0, P0 = _initial(sc, streams.init, wheel_momentum0)
     x = np.concatenate([q0, w0, hw0])
     wheels = _Wheels(sc, hw0)
     sig_sun = math.radians(sc.sun_noise_deg)
@@ -338,7 +515,7 @@ def _simulate_python(
     nadir = np.array([0.0, 0.0, 1.0])
     use_ekf = estimator == "ekf"
     if use_ekf:
-        ekf = MEKF(J, q_hat0, w_hat0, P0, filter_psd)
+        ekf = MEKF(J, q_hat0, w_hat0, P0, filter_psd, gg_gain=dist_model[0])
     n_log = steps // log_every + 1
     log = {
         k: np.zeros((n_log, m))
@@ -355,21 +532,29 @@ def _simulate_python(
     t_log = np.zeros(n_log)
     saturated = False
     noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
+    process, sensor = streams.block(0, steps + 1, sensor_every, noise_sd)
+    err = np.zeros(steps + 1)
+    cmd = np.zeros((steps + 1, sc.n_wheels))
+    h_frac = 0.0
     k_log = 0
     for k in range(steps + 1):
         t = k * sc.dt
         s_orb = sun_direction(sc, t)
         if use_ekf and k % sensor_every == 0:
+            e = sensor[k // sensor_every]
             C = dcm(x[:4])
             sun_b = C @ s_orb
             if math.degrees(math.acos(max(-1.0, min(1.0, -sun_b[0])))) <= sc.sun_fov_deg:
-                ekf.update(_noisy(sun_b, sig_sun, rng), s_orb, sig_sun * noise_scale)
-            ekf.update(_noisy(C @ nadir, sig_earth, rng), nadir, sig_earth * noise_scale)
+                ekf.update(_noisy(sun_b, sig_sun, e[:3]), s_orb, sig_sun * noise_scale)
+            ekf.update(_noisy(C @ nadir, sig_earth, e[3:]), nadir, sig_earth * noise_scale)
         q_hat, w_hat = (ekf.q, ekf.w) if use_ekf else (x[:4], x[4:7])
         h_body = G @ x[7:]
         tau_cmd = controller.torque(t, q_hat, _w_bo(q_hat, w_hat), h_body)
-        hw_dot = wheels.realise(-G_pinv @ tau_cmd, x[7:], sc.dt)
+        cmd[k] = -G_pinv @ tau_cmd
+        hw_dot = wheels.realise(cmd[k], x[7:], sc.dt)
         saturated |= bool(np.any(np.abs(x[7:]) >= h_max * 0.999))
+        h_frac = max(h_frac, float(np.max(np.abs(x[7:]) / h_max)))
+        err[k] = math.degrees(2 * math.asin(min(1.0, float(np.linalg.norm(x[:3])))))
         if k % log_every == 0:
             t_log[k_log] = t
             log["q"][k_log] = x[:4] if x[3] >= 0 else -x[:4]
@@ -385,7 +570,7 @@ def _simulate_python(
         if k == steps:
             break
         dist = dist_true.copy()
-        dist[7:10] += noise_sd * rng.standard_normal(3)
+        dist[7:10] += process[k]
         x_next = propagate(
             x, hw_dot, sc.dt, 1, J, J_inv, G, h_max, GEO_RATE, dist, s_orb, MOON_DIRECTION
         )
@@ -406,6 +591,8 @@ def _simulate_python(
             )
             ekf.predict(model, h_body, sc.dt)
         x = x_next
+        if progress is not None and k % BLOCK_STEPS == 0:
+            progress(k)
     return _result(
         t_log[:k_log],
         log["q"][:k_log],
@@ -416,4 +603,22 @@ def _simulate_python(
         log["wheel"][:k_log],
         log["nees"][:k_log, 0],
         saturated,
+        _stats_from_steps(err, cmd, sc.wheel_max_torque, steady_from, h_frac),
+        steady_from * sc.dt,
     )
+
+
+def _stats_from_steps(err, cmd, tau_max, steady_from, h_frac) -> np.ndarray:
+    """The kernel's statistics from every step's error (°) and wheel commands (no unloading)."""
+    s = kernel.new_stats()
+    steady, cmd_steady = err[steady_from:], cmd[steady_from:]
+    clipped = np.clip(cmd, -tau_max, tau_max)
+    s[kernel.MAX_ERR] = err.max()
+    s[kernel.STEADY_MAX] = s[kernel.STEADY_EXCL] = steady.max(initial=0.0)
+    s[kernel.SAT_STEPS] = np.count_nonzero(np.any(np.abs(cmd_steady) >= tau_max, axis=1))
+    s[kernel.STEADY_STEPS] = s[kernel.EXCL_STEPS] = steady.size
+    s[kernel.TAU_PEAK] = np.abs(clipped).max()
+    s[kernel.TAU_SQ] = np.sum(np.mean(clipped[steady_from:] ** 2, axis=1))
+    s[kernel.ERR_SQ] = np.sum(steady**2)
+    s[kernel.H_PEAK] = h_frac
+    return s
