@@ -1,16 +1,28 @@
-"""Paper B's controllers on the GEO plant, and its comparison study.
+"""Paper B's controllers on the GEO plant, designed at the rates the loop runs, and its study.
 
-- **LQR**: u = −K s, s = [θ, ω_bo] (θ = 2 q_v), K from the Riccati equation of
-  the plant linearised about the *current* operating point, re-solved every
-  ``update_period`` seconds (the paper re-linearises every step; 1 s by
-  default here, configurable down to dt), acting on the true state.
-- **LQG**: the same gain acting on the MEKF's estimate.
-- **LQG/LTR**: the same gain; the filter is tuned for loop transfer recovery at
-  the plant input — fictitious process noise q²·B Bᵀ through B and measurement
-  noise ρ·R₀ (paper B: ρ = 0.7692); see :func:`ltr_noise` for q².
+- **LQR**: discrete gain (MATLAB ``lqrd``) for the plant linearised at the
+  reference and sampled with a hold at the control period ``dt``, acting on the
+  true state. Weights (Bryson) come from the scenario: attitude
+  ``lqr_attitude_deg`` (the pointing requirement), rate ``lqr_rate_deg_s`` and a
+  torque of ``lqr_torque_fraction`` × the wheels' torque capacity, so the wheels
+  never saturate inside the pointing budget (paper B, eq. 26). Large errors are
+  flown as a rate-limited slew (``kernel.control_torque``) that leaves
+  ``slew_torque_fraction`` of the torque in reserve. Paper B re-linearises
+  every step; ``update_period`` keeps that available (off by default: measured
+  benefit below 0.2 % of K, see the README).
+- **LQG**: the same gain on the MEKF's estimate. In paper B's setting the filter
+  does not know SRP, the tides or J2: they are process noise, sized by
+  ``sim.default_filter_psd``.
+- **LQG/LTR**: the same gain; the filter tuned for input loop transfer recovery:
+  fictitious torque noise q² through B, sensor noise ρ·R₀ (paper B: ρ = 0.7692).
+  q² is sized for the LQR loop's real crossover ω_c on its slowest axis (the
+  smallest singular value of B, i.e. the largest inertia): at ρ = 1 the filter
+  bandwidth is ``ltr_bandwidth_factor`` × ω_c on every axis. This is our reading
+  of the paper's "LTR applied to the slowest dynamics found by an SVD".
 
-Weights follow Bryson's rule from the pointing requirement: attitude 0.05°,
-rate 1e-4 rad/s, torque = the wheels' maximum.
+The σ analysis (``ltr_study``, ``crossover``) is discrete at the control period,
+with the 2 Hz sensors represented by an equivalent measurement at ``dt`` of the
+same noise PSD (valid while the loop's bandwidth ≪ the sensors' Nyquist rate).
 """
 
 from __future__ import annotations
@@ -21,16 +33,32 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from rwlab.attitude.design import LTRResult, lqr, ltr
+from rwlab.attitude.design import LTRResult, kalman, lqg_current, lqrd, ltr, sigma
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
 from rwlab.attitude.scenario import Scenario
-from rwlab.attitude.sim import LinearController, SimResult, simulate
+from rwlab.attitude.sim import (
+    LinearController,
+    SimResult,
+    attitude_noise_psd,
+    default_filter_psd,
+    simulate,
+)
 
-__all__ = ["LQRController", "compare", "default_weights", "linearize", "ltr_study", "metrics"]
+__all__ = [
+    "LQRController",
+    "compare",
+    "crossover",
+    "default_weights",
+    "linearize",
+    "ltr_noise",
+    "ltr_study",
+    "metrics",
+    "torque_capacity",
+]
 
-POINTING_DEG = 0.1  # paper B's requirement
 PAPER_RHOS = (76.92, 7.692, 0.7692, 0.007692)
 CHOSEN_RHO = 0.7692
+GAP_BAND = (1e-3, 1e-1)  # rad/s: where paper B's Fig. 8 compares the loops
 
 
 def _f(s, tau, h_body, J, J_inv, n, gg):
@@ -66,117 +94,200 @@ def linearize(q, w_bo, h_body, J, n: float = GEO_RATE, gravity_gradient: bool = 
     return A, B
 
 
+def torque_capacity(scenario: Scenario) -> float:
+    """Largest body torque (N·m) in any direction that no wheel's limit clips (G⁺ allocation)."""
+    rows = np.linalg.norm(np.linalg.pinv(scenario.wheel_matrix), axis=1)
+    return scenario.wheel_max_torque / float(rows.max())
+
+
 def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """Bryson weights: 0.05° attitude, 1e-4 rad/s rate, the wheels' maximum torque."""
-    Q = np.diag([1 / math.radians(POINTING_WEIGHT_DEG) ** 2] * 3 + [1 / 1e-4**2] * 3)
-    R = np.eye(3) / scenario.wheel_max_torque**2
-    return Q, R
+    """Continuous Bryson weights Q (6×6), R (3×3) from the scenario's design fields."""
+    theta0 = math.radians(scenario.lqr_attitude_deg)
+    rate0 = math.radians(scenario.lqr_rate_deg_s)
+    tau0 = scenario.lqr_torque_fraction * torque_capacity(scenario)
+    Q = np.diag([1 / theta0**2] * 3 + [1 / rate0**2] * 3)
+    return Q, np.eye(3) / tau0**2
 
 
-class LQRController(LinearController):
-    """LQR on the plant re-linearised about the operating point every ``update_period`` s."""
+def attitude_plant(
+    scenario: Scenario, q=None, w_bo=None, h_body=None, measure: str = "attitude"
+) -> control.StateSpace:
+    """The continuous linearised plant, at the reference by default.
 
-    def __init__(self, scenario: Scenario, Q=None, R=None, update_period: float = 1.0) -> None:
-        Qd, Rd = default_weights(scenario)
-        self.Q = Qd if Q is None else np.asarray(Q, float)
-        self.R = Rd if R is None else np.asarray(R, float)
-        self.J = scenario.inertia_matrix
-        self.gg = scenario.disturbances.gravity_gradient
-        self.update_period = update_period
-        self.K = lqr(
-            control.ss(
-                *linearize(
-                    np.array([0, 0, 0, 1.0]),
-                    np.zeros(3),
-                    np.zeros(3),
-                    self.J,
-                    gravity_gradient=self.gg,
-                ),
-                np.eye(6),
-                0,
-            ),
-            self.Q,
-            self.R,
-        )
-        self._last = -math.inf
-
-    def gain(self, t, q, w_bo, h_body) -> np.ndarray:
-        if t - self._last >= (self.update_period or math.inf) - 1e-9:
-            A, B = linearize(q, w_bo, h_body, self.J, gravity_gradient=self.gg)
-            self.K = lqr(control.ss(A, B, np.eye(6), 0), self.Q, self.R)
-            self._last = t
-        return self.K
-
-
-def attitude_plant(scenario: Scenario) -> control.StateSpace:
-    """The linearised plant at the reference with θ measured: G(s) = C (sI − A)⁻¹ B, 3×3."""
+    ``measure='attitude'``: C = [I 0] (θ measured, the LTR plant G(s), 3×3);
+    ``'state'``: C = I.
+    """
     A, B = linearize(
-        np.array([0, 0, 0, 1.0]),
-        np.zeros(3),
-        np.zeros(3),
+        np.array([0, 0, 0, 1.0]) if q is None else q,
+        np.zeros(3) if w_bo is None else w_bo,
+        np.zeros(3) if h_body is None else h_body,
         scenario.inertia_matrix,
         gravity_gradient=scenario.disturbances.gravity_gradient,
     )
-    return control.ss(A, B, np.hstack([np.eye(3), np.zeros((3, 3))]), 0)
+    C = np.hstack([np.eye(3), np.zeros((3, 3))]) if measure == "attitude" else np.eye(6)
+    return control.ss(A, B, C, 0)
 
 
-POINTING_WEIGHT_DEG = 0.05  # Bryson's attitude scale in default_weights
+def slew_rate_limit(scenario: Scenario, K: np.ndarray) -> float:
+    """Rate limit of the saturation-aware law, rad/s: what K_ω can hold with the torque
+    reserve, and what the momentum reserve allows on the largest inertia."""
+    by_torque = scenario.slew_torque_fraction * torque_capacity(scenario)
+    by_torque /= np.linalg.norm(K[:, 3:], 2)
+    h_cap = scenario.wheel_max_momentum * torque_capacity(scenario) / scenario.wheel_max_torque
+    by_momentum = (
+        scenario.slew_momentum_fraction * h_cap / np.linalg.eigvalsh(scenario.inertia_matrix).max()
+    )
+    return float(min(by_torque, by_momentum))
 
 
-def ltr_noise(scenario: Scenario) -> tuple[float, float]:
-    """(q², r_c) of the input-LTR filter design, shared by the ρ sweep and the simulation.
+class LQRController(LinearController):
+    """Discrete LQR (``lqrd`` at the control period) in its saturation-aware form.
 
-    r_c is the attitude measurement noise as a continuous PSD (rad²·s: variance
-    × sensor period); q² the fictitious torque PSD through B (N²·m²·s), chosen so
-    that at ρ = 1 the filter's bandwidth is a third of the LQR loop's — recovery
-    then grows as ρ shrinks (filter bandwidth ∝ ρ^(-1/4)).
+    Parameters
+    ----------
+    scenario : Scenario
+    Q, R : array_like, optional
+        Continuous weights (default :func:`default_weights`).
+    update_period : float, optional
+        Re-linearise about the current estimate and re-solve every this many
+        seconds (paper B: every step); None designs once at the reference.
     """
-    sigma = math.radians((scenario.sun_noise_deg + scenario.earth_noise_deg) / 2)
-    r_c = (sigma * scenario.noise_margin) ** 2 * scenario.sensor_period
-    theta0 = math.radians(POINTING_WEIGHT_DEG)
-    q2 = scenario.wheel_max_torque**2 * r_c / (9 * theta0) ** 2
-    return q2, r_c
+
+    def __init__(self, scenario: Scenario, Q=None, R=None, update_period: float | None = None):
+        Qd, Rd = default_weights(scenario)
+        self.Q = Qd if Q is None else np.asarray(Q, float)
+        self.R = Rd if R is None else np.asarray(R, float)
+        self.scenario = scenario
+        self.update_period = update_period
+        self.K, self.plant = lqrd(attitude_plant(scenario), self.Q, self.R, scenario.dt)
+        self.rate_limit = slew_rate_limit(scenario, self.K)
+
+    def gain(self, t, q, w_bo, h_body) -> np.ndarray:
+        if self.update_period:
+            plant = attitude_plant(self.scenario, q, w_bo, h_body)
+            self.K, _ = lqrd(plant, self.Q, self.R, self.scenario.dt)
+        return self.K
+
+
+def _omega_grid(dt: float) -> np.ndarray:
+    return np.logspace(-5, math.log10(math.pi / dt) - 1e-6, 400)
+
+
+def crossover(loop_sigma: np.ndarray, omega: np.ndarray) -> float:
+    """Highest frequency (rad/s) where the largest singular value falls through 1."""
+    s = loop_sigma[:, 0]
+    above = np.flatnonzero(s >= 1)
+    if above.size == 0:
+        return 0.0
+    i = above[-1]
+    if i + 1 >= s.size:
+        return float(omega[-1])
+    t = math.log(s[i]) / (math.log(s[i]) - math.log(s[i + 1]))  # log-log interpolation
+    return float(math.exp(math.log(omega[i]) + t * (math.log(omega[i + 1]) - math.log(omega[i]))))
+
+
+def _discrete_measured(scenario: Scenario, ctl: LQRController) -> control.StateSpace:
+    C = np.hstack([np.eye(3), np.zeros((3, 3))])
+    return control.ss(ctl.plant.A, ctl.plant.B, C, 0, ctl.plant.dt)
+
+
+def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[float, float]:
+    """(q², r_c) of the LTR filter: fictitious torque PSD (N²·m²·s) and attitude noise PSD (rad²·s).
+
+    q² = (κ ω_c)⁴ J_slow² r_c puts a double integrator's Kalman bandwidth
+    (q²/(J² r_c))^¼ at κ = ``ltr_bandwidth_factor`` times the LQR crossover ω_c
+    on the slowest axis, J_slow = 1/σ_min(B) from the SVD of B.
+    """
+    ctl = LQRController(scenario) if ctl is None else ctl
+    w = _omega_grid(scenario.dt)
+    sysd = ctl.plant
+    target = sigma(control.ss(sysd.A, sysd.B, ctl.K, 0 * ctl.K @ sysd.B, sysd.dt), w)
+    w_c = crossover(target, w)
+    B = np.asarray(attitude_plant(scenario).B)
+    J_slow = 1 / np.linalg.svd(B, compute_uv=False).min()
+    r_c = attitude_noise_psd(scenario)
+    return (scenario.ltr_bandwidth_factor * w_c) ** 4 * J_slow**2 * r_c, r_c
 
 
 def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
-    """Paper B Fig. 8: loop singular values at the plant input for each ρ next to LQR's."""
-    Q, R = default_weights(scenario)
-    q2, r_c = ltr_noise(scenario)
+    """Paper B Fig. 8 on the discrete loop: σ of K(z)G(z) at the plant input for each ρ."""
+    ctl = LQRController(scenario)
+    q2, r_c = ltr_noise(scenario, ctl)
+    dt = scenario.dt
     return ltr(
-        attitude_plant(scenario),
-        Q,
-        R,
+        _discrete_measured(scenario, ctl),
+        None,
+        None,
         rhos,
-        R0=np.eye(3) * r_c,
-        q2=q2,
+        K=ctl.K,
+        R0=np.eye(3) * r_c / dt,  # the same PSD as a measurement every dt
+        q2=q2 / dt,
         side="input",
-        omega=np.logspace(-5, 1, 240) if omega is None else omega,
+        omega=_omega_grid(dt) if omega is None else omega,
     )
 
 
-def metrics(r: SimResult, band_deg: float = POINTING_DEG) -> dict:
-    """Pointing metrics of one run (the steady window is the second half)."""
-    steady = r.error_deg[len(r.error_deg) // 2 :]
+def loop_crossovers(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
+    """Crossover (rad/s) of the loop broken at the plant input for each controller.
+
+    LQR: K(zI − A)⁻¹B; LQG: the compensator with the filter's own noise model;
+    LQG/LTR: the compensator with the LTR filter at ρ.
+    """
+    ctl = LQRController(scenario)
+    sysd = _discrete_measured(scenario, ctl)
+    dt, w = scenario.dt, _omega_grid(scenario.dt)
+    B = np.asarray(sysd.B)
+    r_c = attitude_noise_psd(scenario)
+    q2, _ = ltr_noise(scenario, ctl)
+    loops = {"lqr": control.ss(sysd.A, B, ctl.K, 0 * ctl.K @ B, dt)}
+    for name, psd, r in (
+        ("lqg", default_filter_psd(scenario), r_c),
+        ("lqg_ltr", q2, rho * r_c),
+    ):
+        L = kalman(sysd, psd / dt * B @ B.T, np.eye(3) * r / dt)
+        comp = lqg_current(sysd, ctl.K, np.linalg.solve(np.asarray(sysd.A), L))
+        loops[name] = control.series(sysd, comp)
+    return {name: crossover(sigma(sys, w), w) for name, sys in loops.items()}
+
+
+def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
+    """Pointing, torque and momentum metrics of one run.
+
+    Maxima and RMS come from every step; the steady window starts at
+    ``r.steady_from_s`` (half the run, at most its first hour). "Excluding
+    desaturation" leaves out unloading windows and ``unload_recovery_s`` after each.
+    """
+    st = r.stats
+    steady_n = max(st["steady_steps"], 1)
     outside = np.flatnonzero(r.error_deg > band_deg)
     settled = outside.size == 0 or outside[-1] < len(r.t) - 1
     theta = np.degrees(2 * r.q[:, :3])
     sign0 = np.sign(theta[0])
     overshoot = float(max(0.0, np.max(-sign0 * theta))) if np.any(sign0) else 0.0
     dt = float(np.median(np.diff(r.t))) if len(r.t) > 1 else 0.0
+    est = r.est_error_deg[r.t >= r.steady_from_s]
     return {
-        "steady_max_error_deg": float(np.max(steady)),
-        "steady_rms_error_deg": float(np.sqrt(np.mean(steady**2))),
+        "steps": int(st["steps"]),
+        "max_error_deg": st["max_error_deg"],
+        "steady_max_error_deg": st["steady_max_error_deg"],
+        "steady_rms_error_deg": math.sqrt(st["steady_error_sq_sum"] / steady_n),
+        "max_error_deg_excluding_desaturation": st["steady_max_error_excl_desat_deg"],
+        "max_error_during_desaturation_deg": st["max_error_in_desat_deg"],
         "settling_time_s": (float(r.t[outside[-1] + 1]) if outside.size else 0.0)
         if settled
         else None,
         "overshoot_deg": overshoot,
         "control_effort_Nms": float(np.sum(np.abs(r.torque)) * dt),
+        "torque_saturated_fraction": st["steady_torque_saturated_steps"] / steady_n,
+        "torque_peak_Nm": st["torque_peak_Nm"],
+        "torque_rms_Nm": math.sqrt(st["steady_torque_sq_sum"] / steady_n),
         "peak_wheel_speed_rpm": float(np.max(np.abs(r.wheel_speed_rpm))),
+        "wheel_momentum_peak_fraction": st["momentum_peak_fraction"],
         "wheel_saturated": bool(r.wheel_saturated),
-        "steady_rms_estimation_error_deg": float(
-            np.sqrt(np.mean(r.est_error_deg[len(r.est_error_deg) // 2 :] ** 2))
-        ),
-        "meets_requirement": bool(np.max(steady) <= band_deg),
+        "desaturation_count": int(st["desaturation_count"]),
+        "thruster_impulse_Nms": st["thruster_impulse_Nms"],
+        "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
+        "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
     }
 
 
@@ -188,6 +299,7 @@ class Comparison:
     runs: dict
     metrics: dict
     rho: float
+    config: dict
 
 
 def compare(
@@ -197,47 +309,50 @@ def compare(
     seed: int | None = None,
     rho: float = CHOSEN_RHO,
     wheel_model_file: str | None = None,
-    update_period: float = 1.0,
+    update_period: float | None = None,
+    progress=None,
 ) -> Comparison:
-    """LQR (true state), LQG (MEKF) and LQG/LTR (LTR-tuned MEKF) on the same scenario and seeds.
+    """LQR (true state), LQG (MEKF) and LQG/LTR (LTR-tuned MEKF), same scenario and noise.
 
-    With ``wheel_model_file`` the LQG loop is also run with the identified wheel
-    model as the actuator (``lqg_identified_wheel``) to show the wheel's lag cost.
+    Every run draws its process noise, sensor noise and initial estimate from
+    its own stream of the same seed, so the controllers see identical
+    disturbances. With ``wheel_model_file`` the LQG loop is also run with the
+    identified wheel model as the actuator (``lqg_identified_wheel``).
+    ``progress(name)`` is called before each run.
     """
     seed = scenario.seed if seed is None else seed
-    runs = {
-        "lqr": simulate(
+    q2, _ = ltr_noise(scenario)
+    plans = {
+        "lqr": (scenario, dict(estimator="truth")),
+        "lqg": (scenario, dict(estimator="ekf")),
+        "lqg_ltr": (
             scenario,
-            LQRController(scenario, update_period=update_period),
-            duration=duration,
-            estimator="truth",
-            seed=seed,
-        ),
-        "lqg": simulate(
-            scenario,
-            LQRController(scenario, update_period=update_period),
-            duration=duration,
-            estimator="ekf",
-            seed=seed,
+            dict(estimator="ekf", filter_torque_psd=q2, filter_noise_scale=math.sqrt(rho)),
         ),
     }
-    q2, _ = ltr_noise(scenario)
-    ltr_filter = dict(filter_torque_psd=q2, filter_noise_scale=math.sqrt(rho))
-    runs["lqg_ltr"] = simulate(
-        scenario,
-        LQRController(scenario, update_period=update_period),
-        duration=duration,
-        estimator="ekf",
-        seed=seed,
-        **ltr_filter,
-    )
     if wheel_model_file:
         wheel = scenario.with_(wheel_model="identified", wheel_model_file=str(wheel_model_file))
-        runs["lqg_identified_wheel"] = simulate(
-            wheel,
-            LQRController(wheel, update_period=update_period),
-            duration=duration,
-            estimator="ekf",
-            seed=seed,
-        )
-    return Comparison(scenario, runs, {k: metrics(v) for k, v in runs.items()}, rho)
+        plans["lqg_identified_wheel"] = (wheel, dict(estimator="ekf"))
+    runs = {}
+    for name, (sc, kw) in plans.items():
+        if progress is not None:
+            progress(name)
+        ctl = LQRController(sc, update_period=update_period)
+        runs[name] = simulate(sc, ctl, duration=duration, seed=seed, **kw)
+    cross = loop_crossovers(scenario, rho)
+    table = {}
+    for name, run in runs.items():
+        table[name] = metrics(run, scenario.pointing_requirement_deg)
+        table[name]["crossover_rad_s"] = cross.get(name, cross["lqg"])
+    config = {
+        "disturbances_known_to_filter": scenario.disturbances_known_to_filter,
+        "seed": seed,
+        "dt_s": scenario.dt,
+        "sensor_period_s": scenario.sensor_period,
+        "relinearize_period_s": update_period,
+        "rho": rho,
+        "ltr_fictitious_torque_psd": q2,
+        "filter_torque_psd": default_filter_psd(scenario),
+        "requirement_deg": scenario.pointing_requirement_deg,
+    }
+    return Comparison(scenario, runs, table, rho, config)

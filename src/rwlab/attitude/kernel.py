@@ -89,26 +89,58 @@ def _noisy(b, sigma, e):
     return v / np.sqrt(v @ v)
 
 
+@njit(cache=True, inline="always")
+def _matvec(M, v, out):
+    """out = M @ v by loops: numba's ``@`` calls BLAS, which costs microseconds on 3×3."""
+    for i in range(M.shape[0]):
+        acc = 0.0
+        for j in range(M.shape[1]):
+            acc += M[i, j] * v[j]
+        out[i] = acc
+
+
+@njit(cache=True)
+def _state_into(q, w, n, s):
+    """s = [2 q_v sign(q4), ω_bo] (ω_bo = ω − A(q) (0, −n, 0))."""
+    sgn = 1.0 if q[3] >= 0 else -1.0
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s[0], s[1], s[2] = 2.0 * q1 * sgn, 2.0 * q2 * sgn, 2.0 * q3 * sgn
+    c = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    s[3] = w[0] + n * 2 * (q1 * q2 + q4 * q3)
+    s[4] = w[1] + n * (c + 2 * q2 * q2)
+    s[5] = w[2] + n * 2 * (q2 * q3 - q4 * q1)
+
+
 @njit(cache=True)
 def _state(q, w, n):
     s = np.empty(6)
-    sgn = 1.0 if q[3] >= 0 else -1.0
-    s[:3] = 2.0 * q[:3] * sgn
-    s[3:] = w - dcm(q) @ np.array([0.0, -n, 0.0])
+    _state_into(q, w, n, s)
     return s
 
 
 @njit(cache=True)
-def control_torque(K, M, w_max, s):
+def control_torque(K_w, M, w_max, s):
     """Body torque (3,) of the saturation-aware linear law for s = [θ, ω_bo] (module docstring).
 
-    K : (3, 6) gain [K_θ K_ω]; M : (3, 3) K_ω⁻¹ K_θ; w_max : rate limit, rad/s (inf: none).
+    K_w : (3, 3) rate block of K = [K_θ K_ω]; M : (3, 3) K_ω⁻¹ K_θ; w_max : rate
+    limit, rad/s (inf: none).
     """
-    w_cmd = -(M @ s[:3])
-    norm = math.sqrt(w_cmd @ w_cmd)
-    if norm > w_max:
-        w_cmd *= w_max / norm
-    return -(K[:, 3:] @ (s[3:] - w_cmd))
+    tau = np.empty(3)
+    _control_into(K_w, M, w_max, s, np.empty(3), tau)
+    return tau
+
+
+@njit(cache=True)
+def _control_into(K_w, M, w_max, s, work, tau):
+    """:func:`control_torque` into ``tau`` with a (3,) ``work`` buffer."""
+    _matvec(M, s[:3], work)
+    norm = math.sqrt(work[0] * work[0] + work[1] * work[1] + work[2] * work[2])
+    scale = w_max / norm if norm > w_max else 1.0
+    for i in range(3):
+        work[i] = s[3 + i] + scale * work[i]  # ω_bo − ω_cmd, ω_cmd = −sat(M θ)
+    _matvec(K_w, work, tau)
+    for i in range(3):
+        tau[i] = -tau[i]
 
 
 @njit(cache=True)
@@ -131,7 +163,7 @@ def run_block(
     P,
     k0,
     steps,
-    K,
+    K_w,
     M,
     w_max,
     use_ekf,
@@ -184,10 +216,20 @@ def run_block(
     T_sensor = sensor_every * dt
     i_sensor = 0
     tau_thr = np.zeros(3)
+    s = np.empty(6)
+    tau = np.empty(3)
+    work = np.empty(3)
+    hw_cmd = np.empty(nw)
+    h_body = np.empty(3)
+    d = dist.copy()
+    dm = dist_model.copy()
+    xm = np.empty_like(x)
+    s_orb = _sun(0.0, sun_dec, sun_phase, sun_moving, n)
     for j in range(steps):
         k = k0 + j
         t = k * dt
-        s_orb = _sun(t, sun_dec, sun_phase, sun_moving, n)
+        if sun_moving:
+            s_orb = _sun(t, sun_dec, sun_phase, sun_moving, n)
         measured = use_ekf and k % sensor_every == 0
         if measured:
             C = dcm(x[:4])
@@ -201,11 +243,15 @@ def run_block(
             q_hat, w_hat, P = _update(
                 q_hat, w_hat, P, _noisy(C[:, 2].copy(), sig_earth, e[3:]), nadir, r_earth
             )
-        s = _state(q_hat, w_hat, n) if use_ekf else _state(x[:4], x[4:7], n)
-        tau = control_torque(K, M, w_max, s)
-        hw_cmd = -(G_pinv @ tau)
+        if use_ekf:
+            _state_into(q_hat, w_hat, n, s)
+        else:
+            _state_into(x[:4], x[4:7], n, s)
+        _control_into(K_w, M, w_max, s, work, tau)
+        _matvec(G_pinv, tau, hw_cmd)
         at_limit = False
         for i in range(nw):
+            hw_cmd[i] = -hw_cmd[i]
             if abs(hw_cmd[i]) >= tau_max:
                 at_limit = True
             hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
@@ -216,7 +262,7 @@ def run_block(
                 saturated = True
 
         # momentum unloading: thruster pulses against the wheels' body momentum
-        h_body = G @ x[7:]
+        _matvec(G, x[7:], h_body)
         tau_thr[:] = 0.0
         if unload[0] > 0:
             h_frac = 0.0
@@ -276,19 +322,18 @@ def run_block(
                 log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
             log_k += 1
 
-        d = dist.copy()
-        d[7:10] += process_noise[j] + tau_thr
+        for i in range(3):
+            d[7 + i] = dist[7 + i] + process_noise[j, i] + tau_thr[i]
         x_next = propagate(x, hw_cmd, dt, 1, J, J_inv, G, h_max, n, d, s_orb, moon)
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
-                F = error_jacobian(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0])
+                F = error_jacobian(q_hat, w_hat, h_body.copy(), J, J_inv, n, dist_model[0])
                 P = _predict_covariance(P, F, Qc, T_sensor)
-            xm = np.empty_like(x)
             xm[:4] = q_hat
             xm[4:7] = w_hat
             xm[7:] = x[7:]
-            dm = dist_model.copy()
-            dm[7:10] += tau_thr  # the thruster command is known to the filter
+            for i in range(3):  # the thruster command is known to the filter
+                dm[7 + i] = dist_model[7 + i] + tau_thr[i]
             xm = propagate(xm, hw_cmd, dt, 1, J, J_inv, G, h_max, n, dm, s_orb, moon)
             q_hat = xm[:4].copy()
             w_hat = xm[4:7].copy()

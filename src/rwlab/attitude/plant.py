@@ -22,6 +22,7 @@ The inner loop is numba-compiled: the whole RK4 step runs without Python.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -102,7 +103,10 @@ def disturbance_torque(q, J, dist, sun_orb, moon_orb):
 
 @njit(cache=True)
 def derivative(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
-    """ẋ for state x with wheel torques ``hw_dot`` (N·m each), all in SI units."""
+    """ẋ for state x with wheel torques ``hw_dot`` (N·m each), all in SI units.
+
+    The readable reference; :func:`propagate` runs its scalar twin ``_derivative_into``.
+    """
     q = x[:4].copy()  # contiguous copies: faster matrix products in numba
     w = x[4:7].copy()
     hw = x[7:].copy()
@@ -122,17 +126,108 @@ def derivative(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
     return out
 
 
+@njit(cache=True, inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, inline="always")
+def _mv(M, a0, a1, a2):
+    """M @ a for a 3×3 M, as a tuple (no array is allocated)."""
+    return (
+        M[0, 0] * a0 + M[0, 1] * a1 + M[0, 2] * a2,
+        M[1, 0] * a0 + M[1, 1] * a1 + M[1, 2] * a2,
+        M[2, 0] * a0 + M[2, 1] * a1 + M[2, 2] * a2,
+    )
+
+
+@njit(cache=True)
+def _derivative_into(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, out):
+    """:func:`derivative` written with scalars into ``out``: the same maths, no temporaries.
+
+    Hand-written because this is the loop's inner call (8 per step): numba
+    allocates every small array the readable version creates. A test holds the
+    two equal to round-off.
+    """
+    q1, q2, q3, q4 = x[0], x[1], x[2], x[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    c00, c11, c22 = s + 2 * q1 * q1, s + 2 * q2 * q2, s + 2 * q3 * q3
+    c01, c10 = 2 * (q1 * q2 + q4 * q3), 2 * (q1 * q2 - q4 * q3)
+    c02, c20 = 2 * (q1 * q3 - q4 * q2), 2 * (q1 * q3 + q4 * q2)
+    c12, c21 = 2 * (q2 * q3 + q4 * q1), 2 * (q2 * q3 - q4 * q1)
+    w0, w1, w2 = x[4], x[5], x[6]
+    b0, b1, b2 = w0 + n * c01, w1 + n * c11, w2 + n * c21  # ω_bo = ω − C (0, −n, 0)
+    out[0] = 0.5 * (q4 * b0 + q2 * b2 - q3 * b1)
+    out[1] = 0.5 * (q4 * b1 + q3 * b0 - q1 * b2)
+    out[2] = 0.5 * (q4 * b2 + q1 * b1 - q2 * b0)
+    out[3] = -0.5 * (q1 * b0 + q2 * b1 + q3 * b2)
+    nw = h_max.shape[0]
+    h0 = h1 = h2 = 0.0  # wheel momentum and torque in body axes
+    g0 = g1 = g2 = 0.0
+    for i in range(nw):
+        hw, hd = x[7 + i], hw_dot[i]
+        if abs(hw) >= h_max[i] and hd * hw > 0:  # a wheel at its limit cannot be pushed further
+            hd = 0.0
+        out[7 + i] = hd
+        h0 += G[0, i] * hw
+        h1 += G[1, i] * hw
+        h2 += G[2, i] * hw
+        g0 += G[0, i] * hd
+        g1 += G[1, i] * hd
+        g2 += G[2, i] * hd
+    # disturbances (see disturbance_torque)
+    r0, r1, r2 = c02, c12, c22
+    j0, j1, j2 = _mv(J, r0, r1, r2)
+    t0, t1, t2 = _cross(r0, r1, r2, j0, j1, j2)
+    t0, t1, t2 = dist[0] * t0, dist[0] * t1, dist[0] * t2
+    s0 = c00 * sun_orb[0] + c01 * sun_orb[1] + c02 * sun_orb[2]
+    s1 = c10 * sun_orb[0] + c11 * sun_orb[1] + c12 * sun_orb[2]
+    s2 = c20 * sun_orb[0] + c21 * sun_orb[1] + c22 * sun_orb[2]
+    p0, p1, p2 = _cross(dist[2], dist[3], dist[4], s0, s1, s2)
+    t0, t1, t2 = t0 - dist[1] * p0, t1 - dist[1] * p1, t2 - dist[1] * p2
+    j0, j1, j2 = _mv(J, s0, s1, s2)
+    p0, p1, p2 = _cross(s0, s1, s2, j0, j1, j2)
+    t0, t1, t2 = t0 + dist[5] * p0, t1 + dist[5] * p1, t2 + dist[5] * p2
+    m0 = c00 * moon_orb[0] + c01 * moon_orb[1] + c02 * moon_orb[2]
+    m1 = c10 * moon_orb[0] + c11 * moon_orb[1] + c12 * moon_orb[2]
+    m2 = c20 * moon_orb[0] + c21 * moon_orb[1] + c22 * moon_orb[2]
+    j0, j1, j2 = _mv(J, m0, m1, m2)
+    p0, p1, p2 = _cross(m0, m1, m2, j0, j1, j2)
+    t0, t1, t2 = (
+        t0 + dist[6] * p0 + dist[7],
+        t1 + dist[6] * p1 + dist[8],
+        t2 + dist[6] * p2 + dist[9],
+    )
+    # J ω̇ = −ω × (J ω + h) − G ḣ_w + τ
+    j0, j1, j2 = _mv(J, w0, w1, w2)
+    p0, p1, p2 = _cross(w0, w1, w2, j0 + h0, j1 + h1, j2 + h2)
+    a0, a1, a2 = _mv(J_inv, -p0 - g0 + t0, -p1 - g1 + t1, -p2 - g2 + t2)
+    out[4], out[5], out[6] = a0, a1, a2
+
+
 @njit(cache=True)
 def propagate(x, hw_dot, dt, steps, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
     """``steps`` fixed RK4 steps of ``dt`` seconds with constant wheel torques; q renormalised."""
     x = x.copy()
+    m = x.shape[0]
+    k1, k2, k3, k4, xt = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    args = (J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
     for _ in range(steps):
-        k1 = derivative(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
-        k2 = derivative(x + 0.5 * dt * k1, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
-        k3 = derivative(x + 0.5 * dt * k2, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
-        k4 = derivative(x + dt * k3, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
-        x += dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        x[:4] /= np.sqrt(x[:4] @ x[:4])
+        _derivative_into(x, hw_dot, *args, k1)
+        for i in range(m):
+            xt[i] = x[i] + 0.5 * dt * k1[i]
+        _derivative_into(xt, hw_dot, *args, k2)
+        for i in range(m):
+            xt[i] = x[i] + 0.5 * dt * k2[i]
+        _derivative_into(xt, hw_dot, *args, k3)
+        for i in range(m):
+            xt[i] = x[i] + dt * k3[i]
+        _derivative_into(xt, hw_dot, *args, k4)
+        for i in range(m):
+            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+        for i in range(4):
+            x[i] /= norm
         for i in range(h_max.shape[0]):
             x[7 + i] = min(max(x[7 + i], -h_max[i]), h_max[i])
     return x

@@ -73,7 +73,7 @@ class LinearController:
     def torque(self, t, q, w_bo, h_body) -> np.ndarray:
         s = np.concatenate([2 * q[:3] * math.copysign(1.0, q[3]), w_bo])
         K = self.gain(t, q, w_bo, h_body)
-        return control_torque(K, _rate_map(K), self.rate_limit, s)
+        return control_torque(np.ascontiguousarray(K[:, 3:]), _rate_map(K), self.rate_limit, s)
 
 
 def _rate_map(K: np.ndarray) -> np.ndarray:
@@ -304,8 +304,11 @@ def simulate(
         progress=progress,
     )
     if scenario.wheel_model == "ideal" and isinstance(controller, LinearController):
-        return _simulate_compiled(scenario, controller, **kw)
-    return _simulate_python(scenario, controller, **kw)
+        result = _simulate_compiled(scenario, controller, **kw)
+    else:
+        result = _simulate_python(scenario, controller, **kw)
+    result.stats["steps"] = steps
+    return result
 
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
@@ -411,7 +414,7 @@ def _simulate_compiled(
             P,
             k,
             n_steps,
-            K,
+            np.ascontiguousarray(K[:, 3:]),
             _rate_map(K),
             float(controller.rate_limit),
             use_ekf,
