@@ -33,11 +33,12 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from rwlab.attitude.design import LTRResult, kalman, lqg_current, lqrd, ltr, sigma
+from rwlab.attitude.design import DesignError, LTRResult, kalman, lqg_current, lqrd, ltr, sigma
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
 from rwlab.attitude.scenario import Scenario
 from rwlab.attitude.sim import (
     LinearController,
+    PDController,
     SimResult,
     attitude_noise_psd,
     default_filter_psd,
@@ -45,14 +46,17 @@ from rwlab.attitude.sim import (
 )
 
 __all__ = [
+    "CONTROLLERS",
     "LQRController",
     "compare",
     "crossover",
     "default_weights",
+    "fly",
     "linearize",
     "ltr_noise",
     "ltr_study",
     "metrics",
+    "pd_gains",
     "torque_capacity",
 ]
 
@@ -356,3 +360,56 @@ def compare(
         "requirement_deg": scenario.pointing_requirement_deg,
     }
     return Comparison(scenario, runs, table, rho, config)
+
+
+CONTROLLERS = ("pd", "lqr", "lqg", "lqg_ltr")
+
+
+def pd_gains(scenario: Scenario) -> tuple[float, float]:
+    """(kp N·m/rad, kd N·m·s/rad) of a PD law with the LQR design's proportional gain
+    (Bryson: ``lqr_torque_fraction`` of the torque at ``lqr_attitude_deg``) and ζ = 0.707
+    on the largest inertia."""
+    kp = scenario.lqr_torque_fraction * torque_capacity(scenario)
+    kp /= math.radians(scenario.lqr_attitude_deg)
+    j_max = float(np.linalg.eigvalsh(scenario.inertia_matrix).max())
+    return kp, 2 * 0.707 * math.sqrt(kp * j_max)
+
+
+def fly(
+    scenario: Scenario,
+    controller: str,
+    *,
+    estimator: str | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+    rho: float = CHOSEN_RHO,
+    update_period: float | None = None,
+    log_every: int = 10,
+    progress=None,
+) -> tuple[SimResult, dict]:
+    """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
+    simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise."""
+    if controller not in CONTROLLERS:
+        raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+    estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
+    kw = {}
+    if controller == "pd":
+        ctl = PDController(*pd_gains(scenario))
+        ctl.rate_limit = slew_rate_limit(scenario, ctl.K)
+    else:
+        ctl = LQRController(scenario, update_period=update_period)
+    if controller == "lqg_ltr":
+        if not (math.isfinite(rho) and rho > 0):
+            raise DesignError(f"ρ must be a positive number, got {rho}")
+        kw = dict(filter_torque_psd=ltr_noise(scenario, ctl)[0], filter_noise_scale=math.sqrt(rho))
+    run = simulate(
+        scenario,
+        ctl,
+        duration=duration,
+        estimator=estimator,
+        seed=seed,
+        log_every=log_every,
+        progress=progress,
+        **kw,
+    )
+    return run, metrics(run, scenario.pointing_requirement_deg)

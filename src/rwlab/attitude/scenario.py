@@ -157,6 +157,11 @@ class Scenario:
             raise ConfigError(
                 f"{self.name}: wheel_max_momentum exceeds wheel_inertia × wheel_max_speed_rpm"
             )
+        if self.wheel_max_torque * self.dt > self.wheel_max_momentum:
+            raise ConfigError(
+                f"{self.name}: wheel_max_torque × dt exceeds wheel_max_momentum "
+                "(the wheel would saturate within one step)"
+            )
         if abs(self.sensor_period / self.dt - round(self.sensor_period / self.dt)) > 1e-9:
             raise ConfigError("sensor_period must be a whole number of dt")
 
