@@ -265,7 +265,7 @@ SCENARIOS = {
         # that the 2 Hz sensors' noise is averaged (0.1 would cross at 0.48 rad/s)
         lqr_torque_fraction=0.03,
         thruster_torque=0.02,  # 50 mN cold gas at 0.4 m
-        unload_pulse_period_s=10.0,
+        unload_pulse_period_s=2.0,
     ),
     "geo-comsat": Scenario(name="geo-comsat"),
 }
