@@ -767,9 +767,8 @@ def attitude_simulate(
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
     from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import write_simulation
-
     from rwlab.errors import ConfigError
+    from rwlab.report.attitude import write_simulation
 
     sc = load_scenario(scenario, **({"dt": dt} if dt is not None else {}))
     if not duration > 0:

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt
 
 from rwlab.data import atomic_write_bytes
 
-__all__ = ["Page", "figure"]
+__all__ = ["Page", "figure", "png_uri"]
 
 _STYLE = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;
@@ -39,7 +39,7 @@ def figure(width: float = 8.0, height: float = 3.2, nrows: int = 1, ncols: int =
     return plt.subplots(nrows, ncols, figsize=(width, height), constrained_layout=True, **kw)
 
 
-def _png(fig) -> str:
+def png_uri(fig) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
@@ -84,7 +84,7 @@ class Page:
 
     def figure(self, fig, fig_id: str, caption: str) -> None:
         self.parts.append(
-            f'<figure id="{fig_id}"><img alt="{html.escape(caption)}" src="{_png(fig)}">'
+            f'<figure id="{fig_id}"><img alt="{html.escape(caption)}" src="{png_uri(fig)}">'
             f"<figcaption>{html.escape(caption)}</figcaption></figure>"
         )
 
