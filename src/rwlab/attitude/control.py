@@ -231,11 +231,15 @@ def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
     )
 
 
-def loop_crossovers(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
-    """Crossover (rad/s) of the loop broken at the plant input for each controller.
+def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
+    """Loop broken at the plant input, for each controller: crossover and robustness.
 
     LQR: K(zI − A)⁻¹B; LQG: the compensator with the filter's own noise model;
-    LQG/LTR: the compensator with the LTR filter at ρ.
+    LQG/LTR: the compensator with the LTR filter at ρ. Returns, per controller,
+    ``crossover_rad_s`` (largest σ of L falls through 1) and
+    ``return_difference_min`` = min over ω of σ_min(I + L): a multivariable
+    stability margin (α: every loop tolerates a gain in [1/(1+α), 1/(1−α)] and a
+    phase of ±2 asin(α/2) at once).
     """
     ctl = LQRController(scenario)
     sysd = _discrete_measured(scenario, ctl)
@@ -251,7 +255,17 @@ def loop_crossovers(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
         L = kalman(sysd, psd / dt * B @ B.T, np.eye(3) * r / dt)
         comp = lqg_current(sysd, ctl.K, np.linalg.solve(np.asarray(sysd.A), L))
         loops[name] = control.series(sysd, comp)
-    return {name: crossover(sigma(sys, w), w) for name, sys in loops.items()}
+    out = {}
+    for name, loop in loops.items():
+        resp = np.asarray(loop.frequency_response(w).fresp)
+        ret = [
+            np.linalg.svd(np.eye(3) + resp[:, :, i], compute_uv=False)[-1] for i in range(w.size)
+        ]
+        out[name] = {
+            "crossover_rad_s": crossover(sigma(loop, w), w),
+            "return_difference_min": float(ret.min()),
+        }
+    return out
 
 
 def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
@@ -343,11 +357,11 @@ def compare(
             progress(name)
         ctl = LQRController(sc, update_period=update_period)
         runs[name] = simulate(sc, ctl, duration=duration, seed=seed, **kw)
-    cross = loop_crossovers(scenario, rho)
+    margins = loop_margins(scenario, rho)
     table = {}
     for name, run in runs.items():
         table[name] = metrics(run, scenario.pointing_requirement_deg)
-        table[name]["crossover_rad_s"] = cross.get(name, cross["lqg"])
+        table[name].update(margins.get(name, margins["lqg"]))
     config = {
         "disturbances_known_to_filter": scenario.disturbances_known_to_filter,
         "seed": seed,

@@ -243,24 +243,6 @@ def run_block(
             q_hat, w_hat, P = _update(
                 q_hat, w_hat, P, _noisy(C[:, 2].copy(), sig_earth, e[3:]), nadir, r_earth
             )
-        if use_ekf:
-            _state_into(q_hat, w_hat, n, s)
-        else:
-            _state_into(x[:4], x[4:7], n, s)
-        _control_into(K_w, M, w_max, s, work, tau)
-        _matvec(G_pinv, tau, hw_cmd)
-        at_limit = False
-        for i in range(nw):
-            hw_cmd[i] = -hw_cmd[i]
-            if abs(hw_cmd[i]) >= tau_max:
-                at_limit = True
-            hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
-            stats[TAU_PEAK] = max(stats[TAU_PEAK], abs(hw_cmd[i]))
-            frac = abs(x[7 + i]) / h_max[i]
-            stats[H_PEAK] = max(stats[H_PEAK], frac)
-            if frac >= 0.999:
-                saturated = True
-
         # momentum unloading: thruster pulses against the wheels' body momentum
         _matvec(G, x[7:], h_body)
         tau_thr[:] = 0.0
@@ -285,6 +267,25 @@ def run_block(
                     if not fired:  # what is left lies in the wheels' null space
                         stats[UNLOADING] = 0
                         stats[UNLOAD_END] = t
+
+        if use_ekf:
+            _state_into(q_hat, w_hat, n, s)
+        else:
+            _state_into(x[:4], x[4:7], n, s)
+        _control_into(K_w, M, w_max, s, work, tau)
+        for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
+            work[i] = tau_thr[i] - tau[i]
+        _matvec(G_pinv, work, hw_cmd)
+        at_limit = False
+        for i in range(nw):
+            if abs(hw_cmd[i]) >= tau_max:
+                at_limit = True
+            hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
+            stats[TAU_PEAK] = max(stats[TAU_PEAK], abs(hw_cmd[i]))
+            frac = abs(x[7 + i]) / h_max[i]
+            stats[H_PEAK] = max(stats[H_PEAK], frac)
+            if frac >= 0.999:
+                saturated = True
 
         # pointing statistics on every step (the true error, target = orbital frame)
         qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])

@@ -111,11 +111,11 @@ class Scenario:
     filter_disturbance_budget_deg: float = 0.02
     ltr_bandwidth_factor: float = 2.5
     momentum_unloading: bool = True
-    thruster_torque: float = 12.0
-    thruster_min_pulse_s: float = 0.02
+    thruster_torque: float = 1.2  # a 1 N hydrazine thruster at 1.2 m
+    thruster_min_pulse_s: float = 0.015
     unload_start_fraction: float = 0.5
     unload_stop_fraction: float = 0.1
-    unload_pulse_period_s: float = 20.0
+    unload_pulse_period_s: float = 2.0
     unload_recovery_s: float = 300.0
 
     def __post_init__(self) -> None:
