@@ -257,10 +257,8 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
         loops[name] = control.series(sysd, comp)
     out = {}
     for name, loop in loops.items():
-        resp = np.asarray(loop.frequency_response(w).fresp)
-        ret = [
-            np.linalg.svd(np.eye(3) + resp[:, :, i], compute_uv=False)[-1] for i in range(w.size)
-        ]
+        resp = np.moveaxis(np.asarray(loop.frequency_response(w).frdata), 2, 0)
+        ret = np.linalg.svd(np.eye(3) + resp, compute_uv=False)[:, -1]
         out[name] = {
             "crossover_rad_s": crossover(sigma(loop, w), w),
             "return_difference_min": float(ret.min()),
