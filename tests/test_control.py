@@ -344,3 +344,15 @@ def test_bad_configurations_exit_with_clear_errors(tmp_path):
     ):
         r = CliRunner().invoke(main, args)
         assert r.exit_code == 2 and r.output.startswith("error:"), (args, r.output)
+
+
+def test_ltr_rides_an_unexpected_torque_that_lqg_cannot():
+    """Paper B's ranking, measured: a constant torque 14× the one the LQG filter was sized
+    for pulls LQG off the requirement; the LTR filter, recovered to the LQR loop, tracks it."""
+    from pathlib import Path
+
+    from rwlab.attitude.scenario import load_scenario
+
+    path = Path(__file__).parents[1] / "docs" / "scenarios" / "unknown-torque.toml"
+    m = compare(load_scenario(str(path)), duration=1200).metrics
+    assert m["lqg_ltr"]["steady_max_error_deg"] <= 0.1 < m["lqg"]["steady_max_error_deg"]

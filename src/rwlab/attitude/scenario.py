@@ -63,6 +63,8 @@ class Scenario:
         to the filter and enter as process noise.
     filter_disturbance_budget_deg : the filter's lag on the worst-case unknown
         torque allowed by its process noise (see ``sim.default_filter_psd``).
+    filter_torque_bound : that worst-case torque, N·m, as the designer assumes it;
+        0 derives it from the disturbance model (SRP, tides, constant torque).
     ltr_bandwidth_factor : LTR's fictitious noise puts the filter's bandwidth at
         this multiple of the LQR loop's crossover at ρ = 1.
 
@@ -109,6 +111,7 @@ class Scenario:
     slew_momentum_fraction: float = 0.25
     disturbances_known_to_filter: bool = False
     filter_disturbance_budget_deg: float = 0.02
+    filter_torque_bound: float = 0.0
     ltr_bandwidth_factor: float = 2.5
     momentum_unloading: bool = True
     thruster_torque: float = 1.2  # a 1 N hydrazine thruster at 1.2 m
@@ -147,7 +150,12 @@ class Scenario:
                 raise ConfigError(f"{self.name}: {name} must be in (0, 1], got {value!r}")
         if not self.unload_stop_fraction < self.unload_start_fraction:
             raise ConfigError(f"{self.name}: unload_stop_fraction must be < unload_start_fraction")
-        for name in ("process_noise_torque", "initial_error_deg", "estimator_error_deg"):
+        for name in (
+            "process_noise_torque",
+            "initial_error_deg",
+            "estimator_error_deg",
+            "filter_torque_bound",
+        ):
             if not math.isfinite(getattr(self, name)) or getattr(self, name) < 0:
                 raise ConfigError(f"{self.name}: {name} must be ≥ 0")
         if np.linalg.norm(self.initial_axis) == 0:

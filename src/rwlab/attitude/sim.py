@@ -191,12 +191,14 @@ def unknown_torque_bound(sc: Scenario) -> float:
     """A bound on the disturbance torque the filter does not model, N·m.
 
     SRP force times the centre-of-pressure offset, plus the Sun and Moon tides
-    on the inertia spread; J2 is part of the gravity gradient's 7e-5 margin.
+    on the inertia spread and any constant torque; J2 is within the gravity
+    gradient's 7e-5 margin.
     """
     d = sc.disturbances.vector()
     J = sc.inertia_matrix
     spread = float(np.ptp(np.linalg.eigvalsh(J)))
-    return float(d[1] * np.linalg.norm(d[2:5]) + (d[5] + d[6]) * spread / 2)
+    tides = (d[5] + d[6]) * spread / 2
+    return float(d[1] * np.linalg.norm(d[2:5]) + tides + np.linalg.norm(d[7:10]))
 
 
 def default_filter_psd(sc: Scenario) -> float:
@@ -204,13 +206,15 @@ def default_filter_psd(sc: Scenario) -> float:
 
     With the disturbances unknown to the filter, its process noise is sized so
     that the estimate's lag on the worst-case unmodelled torque τ_u stays within
-    ``filter_disturbance_budget_deg``: a Kalman filter on J θ̈ = τ measuring θ
+    ``filter_disturbance_budget_deg`` (τ_u: ``filter_torque_bound``, or
+    :func:`unknown_torque_bound` when that is 0): a Kalman filter on J θ̈ = τ measuring θ
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
     """
     q = sc.process_noise_torque**2
     if not sc.disturbances_known_to_filter:
         r = attitude_noise_psd(sc)
-        q += r * (unknown_torque_bound(sc) / math.radians(sc.filter_disturbance_budget_deg)) ** 2
+        bound = sc.filter_torque_bound or unknown_torque_bound(sc)
+        q += r * (bound / math.radians(sc.filter_disturbance_budget_deg)) ** 2
     return q
 
 
