@@ -79,20 +79,82 @@ def test_reported_covariance_is_honest_over_100_seeds(kind):
     assert np.all(coverage >= 0.95), coverage
 
 
-@pytest.mark.parametrize("steady", [False, True])
-def test_analytic_gradient_matches_finite_differences(steady):
-    orders = _Orders(2, 2, 1, 1, 1, 1, steady)
-    r = np.random.default_rng(3)
-    y, u = r.standard_normal(200), r.standard_normal(200)
-    theta = np.array([-0.5, 0.2, 1.0, 0.4, 0.3, -0.6, -0.4])
-    e, w, v = _signals(orders, theta, y, u)
-    psi = _jacobian_block(orders, theta, y, u, e, w, v)
-    h = 1e-6
+# Free polynomials of each structure, in _Orders field order (na, nb, nc, nd, nf).
+STRUCTURES = {
+    "arx": ("na", "nb"),
+    "armax": ("na", "nb", "nc"),
+    "oe": ("nb", "nf"),
+    "bj": ("nb", "nc", "nd", "nf"),
+    "poly": ("na", "nb", "nc", "nd", "nf"),
+}
+
+
+def _orders_with(structure: str, d: int, nk: int, steady: bool) -> _Orders:
+    """Orders of ``structure`` with exactly d free parameters, spread round-robin (nb ≥ 1)."""
+    names = STRUCTURES[structure]
+    counts = dict.fromkeys(("na", "nb", "nc", "nd", "nf"), 0)
+    for i in range(d):
+        counts[names[i % len(names)]] += 1
+    if counts["nb"] == 0:  # d smaller than the number of polynomials
+        counts[names[(d - 1) % len(names)]] -= 1
+        counts["nb"] = 1
+    return _Orders(**counts, nk=nk, steady=steady)
+
+
+def _finite_difference_jacobian(orders, theta, y, u, h=1e-6):
+    cols = []
     for i in range(orders.d):
         step = np.zeros_like(theta)
         step[i] = h
-        numeric = _signals(orders, theta + step, y, u)[0] - _signals(orders, theta - step, y, u)[0]
-        assert np.allclose(psi[:, i], numeric / (2 * h), atol=1e-6), orders.d
+        plus = _signals(orders, theta + step, y, u)[0]
+        minus = _signals(orders, theta - step, y, u)[0]
+        cols.append((plus - minus) / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("steady", [False, True])
+@pytest.mark.parametrize("structure", sorted(STRUCTURES))
+@pytest.mark.parametrize("d", range(1, 13))
+def test_analytic_jacobian_matches_finite_differences(d, structure, steady):
+    """Every column of ψ = ∂ε/∂θ, for every parameter count 1..12: a corrupted column (as an
+    in-place ufunc on a strided view produced for d = 8) fails here."""
+    orders = _orders_with(structure, d, nk=1 + d % 3, steady=steady)
+    assert orders.d == d
+    r = np.random.default_rng(d)
+    y, u = r.standard_normal(150), r.standard_normal(150)
+    theta = 0.3 / np.sqrt(d) * r.standard_normal(d)  # small: every polynomial stays stable
+    e, w, v = _signals(orders, theta, y, u)
+    psi = _jacobian_block(orders, theta, y, u, e, w, v)
+    assert psi.shape == (150, d)
+    assert np.allclose(psi, _finite_difference_jacobian(orders, theta, y, u), atol=1e-6)
+
+
+# Eight free parameters each (the count a numpy ≥ 2.1 strided-ufunc bug once corrupted).
+EIGHT = {
+    "oe441": (([1], [0, 1.0, 0.6, 0.3, 0.1], [1], [1], [1, -1.2, 0.6, -0.1, 0.05]), (4, 4, 1)),
+    "armax3321": (
+        ([1, -1.6, 0.9, -0.2], [0, 1.0, 0.5, 0.2], [1, -0.4, 0.2], [1], [1]),
+        (3, 3, 2, 1),
+    ),
+    "bj22221": (
+        ([1], [0, 1.0, 0.5], [1, 0.4, 0.2], [1, -0.9, 0.2], [1, -1.2, 0.5]),
+        (2, 2, 2, 2, 1),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(EIGHT))
+def test_eight_parameter_models_recover_the_truth(name):
+    truth, orders = EIGHT[name]
+    estimator = {"oe": oe, "armax": armax, "bj": bj}[name.rstrip("0123456789")]
+    data = _simulate(truth, 4000, seed=11, sigma=1e-3)
+    m = estimator(data, *orders)
+    A, B, C, D, F = truth
+    expected = np.concatenate([A[1:], B[1:], C[1:], D[1:], F[1:]])
+    assert m.n_params == 8
+    assert np.allclose(_dynamics(m), np.concatenate([A[1:], B[1:], F[1:]]), atol=1e-3)
+    assert np.all(np.abs(m.parameters - expected) <= 5 * m.parameter_std)
+    assert m.report["termination"].startswith("converged")
 
 
 def test_noise_and_denominator_polynomials_come_back_stable():

@@ -110,10 +110,9 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
 
     def put(signal, first_lag, count, sign):
         nonlocal col
+        signal = -signal if sign < 0 else signal  # never negate a strided column in place
         for i in range(count):
             psi[:, col] = shift(signal, first_lag + i, orders.steady)
-            if sign < 0:
-                np.negative(psi[:, col], out=psi[:, col])
             col += 1
 
     st = orders.steady
