@@ -162,6 +162,7 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
         B if first.nu != 1 else B[0],
         Ts=first.Ts,
         nk=nk,
+        nb=nb,
         noise_variance=lam,
         covariance=cov,
         input_name=first.input_names[0] if first.nu == 1 else first.input_names,

@@ -59,6 +59,10 @@ class PolyModel:
         Sample time in seconds (required, > 0).
     nk : int or sequence of int, optional
         Input delay in samples per input (default: B's leading zeros).
+    nb : int or sequence of int, optional
+        Number of free B coefficients per input, from ``b_nk`` on (default: the
+        rest of each row). Give it when rows are padded with trailing zeros,
+        e.g. for several inputs with different ``nb + nk``.
     noise_variance : float, optional
         Variance of the innovation e(t).
     covariance : array_like, shape (d, d), optional
@@ -79,6 +83,7 @@ class PolyModel:
         *,
         Ts,
         nk=None,
+        nb=None,
         noise_variance: float | None = None,
         covariance=None,
         report: dict | None = None,
@@ -108,7 +113,14 @@ class PolyModel:
             if np.any(row[: min(k, len(row))] != 0):
                 raise ModelError(f"B must start with nk = {k} zeros, got {row}")
         self.nk = tuple(nk)
-        self.nb = tuple(max(B2.shape[1] - k, 0) for k in nk)
+        width = B2.shape[1]
+        nb = [max(width - k, 0) for k in nk] if nb is None else [int(b) for b in np.atleast_1d(nb)]
+        if len(nb) != self.nu or any(b < 0 or k + b > width for b, k in zip(nb, nk, strict=True)):
+            raise ModelError(f"nb must give one count per input with nk + nb ≤ {width}, got {nb}")
+        for row, k, b in zip(B2, nk, nb, strict=True):
+            if np.any(row[k + b :] != 0):
+                raise ModelError(f"B must end with zeros after its nb = {b} free coefficients")
+        self.nb = tuple(nb)
         self.noise_variance = None if noise_variance is None else float(noise_variance)
         self.covariance = None if covariance is None else np.array(covariance, dtype=float)
         if self.covariance is not None and self.covariance.shape != (self.n_params,) * 2:
@@ -374,6 +386,7 @@ class PolyModel:
             "D": self.D.tolist(),
             "F": self.F.tolist(),
             "nk": list(self.nk),
+            "nb": list(self.nb),
             "noise_variance": self.noise_variance,
             "covariance": None if self.covariance is None else self.covariance.tolist(),
             "parameter_names": self.parameter_names,
@@ -396,6 +409,7 @@ class PolyModel:
                 d["F"],
                 Ts=d["Ts"],
                 nk=d["nk"],
+                nb=d.get("nb"),
                 noise_variance=d.get("noise_variance"),
                 covariance=d.get("covariance"),
                 report=d.get("report"),
