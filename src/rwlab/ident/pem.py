@@ -48,6 +48,7 @@ from rwlab.ident.validation import estimation_report
 __all__ = ["armax", "bj", "oe", "pem"]
 
 INIT_SAMPLES = 100_000
+ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
 
 @dataclass(frozen=True)
@@ -391,7 +392,7 @@ def armax(
         0,
         0,
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_armax(orders, _init_subset(series))
@@ -418,7 +419,7 @@ def oe(
         0,
         check_order("nf", nf),
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
@@ -446,7 +447,7 @@ def bj(
         check_order("nd", nd),
         check_order("nf", nf),
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_bj(orders, _init_subset(series))
@@ -474,7 +475,7 @@ def pem(
         init.nd,
         init.nf,
         init.nk[0],
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)

@@ -9,8 +9,10 @@ prediction error on the estimation data):
 - nAIC  = log V + 2d/N                                    (MATLAB ``aic(m)`` and ``selstruc``)
 - BIC   = N·log V + d·log N + N·(log 2π + 1)
 
-Simulations and predictions start from zero initial conditions (the testbed's
-records start at rest, where this is exact).
+Initial conditions: ``compare`` estimates the initial state by least squares
+by default, as MATLAB's ``compare`` does; ``resid`` and the estimation report
+use zero initial conditions unless told otherwise (``initial='steady'`` for a
+record that starts at rest, ``'estimate'`` for MATLAB's 'e').
 """
 
 from __future__ import annotations
@@ -115,10 +117,14 @@ class CompareResult:
     horizon: float
 
 
-def compare(model, data: IOData, horizon: float = np.inf, initial: str = "zero") -> CompareResult:
+def compare(
+    model, data: IOData, horizon: float = np.inf, initial: str = "estimate"
+) -> CompareResult:
     """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``.
 
-    ``initial``: 'zero' or 'steady' pre-sample values (see ``PolyModel.simulate``).
+    ``initial``: 'estimate' (default, as MATLAB's ``compare``): the initial state
+    that best fits ``data``'s output; 'zero' or 'steady' pre-sample values (see
+    ``PolyModel.simulate``).
     """
     yhat = model.predict(data, horizon, initial=initial)
     y = data.y[:, 0]
@@ -204,6 +210,8 @@ def resid(
         Largest lag M in samples (MATLAB default 25).
     confidence : float
         Level of the bounds and tests (MATLAB default 0.99).
+    initial : {'zero', 'steady', 'estimate'}
+        Initial conditions of the one-step predictor (see ``PolyModel.predict``).
     """
     if not 0 < confidence < 1:
         raise DataError(f"confidence must be in (0, 1), got {confidence}")
