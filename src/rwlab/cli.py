@@ -190,7 +190,7 @@ _estimate_command(
 @click.option("--na", type=int, default=2, show_default=True)
 @click.option("--nb", type=int, default=2, show_default=True)
 @click.option("--nk-min", type=int, default=0, show_default=True)
-@click.option("--nk-max", type=int, default=10, show_default=True)
+@click.option("--nk-max", type=int, default=None, help="Largest delay [default: nk-min + 20].")
 @click.option("--json", "as_json", is_flag=True, help="Print the losses as JSON.")
 @_friendly_errors
 def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, nk_max, as_json):
