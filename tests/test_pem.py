@@ -4,7 +4,7 @@ from scipy.signal import lfilter
 
 from rwlab import datasets
 from rwlab.data import IOData, merge
-from rwlab.errors import DataError, EstimationError
+from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident import PolyModel, armax, arx, bj, oe, pem
 from rwlab.ident.pem import _jacobian_block, _Orders, _signals
 from rwlab.ident.polynomials import is_stable
@@ -233,3 +233,32 @@ def test_steady_initial_conditions_fit_offset_data_that_start_at_rest(kind):
     if kind == "oe":  # without a noise model nothing can absorb the zero-IC transient
         zero = est("zero")
         assert np.max(np.abs(_dynamics(zero) - _true_dynamics(kind))) > 1e-4
+
+
+def test_stopping_without_converging_warns():
+    data = _simulate(OE, 1000, seed=12)
+    with pytest.warns(RwlabWarning, match="stopped after 1 iterations"):
+        m = oe(data, 2, 2, 1, max_iter=1)
+    assert m.report["termination"] == "maximum iterations reached"
+
+
+def test_noise_free_data_converge_without_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RwlabWarning)
+        m = armax(_simulate(ARMAX, 1000, seed=13, sigma=0.0), 2, 2, 1, 1)
+    assert m.report["termination"] == "converged (exact fit)"
+
+
+def test_rwlab_ident_pem_is_the_module_and_still_the_estimator():
+    import types
+
+    import rwlab.ident.pem as module
+    from rwlab import ident
+
+    assert isinstance(module, types.ModuleType) and module.armax is armax
+    assert ident.pem is module
+    data = _simulate(ARMAX, 800, seed=14)
+    start = PolyModel([1, -1.4, 0.6], [0, 0.9, 0.4], C=[1, 0.0], Ts=data.Ts)
+    assert np.array_equal(ident.pem(data, start).parameters, module.pem(data, start).parameters)

@@ -31,6 +31,9 @@ every sample. The covariance is
 
 from __future__ import annotations
 
+import sys
+import types
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -39,7 +42,7 @@ from scipy import linalg
 from scipy import signal as sps
 
 from rwlab.data import IOData, as_experiments
-from rwlab.errors import DataError, EstimationError
+from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident.arx import check_order
 from rwlab.ident.models import PolyModel
 from rwlab.ident.polynomials import check_initial, filt, shift, stabilize
@@ -48,6 +51,8 @@ from rwlab.ident.validation import estimation_report
 __all__ = ["armax", "bj", "oe", "pem"]
 
 INIT_SAMPLES = 100_000
+MAX_ITER = "maximum iterations reached"
+EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-free and fitted exactly
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
 
@@ -149,12 +154,13 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float):
     """Levenberg–Marquardt on ½Σε². Returns θ, H, sse, iterations, reason."""
     theta = _stabilized(orders, theta)
     mu = 1e-4
-    reason = "maximum iterations reached"
+    reason = MAX_ITER
     it = 0
     H, g, sse = _normal_equations(orders, theta, experiments)
+    exact = EXACT_FIT * sum(float(y @ y) for y, _ in experiments)
     for it in range(1, max_iter + 1):
-        if sse == 0.0:
-            reason = "zero residual"
+        if sse <= exact:
+            reason = "converged (exact fit)"
             break
         scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
         Hs = H / np.outer(scale, scale)
@@ -308,17 +314,36 @@ def _init_subset(series):
 
 def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyModel:
     theta, H, sse, iterations, reason = _minimize(orders, theta, series, max_iter, tol)
+    if reason == MAX_ITER:
+        warnings.warn(
+            f"{method.split()[0]}: stopped after {iterations} iterations without converging; "
+            "the model may not be the optimum (raise max_iter, or check orders and data)",
+            RwlabWarning,
+            stacklevel=3,
+        )
     N = sum(len(y) for y, _ in series)
     lam = sse / max(N - orders.d, 1)
     scale = sum(float(y @ y) for y, _ in series)
     note = {}
-    if sse <= 1e-24 * max(scale, 1e-300):
+    if sse <= EXACT_FIT * max(scale, 1e-300):
         # an exact fit: no noise to measure, and C and D are not identifiable from it
         cov = None
         note["note"] = "exact fit (noise-free data): noise model undetermined, no covariance"
     else:
         try:
-            cov = lam * linalg.inv(H)
+            unit = np.sqrt(np.maximum(np.diag(H), 1e-300))  # equilibrate before inverting
+            Hs = H / np.outer(unit, unit)
+            if np.linalg.cond(Hs) > 1e12:
+                warnings.warn(
+                    f"{method.split()[0]}: the Hessian is nearly singular at the estimate, so "
+                    "some parameters are barely identifiable and their covariance is unreliable "
+                    "(near pole-zero cancellation: try lower orders)",
+                    RwlabWarning,
+                    stacklevel=3,
+                )
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", linalg.LinAlgWarning)
+                cov = lam * linalg.inv(Hs) / np.outer(unit, unit)
         except linalg.LinAlgError:
             raise EstimationError(
                 "the Hessian is singular at the optimum: some parameters are not identifiable "
@@ -480,3 +505,16 @@ def pem(
     experiments, series = _prepare(data, orders)
     theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)
     return _finish(orders, theta0, experiments, series, "pem (prediction error, LM)", max_iter, tol)
+
+
+class _CallableModule(types.ModuleType):
+    """``rwlab.ident.pem`` is this module (``import rwlab.ident.pem`` reaches ``armax``, ``oe``,
+    ...), and calling it calls the estimator :func:`pem`, MATLAB's name for both."""
+
+    def __call__(self, data, init, **options) -> PolyModel:
+        return pem(data, init, **options)
+
+    __call__.__doc__ = pem.__doc__
+
+
+sys.modules[__name__].__class__ = _CallableModule
