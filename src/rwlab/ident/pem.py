@@ -16,9 +16,11 @@ inside, so the predictor stays stable (as MATLAB does).
 
 Starting values: ARMAX and BJ noise models from the Hannan–Rissanen two-stage
 least squares (long ARX → residuals → linear regression); OE and BJ dynamics
-from instrumental variables with simulated-output instruments. The start uses
-at most ``INIT_SAMPLES`` samples per experiment: it only needs to land in the
-basin of the optimum, which every later iteration refines on all data.
+from instrumental variables with simulated-output instruments. ARMAX is also
+started from the output-error dynamics (A = F, C = 1): its likelihood can have
+several minima (the detrended cascaded tanks' ARMAX3321 has two). Starts and a
+first search use at most ``START_SAMPLES`` samples per experiment: they only
+need to land in the basin of the optimum; the best is then refined on all data.
 
 Pre-sample values (``initial=``): ``'zero'`` — all filters start from zero
 (MATLAB ``InitialCondition = 'zero'``); ``'steady'`` — every signal held its
@@ -43,14 +45,14 @@ from scipy import signal as sps
 
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError, RwlabWarning
-from rwlab.ident.arx import check_order
+from rwlab.ident.arx import check_order, triangular_factor
 from rwlab.ident.models import PolyModel
-from rwlab.ident.polynomials import check_initial, filt, shift, stabilize
+from rwlab.ident.polynomials import check_initial, filt, stabilize
 from rwlab.ident.validation import estimation_report
 
 __all__ = ["armax", "bj", "oe", "pem"]
 
-INIT_SAMPLES = 100_000
+START_SAMPLES = 10_000
 MAX_ITER = "maximum iterations reached"
 EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-free and fitted exactly
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
@@ -106,22 +108,25 @@ def _sse(orders, theta, experiments) -> float:
 
 
 def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
-    """ψ = ∂ε/∂θ for one experiment, shape (N, d)."""
+    """ψᵀ = (∂ε/∂θ)ᵀ for one experiment, shape (d, N): one contiguous row per parameter."""
     _A, _B, C, D, F = orders.unpack(theta)
     N = len(y)
-    psi = np.empty((N, orders.d))
-    col = 0
+    psi_t = np.empty((orders.d, N))
+    row = 0
     noise = orders.nc or orders.nd
     CF = np.convolve(C, F)
+    st = orders.steady
 
     def put(signal, first_lag, count, sign):
-        nonlocal col
-        signal = -signal if sign < 0 else signal  # never negate a strided column in place
+        nonlocal row
         for i in range(count):
-            psi[:, col] = shift(signal, first_lag + i, orders.steady)
-            col += 1
+            k = min(first_lag + i, N)
+            psi_t[row, :k] = signal[0] if (st and k and N) else 0.0
+            psi_t[row, k:] = signal[: N - k]
+            if sign < 0:
+                psi_t[row] *= -1.0  # a contiguous row: safe in place
+            row += 1
 
-    st = orders.steady
     if orders.na:
         put(filt(D, C, y, st) if noise else y, 1, orders.na, +1)
     if orders.nb:
@@ -132,7 +137,7 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
         put(filt([1.0], C, v, st), 1, orders.nd, +1)
     if orders.nf:
         put(filt(D, CF, w, st), 1, orders.nf, +1)
-    return psi
+    return psi_t
 
 
 def _normal_equations(orders, theta, experiments):
@@ -143,9 +148,9 @@ def _normal_equations(orders, theta, experiments):
     sse = 0.0
     for y, u in experiments:
         e, w, v = _signals(orders, theta, y, u)
-        psi = _jacobian_block(orders, theta, y, u, e, w, v)
-        H += psi.T @ psi
-        g += psi.T @ e
+        psi_t = _jacobian_block(orders, theta, y, u, e, w, v)
+        H += psi_t @ psi_t.T
+        g += psi_t @ e
         sse += float(e @ e)
     return H, g, sse
 
@@ -196,9 +201,16 @@ def _lags(x: np.ndarray, first: int, count: int, n0: int) -> list[np.ndarray]:
 
 
 def _least_squares(columns: list[np.ndarray], target: np.ndarray) -> np.ndarray:
+    """Least squares by a QR factorisation of [Φ | target] (minimum norm if rank deficient)."""
     if not columns:
         return np.zeros(0)
-    theta, *_ = np.linalg.lstsq(np.column_stack(columns), target, rcond=None)
+    d = len(columns)
+    M = np.empty((len(target), d + 1))
+    for i, c in enumerate(columns):
+        M[:, i] = c
+    M[:, d] = target
+    R = triangular_factor(M)
+    theta, *_ = np.linalg.lstsq(R[:d, :d], R[:d, d], rcond=None)
     return theta
 
 
@@ -239,7 +251,7 @@ def _initial_armax(orders: _Orders, experiments) -> np.ndarray:
             )
         )
         targets.append(y[n0:])
-    th, *_ = np.linalg.lstsq(np.vstack(cols_all), np.concatenate(targets), rcond=None)
+    th = _least_squares(list(np.vstack(cols_all).T), np.concatenate(targets))
     A = np.concatenate([[1.0], th[:na]])
     B = np.zeros(nk + nb)
     B[nk:] = th[na : na + nb]
@@ -262,7 +274,7 @@ def _initial_oe(nb: int, nf: int, nk: int, experiments, iterations: int = 3):
                 Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + _lags(u, nk, nb, n0)))
         Phi, T = np.vstack(Phi), np.concatenate(T)
         if not instrumented:
-            return np.linalg.lstsq(Phi, T, rcond=None)[0]
+            return _least_squares(list(Phi.T), T)
         Z = np.vstack(Z)
         return np.linalg.lstsq(Z.T @ Phi, Z.T @ T, rcond=None)[0]
 
@@ -309,11 +321,25 @@ def _prepare(data, orders: _Orders):
 
 
 def _init_subset(series):
-    return [(y[:INIT_SAMPLES], u[:INIT_SAMPLES]) for y, u in series]
+    return [(y[:START_SAMPLES], u[:START_SAMPLES]) for y, u in series]
 
 
-def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyModel:
-    theta, H, sse, iterations, reason = _minimize(orders, theta, series, max_iter, tol)
+def _search(orders, starts, series, max_iter, tol):
+    """LM from every start on the first ``START_SAMPLES`` samples; the best, refined on all data.
+
+    Several starts guard against local minima (ARMAX's likelihood has them);
+    the short record makes each cheap, and from its optimum the full record
+    needs only a step or two.
+    """
+    subset = _init_subset(series)
+    whole = all(len(y) <= START_SAMPLES for y, _ in series)
+    fits = [_minimize(orders, theta, subset, max_iter, tol) for theta in starts]
+    best = min(fits, key=lambda fit: fit[2] if np.isfinite(fit[2]) else np.inf)
+    return best if whole else _minimize(orders, best[0], series, max_iter, tol)
+
+
+def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyModel:
+    theta, H, sse, iterations, reason = _search(orders, starts, series, max_iter, tol)
     if reason == MAX_ITER:
         warnings.warn(
             f"{method.split()[0]}: stopped after {iterations} iterations without converging; "
@@ -420,9 +446,14 @@ def armax(
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
-    theta0 = _initial_armax(orders, _init_subset(series))
+    subset = _init_subset(series)
+    starts = [_initial_armax(orders, subset)]
+    if orders.na:  # also from the output-error dynamics: a start in another basin
+        B, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
+        C = np.concatenate([[1.0], np.zeros(orders.nc)])
+        starts.append(orders.pack(F, B, C, np.ones(1), np.ones(1)))
     return _finish(
-        orders, theta0, experiments, series, "armax (prediction error, LM)", max_iter, tol
+        orders, starts, experiments, series, "armax (prediction error, LM)", max_iter, tol
     )
 
 
@@ -449,7 +480,9 @@ def oe(
     experiments, series = _prepare(data, orders)
     B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
     theta0 = orders.pack(np.ones(1), B, np.ones(1), np.ones(1), F)
-    return _finish(orders, theta0, experiments, series, "oe (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "oe (prediction error, LM)", max_iter, tol
+    )
 
 
 def bj(
@@ -476,7 +509,9 @@ def bj(
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_bj(orders, _init_subset(series))
-    return _finish(orders, theta0, experiments, series, "bj (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "bj (prediction error, LM)", max_iter, tol
+    )
 
 
 def pem(
@@ -504,7 +539,9 @@ def pem(
     )
     experiments, series = _prepare(data, orders)
     theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)
-    return _finish(orders, theta0, experiments, series, "pem (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "pem (prediction error, LM)", max_iter, tol
+    )
 
 
 class _CallableModule(types.ModuleType):
