@@ -153,7 +153,7 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
         command = click.argument(order, type=click.IntRange(min=0))(command)
     if name != "arx":
         command = click.option(
-            "--max-iter", type=click.IntRange(min=1), default=50, show_default=True
+            "--max-iter", type=click.IntRange(min=1), default=100, show_default=True
         )(command)
     command = click.option("--force", is_flag=True, help="Overwrite --save's file.")(command)
     command = click.option(

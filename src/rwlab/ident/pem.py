@@ -415,7 +415,7 @@ def armax(
     nc: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -463,7 +463,7 @@ def oe(
     nf: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -493,7 +493,7 @@ def bj(
     nf: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -518,7 +518,7 @@ def pem(
     data: IOData | Sequence[IOData],
     init: PolyModel,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
