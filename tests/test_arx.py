@@ -90,3 +90,30 @@ def test_estimation_does_not_modify_the_data(arx_system):
     before = data.y.copy()
     arx(data, 2, 2, 1)
     assert np.array_equal(data.y, before)
+
+
+def _plain_lstsq_arx(y, u, na, nb, nk):
+    """Independent reference: the ARX regression built row by row, solved by np.linalg.lstsq."""
+    n0 = max([na] + [k + b - 1 for b, k in zip(nb, nk, strict=True)])
+    rows = []
+    for t in range(n0, len(y)):
+        row = [-y[t - i] for i in range(1, na + 1)]
+        for j, (b, k) in enumerate(zip(nb, nk, strict=True)):
+            row += [u[t - k - i, j] for i in range(b)]
+        rows.append(row)
+    return np.linalg.lstsq(np.array(rows), y[n0:], rcond=None)[0]
+
+
+@pytest.mark.parametrize(("nb", "nk"), [([2, 3], [1, 2]), ([2, 2], [1, 2]), ([1, 3], [0, 3])])
+def test_two_input_arx_with_different_nb_nk_equals_plain_least_squares(rng, nb, nk):
+    u = rng.standard_normal((600, 2))
+    y = lfilter([0, 1.0, 0.5], [1, -0.8, 0.2], u[:, 0]) + lfilter([0, 0, 0.7], [1, -0.3], u[:, 1])
+    y = y + 0.1 * rng.standard_normal(600)
+    m = arx(IOData(u, y, 1.0), 2, nb, nk)
+    reference = _plain_lstsq_arx(y, u, 2, nb, nk)
+    assert m.nb == tuple(nb) and m.nk == tuple(nk)
+    assert m.covariance.shape == (2 + sum(nb),) * 2 == (m.n_params,) * 2
+    assert np.max(np.abs(m.parameters - reference)) <= 1e-8
+    for j, (b, k) in enumerate(zip(nb, nk, strict=True)):  # padded rows: zeros outside k..k+b
+        assert not m.B[j, :k].any() and not m.B[j, k + b :].any()
+    assert m.parameter_names[2 : 2 + nb[0]] == [f"b[1]{nk[0] + i}" for i in range(nb[0])]

@@ -111,3 +111,23 @@ def test_errors_are_one_line_messages_with_status_2(tmp_path):
 def test_every_command_has_help(cmd):
     r = run(*cmd, "--help")
     assert r.exit_code == 0 and "Usage:" in r.output
+
+
+def test_an_estimator_warning_is_one_line_on_stderr_and_json_stays_clean():
+    args = "ident oe cascaded_tanks_est 4 4 1 --detrend constant --split 1 --max-iter 2 --json"
+    r = CliRunner().invoke(main, args.split())
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["model"]["report"]["termination"] == "maximum iterations reached"
+    lines = r.stderr.strip().splitlines()  # one line per warning, no file, line or source
+    assert lines and all(line.startswith("warning: ") for line in lines)
+    assert lines[0].startswith("warning: oe: stopped after 2 iterations")
+
+
+def test_datasets_lists_every_bundled_record():
+    from rwlab import datasets
+
+    r = run("datasets")
+    listed = [line.split()[0] for line in r.output.splitlines()]
+    assert listed == list(datasets.NAMES)
+    assert {"cascaded_tanks_est", "cascaded_tanks_val"} <= set(listed)
+    assert datasets.get("cascaded_tanks_val").N == 1024

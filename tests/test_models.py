@@ -181,3 +181,12 @@ def test_printout_names_the_structure_and_uncertainty():
     m = PolyModel(PAPER_A, PAPER_B, Ts=0.5, covariance=np.diag([1e-4, 1e-4, 4e-6, 4e-6]))
     text = str(m)
     assert "ARX221" in text and "(+/- 0.01)" in text and "- 1.758" in text
+
+
+def test_padded_multi_input_model_keeps_its_orders_through_json(tmp_path):
+    B = [[0, 1.0, 0.5, 0], [0, 0, 0.3, 0.2]]  # nb = [2, 2], nk = [1, 2]: row 1 padded
+    m = PolyModel([1, -0.5], B, Ts=1.0, nb=[2, 2], covariance=np.eye(5))
+    back = PolyModel.load(m.save(tmp_path / "m.json"))
+    assert back.nb == (2, 2) and back.nk == (1, 2) and back.n_params == 5
+    with pytest.raises(ModelError, match="end with zeros"):
+        PolyModel([1], [[0, 1.0, 0.5], [0, 1.0, 0.0]], Ts=1.0, nb=[1, 1])

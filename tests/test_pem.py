@@ -4,7 +4,7 @@ from scipy.signal import lfilter
 
 from rwlab import datasets
 from rwlab.data import IOData, merge
-from rwlab.errors import DataError, EstimationError
+from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident import PolyModel, armax, arx, bj, oe, pem
 from rwlab.ident.pem import _jacobian_block, _Orders, _signals
 from rwlab.ident.polynomials import is_stable
@@ -79,20 +79,82 @@ def test_reported_covariance_is_honest_over_100_seeds(kind):
     assert np.all(coverage >= 0.95), coverage
 
 
-@pytest.mark.parametrize("steady", [False, True])
-def test_analytic_gradient_matches_finite_differences(steady):
-    orders = _Orders(2, 2, 1, 1, 1, 1, steady)
-    r = np.random.default_rng(3)
-    y, u = r.standard_normal(200), r.standard_normal(200)
-    theta = np.array([-0.5, 0.2, 1.0, 0.4, 0.3, -0.6, -0.4])
-    e, w, v = _signals(orders, theta, y, u)
-    psi = _jacobian_block(orders, theta, y, u, e, w, v)
-    h = 1e-6
+# Free polynomials of each structure, in _Orders field order (na, nb, nc, nd, nf).
+STRUCTURES = {
+    "arx": ("na", "nb"),
+    "armax": ("na", "nb", "nc"),
+    "oe": ("nb", "nf"),
+    "bj": ("nb", "nc", "nd", "nf"),
+    "poly": ("na", "nb", "nc", "nd", "nf"),
+}
+
+
+def _orders_with(structure: str, d: int, nk: int, steady: bool) -> _Orders:
+    """Orders of ``structure`` with exactly d free parameters, spread round-robin (nb ≥ 1)."""
+    names = STRUCTURES[structure]
+    counts = dict.fromkeys(("na", "nb", "nc", "nd", "nf"), 0)
+    for i in range(d):
+        counts[names[i % len(names)]] += 1
+    if counts["nb"] == 0:  # d smaller than the number of polynomials
+        counts[names[(d - 1) % len(names)]] -= 1
+        counts["nb"] = 1
+    return _Orders(**counts, nk=nk, steady=steady)
+
+
+def _finite_difference_jacobian(orders, theta, y, u, h=1e-6):
+    cols = []
     for i in range(orders.d):
         step = np.zeros_like(theta)
         step[i] = h
-        numeric = _signals(orders, theta + step, y, u)[0] - _signals(orders, theta - step, y, u)[0]
-        assert np.allclose(psi[:, i], numeric / (2 * h), atol=1e-6), orders.d
+        plus = _signals(orders, theta + step, y, u)[0]
+        minus = _signals(orders, theta - step, y, u)[0]
+        cols.append((plus - minus) / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("steady", [False, True])
+@pytest.mark.parametrize("structure", sorted(STRUCTURES))
+@pytest.mark.parametrize("d", range(1, 13))
+def test_analytic_jacobian_matches_finite_differences(d, structure, steady):
+    """Every column of ψ = ∂ε/∂θ, for every parameter count 1..12: a corrupted column (as an
+    in-place ufunc on a strided view produced for d = 8) fails here."""
+    orders = _orders_with(structure, d, nk=1 + d % 3, steady=steady)
+    assert orders.d == d
+    r = np.random.default_rng(d)
+    y, u = r.standard_normal(150), r.standard_normal(150)
+    theta = 0.3 / np.sqrt(d) * r.standard_normal(d)  # small: every polynomial stays stable
+    e, w, v = _signals(orders, theta, y, u)
+    psi = _jacobian_block(orders, theta, y, u, e, w, v).T  # returned as ψᵀ, (d, N)
+    assert psi.shape == (150, d)
+    assert np.allclose(psi, _finite_difference_jacobian(orders, theta, y, u), atol=1e-6)
+
+
+# Eight free parameters each (the count a numpy ≥ 2.1 strided-ufunc bug once corrupted).
+EIGHT = {
+    "oe441": (([1], [0, 1.0, 0.6, 0.3, 0.1], [1], [1], [1, -1.2, 0.6, -0.1, 0.05]), (4, 4, 1)),
+    "armax3321": (
+        ([1, -1.6, 0.9, -0.2], [0, 1.0, 0.5, 0.2], [1, -0.4, 0.2], [1], [1]),
+        (3, 3, 2, 1),
+    ),
+    "bj22221": (
+        ([1], [0, 1.0, 0.5], [1, 0.4, 0.2], [1, -0.9, 0.2], [1, -1.2, 0.5]),
+        (2, 2, 2, 2, 1),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(EIGHT))
+def test_eight_parameter_models_recover_the_truth(name):
+    truth, orders = EIGHT[name]
+    estimator = {"oe": oe, "armax": armax, "bj": bj}[name.rstrip("0123456789")]
+    data = _simulate(truth, 4000, seed=11, sigma=1e-3)
+    m = estimator(data, *orders)
+    A, B, C, D, F = truth
+    expected = np.concatenate([A[1:], B[1:], C[1:], D[1:], F[1:]])
+    assert m.n_params == 8
+    assert np.allclose(_dynamics(m), np.concatenate([A[1:], B[1:], F[1:]]), atol=1e-3)
+    assert np.all(np.abs(m.parameters - expected) <= 5 * m.parameter_std)
+    assert m.report["termination"].startswith("converged")
 
 
 def test_noise_and_denominator_polynomials_come_back_stable():
@@ -171,3 +233,52 @@ def test_steady_initial_conditions_fit_offset_data_that_start_at_rest(kind):
     if kind == "oe":  # without a noise model nothing can absorb the zero-IC transient
         zero = est("zero")
         assert np.max(np.abs(_dynamics(zero) - _true_dynamics(kind))) > 1e-4
+
+
+def test_stopping_without_converging_warns():
+    data = _simulate(OE, 1000, seed=12)
+    with pytest.warns(RwlabWarning, match="stopped after 1 iterations"):
+        m = oe(data, 2, 2, 1, max_iter=1)
+    assert m.report["termination"] == "maximum iterations reached"
+
+
+def test_noise_free_data_converge_without_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RwlabWarning)
+        m = armax(_simulate(ARMAX, 1000, seed=13, sigma=0.0), 2, 2, 1, 1)
+    assert m.report["termination"] == "converged (exact fit)"
+
+
+def test_rwlab_ident_pem_is_the_module_and_still_the_estimator():
+    import types
+
+    import rwlab.ident.pem as module
+    from rwlab import ident
+
+    assert isinstance(module, types.ModuleType) and module.armax is armax
+    assert ident.pem is module
+    data = _simulate(ARMAX, 800, seed=14)
+    start = PolyModel([1, -1.4, 0.6], [0, 0.9, 0.4], C=[1, 0.0], Ts=data.Ts)
+    assert np.array_equal(ident.pem(data, start).parameters, module.pem(data, start).parameters)
+
+
+def test_armax_escapes_the_local_minimum_of_the_cascaded_tanks():
+    """ARMAX3321 on the detrended tanks has two minima; the Hannan–Rissanen start lies in the
+    worse one. The result must be at least as good as scipy's MINPACK LM (an independent
+    implementation of the same prediction error) started in the better basin, from the
+    output-error dynamics."""
+    from scipy.optimize import least_squares
+
+    d = datasets.cascaded_tanks()[0].detrend()
+    y, u = d.y[:, 0], d.u[:, 0]
+
+    def eps(th):
+        C = [1, *th[6:]]
+        return lfilter([1, *th[:3]], C, y) - lfilter([0, *th[3:6]], C, u)
+
+    o = oe(d, 3, 3, 1)
+    ref = least_squares(eps, np.concatenate([o.F[1:], o.B[1:], [0.0, 0.0]]), method="lm").x
+    m = armax(d, 3, 3, 2, 1)
+    assert m.report["loss"] <= np.mean(eps(ref) ** 2) * (1 + 1e-6)

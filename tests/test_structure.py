@@ -19,9 +19,17 @@ def _arx_data(nk, seed=0, N=2000, sigma=0.05):
     return IOData(u, lfilter(B, A, u) + lfilter([1], A, sigma * r.standard_normal(N)), 0.5)
 
 
-@pytest.mark.parametrize("nk", [0, 1, 3, 6])
+@pytest.mark.parametrize("nk", [0, 1, 3, 6, 15, 20])
 def test_delayest_finds_the_true_delay(nk):
+    """Unaided: MATLAB's default scan nk_min..nk_min + 20 includes delays beyond 10."""
     assert delayest(_arx_data(nk, seed=nk)) == nk
+
+
+def test_delay_scan_covers_matlabs_default_range_and_refuses_short_records():
+    assert list(delay_scan(_arx_data(1))) == list(range(21))
+    assert list(delay_scan(_arx_data(1), nk_min=5)) == list(range(5, 26))
+    with pytest.raises(DataError, match="too short to scan delays up to nk_max = 20"):
+        delayest(_arx_data(1, N=28))
 
 
 def test_delayest_on_the_hair_dryer_is_three_samples_as_in_matlab():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import click
@@ -98,6 +99,12 @@ def ident() -> None:
     FILE is a .csv, .dat, .parquet or .mat record, or the name of a bundled
     data set (see `rwlab datasets`).
     """
+    warnings.showwarning = _one_line_warning
+
+
+def _one_line_warning(message, category, *_args, **_kwargs) -> None:
+    """Show a warning as ``warning: message`` on stderr (no file, line or source)."""
+    click.echo(f"warning: {message}", err=True)
 
 
 def _estimate_command(name: str, order_names: list[str], estimator_name: str, doc: str):
@@ -109,7 +116,8 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
 
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
         est, val = (data, None) if split >= 1 else data.split(split)
-        model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names])
+        extra = {"max_iter": orders.pop("max_iter")} if "max_iter" in orders else {}
+        model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names], **extra)
         result = {"model": model.to_dict()}
         if val is not None:
             cmp = idm.compare(model, val)
@@ -143,6 +151,10 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
 
     for order in reversed(order_names):
         command = click.argument(order, type=click.IntRange(min=0))(command)
+    if name != "arx":
+        command = click.option(
+            "--max-iter", type=click.IntRange(min=1), default=100, show_default=True
+        )(command)
     command = click.option("--force", is_flag=True, help="Overwrite --save's file.")(command)
     command = click.option(
         "--save", type=click.Path(dir_okay=False), help="Write the model as JSON here."
@@ -190,7 +202,7 @@ _estimate_command(
 @click.option("--na", type=int, default=2, show_default=True)
 @click.option("--nb", type=int, default=2, show_default=True)
 @click.option("--nk-min", type=int, default=0, show_default=True)
-@click.option("--nk-max", type=int, default=10, show_default=True)
+@click.option("--nk-max", type=int, default=None, help="Largest delay [default: nk-min + 20].")
 @click.option("--json", "as_json", is_flag=True, help="Print the losses as JSON.")
 @_friendly_errors
 def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, nk_max, as_json):
@@ -280,7 +292,7 @@ def datasets_cmd() -> None:
     for name, loader in datasets.NAMES.items():
         data = loader()
         summary = (loader.__doc__ or "").strip().splitlines()[0]
-        click.echo(f"{name:<12} N={data.N:<5} Ts={data.Ts:<5g} {summary}")
+        click.echo(f"{name:<18} N={data.N:<5} Ts={data.Ts:<5g} {summary}")
 
 
 # -- the wheel ------------------------------------------------------------------------

@@ -45,3 +45,7 @@ class WheelCommandError(RwlabError, ValueError):
 
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
+
+
+class RwlabWarning(UserWarning):
+    """A result rwlab returns but does not vouch for, e.g. an estimator that stopped early."""

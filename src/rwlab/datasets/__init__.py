@@ -13,7 +13,16 @@ from scipy.io import loadmat
 from rwlab.data import IOData, load
 from rwlab.errors import DataError
 
-__all__ = ["NAMES", "cascaded_tanks", "drive", "dryer", "gas_furnace", "get"]
+__all__ = [
+    "NAMES",
+    "cascaded_tanks",
+    "cascaded_tanks_est",
+    "cascaded_tanks_val",
+    "drive",
+    "dryer",
+    "gas_furnace",
+    "get",
+]
 
 
 def _path(name: str):
@@ -88,11 +97,27 @@ def drive(experiment: int = 1) -> IOData:
     )
 
 
-NAMES = {"dryer": dryer, "gas_furnace": gas_furnace, "drive": drive}
+def cascaded_tanks_est() -> IOData:
+    """Cascaded tanks benchmark, estimation record: 1024 samples, Ts = 4 s."""
+    return cascaded_tanks()[0]
+
+
+def cascaded_tanks_val() -> IOData:
+    """Cascaded tanks benchmark, validation record: 1024 samples, Ts = 4 s."""
+    return cascaded_tanks()[1]
+
+
+NAMES = {
+    "dryer": dryer,
+    "gas_furnace": gas_furnace,
+    "cascaded_tanks_est": cascaded_tanks_est,
+    "cascaded_tanks_val": cascaded_tanks_val,
+    "drive": drive,
+}
 
 
 def get(name: str) -> IOData:
-    """A bundled single-record dataset by name (see ``NAMES``)."""
+    """A bundled record by name (see ``NAMES``; ``drive`` is experiment 1)."""
     if name not in NAMES:
         raise DataError(f"no bundled dataset {name!r}; choose from {sorted(NAMES)}")
     return NAMES[name]()

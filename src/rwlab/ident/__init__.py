@@ -6,9 +6,10 @@ Validation: :func:`compare`, :func:`resid`, :func:`fit_percent`, :func:`mse`.
 Models: :class:`PolyModel` (``idpoly``) and :func:`c2d`.
 """
 
+from rwlab.ident import pem  # the module; calling it calls pem.pem (see rwlab.ident.pem)
 from rwlab.ident.arx import arx
 from rwlab.ident.models import PolyModel, c2d
-from rwlab.ident.pem import armax, bj, oe, pem
+from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import arxstruc, delay_scan, delayest, selstruc, struc
 from rwlab.ident.validation import compare, fit_percent, fpe, mse, resid
 

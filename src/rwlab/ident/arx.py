@@ -46,7 +46,7 @@ def _fill(data: IOData, na: int, nb: list[int], nk: list[int], n0: int, out: np.
     N = data.N
     col = 0
     for i in range(1, na + 1):
-        np.negative(y[n0 - i : N - i], out=out[:, col])
+        out[:, col] = -y[n0 - i : N - i]
         col += 1
     for j, (b, k) in enumerate(zip(nb, nk, strict=True)):
         u = data.u[:, j]
@@ -162,6 +162,7 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
         B if first.nu != 1 else B[0],
         Ts=first.Ts,
         nk=nk,
+        nb=nb,
         noise_variance=lam,
         covariance=cov,
         input_name=first.input_names[0] if first.nu == 1 else first.input_names,

@@ -25,7 +25,7 @@ from scipy import signal as sps
 
 from rwlab.data import IOData, atomic_write_bytes, check_Ts
 from rwlab.errors import DataError, FileFormatError, ModelError
-from rwlab.ident.polynomials import check_initial, filt, is_stable, roots_z, to_z
+from rwlab.ident.polynomials import check_initial, filt, fit_initial, is_stable, roots_z, to_z
 
 __all__ = ["PolyModel", "c2d"]
 
@@ -59,6 +59,10 @@ class PolyModel:
         Sample time in seconds (required, > 0).
     nk : int or sequence of int, optional
         Input delay in samples per input (default: B's leading zeros).
+    nb : int or sequence of int, optional
+        Number of free B coefficients per input, from ``b_nk`` on (default: the
+        rest of each row). Give it when rows are padded with trailing zeros,
+        e.g. for several inputs with different ``nb + nk``.
     noise_variance : float, optional
         Variance of the innovation e(t).
     covariance : array_like, shape (d, d), optional
@@ -79,6 +83,7 @@ class PolyModel:
         *,
         Ts,
         nk=None,
+        nb=None,
         noise_variance: float | None = None,
         covariance=None,
         report: dict | None = None,
@@ -108,7 +113,14 @@ class PolyModel:
             if np.any(row[: min(k, len(row))] != 0):
                 raise ModelError(f"B must start with nk = {k} zeros, got {row}")
         self.nk = tuple(nk)
-        self.nb = tuple(max(B2.shape[1] - k, 0) for k in nk)
+        width = B2.shape[1]
+        nb = [max(width - k, 0) for k in nk] if nb is None else [int(b) for b in np.atleast_1d(nb)]
+        if len(nb) != self.nu or any(b < 0 or k + b > width for b, k in zip(nb, nk, strict=True)):
+            raise ModelError(f"nb must give one count per input with nk + nb ≤ {width}, got {nb}")
+        for row, k, b in zip(B2, nk, nb, strict=True):
+            if np.any(row[k + b :] != 0):
+                raise ModelError(f"B must end with zeros after its nb = {b} free coefficients")
+        self.nb = tuple(nb)
         self.noise_variance = None if noise_variance is None else float(noise_variance)
         self.covariance = None if covariance is None else np.array(covariance, dtype=float)
         if self.covariance is not None and self.covariance.shape != (self.n_params,) * 2:
@@ -206,26 +218,36 @@ class PolyModel:
         Parameters
         ----------
         u : array_like, shape (N,) or (N, nu), or IOData
-            Input samples.
-        initial : {'zero', 'steady'}
-            Pre-sample input: zero, or held at ``u[0]`` forever (start in equilibrium).
+            Input samples (an IOData, with its measured output, for ``'estimate'``).
+        initial : {'zero', 'steady', 'estimate'}
+            Pre-sample values: zero; the input held at ``u[0]`` forever (start in
+            equilibrium); or the initial state that best fits the measured output
+            in the least-squares sense (MATLAB ``InitialCondition = 'e'``).
 
         Returns
         -------
         numpy.ndarray, shape (N,)
         """
-        steady = check_initial(initial) == "steady"
+        initial = check_initial(initial)
         u2 = self._inputs(u)
         den = np.convolve(self.A, self.F)
-        return sum(filt(b, den, u2[:, j], steady) for j, b in enumerate(self._B))
+        yhat = sum(filt(b, den, u2[:, j], initial == "steady") for j, b in enumerate(self._B))
+        if initial != "estimate":
+            return yhat
+        if not isinstance(u, IOData) or u.ny != 1:
+            raise DataError("initial='estimate' needs an IOData with the measured output")
+        n = max(len(den), self._B.shape[1]) - 1
+        return fit_initial(u.y[:, 0], yhat, den, n)
 
     def predict(self, data: IOData, horizon: float = 1, initial: str = "zero") -> np.ndarray:
         """k-step-ahead prediction ŷ(t | t−k) from measured inputs and outputs.
 
         Uses ``ŷ = H̄ₖ D B/(C F) u + (1 − H̄ₖ A D / C) y`` where ``H̄ₖ`` holds the
         first k impulse-response coefficients of the noise model ``C/(A D)``.
-        ``initial``: pre-sample values zero, or every signal held at its first
-        sample ('steady'). ``horizon=numpy.inf`` is pure simulation.
+        ``initial``: pre-sample values zero, every signal held at its first
+        sample ('steady'), or the predictor's initial state fitted to the
+        measured output by least squares ('estimate', MATLAB's 'e').
+        ``horizon=numpy.inf`` is pure simulation.
 
         Returns
         -------
@@ -237,7 +259,8 @@ class PolyModel:
             raise DataError("PolyModel is single-output; data must have one output")
         if horizon != np.inf and (int(horizon) != horizon or horizon < 1):
             raise DataError(f"horizon must be a positive integer or inf, got {horizon}")
-        steady = check_initial(initial) == "steady"
+        initial = check_initial(initial)
+        steady = initial == "steady"
         if horizon == np.inf or horizon >= data.N:
             return self.simulate(data, initial)
         k = int(horizon)
@@ -247,12 +270,17 @@ class PolyModel:
         hk = sps.lfilter(self.C, AD, impulse)
         y = data.y[:, 0]
         u = self._inputs(data)
-        num_u = np.convolve(hk, self.D)
+        num_y = np.convolve(hk, AD)
+        num_u = [np.convolve(np.convolve(hk, self.D), b) for b in self._B]
         den_u = np.convolve(self.C, self.F)
-        yhat = y - filt(np.convolve(hk, AD), self.C, y, steady)
-        for j, b in enumerate(self._B):
-            yhat = yhat + filt(np.convolve(num_u, b), den_u, u[:, j], steady)
-        return yhat
+        yhat = y - filt(num_y, self.C, y, steady)
+        for j, num in enumerate(num_u):
+            yhat = yhat + filt(num, den_u, u[:, j], steady)
+        if initial != "estimate":
+            return yhat
+        # every filter above is a filter with denominator C·F (y's: numerator num_y·F)
+        n = max(len(den_u), len(num_y) + self.nf, *map(len, num_u)) - 1
+        return fit_initial(y, yhat, den_u, n)
 
     def step_response(self, n: int, input_index: int = 0) -> np.ndarray:
         """Response to a unit step on one input, ``n`` samples from rest, shape (n,)."""
@@ -374,6 +402,7 @@ class PolyModel:
             "D": self.D.tolist(),
             "F": self.F.tolist(),
             "nk": list(self.nk),
+            "nb": list(self.nb),
             "noise_variance": self.noise_variance,
             "covariance": None if self.covariance is None else self.covariance.tolist(),
             "parameter_names": self.parameter_names,
@@ -396,6 +425,7 @@ class PolyModel:
                 d["F"],
                 Ts=d["Ts"],
                 nk=d["nk"],
+                nb=d.get("nb"),
                 noise_variance=d.get("noise_variance"),
                 covariance=d.get("covariance"),
                 report=d.get("report"),

@@ -16,9 +16,11 @@ inside, so the predictor stays stable (as MATLAB does).
 
 Starting values: ARMAX and BJ noise models from the Hannan–Rissanen two-stage
 least squares (long ARX → residuals → linear regression); OE and BJ dynamics
-from instrumental variables with simulated-output instruments. The start uses
-at most ``INIT_SAMPLES`` samples per experiment: it only needs to land in the
-basin of the optimum, which every later iteration refines on all data.
+from instrumental variables with simulated-output instruments. ARMAX is also
+started from the output-error dynamics (A = F, C = 1): its likelihood can have
+several minima (the detrended cascaded tanks' ARMAX3321 has two). Starts and a
+first search use at most ``START_SAMPLES`` samples per experiment: they only
+need to land in the basin of the optimum; the best is then refined on all data.
 
 Pre-sample values (``initial=``): ``'zero'`` — all filters start from zero
 (MATLAB ``InitialCondition = 'zero'``); ``'steady'`` — every signal held its
@@ -31,6 +33,9 @@ every sample. The covariance is
 
 from __future__ import annotations
 
+import sys
+import types
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -39,15 +44,18 @@ from scipy import linalg
 from scipy import signal as sps
 
 from rwlab.data import IOData, as_experiments
-from rwlab.errors import DataError, EstimationError
+from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident.arx import check_order
 from rwlab.ident.models import PolyModel
-from rwlab.ident.polynomials import check_initial, filt, shift, stabilize
+from rwlab.ident.polynomials import check_initial, filt, stabilize
 from rwlab.ident.validation import estimation_report
 
 __all__ = ["armax", "bj", "oe", "pem"]
 
-INIT_SAMPLES = 100_000
+START_SAMPLES = 10_000
+MAX_ITER = "maximum iterations reached"
+EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-free and fitted exactly
+ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
 
 @dataclass(frozen=True)
@@ -100,23 +108,25 @@ def _sse(orders, theta, experiments) -> float:
 
 
 def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
-    """ψ = ∂ε/∂θ for one experiment, shape (N, d)."""
+    """ψᵀ = (∂ε/∂θ)ᵀ for one experiment, shape (d, N): one contiguous row per parameter."""
     _A, _B, C, D, F = orders.unpack(theta)
     N = len(y)
-    psi = np.empty((N, orders.d))
-    col = 0
+    psi_t = np.empty((orders.d, N))
+    row = 0
     noise = orders.nc or orders.nd
     CF = np.convolve(C, F)
+    st = orders.steady
 
     def put(signal, first_lag, count, sign):
-        nonlocal col
+        nonlocal row
         for i in range(count):
-            psi[:, col] = shift(signal, first_lag + i, orders.steady)
+            k = min(first_lag + i, N)
+            psi_t[row, :k] = signal[0] if (st and k and N) else 0.0
+            psi_t[row, k:] = signal[: N - k]
             if sign < 0:
-                np.negative(psi[:, col], out=psi[:, col])
-            col += 1
+                psi_t[row] *= -1.0  # a contiguous row: safe in place
+            row += 1
 
-    st = orders.steady
     if orders.na:
         put(filt(D, C, y, st) if noise else y, 1, orders.na, +1)
     if orders.nb:
@@ -127,7 +137,7 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
         put(filt([1.0], C, v, st), 1, orders.nd, +1)
     if orders.nf:
         put(filt(D, CF, w, st), 1, orders.nf, +1)
-    return psi
+    return psi_t
 
 
 def _normal_equations(orders, theta, experiments):
@@ -138,9 +148,9 @@ def _normal_equations(orders, theta, experiments):
     sse = 0.0
     for y, u in experiments:
         e, w, v = _signals(orders, theta, y, u)
-        psi = _jacobian_block(orders, theta, y, u, e, w, v)
-        H += psi.T @ psi
-        g += psi.T @ e
+        psi_t = _jacobian_block(orders, theta, y, u, e, w, v)
+        H += psi_t @ psi_t.T
+        g += psi_t @ e
         sse += float(e @ e)
     return H, g, sse
 
@@ -149,12 +159,13 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float):
     """Levenberg–Marquardt on ½Σε². Returns θ, H, sse, iterations, reason."""
     theta = _stabilized(orders, theta)
     mu = 1e-4
-    reason = "maximum iterations reached"
+    reason = MAX_ITER
     it = 0
     H, g, sse = _normal_equations(orders, theta, experiments)
+    exact = EXACT_FIT * sum(float(y @ y) for y, _ in experiments)
     for it in range(1, max_iter + 1):
-        if sse == 0.0:
-            reason = "zero residual"
+        if sse <= exact:
+            reason = "converged (exact fit)"
             break
         scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
         Hs = H / np.outer(scale, scale)
@@ -190,10 +201,17 @@ def _lags(x: np.ndarray, first: int, count: int, n0: int) -> list[np.ndarray]:
 
 
 def _least_squares(columns: list[np.ndarray], target: np.ndarray) -> np.ndarray:
+    """Least squares by the (equilibrated) normal equations: accurate enough for a start,
+    and far cheaper than a QR of the tall regressor matrix."""
     if not columns:
         return np.zeros(0)
-    theta, *_ = np.linalg.lstsq(np.column_stack(columns), target, rcond=None)
-    return theta
+    Phi = np.empty((len(columns), len(target)))  # one contiguous row per regressor
+    for i, c in enumerate(columns):
+        Phi[i] = c
+    G = Phi @ Phi.T
+    unit = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    theta, *_ = np.linalg.lstsq(G / np.outer(unit, unit), (Phi @ target) / unit, rcond=1e-12)
+    return theta / unit
 
 
 def _arma_hannan_rissanen(v: np.ndarray, nc: int, nd: int) -> tuple[np.ndarray, np.ndarray]:
@@ -233,7 +251,7 @@ def _initial_armax(orders: _Orders, experiments) -> np.ndarray:
             )
         )
         targets.append(y[n0:])
-    th, *_ = np.linalg.lstsq(np.vstack(cols_all), np.concatenate(targets), rcond=None)
+    th = _least_squares(list(np.vstack(cols_all).T), np.concatenate(targets))
     A = np.concatenate([[1.0], th[:na]])
     B = np.zeros(nk + nb)
     B[nk:] = th[na : na + nb]
@@ -256,7 +274,7 @@ def _initial_oe(nb: int, nf: int, nk: int, experiments, iterations: int = 3):
                 Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + _lags(u, nk, nb, n0)))
         Phi, T = np.vstack(Phi), np.concatenate(T)
         if not instrumented:
-            return np.linalg.lstsq(Phi, T, rcond=None)[0]
+            return _least_squares(list(Phi.T), T)
         Z = np.vstack(Z)
         return np.linalg.lstsq(Z.T @ Phi, Z.T @ T, rcond=None)[0]
 
@@ -303,22 +321,55 @@ def _prepare(data, orders: _Orders):
 
 
 def _init_subset(series):
-    return [(y[:INIT_SAMPLES], u[:INIT_SAMPLES]) for y, u in series]
+    return [(y[:START_SAMPLES], u[:START_SAMPLES]) for y, u in series]
 
 
-def _finish(orders, theta, experiments, series, method, max_iter, tol) -> PolyModel:
-    theta, H, sse, iterations, reason = _minimize(orders, theta, series, max_iter, tol)
+def _search(orders, starts, series, max_iter, tol):
+    """LM from every start on the first ``START_SAMPLES`` samples; the best, refined on all data.
+
+    Several starts guard against local minima (ARMAX's likelihood has them);
+    the short record makes each cheap, and from its optimum the full record
+    needs only a step or two.
+    """
+    subset = _init_subset(series)
+    whole = all(len(y) <= START_SAMPLES for y, _ in series)
+    fits = [_minimize(orders, theta, subset, max_iter, tol) for theta in starts]
+    best = min(fits, key=lambda fit: fit[2] if np.isfinite(fit[2]) else np.inf)
+    return best if whole else _minimize(orders, best[0], series, max_iter, tol)
+
+
+def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyModel:
+    theta, H, sse, iterations, reason = _search(orders, starts, series, max_iter, tol)
+    if reason == MAX_ITER:
+        warnings.warn(
+            f"{method.split()[0]}: stopped after {iterations} iterations without converging; "
+            "the model may not be the optimum (raise max_iter, or check orders and data)",
+            RwlabWarning,
+            stacklevel=3,
+        )
     N = sum(len(y) for y, _ in series)
     lam = sse / max(N - orders.d, 1)
     scale = sum(float(y @ y) for y, _ in series)
     note = {}
-    if sse <= 1e-24 * max(scale, 1e-300):
+    if sse <= EXACT_FIT * max(scale, 1e-300):
         # an exact fit: no noise to measure, and C and D are not identifiable from it
         cov = None
         note["note"] = "exact fit (noise-free data): noise model undetermined, no covariance"
     else:
         try:
-            cov = lam * linalg.inv(H)
+            unit = np.sqrt(np.maximum(np.diag(H), 1e-300))  # equilibrate before inverting
+            Hs = H / np.outer(unit, unit)
+            if np.linalg.cond(Hs) > 1e12:
+                warnings.warn(
+                    f"{method.split()[0]}: the Hessian is nearly singular at the estimate, so "
+                    "some parameters are barely identifiable and their covariance is unreliable "
+                    "(near pole-zero cancellation: try lower orders)",
+                    RwlabWarning,
+                    stacklevel=3,
+                )
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", linalg.LinAlgWarning)
+                cov = lam * linalg.inv(Hs) / np.outer(unit, unit)
         except linalg.LinAlgError:
             raise EstimationError(
                 "the Hessian is singular at the optimum: some parameters are not identifiable "
@@ -364,7 +415,7 @@ def armax(
     nc: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -392,12 +443,17 @@ def armax(
         0,
         0,
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
-    theta0 = _initial_armax(orders, _init_subset(series))
+    subset = _init_subset(series)
+    starts = [_initial_armax(orders, subset)]
+    if orders.na:  # also from the output-error dynamics: a start in another basin
+        B, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
+        C = np.concatenate([[1.0], np.zeros(orders.nc)])
+        starts.append(orders.pack(F, B, C, np.ones(1), np.ones(1)))
     return _finish(
-        orders, theta0, experiments, series, "armax (prediction error, LM)", max_iter, tol
+        orders, starts, experiments, series, "armax (prediction error, LM)", max_iter, tol
     )
 
 
@@ -407,7 +463,7 @@ def oe(
     nf: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -419,12 +475,14 @@ def oe(
         0,
         check_order("nf", nf),
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
     theta0 = orders.pack(np.ones(1), B, np.ones(1), np.ones(1), F)
-    return _finish(orders, theta0, experiments, series, "oe (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "oe (prediction error, LM)", max_iter, tol
+    )
 
 
 def bj(
@@ -435,7 +493,7 @@ def bj(
     nf: int,
     nk: int = 1,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -447,18 +505,20 @@ def bj(
         check_order("nd", nd),
         check_order("nf", nf),
         check_order("nk", nk),
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = _initial_bj(orders, _init_subset(series))
-    return _finish(orders, theta0, experiments, series, "bj (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "bj (prediction error, LM)", max_iter, tol
+    )
 
 
 def pem(
     data: IOData | Sequence[IOData],
     init: PolyModel,
     *,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
@@ -475,8 +535,23 @@ def pem(
         init.nd,
         init.nf,
         init.nk[0],
-        check_initial(initial) == "steady",
+        check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     experiments, series = _prepare(data, orders)
     theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)
-    return _finish(orders, theta0, experiments, series, "pem (prediction error, LM)", max_iter, tol)
+    return _finish(
+        orders, [theta0], experiments, series, "pem (prediction error, LM)", max_iter, tol
+    )
+
+
+class _CallableModule(types.ModuleType):
+    """``rwlab.ident.pem`` is this module (``import rwlab.ident.pem`` reaches ``armax``, ``oe``,
+    ...), and calling it calls the estimator :func:`pem`, MATLAB's name for both."""
+
+    def __call__(self, data, init, **options) -> PolyModel:
+        return pem(data, init, **options)
+
+    __call__.__doc__ = pem.__doc__
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
-__all__ = ["filt", "is_stable", "shift", "stabilize", "to_z"]
+__all__ = ["filt", "fit_initial", "free_responses", "is_stable", "shift", "stabilize", "to_z"]
 
 
 def to_z(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -54,16 +54,41 @@ def stabilize(p: np.ndarray) -> np.ndarray:
     return out
 
 
-INITIAL = ("zero", "steady")
+INITIAL = ("zero", "steady", "estimate")
 
 
-def check_initial(initial: str) -> str:
-    """Validate an initial-condition convention name."""
-    if initial not in INITIAL:
+def check_initial(initial: str, allowed: tuple[str, ...] = INITIAL) -> str:
+    """Validate an initial-condition convention name against ``allowed``."""
+    if initial not in allowed:
         from rwlab.errors import DataError
 
-        raise DataError(f"initial must be 'zero' or 'steady', got {initial!r}")
+        raise DataError(f"initial must be one of {', '.join(allowed)}; got {initial!r}")
     return initial
+
+
+def free_responses(den: np.ndarray, n: int, N: int) -> np.ndarray:
+    """Basis of every response of an ``n``-state filter with denominator ``den`` to its initial
+    state alone, shape (N, n).
+
+    Column i is ``(1/den) δ(t − i)``: these n sequences are independent and span the
+    solutions of ``den(q) s(t) = 0`` for t ≥ n, i.e. all free responses of any
+    realisation of order n (n ≥ len(den) − 1) with this denominator.
+    """
+    impulses = np.zeros((N, n))
+    idx = np.arange(min(n, N))
+    impulses[idx, idx] = 1.0
+    return sps.lfilter([1.0], den, impulses, axis=0)
+
+
+def fit_initial(y: np.ndarray, yhat: np.ndarray, den: np.ndarray, n: int) -> np.ndarray:
+    """``yhat`` plus the free response of ``den`` (n states) that best fits ``y`` (least squares).
+
+    This is MATLAB's ``InitialCondition = 'e'``: the initial state is chosen to
+    minimise ‖y − ŷ‖, given the zero-initial-state response ``yhat``.
+    """
+    basis = free_responses(den, n, len(y))
+    x0, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
+    return yhat + basis @ x0
 
 
 def shift(x: np.ndarray, k: int, steady: bool = False) -> np.ndarray:

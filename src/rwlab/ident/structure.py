@@ -26,26 +26,53 @@ def _siso(data: IOData, what: str) -> None:
 
 
 def delay_scan(
-    data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0, nk_max: int = 10
+    data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0, nk_max: int | None = None
 ) -> dict[int, float]:
     """Loss of ARX(na, nb, nk) for every nk in nk_min..nk_max (paper A, Fig. 16).
+
+    Parameters
+    ----------
+    data : IOData
+        SISO record.
+    na, nb : int
+        ARX orders (MATLAB ``delayest``'s defaults: 2 and 2).
+    nk_min, nk_max : int
+        Delays to scan, in samples; ``nk_max`` defaults to ``nk_min + 20`` as in MATLAB.
 
     Returns
     -------
     dict
-        nk → mean squared one-step prediction error on ``data``.
+        nk → mean squared one-step prediction error on ``data``, every loss on the
+        same rows.
+
+    Raises
+    ------
+    DataError
+        When the record has too few samples for ARX(na, nb, nk_max).
     """
     _siso(data, "delay_scan")
     na, nb = check_order("na", na), check_order("nb", nb, 1)
-    nk_min, nk_max = check_order("nk_min", nk_min), check_order("nk_max", nk_max)
+    nk_min = check_order("nk_min", nk_min)
+    nk_max = nk_min + 20 if nk_max is None else check_order("nk_max", nk_max)
     if nk_max < nk_min:
         raise DataError(f"nk_max ({nk_max}) must be ≥ nk_min ({nk_min})")
     n0 = first_row(na, [nb], [nk_max])
+    if data.N - n0 <= 2 * (na + nb):
+        raise DataError(
+            f"the record ({data.N} samples) is too short to scan delays up to nk_max = {nk_max} "
+            f"with ARX({na}, {nb}): it needs more than {n0 + 2 * (na + nb)} samples; "
+            "pass a smaller nk_max"
+        )
     return {nk: arx_loss(data, None, na, nb, nk, n0) for nk in range(nk_min, nk_max + 1)}
 
 
-def delayest(data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0, nk_max: int = 10) -> int:
-    """Input delay in samples that minimises the ARX(na, nb, nk) loss (MATLAB ``delayest``)."""
+def delayest(
+    data: IOData, na: int = 2, nb: int = 2, nk_min: int = 0, nk_max: int | None = None
+) -> int:
+    """Input delay in samples that minimises the ARX(na, nb, nk) loss (MATLAB ``delayest``).
+
+    Scans nk_min..nk_max (default ``nk_min + 20``, MATLAB's); see :func:`delay_scan`.
+    """
     losses = delay_scan(data, na, nb, nk_min, nk_max)
     return min(losses, key=losses.get)
 

@@ -15,11 +15,14 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
    check (Fig. 24);
 7. the chosen model in physical units with the wheel's saturations.
 
-Fit % and MSE are computed on the validation data by simulation (MATLAB
-``compare``'s default), in the preprocessed units the paper reports. Pre-sample
-values follow the ``'steady'`` convention (every signal held its first value):
-exact for a record that starts at rest, and far closer than zero for
-normalised data, where physical zero is not 0.
+Fit % and MSE are computed on the validation data by simulation, in the
+preprocessed units the paper reports. Every number (estimation, fit %, MSE,
+one-step prediction fit, residuals) uses the ``'steady'`` pre-sample
+convention (every signal held its first value): exact for a record that starts
+at rest, and far closer than zero for normalised data, where physical zero is
+not 0. This is not MATLAB ``compare``'s default (``'estimate'``, an initial
+state fitted to the validation output), which can only score higher; the
+convention is recorded in ``study.json`` as ``initial_conditions``.
 """
 
 from __future__ import annotations
@@ -102,6 +105,7 @@ class StudyResult:
                 "input": self.data.input_names[0],
                 "output": self.data.output_names[0],
                 "preprocess": self.preprocess,
+                "initial_conditions": INITIAL,
                 "trend": self.data.trend.to_dict(),
             },
             "delay": {

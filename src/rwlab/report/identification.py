@@ -119,7 +119,9 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f"(input {d['input']}, output {d['output']}), preprocessed: {d['preprocess']}; "
         f"estimation {d['n_estimation']} samples, validation {d['n_validation']} samples. "
         "Fit % is the NRMSE fit of the simulated output on the validation data "
-        "(MATLAB compare), in preprocessed units, as paper A reports it."
+        "(MATLAB compare's measure), in preprocessed units, as paper A reports it, with "
+        "'steady' initial conditions (every signal held its first value), not compare's "
+        "default of an initial state fitted to the validation output."
     )
     ch = study["chosen"]
     page.html(
