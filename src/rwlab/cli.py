@@ -763,16 +763,14 @@ def attitude_ltr(scenario, rho, out, force):
     """Loop singular values at the plant input for each ρ next to LQR's (paper Fig. 8)."""
     from rwlab.attitude.control import ltr_study
     from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import write_ltr
+    from rwlab.report.attitude import ltr_rows, write_ltr
 
     sc = load_scenario(scenario)
     res = ltr_study(sc, rhos=rho)
     paths = write_ltr(res, sc.name, out, force=force)
-    for r in res.loops:
-        click.echo(
-            f"rho = {r:<10g} max gap to LQR (1e-3..1e-1 rad/s): "
-            f"{res.max_gap(r, (1e-3, 1e-1)):.2f} dB"
-        )
+    click.echo("rho        gap 1e-3..1e-1 [dB]  gap to crossover [dB]  crossover / LQR [rad/s]")
+    for rho, gap, gap_c, w, w_c in ltr_rows(res):
+        click.echo(f"{rho:<10} {gap:19.2f} {gap_c:22.2f}  {w:.3g} / {w_c:.3g}")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 

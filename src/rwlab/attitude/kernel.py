@@ -206,7 +206,8 @@ def run_block(
     ``process_noise`` (steps, 3) is the white torque of each step, N·m;
     ``sensor_noise`` (≥ sensor steps in the block, 6) the standard normals of
     the sun and earth sensors. ``unload`` = [enabled, start fraction, stop
-    fraction, pulse torque N·m, pulse steps between pulses, recovery s];
+    fraction, pulse torque N·m, pulse steps between pulses, recovery s, pointing
+    error (°) above which no window starts and no pulse fires];
     ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
     P, log position and whether a wheel touched its momentum limit.
     """
@@ -250,14 +251,16 @@ def run_block(
             h_frac = 0.0
             for i in range(nw):
                 h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
-            if stats[UNLOADING] == 0 and h_frac > unload[1]:
+            qv0 = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+            pointing = math.degrees(2.0 * math.asin(min(1.0, qv0))) <= unload[6]
+            if stats[UNLOADING] == 0 and h_frac > unload[1] and pointing:
                 stats[UNLOADING] = 1
                 stats[DESAT_COUNT] += 1
             if stats[UNLOADING] == 1:
                 if h_frac <= unload[2]:
                     stats[UNLOADING] = 0
                     stats[UNLOAD_END] = t
-                elif k % int(unload[4]) == 0:
+                elif k % int(unload[4]) == 0 and pointing:  # no pulses during a slew
                     fired = False
                     for i in range(3):
                         if abs(h_body[i]) > unload[2] * h_max.min():
@@ -292,7 +295,7 @@ def run_block(
         err = math.degrees(2.0 * math.asin(min(1.0, qv)))
         in_desat = stats[UNLOADING] == 1 or t - stats[UNLOAD_END] <= unload[5]
         stats[MAX_ERR] = max(stats[MAX_ERR], err)
-        if in_desat:
+        if in_desat and k >= steady_from:
             stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
             stats[DESAT_STEPS] += 1
         if k >= steady_from:

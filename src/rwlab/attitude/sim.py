@@ -360,6 +360,7 @@ def _unload_vector(sc: Scenario) -> np.ndarray:
             sc.thruster_torque * sc.thruster_min_pulse_s / sc.dt,  # one pulse's impulse in a step
             max(1, round(sc.unload_pulse_period_s / sc.dt)),
             sc.unload_recovery_s,
+            sc.pointing_requirement_deg,
         ]
     )
 

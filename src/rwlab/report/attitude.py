@@ -195,29 +195,62 @@ def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
     return page
 
 
+def ltr_rows(res: LTRResult) -> list[list]:
+    """Per ρ: the gap over paper B's band, the gap up to the target's crossover, and the
+    recovered loop's crossover next to the target's (rad/s)."""
+    from rwlab.attitude.control import GAP_BAND, crossover
+
+    w_c = crossover(res.target, res.omega)
+    return [
+        [
+            f"{rho:g}",
+            round(res.max_gap(rho, GAP_BAND), 2),
+            round(res.max_gap(rho, (GAP_BAND[0], w_c)), 2),
+            round(crossover(res.loops[rho], res.omega), 4),
+            round(w_c, 4),
+        ]
+        for rho in res.loops
+    ]
+
+
+LTR_COLUMNS = [
+    "ρ",
+    "max gap 1e-3..1e-1 rad/s [dB]",
+    "max gap 1e-3 rad/s..target crossover [dB]",
+    "crossover [rad/s]",
+    "LQR crossover [rad/s]",
+]
+
+
 def _sigma_figure(page: Page, res: LTRResult) -> None:
     rhos = list(res.loops)
     cols = 2
     rows = (len(rhos) + 1) // 2
+    keep = res.omega <= res.omega.max() / 2  # the hold's zero at z = −1 owns the last octave
+    w = res.omega[keep]
     fig, axes = figure(10, 3.0 * rows, rows, cols, sharex=True, sharey=True)
     for ax, rho in zip(np.ravel(axes), rhos, strict=False):
         for k in range(min(2, res.target.shape[1])):
-            ax.loglog(
-                res.omega,
-                res.target[:, k],
+            ax.semilogx(
+                w,
+                20 * np.log10(res.target[keep, k]),
                 color="k",
                 lw=1.2,
                 label="LQR target" if k == 0 else None,
             )
-            ax.loglog(
-                res.omega,
-                res.loops[rho][:, k],
+            ax.semilogx(
+                w,
+                20 * np.log10(res.loops[rho][keep, k]),
                 color="#d62728",
                 lw=1,
                 ls="--",
                 label="LQG/LTR" if k == 0 else None,
             )
+        ax.axhline(0, color="#888", lw=0.8)
+        ax.axvspan(1e-3, 1e-1, color="#1f77b4", alpha=0.06)
+        ax.set_ylim(-80, 120)
         ax.set_title(f"ρ = {rho:g}")
+        ax.set_ylabel("σ [dB]")
         ax.grid(alpha=0.3, which="both")
     np.ravel(axes)[0].legend(fontsize=8)
     for ax in np.ravel(axes)[-cols:]:
@@ -225,8 +258,9 @@ def _sigma_figure(page: Page, res: LTRResult) -> None:
     page.figure(
         fig,
         "fig8-sigma",
-        "Two largest singular values of the loop broken at the plant "
-        "input, K(s)G(s), for each ρ, next to the LQR loop K(sI − A)⁻¹B.",
+        "Two largest singular values (dB) of the loop broken at the plant input, K(z)G(z), "
+        "for each ρ, next to the LQR loop K(zI − A)⁻¹B; shaded: paper B's comparison band, "
+        "grey line: 0 dB. Shown up to half the Nyquist rate.",
     )
 
 
@@ -237,12 +271,7 @@ def write_ltr(
     targets = _check_out(Path(out_dir), ["sigma.json", "report.html"], force)
     _write_json(targets["sigma.json"], res.to_dict())
     page = Page(f"Loop transfer recovery — {scenario_name}")
-    gaps = [[f"{rho:g}", res.max_gap(rho, (1e-3, 1e-1)), res.max_gap(rho)] for rho in res.loops]
-    page.table(
-        ["ρ", "max gap 1e-3..1e-1 rad/s [dB]", "max gap, all ω [dB]"],
-        gaps,
-        table_id="table-gaps",
-    )
+    page.table(LTR_COLUMNS, ltr_rows(res), table_id="table-gaps")
     _sigma_figure(page, res)
     page.save(targets["report.html"])
     return targets
