@@ -193,8 +193,12 @@ def test_bad_inputs_are_typed_errors(rng):
         armax(IOData(np.zeros(200), rng.standard_normal(200), 1.0), 2, 2, 1, 1)
     with pytest.raises(DataError, match="too few samples"):
         bj(IOData(rng.standard_normal(8), rng.standard_normal(8), 1.0), 2, 2, 2, 2, 1)
-    with pytest.raises(DataError, match="single-input"):
-        oe(IOData(rng.standard_normal((50, 2)), rng.standard_normal(50), 1.0), 2, 2, 1)
+    with pytest.raises(DataError, match="one value per input"):
+        oe(IOData(rng.standard_normal((50, 2)), rng.standard_normal(50), 1.0), [2, 2, 2], 2, 1)
+    with pytest.raises(DataError, match="needs an input"):
+        oe(IOData(None, rng.standard_normal(50), 1.0), 2, 2, 1)
+    with pytest.raises(DataError, match="no input"):
+        armax(IOData(None, rng.standard_normal(50), 1.0), 2, 2, 1)
     with pytest.raises(DataError):
         armax(IOData(rng.standard_normal(50), rng.standard_normal(50), 1.0), 2, 0, 1, 1)
 
