@@ -22,6 +22,21 @@ def test_arx_on_the_bundled_dryer_prints_json_with_validation():
     assert out["validation"]["fit_percent"] > 80
 
 
+def test_ar_command_fits_the_output_alone(tmp_path):
+    r = np.random.default_rng(3)
+    y = lfilter([1], [1, -1.5, 0.7], r.standard_normal(3000))
+    IOData(r.standard_normal(3000), y, 0.5).write(tmp_path / "ts.csv")
+    out = run("ident", "ar", str(tmp_path / "ts.csv"), "2", "--approach", "ls", "--json")
+    assert out.exit_code == 0, out.output
+    result = json.loads(out.output)
+    assert result["model"]["structure"] == "AR2" and result["model"]["B"] == []
+    assert np.allclose(result["model"]["A"], [1, -1.5, 0.7], atol=0.05)
+    assert result["validation"]["residuals_white"]
+    assert "ar (least squares)" in result["model"]["report"]["method"]
+    bad = run("ident", "ar", str(tmp_path / "ts.csv"), "5000")
+    assert bad.exit_code == 2 and "too few samples" in bad.output
+
+
 def test_delay_command_reports_the_dryer_delay():
     r = run("ident", "delay", "dryer", "--detrend", "constant", "--json")
     assert r.exit_code == 0 and json.loads(r.output)["nk"] == 3
@@ -103,6 +118,7 @@ def test_errors_are_one_line_messages_with_status_2(tmp_path):
         ["ident", "armax"],
         ["ident", "oe"],
         ["ident", "bj"],
+        ["ident", "ar"],
         ["ident", "delay"],
         ["ident", "struct"],
         ["datasets"],

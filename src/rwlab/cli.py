@@ -197,6 +197,74 @@ _estimate_command(
 )
 
 
+@ident.command("ar")
+@_data_options
+@click.argument("na", type=click.IntRange(min=0))
+@click.option(
+    "--approach",
+    type=click.Choice(["fb", "ls"]),
+    default="fb",
+    show_default=True,
+    help="Forward-backward (MATLAB's default) or forward least squares.",
+)
+@click.option(
+    "--split",
+    type=float,
+    default=0.7,
+    show_default=True,
+    help="Estimation share; the rest validates (1: no validation).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the model and scores as JSON.")
+@click.option("--save", type=click.Path(dir_okay=False), help="Write the model as JSON here.")
+@click.option("--force", is_flag=True, help="Overwrite --save's file.")
+@_friendly_errors
+def ident_ar(
+    file, Ts, input_col, output_col, detrend, normalize, na, approach, split, as_json, save, force
+):
+    """Estimate an AR(NA) model A y = e of the output alone (a time series; inputs ignored)."""
+    from rwlab import ident as idm
+    from rwlab.data import IOData
+
+    data = _load(file, Ts, input_col, output_col, detrend, normalize)
+    data = IOData(
+        None,
+        data.y,
+        data.Ts,
+        output_names=data.output_names,
+        output_units=data.output_units,
+        tstart=data.tstart,
+        name=data.name,
+    )
+    est, val = (data, None) if split >= 1 else data.split(split)
+    model = idm.ar(est, na, approach)
+    result = {"model": model.to_dict()}
+    if val is not None:
+        cmp = idm.compare(model, val)  # a time series: 1-step prediction
+        res = idm.resid(model, val, max_lag=min(25, val.N // 2 - 1))
+        result["validation"] = {
+            "prediction_fit_percent": cmp.fit_percent,
+            "mse": cmp.mse,
+            "residuals_white": res.white,
+            "whiteness_p": res.whiteness_p,
+        }
+    if save:
+        model.save(save, overwrite=force)
+    if as_json:
+        _echo_json(result)
+        return
+    click.echo(f"data: {data!r}, estimation {est.N} samples")
+    click.echo(str(model))
+    if val is not None:
+        v = result["validation"]
+        click.echo(
+            f"validation ({val.N} samples, 1-step prediction): fit "
+            f"{v['prediction_fit_percent']:.2f} %, MSE {v['mse']:.4g}; residuals "
+            f"{'white' if v['residuals_white'] else 'NOT white'} (p = {v['whiteness_p']:.3f})"
+        )
+    if save:
+        click.echo(f"model written to {save}")
+
+
 @ident.command("delay")
 @_data_options
 @click.option("--na", type=int, default=2, show_default=True)

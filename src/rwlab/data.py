@@ -141,8 +141,9 @@ class IOData:
 
     Parameters
     ----------
-    u : array_like, shape (N,) or (N, nu)
-        Input samples. ``nu`` may be 0 for time series (pass an (N, 0) array).
+    u : array_like, shape (N,) or (N, nu), or None
+        Input samples. ``None`` (or an (N, 0) array): no input, a time series
+        (MATLAB ``iddata(y, [], Ts)``).
     y : array_like, shape (N,) or (N, ny)
         Output samples.
     Ts : float
@@ -179,8 +180,8 @@ class IOData:
         name: str = "",
     ) -> None:
         self.Ts = check_Ts(Ts)
-        self.u = _as_matrix(u, "u")
         self.y = _as_matrix(y, "y")
+        self.u = np.zeros((self.y.shape[0], 0)) if u is None else _as_matrix(u, "u")
         if self.u.shape[0] != self.y.shape[0]:
             raise DataError(
                 f"u has {self.u.shape[0]} samples but y has {self.y.shape[0]}; "

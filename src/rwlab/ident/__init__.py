@@ -1,12 +1,14 @@
 """System identification with MATLAB System Identification Toolbox semantics.
 
-Estimators: :func:`arx`, :func:`armax`, :func:`oe`, :func:`bj`, :func:`pem`.
+Estimators: :func:`arx`, :func:`armax`, :func:`oe`, :func:`bj`, :func:`pem`;
+time series (no input): :func:`ar`, and ``arx``/``armax`` on an output-only record.
 Structure: :func:`delayest`, :func:`delay_scan`, :func:`arxstruc`, :func:`selstruc`.
 Validation: :func:`compare`, :func:`resid`, :func:`fit_percent`, :func:`mse`.
 Models: :class:`PolyModel` (``idpoly``) and :func:`c2d`.
 """
 
 from rwlab.ident import pem  # the module; calling it calls pem.pem (see rwlab.ident.pem)
+from rwlab.ident.ar import ar
 from rwlab.ident.arx import arx
 from rwlab.ident.models import PolyModel, c2d
 from rwlab.ident.pem import armax, bj, oe
@@ -15,6 +17,7 @@ from rwlab.ident.validation import compare, fit_percent, fpe, mse, resid
 
 __all__ = [
     "PolyModel",
+    "ar",
     "armax",
     "arx",
     "arxstruc",

@@ -33,6 +33,10 @@ def check_order(name: str, value, minimum: int = 0) -> int:
     return int(value)
 
 
+def _is_empty(value) -> bool:
+    return isinstance(value, Sequence) and len(value) == 0
+
+
 def _per_input(name: str, value, nu: int, minimum: int) -> list[int]:
     values = list(value) if isinstance(value, Sequence) else [value] * nu
     if len(values) != nu:
@@ -117,8 +121,11 @@ def _solve(experiments, na, nb, nk, n0=None):
     return theta, R11, float(r22**2), rows
 
 
-def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
+def arx(data: IOData | Sequence[IOData], na: int, nb=None, nk=None) -> PolyModel:
     """Estimate an ARX model by least squares (MATLAB ``arx(data, [na nb nk])``).
+
+    With no input (a time series) this is the AR model ``A y = e`` by forward
+    least squares (MATLAB ``arx(y, na)``; see also :func:`rwlab.ident.ar`).
 
     Parameters
     ----------
@@ -126,10 +133,10 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
         Single-output record(s); several experiments are estimated jointly.
     na : int
         Order of A (≥ 0).
-    nb : int or sequence of int
-        Number of B coefficients per input (≥ 0).
-    nk : int or sequence of int
-        Input delay in samples per input (≥ 0).
+    nb : int or sequence of int, optional
+        Number of B coefficients per input (≥ 0; default 2). Omit for a time series.
+    nk : int or sequence of int, optional
+        Input delay in samples per input (≥ 0; default 1). Omit for a time series.
 
     Returns
     -------
@@ -139,8 +146,12 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
     """
     experiments = as_experiments(data)
     first = experiments[0]
-    if first.ny != 1 or first.nu < 1:
-        raise DataError("arx needs one output and at least one input channel")
+    if first.ny != 1:
+        raise DataError(f"arx estimates single-output models; the data have {first.ny} outputs")
+    if first.nu == 0 and not all(v is None or _is_empty(v) for v in (nb, nk)):
+        raise DataError("the data have no input (a time series): omit nb and nk, arx(data, na)")
+    nb = 2 if nb is None else nb
+    nk = 1 if nk is None else nk
     na = check_order("na", na)
     nb = _per_input("nb", nb, first.nu, 0)
     nk = _per_input("nk", nk, first.nu, 0)
@@ -159,7 +170,7 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=2, nk=1) -> PolyModel:
         pos += b
     model = PolyModel(
         A,
-        B if first.nu != 1 else B[0],
+        (B if first.nu != 1 else B[0]) if first.nu else None,
         Ts=first.Ts,
         nk=nk,
         nb=nb,

@@ -4,8 +4,10 @@
 Polynomials are in q⁻¹ with MATLAB's layout: ``A = [1, a1, ..., a_na]`` and
 ``B`` carrying ``nk`` leading zeros (``B = [0, b1, b2]`` for nk = 1).
 
-Several inputs (MISO) are supported with ``F = 1``: then ``B`` is a 2-D array
-with one row per input (rows padded with trailing zeros).
+Several inputs (MISO): ``B`` and ``F`` are 2-D arrays with one row per input
+(rows padded with trailing zeros), so ``y = Σⱼ [Bⱼ/(A Fⱼ)] uⱼ + [C/(A D)] e``.
+No input (a time series, MATLAB ``idpoly(A, [], C)``): ``B=None``; then
+``A y = (C/D) e``.
 
 The sample time ``Ts`` (seconds) is required. Continuous-time conversion
 (:meth:`PolyModel.d2c`) is written here because python-control has no d2c.
@@ -41,6 +43,21 @@ def _monic(p, name: str) -> np.ndarray:
     return arr
 
 
+def _denominators(F, nu: int) -> np.ndarray:
+    """F as an (nu, L) array of monic rows (one per input; a 1-D F is shared by all inputs)."""
+    arr = np.array(1.0 if F is None else F, dtype=float)
+    rows = np.atleast_2d(arr)
+    if nu == 0 and arr.size > 1:
+        raise ModelError("a model without input (time series) has no F")
+    if arr.ndim <= 1:
+        rows = np.repeat(_monic(arr, "F")[None, :], nu, axis=0)
+    if rows.ndim != 2 or rows.shape[0] != nu or rows.shape[1] == 0:
+        raise ModelError(f"F must be 1-D, or 2-D with one row per input ({nu}); got {arr.shape}")
+    for row in rows:
+        _monic(row, "F")
+    return rows
+
+
 def _leading_zeros(row: np.ndarray) -> int:
     nz = np.flatnonzero(row)
     return int(nz[0]) if nz.size else len(row)
@@ -51,10 +68,13 @@ class PolyModel:
 
     Parameters
     ----------
-    A, C, D, F : array_like, optional
-        Monic polynomials in q⁻¹ (default 1). ``F`` must be 1 for several inputs.
-    B : array_like
+    A, C, D : array_like, optional
+        Monic polynomials in q⁻¹ (default 1).
+    B : array_like or None
         Shape (nb_total,) for one input, (nu, L) for several; ``nk`` leading zeros.
+        ``None`` (or shape (0, L)): no input, a time-series model ``A y = (C/D) e``.
+    F : array_like, optional
+        Monic, shape (nf+1,), or (nu, L) with one row per input (default 1).
     Ts : float
         Sample time in seconds (required, > 0).
     nk : int or sequence of int, optional
@@ -63,6 +83,9 @@ class PolyModel:
         Number of free B coefficients per input, from ``b_nk`` on (default: the
         rest of each row). Give it when rows are padded with trailing zeros,
         e.g. for several inputs with different ``nb + nk``.
+    nf : int or sequence of int, optional
+        Order of F per input (default: the width of F's rows minus one). Give
+        it when F's rows are padded with trailing zeros.
     noise_variance : float, optional
         Variance of the innovation e(t).
     covariance : array_like, shape (d, d), optional
@@ -84,6 +107,7 @@ class PolyModel:
         Ts,
         nk=None,
         nb=None,
+        nf=None,
         noise_variance: float | None = None,
         covariance=None,
         report: dict | None = None,
@@ -94,16 +118,21 @@ class PolyModel:
         self.A = _monic(A, "A")
         self.C = _monic(C, "C")
         self.D = _monic(D, "D")
-        self.F = _monic(F, "F")
-        if B is None:
-            raise ModelError("B is required (use B=[0, b1, ...] with nk leading zeros)")
-        B2 = np.atleast_2d(np.array(B, dtype=float))
+        no_input = B is None or np.size(B) == 0
+        B2 = np.zeros((0, 1)) if no_input else np.atleast_2d(np.array(B, dtype=float))
         if B2.ndim != 2 or not np.all(np.isfinite(B2)):
             raise ModelError("B must be a finite 1-D array, or 2-D with one row per input")
         self._B = B2
         self.nu = B2.shape[0]
-        if self.nu > 1 and len(self.F) > 1:
-            raise ModelError("several inputs are supported with F = 1 only (ARX/ARMAX form)")
+        self._F = _denominators(F, self.nu)
+        width_f = self._F.shape[1]
+        nf = [width_f - 1] * self.nu if nf is None else [int(n) for n in np.atleast_1d(nf)]
+        if len(nf) != self.nu or any(n < 0 or n + 1 > width_f for n in nf):
+            raise ModelError(f"nf must give one order per input with nf < {width_f}, got {nf}")
+        for row, n in zip(self._F, nf, strict=True):
+            if np.any(row[n + 1 :] != 0):
+                raise ModelError(f"F must end with zeros after its nf = {n} coefficients")
+        self._nf = tuple(nf)
         if nk is None:
             nk = [_leading_zeros(r) for r in B2]
         nk = [int(k) for k in np.atleast_1d(nk)]
@@ -131,7 +160,7 @@ class PolyModel:
         self.report = dict(report or {})
         self.input_name = input_name
         self.output_name = output_name
-        for arr in (self.A, self.C, self.D, self.F, self._B):
+        for arr in (self.A, self.C, self.D, self._F, self._B):
             arr.setflags(write=False)
 
     # -- structure ---------------------------------------------------------------
@@ -139,6 +168,24 @@ class PolyModel:
     def B(self) -> np.ndarray:
         """B in MATLAB layout: 1-D for one input, (nu, L) for several."""
         return self._B[0] if self.nu == 1 else self._B
+
+    @property
+    def F(self) -> np.ndarray:
+        """F in MATLAB layout: 1-D for one input (or none), (nu, L) for several."""
+        if self.nu == 0:
+            return np.ones(1)
+        return self._F[0, : self._nf[0] + 1] if self.nu == 1 else self._F
+
+    def _den(self, j: int) -> np.ndarray:
+        """A·Fⱼ, the denominator of input j's transfer function."""
+        return np.convolve(self.A, self._F[j, : self._nf[j] + 1])
+
+    def _all_den(self, first: np.ndarray) -> np.ndarray:
+        """``first`` times every Fⱼ: a common denominator over all inputs."""
+        out = np.asarray(first, float)
+        for row, n in zip(self._F, self._nf, strict=True):
+            out = np.convolve(out, row[: n + 1])
+        return out
 
     @property
     def na(self) -> int:
@@ -153,29 +200,38 @@ class PolyModel:
         return len(self.D) - 1
 
     @property
-    def nf(self) -> int:
-        return len(self.F) - 1
+    def nf(self) -> int | tuple[int, ...]:
+        """Order of F: an int for one input (0 for none), a tuple per input for several."""
+        if self.nu <= 1:
+            return self._nf[0] if self.nu else 0
+        return self._nf
 
     @property
     def structure(self) -> str:
         """MATLAB-style name of the structure and orders, e.g. ``ARX221`` or ``BJ22221``."""
+        if self.nu == 0:
+            if self.nd:
+                return f"POLY{self.na}{self.nc}{self.nd}"
+            return f"ARMA{self.na}{self.nc}" if self.nc else f"AR{self.na}"
         nb = "".join(map(str, self.nb)) if self.nu == 1 else str(list(self.nb))
         nk = "".join(map(str, self.nk)) if self.nu == 1 else str(list(self.nk))
-        if self.nf == 0 and self.nd == 0:
+        nf = "".join(map(str, self._nf)) if self.nu == 1 else str(list(self._nf))
+        if not any(self._nf) and self.nd == 0:
             if self.nc == 0:
                 return f"ARX{self.na}{nb}{nk}"
             return f"ARMAX{self.na}{nb}{self.nc}{nk}"
         if self.na == 0 and self.nc == 0 and self.nd == 0:
-            return f"OE{nb}{self.nf}{nk}"
+            return f"OE{nb}{nf}{nk}"
         if self.na == 0:
-            return f"BJ{nb}{self.nc}{self.nd}{self.nf}{nk}"
-        return f"POLY{self.na}{nb}{self.nc}{self.nd}{self.nf}{nk}"
+            return f"BJ{nb}{self.nc}{self.nd}{nf}{nk}"
+        return f"POLY{self.na}{nb}{self.nc}{self.nd}{nf}{nk}"
 
     @property
     def parameters(self) -> np.ndarray:
-        """Free parameters: a…, b… (per input, from b_nk), c…, d…, f… (MATLAB order)."""
+        """Free parameters: a…, b… (per input, from b_nk), c…, d…, f… (per input; MATLAB order)."""
         bs = [row[k : k + n] for row, k, n in zip(self._B, self.nk, self.nb, strict=True)]
-        return np.concatenate([self.A[1:], *bs, self.C[1:], self.D[1:], self.F[1:]])
+        fs = [row[1 : n + 1] for row, n in zip(self._F, self._nf, strict=True)]
+        return np.concatenate([self.A[1:], *bs, self.C[1:], self.D[1:], *fs])
 
     @property
     def parameter_names(self) -> list[str]:
@@ -185,12 +241,14 @@ class PolyModel:
             names += [f"b{tag}{i}" for i in range(k, k + n)]
         names += [f"c{i}" for i in range(1, self.nc + 1)]
         names += [f"d{i}" for i in range(1, self.nd + 1)]
-        names += [f"f{i}" for i in range(1, self.nf + 1)]
+        for j, n in enumerate(self._nf):
+            tag = "" if self.nu == 1 else f"[{j + 1}]"
+            names += [f"f{tag}{i}" for i in range(1, n + 1)]
         return names
 
     @property
     def n_params(self) -> int:
-        return self.na + sum(self.nb) + self.nc + self.nd + self.nf
+        return self.na + sum(self.nb) + self.nc + self.nd + sum(self._nf)
 
     @property
     def parameter_std(self) -> np.ndarray | None:
@@ -213,7 +271,7 @@ class PolyModel:
         return arr
 
     def simulate(self, u, initial: str = "zero") -> np.ndarray:
-        """Noise-free output ``y = B/(A F) u``.
+        """Noise-free output ``y = Σⱼ Bⱼ/(A Fⱼ) uⱼ`` (zero for a time series, as MATLAB's ``sim``).
 
         Parameters
         ----------
@@ -230,13 +288,16 @@ class PolyModel:
         """
         initial = check_initial(initial)
         u2 = self._inputs(u)
-        den = np.convolve(self.A, self.F)
-        yhat = sum(filt(b, den, u2[:, j], initial == "steady") for j, b in enumerate(self._B))
-        if initial != "estimate":
+        yhat = np.zeros(u2.shape[0])
+        for j, b in enumerate(self._B):
+            yhat = yhat + filt(b, self._den(j), u2[:, j], initial == "steady")
+        if initial != "estimate" or self.nu == 0:
             return yhat
         if not isinstance(u, IOData) or u.ny != 1:
             raise DataError("initial='estimate' needs an IOData with the measured output")
-        n = max(len(den), self._B.shape[1]) - 1
+        # every term shares the denominator A·F₁·…·F_nu (term j: numerator Bⱼ·Πᵢ≠ⱼ Fᵢ)
+        den = self._all_den(self.A)
+        n = max(len(den), self._B.shape[1] + sum(self._nf)) - 1
         return fit_initial(u.y[:, 0], yhat, den, n)
 
     def predict(self, data: IOData, horizon: float = 1, initial: str = "zero") -> np.ndarray:
@@ -272,15 +333,17 @@ class PolyModel:
         u = self._inputs(data)
         num_y = np.convolve(hk, AD)
         num_u = [np.convolve(np.convolve(hk, self.D), b) for b in self._B]
-        den_u = np.convolve(self.C, self.F)
         yhat = y - filt(num_y, self.C, y, steady)
         for j, num in enumerate(num_u):
+            den_u = np.convolve(self.C, self._F[j, : self._nf[j] + 1])
             yhat = yhat + filt(num, den_u, u[:, j], steady)
         if initial != "estimate":
             return yhat
-        # every filter above is a filter with denominator C·F (y's: numerator num_y·F)
-        n = max(len(den_u), len(num_y) + self.nf, *map(len, num_u)) - 1
-        return fit_initial(y, yhat, den_u, n)
+        # every filter above has the common denominator C·F₁·…·F_nu
+        den = self._all_den(self.C)
+        extra = sum(self._nf)
+        n = max(len(den), len(num_y) + extra, *[len(v) + extra for v in num_u]) - 1
+        return fit_initial(y, yhat, den, n)
 
     def step_response(self, n: int, input_index: int = 0) -> np.ndarray:
         """Response to a unit step on one input, ``n`` samples from rest, shape (n,)."""
@@ -299,13 +362,17 @@ class PolyModel:
         """G(e^{jωTs}) at ``omega`` (rad/s); shape (len(omega),), or (nu, len(omega))."""
         w = np.atleast_1d(np.asarray(omega, dtype=float))
         zinv = np.exp(-1j * w * self.Ts)
-        den = np.polyval(np.convolve(self.A, self.F)[::-1], zinv)
-        out = np.array([np.polyval(b[::-1], zinv) / den for b in self._B])
+        out = np.array(
+            [
+                np.polyval(b[::-1], zinv) / np.polyval(self._den(j)[::-1], zinv)
+                for j, b in enumerate(self._B)
+            ]
+        ).reshape(self.nu, w.size)
         return out[0] if self.nu == 1 else out
 
     def poles(self) -> np.ndarray:
-        """Poles of the input–output part B/(A F), in z."""
-        return roots_z(np.convolve(self.A, self.F))
+        """Poles of the input–output part B/(A F) (of A·F₁·…·F_nu with several inputs), in z."""
+        return roots_z(self._all_den(self.A))
 
     def zeros(self, input_index: int = 0) -> np.ndarray:
         """Finite nonzero-delay zeros of B for one input, in z."""
@@ -314,23 +381,21 @@ class PolyModel:
 
     def dc_gain(self) -> np.ndarray | float:
         """Static gain B(1)/(A(1) F(1)) per input."""
-        den = np.sum(self.A) * np.sum(self.F)
-        if abs(den) < 1e-14:
-            return np.inf if self.nu == 1 else np.full(self.nu, np.inf)
-        g = self._B.sum(axis=1) / den
+        den = np.array([np.sum(self._den(j)) for j in range(self.nu)])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(np.abs(den) < 1e-14, np.inf, self._B.sum(axis=1) / den)
         return float(g[0]) if self.nu == 1 else g
 
     def is_stable(self) -> bool:
         """True when every pole of B/(A F) is strictly inside the unit circle."""
-        return is_stable(np.convolve(self.A, self.F))
+        return is_stable(self._all_den(self.A))
 
     # -- python-control ----------------------------------------------------------
     def to_tf(self) -> control.TransferFunction:
         """G(z) = B/(A F) as a discrete ``control.TransferFunction`` (dt = Ts), 1×nu."""
-        den = np.convolve(self.A, self.F)
         nums, dens = [], []
-        for b in self._B:
-            n, d = to_z(b, den)
+        for j, b in enumerate(self._B):
+            n, d = to_z(b, self._den(j))
             nums.append(n)
             dens.append(d)
         return control.tf([nums], [dens], self.Ts)
@@ -403,6 +468,7 @@ class PolyModel:
             "F": self.F.tolist(),
             "nk": list(self.nk),
             "nb": list(self.nb),
+            "nf": list(self._nf),
             "noise_variance": self.noise_variance,
             "covariance": None if self.covariance is None else self.covariance.tolist(),
             "parameter_names": self.parameter_names,
@@ -426,6 +492,7 @@ class PolyModel:
                 Ts=d["Ts"],
                 nk=d["nk"],
                 nb=d.get("nb"),
+                nf=d.get("nf"),
                 noise_variance=d.get("noise_variance"),
                 covariance=d.get("covariance"),
                 report=d.get("report"),
@@ -476,17 +543,22 @@ class PolyModel:
             s = " ".join(terms)
             return s[2:] if s.startswith("+ ") else ("-" + s[2:] if s.startswith("- ") else s)
 
-        kinds = {"A": self.na, "C": self.nc, "D": self.nd, "F": self.nf}
+        kinds = {"A": self.na, "C": self.nc, "D": self.nd}
         lines = [f"Discrete-time {self.structure} model (Ts = {self.Ts:g} s)"]
         if self.na:
             lines.append(f"  A(z) = {poly('A', self.A, 0)}")
-        for j, (row, k) in enumerate(zip(self._B, self.nk, strict=True)):
+        for j, (row, k, b) in enumerate(zip(self._B, self.nk, self.nb, strict=True)):
             tag = "" if self.nu == 1 else f"[{j + 1}]"
             label = "B(z)" if self.nu == 1 else f"B{j + 1}(z)"
-            lines.append(f"  {label} = {poly('B', row, k, tag)}")
-        for letter in "CDF":
+            lines.append(f"  {label} = {poly('B', row[: k + b], k, tag)}")
+        for letter in "CD":
             if kinds[letter]:
                 lines.append(f"  {letter}(z) = {poly(letter, getattr(self, letter), 0)}")
+        for j, n in enumerate(self._nf):
+            if n:
+                tag = "" if self.nu == 1 else f"[{j + 1}]"
+                label = "F(z)" if self.nu == 1 else f"F{j + 1}(z)"
+                lines.append(f"  {label} = {poly('F', self._F[j, : n + 1], 0, tag)}")
         if self.noise_variance is not None:
             lines.append(f"  noise variance: {self.noise_variance:.4g}")
         rep = self.report

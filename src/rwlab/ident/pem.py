@@ -58,45 +58,87 @@ EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-fre
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
 
+def _per_input_tuple(value, nu: int) -> tuple[int, ...]:
+    values = np.atleast_1d(np.asarray(value, dtype=int)).tolist()
+    return tuple(values * nu if len(values) == 1 and nu != 1 else values)
+
+
 @dataclass(frozen=True)
 class _Orders:
+    """Orders of ``A y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + (C/D) e``; nb, nf, nk per input.
+
+    An int for nb, nf or nk means one input (nb) or the same for every input (nf, nk);
+    ``nb=()`` means no input (a time series).
+    """
+
     na: int
-    nb: int
+    nb: tuple[int, ...]
     nc: int
     nd: int
-    nf: int
-    nk: int
+    nf: tuple[int, ...]
+    nk: tuple[int, ...]
     steady: bool = False  # pre-sample values: zero, or each signal's first value
+
+    def __post_init__(self):
+        nb = tuple(int(b) for b in np.atleast_1d(self.nb))
+        object.__setattr__(self, "nb", nb)
+        for name in ("nf", "nk"):
+            values = _per_input_tuple(getattr(self, name), len(nb))
+            if len(values) != len(nb):
+                raise DataError(f"{name} needs one value per input ({len(nb)}), got {values}")
+            object.__setattr__(self, name, values)
+
+    @property
+    def nu(self) -> int:
+        return len(self.nb)
 
     @property
     def d(self) -> int:
-        return self.na + self.nb + self.nc + self.nd + self.nf
+        return self.na + sum(self.nb) + self.nc + self.nd + sum(self.nf)
 
     def unpack(self, theta: np.ndarray):
-        """θ → (A, B, C, D, F) polynomials in q⁻¹."""
-        i = np.cumsum([0, self.na, self.nb, self.nc, self.nd, self.nf])
-        B = np.zeros(self.nk + self.nb)
-        B[self.nk :] = theta[i[1] : i[2]]
-        mon = lambda k: np.concatenate([[1.0], theta[i[k] : i[k + 1]]])  # noqa: E731
-        return mon(0), B, mon(2), mon(3), mon(4)
+        """θ → (A, [B₁ …], C, D, [F₁ …]) polynomials in q⁻¹."""
+        pos = 0
 
-    def pack(self, A, B, C, D, F) -> np.ndarray:
-        return np.concatenate([A[1:], B[self.nk : self.nk + self.nb], C[1:], D[1:], F[1:]])
+        def take(n: int) -> np.ndarray:
+            nonlocal pos
+            pos += n
+            return theta[pos - n : pos]
+
+        A = np.concatenate([[1.0], take(self.na)])
+        Bs = [np.concatenate([np.zeros(k), take(b)]) for b, k in zip(self.nb, self.nk, strict=True)]
+        C = np.concatenate([[1.0], take(self.nc)])
+        D = np.concatenate([[1.0], take(self.nd)])
+        Fs = [np.concatenate([[1.0], take(f)]) for f in self.nf]
+        return A, Bs, C, D, Fs
+
+    def pack(self, A, Bs, C, D, Fs) -> np.ndarray:
+        bs = [B[k : k + b] for B, b, k in zip(Bs, self.nb, self.nk, strict=True)]
+        fs = [F[1 : f + 1] for F, f in zip(Fs, self.nf, strict=True)]
+        return np.concatenate([A[1 : self.na + 1], *bs, C[1:], D[1:], *fs])
 
 
 def _stabilized(orders: _Orders, theta: np.ndarray) -> np.ndarray:
-    A, B, C, D, F = orders.unpack(theta)
-    return orders.pack(A, B, stabilize(C), stabilize(D), stabilize(F))
+    A, Bs, C, D, Fs = orders.unpack(theta)
+    return orders.pack(A, Bs, stabilize(C), stabilize(D), [stabilize(F) for F in Fs])
+
+
+def _columns(u: np.ndarray) -> np.ndarray:
+    """Inputs as an (N, nu) array (a 1-D u is one input)."""
+    return u[:, None] if u.ndim == 1 else u
 
 
 def _signals(orders: _Orders, theta, y, u):
-    """ε, w = (B/F) u and v = A y − w for one experiment."""
-    A, B, C, D, F = orders.unpack(theta)
+    """ε, [wⱼ = (Bⱼ/Fⱼ) uⱼ] and v = A y − Σⱼ wⱼ for one experiment."""
+    A, Bs, C, D, Fs = orders.unpack(theta)
     st = orders.steady
-    w = filt(B, F, u, st)
-    v = (filt(A, [1.0], y, st) if orders.na else y) - w
+    u = _columns(u)
+    ws = [filt(B, F, u[:, j], st) for j, (B, F) in enumerate(zip(Bs, Fs, strict=True))]
+    v = filt(A, [1.0], y, st) if orders.na else y
+    for w in ws:
+        v = v - w
     e = filt(D, C, v, st) if (orders.nc or orders.nd) else v
-    return e, w, v
+    return e, ws, v
 
 
 def _sse(orders, theta, experiments) -> float:
@@ -107,14 +149,14 @@ def _sse(orders, theta, experiments) -> float:
     return total
 
 
-def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
+def _jacobian_block(orders: _Orders, theta, y, u, e, ws, v) -> np.ndarray:
     """ψᵀ = (∂ε/∂θ)ᵀ for one experiment, shape (d, N): one contiguous row per parameter."""
-    _A, _B, C, D, F = orders.unpack(theta)
+    C, D, Fs = orders.unpack(theta)[2:]
     N = len(y)
+    u = _columns(u)
     psi_t = np.empty((orders.d, N))
     row = 0
     noise = orders.nc or orders.nd
-    CF = np.convolve(C, F)
     st = orders.steady
 
     def put(signal, first_lag, count, sign):
@@ -127,16 +169,21 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, w, v) -> np.ndarray:
                 psi_t[row] *= -1.0  # a contiguous row: safe in place
             row += 1
 
+    def through_noise_and_f(x, F):  # (D/(C F)) x
+        return filt(D, np.convolve(C, F), x, st) if (noise or len(F) > 1) else x
+
     if orders.na:
         put(filt(D, C, y, st) if noise else y, 1, orders.na, +1)
-    if orders.nb:
-        put(filt(D, CF, u, st) if (noise or orders.nf) else u, orders.nk, orders.nb, -1)
+    for j, (b, k) in enumerate(zip(orders.nb, orders.nk, strict=True)):
+        if b:
+            put(through_noise_and_f(u[:, j], Fs[j]), k, b, -1)
     if orders.nc:
         put(filt([1.0], C, e, st), 1, orders.nc, -1)
     if orders.nd:
         put(filt([1.0], C, v, st), 1, orders.nd, +1)
-    if orders.nf:
-        put(filt(D, CF, w, st), 1, orders.nf, +1)
+    for j, f in enumerate(orders.nf):
+        if f:
+            put(through_noise_and_f(ws[j], Fs[j]), 1, f, +1)
     return psi_t
 
 
@@ -229,95 +276,157 @@ def _arma_hannan_rissanen(v: np.ndarray, nc: int, nd: int) -> tuple[np.ndarray, 
     return stabilize(C), stabilize(D)
 
 
+def _input_lags(u: np.ndarray, nb, nk, n0: int) -> list[np.ndarray]:
+    """Lagged columns uⱼ(t−nkⱼ−i), i < nbⱼ, of every input, rows t = n0..N−1."""
+    u = _columns(u)
+    return [
+        c for j, (b, k) in enumerate(zip(nb, nk, strict=True)) for c in _lags(u[:, j], k, b, n0)
+    ]
+
+
+def _first_row(nb, nk, *others: int) -> int:
+    return max([*others, *[k + b - 1 for b, k in zip(nb, nk, strict=True)], 0])
+
+
+def _split_b(th: np.ndarray, nb, nk) -> list[np.ndarray]:
+    """Consecutive coefficient blocks of θ → one B per input, with nk leading zeros."""
+    out, pos = [], 0
+    for b, k in zip(nb, nk, strict=True):
+        out.append(np.concatenate([np.zeros(k), th[pos : pos + b]]))
+        pos += b
+    return out
+
+
 def _initial_armax(orders: _Orders, experiments) -> np.ndarray:
     """Hannan–Rissanen: long ARX residuals ê, then y on lags of y, u and ê."""
     na, nb, nc, nk = orders.na, orders.nb, orders.nc, orders.nk
-    long = max(10, 2 * (na + nc), na + nb)
+    long = max(10, 2 * (na + nc), na + max(nb, default=0))
+    longs = (long,) * orders.nu
     cols_all, targets = [], []
-    ehats = []
     for y, u in experiments:
-        n0 = max(long, nk + long - 1)
-        cols = [-c for c in _lags(y, 1, long, n0)] + _lags(u, nk, long, n0)
-        th = _least_squares(cols, y[n0:])
-        A_long = np.concatenate([[1.0], th[:long]])
-        B_long = np.concatenate([np.zeros(nk), th[long:]])
-        ehat = np.convolve(y, A_long)[: len(y)] - np.convolve(u, B_long)[: len(u)]
-        ehats.append(ehat)
-    for (y, u), ehat in zip(experiments, ehats, strict=True):
-        n0 = max(long, nk + long - 1, na, nk + nb - 1, nc)
-        cols_all.append(
-            np.column_stack(
-                [-c for c in _lags(y, 1, na, n0)] + _lags(u, nk, nb, n0) + _lags(ehat, 1, nc, n0)
-            )
+        n0 = _first_row(longs, nk, long)
+        th = _least_squares(
+            [-c for c in _lags(y, 1, long, n0)] + _input_lags(u, longs, nk, n0), y[n0:]
         )
+        ehat = np.convolve(y, np.concatenate([[1.0], th[:long]]))[: len(y)]
+        for j, B in enumerate(_split_b(th[long:], longs, nk)):
+            ehat = ehat - np.convolve(_columns(u)[:, j], B)[: len(y)]
+        n0 = max(_first_row(longs, nk, long), _first_row(nb, nk, na, nc))
+        cols = (
+            [-c for c in _lags(y, 1, na, n0)] + _input_lags(u, nb, nk, n0) + _lags(ehat, 1, nc, n0)
+        )
+        cols_all.append(np.column_stack(cols))
         targets.append(y[n0:])
     th = _least_squares(list(np.vstack(cols_all).T), np.concatenate(targets))
     A = np.concatenate([[1.0], th[:na]])
-    B = np.zeros(nk + nb)
-    B[nk:] = th[na : na + nb]
-    C = stabilize(np.concatenate([[1.0], th[na + nb :]]))
-    return orders.pack(A, B, C, np.ones(1), np.ones(1))
+    Bs = _split_b(th[na:], nb, nk)
+    C = stabilize(np.concatenate([[1.0], th[na + sum(nb) :]]))
+    return orders.pack(A, Bs, C, np.ones(1), [np.ones(1)] * orders.nu)
 
 
-def _initial_oe(nb: int, nf: int, nk: int, experiments, iterations: int = 3):
-    """B and F by ARX(nf, nb, nk), then instrumental variables with simulated instruments."""
-    n0 = max(nf, nk + nb - 1)
+def _initial_oe(nb, nf: int, nk, experiments, iterations: int = 3):
+    """Bⱼ and a common F by ARX(nf, nb, nk), then instrumental variables with simulated
+    instruments. Returns ([B₁ …], F)."""
+    nb, nk = tuple(np.atleast_1d(nb)), tuple(np.atleast_1d(nk))
+    n0 = _first_row(nb, nk, nf)
 
-    def regress(instrumented: bool, B, F):
+    def regress(instrumented: bool, Bs, F):
         Phi, Z, T = [], [], []
         for y, u in experiments:
-            cols = [-c for c in _lags(y, 1, nf, n0)] + _lags(u, nk, nb, n0)
-            Phi.append(np.column_stack(cols))
+            inputs = _input_lags(u, nb, nk, n0)
+            Phi.append(np.column_stack([-c for c in _lags(y, 1, nf, n0)] + inputs))
             T.append(y[n0:])
             if instrumented:
-                x = sps.lfilter(B, F, u)
-                Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + _lags(u, nk, nb, n0)))
+                x = sum(sps.lfilter(B, F, _columns(u)[:, j]) for j, B in enumerate(Bs))
+                Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + inputs))
         Phi, T = np.vstack(Phi), np.concatenate(T)
         if not instrumented:
             return _least_squares(list(Phi.T), T)
         Z = np.vstack(Z)
         return np.linalg.lstsq(Z.T @ Phi, Z.T @ T, rcond=None)[0]
 
-    B = np.zeros(nk + nb)
-    F = np.ones(1)
-    th = regress(False, B, F)
+    th = regress(False, None, None)
     for i in range(iterations + 1):
         F = stabilize(np.concatenate([[1.0], th[:nf]]))
-        B = np.zeros(nk + nb)
-        B[nk:] = th[nf:]
+        Bs = _split_b(th[nf:], nb, nk)
         if i < iterations:
-            th = regress(True, B, F)
-    return B, F
+            th = regress(True, Bs, F)
+    return Bs, F
+
+
+def _initial_dynamics(orders: _Orders, experiments, sweeps: int = 2):
+    """Bⱼ and Fⱼ per input: one input at a time on the output less the other inputs'
+    simulated contributions (backfitting), each by :func:`_initial_oe`."""
+    if orders.nu == 1:
+        Bs, F = _initial_oe(orders.nb, orders.nf[0], orders.nk, experiments)
+        return Bs, [F]
+    Bs = [np.zeros(k + b) for b, k in zip(orders.nb, orders.nk, strict=True)]
+    Fs = [np.ones(1)] * orders.nu
+    for _ in range(sweeps):
+        for j in range(orders.nu):
+            parts = []
+            for y, u in experiments:
+                u = _columns(u)
+                others = sum(sps.lfilter(Bs[i], Fs[i], u[:, i]) for i in range(orders.nu) if i != j)
+                parts.append((y - others, u[:, j]))
+            (Bs[j],), Fs[j] = _initial_oe(orders.nb[j], orders.nf[j], orders.nk[j], parts)
+    return Bs, Fs
+
+
+def _simulated(Bs, Fs, u) -> np.ndarray:
+    u = _columns(u)
+    return sum(
+        (sps.lfilter(B, F, u[:, j]) for j, (B, F) in enumerate(zip(Bs, Fs, strict=True))),
+        np.zeros(len(u)),
+    )
 
 
 def _initial_bj(orders: _Orders, experiments) -> np.ndarray:
-    B, F = _initial_oe(orders.nb, orders.nf, orders.nk, experiments)
-    v = np.concatenate([y - sps.lfilter(B, F, u) for y, u in experiments])
+    Bs, Fs = _initial_dynamics(orders, experiments)
+    v = np.concatenate([y - _simulated(Bs, Fs, u) for y, u in experiments])
     C, D = _arma_hannan_rissanen(v, orders.nc, orders.nd)
-    return orders.pack(np.ones(1), B, C, D, F)
+    return orders.pack(np.ones(1), Bs, C, D, Fs)
 
 
 # -- public estimators ---------------------------------------------------------------
-def _prepare(data, orders: _Orders):
+def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
+    """One order per input (MATLAB's order vectors); a scalar applies to every input."""
+    if nu == 0:
+        if value is None or (isinstance(value, Sequence) and len(value) == 0):
+            return ()
+        raise DataError(
+            f"the data have no input (a time series), so {name} must be omitted or []; "
+            "an ARMA model is armax(data, na, nc=...)"
+        )
+    if value is None:
+        raise DataError(f"{name} is required: the data have {nu} input(s)")
+    values = list(value) if isinstance(value, Sequence) else [value] * nu
+    if len(values) != nu:
+        raise DataError(f"{name} needs one value per input ({nu}), got {values}")
+    return tuple(check_order(name, v, minimum) for v in values)
+
+
+def _prepare(data, orders: _Orders, what: str):
     experiments = as_experiments(data)
     first = experiments[0]
-    if first.ny != 1 or first.nu != 1:
-        raise DataError(
-            "armax/oe/bj/pem estimate single-input single-output models; "
-            f"the data have {first.nu} inputs and {first.ny} outputs"
-        )
+    if first.ny != 1:
+        raise DataError(f"{what} estimates single-output models; the data have {first.ny} outputs")
+    if first.nu != orders.nu:
+        raise DataError(f"{what}: the orders are for {orders.nu} inputs, the data have {first.nu}")
     N = sum(e.N for e in experiments)
-    needed = orders.d + max(orders.na, orders.nk + orders.nb, orders.nc, orders.nd, orders.nf) + 1
+    lags = [k + b for b, k in zip(orders.nb, orders.nk, strict=True)]
+    needed = orders.d + max(orders.na, *lags, orders.nc, orders.nd, *orders.nf, 0) + 1
     if N < needed:
         raise DataError(
             f"too few samples: {N} for a model with {orders.d} parameters; need at least {needed}"
         )
-    if orders.nb and all(np.ptp(e.u[:, 0]) == 0 for e in experiments):
-        raise EstimationError(
-            "the input is constant: it is not persistently exciting, so B cannot be "
-            "identified; use a PRBS, chirp or multisine input"
-        )
-    return experiments, [(e.y[:, 0], e.u[:, 0]) for e in experiments]
+    for j, b in enumerate(orders.nb):
+        if b and all(np.ptp(e.u[:, j]) == 0 for e in experiments):
+            raise EstimationError(
+                f"input {first.input_names[j]!r} is constant: it is not persistently exciting, "
+                "so B cannot be identified; use a PRBS, chirp or multisine input"
+            )
+    return experiments, [(e.y[:, 0], e.u) for e in experiments]
 
 
 def _init_subset(series):
@@ -336,6 +445,14 @@ def _search(orders, starts, series, max_iter, tol):
     fits = [_minimize(orders, theta, subset, max_iter, tol) for theta in starts]
     best = min(fits, key=lambda fit: fit[2] if np.isfinite(fit[2]) else np.inf)
     return best if whole else _minimize(orders, best[0], series, max_iter, tol)
+
+
+def _padded(rows: list[np.ndarray]) -> np.ndarray:
+    """Rows of different lengths as one array, padded with trailing zeros."""
+    out = np.zeros((len(rows), max([len(r) for r in rows] + [1])))
+    for j, r in enumerate(rows):
+        out[j, : len(r)] = r
+    return out
 
 
 def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyModel:
@@ -378,19 +495,22 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyM
         cov = (cov + cov.T) / 2
     if not np.all(np.isfinite(theta)):
         raise EstimationError("the search diverged; try lower orders or detrended data")
-    A, B, C, D, F = orders.unpack(theta)
+    A, Bs, C, D, Fs = orders.unpack(theta)
     first = experiments[0]
+    one = orders.nu == 1
     model = PolyModel(
         A,
-        B,
+        (Bs[0] if one else _padded(Bs)) if orders.nu else None,
         C,
         D,
-        F,
+        (Fs[0] if one else _padded(Fs)) if orders.nu else None,
         Ts=first.Ts,
         nk=orders.nk,
+        nb=orders.nb,
+        nf=orders.nf,
         noise_variance=lam,
         covariance=cov,
-        input_name=first.input_names[0],
+        input_name=first.input_names[0] if one else first.input_names,
         output_name=first.output_names[0],
     )
     model.report.update(
@@ -408,25 +528,37 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyM
     return model
 
 
+def _nu(data) -> int:
+    return as_experiments(data)[0].nu
+
+
 def armax(
     data: IOData | Sequence[IOData],
     na: int,
-    nb: int,
-    nc: int,
-    nk: int = 1,
+    nb=None,
+    nc: int | None = None,
+    nk=1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
-    """Estimate an ARMAX model ``A y = B u(t−nk) + C e`` (MATLAB ``armax(data,[na nb nc nk])``).
+    """Estimate ``A y = Σⱼ Bⱼ uⱼ(t−nkⱼ) + C e`` (MATLAB ``armax(data,[na nb nc nk])``).
+
+    With no input (a time series, ``IOData(None, y, Ts)``) this is the ARMA
+    model ``A y = C e`` (MATLAB ``armax(data,[na nc])``): call
+    ``armax(data, na, nc=nc)``.
 
     Parameters
     ----------
     data : IOData or list of IOData
-        SISO record(s).
-    na, nb, nc, nk : int
-        Orders of A, B, C (≥ 0; nb ≥ 1) and the input delay in samples.
+        Single-output record(s), with any number of inputs (0 for a time series).
+    na, nc : int
+        Orders of A and C (≥ 0).
+    nb : int or sequence of int
+        Number of B coefficients per input (≥ 1); omit (or ``[]``) for a time series.
+    nk : int or sequence of int
+        Input delay in samples per input (default 1).
     max_iter : int
         Maximum Levenberg–Marquardt iterations.
     tol : float
@@ -435,51 +567,71 @@ def armax(
         Pre-sample values: zero (MATLAB ``InitialCondition='zero'``), or every
         signal held at its first sample (a record that starts at rest, in any
         units: use it for normalised or offset data).
+
+    Returns
+    -------
+    PolyModel
+        With ``noise_variance`` = Σε²/(N − d) and covariance λ (ψᵀψ)⁻¹.
     """
+    nu = _nu(data)
+    if nc is None:
+        raise DataError("armax needs nc, the order of C (armax(data, na, nb, nc, nk))")
+    nb = _input_orders("nb", nb, nu, 1)
     orders = _Orders(
         check_order("na", na),
-        check_order("nb", nb, 1),
+        nb,
         check_order("nc", nc),
         0,
-        0,
-        check_order("nk", nk),
+        (0,) * nu,
+        _input_orders("nk", nk if nu else None, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    experiments, series = _prepare(data, orders)
+    experiments, series = _prepare(data, orders, "armax")
     subset = _init_subset(series)
     starts = [_initial_armax(orders, subset)]
-    if orders.na:  # also from the output-error dynamics: a start in another basin
-        B, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
+    if orders.na and orders.nu:  # also from the output-error dynamics: a start in another basin
+        Bs, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
         C = np.concatenate([[1.0], np.zeros(orders.nc)])
-        starts.append(orders.pack(F, B, C, np.ones(1), np.ones(1)))
+        starts.append(orders.pack(F, Bs, C, np.ones(1), [np.ones(1)] * orders.nu))
     return _finish(
         orders, starts, experiments, series, "armax (prediction error, LM)", max_iter, tol
     )
 
 
+def _needs_input(what: str, nu: int) -> None:
+    if nu == 0:
+        raise DataError(f"{what} needs an input; for a time series use ar, arx or armax")
+
+
 def oe(
     data: IOData | Sequence[IOData],
-    nb: int,
-    nf: int,
-    nk: int = 1,
+    nb,
+    nf,
+    nk=1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
-    """Estimate an output-error model ``y = (B/F) u(t−nk) + e`` (MATLAB ``oe(data,[nb nf nk])``)."""
+    """Estimate ``y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + e`` (MATLAB ``oe(data,[nb nf nk])``).
+
+    ``nb`` (≥ 1), ``nf`` and ``nk`` are one value per input, or one for all
+    (MATLAB's order vectors); options as for :func:`armax`.
+    """
+    nu = _nu(data)
+    _needs_input("oe", nu)
     orders = _Orders(
         0,
-        check_order("nb", nb, 1),
+        _input_orders("nb", nb, nu, 1),
         0,
         0,
-        check_order("nf", nf),
-        check_order("nk", nk),
+        _input_orders("nf", nf, nu, 0),
+        _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    experiments, series = _prepare(data, orders)
-    B, F = _initial_oe(orders.nb, orders.nf, orders.nk, _init_subset(series))
-    theta0 = orders.pack(np.ones(1), B, np.ones(1), np.ones(1), F)
+    experiments, series = _prepare(data, orders, "oe")
+    Bs, Fs = _initial_dynamics(orders, _init_subset(series))
+    theta0 = orders.pack(np.ones(1), Bs, np.ones(1), np.ones(1), Fs)
     return _finish(
         orders, [theta0], experiments, series, "oe (prediction error, LM)", max_iter, tol
     )
@@ -487,27 +639,32 @@ def oe(
 
 def bj(
     data: IOData | Sequence[IOData],
-    nb: int,
+    nb,
     nc: int,
     nd: int,
-    nf: int,
-    nk: int = 1,
+    nf,
+    nk=1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
-    """Estimate a Box–Jenkins model ``y = (B/F) u(t−nk) + (C/D) e`` (MATLAB ``bj``)."""
+    """Estimate ``y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + (C/D) e`` (MATLAB ``bj(data,[nb nc nd nf nk])``).
+
+    ``nb``, ``nf`` and ``nk`` per input as for :func:`oe`; options as for :func:`armax`.
+    """
+    nu = _nu(data)
+    _needs_input("bj", nu)
     orders = _Orders(
         0,
-        check_order("nb", nb, 1),
+        _input_orders("nb", nb, nu, 1),
         check_order("nc", nc),
         check_order("nd", nd),
-        check_order("nf", nf),
-        check_order("nk", nk),
+        _input_orders("nf", nf, nu, 0),
+        _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    experiments, series = _prepare(data, orders)
+    experiments, series = _prepare(data, orders, "bj")
     theta0 = _initial_bj(orders, _init_subset(series))
     return _finish(
         orders, [theta0], experiments, series, "bj (prediction error, LM)", max_iter, tol
@@ -522,25 +679,25 @@ def pem(
     tol: float = 1e-8,
     initial: str = "zero",
 ) -> PolyModel:
-    """Refine any SISO ``PolyModel`` structure by prediction-error minimisation from ``init``.
+    """Refine any ``PolyModel`` structure by prediction-error minimisation from ``init``.
 
     ``max_iter``, ``tol`` and ``initial`` as for :func:`armax`.
     """
-    if init.nu != 1:
-        raise DataError("pem refines single-input models")
+    nu = init.nu
     orders = _Orders(
         init.na,
-        init.nb[0],
+        tuple(init.nb),
         init.nc,
         init.nd,
-        init.nf,
-        init.nk[0],
+        tuple(init._nf),
+        tuple(init.nk),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    experiments, series = _prepare(data, orders)
-    theta0 = orders.pack(init.A, init.B, init.C, init.D, init.F)
+    if nu and min(orders.nb) < 1:
+        raise DataError("pem needs at least one B coefficient per input")
+    experiments, series = _prepare(data, orders, "pem")
     return _finish(
-        orders, [theta0], experiments, series, "pem (prediction error, LM)", max_iter, tol
+        orders, [init.parameters], experiments, series, "pem (prediction error, LM)", max_iter, tol
     )
 
 

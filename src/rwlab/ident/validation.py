@@ -118,14 +118,19 @@ class CompareResult:
 
 
 def compare(
-    model, data: IOData, horizon: float = np.inf, initial: str = "estimate"
+    model, data: IOData, horizon: float | None = None, initial: str = "estimate"
 ) -> CompareResult:
     """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``.
 
-    ``initial``: 'estimate' (default, as MATLAB's ``compare``): the initial state
-    that best fits ``data``'s output; 'zero' or 'steady' pre-sample values (see
-    ``PolyModel.simulate``).
+    ``horizon``: samples ahead, ``numpy.inf`` for simulation. The default is
+    simulation for a model with inputs and 1-step prediction for a time
+    series (a model without input simulates to zero, so only prediction says
+    anything about it). ``initial``: 'estimate' (default, as MATLAB's
+    ``compare``): the initial state that best fits ``data``'s output; 'zero'
+    or 'steady' pre-sample values (see ``PolyModel.simulate``).
     """
+    if horizon is None:
+        horizon = np.inf if model.nu else 1
     yhat = model.predict(data, horizon, initial=initial)
     y = data.y[:, 0]
     return CompareResult(y.copy(), yhat, fit_percent(y, yhat), mse(y, yhat), float(horizon))
@@ -156,7 +161,8 @@ class ResidResult:
     whiteness_p : float
         Ljung–Box portmanteau p-value for lags 1..M.
     independence_p : float
-        p-value of the joint test that e is uncorrelated with u at every lag
+        NaN for a time series (no input: nothing to test; ``ccf`` is then empty).
+        Otherwise the p-value of the joint test that e is uncorrelated with u at every lag
         −M..M: the input is prewhitened by a least-squares AR(M) model, and
         ζ = N rᵀ R⁻¹ r (r the 2M+1 cross-correlations of e with the whitened
         input, R the Toeplitz matrix of e's autocorrelation) is referred to χ²(2M+1).
@@ -183,7 +189,10 @@ class ResidResult:
 
     @property
     def independent(self) -> bool:
-        """True when the residuals show no significant correlation with the input."""
+        """True when the residuals show no significant correlation with the input
+        (always True for a time series, which has no input)."""
+        if math.isnan(self.independence_p):
+            return True
         return self.independence_p >= 1 - self.confidence
 
     def to_dict(self) -> dict:
@@ -225,6 +234,8 @@ def resid(
 ) -> ResidResult:
     """Residual whiteness and input independence tests with confidence bounds.
 
+    For a time series (no input) only whiteness is tested, as MATLAB's ``resid``.
+
     Parameters
     ----------
     model : PolyModel
@@ -243,7 +254,6 @@ def resid(
     if max_lag < 1 or max_lag >= data.N // 2:
         raise DataError(f"max_lag must be in 1..{data.N // 2 - 1}, got {max_lag}")
     e = data.y[:, 0] - model.predict(data, 1, initial=initial)
-    u = data.u[:, 0] - data.u[:, 0].mean()
     N = e.size
     z = stats.norm.ppf(0.5 + confidence / 2)
     ree = _xcorr(e, e, max_lag)
@@ -251,24 +261,33 @@ def resid(
     if r0 <= 0:
         raise DataError("the residuals are identically zero; nothing to test")
     acf = ree[max_lag:] / r0
+    k = np.arange(1, max_lag + 1)
+    q_lb = N * (N + 2) * np.sum(acf[1:] ** 2 / (N - k))
+    common = dict(
+        residuals=e,
+        lags=np.arange(max_lag + 1),
+        acf=acf,
+        acf_bound=float(z / math.sqrt(N)),
+        confidence=confidence,
+        whiteness_p=float(stats.chi2.sf(q_lb, max_lag)),
+    )
+    if data.nu == 0:
+        nothing = np.zeros(0)
+        return ResidResult(
+            **common, ccf_lags=nothing, ccf=nothing, ccf_bound=math.nan, independence_p=math.nan
+        )
+    u = data.u[:, 0] - data.u[:, 0].mean()
     ruu = _xcorr(u, u, max_lag)
     su = ruu[max_lag]
     ccf = _xcorr(e, u, max_lag) / math.sqrt(r0 * su) if su > 0 else np.zeros(2 * max_lag + 1)
     rho_u = ruu / su if su > 0 else np.zeros_like(ruu)
     rho_e = ree / r0
     var_ccf = max(float(np.sum(rho_e * rho_u)), 1e-12) / N
-    k = np.arange(1, max_lag + 1)
-    q_lb = N * (N + 2) * np.sum(acf[1:] ** 2 / (N - k))
     independence_p = _independence_p(e, u, max_lag) if su > 0 else 1.0
     return ResidResult(
-        residuals=e,
-        lags=np.arange(max_lag + 1),
-        acf=acf,
-        acf_bound=float(z / math.sqrt(N)),
+        **common,
         ccf_lags=np.arange(-max_lag, max_lag + 1),
         ccf=ccf,
         ccf_bound=float(z * math.sqrt(var_ccf)),
-        confidence=confidence,
-        whiteness_p=float(stats.chi2.sf(q_lb, max_lag)),
         independence_p=independence_p,
     )
