@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -767,7 +769,7 @@ def _single_thread_blas() -> None:
     help="model.json from `rwlab identify`: also fly it as the actuator.",
 )
 @click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ.")
-@click.option("--seed", type=int, default=None)
+@click.option("--seed", type=click.IntRange(min=0), default=None)
 @click.option(
     "--relinearize",
     type=float,
@@ -781,14 +783,21 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.design import DesignError
     from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import write_comparison
+    from rwlab.report.attitude import check_outputs, write_comparison
 
-    if rho <= 0:
-        raise DesignError(f"ρ must be positive, got {rho}")
+    if not (math.isfinite(rho) and rho > 0):
+        raise DesignError(f"--rho must be a positive number, got {rho:g}")
+    _check_run(duration, relinearize)
     sc = load_scenario(scenario)
+    if wheel_model:
+        from rwlab.wheel.identified import IdentifiedWheel
+
+        IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
+    check_outputs(out, ["report.html", "metrics.json", "sigma.json"], force)
     click.echo(
         f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
-        f"{', identified wheel' if wheel_model else ''})...",
+        f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
+        "~30 s)...",
         err=True,
     )
     comp = compare(
@@ -842,6 +851,41 @@ def attitude_ltr(scenario, rho, out, force):
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
+def _check_run(duration: float, relinearize: float | None) -> None:
+    from rwlab.errors import ConfigError
+
+    if not (math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration:g}")
+    if relinearize is not None and not (math.isfinite(relinearize) and relinearize > 0):
+        raise ConfigError(
+            f"--relinearize must be a positive number of seconds, got {relinearize:g}"
+        )
+
+
+@contextlib.contextmanager
+def _steps_progress(steps: int, label: str):
+    """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
+    if sys.stderr.isatty():
+        with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
+            done = [0]
+
+            def update(k):
+                bar.update(k - done[0])
+                done[0] = k
+
+            yield update
+        return
+    shown = [0]
+
+    def report(k):
+        tenth = 10 * k // max(steps, 1)
+        if tenth > shown[0]:
+            shown[0] = tenth
+            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} steps)", err=True)
+
+    yield report
+
+
 @attitude.command("simulate")
 @click.option("--scenario", default="geo-comsat", show_default=True)
 @click.option(
@@ -857,7 +901,7 @@ def attitude_ltr(scenario, rho, out, force):
 )
 @click.option("--dt", type=float, help="Control and physics step, s (the scenario's by default).")
 @click.option("--duration", type=float, required=True, help="Seconds.")
-@click.option("--seed", type=int, default=None)
+@click.option("--seed", type=click.IntRange(min=0), default=None)
 @click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ (lqg_ltr).")
 @click.option(
     "--relinearize", type=float, default=None, help="Re-design the LQR every this many seconds."
@@ -872,22 +916,16 @@ def attitude_simulate(
     from rwlab.attitude.control import fly
     from rwlab.attitude.scenario import load_scenario
     from rwlab.errors import ConfigError
-    from rwlab.report.attitude import write_simulation
+    from rwlab.report.attitude import check_outputs, write_simulation
 
+    _check_run(duration, relinearize)
     sc = load_scenario(scenario, **({"dt": dt} if dt is not None else {}))
-    if not duration > 0:
-        raise ConfigError(f"--duration must be a positive number of seconds, got {duration:g}")
+    check_outputs(out, ["metrics.json", "trace.parquet", "report.html"], force)
     steps = round(duration / sc.dt)
+    if steps > 1e9:
+        raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
     log_every = max(10, -(-steps // 100_000))
-    with click.progressbar(
-        length=max(steps, 1), label=f"{controller} on {sc.name}", file=sys.stderr
-    ) as bar:
-        done = [0]
-
-        def progress(k):
-            bar.update(k - done[0])
-            done[0] = k
-
+    with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
         run, metrics = fly(
             sc,
             controller,

@@ -321,6 +321,9 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
             raise ConfigError(f"{path}: disturbances.{key} must be true or false")
         if isinstance(default, float) and not (_is_number(value) and value >= 0):
             raise ConfigError(f"{path}: disturbances.{key} must be a number ≥ 0")
+    model_file = table.get("wheel_model_file")
+    if isinstance(model_file, str) and not Path(model_file).is_absolute():
+        table["wheel_model_file"] = str(path.parent / model_file)  # relative to the file
     return replace(
         base,
         name=str(table.pop("name", path.stem)),

@@ -35,11 +35,20 @@ COLORS = {
 }
 
 
-def _check_out(out: Path, names: list[str], force: bool) -> dict[str, Path]:
+def check_outputs(out: str | os.PathLike, names: list[str], force: bool) -> dict[str, Path]:
+    """The output paths; refuses existing ones without ``force`` (call before a long run)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} exists and is not a folder")
     targets = {n: out / n for n in names}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not force:
         raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+    return targets
+
+
+def _check_out(out: Path, names: list[str], force: bool) -> dict[str, Path]:
+    targets = check_outputs(out, names, force)
     out.mkdir(parents=True, exist_ok=True)
     return targets
 
