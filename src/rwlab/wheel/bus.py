@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-import can
+from typing import TYPE_CHECKING
 
 from rwlab.errors import ConfigError
+
+if TYPE_CHECKING:
+    import can
 
 __all__ = ["DEFAULT_CHANNELS", "INTERFACES", "open_bus"]
 
@@ -32,6 +35,8 @@ def open_bus(
     """
     if interface not in INTERFACES:
         raise ConfigError(f"unknown interface {interface!r}; choose from {', '.join(INTERFACES)}")
+    import can  # here, not at the top: the CLI's --help must not pay for python-can
+
     channel = channel or DEFAULT_CHANNELS[interface]
     try:
         if interface == "serial":
