@@ -12,10 +12,16 @@ from click.testing import CliRunner
 
 from rwlab.cli import main
 from rwlab.data import load
-from rwlab.errors import ConfigError, FileFormatError, RecordGapError
+from rwlab.errors import ConfigError, DataError, FileFormatError, RecordGapError
 from rwlab.ident import arx, delayest
 from rwlab.testbed import ExperimentConfig, RecordWriter, load_record, read_record, run_experiment
 from rwlab.wheel.protocol import dbc_sha256
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @pytest.fixture(scope="module")
@@ -200,8 +206,11 @@ def test_export_writes_csv_parquet_and_mat(tmp_path, prbs_record):
         out = tmp_path / f"x.{fmt}"
         r = runner.invoke(main, ["export", str(path), "--format", fmt, "--out", str(out)])
         assert r.exit_code == 0, r.output
-        back = load(out, Ts=0.5) if fmt != "csv" else load(out)
-        assert back.N == 2401 and back.Ts == 0.5
+        with pytest.raises(DataError, match="ambiguous"):  # four channels: which is the output?
+            load(out)
+        back = load(out, input_columns="command", output_columns="current_a")
+        assert back.N == 2401 and back.Ts == 0.5 and back.output_names == ("current_a",)
+        assert oct(out.stat().st_mode & 0o777) == oct(0o666 & ~_umask())
     header = (tmp_path / "x.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["time_s", "command", "speed_rpm"]
     r = runner.invoke(

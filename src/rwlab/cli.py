@@ -6,27 +6,78 @@ import functools
 import json
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import click
 
 from rwlab import __version__
-from rwlab.errors import RwlabError
+from rwlab.errors import ConfigError, RwlabError
 
 # -- shared plumbing -------------------------------------------------------------------
 
 
+def _message(exc: BaseException) -> str:
+    """One line for an error a user caused (an OS error names its file)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror}" if where else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _fail(exc: BaseException) -> NoReturn:
+    click.echo(f"error: {_message(exc)}", err=True)
+    sys.exit(2)
+
+
 def _friendly_errors(func):
-    """Turn rwlab's typed errors into a one-line message and exit status 2."""
+    """Turn rwlab's typed errors and OS errors into a one-line message and exit status 2."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         try:
             return func(*args, **kwargs)
-        except (RwlabError, FileNotFoundError, FileExistsError) as exc:
-            click.echo(f"error: {exc}", err=True)
-            sys.exit(2)
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
 
     return wrapper
+
+
+class _Cli(click.Group):
+    """The ``rwlab`` group: a usage error is one line and exit status 2, like any other."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.UsageError as exc:
+            where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+            hint = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
+            _fail(RwlabError(f"{where}{exc.format_message()}{hint}"))
+        except click.ClickException as exc:
+            _fail(RwlabError(exc.format_message()))
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
+        except click.Abort:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+
+
+def _columns_option(func):
+    for option in reversed(
+        [
+            click.option(
+                "--input",
+                "input_col",
+                help="Input column(s) or .mat variable(s), several as a,b (records: command).",
+            ),
+            click.option(
+                "--output",
+                "output_col",
+                help="Output column(s) or .mat variable(s), several as a,b (records: speed_rpm).",
+            ),
+        ]
+    ):
+        func = option(func)
+    return func
 
 
 def _data_options(func):
@@ -36,10 +87,7 @@ def _data_options(func):
         click.option(
             "--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."
         ),
-        click.option("--input", "input_col", help="Input column name (tables) or variable (.mat)."),
-        click.option(
-            "--output", "output_col", help="Output column name (tables) or variable (.mat)."
-        ),
+        _columns_option,
         click.option(
             "--detrend",
             type=click.Choice(["none", "constant", "linear"]),
@@ -54,21 +102,17 @@ def _data_options(func):
     return func
 
 
-def _load(file, Ts, input_col, output_col, detrend, normalize):
+def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
+    """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
     from rwlab import datasets
     from rwlab.data import load
 
     if not Path(file).exists() and file in datasets.NAMES:
+        if input_col or output_col:
+            raise ConfigError(f"{file} is a bundled data set: it has one input and one output")
         data = datasets.get(file)
     else:
-        opts = {}
-        if Path(file).suffix.lower() == ".mat":
-            opts = {k: v for k, v in (("u", input_col), ("y", output_col)) if v}
-        else:
-            opts = {
-                k: v for k, v in (("input_columns", input_col), ("output_columns", output_col)) if v
-            }
-        data = load(file, Ts, **opts)
+        data = load(file, Ts, input_columns=input_col, output_columns=output_col)
     if detrend != "none":
         data = data.detrend(detrend)
     if normalize:
@@ -85,7 +129,7 @@ def _echo_json(obj) -> None:
 # -- commands --------------------------------------------------------------------------
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rwlab")
 def main() -> None:
     """rwlab: test a reaction wheel, identify it, and control a satellite with it."""
@@ -107,6 +151,7 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     ):
         from rwlab import ident as idm
 
+        _check_orders(name, orders)
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
         est, val = (data, None) if split >= 1 else data.split(split)
         model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names])
@@ -152,7 +197,7 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     )(command)
     command = click.option(
         "--split",
-        type=float,
+        type=click.FloatRange(0, 1, min_open=True),
         default=0.7,
         show_default=True,
         help="Estimation share; the rest validates (1: no validation).",
@@ -160,6 +205,15 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     command = _data_options(command)
     command.__doc__ = doc
     return ident.command(name)(command)
+
+
+def _check_orders(name: str, orders: dict[str, int]) -> None:
+    """Refuse orders that leave nothing to estimate, before any data is read."""
+    shown = ", ".join(f"{k}={v}" for k, v in orders.items())
+    if not any(v for k, v in orders.items() if k != "nk"):
+        raise ConfigError(f"{name.upper()}({shown}) has no parameters to estimate")
+    if name in ("oe", "bj") and orders["nb"] == 0:
+        raise ConfigError(f"{name.upper()}({shown}): nb must be ≥ 1, or the input never enters")
 
 
 _estimate_command(
@@ -214,9 +268,16 @@ def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, n
 @click.option("--na", "na_range", default="1:10", show_default=True, help="Range lo:hi of na.")
 @click.option("--nb", "nb_range", default="1:10", show_default=True, help="Range lo:hi of nb.")
 @click.option("--nk", "nk_range", default=None, help="Range lo:hi of nk (default: delayest's).")
-@click.option("--split", type=float, default=0.5, show_default=True, help="Estimation share.")
+@click.option(
+    "--split",
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    default=0.5,
+    show_default=True,
+    help="Estimation share.",
+)
 @click.option(
     "--criterion",
+    callback=lambda ctx, param, value: _criterion(value),
     default="0",
     show_default=True,
     help="0 (validation loss), aic, mdl, or a number c for V(1+c·d/N).",
@@ -244,8 +305,7 @@ def struct_(
     est, val = data.split(split)
     nks = _range(nk_range) if nk_range else [delayest(est)]
     table = arxstruc(est, val, struc(_range(na_range), _range(nb_range), nks))
-    crit = criterion if criterion in ("aic", "mdl") else float(criterion)
-    best = selstruc(table, crit)
+    best = selstruc(table, criterion)
     if as_json:
         _echo_json(
             {
@@ -261,14 +321,27 @@ def struct_(
     click.echo(f"selected (criterion {criterion}): na={best[0]} nb={best[1]} nk={best[2]}")
 
 
+def _criterion(text: str) -> str | float:
+    """selstruc's criterion: 'aic', 'mdl', or a number c ≥ 0."""
+    if text in ("aic", "mdl"):
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (value >= 0 and value < float("inf")):
+        raise click.BadParameter(f"expected 0, aic, mdl or a number c ≥ 0, got {text!r}")
+    return value
+
+
 def _range(text: str) -> list[int]:
     try:
         lo, _, hi = text.partition(":")
         values = list(range(int(lo), int(hi or lo) + 1))
     except ValueError:
         raise click.BadParameter(f"expected a range lo:hi, got {text!r}") from None
-    if not values:
-        raise click.BadParameter(f"empty range {text!r}")
+    if not values or values[0] < 0:
+        raise click.BadParameter(f"expected a range lo:hi of orders ≥ 0, got {text!r}")
     return values
 
 
@@ -607,6 +680,7 @@ def monitor_cmd(record, host, port, replay, speed):
 @click.argument("file")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
 @click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@_columns_option
 @click.option(
     "--preprocess",
     type=click.Choice(["normalize", "detrend", "none"]),
@@ -614,17 +688,23 @@ def monitor_cmd(record, host, port, replay, speed):
     show_default=True,
     help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
 )
-@click.option("--split", type=float, default=0.7, show_default=True, help="Estimation share.")
+@click.option(
+    "--split",
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    default=0.7,
+    show_default=True,
+    help="Estimation share.",
+)
 @click.option(
     "--tolerance",
-    type=float,
+    type=click.FloatRange(min=0),
     default=3.0,
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
-def identify(file, out, Ts, preprocess, split, tolerance, force):
+def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance, force):
     """Run paper A's whole identification study on a record or data file.
 
     Writes OUT/report.html (tables and figures, opens offline), OUT/study.json
@@ -634,7 +714,7 @@ def identify(file, out, Ts, preprocess, split, tolerance, force):
     from rwlab.ident.study import identification_study, load_study_data, physical_model
     from rwlab.report.identification import write_study
 
-    data, saturation = load_study_data(file, Ts)
+    data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
     click.echo(f"data: {data!r}", err=True)
     result = identification_study(data, preprocess=preprocess, split=split, tolerance=tolerance)
     model = physical_model(

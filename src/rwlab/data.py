@@ -13,6 +13,7 @@ Nothing here modifies the caller's arrays.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
@@ -343,8 +344,9 @@ class IOData:
         """Write to ``.csv``, ``.parquet`` or ``.mat`` (chosen by suffix), atomically.
 
         The file appears complete or not at all. An existing file is an error
-        unless ``overwrite=True``. ``plain=True`` leaves out rwlab's metadata
-        line at the top of a CSV, for tools that expect the header first.
+        unless ``overwrite=True``. ``plain=True`` writes what other tools
+        expect: no rwlab metadata (CSV header first, Parquet without schema
+        metadata) and a .mat with one vector per channel, named after it.
         """
         from rwlab import _io
 
@@ -401,14 +403,28 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
     return _io.read(Path(path), Ts, **options)
 
 
+def _umask_mode() -> int:
+    """The mode a plainly created file gets here (0666 less the umask)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: Path, writer) -> Path:
-    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file."""
+    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file.
+
+    The file gets the usual permissions (0666 less the umask), not the
+    temporary file's private 0600.
+    """
     path = Path(path)
+    if path.parent.exists() and not path.parent.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path.parent))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         writer(Path(tmp))
+        os.chmod(tmp, _umask_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

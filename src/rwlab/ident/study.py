@@ -373,14 +373,21 @@ def physical_model(
 
 
 def load_study_data(
-    path: str, Ts: float | None = None, *, max_orders: int = 5, nk_max: int = 10
+    path: str,
+    Ts: float | None = None,
+    *,
+    input_col: str | None = None,
+    output_col: str | None = None,
+    max_orders: int = 5,
+    nk_max: int = 10,
 ) -> tuple[IOData, dict]:
-    """Read a testbed record (``.mcap``) or a data file for the study.
+    """Read a testbed record (``.mcap``), an exported or other data file, or a bundled set.
 
-    Returns the data and the saturations to store with the model: from the
-    record's wheel parameters when present, else the RW90 defaults. A record
-    whose telemetry has a gap longer than the largest model's memory
-    (``max_orders + nk_max`` samples) is refused.
+    ``input_col``/``output_col`` choose the columns (a record's default is
+    command → speed_rpm). Returns the data and the saturations to store with
+    the model: from the record's wheel parameters when present, else the RW90
+    defaults. A record whose telemetry has a gap longer than the largest
+    model's memory (``max_orders + nk_max`` samples) is refused.
     """
     from pathlib import Path
 
@@ -392,13 +399,14 @@ def load_study_data(
         "accel_limit_rpm_s": 314.0,
         "saturation_source": "RW90 defaults (paper A)",
     }
+    columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
-        from rwlab.testbed import load_record, read_record
+        from rwlab.testbed import read_record
 
         meta = read_record(path).metadata
         Ts_rec = Ts if Ts is not None else meta.get("Ts")
         memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load_record(path, Ts, max_gap=memory or None)
+        data = load(path, Ts, **columns, max_gap=memory or None)
         wheel = meta.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
@@ -408,5 +416,7 @@ def load_study_data(
             }
         return data, saturation
     if not Path(path).exists() and path in datasets.NAMES:
+        if input_col or output_col:
+            raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    return load(path, Ts), saturation
+    return load(path, Ts, **columns), saturation
