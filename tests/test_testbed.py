@@ -15,6 +15,7 @@ from rwlab.data import load
 from rwlab.errors import ConfigError, DataError, FileFormatError, RecordGapError
 from rwlab.ident import arx, delayest
 from rwlab.testbed import ExperimentConfig, RecordWriter, load_record, read_record, run_experiment
+from rwlab.testbed.record import partial_path
 from rwlab.wheel.protocol import dbc_sha256
 
 
@@ -193,7 +194,8 @@ while True:
     killed_at = time.time()
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
-    rec = read_record(path)  # opens although it has no footer
+    assert not path.exists()  # a killed run never replaces the record at its path...
+    rec = read_record(partial_path(path))  # ...and its own opens although it has no footer
     frames = rec.topic("/telemetry")
     assert not rec.complete and len(frames) > 500  # ~1 kHz for 1.5 s
     assert killed_at - frames[-1]["t"] <= 0.100

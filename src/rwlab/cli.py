@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
+import threading
 from pathlib import Path
 from typing import NoReturn
 
@@ -59,6 +61,34 @@ class _Cli(click.Group):
         except click.Abort:
             click.echo("interrupted", err=True)
             sys.exit(130)
+
+
+@contextlib.contextmanager
+def _stop_signals():
+    """SIGTERM and SIGHUP stop a run the way Ctrl-C does (KeyboardInterrupt).
+
+    So ``kill`` or a closed terminal also idles the wheel, closes the record and
+    stops the monitor. Only the first signal interrupts; later ones are ignored
+    so that the clean-up they would cut short can finish.
+    """
+    import signal
+
+    stops = (signal.SIGTERM, signal.SIGHUP)
+
+    def interrupt(signum, frame):
+        for s in stops:
+            signal.signal(s, signal.SIG_IGN)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set from the main thread
+        return
+    previous = {s: signal.signal(s, interrupt) for s in stops}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _columns_option(func):
@@ -419,9 +449,10 @@ def wheel_serve(
     import time
 
     from rwlab.wheel import RW90, WheelNode, WheelParams
-    from rwlab.wheel.bus import open_bus
+    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_bus
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
+    channel = channel or DEFAULT_CHANNELS[interface]
     bus = open_bus(interface, channel)
     node = WheelNode(
         bus,
@@ -432,18 +463,19 @@ def wheel_serve(
         watchdog=watchdog,
     ).start()
     click.echo(
-        f"simulated wheel {node_id} on {interface}:{bus.channel_info}; Ctrl-C to stop", err=True
+        f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True
     )
     start = time.monotonic()
     try:
-        while duration is None or time.monotonic() - start < duration:
-            time.sleep(min(1.0, duration or 1.0))
-            w = node.wheel
-            click.echo(
-                f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
-                f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
-                err=True,
-            )
+        with _stop_signals():
+            while duration is None or time.monotonic() - start < duration:
+                time.sleep(min(1.0, duration or 1.0))
+                w = node.wheel
+                click.echo(
+                    f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
+                    f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
+                    err=True,
+                )
     except KeyboardInterrupt:
         pass
     finally:
@@ -543,7 +575,9 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
-@click.option("--port", type=int, default=5006, show_default=True, help="Monitor port.")
+@click.option(
+    "--port", type=click.IntRange(1, 65535), default=5006, show_default=True, help="Monitor port."
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
 def experiment(
@@ -597,24 +631,33 @@ def experiment(
 
     cfg.check_limits(RW90)
     if Path(out).exists() and not force:
-        raise FileExistsError(f"{out} exists; pass --force to overwrite it")
-    server = None
-    if monitor:
-        from rwlab.testbed.monitor import start_process
-
-        server = start_process(out, port=port)  # its own process: it can never slow the run
-        click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
+        raise FileExistsError(f"{out} exists; pass --force to replace it")
     n = round(cfg.duration / cfg.Ts)
-    label = f"{cfg.signal} ({cfg.mode}, {'real time' if cfg.realtime else 'simulated clock'})"
+    realtime = cfg.realtime or cfg.interface != "virtual"
+    label = f"{cfg.signal} ({cfg.mode}, {'real time' if realtime else 'simulated clock'})"
+    server = None
     try:
-        with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
-            summary = run_experiment(cfg, out, force=force, progress=lambda k, total: bar.update(1))
-    except KeyboardInterrupt:
-        click.echo(f"\ninterrupted: the wheel is idle and {out} is closed", err=True)
+        with _stop_signals():
+            if monitor:
+                from rwlab.testbed.monitor import start_process
+                from rwlab.testbed.record import partial_path
+
+                # its own process, following the file being written: it never slows the run
+                server = start_process(partial_path(out), port=port)
+                click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
+            with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
+                summary = run_experiment(
+                    cfg, out, force=force, progress=lambda k, total: bar.update(1)
+                )
+    except KeyboardInterrupt as exc:
+        why = exc.args[0] if exc.args else "Ctrl-C"
+        click.echo(f"\ninterrupted ({why}): the wheel is idle and {out} is closed", err=True)
         sys.exit(130)
     finally:
         if server is not None:
-            server.terminate()
+            from rwlab.testbed.monitor import stop_process
+
+            stop_process(server)
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
         f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
@@ -657,9 +700,15 @@ def export(record, fmt, out, Ts, max_gap, force):
     show_default=True,
     help="Address to serve on (0.0.0.0 exposes it to the network).",
 )
-@click.option("--port", type=int, default=5006, show_default=True)
+@click.option("--port", type=click.IntRange(1, 65535), default=5006, show_default=True)
 @click.option("--replay", is_flag=True, help="Play a finished record back instead of following it.")
-@click.option("--speed", type=float, default=1.0, show_default=True, help="Replay speed factor.")
+@click.option(
+    "--speed",
+    type=click.FloatRange(0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Replay speed factor.",
+)
 @_friendly_errors
 def monitor_cmd(record, host, port, replay, speed):
     """Serve the live monitor page for a record that is being written (or replay one)."""

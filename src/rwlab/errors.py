@@ -45,3 +45,7 @@ class WheelCommandError(RwlabError, ValueError):
 
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
+
+
+class RecordBusyError(RwlabError):
+    """Another run is writing the same record."""

@@ -224,9 +224,25 @@ def run_experiment(
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
-    host_bus = open_bus(
-        cfg.interface, cfg.channel or f"rwlab-{os.getpid()}-{id(cfg)}", simulated_clock=not realtime
-    )
+    metadata = {
+        "rwlab_version": __version__,
+        "dbc_sha256": dbc_sha256(),
+        "Ts": cfg.Ts,
+        "mode": cfg.mode,
+        "experiment": cfg.to_dict(),
+        "wheel": params.to_dict(),
+        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
+        "clock": "wall" if realtime else "simulated",
+        "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
+        "time_origin": "s since the first command",
+    }
+    writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    try:
+        channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
+        host_bus = open_bus(cfg.interface, channel, simulated_clock=not realtime)
+    except BaseException:
+        writer.discard()  # nothing was recorded: keep the old record, if any
+        raise
     node = None
     if simulated:
         node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
@@ -241,19 +257,6 @@ def run_experiment(
         )
         if realtime:
             node.start()
-    metadata = {
-        "rwlab_version": __version__,
-        "dbc_sha256": dbc_sha256(),
-        "Ts": cfg.Ts,
-        "mode": cfg.mode,
-        "experiment": cfg.to_dict(),
-        "wheel": params.to_dict(),
-        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
-        "clock": "wall" if realtime else "simulated",
-        "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
-        "time_origin": "s since the first command",
-    }
-    writer = RecordWriter(out, metadata, force=force)
     client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
     if cfg.raw_frames:
         client.frame_listener = lambda msg, direction: writer.write(
