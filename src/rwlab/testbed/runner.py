@@ -281,6 +281,8 @@ def run_experiment(
                 "/command",
                 {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
             )
+            if k == 0:
+                client.wait_ack(seq)  # no wheel on the bus: WheelTimeout now, not an empty record
             if progress:
                 progress(k + 1, len(command))
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)

@@ -49,6 +49,7 @@ def open_bus(
             )
         if interface == "socketcan":
             return can.Bus(interface="socketcan", channel=channel, bitrate=1_000_000)
-        return can.Bus(interface="udp_multicast", channel=channel)
+        # hop limit / TTL 0: the frames never leave this host (loopback delivery only)
+        return can.Bus(interface="udp_multicast", channel=channel, hop_limit=0)
     except (OSError, can.CanError, ValueError) as exc:
         raise ConfigError(f"cannot open {interface} bus on {channel!r}: {exc}") from exc
