@@ -185,10 +185,11 @@ def check_port(host: str, port: int) -> None:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as tornado binds
         try:
             s.bind((host, port))
-        except OSError as exc:
+        except (OSError, TypeError, UnicodeError, OverflowError) as exc:
+            why = getattr(exc, "strerror", None) or exc
             raise ConfigError(
-                f"the monitor cannot listen on {host}:{port} ({exc.strerror}); "
-                "choose another --port"
+                f"the monitor cannot listen on {host}:{port} ({why}); "
+                "choose another --host or --port"
             ) from None
 
 
@@ -216,7 +217,10 @@ def serve(
         allow_websocket_origin=[f"{host}:{port}", f"localhost:{port}"],
     )
     server.start()
-    server.io_loop.start()
+    try:
+        server.io_loop.start()
+    finally:
+        server.stop()  # Ctrl-C or SIGTERM: release the port at once
 
 
 class _ThreadedServer:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
@@ -35,6 +34,7 @@ __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_expe
 
 SIGNALS = ("prbs", "chirp", "step", "multisine", "file")
 MODES = ("speed", "acceleration")
+MAX_COMMANDS = 10_000_000  # 58 days at 0.5 s: a typo, not an experiment, beyond this
 
 
 @dataclass(frozen=True)
@@ -109,10 +109,45 @@ class ExperimentConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
+        number = (int, float)
+        expected = {
+            "seed": (int, "an integer"),
+            "node_id": (int, "an integer 0..15"),
+            "realtime": (bool, "true or false"),
+            "rate_limit": (bool, "true or false"),
+            "raw_frames": (bool, "true or false"),
+            "latency": (number, "a number of seconds"),
+            "f0": (number, "a number of Hz"),
+            "channel": ((str, type(None)), "a string"),
+            "file": ((str, type(None)), "a string"),
+            "f1": ((*number, type(None)), "a number of Hz"),
+        }
+        for name, (kind, text) in expected.items():
+            value = getattr(self, name)
+            bad_bool = isinstance(value, bool) and kind is not bool
+            if not isinstance(value, kind) or bad_bool:
+                raise ConfigError(f"{name} must be {text}, got {value!r}")
+        if not 0 <= self.node_id <= 15:
+            raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
+        if not (math.isfinite(self.latency) and self.latency >= 0):
+            raise ConfigError(f"latency must be a number of seconds ≥ 0, got {self.latency!r}")
+        f1 = math.inf if self.f1 is None else self.f1
+        if not (0 < self.f0 < f1 and math.isfinite(self.f0)):
+            raise ConfigError(f"the band must be 0 < f0 < f1 Hz, got f0={self.f0}, f1={self.f1}")
+        levels = self.step_levels if isinstance(self.step_levels, tuple) else ()
+        if not levels or not all(
+            isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in levels
+        ):
+            raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
             raise ConfigError(f"duration {self.duration} s is shorter than Ts = {self.Ts} s")
+        if self.duration / self.Ts > MAX_COMMANDS:
+            raise ConfigError(
+                f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
+                f"{MAX_COMMANDS:.0e} in one experiment"
+            )
 
     def check_limits(self, params: WheelParams) -> None:
         """Refuse amplitudes beyond the wheel's limits."""
@@ -130,13 +165,9 @@ class ExperimentConfig:
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides) -> ExperimentConfig:
         """Read an ``[experiment]`` table (or top-level keys); ``overrides`` win."""
-        try:
-            raw = tomllib.loads(Path(path).read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-        except FileNotFoundError:
-            raise ConfigError(f"no such experiment file: {path}") from None
-        table = dict(raw.get("experiment", raw))
+        from rwlab._toml import read_table
+
+        table = read_table(path, "experiment", "experiment")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
@@ -144,7 +175,7 @@ class ExperimentConfig:
                 f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}"
             )
         table.update({k: v for k, v in overrides.items() if v is not None})
-        if "step_levels" in table:
+        if isinstance(table.get("step_levels"), list):
             table["step_levels"] = tuple(table["step_levels"])
         return cls(**table)
 
