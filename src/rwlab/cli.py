@@ -889,9 +889,15 @@ def demo(out, realtime, monitor, quick, force):
     def progress(label, n):
         return click.progressbar(length=n, label=f"  {label}", show_eta=True, file=sys.stderr)
 
-    summary = run_demo(
-        out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
-    )
+    try:
+        with _stop_signals():
+            summary = run_demo(
+                out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
+            )
+    except KeyboardInterrupt as exc:
+        why = exc.args[0] if exc.args else "Ctrl-C"
+        click.echo(f"\ninterrupted ({why}): the wheel is idle and every record is closed", err=True)
+        sys.exit(130)
     cm = summary["chosen_model"]
     click.echo(f"wheel model: {cm['structure']} (validation fit {cm['fit_percent']:.2f} %)")
     for name, m in summary["controllers"].items():
