@@ -330,3 +330,26 @@ def test_a_wheel_client_ignores_commands_read_back_from_the_bus():
         other.send(encode_command(Command(0, Mode.SPEED, 100.0, 7)))
         time.sleep(0.05)
         assert client.drain() == [] and client.heartbeat is None
+
+
+# -- the identification report says what its numbers are -------------------------------
+
+
+def test_report_labels_fold_signs_and_name_the_preprocessing():
+    from rwlab.report.identification import _minus, _preprocessed_label
+
+    assert _minus("output", -4772.0) == "output + 4772"
+    assert _minus("input", 31.4) == "input − 31.4" and _minus("input", 0.0) == "input"
+    assert _preprocessed_label("speed_rpm", "rpm", "normalize") == "speed_rpm, normalised to [0, 1]"
+    assert _preprocessed_label("speed_rpm", "rpm", "none") == "speed_rpm [rpm]"
+
+
+def test_acceleration_check_is_in_physical_units(arx_system):
+    from rwlab.ident import arx
+    from rwlab.ident.study import acceleration_pair
+
+    _, _, raw = arx_system
+    scaled = raw.normalize()
+    measured, simulated = acceleration_pair(arx(scaled, 2, 2, 1), scaled)
+    assert np.allclose(measured, np.diff(raw.y[:, 0]) / raw.Ts)
+    assert np.corrcoef(measured, simulated)[0, 1] > 0.9

@@ -462,9 +462,7 @@ def wheel_serve(
         latency=latency_ms / 1000,
         watchdog=watchdog,
     ).start()
-    click.echo(
-        f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True
-    )
+    click.echo(f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True)
     start = time.monotonic()
     try:
         with _stop_signals():

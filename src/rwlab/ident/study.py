@@ -298,10 +298,12 @@ def _continuous(model: PolyModel, u: np.ndarray) -> dict:
 
 
 def _acceleration(model: PolyModel, val: IOData) -> dict:
-    """Model speed change per second vs the measured one on validation data (Fig. 24)."""
-    y_sim = model.simulate(val, initial=INITIAL)
-    acc_model = np.diff(y_sim) / val.Ts
-    acc_meas = np.diff(val.y[:, 0]) / val.Ts
+    """Model speed change per second vs the measured one on validation data (Fig. 24).
+
+    In physical units (output unit per second, rpm/s for a wheel record), not
+    the preprocessed ones.
+    """
+    acc_meas, acc_model = acceleration_pair(model, val)
     corr = float(np.corrcoef(acc_model, acc_meas)[0, 1]) if np.std(acc_meas) > 0 else float("nan")
     return {
         "correlation": corr,
@@ -309,6 +311,14 @@ def _acceleration(model: PolyModel, val: IOData) -> dict:
         "rms_measured": float(np.sqrt(np.mean(acc_meas**2))),
         "rms_model": float(np.sqrt(np.mean(acc_model**2))),
     }
+
+
+def acceleration_pair(model: PolyModel, val: IOData) -> tuple[np.ndarray, np.ndarray]:
+    """Measured and simulated output change per second on ``val``, in physical units."""
+    t = val.time
+    measured = val.trend.output_to_physical(val.y[:, 0], t)
+    simulated = val.trend.output_to_physical(model.simulate(val, initial=INITIAL), t)
+    return np.diff(measured) / val.Ts, np.diff(simulated) / val.Ts
 
 
 def physical_model(
