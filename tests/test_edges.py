@@ -22,7 +22,7 @@ from rwlab.data import load
 from rwlab.errors import DataError, RecordBusyError
 from rwlab.testbed import ExperimentConfig, RecordWriter, load_record, read_record, run_experiment
 from rwlab.testbed.load import telemetry_gaps
-from rwlab.testbed.monitor import acceleration_from_speed
+from rwlab.testbed.monitor import acceleration_from_speed, check_port, free_port
 from rwlab.testbed.record import partial_path
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -233,7 +233,20 @@ def test_a_record_being_written_is_locked(tmp_path):
 @pytest.mark.slow
 def test_sigterm_mid_experiment_idles_the_wheel_and_closes_the_record(tmp_path):
     out = tmp_path / "t.mcap"
-    child = rwlab_process("experiment", "--realtime", "--duration", 30, "--Ts", 0.1, "--out", out)
+    port = free_port()
+    child = rwlab_process(
+        "experiment",
+        "--realtime",
+        "--duration",
+        30,
+        "--Ts",
+        0.1,
+        "--out",
+        out,
+        "--monitor",
+        "--port",
+        port,
+    )
     deadline = time.monotonic() + 30
     while not (partial_path(out).exists() and partial_path(out).stat().st_size > 2000):
         assert time.monotonic() < deadline and child.poll() is None
@@ -246,6 +259,7 @@ def test_sigterm_mid_experiment_idles_the_wheel_and_closes_the_record(tmp_path):
     assert rec.complete and rec.topic("/event")[-1]["message"] == "interrupted"
     assert rec.topic("/telemetry")[-1]["mode"] == "IDLE"
     assert cli("export", out, "--format", "csv", "--out", tmp_path / "t.csv").exit_code == 0
+    check_port("127.0.0.1", port)  # the monitor child is gone and its port free
 
 
 @pytest.mark.slow

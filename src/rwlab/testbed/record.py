@@ -194,10 +194,10 @@ class RecordWriter:
         self.closed = True
         try:
             self._writer.finish()
-        finally:
             self._fh.flush()
             os.fsync(self._fh.fileno())
             os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
+        finally:  # a failed finish (a full disk) leaves the old record and this partial one
             self._fh.close()
 
     def discard(self) -> None:

@@ -329,14 +329,18 @@ def run_experiment(
         writer.event(clock.now(), "error", f"{type(exc).__name__}: {exc}")
         raise
     finally:
-        client.close()
-        _drain(client, writer, clock)
-        writer.event(clock.now(), "stop", status)
-        writer.close()
-        if node is not None:
-            node.stop()
-            node.bus.shutdown()
-        host_bus.shutdown()
+        try:
+            client.close()  # the wheel idles first, whatever else fails
+            _drain(client, writer, clock)
+            writer.event(clock.now(), "stop", status)
+        finally:
+            try:
+                writer.close()
+            finally:
+                if node is not None:
+                    node.stop()
+                    node.bus.shutdown()
+                host_bus.shutdown()
     return RunSummary(
         Path(out),
         writer.counts["/command"],
