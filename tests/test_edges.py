@@ -49,8 +49,7 @@ def assert_one_line_error(r):
     assert r.exit_code == 2, r.output
     assert "Traceback" not in r.output
     lines = [line for line in r.output.splitlines() if line.strip()]
-    assert lines and lines[-1].startswith("error: "), r.output
-    assert not any(line.startswith("error: ") for line in lines[:-1]), r.output
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.output
 
 
 @pytest.fixture(scope="module")

@@ -91,6 +91,20 @@ def _stop_signals():
             signal.signal(s, handler)
 
 
+def _check_folder(folder) -> None:
+    """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
+    import errno
+    import os
+
+    path = Path(folder).absolute()
+    while not path.exists():
+        path = path.parent
+    if not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path))
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "permission denied", str(path))
+
+
 def _columns_option(func):
     for option in reversed(
         [
@@ -182,6 +196,8 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
         from rwlab import ident as idm
 
         _check_orders(name, orders)
+        if save:
+            _check_folder(Path(save).parent)
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
         est, val = (data, None) if split >= 1 else data.split(split)
         model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names])
@@ -630,6 +646,7 @@ def experiment(
     cfg.check_limits(RW90)
     if Path(out).exists() and not force:
         raise FileExistsError(f"{out} exists; pass --force to replace it")
+    _check_folder(Path(out).parent)
     n = round(cfg.duration / cfg.Ts)
     realtime = cfg.realtime or cfg.interface != "virtual"
     label = f"{cfg.signal} ({cfg.mode}, {'real time' if realtime else 'simulated clock'})"
@@ -682,6 +699,7 @@ def export(record, fmt, out, Ts, max_gap, force):
     """
     from rwlab.testbed import load_record
 
+    _check_folder(Path(out).parent)
     data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
     path = Path(out)
     if path.suffix.lower() != f".{fmt}":
@@ -710,8 +728,9 @@ def export(record, fmt, out, Ts, max_gap, force):
 @_friendly_errors
 def monitor_cmd(record, host, port, replay, speed):
     """Serve the live monitor page for a record that is being written (or replay one)."""
-    from rwlab.testbed.monitor import serve
+    from rwlab.testbed.monitor import check_port, serve
 
+    check_port(host, port)
     if replay:
         from rwlab.testbed import read_record
 
@@ -761,6 +780,7 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
     from rwlab.ident.study import identification_study, load_study_data, physical_model
     from rwlab.report.identification import write_study
 
+    _check_folder(out)
     data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
     click.echo(f"data: {data!r}", err=True)
     result = identification_study(data, preprocess=preprocess, split=split, tolerance=tolerance)
@@ -881,6 +901,7 @@ def demo(out, realtime, monitor, quick, force):
 
     from rwlab.demo import DemoConfig, run_demo
 
+    _check_folder(out)
     cfg = DemoConfig.quick() if quick else DemoConfig()
     cfg = dataclasses.replace(cfg, realtime=realtime, monitor=monitor)
 
