@@ -120,6 +120,18 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path, record):
     assert not (tmp_path / "m.mcap").exists()
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_an_output_the_system_refuses_is_one_line(tmp_path, record):
+    for args in [
+        ("export", record, "--format", "csv", "--out", "/proc/rwlab-x.csv"),
+        ("experiment", "--duration", 5, "--out", "/proc/rwlab-x.mcap"),
+        ("ident", "arx", "dryer", 2, 2, 1, "--save", "/proc/rwlab-m.json"),
+    ]:
+        r = cli(*args)
+        assert_one_line_error(r)
+        assert "/proc/rwlab-" in r.output
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
 def test_a_read_only_output_folder_is_one_line(tmp_path, record):
     ro = tmp_path / "ro"

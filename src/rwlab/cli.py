@@ -647,7 +647,6 @@ def experiment(
     if Path(out).exists() and not force:
         raise FileExistsError(f"{out} exists; pass --force to replace it")
     _check_folder(Path(out).parent)
-    n = round(cfg.duration / cfg.Ts)
     realtime = cfg.realtime or cfg.interface != "virtual"
     label = f"{cfg.signal} ({cfg.mode}, {'real time' if realtime else 'simulated clock'})"
     server = None
@@ -660,10 +659,18 @@ def experiment(
                 # its own process, following the file being written: it never slows the run
                 server = start_process(partial_path(out), port=port)
                 click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
-            with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
-                summary = run_experiment(
-                    cfg, out, force=force, progress=lambda k, total: bar.update(1)
-                )
+            with contextlib.ExitStack() as stack:
+                bars = []
+
+                def progress(k: int, total: int) -> None:
+                    if not bars:  # shown from the first command: a failed start prints nothing
+                        bar = click.progressbar(
+                            length=total, label=label, show_eta=True, file=sys.stderr
+                        )
+                        bars.append(stack.enter_context(bar))
+                    bars[0].update(1)
+
+                summary = run_experiment(cfg, out, force=force, progress=progress)
     except KeyboardInterrupt as exc:
         why = exc.args[0] if exc.args else "Ctrl-C"
         click.echo(f"\ninterrupted ({why}): the wheel is idle and {out} is closed", err=True)
