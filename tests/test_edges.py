@@ -310,31 +310,25 @@ def test_a_killed_forced_rerun_keeps_the_old_record(tmp_path, record):
 
 @pytest.mark.slow
 def test_udp_multicast_experiment_against_wheel_serve_in_another_process(tmp_path):
-    group = f"239.74.{random.randrange(256)}.{random.randrange(1, 255)}"
+    # the default channel (group 239.74.163.2, frames kept on this host); a random node id
+    # keeps this wheel apart from any other on the same group
+    node = str(random.randrange(1, 16))
     server = rwlab_process(
-        "wheel", "serve", "--interface", "udp_multicast", "--channel", group, "--duration", 30
+        "wheel", "serve", "--interface", "udp_multicast", "--node-id", node, "--duration", 30
     )
     try:
-        assert f"udp_multicast:{group}" in server.stdout.readline()
+        assert "udp_multicast:239.74.163.2" in server.stdout.readline()
         out = tmp_path / "udp.mcap"
         client = rwlab_process(
-            "experiment",
-            "--interface",
-            "udp_multicast",
-            "--channel",
-            group,
-            "--duration",
-            3,
-            "--Ts",
-            0.5,
-            "--out",
-            out,
+            *("experiment", "--interface", "udp_multicast", "--node-id", node),
+            *("--duration", 3, "--Ts", 0.5, "--out", out),
         )
         output, _ = client.communicate(timeout=60)
         assert client.returncode == 0 and "(completed)" in output, output
         rec = read_record(out)
         assert rec.complete and len(rec.topic("/command")) == 6
         assert len(rec.topic("/telemetry")) > 100  # the server's 100 Hz
+        assert rec.topic("/telemetry")[-1]["mode"] == "IDLE"
     finally:
         server.terminate()
         server.communicate(timeout=10)
