@@ -23,7 +23,7 @@ from rwlab.data import IOData
 from rwlab.testbed import ExperimentConfig, run_experiment
 from rwlab.wheel import WheelParams
 
-BUDGET_S = 4.0
+BUDGET_S = 2.0
 
 
 def _commands(group: click.Group, prefix=()) -> list[tuple[tuple[str, ...], click.Command]]:
@@ -108,12 +108,11 @@ def _value(param: click.Parameter, files: dict, root: Path):
 
 
 @st.composite
-def invocations(draw, files, root):
-    """A command with its arguments and a few options, sometimes shuffled or cut short."""
-    path, cmd = draw(st.sampled_from(COMMANDS))
+def invocations(draw, path, cmd, files, root):
+    """``cmd`` with its arguments and a few options, sometimes shuffled or cut short."""
     args = [draw(_value(p, files, root)) for p in cmd.params if isinstance(p, click.Argument)]
     options = [p for p in cmd.params if isinstance(p, click.Option)]
-    for opt in draw(st.lists(st.sampled_from(options), max_size=4)) if options else []:
+    for opt in draw(st.lists(st.sampled_from(options), max_size=6)) if options else []:
         args.append(opt.opts[0])
         if not opt.is_flag:
             args.append(draw(_value(opt, files, root)))
@@ -152,16 +151,17 @@ class _Budget:
 
 
 @pytest.mark.slow
-def test_random_command_lines_exit_0_or_2_without_traceback(files):
+@pytest.mark.parametrize(("path", "cmd"), COMMANDS, ids=[" ".join(p) for p, _ in COMMANDS])
+def test_random_command_lines_exit_0_or_2_without_traceback(files, path, cmd):
     root, made = files
 
     @settings(
-        max_examples=int(os.environ.get("RWLAB_FUZZ_EXAMPLES", 60)),
+        max_examples=int(os.environ.get("RWLAB_FUZZ_EXAMPLES", 12)),
         derandomize="RWLAB_FUZZ_EXAMPLES" not in os.environ,  # CI: the same examples each run
         deadline=None,
         suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
     )
-    @given(args=invocations(made, root))
+    @given(args=invocations(path, cmd, made, root))
     def check(args):
         cwd = os.getcwd()
         os.chdir(root)  # a command's default --out lands in the scratch folder
