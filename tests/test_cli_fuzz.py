@@ -57,7 +57,8 @@ def _toml(table: dict) -> str:
         if isinstance(v, bool):
             return "true" if v else "false"
         if isinstance(v, str):
-            return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML's
+            # JSON's escapes are TOML's; TOML also wants DEL escaped
+            return json.dumps(v, ensure_ascii=False).replace("\x7f", "\\u007f")
         if isinstance(v, float) and not np.isfinite(v):
             return "inf" if v > 0 else "-inf"
         if isinstance(v, list):
