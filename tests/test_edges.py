@@ -241,6 +241,22 @@ def test_a_record_being_written_is_locked(tmp_path):
     assert read_record(path).complete and not partial_path(path).exists()
 
 
+def test_a_follower_reads_the_partial_record_then_the_closed_one(tmp_path):
+    from rwlab.testbed.record import RecordFollower
+
+    path = tmp_path / "live.mcap"
+    follower = RecordFollower(path)
+    writer = RecordWriter(path, {"Ts": 1})
+    seen = []
+    for k in range(3):
+        writer.event(float(k), "note", str(k))
+        writer._fh.flush()
+        seen += follower.poll()["/event"]
+    writer.close()
+    seen += follower.poll()["/event"]
+    assert [e["message"] for e in seen] == ["0", "1", "2"] and follower.complete
+
+
 @pytest.mark.slow
 def test_sigterm_mid_experiment_idles_the_wheel_and_closes_the_record(tmp_path):
     out = tmp_path / "t.mcap"

@@ -654,10 +654,9 @@ def experiment(
         with _stop_signals():
             if monitor:
                 from rwlab.testbed.monitor import start_process
-                from rwlab.testbed.record import partial_path
 
                 # its own process, following the file being written: it never slows the run
-                server = start_process(partial_path(out), port=port)
+                server = start_process(out, port=port)
                 click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
             with contextlib.ExitStack() as stack:
                 bars = []

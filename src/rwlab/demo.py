@@ -148,9 +148,8 @@ def run_demo(
         path = out / "records" / f"{name}.mcap"
         if cfg.monitor:
             from rwlab.testbed.monitor import start_process
-            from rwlab.testbed.record import partial_path
 
-            monitor = start_process(partial_path(path), port=5006)  # the file being written
+            monitor = start_process(path, port=5006)
             echo(f"live monitor for {name}: http://127.0.0.1:5006/")
         n = round(exp.duration / exp.Ts)
         echo(f"[testbed] {title}: {n} commands")

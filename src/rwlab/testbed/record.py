@@ -279,6 +279,8 @@ def read_record(path: str | os.PathLike) -> Record:
 class RecordFollower:
     """Read a record that is still being written, a little more on each call.
 
+    ``path`` is the record's final name; until it closes, its partial file is read.
+
     Only complete MCAP records are parsed, so a half-written message is never
     seen; the writer is never blocked (this only reads the file).
     """
@@ -293,8 +295,10 @@ class RecordFollower:
     def poll(self) -> dict[str, list[dict]]:
         """New messages per topic since the last call."""
         out = Record(self.path)
+        # while a run writes, the data are in its partial file, renamed (same bytes) on close
+        source = self.path if self.path.exists() else partial_path(self.path)
         try:
-            with open(self.path, "rb") as fh:
+            with open(source, "rb") as fh:
                 fh.seek(self._offset)
                 data = fh.read()
         except FileNotFoundError:
