@@ -524,39 +524,42 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
     if interface == "virtual":
         node = WheelNode(open_bus(interface, channel), node_id, latency=0.02).start()
     client = WheelClient(bus, node_id, timeout=timeout)
-    try:
-        send = {
-            "speed": lambda: client.set_speed(value),
-            "accel": lambda: client.set_acceleration(value),
-            "idle": client.idle,
-            "clear": client.clear_fault,
-        }[action]
-        seq = send()
-        client.wait_ack(seq)
-        t0 = client.clock.now()
-        click.echo(f"acknowledged in {client.latency_of(seq, client.latest_time) * 1000:.1f} ms")
-        click.echo(f"{'t [s]':>7} {'speed [rpm]':>12} {'current [A]':>12} mode")
-        next_print = next_send = t0
-        while client.clock.now() - t0 <= watch:
-            now = client.clock.now()
-            if action in ("speed", "accel") and now >= next_send:
-                send()  # keep-alive: the wheel's watchdog idles it without commands
-                next_send += 0.25
-            tel = client.telemetry()
-            client.raise_if_faulted()
-            if now >= next_print:
-                click.echo(
-                    f"{now - t0:7.2f} {tel.speed_rpm:12.1f} {tel.current:12.3f} {tel.mode.name}"
-                )
-                next_print += 0.1
-            client.clock.sleep(0.005)
-    finally:
-        if action not in ("idle", "clear"):
-            client.close()
-        if node is not None:
-            node.stop()
-            node.bus.shutdown()
-        bus.shutdown()
+    with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles
+        try:
+            send = {
+                "speed": lambda: client.set_speed(value),
+                "accel": lambda: client.set_acceleration(value),
+                "idle": client.idle,
+                "clear": client.clear_fault,
+            }[action]
+            seq = send()
+            client.wait_ack(seq)
+            t0 = client.clock.now()
+            click.echo(
+                f"acknowledged in {client.latency_of(seq, client.latest_time) * 1000:.1f} ms"
+            )
+            click.echo(f"{'t [s]':>7} {'speed [rpm]':>12} {'current [A]':>12} mode")
+            next_print = next_send = t0
+            while client.clock.now() - t0 <= watch:
+                now = client.clock.now()
+                if action in ("speed", "accel") and now >= next_send:
+                    send()  # keep-alive: the wheel's watchdog idles it without commands
+                    next_send += 0.25
+                tel = client.telemetry()
+                client.raise_if_faulted()
+                if now >= next_print:
+                    click.echo(
+                        f"{now - t0:7.2f} {tel.speed_rpm:12.1f} {tel.current:12.3f} {tel.mode.name}"
+                    )
+                    next_print += 0.1
+                client.clock.sleep(0.005)
+        finally:
+            if action not in ("idle", "clear"):
+                client.close()
+            if node is not None:
+                node.stop()
+                node.bus.shutdown()
+            bus.shutdown()
 
 
 # -- the testbed ----------------------------------------------------------------------
