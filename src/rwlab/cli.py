@@ -792,7 +792,16 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
     _check_folder(out)
     data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
     click.echo(f"data: {data!r}", err=True)
-    result = identification_study(data, preprocess=preprocess, split=split, tolerance=tolerance)
+    with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
+
+        def progress(done: int, total: int, label: str) -> None:
+            bar.length = total
+            bar.label = f"identification study: {label}"
+            bar.update(1)
+
+        result = identification_study(
+            data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+        )
     model = physical_model(
         result,
         speed_limit_rpm=saturation["speed_limit_rpm"],

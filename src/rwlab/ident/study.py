@@ -25,6 +25,7 @@ normalised data, where physical zero is not 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import control
@@ -158,6 +159,7 @@ def identification_study(
     nk_max: int = 10,
     tolerance: float = 3.0,
     seed: int = 0,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -178,6 +180,9 @@ def identification_study(
         (default 3: paper A kept ARX221 although ARX331 fitted 1.6 points better).
     seed : int
         For the new input of the continuous-time check.
+    progress : callable, optional
+        ``progress(done, total, label)`` after each stage (delay scan, each
+        estimate, validation), for a progress bar.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -198,8 +203,16 @@ def identification_study(
         preprocess
     ]()
     est, val = prepared.split(split)
+    total, done = len(orders) + 5, 0
+
+    def step(label: str) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total, label)
 
     losses = delay_scan(est, 2, 2, 0, nk_max)
+    step("delay scan")
     nk = min(losses, key=losses.get)
     if nk == 0:
         nk = 1 if losses.get(1, math.inf) <= losses[0] * 1.001 else 0
@@ -210,16 +223,19 @@ def identification_study(
         m = arx(est, n, n, nk)
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
+        step(m.structure)
     others = []
     nk_pem = max(nk, 1)
-    for m in (
-        _try(armax, est, 2, 2, 1, nk_pem),
-        _try(oe, est, 2, 2, nk_pem),
-        _try(bj, est, 2, 1, 1, 2, nk_pem),
+    for name, estimate, args in (
+        ("ARMAX", armax, (2, 2, 1, nk_pem)),
+        ("OE", oe, (2, 2, nk_pem)),
+        ("BJ", bj, (2, 1, 1, 2, nk_pem)),
     ):
+        m = _try(estimate, est, *args)
         if m is not None:
             models[m.structure] = m
             others.append(_row(m, val))
+        step(name)
 
     candidates = [r for r in rows + others if r["fit_percent"] is not None]
     if not candidates:
@@ -243,6 +259,7 @@ def identification_study(
     rng = np.random.default_rng(seed)
     new_u = _new_input(rng, est, val.N)
     continuous = _continuous(chosen, new_u)
+    step("validation")
     return StudyResult(
         data=prepared,
         est=est,
