@@ -385,7 +385,8 @@ def as_experiments(data: IOData | Sequence[IOData]) -> list[IOData]:
 
 
 def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
-    """Read a record from ``.csv``, ``.dat``/``.txt``, ``.parquet`` or ``.mat``.
+    """Read a record from ``.mcap`` (a testbed record), ``.csv``, ``.dat``/``.txt``,
+    ``.parquet`` or ``.mat``.
 
     Parameters
     ----------
@@ -395,8 +396,20 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
         Sample time in seconds; required when the file does not carry one
         (a CSV without a time column, a .mat without ``Ts``).
     **options
-        ``input_columns``/``output_columns`` (names or indices) for tables;
-        ``u``/``y`` variable names for .mat files.
+        ``input_columns``/``output_columns``: column names (or indices), .mat
+        variable names, or a testbed record's channels (default ``command`` →
+        ``speed_rpm``); one name, a list, or ``"a,b"``. Without them a file
+        with more than one input/output split is an error (``DataError``),
+        never a guess, unless rwlab's own metadata says which is which.
+        ``max_gap`` (s) for a record: see :func:`rwlab.testbed.load_record`.
+
+    Raises
+    ------
+    DataError
+        An ambiguous or unknown column choice, or a NaN/Inf in a chosen column
+        (the message names the line and the column).
+    FileFormatError
+        A file that cannot be parsed.
     """
     from rwlab import _io
 
