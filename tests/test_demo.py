@@ -5,6 +5,7 @@ import pytest
 from click.testing import CliRunner
 
 from rwlab.cli import main
+from rwlab.demo import check_out
 from tests.conftest import needs_chromium
 
 
@@ -57,9 +58,12 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
 
 
 @pytest.mark.slow
-def test_demo_refuses_to_overwrite_without_force(demo_dir):
-    r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(demo_dir)])
-    assert r.exit_code == 2 and "exists" in r.output
+def test_a_rerun_replaces_a_demo_but_never_a_foreign_folder(demo_dir, tmp_path):
+    check_out(demo_dir, force=False)  # the Quick start run twice: the old demo is replaced
+    (tmp_path / "thesis.tex").write_text("mine")
+    r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "not a previous demo" in r.output
+    assert (tmp_path / "thesis.tex").read_text() == "mine"
 
 
 @pytest.mark.slow

@@ -12,10 +12,17 @@ from click.testing import CliRunner
 
 from rwlab.cli import main
 from rwlab.data import load
-from rwlab.errors import ConfigError, FileFormatError, RecordGapError
+from rwlab.errors import ConfigError, DataError, FileFormatError, RecordGapError
 from rwlab.ident import arx, delayest
 from rwlab.testbed import ExperimentConfig, RecordWriter, load_record, read_record, run_experiment
+from rwlab.testbed.record import partial_path
 from rwlab.wheel.protocol import dbc_sha256
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @pytest.fixture(scope="module")
@@ -187,7 +194,8 @@ while True:
     killed_at = time.time()
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
-    rec = read_record(path)  # opens although it has no footer
+    assert not path.exists()  # a killed run never replaces the record at its path...
+    rec = read_record(partial_path(path))  # ...and its own opens although it has no footer
     frames = rec.topic("/telemetry")
     assert not rec.complete and len(frames) > 500  # ~1 kHz for 1.5 s
     assert killed_at - frames[-1]["t"] <= 0.100
@@ -200,8 +208,11 @@ def test_export_writes_csv_parquet_and_mat(tmp_path, prbs_record):
         out = tmp_path / f"x.{fmt}"
         r = runner.invoke(main, ["export", str(path), "--format", fmt, "--out", str(out)])
         assert r.exit_code == 0, r.output
-        back = load(out, Ts=0.5) if fmt != "csv" else load(out)
-        assert back.N == 2401 and back.Ts == 0.5
+        with pytest.raises(DataError, match="ambiguous"):  # four channels: which is the output?
+            load(out)
+        back = load(out, input_columns="command", output_columns="current_a")
+        assert back.N == 2401 and back.Ts == 0.5 and back.output_names == ("current_a",)
+        assert oct(out.stat().st_mode & 0o777) == oct(0o666 & ~_umask())
     header = (tmp_path / "x.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["time_s", "command", "speed_rpm"]
     r = runner.invoke(

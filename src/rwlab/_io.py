@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.data import IOData, Trend, atomic_write_bytes, check_Ts
-from rwlab.errors import DataError, FileFormatError
+from rwlab.errors import DataError, FileFormatError, RwlabError
 
 _META_PREFIX = "# rwlab "
 _TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
@@ -27,9 +27,7 @@ def write(data: IOData, path: Path, *, overwrite: bool, plain: bool = False) -> 
     writers = {".csv": _write_csv, ".parquet": _write_parquet, ".mat": _write_mat}
     if suffix not in writers:
         raise DataError(f"unknown data file type {suffix!r}; use .csv, .parquet or .mat")
-    if suffix == ".csv":
-        return atomic_write_bytes(path, lambda tmp: _write_csv(data, tmp, plain=plain))
-    return atomic_write_bytes(path, lambda tmp: writers[suffix](data, tmp))
+    return atomic_write_bytes(path, lambda tmp: writers[suffix](data, tmp, plain=plain))
 
 
 def read(path: Path, Ts: float | None, **options) -> IOData:
@@ -42,12 +40,15 @@ def read(path: Path, Ts: float | None, **options) -> IOData:
         ".txt": _read_text,
         ".parquet": _read_parquet,
         ".mat": _read_mat,
+        ".mcap": _read_mcap,
     }
     if suffix not in readers:
-        raise DataError(f"unknown data file type {suffix!r}; use .csv, .dat, .parquet or .mat")
+        raise DataError(
+            f"unknown data file type {suffix!r}; use .mcap, .csv, .dat, .parquet or .mat"
+        )
     try:
         return readers[suffix](path, Ts, **options)
-    except (DataError, FileFormatError, TypeError):
+    except (RwlabError, OSError, TypeError):
         raise
     except Exception as exc:  # any parser failure becomes one typed, named error
         raise FileFormatError(f"{path}: not a readable {suffix} data file ({exc})") from exc
@@ -65,12 +66,19 @@ def _meta(data: IOData) -> str:
     return json.dumps(data.to_dict(), separators=(",", ":"))
 
 
-def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns=None) -> IOData:
-    """Build IOData from a named numeric table, using rwlab metadata when present."""
-    names = [str(n).strip() for n in names]
-    if meta is not None:
-        input_columns = meta["input_names"]
-        output_columns = meta["output_names"]
+def _as_list(cols) -> list | None:
+    """A column choice as a list: None, one name or index, "a,b", or a sequence."""
+    if cols is None:
+        return None
+    if isinstance(cols, str):
+        return [c.strip() for c in cols.split(",") if c.strip()]
+    if isinstance(cols, (int, np.integer)):
+        return [int(cols)]
+    return list(cols)
+
+
+def _choose(names, data_cols, inputs, outputs, path) -> tuple[list[int], list[int]]:
+    """Indices of the input and output columns; a choice that is not unique is an error."""
 
     def index(col) -> int:
         if isinstance(col, (int, np.integer)):
@@ -81,23 +89,76 @@ def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns
             raise DataError(f"{path}: no column {col!r}; columns are {names}")
         return names.index(col)
 
+    in_idx = None if inputs is None else [index(c) for c in inputs]
+    out_idx = None if outputs is None else [index(c) for c in outputs]
+    if in_idx is None and out_idx is None and len(data_cols) <= 2:
+        in_idx, out_idx = data_cols[:-1], data_cols[-1:]  # u, y or a time series y
+    elif in_idx is not None and out_idx is None:
+        rest = [i for i in data_cols if i not in in_idx]
+        out_idx = rest if len(rest) == 1 else None
+    elif out_idx is not None and in_idx is None:
+        rest = [i for i in data_cols if i not in out_idx]
+        in_idx = rest if len(rest) <= 1 else None
+    if in_idx is None or not out_idx:
+        shown = [names[i] for i in data_cols]
+        raise DataError(
+            f"{path}: which columns are inputs and which outputs is ambiguous ({shown}); "
+            "choose with --input and --output (input_columns=/output_columns=), "
+            "several as a,b"
+        )
+    both = sorted({names[i] for i in in_idx} & {names[i] for i in out_idx})
+    if both:
+        raise DataError(f"{path}: column(s) {both} chosen as both input and output")
+    return in_idx, out_idx
+
+
+def _check_finite(table, cols, names, path, lines=None) -> None:
+    """A NaN or Inf in a chosen column is an error naming its row and column."""
+    if not cols:
+        return
+    bad = np.argwhere(~np.isfinite(table[:, cols]))
+    if bad.size:
+        r, c = bad[0]
+        where = f"line {lines[r]}" if lines is not None else f"row {r + 1}"
+        raise DataError(
+            f"{path}: {where}, column {names[cols[c]]!r} is {float(table[r, cols[c]])}, not a "
+            "finite number; remove or interpolate the bad samples (no column is dropped)"
+        )
+
+
+def _from_table(
+    names,
+    table,
+    Ts,
+    meta,
+    path,
+    input_columns=None,
+    output_columns=None,
+    *,
+    lines=None,
+    units=None,
+) -> IOData:
+    """Build IOData from a named numeric table, using rwlab metadata when present.
+
+    Explicit ``input_columns``/``output_columns`` win over the file's metadata.
+    ``lines`` gives each row's line in the file (for error messages); ``units``
+    maps column names to units.
+    """
+    names = [str(n).strip() for n in names]
+    inputs, outputs = _as_list(input_columns), _as_list(output_columns)
+    chosen_by_meta = meta is not None and inputs is None and outputs is None
+    if chosen_by_meta:
+        inputs, outputs = list(meta["input_names"]), list(meta["output_names"])
     time_col = next((i for i, n in enumerate(names) if n.lower() in _TIME_NAMES), None)
     data_cols = [i for i in range(len(names)) if i != time_col]
-    if output_columns is None:
-        if not data_cols:
-            raise FileFormatError(f"{path}: no data columns")
-        output_columns = [data_cols[-1]]
-    if isinstance(output_columns, (str, int)):
-        output_columns = [output_columns]
-    out_idx = [index(c) for c in output_columns]
-    if input_columns is None:
-        input_columns = [i for i in data_cols if i not in out_idx]
-    if isinstance(input_columns, (str, int)):
-        input_columns = [input_columns]
-    in_idx = [index(c) for c in input_columns]
+    if not data_cols:
+        raise FileFormatError(f"{path}: no data columns")
+    in_idx, out_idx = _choose(names, data_cols, inputs, outputs, path)
+    _check_finite(table, [*in_idx, *out_idx], names, path, lines)
 
     tstart = 0.0
     if time_col is not None and table.shape[0] >= 2:
+        _check_finite(table, [time_col], names, path, lines)
         t = table[:, time_col]
         steps = np.diff(t)
         file_Ts = float(f"{(t[-1] - t[0]) / (len(t) - 1):.12g}")  # drop float noise of the stamps
@@ -113,14 +174,15 @@ def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns
                 f"{path}: Ts={Ts} s disagrees with the file's time column ({file_Ts} s)"
             )
         Ts, tstart = file_Ts, float(t[0])
+    units = dict(units or {})
     kwargs = {}
     if meta is not None:
-        kwargs = dict(
-            input_units=meta["input_units"],
-            output_units=meta["output_units"],
-            name=meta.get("name", ""),
-            trend=Trend.from_dict(meta["trend"]),
-        )
+        units.update(zip(meta["input_names"], meta["input_units"], strict=False))
+        units.update(zip(meta["output_names"], meta["output_units"], strict=False))
+        trend = Trend.from_dict(meta["trend"])
+        if not chosen_by_meta:
+            _check_plain_trend(trend, path)
+        kwargs = dict(name=meta.get("name", ""), trend=trend if chosen_by_meta else None)
         Ts = meta["Ts"] if Ts is None else Ts
         tstart = meta.get("tstart", tstart)
     return IOData(
@@ -129,9 +191,21 @@ def _from_table(names, table, Ts, meta, path, input_columns=None, output_columns
         Ts,
         input_names=[names[i] for i in in_idx],
         output_names=[names[i] for i in out_idx],
+        input_units=[units.get(names[i], "") for i in in_idx],
+        output_units=[units.get(names[i], "") for i in out_idx],
         tstart=tstart,
         **kwargs,
     )
+
+
+def _check_plain_trend(trend: Trend, path) -> None:
+    """A preprocessed file's channels cannot be regrouped: its trend belongs to its choice."""
+    identity = Trend.identity(len(trend.input_offset), len(trend.output_offset))
+    if any(not np.array_equal(getattr(trend, k), getattr(identity, k)) for k in trend.__dict__):
+        raise DataError(
+            f"{path}: the file holds preprocessed (detrended/normalised) data; its input and "
+            "output columns cannot be chosen differently from the file's own"
+        )
 
 
 # -- CSV ----------------------------------------------------------------------------
@@ -151,7 +225,12 @@ def _read_csv(path: Path, Ts, **options) -> IOData:
     if text.startswith(_META_PREFIX):
         first, _, text = text.partition("\n")
         meta = json.loads(first[len(_META_PREFIX) :])
-    rows = [r for r in csv.reader(io.StringIO(text)) if any(cell.strip() for cell in r)]
+    reader = csv.reader(io.StringIO(text))
+    rows, lines = [], []
+    for row in reader:
+        if any(cell.strip() for cell in row):
+            rows.append(row)
+            lines.append(reader.line_num + (meta is not None))
     if len(rows) < 2:
         raise FileFormatError(f"{path}: a CSV record needs a header row and at least one data row")
     header = rows[0]
@@ -160,15 +239,18 @@ def _read_csv(path: Path, Ts, **options) -> IOData:
         header = header[:-1]
     width = len(header)
     table = np.empty((len(rows) - 1, width))
-    for k, row in enumerate(rows[1:], start=2):
+    for k, (row, line) in enumerate(zip(rows[1:], lines[1:], strict=True)):
         cells = row[:width] + [""] * (width - len(row))
         try:
-            table[k - 2] = [float(c) if c.strip() else np.nan for c in cells]
+            table[k] = [float(c) if c.strip() else np.nan for c in cells]
         except ValueError:
-            raise FileFormatError(f"{path}: line {k} is not numeric: {row}") from None
-    # columns that are only partly filled (a Ts written once in the first row) are metadata
-    keep = [i for i in range(width) if not np.isnan(table[:, i]).any()]
-    return _from_table([header[i] for i in keep], table[:, keep], Ts, meta, path, **options)
+            raise FileFormatError(f"{path}: line {line} is not numeric: {row}") from None
+    # a column filled in its first row only (a Ts written once) is metadata, not data;
+    # any other missing value stays in its column and is an error if that column is chosen
+    keep = [i for i in range(width) if len(table) < 2 or not np.isnan(table[1:, i]).all()]
+    return _from_table(
+        [header[i] for i in keep], table[:, keep], Ts, meta, path, lines=lines[1:], **options
+    )
 
 
 def _read_text(path: Path, Ts, **options) -> IOData:
@@ -179,13 +261,14 @@ def _read_text(path: Path, Ts, **options) -> IOData:
 
 
 # -- Parquet ------------------------------------------------------------------------
-def _write_parquet(data: IOData, tmp: Path) -> None:
+def _write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     names, table = _columns(data)
     arrow = pa.table({n: table[:, i] for i, n in enumerate(names)})
-    arrow = arrow.replace_schema_metadata({b"rwlab": _meta(data).encode()})
+    if not plain:
+        arrow = arrow.replace_schema_metadata({b"rwlab": _meta(data).encode()})
     pq.write_table(arrow, tmp)
 
 
@@ -202,42 +285,90 @@ def _read_parquet(path: Path, Ts, **options) -> IOData:
 
 
 # -- MATLAB .mat --------------------------------------------------------------------
-def _write_mat(data: IOData, tmp: Path) -> None:
+def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
+    """rwlab's form: u (N×nu), y (N×ny), Ts, t, metadata; ``plain``: one vector per channel."""
     from scipy.io import savemat
 
+    if plain:
+        names, table = _columns(data)
+        bad = [n for n in names if not n.isidentifier()]
+        if bad:
+            raise DataError(f"channel names {bad} are not MATLAB variable names")
+        variables = {n: table[:, [i]] for i, n in enumerate(names)} | {"Ts": data.Ts}
+    else:
+        variables = {
+            "u": data.u,
+            "y": data.y,
+            "Ts": data.Ts,
+            "t": data.time[:, None],
+            "rwlab_meta": _meta(data),
+        }
     with open(tmp, "wb") as fh:
-        savemat(
-            fh,
-            {
-                "u": data.u,
-                "y": data.y,
-                "Ts": data.Ts,
-                "t": data.time[:, None],
-                "rwlab_meta": _meta(data),
-            },
-        )
+        savemat(fh, variables)
 
 
-def _read_mat(path: Path, Ts, u: str = "u", y: str = "y") -> IOData:
+def _read_mat(path: Path, Ts, input_columns=None, output_columns=None) -> IOData:
+    """Variables ``u`` and ``y`` (rwlab's form) or any vectors chosen by name."""
     from scipy.io import loadmat
 
     mat = loadmat(path)
-    missing = [v for v in (u, y) if v not in mat]
-    if missing:
-        found = sorted(k for k in mat if not k.startswith("__"))
-        raise FileFormatError(f"{path}: no variable {missing[0]!r}; the file holds {found}")
-    meta = json.loads(str(mat["rwlab_meta"][0])) if "rwlab_meta" in mat else None
     if Ts is None and "Ts" in mat:
         Ts = float(np.asarray(mat["Ts"]).ravel()[0])
-    kwargs = {}
-    if meta is not None:
-        kwargs = dict(
-            input_names=meta["input_names"],
-            output_names=meta["output_names"],
-            input_units=meta["input_units"],
-            output_units=meta["output_units"],
-            tstart=meta.get("tstart", 0.0),
-            trend=Trend.from_dict(meta["trend"]),
-            name=meta.get("name", ""),
-        )
-    return IOData(np.asarray(mat[u], float), np.asarray(mat[y], float), Ts, **kwargs)
+    meta = json.loads(str(mat["rwlab_meta"][0])) if "rwlab_meta" in mat else None
+    found = sorted(k for k in mat if not k.startswith("__"))
+    inputs, outputs = _as_list(input_columns), _as_list(output_columns)
+    if (inputs or ["u"]) == ["u"] and (outputs or ["y"]) == ["y"] and {"u", "y"} <= set(mat):
+        u, y = np.asarray(mat["u"], float), np.asarray(mat["y"], float)
+        kwargs = {}
+        if meta is not None:
+            kwargs = {k: meta[k] for k in ("input_names", "output_names")}
+            kwargs |= {k: meta[k] for k in ("input_units", "output_units")}
+            kwargs |= dict(
+                tstart=meta.get("tstart", 0.0),
+                trend=Trend.from_dict(meta["trend"]),
+                name=meta.get("name", ""),
+            )
+        return IOData(u, y, Ts, **kwargs)
+    vectors = {
+        k: np.asarray(v, float).ravel()
+        for k, v in mat.items()
+        if k in found
+        and isinstance(v, np.ndarray)
+        and v.dtype.kind in "fiu"
+        and v.ndim == 2
+        and min(v.shape) == 1
+        and max(v.shape) > 1
+    }
+    for name in [*(inputs or []), *(outputs or [])]:
+        if name not in vectors:
+            raise FileFormatError(f"{path}: no vector variable {name!r}; the file holds {found}")
+    names = list(vectors)
+    if len({v.size for v in vectors.values()}) > 1:
+        chosen = [*(inputs or []), *(outputs or [])]
+        names = chosen or names
+        if len({vectors[n].size for n in names}) > 1:
+            raise FileFormatError(f"{path}: the variables {names} differ in length")
+    table = np.column_stack([vectors[n] for n in names]) if names else np.zeros((0, 0))
+    return _from_table(names, table, Ts, None, path, inputs, outputs)
+
+
+# -- testbed records (.mcap) --------------------------------------------------------
+def _read_mcap(path: Path, Ts, input_columns=None, output_columns=None, max_gap=None) -> IOData:
+    """A testbed record on a uniform grid; input ``command``, output ``speed_rpm`` by default."""
+    from rwlab.testbed.load import OUTPUTS, load_record
+
+    rec = load_record(path, Ts, outputs=tuple(OUTPUTS), max_gap=max_gap)
+    names = ["time_s", *rec.input_names, *rec.output_names]
+    units = dict(zip(names[1:], [*rec.input_units, *rec.output_units], strict=True))
+    table = np.column_stack([rec.time, rec.u, rec.y])
+    data = _from_table(
+        names,
+        table,
+        rec.Ts,
+        None,
+        path,
+        "command" if input_columns is None else input_columns,
+        "speed_rpm" if output_columns is None else output_columns,
+        units=units,
+    )
+    return data._with(data.u, data.y, name=rec.name)

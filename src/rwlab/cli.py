@@ -7,29 +7,123 @@ import functools
 import json
 import math
 import sys
+import threading
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 import click
 
 from rwlab import __version__
-from rwlab.errors import RwlabError
+from rwlab.errors import ConfigError, RwlabError
 
 # -- shared plumbing -------------------------------------------------------------------
 
 
+def _message(exc: BaseException) -> str:
+    """One line for an error a user caused (an OS error names its file)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror}" if where else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _fail(exc: BaseException) -> NoReturn:
+    click.echo(f"error: {_message(exc)}", err=True)
+    sys.exit(2)
+
+
 def _friendly_errors(func):
-    """Turn rwlab's typed errors into a one-line message and exit status 2."""
+    """Turn rwlab's typed errors and OS errors into a one-line message and exit status 2."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         try:
             return func(*args, **kwargs)
-        except (RwlabError, FileNotFoundError, FileExistsError) as exc:
-            click.echo(f"error: {exc}", err=True)
-            sys.exit(2)
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
 
     return wrapper
+
+
+class _Cli(click.Group):
+    """The ``rwlab`` group: a usage error is one line and exit status 2, like any other."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.UsageError as exc:
+            where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+            hint = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
+            _fail(RwlabError(f"{where}{exc.format_message()}{hint}"))
+        except click.ClickException as exc:
+            _fail(RwlabError(exc.format_message()))
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
+        except click.Abort:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+
+
+@contextlib.contextmanager
+def _stop_signals():
+    """SIGTERM and SIGHUP stop a run the way Ctrl-C does (KeyboardInterrupt).
+
+    So ``kill`` or a closed terminal also idles the wheel, closes the record and
+    stops the monitor. Only the first signal interrupts; later ones are ignored
+    so that the clean-up they would cut short can finish.
+    """
+    import signal
+
+    stops = (signal.SIGTERM, signal.SIGHUP)
+
+    def interrupt(signum, frame):
+        for s in stops:
+            signal.signal(s, signal.SIG_IGN)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set from the main thread
+        return
+    previous = {s: signal.signal(s, interrupt) for s in stops}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _check_folder(folder) -> None:
+    """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
+    import errno
+    import os
+
+    path = Path(folder).absolute()
+    while not path.exists():
+        path = path.parent
+    if not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path))
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "permission denied", str(path))
+
+
+def _columns_option(func):
+    for option in reversed(
+        [
+            click.option(
+                "--input",
+                "input_col",
+                help="Input column(s) or .mat variable(s), several as a,b (records: command).",
+            ),
+            click.option(
+                "--output",
+                "output_col",
+                help="Output column(s) or .mat variable(s), several as a,b (records: speed_rpm).",
+            ),
+        ]
+    ):
+        func = option(func)
+    return func
 
 
 def _data_options(func):
@@ -39,10 +133,7 @@ def _data_options(func):
         click.option(
             "--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."
         ),
-        click.option("--input", "input_col", help="Input column name (tables) or variable (.mat)."),
-        click.option(
-            "--output", "output_col", help="Output column name (tables) or variable (.mat)."
-        ),
+        _columns_option,
         click.option(
             "--detrend",
             type=click.Choice(["none", "constant", "linear"]),
@@ -57,21 +148,17 @@ def _data_options(func):
     return func
 
 
-def _load(file, Ts, input_col, output_col, detrend, normalize):
+def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
+    """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
     from rwlab import datasets
     from rwlab.data import load
 
     if not Path(file).exists() and file in datasets.NAMES:
+        if input_col or output_col:
+            raise ConfigError(f"{file} is a bundled data set: it has one input and one output")
         data = datasets.get(file)
     else:
-        opts = {}
-        if Path(file).suffix.lower() == ".mat":
-            opts = {k: v for k, v in (("u", input_col), ("y", output_col)) if v}
-        else:
-            opts = {
-                k: v for k, v in (("input_columns", input_col), ("output_columns", output_col)) if v
-            }
-        data = load(file, Ts, **opts)
+        data = load(file, Ts, input_columns=input_col, output_columns=output_col)
     if detrend != "none":
         data = data.detrend(detrend)
     if normalize:
@@ -88,7 +175,7 @@ def _echo_json(obj) -> None:
 # -- commands --------------------------------------------------------------------------
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rwlab")
 def main() -> None:
     """rwlab: test a reaction wheel, identify it, and control a satellite with it."""
@@ -116,6 +203,9 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     ):
         from rwlab import ident as idm
 
+        _check_orders(name, orders)
+        if save:
+            _check_folder(Path(save).parent)
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
         est, val = (data, None) if split >= 1 else data.split(split)
         extra = {"max_iter": orders.pop("max_iter")} if "max_iter" in orders else {}
@@ -166,7 +256,7 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     )(command)
     command = click.option(
         "--split",
-        type=float,
+        type=click.FloatRange(0, 1, min_open=True),
         default=0.7,
         show_default=True,
         help="Estimation share; the rest validates (1: no validation).",
@@ -174,6 +264,15 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
     command = _data_options(command)
     command.__doc__ = doc
     return ident.command(name)(command)
+
+
+def _check_orders(name: str, orders: dict[str, int]) -> None:
+    """Refuse orders that leave nothing to estimate, before any data is read."""
+    shown = ", ".join(f"{k}={v}" for k, v in orders.items())
+    if not any(v for k, v in orders.items() if k != "nk"):
+        raise ConfigError(f"{name.upper()}({shown}) has no parameters to estimate")
+    if name in ("oe", "bj") and orders["nb"] == 0:
+        raise ConfigError(f"{name.upper()}({shown}): nb must be ≥ 1, or the input never enters")
 
 
 _estimate_command(
@@ -296,9 +395,16 @@ def delay(file, Ts, input_col, output_col, detrend, normalize, na, nb, nk_min, n
 @click.option("--na", "na_range", default="1:10", show_default=True, help="Range lo:hi of na.")
 @click.option("--nb", "nb_range", default="1:10", show_default=True, help="Range lo:hi of nb.")
 @click.option("--nk", "nk_range", default=None, help="Range lo:hi of nk (default: delayest's).")
-@click.option("--split", type=float, default=0.5, show_default=True, help="Estimation share.")
+@click.option(
+    "--split",
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    default=0.5,
+    show_default=True,
+    help="Estimation share.",
+)
 @click.option(
     "--criterion",
+    callback=lambda ctx, param, value: _criterion(value),
     default="0",
     show_default=True,
     help="0 (validation loss), aic, mdl, or a number c for V(1+c·d/N).",
@@ -326,8 +432,7 @@ def struct_(
     est, val = data.split(split)
     nks = _range(nk_range) if nk_range else [delayest(est)]
     table = arxstruc(est, val, struc(_range(na_range), _range(nb_range), nks))
-    crit = criterion if criterion in ("aic", "mdl") else float(criterion)
-    best = selstruc(table, crit)
+    best = selstruc(table, criterion)
     if as_json:
         _echo_json(
             {
@@ -343,14 +448,27 @@ def struct_(
     click.echo(f"selected (criterion {criterion}): na={best[0]} nb={best[1]} nk={best[2]}")
 
 
+def _criterion(text: str) -> str | float:
+    """selstruc's criterion: 'aic', 'mdl', or a number c ≥ 0."""
+    if text in ("aic", "mdl"):
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (value >= 0 and value < float("inf")):
+        raise click.BadParameter(f"expected 0, aic, mdl or a number c ≥ 0, got {text!r}")
+    return value
+
+
 def _range(text: str) -> list[int]:
     try:
         lo, _, hi = text.partition(":")
         values = list(range(int(lo), int(hi or lo) + 1))
     except ValueError:
         raise click.BadParameter(f"expected a range lo:hi, got {text!r}") from None
-    if not values:
-        raise click.BadParameter(f"empty range {text!r}")
+    if not values or values[0] < 0:
+        raise click.BadParameter(f"expected a range lo:hi of orders ≥ 0, got {text!r}")
     return values
 
 
@@ -428,9 +546,10 @@ def wheel_serve(
     import time
 
     from rwlab.wheel import RW90, WheelNode, WheelParams
-    from rwlab.wheel.bus import open_bus
+    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_bus
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
+    channel = channel or DEFAULT_CHANNELS[interface]
     bus = open_bus(interface, channel)
     node = WheelNode(
         bus,
@@ -440,19 +559,18 @@ def wheel_serve(
         latency=latency_ms / 1000,
         watchdog=watchdog,
     ).start()
-    click.echo(
-        f"simulated wheel {node_id} on {interface}:{bus.channel_info}; Ctrl-C to stop", err=True
-    )
+    click.echo(f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True)
     start = time.monotonic()
     try:
-        while duration is None or time.monotonic() - start < duration:
-            time.sleep(min(1.0, duration or 1.0))
-            w = node.wheel
-            click.echo(
-                f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
-                f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
-                err=True,
-            )
+        with _stop_signals():
+            while duration is None or time.monotonic() - start < duration:
+                time.sleep(min(1.0, duration or 1.0))
+                w = node.wheel
+                click.echo(
+                    f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
+                    f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
+                    err=True,
+                )
     except KeyboardInterrupt:
         pass
     finally:
@@ -487,39 +605,42 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
     if interface == "virtual":
         node = WheelNode(open_bus(interface, channel), node_id, latency=0.02).start()
     client = WheelClient(bus, node_id, timeout=timeout)
-    try:
-        send = {
-            "speed": lambda: client.set_speed(value),
-            "accel": lambda: client.set_acceleration(value),
-            "idle": client.idle,
-            "clear": client.clear_fault,
-        }[action]
-        seq = send()
-        client.wait_ack(seq)
-        t0 = client.clock.now()
-        click.echo(f"acknowledged in {client.latency_of(seq, client.latest_time) * 1000:.1f} ms")
-        click.echo(f"{'t [s]':>7} {'speed [rpm]':>12} {'current [A]':>12} mode")
-        next_print = next_send = t0
-        while client.clock.now() - t0 <= watch:
-            now = client.clock.now()
-            if action in ("speed", "accel") and now >= next_send:
-                send()  # keep-alive: the wheel's watchdog idles it without commands
-                next_send += 0.25
-            tel = client.telemetry()
-            client.raise_if_faulted()
-            if now >= next_print:
-                click.echo(
-                    f"{now - t0:7.2f} {tel.speed_rpm:12.1f} {tel.current:12.3f} {tel.mode.name}"
-                )
-                next_print += 0.1
-            client.clock.sleep(0.005)
-    finally:
-        if action not in ("idle", "clear"):
-            client.close()
-        if node is not None:
-            node.stop()
-            node.bus.shutdown()
-        bus.shutdown()
+    with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles
+        try:
+            send = {
+                "speed": lambda: client.set_speed(value),
+                "accel": lambda: client.set_acceleration(value),
+                "idle": client.idle,
+                "clear": client.clear_fault,
+            }[action]
+            seq = send()
+            client.wait_ack(seq)
+            t0 = client.clock.now()
+            click.echo(
+                f"acknowledged in {client.latency_of(seq, client.latest_time) * 1000:.1f} ms"
+            )
+            click.echo(f"{'t [s]':>7} {'speed [rpm]':>12} {'current [A]':>12} mode")
+            next_print = next_send = t0
+            while client.clock.now() - t0 <= watch:
+                now = client.clock.now()
+                if action in ("speed", "accel") and now >= next_send:
+                    send()  # keep-alive: the wheel's watchdog idles it without commands
+                    next_send += 0.25
+                tel = client.telemetry()
+                client.raise_if_faulted()
+                if now >= next_print:
+                    click.echo(
+                        f"{now - t0:7.2f} {tel.speed_rpm:12.1f} {tel.current:12.3f} {tel.mode.name}"
+                    )
+                    next_print += 0.1
+                client.clock.sleep(0.005)
+        finally:
+            if action not in ("idle", "clear"):
+                client.close()
+            if node is not None:
+                node.stop()
+                node.bus.shutdown()
+            bus.shutdown()
 
 
 # -- the testbed ----------------------------------------------------------------------
@@ -552,7 +673,9 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
-@click.option("--port", type=int, default=5006, show_default=True, help="Monitor port.")
+@click.option(
+    "--port", type=click.IntRange(1, 65535), default=5006, show_default=True, help="Monitor port."
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
 def experiment(
@@ -606,24 +729,40 @@ def experiment(
 
     cfg.check_limits(RW90)
     if Path(out).exists() and not force:
-        raise FileExistsError(f"{out} exists; pass --force to overwrite it")
+        raise FileExistsError(f"{out} exists; pass --force to replace it")
+    _check_folder(Path(out).parent)
+    realtime = cfg.realtime or cfg.interface != "virtual"
+    label = f"{cfg.signal} ({cfg.mode}, {'real time' if realtime else 'simulated clock'})"
     server = None
-    if monitor:
-        from rwlab.testbed.monitor import start_process
-
-        server = start_process(out, port=port)  # its own process: it can never slow the run
-        click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
-    n = round(cfg.duration / cfg.Ts)
-    label = f"{cfg.signal} ({cfg.mode}, {'real time' if cfg.realtime else 'simulated clock'})"
     try:
-        with click.progressbar(length=n, label=label, show_eta=True, file=sys.stderr) as bar:
-            summary = run_experiment(cfg, out, force=force, progress=lambda k, total: bar.update(1))
-    except KeyboardInterrupt:
-        click.echo(f"\ninterrupted: the wheel is idle and {out} is closed", err=True)
+        with _stop_signals():
+            if monitor:
+                from rwlab.testbed.monitor import start_process
+
+                # its own process, following the file being written: it never slows the run
+                server = start_process(out, port=port)
+                click.echo(f"live monitor: http://127.0.0.1:{port}/", err=True)
+            with contextlib.ExitStack() as stack:
+                bars = []
+
+                def progress(k: int, total: int) -> None:
+                    if not bars:  # shown from the first command: a failed start prints nothing
+                        bar = click.progressbar(
+                            length=total, label=label, show_eta=True, file=sys.stderr
+                        )
+                        bars.append(stack.enter_context(bar))
+                    bars[0].update(1)
+
+                summary = run_experiment(cfg, out, force=force, progress=progress)
+    except KeyboardInterrupt as exc:
+        why = exc.args[0] if exc.args else "Ctrl-C"
+        click.echo(f"\ninterrupted ({why}): the wheel is idle and {out} is closed", err=True)
         sys.exit(130)
     finally:
         if server is not None:
-            server.terminate()
+            from rwlab.testbed.monitor import stop_process
+
+            stop_process(server)
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
         f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
@@ -650,6 +789,7 @@ def export(record, fmt, out, Ts, max_gap, force):
     """
     from rwlab.testbed import load_record
 
+    _check_folder(Path(out).parent)
     data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
     path = Path(out)
     if path.suffix.lower() != f".{fmt}":
@@ -666,14 +806,21 @@ def export(record, fmt, out, Ts, max_gap, force):
     show_default=True,
     help="Address to serve on (0.0.0.0 exposes it to the network).",
 )
-@click.option("--port", type=int, default=5006, show_default=True)
+@click.option("--port", type=click.IntRange(1, 65535), default=5006, show_default=True)
 @click.option("--replay", is_flag=True, help="Play a finished record back instead of following it.")
-@click.option("--speed", type=float, default=1.0, show_default=True, help="Replay speed factor.")
+@click.option(
+    "--speed",
+    type=click.FloatRange(0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Replay speed factor.",
+)
 @_friendly_errors
 def monitor_cmd(record, host, port, replay, speed):
     """Serve the live monitor page for a record that is being written (or replay one)."""
-    from rwlab.testbed.monitor import serve
+    from rwlab.testbed.monitor import check_port, serve
 
+    check_port(host, port)
     if replay:
         from rwlab.testbed import read_record
 
@@ -689,6 +836,7 @@ def monitor_cmd(record, host, port, replay, speed):
 @click.argument("file")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
 @click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@_columns_option
 @click.option(
     "--preprocess",
     type=click.Choice(["normalize", "detrend", "none"]),
@@ -696,17 +844,23 @@ def monitor_cmd(record, host, port, replay, speed):
     show_default=True,
     help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
 )
-@click.option("--split", type=float, default=0.7, show_default=True, help="Estimation share.")
+@click.option(
+    "--split",
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    default=0.7,
+    show_default=True,
+    help="Estimation share.",
+)
 @click.option(
     "--tolerance",
-    type=float,
+    type=click.FloatRange(min=0),
     default=3.0,
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
-def identify(file, out, Ts, preprocess, split, tolerance, force):
+def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance, force):
     """Run paper A's whole identification study on a record or data file.
 
     Writes OUT/report.html (tables and figures, opens offline), OUT/study.json
@@ -716,9 +870,19 @@ def identify(file, out, Ts, preprocess, split, tolerance, force):
     from rwlab.ident.study import identification_study, load_study_data, physical_model
     from rwlab.report.identification import write_study
 
-    data, saturation = load_study_data(file, Ts)
+    _check_folder(out)
+    data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
     click.echo(f"data: {data!r}", err=True)
-    result = identification_study(data, preprocess=preprocess, split=split, tolerance=tolerance)
+    with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
+
+        def progress(done: int, total: int, label: str) -> None:
+            bar.length = total
+            bar.label = f"identification study: {label}"
+            bar.update(1)
+
+        result = identification_study(
+            data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+        )
     model = physical_model(
         result,
         speed_limit_rpm=saturation["speed_limit_rpm"],
@@ -793,6 +957,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
         from rwlab.wheel.identified import IdentifiedWheel
 
         IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
+    _check_folder(out)
     check_outputs(out, ["report.html", "metrics.json", "sigma.json"], force)
     click.echo(
         f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
@@ -842,6 +1007,7 @@ def attitude_ltr(scenario, rho, out, force):
     from rwlab.attitude.scenario import load_scenario
     from rwlab.report.attitude import ltr_rows, write_ltr
 
+    _check_folder(out)
     sc = load_scenario(scenario)
     res = ltr_study(sc, rhos=rho)
     paths = write_ltr(res, sc.name, out, force=force)
@@ -920,6 +1086,7 @@ def attitude_simulate(
 
     _check_run(duration, relinearize)
     sc = load_scenario(scenario, **({"dt": dt} if dt is not None else {}))
+    _check_folder(out)
     check_outputs(out, ["metrics.json", "trace.parquet", "report.html"], force)
     steps = round(duration / sc.dt)
     if steps > 1e9:
@@ -979,15 +1146,22 @@ def demo(out, realtime, monitor, quick, force):
     from rwlab.demo import DemoConfig, run_demo
 
     _single_thread_blas()
+    _check_folder(out)
     cfg = DemoConfig.quick() if quick else DemoConfig()
     cfg = dataclasses.replace(cfg, realtime=realtime, monitor=monitor)
 
     def progress(label, n):
         return click.progressbar(length=n, label=f"  {label}", show_eta=True, file=sys.stderr)
 
-    summary = run_demo(
-        out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
-    )
+    try:
+        with _stop_signals():
+            summary = run_demo(
+                out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
+            )
+    except KeyboardInterrupt as exc:
+        why = exc.args[0] if exc.args else "Ctrl-C"
+        click.echo(f"\ninterrupted ({why}): the wheel is idle and every record is closed", err=True)
+        sys.exit(130)
     cm = summary["chosen_model"]
     click.echo(f"wheel model: {cm['structure']} (validation fit {cm['fit_percent']:.2f} %)")
     for name, m in summary["controllers"].items():

@@ -13,6 +13,7 @@ Nothing here modifies the caller's arrays.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
@@ -344,8 +345,9 @@ class IOData:
         """Write to ``.csv``, ``.parquet`` or ``.mat`` (chosen by suffix), atomically.
 
         The file appears complete or not at all. An existing file is an error
-        unless ``overwrite=True``. ``plain=True`` leaves out rwlab's metadata
-        line at the top of a CSV, for tools that expect the header first.
+        unless ``overwrite=True``. ``plain=True`` writes what other tools
+        expect: no rwlab metadata (CSV header first, Parquet without schema
+        metadata) and a .mat with one vector per channel, named after it.
         """
         from rwlab import _io
 
@@ -384,7 +386,8 @@ def as_experiments(data: IOData | Sequence[IOData]) -> list[IOData]:
 
 
 def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
-    """Read a record from ``.csv``, ``.dat``/``.txt``, ``.parquet`` or ``.mat``.
+    """Read a record from ``.mcap`` (a testbed record), ``.csv``, ``.dat``/``.txt``,
+    ``.parquet`` or ``.mat``.
 
     Parameters
     ----------
@@ -394,22 +397,51 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
         Sample time in seconds; required when the file does not carry one
         (a CSV without a time column, a .mat without ``Ts``).
     **options
-        ``input_columns``/``output_columns`` (names or indices) for tables;
-        ``u``/``y`` variable names for .mat files.
+        ``input_columns``/``output_columns``: column names (or indices), .mat
+        variable names, or a testbed record's channels (default ``command`` →
+        ``speed_rpm``); one name, a list, or ``"a,b"``. Without them a file
+        with more than one input/output split is an error (``DataError``),
+        never a guess, unless rwlab's own metadata says which is which.
+        ``max_gap`` (s) for a record: see :func:`rwlab.testbed.load_record`.
+
+    Raises
+    ------
+    DataError
+        An ambiguous or unknown column choice, or a NaN/Inf in a chosen column
+        (the message names the line and the column).
+    FileFormatError
+        A file that cannot be parsed.
     """
     from rwlab import _io
 
     return _io.read(Path(path), Ts, **options)
 
 
+def _umask_mode() -> int:
+    """The mode a plainly created file gets here (0666 less the umask)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: Path, writer) -> Path:
-    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file."""
+    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file.
+
+    The file gets the usual permissions (0666 less the umask), not the
+    temporary file's private 0600.
+    """
     path = Path(path)
+    if path.parent.exists() and not path.parent.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path.parent))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:  # name the file the caller asked for, not the temporary one
+        raise OSError(exc.errno, f"cannot write here ({exc.strerror})", str(path)) from None
     os.close(fd)
     try:
         writer(Path(tmp))
+        os.chmod(tmp, _umask_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

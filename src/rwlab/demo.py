@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import errno
 import html
 import json
 import os
@@ -103,6 +104,22 @@ def _experiments(cfg: DemoConfig):
     ]
 
 
+def check_out(out: Path, force: bool) -> None:
+    """Refuse an ``out`` that holds anything but a previous demo, unless ``force``.
+
+    A previous demo's folder (it has ``summary.json``) is simply replaced, so
+    running the Quick start twice works.
+    """
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(out))
+    if force or not out.exists() or (out / "summary.json").exists():
+        return
+    if any(out.iterdir()):
+        raise FileExistsError(
+            f"{out} exists and is not a previous demo's output; use --force or another --out"
+        )
+
+
 def run_demo(
     out: str | os.PathLike,
     cfg: DemoConfig = DemoConfig(),
@@ -124,8 +141,7 @@ def run_demo(
     from rwlab.testbed import load_record, run_experiment
 
     out = Path(out)
-    if (out / "index.html").exists() and not force:
-        raise FileExistsError(f"{out / 'index.html'} exists; use --force to overwrite")
+    check_out(out, force)
     (out / "records").mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     records = []
@@ -149,7 +165,9 @@ def run_demo(
                 summary = run_experiment(exp, path, force=True)
         finally:
             if monitor is not None:
-                monitor.terminate()
+                from rwlab.testbed.monitor import stop_process
+
+                stop_process(monitor)
         records.append(
             {
                 "name": name,

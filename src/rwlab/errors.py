@@ -49,3 +49,7 @@ class RecordGapError(DataError):
 
 class RwlabWarning(UserWarning):
     """A result rwlab returns but does not vouch for, e.g. an estimator that stopped early."""
+
+
+class RecordBusyError(RwlabError):
+    """Another run is writing the same record."""

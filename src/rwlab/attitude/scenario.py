@@ -290,9 +290,13 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
             f"unknown scenario {name_or_path!r}: not one of {sorted(SCENARIOS)} and no such file"
         )
     try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    if not isinstance(raw.get("scenario", {}), dict) or not isinstance(
+        raw.get("disturbances", {}), dict
+    ):
+        raise ConfigError(f"{path}: [scenario] and [disturbances] must be tables")
     table = dict(raw.get("scenario", {}))
     base_name = table.pop("base", None)
     if base_name is not None and base_name not in SCENARIOS:

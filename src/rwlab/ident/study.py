@@ -28,6 +28,7 @@ convention is recorded in ``study.json`` as ``initial_conditions``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import control
@@ -162,6 +163,7 @@ def identification_study(
     nk_max: int = 10,
     tolerance: float = 3.0,
     seed: int = 0,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -182,6 +184,9 @@ def identification_study(
         (default 3: paper A kept ARX221 although ARX331 fitted 1.6 points better).
     seed : int
         For the new input of the continuous-time check.
+    progress : callable, optional
+        ``progress(done, total, label)`` after each stage (delay scan, each
+        estimate, validation), for a progress bar.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -202,8 +207,16 @@ def identification_study(
         preprocess
     ]()
     est, val = prepared.split(split)
+    total, done = len(orders) + 5, 0
+
+    def step(label: str) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total, label)
 
     losses = delay_scan(est, 2, 2, 0, nk_max)
+    step("delay scan")
     nk = min(losses, key=losses.get)
     if nk == 0:
         nk = 1 if losses.get(1, math.inf) <= losses[0] * 1.001 else 0
@@ -214,16 +227,19 @@ def identification_study(
         m = arx(est, n, n, nk)
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
+        step(m.structure)
     others = []
     nk_pem = max(nk, 1)
-    for m in (
-        _try(armax, est, 2, 2, 1, nk_pem),
-        _try(oe, est, 2, 2, nk_pem),
-        _try(bj, est, 2, 1, 1, 2, nk_pem),
+    for name, estimate, args in (
+        ("ARMAX", armax, (2, 2, 1, nk_pem)),
+        ("OE", oe, (2, 2, nk_pem)),
+        ("BJ", bj, (2, 1, 1, 2, nk_pem)),
     ):
+        m = _try(estimate, est, *args)
         if m is not None:
             models[m.structure] = m
             others.append(_row(m, val))
+        step(name)
 
     candidates = [r for r in rows + others if r["fit_percent"] is not None]
     if not candidates:
@@ -247,6 +263,7 @@ def identification_study(
     rng = np.random.default_rng(seed)
     new_u = _new_input(rng, est, val.N)
     continuous = _continuous(chosen, new_u)
+    step("validation")
     return StudyResult(
         data=prepared,
         est=est,
@@ -302,10 +319,12 @@ def _continuous(model: PolyModel, u: np.ndarray) -> dict:
 
 
 def _acceleration(model: PolyModel, val: IOData) -> dict:
-    """Model speed change per second vs the measured one on validation data (Fig. 24)."""
-    y_sim = model.simulate(val, initial=INITIAL)
-    acc_model = np.diff(y_sim) / val.Ts
-    acc_meas = np.diff(val.y[:, 0]) / val.Ts
+    """Model speed change per second vs the measured one on validation data (Fig. 24).
+
+    In physical units (output unit per second, rpm/s for a wheel record), not
+    the preprocessed ones.
+    """
+    acc_meas, acc_model = acceleration_pair(model, val)
     corr = float(np.corrcoef(acc_model, acc_meas)[0, 1]) if np.std(acc_meas) > 0 else float("nan")
     return {
         "correlation": corr,
@@ -313,6 +332,14 @@ def _acceleration(model: PolyModel, val: IOData) -> dict:
         "rms_measured": float(np.sqrt(np.mean(acc_meas**2))),
         "rms_model": float(np.sqrt(np.mean(acc_model**2))),
     }
+
+
+def acceleration_pair(model: PolyModel, val: IOData) -> tuple[np.ndarray, np.ndarray]:
+    """Measured and simulated output change per second on ``val``, in physical units."""
+    t = val.time
+    measured = val.trend.output_to_physical(val.y[:, 0], t)
+    simulated = val.trend.output_to_physical(model.simulate(val, initial=INITIAL), t)
+    return np.diff(measured) / val.Ts, np.diff(simulated) / val.Ts
 
 
 def physical_model(
@@ -377,14 +404,21 @@ def physical_model(
 
 
 def load_study_data(
-    path: str, Ts: float | None = None, *, max_orders: int = 5, nk_max: int = 10
+    path: str,
+    Ts: float | None = None,
+    *,
+    input_col: str | None = None,
+    output_col: str | None = None,
+    max_orders: int = 5,
+    nk_max: int = 10,
 ) -> tuple[IOData, dict]:
-    """Read a testbed record (``.mcap``) or a data file for the study.
+    """Read a testbed record (``.mcap``), an exported or other data file, or a bundled set.
 
-    Returns the data and the saturations to store with the model: from the
-    record's wheel parameters when present, else the RW90 defaults. A record
-    whose telemetry has a gap longer than the largest model's memory
-    (``max_orders + nk_max`` samples) is refused.
+    ``input_col``/``output_col`` choose the columns (a record's default is
+    command → speed_rpm). Returns the data and the saturations to store with
+    the model: from the record's wheel parameters when present, else the RW90
+    defaults. A record whose telemetry has a gap longer than the largest
+    model's memory (``max_orders + nk_max`` samples) is refused.
     """
     from pathlib import Path
 
@@ -396,13 +430,14 @@ def load_study_data(
         "accel_limit_rpm_s": 314.0,
         "saturation_source": "RW90 defaults (paper A)",
     }
+    columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
-        from rwlab.testbed import load_record, read_record
+        from rwlab.testbed import read_record
 
         meta = read_record(path).metadata
         Ts_rec = Ts if Ts is not None else meta.get("Ts")
         memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load_record(path, Ts, max_gap=memory or None)
+        data = load(path, Ts, **columns, max_gap=memory or None)
         wheel = meta.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
@@ -412,5 +447,7 @@ def load_study_data(
             }
         return data, saturation
     if not Path(path).exists() and path in datasets.NAMES:
+        if input_col or output_col:
+            raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    return load(path, Ts), saturation
+    return load(path, Ts, **columns), saturation

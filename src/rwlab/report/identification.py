@@ -13,9 +13,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from rwlab.data import atomic_write_bytes
-from rwlab.ident.study import INITIAL, StudyResult
+from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import Page, figure
 
 __all__ = ["FIGURES", "write_study"]
@@ -87,9 +88,26 @@ def _compare_figure(
             continue
         ax.plot(t, m.simulate(val, initial=INITIAL), lw=1, label=name)
     ax.set_xlabel("time in validation record [s]")
-    ax.set_ylabel(f"{val.output_names[0]} ({result.preprocess})")
+    ax.set_ylabel(_preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess))
     ax.legend(loc="best", fontsize=8)
     page.figure(fig, fig_id, caption)
+
+
+def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
+    """An axis label that says what the plotted numbers are."""
+    unit = f" [{unit}]" if unit else ""
+    if preprocess == "normalize":
+        return f"{name}, normalised to [0, 1]"
+    if preprocess == "detrend":
+        return f"{name} − its mean{unit}"
+    return f"{name}{unit}"
+
+
+def _minus(name: str, offset: float) -> str:
+    """``name − offset`` with the sign folded in: never "x − -4772"."""
+    if offset == 0:
+        return name
+    return f"{name} {'−' if offset > 0 else '+'} {abs(offset):.4g}"
 
 
 def write_study(
@@ -160,6 +178,7 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     fig, ax = figure(7, 2.8)
     ax.plot([r["na"] for r in rows], [r["mse"] for r in rows], "o-")
     ax.set_xlabel("na = nb")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # orders are whole numbers
     ax.set_ylabel("validation MSE")
     page.figure(fig, "fig17-orders", "Validation error per ARX order.")
     fig, ax = figure(8, 3.0)
@@ -263,13 +282,14 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     page.heading("6. Acceleration check (paper Fig. 24)", "acceleration")
     acc = study["acceleration"]
     val = result.val
-    y_sim = result.chosen.simulate(val, initial=INITIAL)
+    measured, simulated = acceleration_pair(result.chosen, val)
     fig, ax = figure(9, 3.0)
     tt = (val.time - val.time[0])[1:]
-    ax.plot(tt, np.diff(val.y[:, 0]) / val.Ts, color="k", lw=1, label="measured")
-    ax.plot(tt, np.diff(y_sim) / val.Ts, lw=1, label=ch["structure"])
+    ax.plot(tt, measured, color="k", lw=1, label="measured")
+    ax.plot(tt, simulated, lw=1, label=ch["structure"])
     ax.set_xlabel("time in validation record [s]")
-    ax.set_ylabel("rate of change per s")
+    unit = val.output_units[0]
+    ax.set_ylabel(f"{val.output_names[0]} change [{unit}/s]" if unit else "change per s")
     ax.legend(fontsize=8)
     page.figure(
         fig,
@@ -281,8 +301,8 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     sat = model_info["saturation"]
     u_off, y_off = model_info["input"]["offset"], model_info["output"]["offset"]
     page.text(
-        f"{model_info['structure']} in physical units: output − {y_off:.4g} "
-        f"= B/(A F)·(input − {u_off:.4g}), Ts = {model_info['Ts']:g} s. "
+        f"{model_info['structure']} in physical units: {_minus('output', y_off)} "
+        f"= B/(A F)·({_minus('input', u_off)}), Ts = {model_info['Ts']:g} s. "
         f"Wrap it with a speed-command saturation of ±{sat['speed_rpm']:g} rpm and an "
         f"acceleration limit of ±{sat['accel_rpm_s']:g} rpm/s ({sat['source']}): the wheel "
         "is linear only inside them (paper A, section 5)."

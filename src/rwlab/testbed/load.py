@@ -20,11 +20,16 @@ OUTPUTS = {
 
 
 def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
-    """(start time, length) of every interval between telemetry frames longer than ``max_gap`` s."""
+    """(start time, length) of every interval between telemetry frames longer than ``max_gap`` s.
+
+    Frame times jitter around the telemetry period, so an interval counts as a
+    gap only when it exceeds ``max_gap`` by more than half the typical (median)
+    interval: at 10 Hz, a 0.1000001 s step is not a gap, a lost frame's 0.2 s is.
+    """
     if times.size < 2:
         return []
     steps = np.diff(times)
-    idx = np.flatnonzero(steps > max_gap)
+    idx = np.flatnonzero(steps > max_gap + 0.5 * float(np.median(steps)))
     return [(float(times[i]), float(steps[i])) for i in idx]
 
 
@@ -47,9 +52,11 @@ def load_record(
         Output channels: measured speed (rpm), acceleration derived from it by a
         backward difference over Ts (rpm/s), motor current (A).
     max_gap : float, optional
-        Longest accepted interval between telemetry frames, s (default Ts).
-        Longer gaps raise ``RecordGapError`` listing them; pass ``numpy.inf``
-        to accept them.
+        Longest accepted interval between telemetry frames, s (default Ts),
+        beyond the timestamps' jitter (half the median frame interval). Longer
+        gaps raise ``RecordGapError`` listing them; pass ``numpy.inf`` to accept
+        them. Without ``max_gap``, a ``Ts`` shorter than the telemetry period is
+        refused (``DataError``).
 
     Returns
     -------
@@ -72,15 +79,22 @@ def load_record(
     tc = np.array([c["t"] for c in commands])
     uc = np.array([c["setpoint"] for c in commands])
     tt = np.array([m["t"] for m in telemetry])
-    gaps = telemetry_gaps(tt, Ts if max_gap is None else max_gap)
+    period = float(np.median(np.diff(tt)))
+    if max_gap is None and Ts < 0.75 * period:
+        raise DataError(
+            f"{path}: Ts = {Ts:g} s is shorter than the telemetry period ({period:.3g} s), "
+            "so most samples would repeat the last frame; use Ts >= the telemetry period"
+        )
+    limit = Ts if max_gap is None else max_gap
+    gaps = telemetry_gaps(tt, limit)
     if gaps:
         shown = ", ".join(
             f"{length:.3g} s at t = {start - tc[0]:.3g} s" for start, length in gaps[:5]
         )
         raise RecordGapError(
-            f"{path}: {len(gaps)} telemetry gap(s) longer than {max_gap or Ts:g} s ({shown}"
+            f"{path}: {len(gaps)} telemetry gap(s) longer than {limit:g} s ({shown}"
             f"{', ...' if len(gaps) > 5 else ''}); frames were lost, so samples there are stale. "
-            "Pass max_gap to accept them."
+            "Pass max_gap (CLI: --max-gap) to accept them."
         )
     t0 = tc[0]
     n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1

@@ -6,7 +6,7 @@ recorder; ``rwlab experiment --monitor`` even runs it in its own process. The
 page refreshes at 20 Hz and keeps only the last ``max_points`` samples per
 plot (drop-oldest, for the display only: the record keeps everything).
 
-It shows command vs speed, acceleration (derived from speed over 0.1 s),
+It shows command vs speed, acceleration (derived from speed over ≥ 0.1 s),
 motor current, and the wheel's mode, faults and the experiment's events. Given
 a finished record with ``replay=True`` it plays the record back at ``speed``×.
 Bokeh serves its own JavaScript from the server: no CDN, works offline.
@@ -22,11 +22,22 @@ import time
 from collections import deque
 from pathlib import Path
 
+from rwlab.errors import ConfigError
 from rwlab.testbed.record import RecordFollower, read_record
 
-__all__ = ["free_port", "make_document", "serve", "serve_in_thread", "start_process"]
+__all__ = [
+    "acceleration_from_speed",
+    "check_port",
+    "free_port",
+    "make_document",
+    "serve",
+    "serve_in_thread",
+    "start_process",
+    "stop_process",
+]
 
 REFRESH_MS = 50  # 20 Hz
+ACCEL_WINDOW = 0.1  # s: acceleration is the speed difference over at least this long
 
 
 class _Feed:
@@ -107,11 +118,7 @@ def make_document(
         if frames:
             acc = []
             for m in frames:
-                recent.append((m["t"], m["speed_rpm"]))
-                while recent and m["t"] - recent[0][0] > 0.1:
-                    recent.popleft()
-                dt = recent[-1][0] - recent[0][0]
-                acc.append((recent[-1][1] - recent[0][1]) / dt if dt > 0 else 0.0)
+                acc.append(acceleration_from_speed(recent, m["t"], m["speed_rpm"]))
                 if state["counter"] is not None:
                     state["lost"] += (m["counter"] - state["counter"] - 1) % 256
                 state["counter"] = m["counter"]
@@ -142,6 +149,20 @@ def make_document(
     doc.add_periodic_callback(refresh, REFRESH_MS)
 
 
+def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:
+    """Acceleration (rpm/s) at the newest frame, from the speed ≥ ``ACCEL_WINDOW`` s before.
+
+    ``recent`` holds the (t, speed) pairs seen so far and is trimmed in place. The
+    oldest frame kept is the newest one at least ``ACCEL_WINDOW`` old, so the
+    difference always spans a frame interval, whatever the telemetry rate.
+    """
+    recent.append((t, speed))
+    while len(recent) > 2 and t - recent[1][0] >= ACCEL_WINDOW:
+        recent.popleft()
+    dt = recent[-1][0] - recent[0][0]
+    return (recent[-1][1] - recent[0][1]) / dt if dt > 0 else 0.0
+
+
 def _application(path, replay, speed):
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
@@ -158,12 +179,37 @@ def free_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
+def check_port(host: str, port: int) -> None:
+    """Raise ``ConfigError`` now if the monitor could not listen on ``host:port``."""
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as tornado binds
+        try:
+            s.bind((host, port))
+        except (OSError, TypeError, UnicodeError, OverflowError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            raise ConfigError(
+                f"the monitor cannot listen on {host}:{port} ({why}); "
+                "choose another --host or --port"
+            ) from None
+
+
+def stop_process(child: subprocess.Popen) -> None:
+    """Stop a monitor started by :func:`start_process` and wait for it to release its port."""
+    child.terminate()
+    try:
+        child.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.wait()
+
+
 def serve(
     path, *, host: str = "127.0.0.1", port: int = 5006, replay: bool = False, speed: float = 1.0
 ) -> None:
     """Serve the monitor until interrupted (blocking)."""
     from bokeh.server.server import Server
 
+    check_port(host, port)
     server = Server(
         {"/": _application(path, replay, speed)},
         address=host,
@@ -171,7 +217,10 @@ def serve(
         allow_websocket_origin=[f"{host}:{port}", f"localhost:{port}"],
     )
     server.start()
-    server.io_loop.start()
+    try:
+        server.io_loop.start()
+    finally:
+        server.stop()  # Ctrl-C or SIGTERM: release the port at once
 
 
 class _ThreadedServer:
@@ -228,7 +277,11 @@ def serve_in_thread(
 
 
 def start_process(path, *, host: str = "127.0.0.1", port: int = 5006) -> subprocess.Popen:
-    """Run the monitor in its own process (what ``rwlab experiment --monitor`` does)."""
+    """Run the monitor in its own process (what ``rwlab experiment --monitor`` does).
+
+    Raises ``ConfigError`` at once if the port is taken; stop it with :func:`stop_process`.
+    """
+    check_port(host, port)
     return subprocess.Popen(
         [
             sys.executable,

@@ -23,6 +23,7 @@ Ts, the rwlab version and the DBC's SHA-256.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -36,9 +37,9 @@ from mcap.records import Channel, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from rwlab.errors import FileFormatError
+from rwlab.errors import FileFormatError, RecordBusyError
 
-__all__ = ["CHANNELS", "Record", "RecordWriter", "read_record"]
+__all__ = ["CHANNELS", "Record", "RecordWriter", "partial_path", "read_record"]
 
 FLUSH_PERIOD = 0.05  # s of wall time between flushes to the OS (the promise is 100 ms)
 MAGIC = b"\x89MCAP0\r\n"
@@ -81,8 +82,49 @@ def _schema(topic: str) -> bytes:
     ).encode()
 
 
+def partial_path(path: str | os.PathLike) -> Path:
+    """Where a record is written until it closes: ``name.partial.mcap`` beside ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.partial{path.suffix or '.mcap'}")
+
+
+def _open_locked(path: Path):
+    """Open ``path`` for writing under an exclusive lock, or raise ``RecordBusyError``.
+
+    ``fcntl.flock`` (advisory, released by the OS when the process dies) guards
+    the file; it is truncated only once the lock is held, and the lock is
+    retried when the file was renamed away between opening and locking.
+    """
+    import fcntl
+
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise RecordBusyError(
+                f"{path} is being written by another run; wait for it or choose another --out"
+            ) from None
+        try:
+            same = os.stat(path).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            return os.fdopen(fd, "wb")
+        os.close(fd)  # the previous writer renamed it to its record meanwhile: start again
+
+
 class RecordWriter:
     """Write one experiment record.
+
+    The record is written to ``name.partial.mcap`` beside ``path`` under an
+    exclusive lock, and renamed onto ``path`` when it closes: a second run on
+    the same path is refused while the first writes, and a rerun with
+    ``force`` replaces the old record only once the new one is complete. A
+    killed run leaves the old record intact and its own partial record
+    readable (until the next run on that path).
 
     Parameters
     ----------
@@ -91,15 +133,20 @@ class RecordWriter:
     metadata : dict
         JSON-serialisable description (wheel, signal, Ts, versions).
     force : bool
-        Replace an existing file.
+        Replace an existing file (when this record closes).
     """
 
     def __init__(self, path: str | os.PathLike, metadata: dict, *, force: bool = False) -> None:
         self.path = Path(path)
+        self.partial = partial_path(self.path)
         if self.path.exists() and not force:
             raise FileExistsError(f"{self.path} exists; use --force (force=True) to replace it")
+        if self.path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "is a directory", str(self.path))
+        if self.path.parent.exists() and not self.path.parent.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(self.path.parent))
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
+        self._fh = _open_locked(self.partial)
         self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
         self._writer.start(profile="rwlab", library="rwlab")
         self._channels = {}
@@ -141,16 +188,25 @@ class RecordWriter:
         self.write("/event", {"t": t, "kind": kind, "message": message})
 
     def close(self) -> None:
-        """Write the summary and footer and close the file (safe to call twice)."""
+        """Write the summary and footer, rename onto ``path`` and close (safe to call twice)."""
         if self.closed:
             return
         self.closed = True
         try:
             self._writer.finish()
-        finally:
             self._fh.flush()
             os.fsync(self._fh.fileno())
+            os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
+        finally:  # a failed finish (a full disk) leaves the old record and this partial one
             self._fh.close()
+
+    def discard(self) -> None:
+        """Close and delete the partial record, leaving any old record at ``path`` as it was."""
+        if self.closed:
+            return
+        self.closed = True
+        self.partial.unlink(missing_ok=True)  # still under the lock
+        self._fh.close()
 
     def __enter__(self) -> RecordWriter:
         return self
@@ -223,6 +279,8 @@ def read_record(path: str | os.PathLike) -> Record:
 class RecordFollower:
     """Read a record that is still being written, a little more on each call.
 
+    ``path`` is the record's final name; until it closes, its partial file is read.
+
     Only complete MCAP records are parsed, so a half-written message is never
     seen; the writer is never blocked (this only reads the file).
     """
@@ -237,8 +295,10 @@ class RecordFollower:
     def poll(self) -> dict[str, list[dict]]:
         """New messages per topic since the last call."""
         out = Record(self.path)
+        # while a run writes, the data are in its partial file, renamed (same bytes) on close
+        source = self.path if self.path.exists() else partial_path(self.path)
         try:
-            with open(self.path, "rb") as fh:
+            with open(source, "rb") as fh:
                 fh.seek(self._offset)
                 data = fh.read()
         except FileNotFoundError:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
@@ -35,6 +34,7 @@ __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_expe
 
 SIGNALS = ("prbs", "chirp", "step", "multisine", "file")
 MODES = ("speed", "acceleration")
+MAX_COMMANDS = 10_000_000  # 58 days at 0.5 s: a typo, not an experiment, beyond this
 
 
 @dataclass(frozen=True)
@@ -109,10 +109,45 @@ class ExperimentConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
+        number = (int, float)
+        expected = {
+            "seed": (int, "an integer"),
+            "node_id": (int, "an integer 0..15"),
+            "realtime": (bool, "true or false"),
+            "rate_limit": (bool, "true or false"),
+            "raw_frames": (bool, "true or false"),
+            "latency": (number, "a number of seconds"),
+            "f0": (number, "a number of Hz"),
+            "channel": ((str, type(None)), "a string"),
+            "file": ((str, type(None)), "a string"),
+            "f1": ((*number, type(None)), "a number of Hz"),
+        }
+        for name, (kind, text) in expected.items():
+            value = getattr(self, name)
+            bad_bool = isinstance(value, bool) and kind is not bool
+            if not isinstance(value, kind) or bad_bool:
+                raise ConfigError(f"{name} must be {text}, got {value!r}")
+        if not 0 <= self.node_id <= 15:
+            raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
+        if not (math.isfinite(self.latency) and self.latency >= 0):
+            raise ConfigError(f"latency must be a number of seconds ≥ 0, got {self.latency!r}")
+        f1 = math.inf if self.f1 is None else self.f1
+        if not (0 < self.f0 < f1 and math.isfinite(self.f0)):
+            raise ConfigError(f"the band must be 0 < f0 < f1 Hz, got f0={self.f0}, f1={self.f1}")
+        levels = self.step_levels if isinstance(self.step_levels, tuple) else ()
+        if not levels or not all(
+            isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in levels
+        ):
+            raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
             raise ConfigError(f"duration {self.duration} s is shorter than Ts = {self.Ts} s")
+        if self.duration / self.Ts > MAX_COMMANDS:
+            raise ConfigError(
+                f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
+                f"{MAX_COMMANDS:.0e} in one experiment"
+            )
 
     def check_limits(self, params: WheelParams) -> None:
         """Refuse amplitudes beyond the wheel's limits."""
@@ -130,13 +165,9 @@ class ExperimentConfig:
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides) -> ExperimentConfig:
         """Read an ``[experiment]`` table (or top-level keys); ``overrides`` win."""
-        try:
-            raw = tomllib.loads(Path(path).read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-        except FileNotFoundError:
-            raise ConfigError(f"no such experiment file: {path}") from None
-        table = dict(raw.get("experiment", raw))
+        from rwlab._toml import read_table
+
+        table = read_table(path, "experiment", "experiment")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
@@ -144,7 +175,7 @@ class ExperimentConfig:
                 f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}"
             )
         table.update({k: v for k, v in overrides.items() if v is not None})
-        if "step_levels" in table:
+        if isinstance(table.get("step_levels"), list):
             table["step_levels"] = tuple(table["step_levels"])
         return cls(**table)
 
@@ -224,9 +255,25 @@ def run_experiment(
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
-    host_bus = open_bus(
-        cfg.interface, cfg.channel or f"rwlab-{os.getpid()}-{id(cfg)}", simulated_clock=not realtime
-    )
+    metadata = {
+        "rwlab_version": __version__,
+        "dbc_sha256": dbc_sha256(),
+        "Ts": cfg.Ts,
+        "mode": cfg.mode,
+        "experiment": cfg.to_dict(),
+        "wheel": params.to_dict(),
+        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
+        "clock": "wall" if realtime else "simulated",
+        "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
+        "time_origin": "s since the first command",
+    }
+    writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    try:
+        channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
+        host_bus = open_bus(cfg.interface, channel, simulated_clock=not realtime)
+    except BaseException:
+        writer.discard()  # nothing was recorded: keep the old record, if any
+        raise
     node = None
     if simulated:
         node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
@@ -241,19 +288,6 @@ def run_experiment(
         )
         if realtime:
             node.start()
-    metadata = {
-        "rwlab_version": __version__,
-        "dbc_sha256": dbc_sha256(),
-        "Ts": cfg.Ts,
-        "mode": cfg.mode,
-        "experiment": cfg.to_dict(),
-        "wheel": params.to_dict(),
-        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
-        "clock": "wall" if realtime else "simulated",
-        "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
-        "time_origin": "s since the first command",
-    }
-    writer = RecordWriter(out, metadata, force=force)
     client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
     if cfg.raw_frames:
         client.frame_listener = lambda msg, direction: writer.write(
@@ -278,6 +312,8 @@ def run_experiment(
                 "/command",
                 {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
             )
+            if k == 0:
+                client.wait_ack(seq)  # no wheel on the bus: WheelTimeout now, not an empty record
             if progress:
                 progress(k + 1, len(command))
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
@@ -293,14 +329,18 @@ def run_experiment(
         writer.event(clock.now(), "error", f"{type(exc).__name__}: {exc}")
         raise
     finally:
-        client.close()
-        _drain(client, writer, clock)
-        writer.event(clock.now(), "stop", status)
-        writer.close()
-        if node is not None:
-            node.stop()
-            node.bus.shutdown()
-        host_bus.shutdown()
+        try:
+            client.close()  # the wheel idles first, whatever else fails
+            _drain(client, writer, clock)
+            writer.event(clock.now(), "stop", status)
+        finally:
+            try:
+                writer.close()
+            finally:
+                if node is not None:
+                    node.stop()
+                    node.bus.shutdown()
+                host_bus.shutdown()
     return RunSummary(
         Path(out),
         writer.counts["/command"],

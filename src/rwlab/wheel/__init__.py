@@ -9,13 +9,35 @@
 - :class:`IdentifiedWheel` — the model chosen by ``rwlab identify`` (``model.json``).
 """
 
-from rwlab.errors import WheelCommandError, WheelFault, WheelTimeout
-from rwlab.wheel.client import WheelClient
-from rwlab.wheel.clock import SimClock, WallClock
-from rwlab.wheel.identified import IdentifiedWheel
-from rwlab.wheel.node import FaultInjection, WheelNode
-from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
-from rwlab.wheel.serial import SlipSerialBus
+import importlib
+
+_SOURCES = {
+    "WheelCommandError": "rwlab.errors",
+    "WheelFault": "rwlab.errors",
+    "WheelTimeout": "rwlab.errors",
+    "WheelClient": "rwlab.wheel.client",
+    "SimClock": "rwlab.wheel.clock",
+    "WallClock": "rwlab.wheel.clock",
+    "IdentifiedWheel": "rwlab.wheel.identified",
+    "FaultInjection": "rwlab.wheel.node",
+    "WheelNode": "rwlab.wheel.node",
+    "RW90": "rwlab.wheel.physics",
+    "Fault": "rwlab.wheel.physics",
+    "Mode": "rwlab.wheel.physics",
+    "WheelParams": "rwlab.wheel.physics",
+    "WheelPhysics": "rwlab.wheel.physics",
+    "SlipSerialBus": "rwlab.wheel.serial",
+}
+
+
+def __getattr__(name: str):
+    """Import on first use (PEP 562): ``rwlab --help`` must not load python-can and SciPy."""
+    if name not in _SOURCES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_SOURCES[name]), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "RW90",

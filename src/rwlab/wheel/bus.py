@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-import can
+from typing import TYPE_CHECKING
 
 from rwlab.errors import ConfigError
+
+if TYPE_CHECKING:
+    import can
 
 __all__ = ["DEFAULT_CHANNELS", "INTERFACES", "open_bus"]
 
@@ -32,6 +35,8 @@ def open_bus(
     """
     if interface not in INTERFACES:
         raise ConfigError(f"unknown interface {interface!r}; choose from {', '.join(INTERFACES)}")
+    import can  # here, not at the top: the CLI's --help must not pay for python-can
+
     channel = channel or DEFAULT_CHANNELS[interface]
     try:
         if interface == "serial":
@@ -44,6 +49,7 @@ def open_bus(
             )
         if interface == "socketcan":
             return can.Bus(interface="socketcan", channel=channel, bitrate=1_000_000)
-        return can.Bus(interface="udp_multicast", channel=channel)
+        # hop limit / TTL 0: the frames never leave this host (loopback delivery only)
+        return can.Bus(interface="udp_multicast", channel=channel, hop_limit=0)
     except (OSError, can.CanError, ValueError) as exc:
         raise ConfigError(f"cannot open {interface} bus on {channel!r}: {exc}") from exc

@@ -125,8 +125,8 @@ class WheelClient:
             except proto.ProtocolError:
                 self.bad_frames += 1
                 continue
-            if frame is None or frame.node_id != self.node_id:
-                continue
+            if frame is None or frame.node_id != self.node_id or isinstance(frame, proto.Command):
+                continue  # other protocols, other wheels, and commands (ours, echoed by UDP)
             t = msg.timestamp if isinstance(self.clock, SimClock) else self.clock.now()
             if isinstance(frame, proto.Telemetry):
                 if self.latest is not None:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import enum
 import math
-import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
@@ -162,11 +161,9 @@ class WheelParams:
 
         Unknown keys are an error; missing keys keep the RW90 defaults.
         """
-        try:
-            raw = tomllib.loads(Path(path).read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-        table = raw.get("wheel", raw)
+        from rwlab._toml import read_table
+
+        table = read_table(path, "wheel", "wheel parameter")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
