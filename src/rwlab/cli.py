@@ -818,8 +818,11 @@ def export(record, fmt, out, Ts, max_gap, force):
 @_friendly_errors
 def monitor_cmd(record, host, port, replay, speed):
     """Serve the live monitor page for a record that is being written (or replay one)."""
+    from rwlab.errors import ConfigError
     from rwlab.testbed.monitor import check_port, serve
 
+    if not host.strip():
+        raise ConfigError("--host must name an address, e.g. 127.0.0.1")
     check_port(host, port)
     if replay:
         from rwlab.testbed import read_record
