@@ -8,6 +8,7 @@ import pytest
 
 from rwlab.testbed import ExperimentConfig, run_experiment
 from rwlab.testbed.monitor import serve_in_thread
+from rwlab.testbed.record import partial_path
 from tests.conftest import needs_chromium
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
@@ -42,7 +43,7 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path, browser):
     )
     run = threading.Thread(target=run_experiment, args=(cfg, record), daemon=True)
     run.start()
-    while not record.exists():
+    while not (record.exists() or partial_path(record).exists()):  # written as .partial
         time.sleep(0.05)
     server = serve_in_thread(record)
     driver = browser()
