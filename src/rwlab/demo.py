@@ -266,7 +266,7 @@ def _index(s: dict, figure_uri: str) -> str:
 <style>body{{font-family:system-ui,sans-serif;max-width:900px;margin:2em auto;padding:0 1em;
 line-height:1.5;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;
 padding:.3em .7em}}th{{background:#f3f3f3}}.box{{background:#eef7ee;padding:.8em 1em;
-border-left:4px solid #4a4}}</style></head><body>
+border-left:4px solid #4a4}}img{{max-width:100%}}</style></head><body>
 <h1>rwlab demo: a reaction wheel from the bench to the satellite</h1>
 <div class="box" id="summary"><p><b>Identified wheel model: {esc(cm["structure"])}</b>,
 validation fit {cm["fit_percent"]:.2f} % (delay nk = {cm["delay_nk"]}, Ts = {cm["Ts"]:g} s).
