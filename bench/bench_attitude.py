@@ -1,6 +1,6 @@
 """GEO closed-loop simulation speed: rwlab vs Basilisk on the same plant and step.
 
-Run:  python bench/bench_attitude.py [--hours 2] [--basilisk-python PATH]
+Run:  python bench/bench_attitude.py [--hours 2] [--peer SCRIPT --basilisk-python PATH]
 
 Plant (both): J = diag(1200, 1000, 1500) kg·m², three orthogonal 50 N·m·s wheels,
 gravity gradient plus a constant SRP-like torque (5, −3, 8)·1e-6 N·m, RK4 at
@@ -9,9 +9,11 @@ rwlab rows:
 - "plant + PD (truth)": PD on the true state (Basilisk's mrpFeedback gains);
 - "full LQG loop": the same plus sun/earth sensors every 0.5 s and the MEKF
   every step, the controller acting on the estimate.
-Basilisk runs `bench/peers/basilisk_geo_peer.py` (PyPI `bsk`) with the Python
-given (default: this one, if it can import Basilisk). Printed: wall seconds per
-simulated day. A benchmark, not a test: numbers depend on the machine's load.
+Basilisk runs the peer script given with ``--peer`` (the project keeps none: use
+the shared ``peers/basilisk_geo_peer.py`` beside the checkout, which needs PyPI
+`bsk`) with the Python given (default: this one). It must print JSON lines with
+``exec_s`` and ``hours``. Printed: wall seconds per simulated day. A benchmark,
+not a test: numbers depend on the machine's load.
 """
 
 from __future__ import annotations
@@ -21,13 +23,10 @@ import json
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 from rwlab.attitude.plant import DisturbanceModel
 from rwlab.attitude.scenario import SCENARIOS
 from rwlab.attitude.sim import PDController, simulate
-
-PEER = Path(__file__).parent / "peers" / "basilisk_geo_peer.py"
 
 
 def rwlab_case(hours: float, estimator: str) -> float:
@@ -49,11 +48,13 @@ def rwlab_case(hours: float, estimator: str) -> float:
     return elapsed / hours * 24
 
 
-def basilisk_case(hours: float, python: str) -> float | None:
-    """Seconds per simulated day from the peer's JSON record lines, or None without bsk."""
+def basilisk_case(hours: float, peer: str | None, python: str) -> float | None:
+    """Seconds per simulated day from the peer's JSON record lines, or None without one."""
+    if peer is None:
+        return None
     try:
         out = subprocess.run(
-            [python, str(PEER), "--hours", str(hours), "--dt", "0.1", "--repeats", "1"],
+            [python, peer, "--hours", str(hours), "--dt", "0.1", "--repeats", "1"],
             capture_output=True,
             text=True,
             timeout=3600,
@@ -70,6 +71,7 @@ def basilisk_case(hours: float, python: str) -> float | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hours", type=float, default=2.0, help="simulated hours per case")
+    parser.add_argument("--peer", help="the Basilisk peer script (not kept in the project)")
     parser.add_argument(
         "--basilisk-python",
         default=sys.executable,
@@ -79,12 +81,15 @@ def main() -> None:
     rows = [
         ("rwlab plant + PD (truth), dt 0.1 s", rwlab_case(args.hours, "truth")),
         ("rwlab full LQG loop (sensors + MEKF), dt 0.1 s", rwlab_case(args.hours, "ekf")),
-        ("Basilisk peer (mrpFeedback), dt 0.1 s", basilisk_case(args.hours, args.basilisk_python)),
+        (
+            "Basilisk peer (mrpFeedback), dt 0.1 s",
+            basilisk_case(args.hours, args.peer, args.basilisk_python),
+        ),
     ]
     print(f"{'case':<50} {'s per simulated day':>20}")
     print("-" * 72)
     for name, value in rows:
-        shown = "n/a (no bsk)" if value is None else f"{value:20.1f}"
+        shown = "n/a (no peer or bsk)" if value is None else f"{value:20.1f}"
         print(f"{name:<50} {shown:>20}")
 
 
