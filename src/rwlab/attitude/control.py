@@ -33,7 +33,15 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from rwlab.attitude.design import DesignError, LTRResult, kalman, lqg_current, lqrd, ltr, sigma
+from rwlab.attitude.design import (
+    DesignError,
+    LTRResult,
+    kalman_current,
+    lqg_current,
+    lqrd,
+    ltr,
+    sigma,
+)
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
 from rwlab.attitude.scenario import Scenario
 from rwlab.attitude.sim import (
@@ -113,14 +121,9 @@ def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return Q, np.eye(3) / tau0**2
 
 
-def attitude_plant(
-    scenario: Scenario, q=None, w_bo=None, h_body=None, measure: str = "attitude"
-) -> control.StateSpace:
-    """The continuous linearised plant, at the reference by default.
-
-    ``measure='attitude'``: C = [I 0] (θ measured, the LTR plant G(s), 3×3);
-    ``'state'``: C = I.
-    """
+def attitude_plant(scenario: Scenario, q=None, w_bo=None, h_body=None) -> control.StateSpace:
+    """The continuous linearised plant with θ measured, G(s) = C (sI − A)⁻¹ B (3×3),
+    at the reference by default."""
     A, B = linearize(
         np.array([0, 0, 0, 1.0]) if q is None else q,
         np.zeros(3) if w_bo is None else w_bo,
@@ -128,8 +131,7 @@ def attitude_plant(
         scenario.inertia_matrix,
         gravity_gradient=scenario.disturbances.gravity_gradient,
     )
-    C = np.hstack([np.eye(3), np.zeros((3, 3))]) if measure == "attitude" else np.eye(6)
-    return control.ss(A, B, C, 0)
+    return control.ss(A, B, np.hstack([np.eye(3), np.zeros((3, 3))]), 0)
 
 
 def slew_rate_limit(scenario: Scenario, K: np.ndarray) -> float:
@@ -190,11 +192,6 @@ def crossover(loop_sigma: np.ndarray, omega: np.ndarray) -> float:
     return float(math.exp(math.log(omega[i]) + t * (math.log(omega[i + 1]) - math.log(omega[i]))))
 
 
-def _discrete_measured(scenario: Scenario, ctl: LQRController) -> control.StateSpace:
-    C = np.hstack([np.eye(3), np.zeros((3, 3))])
-    return control.ss(ctl.plant.A, ctl.plant.B, C, 0, ctl.plant.dt)
-
-
 def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[float, float]:
     """(q², r_c) of the LTR filter: fictitious torque PSD (N²·m²·s) and attitude noise PSD (rad²·s).
 
@@ -219,7 +216,7 @@ def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
     q2, r_c = ltr_noise(scenario, ctl)
     dt = scenario.dt
     return ltr(
-        _discrete_measured(scenario, ctl),
+        ctl.plant,
         None,
         None,
         rhos,
@@ -242,7 +239,7 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
     phase of ±2 asin(α/2) at once).
     """
     ctl = LQRController(scenario)
-    sysd = _discrete_measured(scenario, ctl)
+    sysd = ctl.plant  # G(z): θ measured
     dt, w = scenario.dt, _omega_grid(scenario.dt)
     B = np.asarray(sysd.B)
     r_c = attitude_noise_psd(scenario)
@@ -252,8 +249,8 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
         ("lqg", default_filter_psd(scenario), r_c),
         ("lqg_ltr", q2, rho * r_c),
     ):
-        L = kalman(sysd, psd / dt * B @ B.T, np.eye(3) * r / dt)
-        comp = lqg_current(sysd, ctl.K, np.linalg.solve(np.asarray(sysd.A), L))
+        M = kalman_current(sysd, psd / dt * B @ B.T, np.eye(3) * r / dt)
+        comp = lqg_current(sysd, ctl.K, M)
         loops[name] = control.series(sysd, comp)
     out = {}
     for name, loop in loops.items():

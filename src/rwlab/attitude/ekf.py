@@ -149,11 +149,13 @@ class MEKF:
 
 
 @njit(cache=True)
-def predict_covariance(P, F, Qc, dt):
-    """P⁺ = Φ P Φᵀ + Q_d with second-order Φ = I + F dt + (F dt)²/2 and
-    Q_d = Qc dt + (F Qc + Qc Fᵀ) dt²/2 (‖F dt‖ ≈ 1e-5 here, so this matches expm)."""
-    Fd = F * dt
-    Phi = np.eye(6) + Fd + 0.5 * Fd @ Fd
-    Qd = Qc * dt + 0.5 * dt * dt * (F @ Qc + Qc @ F.T)
+def predict_covariance(P, F, Qc, T):
+    """P⁺ = Φ P Φᵀ + Q_d over T, Φ and Q_d to third order in F·T (the δθ̇ = δω block
+    makes F·T of order 1 at a 0.5 s sensor period, so first order would not do)."""
+    FT = F * T
+    F2 = F @ F
+    Phi = np.eye(6) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)
+    FQ = F @ Qc
+    Qd = Qc * T + 0.5 * T * T * (FQ + FQ.T) + T**3 / 3.0 * (FQ @ F.T + 0.5 * (F2 @ Qc + Qc @ F2.T))
     P = Phi @ P @ Phi.T + Qd
     return 0.5 * (P + P.T)

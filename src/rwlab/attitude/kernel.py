@@ -18,8 +18,7 @@ slew beyond it, so a large error never asks the wheels for more than they have.
 
 Filter timing: the estimate is propagated with the plant model every step (the
 controller needs it); the covariance only once per sensor period, at the
-measurement, with Φ and Q_d expanded to third order in F·T (F's δθ̇ = δω block
-makes F·T of order 1 at T = 0.5 s, so the first-order form would not do).
+measurement (``ekf.predict_covariance``).
 """
 
 from __future__ import annotations
@@ -29,7 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.ekf import _update, error_jacobian
+from rwlab.attitude.ekf import _update, error_jacobian, predict_covariance
 from rwlab.attitude.frames import dcm, qmul
 from rwlab.attitude.plant import propagate
 
@@ -112,13 +111,6 @@ def _state_into(q, w, n, s):
 
 
 @njit(cache=True)
-def _state(q, w, n):
-    s = np.empty(6)
-    _state_into(q, w, n, s)
-    return s
-
-
-@njit(cache=True)
 def control_torque(K_w, M, w_max, s):
     """Body torque (3,) of the saturation-aware linear law for s = [θ, ω_bo] (module docstring).
 
@@ -141,18 +133,6 @@ def _control_into(K_w, M, w_max, s, work, tau):
     _matvec(K_w, work, tau)
     for i in range(3):
         tau[i] = -tau[i]
-
-
-@njit(cache=True)
-def _predict_covariance(P, F, Qc, T):
-    """P⁺ = Φ P Φᵀ + Q_d over T, Φ and Q_d to third order in F·T."""
-    FT = F * T
-    F2 = F @ F
-    Phi = np.eye(6) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)
-    FQ = F @ Qc
-    Qd = Qc * T + 0.5 * T * T * (FQ + FQ.T) + T**3 / 3.0 * (FQ @ F.T + 0.5 * (F2 @ Qc + Qc @ F2.T))
-    P = Phi @ P @ Phi.T + Qd
-    return 0.5 * (P + P.T)
 
 
 @njit(cache=True)
@@ -332,7 +312,7 @@ def run_block(
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
                 F = error_jacobian(q_hat, w_hat, h_body.copy(), J, J_inv, n, dist_model[0])
-                P = _predict_covariance(P, F, Qc, T_sensor)
+                P = predict_covariance(P, F, Qc, T_sensor)
             xm[:4] = q_hat
             xm[4:7] = w_hat
             xm[7:] = x[7:]
