@@ -210,11 +210,11 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
         est, val = (data, None) if split >= 1 else data.split(split)
         extra = {"max_iter": orders.pop("max_iter")} if "max_iter" in orders else {}
         model = getattr(idm, estimator_name)(est, *[orders[o] for o in order_names], **extra)
-        result = {"model": model.to_dict()}
+        v, line = None, None
         if val is not None:
             cmp = idm.compare(model, val)
             res = idm.resid(model, val, max_lag=min(25, val.N // 2 - 1))
-            result["validation"] = {
+            v = {
                 "fit_percent": cmp.fit_percent,
                 "mse": cmp.mse,
                 "residuals_white": res.white,
@@ -222,24 +222,14 @@ def _estimate_command(name: str, order_names: list[str], estimator_name: str, do
                 "residuals_independent_of_input": res.independent,
                 "independence_p": res.independence_p,
             }
-        if save:
-            model.save(save, overwrite=force)
-        if as_json:
-            _echo_json(result)
-            return
-        click.echo(f"data: {data!r}, estimation {est.N} samples")
-        click.echo(str(model))
-        if val is not None:
-            v = result["validation"]
-            click.echo(
+            line = (
                 f"validation ({val.N} samples, simulation): fit {v['fit_percent']:.2f} %, "
                 f"MSE {v['mse']:.4g}; residuals {'white' if v['residuals_white'] else 'NOT white'} "
                 f"(p = {v['whiteness_p']:.3f}), "
                 f"{'independent of' if v['residuals_independent_of_input'] else 'CORRELATED with'} "
                 f"the input (p = {v['independence_p']:.3f})"
             )
-        if save:
-            click.echo(f"model written to {save}")
+        _show_model(model, data, est, v, line, save=save, force=force, as_json=as_json)
 
     for order in reversed(order_names):
         command = click.argument(order, type=click.IntRange(min=0))(command)
@@ -298,6 +288,24 @@ _estimate_command(
 )
 
 
+def _show_model(model, data, est, validation, line, *, save, force, as_json) -> None:
+    """Save the model if asked, then print it with its validation (JSON or text)."""
+    result = {"model": model.to_dict()}
+    if validation is not None:
+        result["validation"] = validation
+    if save:
+        model.save(save, overwrite=force)
+    if as_json:
+        _echo_json(result)
+        return
+    click.echo(f"data: {data!r}, estimation {est.N} samples")
+    click.echo(str(model))
+    if line:
+        click.echo(line)
+    if save:
+        click.echo(f"model written to {save}")
+
+
 @ident.command("ar")
 @_data_options
 @click.argument("na", type=click.IntRange(min=0))
@@ -338,32 +346,22 @@ def ident_ar(
     )
     est, val = (data, None) if split >= 1 else data.split(split)
     model = idm.ar(est, na, approach)
-    result = {"model": model.to_dict()}
+    v, line = None, None
     if val is not None:
         cmp = idm.compare(model, val)  # a time series: 1-step prediction
         res = idm.resid(model, val, max_lag=min(25, val.N // 2 - 1))
-        result["validation"] = {
+        v = {
             "prediction_fit_percent": cmp.fit_percent,
             "mse": cmp.mse,
             "residuals_white": res.white,
             "whiteness_p": res.whiteness_p,
         }
-    if save:
-        model.save(save, overwrite=force)
-    if as_json:
-        _echo_json(result)
-        return
-    click.echo(f"data: {data!r}, estimation {est.N} samples")
-    click.echo(str(model))
-    if val is not None:
-        v = result["validation"]
-        click.echo(
+        line = (
             f"validation ({val.N} samples, 1-step prediction): fit "
             f"{v['prediction_fit_percent']:.2f} %, MSE {v['mse']:.4g}; residuals "
             f"{'white' if v['residuals_white'] else 'NOT white'} (p = {v['whiteness_p']:.3f})"
         )
-    if save:
-        click.echo(f"model written to {save}")
+    _show_model(model, data, est, v, line, save=save, force=force, as_json=as_json)
 
 
 @ident.command("delay")
