@@ -1,4 +1,4 @@
-"""The compiled closed loop: ideal wheels, a gain-matrix controller, the MEKF and thrusters.
+"""The compiled closed loop: every wheel model, a gain-matrix controller, the MEKF and thrusters.
 
 ``run_block`` advances the whole loop — sensors, filter, control law, wheel
 allocation and limits, thruster momentum unloading, RK4 plant, process noise,
@@ -8,7 +8,7 @@ simulated time), handing it that block's pre-drawn noise: every noise source has
 its own random stream, so every controller sees the same sensor noise and the
 same disturbances whatever else it does.
 
-The control law (shared with the Python path, :func:`control_torque`) is the
+The control law (:func:`control_torque`, also what ``LinearController.torque`` returns) is the
 saturation-aware form of a linear law τ = −K s, s = [θ, ω_bo], θ = 2 q_v sign(q4):
 
     ω_cmd = sat_ω_max(−K_ω⁻¹ K_θ θ),    τ = −K_ω (ω_bo − ω_cmd)
@@ -30,7 +30,8 @@ from numba import njit
 
 from rwlab.attitude.ekf import _update, error_jacobian, predict_covariance
 from rwlab.attitude.frames import dcm, qmul
-from rwlab.attitude.plant import propagate
+from rwlab.attitude.plant import rk4_step
+from rwlab.attitude.wheels import realise
 
 __all__ = ["STATS", "control_torque", "new_stats", "run_block"]
 
@@ -98,16 +99,16 @@ def _matvec(M, v, out):
         out[i] = acc
 
 
-@njit(cache=True)
-def _state_into(q, w, n, s):
-    """s = [2 q_v sign(q4), ω_bo] (ω_bo = ω − A(q) (0, −n, 0))."""
-    sgn = 1.0 if q[3] >= 0 else -1.0
-    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+@njit(cache=True, inline="always")
+def _state_into(qw, n, s):
+    """s = [2 q_v sign(q4), ω_bo] for qw = [q, ω] (ω_bo = ω − A(q) (0, −n, 0))."""
+    q1, q2, q3, q4 = qw[0], qw[1], qw[2], qw[3]
+    sgn = 1.0 if q4 >= 0 else -1.0
     s[0], s[1], s[2] = 2.0 * q1 * sgn, 2.0 * q2 * sgn, 2.0 * q3 * sgn
     c = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
-    s[3] = w[0] + n * 2 * (q1 * q2 + q4 * q3)
-    s[4] = w[1] + n * (c + 2 * q2 * q2)
-    s[5] = w[2] + n * 2 * (q2 * q3 - q4 * q1)
+    s[3] = qw[4] + n * 2 * (q1 * q2 + q4 * q3)
+    s[4] = qw[5] + n * (c + 2 * q2 * q2)
+    s[5] = qw[6] + n * 2 * (q2 * q3 - q4 * q1)
 
 
 @njit(cache=True)
@@ -122,10 +123,10 @@ def control_torque(K_w, M, w_max, s):
     return tau
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _control_into(K_w, M, w_max, s, work, tau):
     """:func:`control_torque` into ``tau`` with a (3,) ``work`` buffer."""
-    _matvec(M, s[:3], work)
+    _matvec(M, s, work)  # reads s[:3]
     norm = math.sqrt(work[0] * work[0] + work[1] * work[1] + work[2] * work[2])
     scale = w_max / norm if norm > w_max else 1.0
     for i in range(3):
@@ -173,6 +174,15 @@ def run_block(
     r_earth,
     moon,
     unload,
+    wheel_kind,
+    wheel_healthy,
+    wheel_faulty,
+    wheel_fault_s,
+    wheel_state,
+    wheel_A,
+    wheel_B,
+    wheel_C,
+    wheel_ident,
     stats,
     log_t,
     log_x,
@@ -187,13 +197,15 @@ def run_block(
     ``sensor_noise`` (≥ sensor steps in the block, 6) the standard normals of
     the sun and earth sensors. ``unload`` = [enabled, start fraction, stop
     fraction, pulse torque N·m, pulse steps between pulses, recovery s, pointing
-    error (°) above which no window starts and no pulse fires];
-    ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
-    P, log position and whether a wheel touched its momentum limit.
+    error (°) above which no window starts and no pulse fires]; ``wheel_*`` the
+    wheel model (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated
+    in place); ``stats`` (see :data:`STATS`) is updated in place. Returns the new
+    x, q̂, ŵ, P, log position and whether a wheel touched its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
     nw = h_max.shape[0]
+    m = x.shape[0]
     T_sensor = sensor_every * dt
     i_sensor = 0
     tau_thr = np.zeros(3)
@@ -201,10 +213,14 @@ def run_block(
     tau = np.empty(3)
     work = np.empty(3)
     hw_cmd = np.empty(nw)
+    hw_real = np.empty(nw)
     h_body = np.empty(3)
+    rk4_work = np.empty((5, m))
     d = dist.copy()
     dm = dist_model.copy()
-    xm = np.empty_like(x)
+    x = x.copy()
+    xm = np.empty(m)
+    est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     s_orb = _sun(0.0, sun_dec, sun_phase, sun_moving, n)
     for j in range(steps):
         k = k0 + j
@@ -224,15 +240,19 @@ def run_block(
             q_hat, w_hat, P = _update(
                 q_hat, w_hat, P, _noisy(C[:, 2].copy(), sig_earth, e[3:]), nadir, r_earth
             )
+        qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        err = math.degrees(2.0 * math.asin(min(1.0, qv)))  # the true error (target: orbital frame)
         # momentum unloading: thruster pulses against the wheels' body momentum
-        _matvec(G, x[7:], h_body)
-        tau_thr[:] = 0.0
+        for i in range(3):
+            h_body[i] = G[i, 0] * x[7]
+            for c in range(1, nw):
+                h_body[i] += G[i, c] * x[7 + c]
+            tau_thr[i] = 0.0
+        h_frac = 0.0
+        for i in range(nw):
+            h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
         if unload[0] > 0:
-            h_frac = 0.0
-            for i in range(nw):
-                h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
-            qv0 = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
-            pointing = math.degrees(2.0 * math.asin(min(1.0, qv0))) <= unload[6]
+            pointing = err <= unload[6]
             if stats[UNLOADING] == 0 and h_frac > unload[1] and pointing:
                 stats[UNLOADING] = 1
                 stats[DESAT_COUNT] += 1
@@ -251,10 +271,9 @@ def run_block(
                         stats[UNLOADING] = 0
                         stats[UNLOAD_END] = t
 
-        if use_ekf:
-            _state_into(q_hat, w_hat, n, s)
-        else:
-            _state_into(x[:4], x[4:7], n, s)
+        for i in range(7):
+            est[i] = (q_hat[i] if i < 4 else w_hat[i - 4]) if use_ekf else x[i]
+        _state_into(est, n, s)
         _control_into(K_w, M, w_max, s, work, tau)
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
@@ -265,19 +284,28 @@ def run_block(
                 at_limit = True
             hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
             stats[TAU_PEAK] = max(stats[TAU_PEAK], abs(hw_cmd[i]))
-            frac = abs(x[7 + i]) / h_max[i]
-            stats[H_PEAK] = max(stats[H_PEAK], frac)
-            if frac >= 0.999:
-                saturated = True
+        stats[H_PEAK] = max(stats[H_PEAK], h_frac)
+        if h_frac >= 0.999:
+            saturated = True
+        realise(
+            wheel_kind,
+            t,
+            dt,
+            hw_cmd,
+            x,
+            wheel_healthy,
+            wheel_faulty,
+            wheel_fault_s,
+            wheel_state,
+            wheel_A,
+            wheel_B,
+            wheel_C,
+            wheel_ident,
+            hw_real,
+        )
 
-        # pointing statistics on every step (the true error, target = orbital frame)
-        qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
-        err = math.degrees(2.0 * math.asin(min(1.0, qv)))
         in_desat = stats[UNLOADING] == 1 or t - stats[UNLOAD_END] <= unload[5]
         stats[MAX_ERR] = max(stats[MAX_ERR], err)
-        if in_desat and k >= steady_from:
-            stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
-            stats[DESAT_STEPS] += 1
         if k >= steady_from:
             stats[STEADY_MAX] = max(stats[STEADY_MAX], err)
             stats[STEADY_STEPS] += 1
@@ -286,16 +314,23 @@ def run_block(
                 stats[TAU_SQ] += hw_cmd[i] * hw_cmd[i] / nw
             if at_limit:
                 stats[SAT_STEPS] += 1
-            if not in_desat:
+            if in_desat:
+                stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
+                stats[DESAT_STEPS] += 1
+            else:
                 stats[STEADY_EXCL] = max(stats[STEADY_EXCL], err)
                 stats[EXCL_STEPS] += 1
 
         if k % log_every == 0:
             log_t[log_k] = t
-            log_x[log_k] = x
-            log_est[log_k, :4] = q_hat if use_ekf else x[:4]
-            log_est[log_k, 4:] = w_hat if use_ekf else x[4:7]
-            log_tau[log_k] = -(G @ hw_cmd)
+            for i in range(m):
+                log_x[log_k, i] = x[i]
+            for i in range(7):
+                log_est[log_k, i] = est[i]
+            for i in range(3):
+                log_tau[log_k, i] = 0.0
+                for c in range(nw):
+                    log_tau[log_k, i] -= G[i, c] * hw_real[c]
             if use_ekf:
                 dq = qmul(x[:4], np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
                 if dq[3] < 0:
@@ -308,7 +343,6 @@ def run_block(
 
         for i in range(3):
             d[7 + i] = dist[7 + i] + process_noise[j, i] + tau_thr[i]
-        x_next = propagate(x, hw_cmd, dt, 1, J, J_inv, G, h_max, n, d, s_orb, moon)
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
                 F = error_jacobian(q_hat, w_hat, h_body.copy(), J, J_inv, n, dist_model[0])
@@ -318,8 +352,9 @@ def run_block(
             xm[7:] = x[7:]
             for i in range(3):  # the thruster command is known to the filter
                 dm[7 + i] = dist_model[7 + i] + tau_thr[i]
-            xm = propagate(xm, hw_cmd, dt, 1, J, J_inv, G, h_max, n, dm, s_orb, moon)
+            # the filter knows the wheels' torques and momenta (their tachometers)
+            rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, moon, rk4_work)
             q_hat = xm[:4].copy()
             w_hat = xm[4:7].copy()
-        x = x_next
+        rk4_step(x, hw_real, dt, J, J_inv, G, h_max, n, d, s_orb, moon, rk4_work)
     return x, q_hat, w_hat, P, log_k, saturated

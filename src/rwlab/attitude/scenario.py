@@ -40,6 +40,8 @@ class Scenario:
     wheel_inertia, wheel_max_torque, wheel_max_momentum, wheel_max_speed_rpm.
     wheel_model : "ideal" | "physics" | "identified".
     wheel_model_file : path to model.json for "identified".
+    wheel_faults : for "physics": a list of tables ``{wheel = 1..N, at_s = s, friction =
+        factor, torque_constant = factor, current_limit = A}`` (any of the last three).
     disturbances : DisturbanceModel.
     sun : "fixed" (paper B: fixed in the orbital frame) or "moving" (turns once a day).
     sun_declination_deg, sun_phase_deg : the Sun's direction (season and time of day).
@@ -86,6 +88,7 @@ class Scenario:
     wheel_max_speed_rpm: float = 6000.0
     wheel_model: str = "ideal"
     wheel_model_file: str | None = None
+    wheel_faults: tuple = ()
     disturbances: DisturbanceModel = field(default_factory=DisturbanceModel)
     sun: str = "fixed"
     sun_declination_deg: float = 10.0
@@ -140,6 +143,7 @@ class Scenario:
                 )
         if self.wheel_model == "identified" and not self.wheel_model_file:
             raise ConfigError("wheel_model 'identified' needs wheel_model_file = model.json")
+        _check_wheel_faults(self)
         for name in _POSITIVE:
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0:
@@ -230,6 +234,41 @@ _FRACTIONS = (
 _VECTORS = {"inertia": (3, 9), "initial_axis": (3,), "initial_rate": (3,)}
 
 
+_FAULT_KEYS = {
+    "friction": "a factor > 0",
+    "torque_constant": "a factor ≥ 0",
+    "current_limit": "A ≥ 0",
+}
+
+
+def _check_wheel_faults(sc: Scenario) -> None:
+    """Each fault names an existing wheel, a start time and at least one known change."""
+    if not isinstance(sc.wheel_faults, (tuple, list)):
+        raise ConfigError(f"{sc.name}: wheel_faults must be a list of tables")
+    if sc.wheel_faults and sc.wheel_model != "physics":
+        raise ConfigError(f"{sc.name}: wheel_faults need wheel_model = 'physics'")
+    for f in sc.wheel_faults:
+        if not isinstance(f, dict):
+            raise ConfigError(f"{sc.name}: each wheel fault must be a table, got {f!r}")
+        unknown = sorted(set(f) - {"wheel", "at_s", *_FAULT_KEYS})
+        wheel = f.get("wheel")
+        if unknown:
+            raise ConfigError(f"{sc.name}: wheel fault has unknown key(s) {unknown}")
+        if isinstance(wheel, bool) or not isinstance(wheel, int) or not 1 <= wheel <= sc.n_wheels:
+            raise ConfigError(f"{sc.name}: wheel fault needs wheel = 1..{sc.n_wheels}")
+        at = f.get("at_s")
+        if not (_is_number(at) and at >= 0):
+            raise ConfigError(f"{sc.name}: wheel fault needs at_s = a time ≥ 0 (s)")
+        if not set(f) & set(_FAULT_KEYS):
+            raise ConfigError(
+                f"{sc.name}: wheel fault changes nothing: give one of {list(_FAULT_KEYS)}"
+            )
+        for key, what in _FAULT_KEYS.items():
+            v = f.get(key, 1.0)
+            if not (_is_number(v) and (v > 0 if key == "friction" else v >= 0)):
+                raise ConfigError(f"{sc.name}: wheel fault {key} must be {what}, got {v!r}")
+
+
 def _check_types(sc: Scenario) -> None:
     """Every field of the type its default has (numbers finite), vectors of the right length."""
     for f in fields(sc):
@@ -310,6 +349,8 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     extra = sorted(set(raw) - {"scenario", "disturbances"})
     if unknown or extra:
         raise ConfigError(f"{path}: unknown key(s) {unknown + extra}")
+    if isinstance(table.get("wheel_faults"), list):
+        table["wheel_faults"] = tuple(table["wheel_faults"])
     for key in ("inertia", "initial_axis", "initial_rate"):
         if isinstance(table.get(key), list):
             table[key] = tuple(table[key])

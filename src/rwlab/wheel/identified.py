@@ -79,6 +79,14 @@ class IdentifiedWheel:
         self._x = np.linalg.solve(np.eye(n) - self._A, self._B * du) if n else np.zeros(0)
         self.speed_rpm = float(speed_rpm)
 
+    def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The linear part (A, B, C, D) that :meth:`step` runs: (n, n), (n,), (n,), scalar."""
+        return self._A.copy(), self._B.copy(), self._C.copy(), self._D
+
+    def model_state(self) -> np.ndarray:
+        """A copy of the linear part's state (n,)."""
+        return self._x.copy()
+
     def step(self, command_rpm: float) -> float:
         """Apply a speed command for one sample time; returns the speed at the next sample, rpm."""
         u = min(max(float(command_rpm), -self.speed_limit_rpm), self.speed_limit_rpm) - self.u0
