@@ -315,3 +315,24 @@ def test_bad_scenario_values_are_config_errors(tmp_path, line, match):
     )
     with pytest.raises(ConfigError, match=match):
         load_scenario(str(path))
+
+
+def test_the_kernels_scalar_filter_twins_equal_their_references():
+    from rwlab.attitude.ekf import (
+        error_jacobian_into,
+        predict_covariance,
+        predict_covariance_into,
+    )
+
+    rng = np.random.default_rng(3)
+    q = from_axis_angle(rng.standard_normal(3), 0.3)
+    w, h = 1e-3 * rng.standard_normal(3), 5 * rng.standard_normal(3)
+    F = np.empty((6, 6))
+    error_jacobian_into(q, w, h, J, J_INV, GEO_RATE, 3 * GEO_RATE**2, F, np.empty((4, 3, 3)))
+    ref = error_jacobian(q, w, h, J, J_INV, GEO_RATE, 3 * GEO_RATE**2)
+    assert np.allclose(F, ref, rtol=1e-12, atol=1e-18)
+    L = rng.standard_normal((6, 6))
+    P, Qc = L @ L.T, np.diag([0, 0, 0, 1e-9, 2e-9, 3e-9])
+    expected = predict_covariance(P, F, Qc, 0.5)
+    predict_covariance_into(P, F, Qc, 0.5, np.empty((6, 6, 6)))
+    assert np.allclose(P, expected, rtol=1e-12, atol=1e-15) and np.array_equal(P, P.T)

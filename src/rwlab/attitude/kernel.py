@@ -18,7 +18,7 @@ slew beyond it, so a large error never asks the wheels for more than they have.
 
 Filter timing: the estimate is propagated with the plant model every step (the
 controller needs it); the covariance only once per sensor period, at the
-measurement (``ekf.predict_covariance``).
+measurement (``ekf.predict_covariance_into``).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.ekf import _update, error_jacobian, predict_covariance
+from rwlab.attitude.ekf import _update, error_jacobian_into, predict_covariance_into
 from rwlab.attitude.frames import dcm, qmul
 from rwlab.attitude.plant import rk4_step
 from rwlab.attitude.wheels import realise
@@ -221,6 +221,8 @@ def run_block(
     x = x.copy()
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
+    F, W3, W6 = np.empty((6, 6)), np.empty((4, 3, 3)), np.empty((6, 6, 6))
+    P = P.copy()
     s_orb = _sun(0.0, sun_dec, sun_phase, sun_moving, n)
     for j in range(steps):
         k = k0 + j
@@ -345,8 +347,8 @@ def run_block(
             d[7 + i] = dist[7 + i] + process_noise[j, i] + tau_thr[i]
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
-                F = error_jacobian(q_hat, w_hat, h_body.copy(), J, J_inv, n, dist_model[0])
-                P = predict_covariance(P, F, Qc, T_sensor)
+                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], F, W3)
+                predict_covariance_into(P, F, Qc, T_sensor, W6)
             xm[:4] = q_hat
             xm[4:7] = w_hat
             xm[7:] = x[7:]
