@@ -32,7 +32,6 @@ import time
 from pathlib import Path
 
 import minimal_loop
-
 from rwlab.attitude.control import fly
 from rwlab.attitude.scenario import SCENARIOS
 

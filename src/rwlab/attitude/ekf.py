@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.frames import GEO_RATE, dcm, qmul, skew
+from rwlab.attitude.frames import dcm, qmul, skew
 
 __all__ = ["error_jacobian", "predict_covariance", "vector_jacobian"]
 
