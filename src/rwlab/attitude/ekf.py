@@ -22,6 +22,8 @@ discrete process noise (Van Loan). Updates use the Joseph form.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -190,3 +192,102 @@ def predict_covariance_into(P, F, Qc, T, W):
     for i in range(6):
         for j in range(6):
             P[i, j] = 0.5 * (Z[i, j] + Z[j, i] + Y[i, j] + Y[j, i])
+
+
+@njit(cache=True)
+def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
+    """One vector-measurement update in place on q (4,), w (3,), P (6, 6): the scalar twin
+    of ``_update`` behind an innovation gate. Returns whether it was applied.
+
+    Rejected (nothing changes) when ν' S⁻¹ ν > ``gate`` (a χ² bound; 0: no gate).
+    ``W`` is a (4, 6, 6) scratch. H = [[b×], 0] is never formed: only its 3×3 block.
+    """
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    b0 = (
+        (s + 2 * q1 * q1) * ref[0]
+        + 2 * (q1 * q2 + q4 * q3) * ref[1]
+        + 2 * (q1 * q3 - q4 * q2) * ref[2]
+    )
+    b1 = (
+        2 * (q1 * q2 - q4 * q3) * ref[0]
+        + (s + 2 * q2 * q2) * ref[1]
+        + 2 * (q2 * q3 + q4 * q1) * ref[2]
+    )
+    b2 = (
+        2 * (q1 * q3 + q4 * q2) * ref[0]
+        + 2 * (q2 * q3 - q4 * q1) * ref[1]
+        + (s + 2 * q3 * q3) * ref[2]
+    )
+    Hx, PHt, K, X = W[0], W[1], W[2], W[3]  # Hx: [b×] in the top-left 3×3
+    _skew_into(b0, b1, b2, Hx)
+    for i in range(6):  # P Hᵀ (6×3)
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += P[i, k] * Hx[j, k]
+            PHt[i, j] = acc
+    r = sigma * sigma
+    S, Si = X[:3, :3], X[3:, :3]  # X is free until the Joseph step
+    for i in range(3):
+        for j in range(3):
+            acc = r if i == j else 0.0
+            for k in range(3):
+                acc += Hx[i, k] * PHt[k, j]
+            S[i, j] = acc
+    _inv3_into(S, Si)
+    nu0, nu1, nu2 = b_meas[0] - b0, b_meas[1] - b1, b_meas[2] - b2
+    if gate > 0:
+        d2 = 0.0
+        nu = (nu0, nu1, nu2)
+        for i in range(3):
+            for j in range(3):
+                d2 += nu[i] * Si[i, j] * nu[j]
+        if d2 > gate:
+            return False
+    dx = K[:, 3]  # K uses the first three columns
+    for i in range(6):  # K = P Hᵀ S⁻¹, δx = K ν
+        for j in range(3):
+            K[i, j] = PHt[i, 0] * Si[0, j] + PHt[i, 1] * Si[1, j] + PHt[i, 2] * Si[2, j]
+        dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    for i in range(6):  # I − K H into PHt's buffer (it is no longer needed)
+        for j in range(6):
+            v = 1.0 if i == j else 0.0
+            if j < 3:
+                v -= K[i, 0] * Hx[0, j] + K[i, 1] * Hx[1, j] + K[i, 2] * Hx[2, j]
+            PHt[i, j] = v
+    _mm(PHt, P, X)  # Joseph form: (I − KH) P (I − KH)ᵀ + K R Kᵀ
+    _mmt(X, PHt, Hx)
+    for i in range(6):
+        for j in range(i, 6):
+            kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
+            v = 0.5 * (Hx[i, j] + Hx[j, i]) + kk
+            P[i, j] = v
+            P[j, i] = v
+    p1, p2, p3 = 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]  # q ← [δθ/2, 1] ⊗ q, renormalised
+    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
+    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
+    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
+    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    for i in range(3):
+        w[i] += dx[3 + i]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _inv3_into(S, out):
+    """out = S⁻¹ for a 3×3 S, by cofactors."""
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 0], S[1, 1], S[1, 2]
+    g, h, i = S[2, 0], S[2, 1], S[2, 2]
+    A, B, C = e * i - f * h, -(d * i - f * g), d * h - e * g
+    det = a * A + b * B + c * C
+    out[0, 0], out[1, 0], out[2, 0] = A / det, B / det, C / det
+    out[0, 1] = -(b * i - c * h) / det
+    out[1, 1] = (a * i - c * g) / det
+    out[2, 1] = -(a * h - b * g) / det
+    out[0, 2] = (b * f - c * e) / det
+    out[1, 2] = -(a * f - c * d) / det
+    out[2, 2] = (a * e - b * d) / det
