@@ -110,7 +110,9 @@ def _parse(name: str, spec: dict, where: str) -> Dispersion:
         raise ConfigError(f"{where}: {name}: unknown key(s) {bad}; allowed {sorted(_KEYS)}")
     kind = spec["distribution"]
     if kind not in ("normal", "uniform"):
-        raise ConfigError(f"{where}: {name}: distribution must be 'normal' or 'uniform', got {kind!r}")
+        raise ConfigError(
+            f"{where}: {name}: distribution must be 'normal' or 'uniform', got {kind!r}"
+        )
     relative = spec.get("relative", False)
     if not isinstance(relative, bool):
         raise ConfigError(f"{where}: {name}: relative must be true or false")

@@ -59,9 +59,11 @@ def worker_count(client) -> int:
 
 
 def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
-    """Split ``items`` into about ``per_worker`` tasks per worker, in order (none empty)."""
-    size = max(1, -(-len(items) // (per_worker * max(1, n_workers))))
-    return [items[i : i + size] for i in range(0, len(items), size)]
+    """Split ``items`` in order into ``per_worker`` tasks per worker (fewer when there are
+    fewer items), of sizes that differ by at most one."""
+    n = max(1, min(len(items), per_worker * max(1, n_workers)))
+    edges = [len(items) * i // n for i in range(n + 1)]
+    return [items[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def _pinned(fn, batch, *args):

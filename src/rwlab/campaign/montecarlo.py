@@ -88,7 +88,9 @@ def axis_errors_deg(q: np.ndarray) -> np.ndarray:
     qv, q4 = q[:, :3], q[:, 3:4]
     s = np.linalg.norm(qv, axis=1, keepdims=True)
     angle = 2 * np.arctan2(s, np.abs(q4))
-    unit = np.divide(qv * np.sign(np.where(q4 == 0, 1.0, q4)), s, out=np.zeros_like(qv), where=s > 0)
+    unit = np.divide(
+        qv * np.sign(np.where(q4 == 0, 1.0, q4)), s, out=np.zeros_like(qv), where=s > 0
+    )
     return np.degrees(angle * unit)
 
 
@@ -166,7 +168,9 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
     if not rows:
         raise ConfigError("a budget needs at least one run")
     req = campaign.scenario.pointing_requirement_deg
-    col = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "settling_time_s"}
+    col = {
+        k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "settling_time_s"
+    }
     pointing = {a: _spread(col[f"steady_max_error_{a}_deg"]) for a in AXES}
     pointing["total"] = _spread(col["steady_max_error_deg"])
     order = np.argsort(-col["steady_max_error_deg"], kind="stable")[:WORST]
