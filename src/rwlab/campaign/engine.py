@@ -12,6 +12,7 @@ the same rows.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 
@@ -63,7 +64,7 @@ def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     fewer items), of sizes that differ by at most one."""
     n = max(1, min(len(items), per_worker * max(1, n_workers)))
     edges = [len(items) * i // n for i in range(n + 1)]
-    return [items[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return [items[a:b] for a, b in itertools.pairwise(edges)]
 
 
 def _pinned(fn, batch, *args):
