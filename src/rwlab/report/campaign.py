@@ -164,6 +164,8 @@ def _worst_figure(page: Page, run, req: float) -> None:
     axes[0].semilogy(run.t, np.maximum(run.error_deg, 1e-6), color="k", lw=0.8, label="total")
     axes[0].axhline(req, color="k", ls="--", lw=1)
     axes[0].set_ylabel("pointing error [°]")
+    for ax in axes:
+        ax.axvspan(run.steady_from_s, run.t[-1], color="#888", alpha=0.08)
     for i, a in enumerate(AXES):
         axes[1].plot(run.t, err[:, i], color=_COLORS[a], lw=0.8, label=a)
         axes[2].plot(run.t, run.torque[:, i], color=_COLORS[a], lw=0.8, label=f"τ{a}")
@@ -178,7 +180,8 @@ def _worst_figure(page: Page, run, req: float) -> None:
         fig,
         "fig-worst-run",
         "The worst run flown again from its seed: pointing error (total, and per axis as the "
-        "rotation vector of the attitude) and control torque.",
+        "rotation vector of the attitude) and control torque; shaded: the steady-state window "
+        "the budget uses.",
     )
 
 
