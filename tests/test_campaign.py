@@ -318,3 +318,51 @@ def test_identify_a_folder_is_the_single_record_study_for_each(tmp_path):
     b = json.loads((tmp_path / "out" / "unit_b" / "study.json").read_text())
     assert b["chosen"]["structure"] == one["chosen"]["structure"]  # an affine copy: same fit
     assert b["chosen"]["fit_percent"] == pytest.approx(one["chosen"]["fit_percent"], abs=1e-3)
+
+
+@pytest.mark.slow
+def test_scheduler_sends_the_campaign_to_an_existing_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        r = _rwlab(
+            "attitude",
+            "montecarlo",
+            "--scenario",
+            "geo-smallsat",
+            "--controller",
+            "pd",
+            "--runs",
+            3,
+            "--duration",
+            20,
+            "--scheduler",
+            cluster.scheduler_address,
+            "--out",
+            tmp_path / "o",
+        )
+    assert r.exit_code == 0, r.output
+    rows = pq.read_table(tmp_path / "o" / "results.parquet").to_pylist()
+    assert [row["seed"] for row in rows] == run_seeds(0, 3)
+
+
+def test_engine_option_errors(tmp_path):
+    both = _rwlab(
+        "attitude",
+        "montecarlo",
+        "--runs",
+        1,
+        "--duration",
+        10,
+        "--workers",
+        1,
+        "--scheduler",
+        "tcp://127.0.0.1:1",
+        "--out",
+        tmp_path / "o",
+    )
+    assert both.exit_code == 2 and "not both" in both.output
+    r = _rwlab("identify", "dryer", "--workers", 2, "--out", tmp_path / "o")
+    assert r.exit_code == 2 and "folder of records" in r.output
