@@ -1282,13 +1282,14 @@ def attitude_montecarlo(
     from rwlab.attitude.scenario import load_scenario
     from rwlab.campaign.dispersions import load_dispersions
     from rwlab.campaign.engine import dask_client
-    from rwlab.campaign.montecarlo import Campaign, budget, fly_run, run_campaign
+    from rwlab.campaign.montecarlo import Campaign, budget, check_runs, fly_run, run_campaign
     from rwlab.report.attitude import check_outputs
     from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
 
     _check_run(duration, None)
     sc = load_scenario(scenario)
     campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
+    check_runs(campaign)  # before the cluster starts
     _check_folder(out)
     check_outputs(out, CAMPAIGN_FILES, force)
     where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"

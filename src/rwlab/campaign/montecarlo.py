@@ -27,6 +27,7 @@ __all__ = [
     "Campaign",
     "axis_errors_deg",
     "budget",
+    "check_runs",
     "fly_run",
     "run_campaign",
     "run_seeds",
@@ -126,12 +127,11 @@ def _run_batch(items: list[tuple[int, int]], campaign: Campaign) -> list[dict]:
     return [{"run": i, **fly_run(campaign, s)[1]} for i, s in items]
 
 
-def run_campaign(campaign: Campaign, client, *, progress=None) -> list[dict]:
-    """Every run's row, in run order, computed on ``client``'s workers.
+def check_runs(campaign: Campaign) -> list[int]:
+    """The runs' seeds, once every run's dispersed scenario is known to be valid.
 
-    Every dispersed scenario is checked here first, so a dispersion that makes a
-    scenario invalid (a negative inertia, the triangle inequality) fails at once,
-    naming the run, not minutes later on a worker.
+    A dispersion that makes a scenario invalid (a negative inertia, the triangle
+    inequality) fails here, naming the run, not minutes later on a worker.
     """
     seeds = run_seeds(campaign.seed, campaign.runs)
     for i, s in enumerate(seeds):
@@ -142,6 +142,13 @@ def run_campaign(campaign: Campaign, client, *, progress=None) -> list[dict]:
                 f"run {i} (seed {s}): the dispersed scenario is invalid ({exc}); "
                 "narrow the dispersions' bounds"
             ) from None
+    return seeds
+
+
+def run_campaign(campaign: Campaign, client, *, progress=None) -> list[dict]:
+    """Every run's row, in run order, computed in batches on ``client``'s workers
+    (``progress(runs done)`` after each batch)."""
+    seeds = check_runs(campaign)
     work = batches(list(enumerate(seeds)), worker_count(client))
     return map_batches(client, _run_batch, work, campaign, progress=progress)
 
