@@ -93,7 +93,8 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
         table_id="table-budget",
     )
     page.text(
-        f"Statistics over runs of {budget['pointing_statistic'].split('per run: ')[1]}. With "
+        "Statistics over runs of each run's steady-state maximum |error| (total: every step; "
+        f"axes: the logged trace, the rotation vector's components). With "
         f"{budget['runs']} runs the 99.73rd percentile is an interpolation between the largest "
         "values (it needs ~370 runs to be observed); mean + 3σ assumes a normal spread.",
         note=True,
