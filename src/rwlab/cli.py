@@ -126,6 +126,19 @@ def _columns_option(func):
     return func
 
 
+def _engine_options(func):
+    """--workers / --scheduler: where a campaign's tasks run (rwlab.campaign.engine)."""
+    func = click.option(
+        "--scheduler",
+        help="Address of an existing Dask scheduler, e.g. tcp://host:8786.",
+    )(func)
+    return click.option(
+        "--workers",
+        type=click.IntRange(min=1),
+        help="Worker processes of the local Dask cluster [default: the cores].",
+    )(func)
+
+
 def _data_options(func):
     """Options every identification command takes to load and preprocess a record."""
     options = [
@@ -859,21 +872,37 @@ def monitor_cmd(record, host, port, replay, speed):
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
+@_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
-def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance, force):
+def identify(
+    file, out, Ts, input_col, output_col, preprocess, split, tolerance, workers, scheduler, force
+):
     """Run paper A's whole identification study on a record or data file.
 
     Writes OUT/report.html (tables and figures, opens offline), OUT/study.json
     (every number) and OUT/model.json (the chosen model in physical units with
     the wheel's saturations, loadable by rwlab.wheel.IdentifiedWheel).
-    """
-    from rwlab.ident.study import identification_study, load_study_data, physical_model
-    from rwlab.report.identification import write_study
 
+    FILE may be a folder of records (a wheel fleet's acceptance tests): each is
+    studied in parallel on a Dask cluster (--workers, --scheduler), into
+    OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
+    """
     _check_folder(out)
-    data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
-    click.echo(f"data: {data!r}", err=True)
+    options = dict(
+        Ts=Ts,
+        input_col=input_col,
+        output_col=output_col,
+        preprocess=preprocess,
+        split=split,
+        tolerance=tolerance,
+        force=force,
+    )
+    if Path(file).is_dir():
+        _identify_fleet(Path(file), Path(out), options, workers, scheduler, force)
+        return
+    if workers is not None or scheduler is not None:
+        raise ConfigError("--workers and --scheduler apply to a folder of records")
     with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
 
         def progress(done: int, total: int, label: str) -> None:
@@ -881,17 +910,9 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
             bar.label = f"identification study: {label}"
             bar.update(1)
 
-        result = identification_study(
-            data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+        study, paths = _identify_one(
+            file, out, progress=progress, echo=lambda t: click.echo(t, err=True), **options
         )
-    model = physical_model(
-        result,
-        speed_limit_rpm=saturation["speed_limit_rpm"],
-        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
-        saturation_source=saturation["saturation_source"],
-    )
-    paths = write_study(result, model, out, force=force)
-    study = result.to_dict()
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
     for row in study["orders"] + study["others"]:
@@ -900,6 +921,105 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
     click.echo(f"chosen: {study['chosen']['reason']}")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
+def _identify_one(
+    file,
+    out,
+    *,
+    Ts,
+    input_col,
+    output_col,
+    preprocess,
+    split,
+    tolerance,
+    force,
+    progress=None,
+    echo=None,
+):
+    """`rwlab identify` on one record: the study written into ``out``; (study dict, paths)."""
+    from rwlab.ident.study import identification_study, load_study_data, physical_model
+    from rwlab.report.identification import write_study
+
+    data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
+    if echo is not None:
+        echo(f"data: {data!r}")
+    result = identification_study(
+        data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+    )
+    model = physical_model(
+        result,
+        speed_limit_rpm=saturation["speed_limit_rpm"],
+        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
+        saturation_source=saturation["saturation_source"],
+    )
+    return result.to_dict(), write_study(result, model, out, force=force)
+
+
+_RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")
+
+
+def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
+    """One fleet line per (record, study folder): its chosen model, or why it failed."""
+    lines = []
+    for record, out in jobs:
+        line = {"record": Path(record).name, "study": Path(out).name, "error": None}
+        line |= {"nk": None, "structure": None, "fit_percent": None}
+        try:
+            study, _ = _identify_one(record, out, **options)
+        except (RwlabError, OSError) as exc:
+            line["error"] = _message(exc)
+        else:
+            chosen = study["chosen"]
+            line |= {
+                "nk": study["delay"]["nk"],
+                "structure": chosen["structure"],
+                "fit_percent": chosen["fit_percent"],
+            }
+        lines.append(line)
+    return lines
+
+
+def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
+    """`rwlab identify FOLDER`: every record's study on the Dask engine, and a fleet summary."""
+    from rwlab.campaign.engine import dask_client, map_batches
+    from rwlab.report.attitude import check_outputs
+    from rwlab.report.campaign import FLEET_FILES, write_fleet
+
+    records = sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file()
+        and p.suffix.lower() in _RECORD_SUFFIXES
+        and not p.name.endswith(".partial.mcap")
+    )
+    if not records:
+        raise ConfigError(f"{folder}: no records ({', '.join(_RECORD_SUFFIXES)}) in the folder")
+    stems = [p.stem for p in records]
+    twins = sorted({s for s in stems if stems.count(s) > 1})
+    if twins:
+        raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
+    check_outputs(out, FLEET_FILES, force)
+    for stem in stems:
+        check_outputs(out / stem, ["report.html", "study.json", "model.json"], force)
+    jobs = [[(str(p), str(out / p.stem))] for p in records]
+    click.echo(f"identifying {len(records)} records on Dask...", err=True)
+    with (
+        dask_client(workers, scheduler) as client,
+        _steps_progress(len(records), "fleet identification", unit="records") as progress,
+    ):
+        lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
+    paths = write_fleet(lines, out, force=force)
+    for line in lines:
+        fit = "" if line["fit_percent"] is None else f"{line['fit_percent']:8.2f}"
+        click.echo(f"{line['record']:<32} {line['structure'] or 'failed':<12} {fit:>8}")
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    failed = [line for line in lines if line["error"]]
+    if failed:
+        raise RwlabError(
+            f"{len(failed)} of {len(lines)} records failed: "
+            + "; ".join(f"{line['record']}: {line['error']}" for line in failed)
+        )
 
 
 # -- attitude control -----------------------------------------------------------------
@@ -1030,7 +1150,7 @@ def _check_run(duration: float, relinearize: float | None) -> None:
 
 
 @contextlib.contextmanager
-def _steps_progress(steps: int, label: str):
+def _steps_progress(steps: int, label: str, unit: str = "steps"):
     """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
     if sys.stderr.isatty():
         with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
@@ -1048,7 +1168,7 @@ def _steps_progress(steps: int, label: str):
         tenth = 10 * k // max(steps, 1)
         if tenth > shown[0]:
             shown[0] = tenth
-            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} steps)", err=True)
+            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} {unit})", err=True)
 
     yield report
 
@@ -1127,6 +1247,69 @@ def attitude_simulate(
         "torque_saturated_fraction",
     ):
         click.echo(f"{key:<40} {metrics[key]:.6g}")
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
+@attitude.command("montecarlo")
+@click.option("--scenario", default="geo-comsat", show_default=True)
+@click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
+@click.option("--duration", type=float, required=True, help="Seconds per run.")
+@click.option(
+    "--controller",
+    type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
+    default="lqg",
+    show_default=True,
+)
+@click.option(
+    "--dispersions",
+    type=click.Path(dir_okay=False),
+    help="Dispersion TOML file [default: rwlab's GEO set].",
+)
+@_engine_options
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@_friendly_errors
+def attitude_montecarlo(
+    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force
+):
+    """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
+
+    Every run flies the controller (designed on the nominal scenario) on a
+    scenario dispersed from its own seed, a child of --seed: a run is the same
+    whatever the number of workers.
+    """
+    from rwlab.attitude.scenario import load_scenario
+    from rwlab.campaign.dispersions import load_dispersions
+    from rwlab.campaign.engine import dask_client
+    from rwlab.campaign.montecarlo import Campaign, budget, check_runs, fly_run, run_campaign
+    from rwlab.report.attitude import check_outputs
+    from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
+
+    _check_run(duration, None)
+    sc = load_scenario(scenario)
+    campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
+    check_runs(campaign)  # before the cluster starts
+    _check_folder(out)
+    check_outputs(out, CAMPAIGN_FILES, force)
+    where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
+    click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
+    with (
+        dask_client(workers, scheduler) as client,
+        _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
+    ):
+        rows = run_campaign(campaign, client, progress=progress)
+    stats = budget(rows, campaign)
+    worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
+    paths = write_campaign(rows, stats, campaign, worst, out, force=force)
+    click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
+    for axis, s in stats["pointing_error_deg"].items():
+        click.echo(
+            f"{axis:<6} {s['mean']:10.4g} {s['std']:10.4g} {s['p99_73']:11.4g} {s['max']:10.4g}"
+        )
+    click.echo(
+        f"meeting ±{sc.pointing_requirement_deg:g}°: {stats['meets_requirement_fraction']:.1%}"
+    )
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 

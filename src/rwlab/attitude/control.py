@@ -404,22 +404,27 @@ def fly(
     update_period: float | None = None,
     log_every: int = 10,
     progress=None,
+    design: Scenario | None = None,
 ) -> tuple[SimResult, dict]:
     """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
-    simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise."""
+    simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
+    ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
+    default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
+    design (the filter still uses the flown scenario's inertia and sensor noise)."""
     if controller not in CONTROLLERS:
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
+    design = scenario if design is None else design
     kw = {}
     if controller == "pd":
-        ctl = PDController(*pd_gains(scenario))
-        ctl.rate_limit = slew_rate_limit(scenario, ctl.K)
+        ctl = PDController(*pd_gains(design))
+        ctl.rate_limit = slew_rate_limit(design, ctl.K)
     else:
-        ctl = LQRController(scenario, update_period=update_period)
+        ctl = LQRController(design, update_period=update_period)
     if controller == "lqg_ltr":
         if not (math.isfinite(rho) and rho > 0):
             raise DesignError(f"ρ must be a positive number, got {rho}")
-        kw = dict(filter_torque_psd=ltr_noise(scenario, ctl)[0], filter_noise_scale=math.sqrt(rho))
+        kw = dict(filter_torque_psd=ltr_noise(design, ctl)[0], filter_noise_scale=math.sqrt(rho))
     run = simulate(
         scenario,
         ctl,
