@@ -882,7 +882,12 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
             bar.update(1)
 
         result = identification_study(
-            data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+            data,
+            preprocess=preprocess,
+            split=split,
+            tolerance=tolerance,
+            limits_rpm=(saturation["speed_limit_rpm"],) * 2,
+            progress=progress,
         )
     model = physical_model(
         result,
@@ -899,6 +904,14 @@ def identify(file, out, Ts, input_col, output_col, preprocess, split, tolerance,
         mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
     click.echo(f"chosen: {study['chosen']['reason']}")
+    nl = study["nonlinear"]
+    if nl and "error" not in nl:
+        click.echo(
+            f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
+            f"{nl['accel_limit_rpm_s']:.4g} (output unit)/s"
+        )
+    elif nl:
+        click.echo(f"nonlinear servo: not fitted ({nl['error']})")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
