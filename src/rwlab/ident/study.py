@@ -96,6 +96,7 @@ class StudyResult:
     new_input: dict = field(repr=False)
     servo: ServoModel | None = None
     nonlinear: dict | None = None
+    physical_val: IOData | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""
@@ -299,6 +300,7 @@ def identification_study(
         new_input={"u": new_u},
         servo=servo,
         nonlinear=nl,
+        physical_val=data.split(split)[1],
     )
 
 
