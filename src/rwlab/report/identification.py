@@ -325,7 +325,7 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         f"{par['gain']:.4g}, PI law kp = {par['kp']:.4g} s⁻¹, ki = {par['ki']:.4g} s⁻², "
         f"rate limit α = {nl['accel_limit_rpm_s']:.4g} (output unit)/s, input delay "
         f"{par['delay'] * 1e3:.0f} ms, fitted by simulation error from {ch}. Validation fit "
-        f"{nl['fit_percent']:.2f} % against {ch}'s {study_fit(result):.2f} %. The speed limit "
+        f"{nl['fit_percent']:.2f} % against {ch}'s {_study_fit(result):.2f} %. The speed limit "
         f"is {nl['speed_limit_note']}."
     )
     val = result.physical_val
@@ -364,7 +364,7 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
     _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
 
 
-def study_fit(result: StudyResult) -> float:
+def _study_fit(result: StudyResult) -> float:
     rows = result.orders + result.others
     return next(r["fit_percent"] for r in rows if r["structure"] == result.chosen.structure)
 
