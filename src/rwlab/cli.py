@@ -920,6 +920,14 @@ def identify(
         mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
     click.echo(f"chosen: {study['chosen']['reason']}")
+    nl = study["nonlinear"]
+    if nl and "error" not in nl:
+        click.echo(
+            f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
+            f"{nl['accel_limit_rpm_s']:.4g} (output unit)/s"
+        )
+    elif nl:
+        click.echo(f"nonlinear servo: not fitted ({nl['error']})")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
@@ -945,7 +953,12 @@ def _identify_one(
     if echo is not None:
         echo(f"data: {data!r}")
     result = identification_study(
-        data, preprocess=preprocess, split=split, tolerance=tolerance, progress=progress
+        data,
+        preprocess=preprocess,
+        split=split,
+        tolerance=tolerance,
+        limits_rpm=(saturation["speed_limit_rpm"],) * 2,
+        progress=progress,
     )
     model = physical_model(
         result,
