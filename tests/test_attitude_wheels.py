@@ -18,6 +18,7 @@ from rwlab.attitude.wheels import (
 )
 from rwlab.errors import ConfigError
 from rwlab.ident.models import PolyModel
+from rwlab.ident.nonlinear import ServoModel
 from rwlab.wheel.identified import IdentifiedWheel
 from rwlab.wheel.physics import Mode, WheelPhysics, rad_s_to_rpm
 
@@ -29,7 +30,7 @@ def _realise(w, t, dt, cmd, momenta):
     out = np.empty(len(cmd))
     realise(
         w.kind, t, dt, np.asarray(cmd, float), x, w.healthy, w.faulty, w.fault_s, w.state,
-        w.A, w.B, w.C, w.ident, out,
+        w.A, w.B, w.C, w.ident, w.servo, out,
     )  # fmt: skip
     return out
 
@@ -105,8 +106,9 @@ def test_wheel_faults_need_the_physics_model_and_load_from_toml(tmp_path):
     assert load_scenario(str(f)).wheel_faults == ({"wheel": 3, "at_s": 60.0, "friction": 5.0},)
 
 
-def _model_file(tmp_path, accel_limit=40.0):
-    """A second-order speed loop (rpm → rpm) at Ts = 0.25 s, as model.json."""
+def _model_file(tmp_path, accel_limit=40.0, servo=False):
+    """A second-order speed loop (rpm → rpm) at Ts = 0.25 s, as model.json; with ``servo``
+    a nonlinear servo model (rate limit 30 rpm/s) beside it, preferred."""
     m = PolyModel(A=[1.0, -1.2, 0.36], B=[0.0, 0.1, 0.06], Ts=0.25)
     info = {
         "format": "rwlab.WheelModel/1",
@@ -115,18 +117,23 @@ def _model_file(tmp_path, accel_limit=40.0):
         "model": m.to_dict(),
         "saturation": {"speed_rpm": 7800.0, "accel_rpm_s": accel_limit},
     }
+    if servo:
+        loop = ServoModel(Ts=0.25, gain=1.0, offset=0.5, kp=0.5, ki=0.1, rate_limit=30.0)
+        info |= {"nonlinear": loop.to_dict(), "preferred": "nonlinear"}
     path = tmp_path / "model.json"
     path.write_text(json.dumps(info))
     return path
 
 
-def test_compiled_identified_wheel_is_the_identified_wheel(tmp_path):
-    path = _model_file(tmp_path)
+@pytest.mark.parametrize("servo", [False, True])
+def test_compiled_identified_wheel_is_the_identified_wheel(tmp_path, servo):
+    path = _model_file(tmp_path, servo=servo)
     sc = SMALL.with_(wheel_model="identified", wheel_model_file=str(path), dt=0.05)
     h0 = 0.05
     w = wheel_setup(sc, np.full(3, h0))
     assert w.kind == IDENTIFIED
     unit = IdentifiedWheel.from_json(path)
+    assert unit.kind == ("nonlinear" if servo else "linear")
     unit.reset(rad_s_to_rpm(h0 / sc.wheel_inertia))
     command = unit.speed_rpm
     rng = np.random.default_rng(2)

@@ -183,6 +183,7 @@ def run_block(
     wheel_B,
     wheel_C,
     wheel_ident,
+    wheel_servo,
     stats,
     log_t,
     log_x,
@@ -303,6 +304,7 @@ def run_block(
             wheel_B,
             wheel_C,
             wheel_ident,
+            wheel_servo,
             hw_real,
         )
 

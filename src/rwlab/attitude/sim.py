@@ -400,6 +400,7 @@ def _simulate_compiled(
             wheels.B,
             wheels.C,
             wheels.ident,
+            wheels.servo,
             stats,
             log_t,
             log_x,

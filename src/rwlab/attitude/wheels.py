@@ -9,8 +9,9 @@ wheel delivers depends on the model (``Scenario.wheel_model``):
   plus the friction, limited by the current limit, and no drive beyond the
   maximum speed; the wheel feels friction. Per-wheel faults (friction or
   torque-constant factors, a lower current limit) switch on at a time.
-- ``identified``: the model ``rwlab identify`` chose (``model.json``), as
-  :class:`rwlab.wheel.identified.IdentifiedWheel` steps it: the commanded
+- ``identified``: the model ``rwlab identify`` chose (``model.json``: the linear
+  model with its saturations, or the nonlinear servo model where it validates
+  better), as :class:`rwlab.wheel.identified.IdentifiedWheel` steps it: the commanded
   accelerations are integrated into a speed command (rpm) that drives the
   identified speed loop at its own sample time Ts; the realised torque over
   each model sample is I·Δspeed/Ts.
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from rwlab.ident.nonlinear import servo_advance
 from rwlab.wheel.physics import RW90, WheelParams, rad_s_to_rpm
 
 __all__ = ["IDEAL", "IDENTIFIED", "PHYSICS", "WheelArrays", "realise", "wheel_setup"]
@@ -39,8 +41,12 @@ RPM = 30.0 / math.pi  # rad/s → rpm
 # viscous and Coulomb friction, maximum speed (rad/s)
 P_I, P_KT, P_ILIM, P_VISC, P_COUL, P_WMAX = range(6)
 # identified state columns (per wheel): speed command (rpm), time since the last model
-# sample (s), model speed (rpm), realised torque (N·m), then the model's states
+# sample (s), model speed (rpm), realised torque (N·m), then the model's states (linear:
+# x, then n scratch; servo: the loop's integral and the last command)
 S_CMD, S_CLOCK, S_SPEED, S_TORQUE, S_X = range(5)
+# identified parameters: D, u0, y0, Ts, speed limit (rpm), acceleration limit (rpm/s),
+# wheel inertia (kg·m²), 1 for the servo model (then ``servo`` holds its vector)
+I_D, I_U0, I_Y0, I_TS, I_SPEED, I_ACCEL, I_INERTIA, I_SERVO = range(8)
 
 
 @dataclass
@@ -57,8 +63,12 @@ class WheelArrays:
         When each wheel's fault starts, s (inf: never).
     state : (N, 4 + 2n) array
         The identified model's per-wheel state (columns S_*, then n scratch), updated in place.
-    A, B, C : (n, n), (n,), (n,) arrays; D, u0, y0, Ts, speed_limit_rpm, accel_limit_rpm_s :
-        The identified model (command clip → linear step → rate limit → speed clip).
+    A, B, C : (n, n), (n,), (n,) arrays
+        The identified linear model (command clip → linear step → rate limit → speed clip).
+    ident : (8,) array
+        Its scalars (columns I_*).
+    servo : (12,) array
+        The nonlinear servo model's vector (``ServoModel.vector``) when ident[I_SERVO] = 1.
     """
 
     kind: int
@@ -69,7 +79,8 @@ class WheelArrays:
     A: np.ndarray
     B: np.ndarray
     C: np.ndarray
-    ident: np.ndarray  # D, u0, y0, Ts, speed limit (rpm), acceleration limit (rpm/s), inertia
+    ident: np.ndarray
+    servo: np.ndarray
 
 
 def physics_params(sc) -> WheelParams:
@@ -114,7 +125,8 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
         faulty[i, P_ILIM] = f.get("current_limit", faulty[i, P_ILIM])
     A = np.zeros((0, 0))
     B = C = np.zeros(0)
-    ident = np.zeros(7)
+    ident = np.zeros(8)
+    servo = np.zeros(12)
     state = np.zeros((nw, S_X))
     if kind == IDENTIFIED:
         from rwlab.wheel.identified import IdentifiedWheel
@@ -130,14 +142,18 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
                 unit.speed_limit_rpm,
                 unit.accel_limit_rpm_s,
                 sc.wheel_inertia,
+                float(unit.servo is not None),
             ]
         )
-        state = np.zeros((nw, S_X + 2 * A.shape[0]))  # states, then scratch
+        if unit.servo is not None:
+            servo = unit.servo.vector
+        state = np.zeros((nw, S_X + max(2 * A.shape[0], 2)))
         for i, h in enumerate(hw0):
             unit.reset(rad_s_to_rpm(h / sc.wheel_inertia))
             state[i, S_CMD] = state[i, S_SPEED] = unit.speed_rpm
-            state[i, S_X : S_X + A.shape[0]] = unit.model_state()
-    return WheelArrays(kind, healthy, faulty, fault_s, state, A, B, C, ident)
+            x = unit.model_state()
+            state[i, S_X : S_X + x.size] = x
+    return WheelArrays(kind, healthy, faulty, fault_s, state, A, B, C, ident, servo)
 
 
 @njit(cache=True, inline="always")
@@ -158,9 +174,14 @@ def _physics(p, cmd, h):
 
 
 @njit(cache=True)
-def _identified_tick(s, A, B, C, ident):
+def _identified_tick(s, A, B, C, ident, servo):
     """One sample of IdentifiedWheel.step on the state row ``s`` (in place); the new speed."""
-    D, u0, y0, Ts, speed_lim, accel_lim = ident[0], ident[1], ident[2], ident[3], ident[4], ident[5]
+    if ident[I_SERVO] > 0:
+        w, s[S_X] = servo_advance(s[S_SPEED], s[S_X], s[S_X + 1], s[S_CMD], servo)
+        s[S_X + 1] = s[S_CMD]
+        return w
+    D, u0, y0, Ts = ident[I_D], ident[I_U0], ident[I_Y0], ident[I_TS]
+    speed_lim, accel_lim = ident[I_SPEED], ident[I_ACCEL]
     u = min(max(s[S_CMD], -speed_lim), speed_lim) - u0
     n = A.shape[0]
     y = y0 + D * u
@@ -178,7 +199,7 @@ def _identified_tick(s, A, B, C, ident):
 
 
 @njit(cache=True)
-def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, out):
+def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, servo, out):
     """Realised wheel torques ``out`` (N,) for the commands ``cmd`` (N,) over one step.
 
     ``cmd`` is already clipped to the rated torque; ``x`` is the plant state (wheel
@@ -190,7 +211,7 @@ def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident
             p = faulty[i] if t >= fault_s[i] else healthy[i]
             out[i] = _physics(p, cmd[i], x[7 + i])
     elif kind == IDENTIFIED:
-        inertia, Ts = ident[6], ident[3]
+        inertia, Ts = ident[I_INERTIA], ident[I_TS]
         for i in range(nw):
             s = state[i]
             s[S_CMD] += cmd[i] / inertia * RPM * dt
@@ -199,7 +220,7 @@ def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident
             before = s[S_SPEED]
             while s[S_CLOCK] >= Ts - 1e-9:
                 s[S_CLOCK] -= Ts
-                s[S_SPEED] = _identified_tick(s, A, B, C, ident)
+                s[S_SPEED] = _identified_tick(s, A, B, C, ident, servo)
                 ticks += 1
             if ticks:
                 s[S_TORQUE] = inertia * (s[S_SPEED] - before) / RPM / (ticks * Ts)

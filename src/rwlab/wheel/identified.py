@@ -122,7 +122,9 @@ class IdentifiedWheel:
         return self._A.copy(), self._B.copy(), self._C.copy(), self._D
 
     def model_state(self) -> np.ndarray:
-        """A copy of the linear part's state (n,)."""
+        """A copy of the model's state: the linear part's x (n,), or the servo's [I, u_prev]."""
+        if self.servo is not None:
+            return np.array([self._integral, self._u_prev])
         return self._x.copy()
 
     def step(self, command_rpm: float) -> float:
