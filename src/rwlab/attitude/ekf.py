@@ -28,7 +28,7 @@ from scipy.linalg import expm
 
 from rwlab.attitude.frames import GEO_RATE, dcm, qmul, skew
 
-__all__ = ["MEKF", "error_jacobian", "vector_jacobian"]
+__all__ = ["MEKF", "error_jacobian", "gated_update", "vector_jacobian"]
 
 
 @njit(cache=True)
@@ -55,11 +55,27 @@ def vector_jacobian(q, ref):
 @njit(cache=True)
 def _update(q, w, P, b_meas, ref, sigma):
     """One vector-measurement update; returns q, w, P (Joseph form, symmetric)."""
+    q, w, P, _ = gated_update(q, w, P, b_meas, ref, sigma, 0.0)
+    return q, w, P
+
+
+@njit(cache=True)
+def gated_update(q, w, P, b_meas, ref, sigma, gate):
+    """:func:`_update` behind an innovation gate: returns q, w, P and whether it was applied.
+
+    The measurement is rejected (estimate and P unchanged) when its normalised
+    innovation ν' S⁻¹ ν exceeds ``gate`` (a χ² bound; 0: no gate). The innovation
+    of a unit vector has two degrees of freedom (its part along b is second order).
+    """
     b, H = vector_jacobian(q, ref)
     R = sigma * sigma * np.eye(3)
     S = H @ P @ H.T + R
-    K = P @ H.T @ np.linalg.inv(S)
-    dx = K @ (b_meas - b)
+    S_inv = np.linalg.inv(S)
+    nu = b_meas - b
+    if gate > 0 and nu @ S_inv @ nu > gate:
+        return q, w, P, False
+    K = P @ H.T @ S_inv
+    dx = K @ nu
     IKH = np.eye(6) - K @ H
     P = IKH @ P @ IKH.T + K @ R @ K.T
     P = 0.5 * (P + P.T)
@@ -68,7 +84,7 @@ def _update(q, w, P, b_meas, ref, sigma):
     dq[3] = 1.0
     q = qmul(dq, q)
     q /= np.sqrt(q @ q)
-    return q, w + dx[3:], P
+    return q, w + dx[3:], P, True
 
 
 class MEKF:
