@@ -125,11 +125,11 @@ def _sun_gcrs(epoch: Epoch, t: np.ndarray) -> np.ndarray:
 
 def _earth_rotation(epoch: Epoch, t: np.ndarray) -> np.ndarray:
     """GCRS → terrestrial (polar motion left out) matrices, (N, 3, 3)."""
-    tt1, tt2, ut1, ut2 = epoch.dates(t)
+    _, _, ut1, ut2 = epoch.dates(t)
     c2i = _interpolated(lambda s: erfa.c2i06a(*epoch.dates(s)[:2]), t, ROTATION_NODE_S)
     era = erfa.era00(ut1, ut2)
     c, s = np.cos(era), np.sin(era)
-    R3 = np.zeros(era.shape + (3, 3))  # erfa.rz(era): rotation of the frame about z
+    R3 = np.zeros((*era.shape, 3, 3))  # erfa.rz(era): rotation of the frame about z
     R3[..., 0, 0], R3[..., 0, 1], R3[..., 1, 0], R3[..., 1, 1] = c, s, -s, c
     R3[..., 2, 2] = 1.0
     return R3 @ c2i

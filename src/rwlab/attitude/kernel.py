@@ -229,8 +229,9 @@ def run_block(
     ``ephemeris.sky_table``, row i at ``sky_t0 + i·sky_step`` s; ``sun_align``,
     ``earth_align`` (3, 3) turn the true body vector into the one each sensor
     reports (bias and misalignment); ``blind_cos`` (2,) the cosines of the earth
-    sensor's Sun and Moon exclusion angles; ``gate`` the χ² innovation gate
-    (0: none). ``log_sky`` rows: sunlit fraction, sun and earth sensor status
+    sensor's Sun and Moon exclusion angles; ``gate`` = [χ² innovation bound (0:
+    none), consecutive rejections after which a sensor's next measurement is taken
+    anyway: a filter that has drifted must not lock its sensors out]. ``log_sky`` rows: sunlit fraction, sun and earth sensor status
     (0 used, 1 unavailable, 2 gated). ``unload`` = [enabled, start fraction, stop
     fraction, pulse torque N·m, pulse steps between pulses, recovery s, pointing
     error (°) above which no window starts and no pulse fires];
@@ -254,6 +255,7 @@ def run_block(
     s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
     sun_status = earth_status = 0.0
+    sun_rejected = earth_rejected = 0  # consecutive gated measurements of each sensor
     for j in range(steps):
         k = k0 + j
         t = k * dt
@@ -284,7 +286,9 @@ def run_block(
                 _matvec(sun_align, sun_b, b_true)
                 _noisy_into(b_true, sig_sun / cos_i, e[0], e[1], e[2], b_meas)
                 r = r_sun / max(-b_meas[0], 1e-3) if sun_incidence else r_sun
-                q_hat, w_hat, P, ok = gated_update(q_hat, w_hat, P, b_meas, s_orb, r, gate)
+                g = gate[0] if sun_rejected < gate[1] else 0.0
+                q_hat, w_hat, P, ok = gated_update(q_hat, w_hat, P, b_meas, s_orb, r, g)
+                sun_rejected = 0 if ok else sun_rejected + 1
                 if not ok:
                     stats[SUN_GATED] += 1
                     sun_status = 2.0
@@ -295,7 +299,9 @@ def run_block(
                     nadir_b[c] = C[c, 2]
                 _matvec(earth_align, nadir_b, b_true)
                 _noisy_into(b_true, sig_earth, e[3], e[4], e[5], b_meas)
-                q_hat, w_hat, P, ok = gated_update(q_hat, w_hat, P, b_meas, nadir, r_earth, gate)
+                g = gate[0] if earth_rejected < gate[1] else 0.0
+                q_hat, w_hat, P, ok = gated_update(q_hat, w_hat, P, b_meas, nadir, r_earth, g)
+                earth_rejected = 0 if ok else earth_rejected + 1
                 if not ok:
                     stats[EARTH_GATED] += 1
                     earth_status = 2.0

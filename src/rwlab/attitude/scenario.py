@@ -70,6 +70,9 @@ class Scenario:
         head's mounting error, a small rotation (x, y, z body), unknown to the filter.
     innovation_gate : χ² bound on a measurement's normalised innovation; beyond
         it the filter rejects the measurement (0: no gate).
+    innovation_gate_max_rejections : after this many rejections in a row a sensor's
+        next measurement is taken whatever its innovation (a drifted filter must
+        not lock its sensors out).
 
     Design (paper B's weights, from the requirement and the actuator):
     pointing_requirement_deg : the pointing requirement (paper B: ±0.1°).
@@ -132,6 +135,7 @@ class Scenario:
     earth_sensor_bias_deg: tuple = (0.0, 0.0)
     earth_sensor_misalignment_deg: tuple = (0.0, 0.0, 0.0)
     innovation_gate: float = 25.0
+    innovation_gate_max_rejections: int = 10
     pointing_requirement_deg: float = 0.1
     lqr_attitude_deg: float = 0.1
     lqr_rate_deg_s: float = 0.05

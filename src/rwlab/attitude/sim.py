@@ -494,7 +494,7 @@ def _simulate_compiled(
             sun_align,
             earth_align,
             blind_cos,
-            sc.innovation_gate,
+            np.array([sc.innovation_gate, sc.innovation_gate_max_rejections]),
             unload,
             stats,
             log_t,
