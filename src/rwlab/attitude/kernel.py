@@ -231,10 +231,11 @@ def run_block(
     reports (bias and misalignment); ``blind_cos`` (2,) the cosines of the earth
     sensor's Sun and Moon exclusion angles; ``gate`` = [χ² innovation bound (0:
     none), consecutive rejections after which a sensor's next measurement is taken
-    anyway: a filter that has drifted must not lock its sensors out]. ``log_sky`` rows: sunlit fraction, sun and earth sensor status
-    (0 used, 1 unavailable, 2 gated). ``unload`` = [enabled, start fraction, stop
-    fraction, pulse torque N·m, pulse steps between pulses, recovery s, pointing
-    error (°) above which no window starts and no pulse fires];
+    anyway: a filter that has drifted must not lock its sensors out]. ``log_sky``
+    rows: sunlit fraction, sun and earth sensor status (0 used, 1 unavailable, 2
+    gated). ``unload`` = [enabled, start fraction, stop fraction, pulse torque
+    N·m, pulse steps between pulses, recovery s, pointing error (°) above which
+    no window starts and no pulse fires];
     ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
     P, log position and whether a wheel touched its momentum limit.
     """
