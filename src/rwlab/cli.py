@@ -1052,6 +1052,13 @@ def _single_thread_blas() -> None:
     threadpool_limits(1, user_api="blas")
 
 
+_EPOCH = click.option(
+    "--epoch",
+    help="UTC start, ISO 8601 (e.g. 2027-03-20T12:00:00Z): the real Sun, Moon and eclipses "
+    "instead of the scenario's fixed vectors.",
+)
+
+
 @attitude.command("compare")
 @click.option(
     "--scenario",
@@ -1074,19 +1081,23 @@ def _single_thread_blas() -> None:
     default=None,
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
+@_EPOCH
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
-def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, force):
+def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force):
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.design import DesignError
     from rwlab.attitude.scenario import load_scenario
+    from rwlab.errors import ConfigError
     from rwlab.report.attitude import check_outputs, write_comparison
 
     if not (math.isfinite(rho) and rho > 0):
         raise DesignError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
-    sc = load_scenario(scenario)
+    sc = load_scenario(scenario, **({"epoch": epoch} if epoch else {}))
+    if wheel_model and sc.epoch:
+        raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
     if wheel_model:
         from rwlab.wheel.identified import IdentifiedWheel
 
@@ -1206,11 +1217,12 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
 @click.option(
     "--relinearize", type=float, default=None, help="Re-design the LQR every this many seconds."
 )
+@_EPOCH
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
 def attitude_simulate(
-    scenario, controller, estimator, dt, duration, seed, rho, relinearize, out, force
+    scenario, controller, estimator, dt, duration, seed, rho, relinearize, epoch, out, force
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
@@ -1219,7 +1231,8 @@ def attitude_simulate(
     from rwlab.report.attitude import check_outputs, write_simulation
 
     _check_run(duration, relinearize)
-    sc = load_scenario(scenario, **({"dt": dt} if dt is not None else {}))
+    overrides = {"dt": dt} if dt is not None else {}
+    sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
     _check_folder(out)
     check_outputs(out, ["metrics.json", "trace.parquet", "report.html"], force)
     steps = round(duration / sc.dt)
@@ -1249,6 +1262,8 @@ def attitude_simulate(
         "relinearize_period_s": relinearize,
         "disturbances_known_to_filter": sc.disturbances_known_to_filter,
         "momentum_unloading": sc.momentum_unloading,
+        "epoch": sc.epoch,
+        "station_longitude_deg": sc.station_longitude_deg,
     }
     paths = write_simulation(run, metrics, config, sc, out, force=force)
     for key in (
@@ -1258,6 +1273,8 @@ def attitude_simulate(
         "wheel_momentum_peak_fraction",
         "desaturation_count",
         "torque_saturated_fraction",
+        "eclipse_s",
+        "earth_sensor_blinded_s",
     ):
         click.echo(f"{key:<40} {metrics[key]:.6g}")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")

@@ -310,6 +310,34 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
         "thruster_impulse_Nms": st["thruster_impulse_Nms"],
         "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
         "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
+        **_sky_metrics(st),
+    }
+
+
+def _sky_metrics(st: dict) -> dict:
+    """Eclipse time (the Earth's umbra + penumbra), pointing inside and outside it (steady
+    window), and the sensors' outages, blindings and gated measurements (sensor ticks)."""
+    n_ecl = st["steady_eclipse_steps"]
+    n_out = st["steady_steps"] - n_ecl
+    period = st.get("sensor_period_s", 0.0)
+    return {
+        "eclipse_s": st["eclipse_steps"] * st.get("dt_s", 0.0),
+        "moon_shadow_s": st["moon_shadow_steps"] * st.get("dt_s", 0.0),
+        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"],
+        "steady_rms_error_in_eclipse_deg": math.sqrt(
+            st["steady_eclipse_error_sq_sum"] / max(n_ecl, 1)
+        ),
+        "steady_max_error_outside_eclipse_deg": st["steady_outside_eclipse_max_error_deg"],
+        "steady_rms_error_outside_eclipse_deg": math.sqrt(
+            st["steady_outside_eclipse_error_sq_sum"] / max(n_out, 1)
+        ),
+        "sun_sensor_outage_count": int(st["sun_sensor_outages"]),
+        "sun_sensor_outage_s": st["sun_sensor_outages"] * period,
+        "earth_sensor_blinded_count": int(st["earth_sensor_blinded"]),
+        "earth_sensor_blinded_s": st["earth_sensor_blinded"] * period,
+        "no_sensor_s": st["no_update_ticks"] * period,
+        "sun_sensor_gated_count": int(st["sun_sensor_gated"]),
+        "earth_sensor_gated_count": int(st["earth_sensor_gated"]),
     }
 
 

@@ -29,7 +29,13 @@ from numba import njit
 
 from rwlab.attitude.frames import dcm, qmul, skew
 
-__all__ = ["error_jacobian", "predict_covariance", "vector_jacobian"]
+__all__ = [
+    "error_jacobian",
+    "gated_update",
+    "gated_update_into",
+    "predict_covariance",
+    "vector_jacobian",
+]
 
 
 @njit(cache=True)
@@ -56,11 +62,27 @@ def vector_jacobian(q, ref):
 @njit(cache=True)
 def _update(q, w, P, b_meas, ref, sigma):
     """One vector-measurement update; returns q, w, P (Joseph form, symmetric)."""
+    q, w, P, _ = gated_update(q, w, P, b_meas, ref, sigma, 0.0)
+    return q, w, P
+
+
+@njit(cache=True)
+def gated_update(q, w, P, b_meas, ref, sigma, gate):
+    """:func:`_update` behind an innovation gate: returns q, w, P and whether it was applied.
+
+    The measurement is rejected (estimate and P unchanged) when its normalised
+    innovation ν' S⁻¹ ν exceeds ``gate`` (a χ² bound; 0: no gate). The innovation
+    of a unit vector has two degrees of freedom (its part along b is second order).
+    """
     b, H = vector_jacobian(q, ref)
     R = sigma * sigma * np.eye(3)
     S = H @ P @ H.T + R
-    K = P @ H.T @ np.linalg.inv(S)
-    dx = K @ (b_meas - b)
+    S_inv = np.linalg.inv(S)
+    nu = b_meas - b
+    if gate > 0 and nu @ S_inv @ nu > gate:
+        return q, w, P, False
+    K = P @ H.T @ S_inv
+    dx = K @ nu
     IKH = np.eye(6) - K @ H
     P = IKH @ P @ IKH.T + K @ R @ K.T
     P = 0.5 * (P + P.T)
@@ -69,7 +91,7 @@ def _update(q, w, P, b_meas, ref, sigma):
     dq[3] = 1.0
     q = qmul(dq, q)
     q /= np.sqrt(q @ q)
-    return q, w + dx[3:], P
+    return q, w + dx[3:], P, True
 
 
 @njit(cache=True)
@@ -235,20 +257,16 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
             for k in range(3):
                 acc += Hx[i, k] * PHt[k, j]
             S[i, j] = acc
-    _inv3_into(S, Si)
+    _cholesky3_into(S, Si)  # S = L Lᵀ (S is SPD; cofactors lose it when S is ill-conditioned)
     nu0, nu1, nu2 = b_meas[0] - b0, b_meas[1] - b1, b_meas[2] - b2
     if gate > 0:
-        d2 = 0.0
-        nu = (nu0, nu1, nu2)
-        for i in range(3):
-            for j in range(3):
-                d2 += nu[i] * Si[i, j] * nu[j]
-        if d2 > gate:
+        z0, z1, z2 = _forward3(Si, nu0, nu1, nu2)
+        if z0 * z0 + z1 * z1 + z2 * z2 > gate:  # ν' S⁻¹ ν = |L⁻¹ ν|²
             return False
     dx = K[:, 3]  # K uses the first three columns
-    for i in range(6):  # K = P Hᵀ S⁻¹, δx = K ν
-        for j in range(3):
-            K[i, j] = PHt[i, 0] * Si[0, j] + PHt[i, 1] * Si[1, j] + PHt[i, 2] * Si[2, j]
+    for i in range(6):  # row i of K = S⁻¹ (P Hᵀ)[i], δx = K ν
+        z0, z1, z2 = _forward3(Si, PHt[i, 0], PHt[i, 1], PHt[i, 2])
+        K[i, 0], K[i, 1], K[i, 2] = _backward3(Si, z0, z1, z2)
         dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
     for i in range(6):  # I − K H into PHt's buffer (it is no longer needed)
         for j in range(6):
@@ -277,17 +295,27 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
 
 
 @njit(cache=True, inline="always")
-def _inv3_into(S, out):
-    """out = S⁻¹ for a 3×3 S, by cofactors."""
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 0], S[1, 1], S[1, 2]
-    g, h, i = S[2, 0], S[2, 1], S[2, 2]
-    A, B, C = e * i - f * h, -(d * i - f * g), d * h - e * g
-    det = a * A + b * B + c * C
-    out[0, 0], out[1, 0], out[2, 0] = A / det, B / det, C / det
-    out[0, 1] = -(b * i - c * h) / det
-    out[1, 1] = (a * i - c * g) / det
-    out[2, 1] = -(a * h - b * g) / det
-    out[0, 2] = (b * f - c * e) / det
-    out[1, 2] = -(a * f - c * d) / det
-    out[2, 2] = (a * e - b * d) / det
+def _cholesky3_into(S, L):
+    """Lower-triangular L with L Lᵀ = S for a 3×3 symmetric positive definite S."""
+    L[0, 0] = math.sqrt(S[0, 0])
+    L[1, 0] = S[1, 0] / L[0, 0]
+    L[2, 0] = S[2, 0] / L[0, 0]
+    L[1, 1] = math.sqrt(S[1, 1] - L[1, 0] * L[1, 0])
+    L[2, 1] = (S[2, 1] - L[2, 0] * L[1, 0]) / L[1, 1]
+    L[2, 2] = math.sqrt(S[2, 2] - L[2, 0] * L[2, 0] - L[2, 1] * L[2, 1])
+
+
+@njit(cache=True, inline="always")
+def _forward3(L, v0, v1, v2):
+    """L⁻¹ v for the lower-triangular 3×3 L."""
+    z0 = v0 / L[0, 0]
+    z1 = (v1 - L[1, 0] * z0) / L[1, 1]
+    return z0, z1, (v2 - L[2, 0] * z0 - L[2, 1] * z1) / L[2, 2]
+
+
+@njit(cache=True, inline="always")
+def _backward3(L, z0, z1, z2):
+    """L⁻ᵀ z for the lower-triangular 3×3 L."""
+    y2 = z2 / L[2, 2]
+    y1 = (z1 - L[2, 1] * y2) / L[1, 1]
+    return (z0 - L[1, 0] * y1 - L[2, 0] * y2) / L[0, 0], y1, y2

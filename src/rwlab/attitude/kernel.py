@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.ekf import _update, error_jacobian_into, predict_covariance_into
+from rwlab.attitude.ekf import error_jacobian_into, gated_update_into, predict_covariance_into
 from rwlab.attitude.frames import dcm, qmul
 from rwlab.attitude.plant import rk4_step
 from rwlab.attitude.wheels import realise
@@ -53,6 +53,18 @@ STATS = (
     "thruster_impulse_Nms",
     "desat_window_steps",
     "steady_excl_desat_steps",
+    "eclipse_steps",
+    "moon_shadow_steps",
+    "steady_eclipse_steps",
+    "steady_eclipse_max_error_deg",
+    "steady_eclipse_error_sq_sum",
+    "steady_outside_eclipse_max_error_deg",
+    "steady_outside_eclipse_error_sq_sum",
+    "sun_sensor_outages",
+    "earth_sensor_blinded",
+    "sun_sensor_gated",
+    "earth_sensor_gated",
+    "no_update_ticks",
 )
 MAX_ERR, STEADY_MAX, STEADY_EXCL, DESAT_MAX = 0, 1, 2, 3
 SAT_STEPS, STEADY_STEPS, TAU_PEAK, TAU_SQ, ERR_SQ = 4, 5, 6, 7, 8
@@ -65,6 +77,8 @@ H_PEAK, DESAT_COUNT, UNLOADING, UNLOAD_END, IMPULSE, DESAT_STEPS, EXCL_STEPS = (
     14,
     15,
 )
+ECL_STEPS, MOON_STEPS, ECL_STEADY, ECL_MAX, ECL_SQ, OUT_MAX, OUT_SQ = 16, 17, 18, 19, 20, 21, 22
+SUN_OUT, EARTH_BLIND, SUN_GATED, EARTH_GATED, NO_UPDATE = 23, 24, 25, 26, 27
 
 
 def new_stats() -> np.ndarray:
@@ -75,18 +89,39 @@ def new_stats() -> np.ndarray:
 
 
 @njit(cache=True)
-def _sun(t, dec, phase, moving, n):
-    theta = phase + (n * t if moving else 0.0)
-    return np.array(
-        [-math.sin(theta) * math.cos(dec), -math.sin(dec), -math.cos(theta) * math.cos(dec)]
+def _sky_at(sky, u, sun, moon):
+    """Sun and Moon unit vectors (into ``sun``, ``moon``) and (sunlit, earth_lit,
+    moon_visible) at row position ``u`` of the sky table (linear interpolation,
+    see ``ephemeris.SKY_COLUMNS``)."""
+    i = min(max(int(u), 0), sky.shape[0] - 2)
+    f = u - i
+    a = sky[i]
+    b = sky[i + 1]
+    ns = nm = 0.0
+    for c in range(3):
+        sun[c] = a[c] + f * (b[c] - a[c])
+        moon[c] = a[3 + c] + f * (b[3 + c] - a[3 + c])
+        ns += sun[c] * sun[c]
+        nm += moon[c] * moon[c]
+    ns, nm = math.sqrt(ns), math.sqrt(nm)
+    for c in range(3):
+        sun[c] /= ns
+        moon[c] /= nm
+    return (
+        a[6] + f * (b[6] - a[6]),
+        a[7] + f * (b[7] - a[7]),
+        a[8] + f * (b[8] - a[8]) > 0.5,
     )
 
 
 @njit(cache=True)
-def _noisy(b, sigma, e):
-    """Unit vector b turned by a small angle: σ times the standard normals e (3,)."""
-    v = b + sigma * np.cross(e, b)
-    return v / np.sqrt(v @ v)
+def _noisy_into(b, sigma, e0, e1, e2, out):
+    """out = unit vector b turned by a small angle: σ times the standard normals e (e × b)."""
+    v0 = b[0] + sigma * (e1 * b[2] - e2 * b[1])
+    v1 = b[1] + sigma * (e2 * b[0] - e0 * b[2])
+    v2 = b[2] + sigma * (e0 * b[1] - e1 * b[0])
+    norm = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    out[0], out[1], out[2] = v0 / norm, v1 / norm, v2 / norm
 
 
 @njit(cache=True, inline="always")
@@ -164,15 +199,19 @@ def run_block(
     process_noise,
     sensor_noise,
     Qc,
-    sun_dec,
-    sun_phase,
-    sun_moving,
+    sky,
+    sky_t0,
+    sky_step,
     sun_fov_cos,
+    sun_incidence,
     sig_sun,
     sig_earth,
     r_sun,
     r_earth,
-    moon,
+    sun_align,
+    earth_align,
+    blind_cos,
+    gate,
     unload,
     wheel_kind,
     wheel_healthy,
@@ -190,18 +229,27 @@ def run_block(
     log_est,
     log_tau,
     log_nees,
+    log_sky,
     log_k,
 ):
     """Run ``steps`` steps from step index ``k0``.
 
     ``process_noise`` (steps, 3) is the white torque of each step, N·m;
     ``sensor_noise`` (≥ sensor steps in the block, 6) the standard normals of
-    the sun and earth sensors. ``unload`` = [enabled, start fraction, stop
-    fraction, pulse torque N·m, pulse steps between pulses, recovery s, pointing
-    error (°) above which no window starts and no pulse fires]; ``wheel_*`` the
-    wheel model (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated
-    in place); ``stats`` (see :data:`STATS`) is updated in place. Returns the new
-    x, q̂, ŵ, P, log position and whether a wheel touched its momentum limit.
+    the sun and earth sensors. ``sky`` (rows, 9) is the sky table of
+    ``ephemeris.sky_table``, row i at ``sky_t0 + i·sky_step`` s; ``sun_align``,
+    ``earth_align`` (3, 3) turn the true body vector into the one each sensor
+    reports (bias and misalignment); ``blind_cos`` (2,) the cosines of the earth
+    sensor's Sun and Moon exclusion angles; ``gate`` = [χ² innovation bound (0:
+    none), consecutive rejections after which a sensor's next measurement is taken
+    anyway: a filter that has drifted must not lock its sensors out]. ``log_sky``
+    rows: sunlit fraction, sun and earth sensor status (0 used, 1 unavailable, 2
+    gated). ``unload`` = [enabled, start fraction, stop fraction, pulse torque
+    N·m, pulse steps between pulses, recovery s, pointing error (°) above which
+    no window starts and no pulse fires]; ``wheel_*`` the wheel model
+    (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated in place);
+    ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
+    P, log position and whether a wheel touched its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
@@ -223,26 +271,64 @@ def run_block(
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     F, W3, W6 = np.empty((6, 6)), np.empty((4, 3, 3)), np.empty((6, 6, 6))
-    P = P.copy()
-    s_orb = _sun(0.0, sun_dec, sun_phase, sun_moving, n)
+    q_hat, w_hat, P = q_hat.copy(), w_hat.copy(), P.copy()
+    s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
+    sun_status = earth_status = 0.0
+    sun_rejected = earth_rejected = 0  # consecutive gated measurements of each sensor
     for j in range(steps):
         k = k0 + j
         t = k * dt
-        if sun_moving:
-            s_orb = _sun(t, sun_dec, sun_phase, sun_moving, n)
-        measured = use_ekf and k % sensor_every == 0
-        if measured:
+        sunlit, earth_lit, moon_visible = _sky_at(sky, (t - sky_t0) / sky_step, s_orb, m_orb)
+        if earth_lit < 1.0:
+            stats[ECL_STEPS] += 1
+        if sunlit < earth_lit:
+            stats[MOON_STEPS] += 1
+        if k % sensor_every == 0:
             C = dcm(x[:4])
-            sun_b = C @ s_orb
+            _matvec(C, s_orb, sun_b)
+            _matvec(C, m_orb, moon_b)
+            # the sun sensor needs the whole disc inside its field; the earth sensor
+            # (boresight +z) is blinded by a visible Sun or Moon inside its exclusion cone
+            sun_ok = sunlit >= 1.0 and -sun_b[0] >= sun_fov_cos
+            earth_ok = not (
+                (sunlit > 0.0 and sun_b[2] >= blind_cos[0])
+                or (moon_visible and moon_b[2] >= blind_cos[1])
+            )
+            sun_status = 0.0 if sun_ok else 1.0
+            earth_status = 0.0 if earth_ok else 1.0
+        measured = use_ekf and k % sensor_every == 0
+        if measured:  # no update through an outage: the filter only propagates
             e = sensor_noise[i_sensor]
             i_sensor += 1
-            if -sun_b[0] >= sun_fov_cos:
-                q_hat, w_hat, P = _update(
-                    q_hat, w_hat, P, _noisy(sun_b, sig_sun, e[:3]), s_orb, r_sun
-                )
-            q_hat, w_hat, P = _update(
-                q_hat, w_hat, P, _noisy(C[:, 2].copy(), sig_earth, e[3:]), nadir, r_earth
-            )
+            if sun_status == 0.0:
+                cos_i = -sun_b[0] if sun_incidence else 1.0  # noise ∝ 1/cos(incidence)
+                _matvec(sun_align, sun_b, b_true)
+                _noisy_into(b_true, sig_sun / cos_i, e[0], e[1], e[2], b_meas)
+                r = r_sun / max(-b_meas[0], 1e-3) if sun_incidence else r_sun
+                g = gate[0] if sun_rejected < gate[1] else 0.0
+                ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, W6)
+                sun_rejected = 0 if ok else sun_rejected + 1
+                if not ok:
+                    stats[SUN_GATED] += 1
+                    sun_status = 2.0
+            else:
+                stats[SUN_OUT] += 1
+            if earth_status == 0.0:
+                for c in range(3):
+                    nadir_b[c] = C[c, 2]
+                _matvec(earth_align, nadir_b, b_true)
+                _noisy_into(b_true, sig_earth, e[3], e[4], e[5], b_meas)
+                g = gate[0] if earth_rejected < gate[1] else 0.0
+                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, r_earth, g, W6)
+                earth_rejected = 0 if ok else earth_rejected + 1
+                if not ok:
+                    stats[EARTH_GATED] += 1
+                    earth_status = 2.0
+            else:
+                stats[EARTH_BLIND] += 1
+            if sun_status != 0.0 and earth_status != 0.0:
+                stats[NO_UPDATE] += 1
         qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         err = math.degrees(2.0 * math.asin(min(1.0, qv)))  # the true error (target: orbital frame)
         # momentum unloading: thruster pulses against the wheels' body momentum
@@ -324,6 +410,13 @@ def run_block(
             else:
                 stats[STEADY_EXCL] = max(stats[STEADY_EXCL], err)
                 stats[EXCL_STEPS] += 1
+            if earth_lit < 1.0:
+                stats[ECL_STEADY] += 1
+                stats[ECL_MAX] = max(stats[ECL_MAX], err)
+                stats[ECL_SQ] += err * err
+            else:
+                stats[OUT_MAX] = max(stats[OUT_MAX], err)
+                stats[OUT_SQ] += err * err
 
         if k % log_every == 0:
             log_t[log_k] = t
@@ -343,10 +436,15 @@ def run_block(
                 ee[:3] = 2 * dq[:3]
                 ee[3:] = x[4:7] - w_hat
                 log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
+            log_sky[log_k, 0] = sunlit
+            log_sky[log_k, 1] = sun_status
+            log_sky[log_k, 2] = earth_status
             log_k += 1
 
         for i in range(3):
             d[7 + i] = dist[7 + i] + process_noise[j, i] + tau_thr[i]
+        d[1] = dist[1] * sunlit  # SRP in the shadow
+        dm[1] = dist_model[1] * sunlit
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
                 error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], F, W3)
@@ -357,8 +455,10 @@ def run_block(
             for i in range(3):  # the thruster command is known to the filter
                 dm[7 + i] = dist_model[7 + i] + tau_thr[i]
             # the filter knows the wheels' torques and momenta (their tachometers)
-            rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, moon, rk4_work)
-            q_hat = xm[:4].copy()
-            w_hat = xm[4:7].copy()
-        rk4_step(x, hw_real, dt, J, J_inv, G, h_max, n, d, s_orb, moon, rk4_work)
+            rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
+            for i in range(4):
+                q_hat[i] = xm[i]
+            for i in range(3):
+                w_hat[i] = xm[4 + i]
+        rk4_step(x, hw_real, dt, J, J_inv, G, h_max, n, d, s_orb, m_orb, rk4_work)
     return x, q_hat, w_hat, P, log_k, saturated

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,27 @@ class Scenario:
     initial_error_deg, initial_axis : initial attitude error; initial_rate : rad/s (body-orbital).
     estimator_error_deg : initial error of the filter's estimate.
     duration : default run length, s.  seed : noise seed.
+
+    The sky (``attitude.ephemeris``) and the sensors as hardware:
+    epoch : UTC instant of t = 0, ISO 8601; None (paper B): the fixed or
+        ``sun``-turning vectors above and a fixed Moon.  With an epoch the Sun
+        and Moon come from the ephemerides and the Earth's shadow is real.
+    station_longitude_deg : the GEO slot, degrees east.
+    sun_noise_incidence : the sun-sensor noise grows as 1/cos of the incidence
+        angle (``sun_noise_deg`` at normal incidence; needs ``sun_fov_deg`` < 90).
+    earth_sensor_sun_exclusion_deg, earth_sensor_moon_exclusion_deg : the earth
+        sensor (boresight +z body) is blinded while a visible Sun / Moon lies
+        within this angle of its boresight (0: never).
+    sun_sensor_bias_deg, earth_sensor_bias_deg : constant errors of each two-axis
+        sensor's output angles (about its transverse axes: y, z for the sun
+        sensor, x, y for the earth sensor).
+    sun_sensor_misalignment_deg, earth_sensor_misalignment_deg : the sensor
+        head's mounting error, a small rotation (x, y, z body), unknown to the filter.
+    innovation_gate : χ² bound on a measurement's normalised innovation; beyond
+        it the filter rejects the measurement (0: no gate).
+    innovation_gate_max_rejections : after this many rejections in a row a sensor's
+        next measurement is taken whatever its innovation (a drifted filter must
+        not lock its sensors out).
 
     Design (paper B's weights, from the requirement and the actuator):
     pointing_requirement_deg : the pointing requirement (paper B: ±0.1°).
@@ -106,6 +128,17 @@ class Scenario:
     estimator_error_deg: float = 1.0
     duration: float = 3600.0
     seed: int = 0
+    epoch: str | None = None
+    station_longitude_deg: float = 0.0
+    sun_noise_incidence: bool = False
+    earth_sensor_sun_exclusion_deg: float = 12.0
+    earth_sensor_moon_exclusion_deg: float = 10.0
+    sun_sensor_bias_deg: tuple = (0.0, 0.0)
+    sun_sensor_misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    earth_sensor_bias_deg: tuple = (0.0, 0.0)
+    earth_sensor_misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    innovation_gate: float = 25.0
+    innovation_gate_max_rejections: int = 10
     pointing_requirement_deg: float = 0.1
     lqr_attitude_deg: float = 0.1
     lqr_rate_deg_s: float = 0.05
@@ -174,8 +207,28 @@ class Scenario:
                 f"{self.name}: wheel_max_torque × dt exceeds wheel_max_momentum "
                 "(the wheel would saturate within one step)"
             )
+        self._check_sky()
         if abs(self.sensor_period / self.dt - round(self.sensor_period / self.dt)) > 1e-9:
             raise ConfigError("sensor_period must be a whole number of dt")
+
+    def _check_sky(self) -> None:
+        if self.epoch is not None:
+            from rwlab.attitude.ephemeris import parse_epoch
+
+            if not isinstance(self.epoch, str):
+                raise ConfigError(f"{self.name}: epoch must be an ISO 8601 string")
+            parse_epoch(self.epoch)
+        if not -180 <= self.station_longitude_deg <= 360:
+            raise ConfigError(f"{self.name}: station_longitude_deg must be in [-180, 360]")
+        for name in (
+            "earth_sensor_sun_exclusion_deg",
+            "earth_sensor_moon_exclusion_deg",
+            "innovation_gate",
+        ):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{self.name}: {name} must be ≥ 0")
+        if self.sun_noise_incidence and self.sun_fov_deg >= 90:
+            raise ConfigError(f"{self.name}: sun_noise_incidence needs sun_fov_deg < 90")
 
     @property
     def inertia_matrix(self) -> np.ndarray:
@@ -231,7 +284,15 @@ _FRACTIONS = (
     "unload_start_fraction",
     "unload_stop_fraction",
 )
-_VECTORS = {"inertia": (3, 9), "initial_axis": (3,), "initial_rate": (3,)}
+_VECTORS = {
+    "inertia": (3, 9),
+    "initial_axis": (3,),
+    "initial_rate": (3,),
+    "sun_sensor_bias_deg": (2,),
+    "sun_sensor_misalignment_deg": (3,),
+    "earth_sensor_bias_deg": (2,),
+    "earth_sensor_misalignment_deg": (3,),
+}
 
 
 _FAULT_KEYS = {
@@ -351,9 +412,11 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
         raise ConfigError(f"{path}: unknown key(s) {unknown + extra}")
     if isinstance(table.get("wheel_faults"), list):
         table["wheel_faults"] = tuple(table["wheel_faults"])
-    for key in ("inertia", "initial_axis", "initial_rate"):
+    for key in _VECTORS:
         if isinstance(table.get(key), list):
             table[key] = tuple(table[key])
+    if isinstance(table.get("epoch"), datetime):  # TOML's own date-time type
+        table["epoch"] = table["epoch"].isoformat()
     for key in ("srp_offset", "constant_torque"):
         if key in dist:
             v = dist[key]

@@ -100,6 +100,8 @@ class SimResult:
     wheel_saturated : a wheel touched its momentum limit.
     stats : dict over every step (not only the logged ones), see ``kernel.STATS``.
     steady_from_s : start of the steady-state window, s.
+    sky : (K, 3) sunlit fraction and the sun and earth sensors' status (0 used,
+    1 unavailable: eclipse, field of view or blinding, 2 gated) at the logged steps.
     """
 
     t: np.ndarray
@@ -115,6 +117,7 @@ class SimResult:
     wheel_saturated: bool
     stats: dict
     steady_from_s: float
+    sky: np.ndarray | None = None
 
 
 def _w_bo(q, w, n=GEO_RATE):
@@ -252,6 +255,8 @@ def simulate(
     )
     result = _simulate_compiled(scenario, controller, **kw)
     result.stats["steps"] = steps
+    result.stats["dt_s"] = scenario.dt
+    result.stats["sensor_period_s"] = scenario.sensor_period
     return result
 
 
@@ -306,6 +311,33 @@ def _unload_vector(sc: Scenario) -> np.ndarray:
     )
 
 
+SKY_STEP = 1.0  # s between rows of the sky table the kernel interpolates
+
+
+def sky_table(sc: Scenario, t: np.ndarray) -> np.ndarray:
+    """The sky (``ephemeris.sky_table``) at times t (s): from the ephemerides with an epoch,
+    else paper B's vectors (:func:`sun_direction`, a fixed Moon) with the same shadow model."""
+    from rwlab.attitude import ephemeris
+
+    if sc.epoch is not None:
+        epoch = ephemeris.parse_epoch(sc.epoch)
+        sun, moon = ephemeris.sun_moon_orbital(epoch, sc.station_longitude_deg, t)
+    else:
+        sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
+        moon = np.broadcast_to(MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8, sun.shape)
+    return ephemeris.sky_table(sun, moon)
+
+
+def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) -> np.ndarray:
+    """The rotation (3, 3) from a true body vector to the one a sensor reports: its output
+    bias (about its two ``transverse`` body axes) after its mounting misalignment (small
+    angles, x y z)."""
+    rot = np.radians(np.asarray(misalignment_deg, float))
+    rot[list(transverse)] += np.radians(np.asarray(bias_deg, float))
+    angle = float(np.linalg.norm(rot))
+    return dcm(from_axis_angle(rot, angle)).T if angle > 0 else np.eye(3)
+
+
 def _simulate_compiled(
     sc,
     controller,
@@ -329,7 +361,7 @@ def _simulate_compiled(
     if not use_ekf:
         q_hat, w_hat = q0.copy(), w0.copy()
     n_log = steps // log_every + 2
-    log_t, log_x = np.zeros(n_log), np.zeros((n_log, x.size))
+    log_t, log_x, log_sky = np.zeros(n_log), np.zeros((n_log, x.size)), np.zeros((n_log, 3))
     log_est, log_tau, log_nees = np.zeros((n_log, 7)), np.zeros((n_log, 3)), np.zeros(n_log)
     dist = sc.disturbances.vector()
     dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
@@ -346,6 +378,12 @@ def _simulate_compiled(
     wheels = wheel_setup(sc, hw0)
     G_pinv = np.linalg.pinv(G)
     h_max = np.full(sc.n_wheels, sc.wheel_max_momentum)
+    sun_align = sensor_alignment(sc.sun_sensor_bias_deg, sc.sun_sensor_misalignment_deg, (1, 2))
+    earth_align = sensor_alignment(
+        sc.earth_sensor_bias_deg, sc.earth_sensor_misalignment_deg, (0, 1)
+    )
+    exclusion = np.array([sc.earth_sensor_sun_exclusion_deg, sc.earth_sensor_moon_exclusion_deg])
+    blind_cos = np.where(exclusion > 0, np.cos(np.radians(exclusion)), 2.0)  # 2: never blinded
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
@@ -354,6 +392,9 @@ def _simulate_compiled(
             controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]), dtype=float
         )
         process, sensor = streams.block(k, n_steps, sensor_every, noise_sd)
+        sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
+        rows = math.ceil(((k + n_steps) * sc.dt - sky_t0) / SKY_STEP) + 2
+        sky = sky_table(sc, sky_t0 + SKY_STEP * np.arange(rows))
         x, q_hat, w_hat, P, log_k, sat = kernel.run_block(
             x,
             q_hat,
@@ -381,15 +422,19 @@ def _simulate_compiled(
             process,
             sensor,
             Qc,
-            math.radians(sc.sun_declination_deg),
-            math.radians(sc.sun_phase_deg),
-            sc.sun == "moving",
+            sky,
+            sky_t0,
+            SKY_STEP,
             fov_cos,
+            sc.sun_noise_incidence,
             math.radians(sc.sun_noise_deg),
             math.radians(sc.earth_noise_deg),
             math.radians(sc.sun_noise_deg) * m,
             math.radians(sc.earth_noise_deg) * m,
-            MOON_DIRECTION,
+            sun_align,
+            earth_align,
+            blind_cos,
+            np.array([sc.innovation_gate, sc.innovation_gate_max_rejections]),
             unload,
             wheels.kind,
             wheels.healthy,
@@ -407,6 +452,7 @@ def _simulate_compiled(
             log_est,
             log_tau,
             log_nees,
+            log_sky,
             log_k,
         )
         saturated |= sat
@@ -417,7 +463,7 @@ def _simulate_compiled(
     w_bo = _w_bo(log_x[:, :4], log_x[:, 4:7])
     w_est = _w_bo(log_est[:, :4], log_est[:, 4:7])
     wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheel_inertia)
-    return _result(
+    result = _result(
         log_t[:log_k],
         log_x[:, :4],
         w_bo,
@@ -430,6 +476,8 @@ def _simulate_compiled(
         stats,
         steady_from * sc.dt,
     )
+    result.sky = log_sky[:log_k]
+    return result
 
 
 BLOCK_STEPS = 36_000  # steps per kernel call without re-linearisation (an hour at 0.1 s)
