@@ -30,6 +30,7 @@ from numba import njit
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import linalg, optimize
 from scipy import signal as sps
+from threadpoolctl import threadpool_limits
 
 from rwlab.data import IOData, as_experiments, atomic_write_bytes, check_Ts
 from rwlab.errors import DataError, EstimationError, FileFormatError, ModelError, RwlabWarning
@@ -148,7 +149,9 @@ class SSModel:
         if ny == 0:
             raise ModelError("C must have at least one row (one output)")
         self.C = _matrix(C, (ny, nx), "C")
-        nu = 0 if B is None or np.size(B) == 0 else np.array(B, dtype=float).reshape(nx, -1).shape[1]
+        nu = (
+            0 if B is None or np.size(B) == 0 else np.array(B, dtype=float).reshape(nx, -1).shape[1]
+        )
         self.B = _matrix(None if nu == 0 else np.reshape(B, (nx, nu)), (nx, nu), "B")
         self.D = _matrix(D, (ny, nu), "D")
         self.K = _matrix(K, (nx, ny), "K")
@@ -290,7 +293,7 @@ class SSModel:
         return out
 
     def impulse_response(self, n: int) -> np.ndarray:
-        """Responses to a unit pulse at t = 0, shape (n, ny, nu) (Markov parameters D, CB, CAB...)."""
+        """Responses to a unit pulse at t = 0, shape (n, ny, nu): D, CB, CAB, ..."""
         out = np.empty((n, self.ny, self.nu))
         for j in range(self.nu):
             u = np.zeros((n, self.nu))
@@ -353,7 +356,7 @@ class SSModel:
         var = None if self.noise_variance is None else float(self.noise_variance[0, 0])
         if self.nu == 0:
             return PolyModel(a, None, c, Ts=self.Ts, noise_variance=var)
-        num, den = sps.ss2tf(self.A, self.B, self.C, self.D)
+        num, _ = sps.ss2tf(self.A, self.B, self.C, self.D)
         num = np.atleast_2d(num)[0]  # descending powers of z, degree nx = powers of q⁻¹
         num = np.where(np.abs(num) < 1e-12 * max(1.0, np.max(np.abs(num))), 0.0, num)
         if not num.any():
@@ -849,7 +852,7 @@ def _canonical(model: SSModel, estimate_k: bool) -> tuple[SSModel, np.ndarray]:
             "the initial model is not observable with evenly spread indices; use form='free'"
         )
     Ti = np.linalg.inv(Ob)
-    A, B, C, K = Ob @ model.A @ Ti, Ob @ model.B, model.C @ Ti, Ob @ model.K
+    A, B, K = Ob @ model.A @ Ti, Ob @ model.B, Ob @ model.K
     starts = np.cumsum([0, *idx[:-1]])
     free_rows = [s + k - 1 for s, k in zip(starts, idx, strict=True)]
     A2 = np.zeros((n, n))
@@ -977,7 +980,8 @@ def ssest(
         return r if np.all(np.isfinite(r)) else np.full(r.shape, 1e10)
 
     beta0 = np.concatenate([np.zeros(nb), *(x0_start if n_x0 else [])])
-    sol = optimize.least_squares(
+    with threadpool_limits(1, user_api="blas"):  # small matrices: BLAS threads only cost
+        sol = optimize.least_squares(
         residuals, beta0, method="trf", x_scale="jac", max_nfev=max_iter * (len(beta0) + 1),
         xtol=tol, ftol=tol, gtol=tol,
     )  # fmt: skip
