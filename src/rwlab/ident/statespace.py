@@ -27,7 +27,6 @@ from pathlib import Path
 import control
 import numpy as np
 from numba import njit
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy import linalg, optimize
 from scipy import signal as sps
 from threadpoolctl import threadpool_limits
@@ -551,31 +550,45 @@ def _horizons(horizon, nx: int, nu: int) -> tuple[int, int, int]:
     return r, sy, (su if nu else 0)
 
 
-def _gram(experiments: list[IOData], r: int, sy: int, su: int, chunk: int = 1 << 15):
+def _gram(experiments: list[IOData], r: int, sy: int, su: int) -> tuple[np.ndarray, int]:
     """Σ z zᵀ over windows z = [u(t−su … t+r−1); y(t−sy … t+r−1)] of every experiment.
 
-    Ordering inside z: input channel-major then lag, then output channel-major then lag.
+    Ordering inside z: input channel-major then lag, then output channel-major
+    then lag. Each entry is a sum of x_a(t) x_b(t+δ) over a run of t, so it is
+    read off the prefix sums of that product: O(N·L) work per channel pair
+    instead of the O(N·L²) of forming the windows and multiplying them.
     """
     nu, ny = experiments[0].nu, experiments[0].ny
-    Lu, Ly = su + r, sy + r
-    dim = nu * Lu + ny * Ly
-    G = np.zeros((dim, dim))
-    count = 0
     s = max(sy, su)
+    lengths = [su + r] * nu + [sy + r] * ny
+    offsets = [s - su] * nu + [s - sy] * ny
+    starts = np.concatenate([[0], np.cumsum(lengths)])
+    G = np.zeros((starts[-1], starts[-1]))
+    count = 0
     for d in experiments:
         n_cols = d.N - s - r + 1
         if n_cols < 1:
             continue
-        uw = sliding_window_view(d.u[s - su :], Lu, axis=0) if nu else None
-        yw = sliding_window_view(d.y[s - sy :], Ly, axis=0)
-        for k in range(0, n_cols, chunk):
-            m = min(chunk, n_cols - k)
-            parts = [yw[k : k + m].reshape(m, ny * Ly)]
-            if nu:
-                parts.insert(0, uw[k : k + m].reshape(m, nu * Lu))
-            Z = np.hstack(parts)
-            G += Z.T @ Z
-            count += m
+        count += n_cols
+        x = np.hstack([d.u, d.y])
+        Gd = np.zeros_like(G)
+        for a in range(nu + ny):
+            for b in range(a, nu + ny):
+                rel = offsets[b] - offsets[a]
+                for delta in range(rel - lengths[a] + 1, rel + lengths[b]):
+                    i = np.arange(lengths[a])
+                    j = delta - rel + i
+                    ok = (j >= 0) & (j < lengths[b])
+                    i, j = i[ok], j[ok]
+                    lo, hi = max(0, -delta), min(d.N, d.N - delta)
+                    prefix = np.concatenate(
+                        [[0.0], np.cumsum(x[lo:hi, a] * x[lo + delta : hi + delta, b])]
+                    )
+                    t0 = offsets[a] + i - lo
+                    vals = prefix[t0 + n_cols] - prefix[t0]
+                    Gd[starts[a] + i, starts[b] + j] = vals
+                    Gd[starts[b] + j, starts[a] + i] = vals
+        G += Gd
     return G, count
 
 
