@@ -5,6 +5,7 @@ time series (no input): :func:`ar`, and ``arx``/``armax`` on an output-only reco
 Structure: :func:`delayest`, :func:`delay_scan`, :func:`arxstruc`, :func:`selstruc`.
 Validation: :func:`compare`, :func:`resid`, :func:`fit_percent`, :func:`mse`.
 Non-parametric: :func:`spa`, :func:`etfe`, :func:`impulseest`.
+Recursive: :class:`RecursiveARX`, :class:`RecursiveARMAX`, :func:`rarx`.
 State space: :func:`n4sid`, :func:`ssest`, :class:`SSModel` (``idss``).
 Models: :class:`PolyModel` (``idpoly``) and :func:`c2d`.
 """
@@ -15,6 +16,7 @@ from rwlab.ident.arx import arx
 from rwlab.ident.models import PolyModel, c2d
 from rwlab.ident.nonparametric import FIRModel, FrequencyResponse, etfe, impulseest, spa
 from rwlab.ident.pem import armax, bj, oe
+from rwlab.ident.recursive import RecursiveARMAX, RecursiveARX, rarx
 from rwlab.ident.statespace import SSModel, n4sid, ssest
 from rwlab.ident.structure import arxstruc, delay_scan, delayest, selstruc, struc
 from rwlab.ident.validation import compare, fit_percent, fpe, mse, resid
@@ -23,6 +25,8 @@ __all__ = [
     "FIRModel",
     "FrequencyResponse",
     "PolyModel",
+    "RecursiveARMAX",
+    "RecursiveARX",
     "SSModel",
     "ar",
     "armax",
@@ -41,6 +45,7 @@ __all__ = [
     "n4sid",
     "oe",
     "pem",
+    "rarx",
     "resid",
     "selstruc",
     "spa",
