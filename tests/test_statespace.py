@@ -168,3 +168,30 @@ def test_several_outputs_survive_split_detrend_and_files(tmp_path, mimo):
         back = load(d.write(tmp_path / f"r.{suffix}"))
         assert back.output_names == d.output_names and np.allclose(back.y, d.y)
         assert np.allclose(back.trend.output_slope, d.trend.output_slope)
+
+
+def test_cli_verbs(tmp_path, mimo):
+    import json
+
+    from click.testing import CliRunner
+
+    from rwlab.cli import main
+
+    path = mimo.write(tmp_path / "mimo.csv")
+    run = CliRunner().invoke
+    res = run(
+        main, ["ident", "ssest", str(path), "4", "--json", "--save", str(tmp_path / "m.json")]
+    )
+    assert res.exit_code == 0, res.output
+    model = SSModel.from_dict(json.loads(res.output)["model"])
+    assert pole_error(model.poles(), TRUE_POLES) < 0.03
+    assert SSModel.load(tmp_path / "m.json").to_dict() == model.to_dict()
+    res = run(
+        main, ["ident", "spa", "dryer", "--detrend", "constant", "--save", str(tmp_path / "g.json")]
+    )
+    assert res.exit_code == 0 and "omega" in res.output
+    assert len(json.loads((tmp_path / "g.json").read_text())["omega"]) == 128
+    res = run(main, ["ident", "impulse", "dryer", "--detrend", "constant", "--n", "20", "--json"])
+    assert res.exit_code == 0 and len(json.loads(res.output)["coefficients"]) == 20
+    res = run(main, ["ident", "n4sid", str(path), "0"])
+    assert res.exit_code == 2
