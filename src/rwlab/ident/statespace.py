@@ -221,11 +221,9 @@ class SSModel:
         )
 
     # -- responses ---------------------------------------------------------------------
-    def _inputs(self, u, N: int | None = None) -> np.ndarray:
+    def _inputs(self, u) -> np.ndarray:
         if isinstance(u, IOData):
             u = u.u
-        if u is None and self.nu == 0:
-            return np.zeros((N or 0, 0))
         arr = np.asarray(u, dtype=float)
         if arr.ndim == 1:
             arr = arr[:, None]
@@ -676,8 +674,8 @@ def n4sid(
     on the past along the future inputs (Van Overschee & De Moor; Larimore's CVA).
     A, B, C, D follow by least squares on [x(t+1); y(t)] = [A B; C D][x(t); u(t)]
     and K from the Riccati equation of the residual covariances. Every product is
-    formed from one Gram matrix of the data windows, built in chunks, so memory
-    does not grow with N.
+    formed from one Gram matrix of the data windows, read off prefix sums of
+    lagged products: O(N) memory and O(N·L) work per channel pair.
     """
     experiments = as_experiments(data)
     nu, ny = experiments[0].nu, experiments[0].ny
