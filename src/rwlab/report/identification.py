@@ -32,6 +32,7 @@ FIGURES = (
     "fig-oe-bj",
     "fig23-continuous",
     "fig24-acceleration",
+    "fig-uncertainty",
 )
 NONLINEAR_FIGURES = ("fig-nonlinear-validation", "fig-nonlinear-step", "fig-nonlinear-resid")
 
@@ -201,6 +202,7 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         "fig20-compare",
         f"Simulated vs measured output of {ch['structure']} on validation data.",
     )
+    _uncertainty_figure(page, result.chosen, ch["structure"])
 
     page.heading("4. ARMAX, OE and BJ (paper Table 3, Fig. 21, Fig. 22)", "others")
     others = study["others"]
@@ -380,3 +382,35 @@ def _tf_text(num, den) -> str:
         return " ".join(terms) or "0"
 
     return f"({poly(num)}) / ({poly(den)})"
+
+
+def _uncertainty_figure(page: Page, model, name: str, k: float = 3.0) -> None:
+    """Step response and Bode magnitude of the chosen model with ±kσ bands (first order)."""
+    from rwlab.ident.uncertainty import bode_band, step_band
+
+    if model.covariance is None:
+        page.text(f"{name} has no parameter covariance: no confidence bands.", note=True)
+        return
+    n = max(40, int(60 / model.Ts))
+    step = step_band(model, n)
+    omega = np.logspace(-2, 0, 100) * np.pi / model.Ts
+    mag, _ = bode_band(model, omega)
+    fig, (a1, a2) = figure(9, 3.0, 1, 2)
+    a1.plot(step.x, step.value[:, 0, 0], color="k", lw=1.2, label=name)
+    a1.fill_between(step.x, step.lower(k)[:, 0, 0], step.upper(k)[:, 0, 0], alpha=0.3,
+                    label=f"±{k:g}σ")  # fmt: skip
+    a1.set_xlabel("t [s]")
+    a1.set_ylabel("step response")
+    a1.legend(fontsize=8)
+    db = lambda x: 20 * np.log10(np.maximum(x, 1e-300))  # noqa: E731
+    a2.semilogx(omega, db(mag.value[:, 0, 0]), color="k", lw=1.2)
+    low = np.maximum(mag.lower(k), mag.value * 1e-3)  # a band through zero: floor at −60 dB
+    a2.fill_between(omega, db(low[:, 0, 0]), db(mag.upper(k)[:, 0, 0]), alpha=0.3)
+    a2.set_xlabel("ω [rad/s]")
+    a2.set_ylabel("|G| [dB]")
+    page.figure(
+        fig,
+        "fig-uncertainty",
+        f"Step response and Bode magnitude of {name} with ±{k:g}σ bands from its parameter "
+        "covariance (first-order propagation, rwlab.ident.uncertainty).",
+    )
