@@ -320,7 +320,8 @@ def test_bad_scenario_values_are_config_errors(tmp_path, line, match):
         load_scenario(str(path))
 
 
-def test_the_kernels_scalar_filter_twins_equal_their_references():
+@pytest.mark.parametrize("n", [6, 9])
+def test_the_kernels_scalar_filter_twins_equal_their_references(n):
     from rwlab.attitude.ekf import (
         error_jacobian_into,
         predict_covariance,
@@ -330,37 +331,40 @@ def test_the_kernels_scalar_filter_twins_equal_their_references():
     rng = np.random.default_rng(3)
     q = from_axis_angle(rng.standard_normal(3), 0.3)
     w, h = 1e-3 * rng.standard_normal(3), 5 * rng.standard_normal(3)
-    F = np.empty((6, 6))
+    F = np.full((n, n), np.nan)
     error_jacobian_into(q, w, h, J, J_INV, GEO_RATE, 3 * GEO_RATE**2, F, np.empty((4, 3, 3)))
-    ref = error_jacobian(q, w, h, J, J_INV, GEO_RATE, 3 * GEO_RATE**2)
+    ref = error_jacobian(q, w, h, J, J_INV, GEO_RATE, 3 * GEO_RATE**2, n)
     assert np.allclose(F, ref, rtol=1e-12, atol=1e-18)
-    L = rng.standard_normal((6, 6))
-    P, Qc = L @ L.T, np.diag([0, 0, 0, 1e-9, 2e-9, 3e-9])
+    if n == 9:  # δω̇ ∋ J⁻¹ δb, δḃ = 0
+        assert np.array_equal(ref[3:6, 6:], J_INV) and not np.any(ref[6:])
+    L = rng.standard_normal((n, n))
+    P, Qc = L @ L.T, np.diag([0, 0, 0, 1e-9, 2e-9, 3e-9, 1e-12, 2e-12, 3e-12][:n])
     expected = predict_covariance(P, F, Qc, 0.5)
-    predict_covariance_into(P, F, Qc, 0.5, np.empty((6, 6, 6)))
+    predict_covariance_into(P, F, Qc, 0.5, np.empty((6, n, n)))
     assert np.allclose(P, expected, rtol=1e-12, atol=1e-15) and np.array_equal(P, P.T)
 
 
-def test_the_kernels_scalar_update_equals_the_reference_and_gates():
+@pytest.mark.parametrize("n", [6, 9])
+def test_the_kernels_scalar_update_equals_the_reference_and_gates(n):
     from rwlab.attitude.ekf import _update, gated_update_into
 
     rng = np.random.default_rng(4)
     q = from_axis_angle(rng.standard_normal(3), 0.2)
-    w = 1e-3 * rng.standard_normal(3)
-    L = 1e-2 * rng.standard_normal((6, 6))
-    P = L @ L.T + 1e-6 * np.eye(6)
+    w = 1e-3 * rng.standard_normal(n - 3)  # [ω̂] or [ω̂, b̂]
+    L = 1e-2 * rng.standard_normal((n, n))
+    P = L @ L.T + 1e-6 * np.eye(n)
     ref = np.array([0.6, -0.48, 0.64])
     meas = dcm(from_axis_angle(rng.standard_normal(3), 0.01) * 1.0) @ dcm(q) @ ref
     q_ref, w_ref, P_ref = _update(q, w, P, meas, ref, 3e-4)
     q2, w2, P2 = q.copy(), w.copy(), P.copy()
-    assert gated_update_into(q2, w2, P2, meas, ref, 3e-4, 0.0, np.empty((4, 6, 6)))
+    assert gated_update_into(q2, w2, P2, meas, ref, 3e-4, 0.0, np.empty((4, n, n)))
     assert np.allclose(q2, q_ref, rtol=0, atol=1e-14) and np.allclose(w2, w_ref, atol=1e-16)
     assert np.allclose(P2, P_ref, rtol=1e-10, atol=1e-18) and np.array_equal(P2, P2.T)
     # a wild measurement (the Sun seen 90° off) is refused by a χ² gate and changes nothing
     q3, w3, P3 = q.copy(), w.copy(), P.copy()
     wild = np.cross(dcm(q) @ ref, [0.0, 0.0, 1.0])
     wild /= np.linalg.norm(wild)
-    assert not gated_update_into(q3, w3, P3, wild, ref, 3e-4, 25.0, np.empty((4, 6, 6)))
+    assert not gated_update_into(q3, w3, P3, wild, ref, 3e-4, 25.0, np.empty((4, n, n)))
     assert np.array_equal(q3, q) and np.array_equal(w3, w) and np.array_equal(P3, P)
 
 

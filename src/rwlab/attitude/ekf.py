@@ -1,19 +1,24 @@
 """Continuous–discrete multiplicative extended Kalman filter on attitude and rate.
 
-State: the attitude quaternion q̂ (orbital → body) and the inertial body rate
-ω̂; the filter's error state is ``δx = [δθ, δω]`` (6), with the true attitude
-``A(q) = (I − [δθ×]) A(q̂)``. Keeping the quaternion out of the covariance
-keeps P 6×6, symmetric positive definite and q̂ exactly unit (the reset folds
-δθ into q̂ after each update) — the standard MEKF (Markley & Crassidis, ch. 6).
+State: the attitude quaternion q̂ (orbital → body), the inertial body rate
+ω̂ and, optionally, a body-frame disturbance torque b̂ (N·m, a random walk:
+disturbance accommodation of the torques the filter does not model); the
+filter's error state is ``δx = [δθ, δω]`` (n = 6) or ``[δθ, δω, δb]`` (n = 9),
+with the true attitude ``A(q) = (I − [δθ×]) A(q̂)``. Keeping the quaternion out
+of the covariance keeps P n×n, symmetric positive definite and q̂ exactly unit
+(the reset folds δθ into q̂ after each update) — the standard MEKF (Markley &
+Crassidis, ch. 6). Every function takes n from P (or F); ``w`` is the rest of
+the state after q, ``[ω̂]`` (3,) or ``[ω̂, b̂]`` (6,).
 
 Error dynamics (analytic; ``F`` below, checked against finite differences):
 
     δθ̇ = −[ω̂×] δθ + δω
-    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + w
+    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + δb + w
+    δḃ = w_b
 
-with r̂ the nadir in body axes and w the process-noise torque. A vector
-measurement ``b = A(q) r + v`` (sun or earth direction, r known in the orbital
-frame) has ``H = [[A(q̂) r ×], 0]``.
+with r̂ the nadir in body axes, w the process-noise torque and w_b the bias's
+random-walk noise. A vector measurement ``b = A(q) r + v`` (sun or earth
+direction, r known in the orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
 
 Prediction propagates q̂, ω̂ with the plant's own RK4 (known wheel torques and
 momenta, modelled disturbances) and P with Φ = expm(F·dt) and the matching
@@ -39,29 +44,33 @@ __all__ = [
 
 
 @njit(cache=True)
-def error_jacobian(q, w, h, J, J_inv, n, gg_gain):
-    """F (6×6) of the error dynamics at (q̂, ω̂) with wheel momentum h (body axes)."""
+def error_jacobian(q, w, h, J, J_inv, n, gg_gain, dim=6):
+    """F (dim × dim, dim 6 or 9) of the error dynamics at (q̂, ω̂) with wheel momentum h
+    (body axes); with the bias state (dim 9) δω̇ gains J⁻¹ δb."""
     r = dcm(q)[:, 2].copy()
-    F = np.zeros((6, 6))
+    F = np.zeros((dim, dim))
     F[:3, :3] = -skew(w)
-    F[:3, 3:] = np.eye(3)
-    F[3:, :3] = J_inv @ (gg_gain * (skew(r) @ J - skew(J @ r)) @ skew(r))
-    F[3:, 3:] = J_inv @ (skew(J @ w + h) - skew(w) @ J)
+    F[:3, 3:6] = np.eye(3)
+    F[3:6, :3] = J_inv @ (gg_gain * (skew(r) @ J - skew(J @ r)) @ skew(r))
+    F[3:6, 3:6] = J_inv @ (skew(J @ w + h) - skew(w) @ J)
+    if dim == 9:
+        F[3:6, 6:] = J_inv
     return F
 
 
 @njit(cache=True)
-def vector_jacobian(q, ref):
-    """Predicted body vector A(q̂) r and its H (3×6)."""
+def vector_jacobian(q, ref, dim=6):
+    """Predicted body vector A(q̂) r and its H (3 × dim)."""
     b = dcm(q) @ ref
-    H = np.zeros((3, 6))
+    H = np.zeros((3, dim))
     H[:, :3] = skew(b)
     return b, H
 
 
 @njit(cache=True)
 def _update(q, w, P, b_meas, ref, sigma):
-    """One vector-measurement update; returns q, w, P (Joseph form, symmetric)."""
+    """One vector-measurement update; returns q, w, P (Joseph form, symmetric).
+    w: (n − 3,) the state after q, [ω̂] or [ω̂, b̂]."""
     q, w, P, _ = gated_update(q, w, P, b_meas, ref, sigma, 0.0)
     return q, w, P
 
@@ -74,7 +83,8 @@ def gated_update(q, w, P, b_meas, ref, sigma, gate):
     innovation ν' S⁻¹ ν exceeds ``gate`` (a χ² bound; 0: no gate). The innovation
     of a unit vector has two degrees of freedom (its part along b is second order).
     """
-    b, H = vector_jacobian(q, ref)
+    dim = P.shape[0]
+    b, H = vector_jacobian(q, ref, dim)
     R = sigma * sigma * np.eye(3)
     S = H @ P @ H.T + R
     S_inv = np.linalg.inv(S)
@@ -83,7 +93,7 @@ def gated_update(q, w, P, b_meas, ref, sigma, gate):
         return q, w, P, False
     K = P @ H.T @ S_inv
     dx = K @ nu
-    IKH = np.eye(6) - K @ H
+    IKH = np.eye(dim) - K @ H
     P = IKH @ P @ IKH.T + K @ R @ K.T
     P = 0.5 * (P + P.T)
     dq = np.empty(4)
@@ -100,7 +110,7 @@ def predict_covariance(P, F, Qc, T):
     makes F·T of order 1 at a 0.5 s sensor period, so first order would not do)."""
     FT = F * T
     F2 = F @ F
-    Phi = np.eye(6) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)
+    Phi = np.eye(P.shape[0]) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)
     FQ = F @ Qc
     Qd = Qc * T + 0.5 * T * T * (FQ + FQ.T) + T**3 / 3.0 * (FQ @ F.T + 0.5 * (F2 @ Qc + Qc @ F2.T))
     P = Phi @ P @ Phi.T + Qd
@@ -108,7 +118,7 @@ def predict_covariance(P, F, Qc, T):
 
 
 # Scalar twins of the functions above for the kernel's inner loop: numba's ``@`` on
-# 6×6 matrices calls BLAS (about a microsecond per call) and every readable line
+# 6×6 and 9×9 matrices calls BLAS (about a microsecond per call) and every readable line
 # allocates. Hand-written because no library offers allocation-free small-matrix
 # kernels callable from numba; tests hold each twin equal to its reference.
 
@@ -137,7 +147,8 @@ def _mmt(A, B, out):
 
 @njit(cache=True)
 def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, F, W):
-    """:func:`error_jacobian` into F (6, 6), with a (4, 3, 3) scratch W."""
+    """:func:`error_jacobian` into F (n, n; n = 6, or 9 with the bias state), with a
+    (4, 3, 3) scratch W."""
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
     r0 = 2 * (q1 * q3 - q4 * q2)
     r1 = 2 * (q2 * q3 + q4 * q1)
@@ -178,6 +189,8 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, F, W):
     for i in range(3):
         for j in range(3):
             F[3 + i, 3 + j] = S[i, j]
+            if F.shape[0] == 9:
+                F[3 + i, 6 + j] = J_inv[i, j]
 
 
 @njit(cache=True, inline="always")
@@ -189,7 +202,8 @@ def _skew_into(a, b, c, out):
 
 @njit(cache=True)
 def predict_covariance_into(P, F, Qc, T, W):
-    """:func:`predict_covariance` in place on P (6, 6), with a (6, 6, 6) scratch W."""
+    """:func:`predict_covariance` in place on P (n, n), with a (6, n, n) scratch W."""
+    nx = P.shape[0]
     Phi, F2, FQ, X, Y, Z = W[0], W[1], W[2], W[3], W[4], W[5]
     _mm(F, F, F2)
     _mm(F2, F, X)  # F³
@@ -197,13 +211,13 @@ def predict_covariance_into(P, F, Qc, T, W):
     _mmt(FQ, F, Y)  # F Qc Fᵀ
     _mmt(Qc, F2, Z)  # Qc F²ᵀ
     T2, T3 = T * T, T * T * T
-    for i in range(6):
-        for j in range(6):
+    for i in range(nx):
+        for j in range(nx):
             Phi[i, j] = (
                 (1.0 if i == j else 0.0) + F[i, j] * T + F2[i, j] * T2 / 2 + X[i, j] * T3 / 6
             )
-    for i in range(6):  # Qd into Y: Qc T + T²/2 (FQ + FQᵀ) + T³/3 (F Qc Fᵀ + (F² Qc + Qc F²ᵀ)/2)
-        for j in range(6):
+    for i in range(nx):  # Qd into Y: Qc T + T²/2 (FQ + FQᵀ) + T³/3 (F Qc Fᵀ + (F² Qc + Qc F²ᵀ)/2)
+        for j in range(nx):
             Y[i, j] = (
                 Qc[i, j] * T
                 + 0.5 * T2 * (FQ[i, j] + FQ[j, i])
@@ -211,19 +225,20 @@ def predict_covariance_into(P, F, Qc, T, W):
             )
     _mm(Phi, P, X)
     _mmt(X, Phi, Z)
-    for i in range(6):
-        for j in range(6):
+    for i in range(nx):
+        for j in range(nx):
             P[i, j] = 0.5 * (Z[i, j] + Z[j, i] + Y[i, j] + Y[j, i])
 
 
 @njit(cache=True)
 def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
-    """One vector-measurement update in place on q (4,), w (3,), P (6, 6): the scalar twin
-    of ``_update`` behind an innovation gate. Returns whether it was applied.
+    """One vector-measurement update in place on q (4,), w (n − 3,), P (n, n): the scalar
+    twin of ``_update`` behind an innovation gate. Returns whether it was applied.
 
     Rejected (nothing changes) when ν' S⁻¹ ν > ``gate`` (a χ² bound; 0: no gate).
-    ``W`` is a (4, 6, 6) scratch. H = [[b×], 0] is never formed: only its 3×3 block.
+    ``W`` is a (4, n, n) scratch. H = [[b×], 0, …] is never formed: only its 3×3 block.
     """
+    nx = P.shape[0]
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
     s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
     b0 = (
@@ -243,7 +258,7 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
     )
     Hx, PHt, K, X = W[0], W[1], W[2], W[3]  # Hx: [b×] in the top-left 3×3
     _skew_into(b0, b1, b2, Hx)
-    for i in range(6):  # P Hᵀ (6×3)
+    for i in range(nx):  # P Hᵀ (n×3)
         for j in range(3):
             acc = 0.0
             for k in range(3):
@@ -264,20 +279,20 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
         if z0 * z0 + z1 * z1 + z2 * z2 > gate:  # ν' S⁻¹ ν = |L⁻¹ ν|²
             return False
     dx = K[:, 3]  # K uses the first three columns
-    for i in range(6):  # row i of K = S⁻¹ (P Hᵀ)[i], δx = K ν
+    for i in range(nx):  # row i of K = S⁻¹ (P Hᵀ)[i], δx = K ν
         z0, z1, z2 = _forward3(Si, PHt[i, 0], PHt[i, 1], PHt[i, 2])
         K[i, 0], K[i, 1], K[i, 2] = _backward3(Si, z0, z1, z2)
         dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
-    for i in range(6):  # I − K H into PHt's buffer (it is no longer needed)
-        for j in range(6):
+    for i in range(nx):  # I − K H into PHt's buffer (it is no longer needed)
+        for j in range(nx):
             v = 1.0 if i == j else 0.0
             if j < 3:
                 v -= K[i, 0] * Hx[0, j] + K[i, 1] * Hx[1, j] + K[i, 2] * Hx[2, j]
             PHt[i, j] = v
     _mm(PHt, P, X)  # Joseph form: (I − KH) P (I − KH)ᵀ + K R Kᵀ
     _mmt(X, PHt, Hx)
-    for i in range(6):
-        for j in range(i, 6):
+    for i in range(nx):
+        for j in range(i, nx):
             kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
             v = 0.5 * (Hx[i, j] + Hx[j, i]) + kk
             P[i, j] = v
@@ -289,7 +304,7 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
     n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
     norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
     q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
-    for i in range(3):
+    for i in range(nx - 3):
         w[i] += dx[3 + i]
     return True
 

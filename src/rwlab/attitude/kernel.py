@@ -16,6 +16,11 @@ saturation-aware form of a linear law τ = −K s, s = [θ, ω_bo], θ = 2 q_v s
 which is exactly −K s while |K_ω⁻¹ K_θ θ| ≤ ω_max, and a rate-limited eigenaxis
 slew beyond it, so a large error never asks the wheels for more than they have.
 
+With the filter's disturbance-torque state (``w_hat`` = [ω̂, b̂], P 9×9; see
+``ekf``) the filter's model adds b̂ to its known torques and the law feeds it
+forward, τ = −K s − b̂ (disturbance accommodation: the integral action LQG
+otherwise lacks).
+
 Filter timing: the estimate is propagated with the plant model every step (the
 controller needs it); the covariance only once per sensor period, at the
 measurement (``ekf.predict_covariance_into``).
@@ -248,8 +253,12 @@ def run_block(
     N·m, pulse steps between pulses, recovery s, pointing error (°) above which
     no window starts and no pulse fires]; ``wheel_*`` the wheel model
     (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated in place);
-    ``stats`` (see :data:`STATS`) is updated in place. Returns the new x, q̂, ŵ,
-    P, log position and whether a wheel touched its momentum limit.
+    ``stats`` (see :data:`STATS`) is updated in place. ``w_hat`` is [ω̂] (3,) with P
+    6×6, or [ω̂, b̂] (6,) with P 9×9 (the disturbance-torque state); ``log_est`` rows
+    are [q̂, ω̂, b̂] (b̂ = 0 without the state); with the state, NEES takes as the true
+    b the constant torque the filter does not model (exact when that is all it does
+    not model). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
+    its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
@@ -270,7 +279,10 @@ def run_block(
     x = x.copy()
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
-    F, W3, W6 = np.empty((6, 6)), np.empty((4, 3, 3)), np.empty((6, 6, 6))
+    nx = P.shape[0]  # 6, or 9 with the disturbance-torque state b̂ = w_hat[3:]
+    biased = use_ekf and nx == 9
+    F, W3, Wn = np.empty((nx, nx)), np.empty((4, 3, 3)), np.empty((6, nx, nx))
+    ee = np.empty(nx)
     q_hat, w_hat, P = q_hat.copy(), w_hat.copy(), P.copy()
     s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
@@ -307,7 +319,7 @@ def run_block(
                 _noisy_into(b_true, sig_sun / cos_i, e[0], e[1], e[2], b_meas)
                 r = r_sun / max(-b_meas[0], 1e-3) if sun_incidence else r_sun
                 g = gate[0] if sun_rejected < gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, W6)
+                ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, Wn)
                 sun_rejected = 0 if ok else sun_rejected + 1
                 if not ok:
                     stats[SUN_GATED] += 1
@@ -320,7 +332,7 @@ def run_block(
                 _matvec(earth_align, nadir_b, b_true)
                 _noisy_into(b_true, sig_earth, e[3], e[4], e[5], b_meas)
                 g = gate[0] if earth_rejected < gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, r_earth, g, W6)
+                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, r_earth, g, Wn)
                 earth_rejected = 0 if ok else earth_rejected + 1
                 if not ok:
                     stats[EARTH_GATED] += 1
@@ -364,6 +376,9 @@ def run_block(
             est[i] = (q_hat[i] if i < 4 else w_hat[i - 4]) if use_ekf else x[i]
         _state_into(est, n, s)
         _control_into(K_w, M, w_max, s, work, tau)
+        if biased:  # disturbance accommodation: cancel the estimated torque
+            for i in range(3):
+                tau[i] -= w_hat[3 + i]
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
         _matvec(G_pinv, work, hw_cmd)
@@ -425,6 +440,8 @@ def run_block(
             for i in range(7):
                 log_est[log_k, i] = est[i]
             for i in range(3):
+                log_est[log_k, 7 + i] = w_hat[3 + i] if biased else 0.0
+            for i in range(3):
                 log_tau[log_k, i] = 0.0
                 for c in range(nw):
                     log_tau[log_k, i] -= G[i, c] * hw_real[c]
@@ -432,9 +449,11 @@ def run_block(
                 dq = qmul(x[:4], np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
                 if dq[3] < 0:
                     dq = -dq
-                ee = np.empty(6)
                 ee[:3] = 2 * dq[:3]
-                ee[3:] = x[4:7] - w_hat
+                for i in range(3):
+                    ee[3 + i] = x[4 + i] - w_hat[i]
+                    if biased:  # the truth's part: the constant torque the filter does not model
+                        ee[6 + i] = dist[7 + i] - dist_model[7 + i] - w_hat[3 + i]
                 log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
             log_sky[log_k, 0] = sunlit
             log_sky[log_k, 1] = sun_status
@@ -448,12 +467,12 @@ def run_block(
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
                 error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], F, W3)
-                predict_covariance_into(P, F, Qc, T_sensor, W6)
+                predict_covariance_into(P, F, Qc, T_sensor, Wn)
             xm[:4] = q_hat
-            xm[4:7] = w_hat
+            xm[4:7] = w_hat[:3]
             xm[7:] = x[7:]
-            for i in range(3):  # the thruster command is known to the filter
-                dm[7 + i] = dist_model[7 + i] + tau_thr[i]
+            for i in range(3):  # the thruster command (and b̂) is known to the filter
+                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + (w_hat[3 + i] if biased else 0.0)
             # the filter knows the wheels' torques and momenta (their tachometers)
             rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):

@@ -89,6 +89,12 @@ class Scenario:
         torque allowed by its process noise (see ``sim.default_filter_psd``).
     filter_torque_bound : that worst-case torque, N·m, as the designer assumes it;
         0 derives it from the disturbance model (SRP, tides, constant torque).
+    filter_torque_bias : the filter estimates a body-frame disturbance torque (a random
+        walk) that its model adds and the controller cancels (disturbance
+        accommodation, ``ekf``); False: the 6-state filter with the unknown torque
+        as inflated rate noise (paper B).
+    filter_bias_torque_psd : that random walk's PSD, N²·m²/s; 0 derives it (see
+        ``sim.bias_torque_psd``).
     ltr_bandwidth_factor : LTR's fictitious noise puts the filter's bandwidth at
         this multiple of the LQR loop's crossover at ρ = 1.
 
@@ -148,6 +154,8 @@ class Scenario:
     disturbances_known_to_filter: bool = False
     filter_disturbance_budget_deg: float = 0.02
     filter_torque_bound: float = 0.0
+    filter_torque_bias: bool = True
+    filter_bias_torque_psd: float = 0.0
     ltr_bandwidth_factor: float = 2.5
     momentum_unloading: bool = True
     thruster_torque: float = 1.2  # a 1 N hydrazine thruster at 1.2 m
@@ -192,6 +200,7 @@ class Scenario:
             "initial_error_deg",
             "estimator_error_deg",
             "filter_torque_bound",
+            "filter_bias_torque_psd",
         ):
             if not math.isfinite(getattr(self, name)) or getattr(self, name) < 0:
                 raise ConfigError(f"{self.name}: {name} must be ≥ 0")

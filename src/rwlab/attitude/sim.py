@@ -31,6 +31,7 @@ __all__ = [
     "PDController",
     "SimResult",
     "attitude_noise_psd",
+    "bias_torque_psd",
     "default_filter_psd",
     "simulate",
     "steady_start",
@@ -102,6 +103,8 @@ class SimResult:
     steady_from_s : start of the steady-state window, s.
     sky : (K, 3) sunlit fraction and the sun and earth sensors' status (0 used,
     1 unavailable: eclipse, field of view or blinding, 2 gated) at the logged steps.
+    torque_bias_est : (K, 3) the filter's disturbance-torque estimate b̂, N·m (zeros
+    without that state, see ``Scenario.filter_torque_bias``).
     """
 
     t: np.ndarray
@@ -118,6 +121,7 @@ class SimResult:
     stats: dict
     steady_from_s: float
     sky: np.ndarray | None = None
+    torque_bias_est: np.ndarray | None = None
 
 
 def _w_bo(q, w, n=GEO_RATE):
@@ -148,20 +152,42 @@ def unknown_torque_bound(sc: Scenario) -> float:
 
 
 def default_filter_psd(sc: Scenario) -> float:
-    """The torque PSD the filter assumes, N²·m²·s (paper B: SRP as process noise).
+    """The torque PSD the filter assumes on its rate, N²·m²·s.
 
-    With the disturbances unknown to the filter, its process noise is sized so
+    With the disturbance-torque state (``filter_torque_bias``) the unknown torque
+    is that state's job (:func:`bias_torque_psd`) and the rate carries only the
+    white ``process_noise_torque``. Without it (paper B: SRP as process noise)
+    and with the disturbances unknown to the filter, its process noise is sized so
     that the estimate's lag on the worst-case unmodelled torque τ_u stays within
     ``filter_disturbance_budget_deg`` (τ_u: ``filter_torque_bound``, or
     :func:`unknown_torque_bound` when that is 0): a Kalman filter on J θ̈ = τ measuring θ
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
     """
     q = sc.process_noise_torque**2
-    if not sc.disturbances_known_to_filter:
+    if not (sc.disturbances_known_to_filter or sc.filter_torque_bias):
         r = attitude_noise_psd(sc)
         bound = sc.filter_torque_bound or unknown_torque_bound(sc)
         q += r * (bound / math.radians(sc.filter_disturbance_budget_deg)) ** 2
     return q
+
+
+def filter_torque_scale(sc: Scenario) -> float:
+    """τ_u, N·m: the unmodelled torque the filter is designed for (``filter_torque_bound``,
+    else :func:`unknown_torque_bound`; 0 with the disturbances known to the filter)."""
+    if sc.disturbances_known_to_filter:
+        return 0.0
+    return sc.filter_torque_bound or unknown_torque_bound(sc)
+
+
+def bias_torque_psd(sc: Scenario) -> float:
+    """PSD of the filter's disturbance-torque random walk, N²·m²/s.
+
+    ``filter_bias_torque_psd`` when set, else τ_u²·n (τ_u from
+    :func:`filter_torque_scale`, n the orbit rate): the walk spreads by τ_u in
+    1/n ≈ 3.8 h, the time the Sun takes to turn a radian in the body frame, which
+    is how fast SRP (the largest unmodelled torque at GEO) changes direction.
+    """
+    return sc.filter_bias_torque_psd or filter_torque_scale(sc) ** 2 * GEO_RATE
 
 
 def attitude_noise_psd(sc: Scenario) -> float:
@@ -261,13 +287,21 @@ def simulate(
 
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
+    """True and estimated initial states. The estimate after q̂ is [ω̂], or [ω̂, b̂] with b̂
+    drawn from its prior N(0, σ_b²): σ_b is the designer's a-priori torque
+    (``filter_torque_bound`` or :func:`unknown_torque_bound`, known or not to the filter)."""
     q0 = from_axis_angle(sc.initial_axis, math.radians(sc.initial_error_deg))
     w0 = dcm(q0) @ np.array([0.0, -GEO_RATE, 0.0]) + np.asarray(sc.initial_rate, float)
     hw0 = np.zeros(sc.n_wheels) if wheel_momentum0 is None else np.asarray(wheel_momentum0, float)
     dq = from_axis_angle(rng.standard_normal(3), math.radians(sc.estimator_error_deg))
     s0 = math.radians(max(sc.estimator_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
-    return q0, w0, hw0, qmul(dq, q0), w0 + 1e-5 * rng.standard_normal(3), P0
+    w_hat = w0 + 1e-5 * rng.standard_normal(3)
+    if sc.filter_torque_bias:
+        sb = max(sc.filter_torque_bound or unknown_torque_bound(sc), sc.process_noise_torque)
+        P0 = np.diag(np.concatenate([np.diag(P0), [sb**2] * 3]))
+        w_hat = np.concatenate([w_hat, sb * rng.standard_normal(3)])
+    return q0, w0, hw0, qmul(dq, q0), w_hat, P0
 
 
 def _result(t, q, w_bo, q_est, w_est, torque, wheel, nees, saturated, stats, steady_s):
@@ -359,14 +393,15 @@ def _simulate_compiled(
     x = np.concatenate([q0, w0, hw0])
     use_ekf = estimator == "ekf"
     if not use_ekf:
-        q_hat, w_hat = q0.copy(), w0.copy()
+        q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
     n_log = steps // log_every + 2
     log_t, log_x, log_sky = np.zeros(n_log), np.zeros((n_log, x.size)), np.zeros((n_log, 3))
-    log_est, log_tau, log_nees = np.zeros((n_log, 7)), np.zeros((n_log, 3)), np.zeros(n_log)
+    log_est, log_tau, log_nees = np.zeros((n_log, 10)), np.zeros((n_log, 3)), np.zeros(n_log)
     dist = sc.disturbances.vector()
     dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
-    Qc = np.zeros((6, 6))
-    Qc[3:, 3:] = filter_psd * J_inv @ J_inv.T
+    Qc = np.zeros(P.shape)
+    Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
+    Qc[6:, 6:] = bias_torque_psd(sc) * np.eye(Qc.shape[0] - 6)
     m = noise_scale
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
     sensor_every = round(sc.sensor_period / sc.dt)
@@ -387,7 +422,7 @@ def _simulate_compiled(
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
-        s_q, s_w = (q_hat, w_hat) if use_ekf else (x[:4], x[4:7])
+        s_q, s_w = (q_hat, w_hat[:3]) if use_ekf else (x[:4], x[4:7])
         K = np.ascontiguousarray(
             controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]), dtype=float
         )
@@ -477,6 +512,7 @@ def _simulate_compiled(
         steady_from * sc.dt,
     )
     result.sky = log_sky[:log_k]
+    result.torque_bias_est = log_est[:, 7:]
     return result
 
 
