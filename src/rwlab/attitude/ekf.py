@@ -13,11 +13,12 @@ the state after q, ``[ω̂]`` (3,) or ``[ω̂, b̂]`` (6,).
 Error dynamics (analytic; ``F`` below, checked against finite differences):
 
     δθ̇ = −[ω̂×] δθ + δω
-    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + δb + w
+    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + ν δb + w
     δḃ = w_b
 
-with r̂ the nadir in body axes, w the process-noise torque and w_b the bias's
-random-walk noise. A vector measurement ``b = A(q) r + v`` (sun or earth
+with r̂ the nadir in body axes, w the process-noise torque, w_b the bias's
+random-walk noise and ν the share of b acting (1, or the sunlit fraction when b
+stands for solar pressure, whose shadows the filter knows from the ephemeris). A vector measurement ``b = A(q) r + v`` (sun or earth
 direction, r known in the orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
 
 Prediction propagates q̂, ω̂ with the plant's own RK4 (known wheel torques and
@@ -44,9 +45,10 @@ __all__ = [
 
 
 @njit(cache=True)
-def error_jacobian(q, w, h, J, J_inv, n, gg_gain, dim=6):
+def error_jacobian(q, w, h, J, J_inv, n, gg_gain, dim=6, bias_gain=1.0):
     """F (dim × dim, dim 6 or 9) of the error dynamics at (q̂, ω̂) with wheel momentum h
-    (body axes); with the bias state (dim 9) δω̇ gains J⁻¹ δb."""
+    (body axes); with the bias state (dim 9) δω̇ gains ν J⁻¹ δb, ν = ``bias_gain`` (the
+    share of b̂ acting now: the sunlit fraction for an SRP-like torque, else 1)."""
     r = dcm(q)[:, 2].copy()
     F = np.zeros((dim, dim))
     F[:3, :3] = -skew(w)
@@ -54,7 +56,7 @@ def error_jacobian(q, w, h, J, J_inv, n, gg_gain, dim=6):
     F[3:6, :3] = J_inv @ (gg_gain * (skew(r) @ J - skew(J @ r)) @ skew(r))
     F[3:6, 3:6] = J_inv @ (skew(J @ w + h) - skew(w) @ J)
     if dim == 9:
-        F[3:6, 6:] = J_inv
+        F[3:6, 6:] = bias_gain * J_inv
     return F
 
 
@@ -146,7 +148,7 @@ def _mmt(A, B, out):
 
 
 @njit(cache=True)
-def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, F, W):
+def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_gain, F, W):
     """:func:`error_jacobian` into F (n, n; n = 6, or 9 with the bias state), with a
     (4, 3, 3) scratch W."""
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
@@ -190,7 +192,7 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, F, W):
         for j in range(3):
             F[3 + i, 3 + j] = S[i, j]
             if F.shape[0] == 9:
-                F[3 + i, 6 + j] = J_inv[i, j]
+                F[3 + i, 6 + j] = bias_gain * J_inv[i, j]
 
 
 @njit(cache=True, inline="always")

@@ -188,6 +188,7 @@ def run_block(
     M,
     w_max,
     use_ekf,
+    bias_sunlit,
     dt,
     sensor_every,
     log_every,
@@ -257,7 +258,8 @@ def run_block(
     6×6, or [ω̂, b̂] (6,) with P 9×9 (the disturbance-torque state); ``log_est`` rows
     are [q̂, ω̂, b̂] (b̂ = 0 without the state); with the state, NEES takes as the true
     b the constant torque the filter does not model (exact when that is all it does
-    not model). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
+    not model); ``bias_sunlit``: b̂ acts scaled by the sunlit fraction (it stands
+    for SRP). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
     its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
@@ -376,9 +378,10 @@ def run_block(
             est[i] = (q_hat[i] if i < 4 else w_hat[i - 4]) if use_ekf else x[i]
         _state_into(est, n, s)
         _control_into(K_w, M, w_max, s, work, tau)
+        nu_b = sunlit if bias_sunlit else 1.0  # the share of b̂ acting now
         if biased:  # disturbance accommodation: cancel the estimated torque
             for i in range(3):
-                tau[i] -= w_hat[3 + i]
+                tau[i] -= nu_b * w_hat[3 + i]
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
         _matvec(G_pinv, work, hw_cmd)
@@ -466,13 +469,15 @@ def run_block(
         dm[1] = dist_model[1] * sunlit
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
-                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], F, W3)
+                error_jacobian_into(
+                    q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], nu_b, F, W3
+                )
                 predict_covariance_into(P, F, Qc, T_sensor, Wn)
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
             xm[7:] = x[7:]
             for i in range(3):  # the thruster command (and b̂) is known to the filter
-                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + (w_hat[3 + i] if biased else 0.0)
+                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + (nu_b * w_hat[3 + i] if biased else 0.0)
             # the filter knows the wheels' torques and momenta (their tachometers)
             rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):

@@ -93,6 +93,9 @@ class Scenario:
         walk) that its model adds and the controller cancels (disturbance
         accommodation, ``ekf``); False: the 6-state filter with the unknown torque
         as inflated rate noise (paper B).
+    filter_bias_sunlit_only : that torque stands for solar pressure: it acts (in the
+        filter's model and the feed-forward) in proportion to the sunlit fraction,
+        which the filter knows from the ephemeris; False: it acts in shadow too.
     filter_bias_torque_psd : that random walk's PSD, N²·m²/s; 0 derives it (see
         ``sim.bias_torque_psd``).
     ltr_bandwidth_factor : LTR's fictitious noise puts the filter's bandwidth at
@@ -155,6 +158,7 @@ class Scenario:
     filter_disturbance_budget_deg: float = 0.02
     filter_torque_bound: float = 0.0
     filter_torque_bias: bool = True
+    filter_bias_sunlit_only: bool = True
     filter_bias_torque_psd: float = 0.0
     ltr_bandwidth_factor: float = 2.5
     momentum_unloading: bool = True

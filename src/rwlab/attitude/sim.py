@@ -441,6 +441,7 @@ def _simulate_compiled(
             _rate_map(K),
             float(controller.rate_limit),
             use_ekf,
+            sc.filter_bias_sunlit_only,
             sc.dt,
             sensor_every,
             log_every,
