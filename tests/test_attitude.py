@@ -189,11 +189,14 @@ def test_the_torque_state_learns_a_constant_unknown_torque_and_cancels_it():
     r = _constant_torque_day(True)
     late = r.t >= 1200
     b = r.torque_bias_est[late]
-    assert np.all(np.linalg.norm(b - TORQUE, axis=1) < 0.02 * np.linalg.norm(TORQUE))
-    assert np.max(r.error_deg[late]) < 1e-4  # fed forward, the torque no longer turns the body
+    assert np.all(np.linalg.norm(b - TORQUE, axis=1) < 0.01 * np.linalg.norm(TORQUE))
+    assert np.max(r.est_error_deg[late]) < 1e-4
+    # fed forward, the torque no longer offsets the body; what is left (< 1e-3°) is the
+    # wheels' growing momentum coupling roll and yaw (h × ω), which the law does not cancel
+    assert np.max(r.error_deg[late]) < 1e-3
     # without the state the same filter lags the torque and the loop has no integral action
     off = _constant_torque_day(False)
-    assert np.max(off.error_deg[off.t >= 1200]) > 30 * np.max(r.error_deg[late])
+    assert np.max(off.error_deg[off.t >= 1200]) > 50 * np.max(r.error_deg[late])
 
 
 def test_quaternion_stays_unit_and_pointing_holds_with_noise():
