@@ -18,8 +18,9 @@ Error dynamics (analytic; ``F`` below, checked against finite differences):
 
 with r̂ the nadir in body axes, w the process-noise torque, w_b the bias's
 random-walk noise and ν the share of b acting (1, or the sunlit fraction when b
-stands for solar pressure, whose shadows the filter knows from the ephemeris). A vector measurement ``b = A(q) r + v`` (sun or earth
-direction, r known in the orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
+stands for solar pressure, whose shadows the filter knows from the ephemeris).
+A vector measurement ``b = A(q) r + v`` (sun or earth direction, r known in the
+orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
 
 Prediction propagates q̂, ω̂ with the plant's own RK4 (known wheel torques and
 momenta, modelled disturbances) and P with Φ = expm(F·dt) and the matching

@@ -469,15 +469,14 @@ def run_block(
         dm[1] = dist_model[1] * sunlit
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
-                error_jacobian_into(
-                    q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], nu_b, F, W3
-                )
+                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], nu_b, F, W3)
                 predict_covariance_into(P, F, Qc, T_sensor, Wn)
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
             xm[7:] = x[7:]
             for i in range(3):  # the thruster command (and b̂) is known to the filter
-                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + (nu_b * w_hat[3 + i] if biased else 0.0)
+                b_i = nu_b * w_hat[3 + i] if biased else 0.0
+                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + b_i
             # the filter knows the wheels' torques and momenta (their tachometers)
             rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):
