@@ -413,3 +413,15 @@ def test_the_scalar_update_holds_on_ill_conditioned_innovations():
         assert np.max(np.abs(P2 - exact)[:3, :3]) < 1e-6 * block
         assert np.all(np.linalg.eigvalsh(P2) > 0)
         q, w, P = q2, w2, P2
+
+
+def test_report_envelope_keeps_every_peak_of_a_long_trace():
+    from rwlab.report.attitude import _envelope
+
+    t = np.arange(100_000) * 0.1
+    y = np.random.default_rng(5).standard_normal(t.size)
+    y[12_345], y[77_777] = 50.0, -40.0
+    t2, y2 = _envelope(t, y, bins=500)
+    assert t2.size <= 1000 + 2 * 200 and np.all(np.diff(t2) > 0)
+    assert y2.max() == 50.0 and y2.min() == -40.0
+    assert np.array_equal(_envelope(t[:900], y[:900], bins=500)[1], y[:900])
