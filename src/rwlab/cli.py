@@ -670,6 +670,15 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option(
+    "--fault",
+    "faults",
+    multiple=True,
+    metavar="NAME[=VALUE]@SECONDS",
+    help="Inject a fault into the simulated wheel (repeatable), e.g. friction=3@900: friction, "
+    "torque_constant (factors), current_limit (A), speed_sensor_bias (rpm), speed_sensor_stuck, "
+    "telemetry_dropout (s).",
+)
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(
     "--port", type=click.IntRange(1, 65535), default=5006, show_default=True, help="Monitor port."
@@ -692,6 +701,7 @@ def experiment(
     channel,
     node_id,
     raw_frames,
+    faults,
     monitor,
     port,
     force,
@@ -718,6 +728,7 @@ def experiment(
         channel=channel,
         node_id=node_id,
         raw_frames=raw_frames,
+        faults=tuple(faults) or None,
     )
     if config_file:
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
