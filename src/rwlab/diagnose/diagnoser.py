@@ -227,7 +227,11 @@ class Diagnoser:
             self._detectors["current"] = Cusum(h, CUSUM_K)
             thresholds["current"] = h
             self.calibration["current_model"] = dict(
-                zip(("a_per_rpm_s", "a_per_rpm", "a_coulomb", "a_offset"), coef.tolist(), strict=True)
+                zip(
+                    ("a_per_rpm_s", "a_per_rpm", "a_coulomb", "a_offset"),
+                    coef.tolist(),
+                    strict=True,
+                )
             )
             self.calibration["current_peak_a"] = float(np.max(np.abs(current)))
         p = (repeat[steady].sum() + 1) / (steady.sum() + 2)  # Laplace's rule: never 0 or 1
@@ -306,7 +310,11 @@ class Diagnosis:
             for part, mask in (("before_alarm", t < first), ("after_alarm", t >= first)):
                 v = x[mask & np.isfinite(x)]
                 out.setdefault(name, {"unit": unit})[part] = (
-                    {"mean": float(v.mean()), "std": float(v.std()), "max_abs": float(np.abs(v).max())}
+                    {
+                        "mean": float(v.mean()),
+                        "std": float(v.std()),
+                        "max_abs": float(np.abs(v).max()),
+                    }
                     if v.size
                     else None
                 )
@@ -356,8 +364,10 @@ def diagnose(
     def column(name, default):
         return data.y[:, names.index(name)] if name in names else np.full(data.N, default)
 
-    speed, current, age = column("speed_rpm", 0), column("current_a", math.nan), column(
-        "telemetry_age_s", 0.0
+    speed, current, age = (
+        column("speed_rpm", 0),
+        column("current_a", math.nan),
+        column("telemetry_age_s", 0.0),
     )
     u = data.u[:, 0]
     d = Diagnoser(

@@ -9,6 +9,8 @@ detector    signature                                               likely fault
 ==========  ======================================================  ======================
 dropout     no telemetry frame for a whole sample period             ``telemetry_dropout``
 stuck       identical speed readings, longer than noise allows       ``speed_sensor_stuck``
+current     the last ≥ 3 speed readings identical (a frozen sensor   ``speed_sensor_stuck``
+            makes the measured acceleration 0 while current flows)
 current     extra current ∝ acceleration (regression slope ≥ 10 %)  ``torque_constant``
 current     extra current in the direction of rotation, not ∝ α     ``friction``
 speed       current clamped below its healthy peak while the         ``current_limit``
@@ -29,6 +31,7 @@ import numpy as np
 
 __all__ = ["isolate"]
 
+FROZEN = 3  # identical readings that point to a frozen sensor (healthy: p³ ≈ 1 %)
 _DIRECT = {"dropout": "telemetry_dropout", "stuck": "speed_sensor_stuck"}
 
 
@@ -49,6 +52,8 @@ def isolate(detector: str, window: np.ndarray, calibration: dict) -> str:
     accel, speed, r_current, current = window[:, 1], window[:, 2], window[:, 3], window[:, 4]
     ok = np.isfinite(r_current)
     if detector == "current":
+        if len(speed) >= FROZEN and speed[-1] != 0 and np.all(speed[-FROZEN:] == speed[-1]):
+            return "speed_sensor_stuck"
         if ok.sum() < 4:
             return "friction"
         # r_i ≈ a·sign ω + b·(c_α α): b is the relative excess current per acceleration

@@ -278,7 +278,9 @@ class WheelPhysics:
         # speed limit: never drive further beyond the maximum speed
         self.speed_limited = abs(self.speed) >= p.max_speed and current * self.speed > 0
         if self.speed_limited:
-            current = _clip(self.friction_torque(self.speed) / p.torque_constant, self.current_limit)
+            current = _clip(
+                self.friction_torque(self.speed) / p.torque_constant, self.current_limit
+            )
         if self.forced_current is not None:
             current = self.forced_current
         self.current = current
