@@ -187,3 +187,13 @@ def test_a_fault_free_two_hour_record_raises_no_alarm(tmp_path, model_file):
     assert report["alarms"] == []
     assert set(report["thresholds"]) >= {"current", "stuck", "dropout"}
     assert (tmp_path / "d" / "report.html").read_text().count("<figure") == 2
+
+
+def test_live_alarms_are_the_offline_alarms(tmp_path, model_file):
+    path = tmp_path / "live.mcap"
+    cfg = ExperimentConfig(duration=600, seed=2, faults=("friction=4@400",), model=str(model_file))
+    run_experiment(cfg, path)
+    live = [e["message"] for e in read_record(path).topic("/event") if e["kind"] == "alarm"]
+    offline = _diagnose(path, model_file).alarms
+    assert offline and offline[0].t_s >= 400 and offline[0].kind == "friction"
+    assert [m.split(" (")[0] for m in live] == [f"{a.kind} at {a.t_s:.1f} s" for a in offline]

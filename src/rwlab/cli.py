@@ -679,6 +679,12 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
     "torque_constant (factors), current_limit (A), speed_sensor_bias (rpm), speed_sensor_stuck, "
     "telemetry_dropout (s).",
 )
+@click.option(
+    "--model",
+    "model_file",
+    type=click.Path(dir_okay=False),
+    help="model.json: run the fault detector live; alarms become record events.",
+)
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(
     "--port", type=click.IntRange(1, 65535), default=5006, show_default=True, help="Monitor port."
@@ -702,6 +708,7 @@ def experiment(
     node_id,
     raw_frames,
     faults,
+    model_file,
     monitor,
     port,
     force,
@@ -729,6 +736,7 @@ def experiment(
         node_id=node_id,
         raw_frames=raw_frames,
         faults=tuple(faults) or None,
+        model=model_file,
     )
     if config_file:
         cfg = ExperimentConfig.from_toml(config_file, **overrides)

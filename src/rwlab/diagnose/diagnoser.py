@@ -179,8 +179,7 @@ class Diagnoser:
         if not self._detectors:
             if usable:
                 self._calib.append(
-                    (r["accel_rpm_s"], speed_rpm, current_a, r["speed"], r["model_rpm"], repeat)
-                    + (r["steady"],)
+                    (r["accel_rpm_s"], speed_rpm, current_a, r["speed"], repeat, r["steady"])
                 )
             if t_s - self._t0 >= self.calibration_s:
                 self._calibrate()
@@ -206,7 +205,9 @@ class Diagnoser:
                 f"only {len(rows)} usable samples in the {self.calibration_s:g} s calibration "
                 "window; the detector needs ≥ 60"
             )
-        accel, speed, current, r_speed, model, repeat, steady = (np.array(c) for c in zip(*rows))
+        accel, speed, current, r_speed, repeat, steady = (
+            np.array(c) for c in zip(*rows, strict=True)
+        )
         if steady.sum() < 30:
             raise DataError(
                 f"only {steady.sum()} steady samples in the {self.calibration_s:g} s calibration "

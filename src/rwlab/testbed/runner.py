@@ -79,6 +79,10 @@ class ExperimentConfig:
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
+    model : str
+        ``model.json`` of an identified wheel: run the fault detector live
+        (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
+        each alarm as an ``alarm`` event.
     """
 
     signal: str = "prbs"
@@ -102,6 +106,7 @@ class ExperimentConfig:
     file: str | None = None
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
+    model: str | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -125,6 +130,7 @@ class ExperimentConfig:
             "f0": (number, "a number of Hz"),
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
+            "model": ((str, type(None)), "a path to model.json"),
             "f1": ((*number, type(None)), "a number of Hz"),
         }
         for name, (kind, text) in expected.items():
@@ -321,6 +327,7 @@ def run_experiment(
     t0 = clock.now() + 0.01
     writer.time_origin = t0
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
+    detector = _live_detector(cfg)
     if node is not None:
         node.schedule_faults(faults, origin=t0)
     try:
@@ -330,6 +337,16 @@ def run_experiment(
             while faults and faults[0].t_s <= k * cfg.Ts:
                 fault = faults.pop(0)
                 writer.event(t0 + fault.t_s, "fault_injected", str(fault))
+            if detector is not None and client.latest is not None:
+                held = command[k - 1] if k else command[0]
+                for alarm in detector.update(
+                    k * cfg.Ts,
+                    float(held),
+                    client.latest.speed_rpm,
+                    client.latest.current,
+                    clock.now() - client.latest_time,
+                ):
+                    writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
             writer.write(
                 "/command",
@@ -374,6 +391,29 @@ def run_experiment(
         client.bad_frames,
         clock.now() - t0,
         status,
+    )
+
+
+def _live_detector(cfg: ExperimentConfig):
+    """The fault detector for ``cfg.model``, or None."""
+    if cfg.model is None:
+        return None
+    from rwlab.diagnose import Diagnoser
+    from rwlab.wheel.identified import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(cfg.model)
+    if cfg.mode != "speed" or not math.isclose(wheel.Ts, cfg.Ts, rel_tol=1e-6):
+        raise ConfigError(
+            f"live diagnosis needs speed mode at the model's Ts = {wheel.Ts:g} s "
+            f"(the experiment: {cfg.mode} mode, Ts = {cfg.Ts:g} s)"
+        )
+    return Diagnoser(wheel)
+
+
+def _alarm_text(alarm) -> str:
+    return (
+        f"{alarm.kind} at {alarm.t_s:.1f} s ({alarm.detector} test, statistic "
+        f"{alarm.statistic:.3g} > {alarm.threshold:.3g})"
     )
 
 
