@@ -82,6 +82,7 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
         ax.axhline(diagnosis.thresholds[name], color="k", ls=":", label="threshold")
         ax.set_yscale("symlog", linthresh=diagnosis.thresholds[name])
+        ax.set_ylim(bottom=0)
         ax.set_ylabel("statistic [σ]")
         ax.legend(loc="upper left", fontsize=8)
         _mark_alarms(ax, diagnosis)
