@@ -86,7 +86,7 @@ def test_model_json_is_physical_and_simulates_the_wheel(study_dir):
         "accel_rpm_s": 314.0,
         "source": "the record's wheel parameters",
     }
-    wheel = IdentifiedWheel.from_json(study_dir / "model.json")
+    wheel = IdentifiedWheel.from_json(study_dir / "model.json", model="linear")  # copied limits
     u = rate_limit(prbs(600, 0.5, 5000, 5, 60, seed=42), 314, 0.5, initial=0.0)
     truth = simulate_speed_command(u, 0.5, seed=42)
     assert fit_percent(truth, wheel.simulate(u)) > 85  # a new input, in rpm

@@ -310,6 +310,34 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
         "thruster_impulse_Nms": st["thruster_impulse_Nms"],
         "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
         "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
+        **_sky_metrics(st),
+    }
+
+
+def _sky_metrics(st: dict) -> dict:
+    """Eclipse time (the Earth's umbra + penumbra), pointing inside and outside it (steady
+    window), and the sensors' outages, blindings and gated measurements (sensor ticks)."""
+    n_ecl = st["steady_eclipse_steps"]
+    n_out = st["steady_steps"] - n_ecl
+    period = st.get("sensor_period_s", 0.0)
+    return {
+        "eclipse_s": st["eclipse_steps"] * st.get("dt_s", 0.0),
+        "moon_shadow_s": st["moon_shadow_steps"] * st.get("dt_s", 0.0),
+        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"],
+        "steady_rms_error_in_eclipse_deg": math.sqrt(
+            st["steady_eclipse_error_sq_sum"] / max(n_ecl, 1)
+        ),
+        "steady_max_error_outside_eclipse_deg": st["steady_outside_eclipse_max_error_deg"],
+        "steady_rms_error_outside_eclipse_deg": math.sqrt(
+            st["steady_outside_eclipse_error_sq_sum"] / max(n_out, 1)
+        ),
+        "sun_sensor_outage_count": int(st["sun_sensor_outages"]),
+        "sun_sensor_outage_s": st["sun_sensor_outages"] * period,
+        "earth_sensor_blinded_count": int(st["earth_sensor_blinded"]),
+        "earth_sensor_blinded_s": st["earth_sensor_blinded"] * period,
+        "no_sensor_s": st["no_update_ticks"] * period,
+        "sun_sensor_gated_count": int(st["sun_sensor_gated"]),
+        "earth_sensor_gated_count": int(st["earth_sensor_gated"]),
     }
 
 
@@ -404,22 +432,27 @@ def fly(
     update_period: float | None = None,
     log_every: int = 10,
     progress=None,
+    design: Scenario | None = None,
 ) -> tuple[SimResult, dict]:
     """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
-    simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise."""
+    simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
+    ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
+    default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
+    design (the filter still uses the flown scenario's inertia and sensor noise)."""
     if controller not in CONTROLLERS:
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
+    design = scenario if design is None else design
     kw = {}
     if controller == "pd":
-        ctl = PDController(*pd_gains(scenario))
-        ctl.rate_limit = slew_rate_limit(scenario, ctl.K)
+        ctl = PDController(*pd_gains(design))
+        ctl.rate_limit = slew_rate_limit(design, ctl.K)
     else:
-        ctl = LQRController(scenario, update_period=update_period)
+        ctl = LQRController(design, update_period=update_period)
     if controller == "lqg_ltr":
         if not (math.isfinite(rho) and rho > 0):
             raise DesignError(f"ρ must be a positive number, got {rho}")
-        kw = dict(filter_torque_psd=ltr_noise(scenario, ctl)[0], filter_noise_scale=math.sqrt(rho))
+        kw = dict(filter_torque_psd=ltr_noise(design, ctl)[0], filter_noise_scale=math.sqrt(rho))
     run = simulate(
         scenario,
         ctl,

@@ -22,13 +22,20 @@ discrete process noise (Van Loan). Updates use the Joseph form.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
-from scipy.linalg import expm
 
-from rwlab.attitude.frames import GEO_RATE, dcm, qmul, skew
+from rwlab.attitude.frames import dcm, qmul, skew
 
-__all__ = ["MEKF", "error_jacobian", "vector_jacobian"]
+__all__ = [
+    "error_jacobian",
+    "gated_update",
+    "gated_update_into",
+    "predict_covariance",
+    "vector_jacobian",
+]
 
 
 @njit(cache=True)
@@ -55,11 +62,27 @@ def vector_jacobian(q, ref):
 @njit(cache=True)
 def _update(q, w, P, b_meas, ref, sigma):
     """One vector-measurement update; returns q, w, P (Joseph form, symmetric)."""
+    q, w, P, _ = gated_update(q, w, P, b_meas, ref, sigma, 0.0)
+    return q, w, P
+
+
+@njit(cache=True)
+def gated_update(q, w, P, b_meas, ref, sigma, gate):
+    """:func:`_update` behind an innovation gate: returns q, w, P and whether it was applied.
+
+    The measurement is rejected (estimate and P unchanged) when its normalised
+    innovation ν' S⁻¹ ν exceeds ``gate`` (a χ² bound; 0: no gate). The innovation
+    of a unit vector has two degrees of freedom (its part along b is second order).
+    """
     b, H = vector_jacobian(q, ref)
     R = sigma * sigma * np.eye(3)
     S = H @ P @ H.T + R
-    K = P @ H.T @ np.linalg.inv(S)
-    dx = K @ (b_meas - b)
+    S_inv = np.linalg.inv(S)
+    nu = b_meas - b
+    if gate > 0 and nu @ S_inv @ nu > gate:
+        return q, w, P, False
+    K = P @ H.T @ S_inv
+    dx = K @ nu
     IKH = np.eye(6) - K @ H
     P = IKH @ P @ IKH.T + K @ R @ K.T
     P = 0.5 * (P + P.T)
@@ -68,84 +91,7 @@ def _update(q, w, P, b_meas, ref, sigma):
     dq[3] = 1.0
     q = qmul(dq, q)
     q /= np.sqrt(q @ q)
-    return q, w + dx[3:], P
-
-
-class MEKF:
-    """The filter. ``predict`` with the plant model, ``update`` per vector measurement.
-
-    Parameters
-    ----------
-    J : array_like, shape (3, 3)
-        Satellite inertia, kg·m².
-    q0, w0 : array_like
-        Initial estimates (scalar-last quaternion; rad/s).
-    P0 : array_like, shape (6, 6)
-        Initial error covariance (rad², (rad/s)²).
-    torque_psd : float
-        Process noise: power spectral density of the unmodelled torque, N²·m²·s.
-    n : float
-        Orbital rate, rad/s.
-    gg_gain : float
-        3n² (0 to leave gravity gradient out of the model).
-    """
-
-    def __init__(
-        self, J, q0, w0, P0, torque_psd: float, n: float = GEO_RATE, gg_gain: float | None = None
-    ) -> None:
-        self.J = np.asarray(J, float)
-        self.J_inv = np.linalg.inv(self.J)
-        self.q = np.asarray(q0, float) / np.linalg.norm(q0)
-        self.w = np.asarray(w0, float).copy()
-        self.P = np.asarray(P0, float).copy()
-        self.n = n
-        self.gg_gain = 3 * n * n if gg_gain is None else gg_gain
-        self.torque_psd = float(torque_psd)
-        self._cache: tuple | None = None
-
-    def _discrete(self, F: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Φ and Q_d for this F over dt (Van Loan), cached while F barely changes."""
-        if (
-            self._cache is not None
-            and self._cache[0] == dt
-            and np.allclose(self._cache[1], F, rtol=1e-3, atol=1e-12)
-        ):
-            return self._cache[2], self._cache[3]
-        G = np.zeros((6, 3))
-        G[3:] = self.J_inv
-        Qc = G @ (self.torque_psd * np.eye(3)) @ G.T
-        M = np.zeros((12, 12))
-        M[:6, :6] = -F
-        M[:6, 6:] = Qc
-        M[6:, 6:] = F.T
-        E = expm(M * dt)
-        Phi = E[6:, 6:].T
-        Qd = Phi @ E[:6, 6:]
-        Qd = 0.5 * (Qd + Qd.T)
-        self._cache = (dt, F.copy(), Phi, Qd)
-        return Phi, Qd
-
-    def predict(self, x_next_model: np.ndarray, h_body: np.ndarray, dt: float) -> None:
-        """Move to the next step: ``x_next_model`` is the plant model propagated from
-        the current estimate (q̂, ω̂, wheel momenta) over ``dt``."""
-        F = error_jacobian(self.q, self.w, h_body, self.J, self.J_inv, self.n, self.gg_gain)
-        Phi, Qd = self._discrete(F, dt)
-        self.q = x_next_model[:4] / np.linalg.norm(x_next_model[:4])
-        self.w = x_next_model[4:7].copy()
-        self.P = Phi @ self.P @ Phi.T + Qd
-        self.P = 0.5 * (self.P + self.P.T)
-
-    def update(self, b_meas: np.ndarray, ref: np.ndarray, sigma: float) -> None:
-        """Fuse a unit-vector measurement ``b_meas`` (body) of ``ref`` (orbital), σ in rad."""
-        self.q, self.w, self.P = _update(
-            self.q, self.w, self.P, np.asarray(b_meas, float), np.asarray(ref, float), float(sigma)
-        )
-
-    def error(self, q_true: np.ndarray, w_true: np.ndarray) -> np.ndarray:
-        """Estimation error δx = [δθ, δω] with A(q) = (I − [δθ×]) A(q̂), for NEES tests."""
-        dq = qmul(q_true, np.array([-self.q[0], -self.q[1], -self.q[2], self.q[3]]))
-        dq = dq if dq[3] >= 0 else -dq
-        return np.concatenate([2 * dq[:3], w_true - self.w])
+    return q, w + dx[3:], P, True
 
 
 @njit(cache=True)
@@ -159,3 +105,217 @@ def predict_covariance(P, F, Qc, T):
     Qd = Qc * T + 0.5 * T * T * (FQ + FQ.T) + T**3 / 3.0 * (FQ @ F.T + 0.5 * (F2 @ Qc + Qc @ F2.T))
     P = Phi @ P @ Phi.T + Qd
     return 0.5 * (P + P.T)
+
+
+# Scalar twins of the functions above for the kernel's inner loop: numba's ``@`` on
+# 6×6 matrices calls BLAS (about a microsecond per call) and every readable line
+# allocates. Hand-written because no library offers allocation-free small-matrix
+# kernels callable from numba; tests hold each twin equal to its reference.
+
+
+@njit(cache=True, inline="always")
+def _mm(A, B, out):
+    """out = A @ B (out must not alias A or B)."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+
+
+@njit(cache=True, inline="always")
+def _mmt(A, B, out):
+    """out = A @ B.T (out must not alias A or B)."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[0]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[j, k]
+            out[i, j] = acc
+
+
+@njit(cache=True)
+def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, F, W):
+    """:func:`error_jacobian` into F (6, 6), with a (4, 3, 3) scratch W."""
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    r0 = 2 * (q1 * q3 - q4 * q2)
+    r1 = 2 * (q2 * q3 + q4 * q1)
+    r2 = q4 * q4 - (q1 * q1 + q2 * q2) + q3 * q3
+    F[:, :] = 0.0
+    for i in range(3):
+        F[i, 3 + i] = 1.0
+    F[0, 1], F[0, 2], F[1, 0], F[1, 2], F[2, 0], F[2, 1] = w[2], -w[1], -w[2], w[0], w[1], -w[0]
+    Jr = (
+        J[0, 0] * r0 + J[0, 1] * r1 + J[0, 2] * r2,
+        J[1, 0] * r0 + J[1, 1] * r1 + J[1, 2] * r2,
+        J[2, 0] * r0 + J[2, 1] * r1 + J[2, 2] * r2,
+    )
+    Jw = (
+        J[0, 0] * w[0] + J[0, 1] * w[1] + J[0, 2] * w[2] + h[0],
+        J[1, 0] * w[0] + J[1, 1] * w[1] + J[1, 2] * w[2] + h[1],
+        J[2, 0] * w[0] + J[2, 1] * w[1] + J[2, 2] * w[2] + h[2],
+    )
+    rx, A, B, S = W[0], W[1], W[2], W[3]
+    _skew_into(r0, r1, r2, rx)
+    _mm(rx, J, A)  # [r×] J − [(J r)×]
+    _skew_into(Jr[0], Jr[1], Jr[2], B)
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = gg_gain * (A[i, j] - B[i, j])
+    _mm(A, rx, B)  # (…) [r×]
+    _mm(J_inv, B, S)
+    for i in range(3):
+        for j in range(3):
+            F[3 + i, j] = S[i, j]
+    _skew_into(w[0], w[1], w[2], rx)  # [(J ω + h)×] − [ω×] J
+    _mm(rx, J, A)
+    _skew_into(Jw[0], Jw[1], Jw[2], B)
+    for i in range(3):
+        for j in range(3):
+            B[i, j] -= A[i, j]
+    _mm(J_inv, B, S)
+    for i in range(3):
+        for j in range(3):
+            F[3 + i, 3 + j] = S[i, j]
+
+
+@njit(cache=True, inline="always")
+def _skew_into(a, b, c, out):
+    out[0, 0], out[0, 1], out[0, 2] = 0.0, -c, b
+    out[1, 0], out[1, 1], out[1, 2] = c, 0.0, -a
+    out[2, 0], out[2, 1], out[2, 2] = -b, a, 0.0
+
+
+@njit(cache=True)
+def predict_covariance_into(P, F, Qc, T, W):
+    """:func:`predict_covariance` in place on P (6, 6), with a (6, 6, 6) scratch W."""
+    Phi, F2, FQ, X, Y, Z = W[0], W[1], W[2], W[3], W[4], W[5]
+    _mm(F, F, F2)
+    _mm(F2, F, X)  # F³
+    _mm(F, Qc, FQ)
+    _mmt(FQ, F, Y)  # F Qc Fᵀ
+    _mmt(Qc, F2, Z)  # Qc F²ᵀ
+    T2, T3 = T * T, T * T * T
+    for i in range(6):
+        for j in range(6):
+            Phi[i, j] = (
+                (1.0 if i == j else 0.0) + F[i, j] * T + F2[i, j] * T2 / 2 + X[i, j] * T3 / 6
+            )
+    for i in range(6):  # Qd into Y: Qc T + T²/2 (FQ + FQᵀ) + T³/3 (F Qc Fᵀ + (F² Qc + Qc F²ᵀ)/2)
+        for j in range(6):
+            Y[i, j] = (
+                Qc[i, j] * T
+                + 0.5 * T2 * (FQ[i, j] + FQ[j, i])
+                + T3 / 3.0 * (Y[i, j] + 0.5 * (Z[j, i] + Z[i, j]))
+            )
+    _mm(Phi, P, X)
+    _mmt(X, Phi, Z)
+    for i in range(6):
+        for j in range(6):
+            P[i, j] = 0.5 * (Z[i, j] + Z[j, i] + Y[i, j] + Y[j, i])
+
+
+@njit(cache=True)
+def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
+    """One vector-measurement update in place on q (4,), w (3,), P (6, 6): the scalar twin
+    of ``_update`` behind an innovation gate. Returns whether it was applied.
+
+    Rejected (nothing changes) when ν' S⁻¹ ν > ``gate`` (a χ² bound; 0: no gate).
+    ``W`` is a (4, 6, 6) scratch. H = [[b×], 0] is never formed: only its 3×3 block.
+    """
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    b0 = (
+        (s + 2 * q1 * q1) * ref[0]
+        + 2 * (q1 * q2 + q4 * q3) * ref[1]
+        + 2 * (q1 * q3 - q4 * q2) * ref[2]
+    )
+    b1 = (
+        2 * (q1 * q2 - q4 * q3) * ref[0]
+        + (s + 2 * q2 * q2) * ref[1]
+        + 2 * (q2 * q3 + q4 * q1) * ref[2]
+    )
+    b2 = (
+        2 * (q1 * q3 + q4 * q2) * ref[0]
+        + 2 * (q2 * q3 - q4 * q1) * ref[1]
+        + (s + 2 * q3 * q3) * ref[2]
+    )
+    Hx, PHt, K, X = W[0], W[1], W[2], W[3]  # Hx: [b×] in the top-left 3×3
+    _skew_into(b0, b1, b2, Hx)
+    for i in range(6):  # P Hᵀ (6×3)
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += P[i, k] * Hx[j, k]
+            PHt[i, j] = acc
+    r = sigma * sigma
+    S, Si = X[:3, :3], X[3:, :3]  # X is free until the Joseph step
+    for i in range(3):
+        for j in range(3):
+            acc = r if i == j else 0.0
+            for k in range(3):
+                acc += Hx[i, k] * PHt[k, j]
+            S[i, j] = acc
+    _cholesky3_into(S, Si)  # S = L Lᵀ (S is SPD; cofactors lose it when S is ill-conditioned)
+    nu0, nu1, nu2 = b_meas[0] - b0, b_meas[1] - b1, b_meas[2] - b2
+    if gate > 0:
+        z0, z1, z2 = _forward3(Si, nu0, nu1, nu2)
+        if z0 * z0 + z1 * z1 + z2 * z2 > gate:  # ν' S⁻¹ ν = |L⁻¹ ν|²
+            return False
+    dx = K[:, 3]  # K uses the first three columns
+    for i in range(6):  # row i of K = S⁻¹ (P Hᵀ)[i], δx = K ν
+        z0, z1, z2 = _forward3(Si, PHt[i, 0], PHt[i, 1], PHt[i, 2])
+        K[i, 0], K[i, 1], K[i, 2] = _backward3(Si, z0, z1, z2)
+        dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    for i in range(6):  # I − K H into PHt's buffer (it is no longer needed)
+        for j in range(6):
+            v = 1.0 if i == j else 0.0
+            if j < 3:
+                v -= K[i, 0] * Hx[0, j] + K[i, 1] * Hx[1, j] + K[i, 2] * Hx[2, j]
+            PHt[i, j] = v
+    _mm(PHt, P, X)  # Joseph form: (I − KH) P (I − KH)ᵀ + K R Kᵀ
+    _mmt(X, PHt, Hx)
+    for i in range(6):
+        for j in range(i, 6):
+            kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
+            v = 0.5 * (Hx[i, j] + Hx[j, i]) + kk
+            P[i, j] = v
+            P[j, i] = v
+    p1, p2, p3 = 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]  # q ← [δθ/2, 1] ⊗ q, renormalised
+    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
+    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
+    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
+    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    for i in range(3):
+        w[i] += dx[3 + i]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _cholesky3_into(S, L):
+    """Lower-triangular L with L Lᵀ = S for a 3×3 symmetric positive definite S."""
+    L[0, 0] = math.sqrt(S[0, 0])
+    L[1, 0] = S[1, 0] / L[0, 0]
+    L[2, 0] = S[2, 0] / L[0, 0]
+    L[1, 1] = math.sqrt(S[1, 1] - L[1, 0] * L[1, 0])
+    L[2, 1] = (S[2, 1] - L[2, 0] * L[1, 0]) / L[1, 1]
+    L[2, 2] = math.sqrt(S[2, 2] - L[2, 0] * L[2, 0] - L[2, 1] * L[2, 1])
+
+
+@njit(cache=True, inline="always")
+def _forward3(L, v0, v1, v2):
+    """L⁻¹ v for the lower-triangular 3×3 L."""
+    z0 = v0 / L[0, 0]
+    z1 = (v1 - L[1, 0] * z0) / L[1, 1]
+    return z0, z1, (v2 - L[2, 0] * z0 - L[2, 1] * z1) / L[2, 2]
+
+
+@njit(cache=True, inline="always")
+def _backward3(L, z0, z1, z2):
+    """L⁻ᵀ z for the lower-triangular 3×3 L."""
+    y2 = z2 / L[2, 2]
+    y1 = (z1 - L[2, 1] * y2) / L[1, 1]
+    return (z0 - L[1, 0] * y1 - L[2, 0] * y2) / L[0, 0], y1, y2

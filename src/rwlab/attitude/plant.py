@@ -30,7 +30,7 @@ from numba import njit
 
 from rwlab.attitude.frames import EARTH_RADIUS, GEO_RADIUS, GEO_RATE, J2_EARTH, dcm, xi
 
-__all__ = ["DisturbanceModel", "derivative", "propagate"]
+__all__ = ["DisturbanceModel", "derivative", "propagate", "rk4_step"]
 
 SOLAR_PRESSURE = 4.56e-6  # N/m² at 1 AU
 SUN_TIDE = 1.32712440018e20 / 1.495978707e11**3  # μ/R³ of the Sun at 1 AU, 1/s²
@@ -206,28 +206,38 @@ def _derivative_into(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, 
 
 
 @njit(cache=True)
-def propagate(x, hw_dot, dt, steps, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
-    """``steps`` fixed RK4 steps of ``dt`` seconds with constant wheel torques; q renormalised."""
-    x = x.copy()
+def rk4_step(x, hw_dot, dt, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, work):
+    """One RK4 step of ``dt`` seconds on ``x`` in place (q renormalised, wheels clipped).
+
+    ``work`` is a (5, len(x)) scratch array: the kernel calls this every step and
+    allocates nothing.
+    """
     m = x.shape[0]
-    k1, k2, k3, k4, xt = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    args = (J, J_inv, G, h_max, n, dist, sun_orb, moon_orb)
+    k1, k2, k3, k4, xt = work[0], work[1], work[2], work[3], work[4]
+    _derivative_into(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k1)
+    for i in range(m):
+        xt[i] = x[i] + 0.5 * dt * k1[i]
+    _derivative_into(xt, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k2)
+    for i in range(m):
+        xt[i] = x[i] + 0.5 * dt * k2[i]
+    _derivative_into(xt, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k3)
+    for i in range(m):
+        xt[i] = x[i] + dt * k3[i]
+    _derivative_into(xt, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k4)
+    for i in range(m):
+        x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    for i in range(4):
+        x[i] /= norm
+    for i in range(h_max.shape[0]):
+        x[7 + i] = min(max(x[7 + i], -h_max[i]), h_max[i])
+
+
+@njit(cache=True)
+def propagate(x, hw_dot, dt, steps, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
+    """``steps`` fixed RK4 steps of ``dt`` seconds with constant wheel torques; returns a new x."""
+    x = x.copy()
+    work = np.empty((5, x.shape[0]))
     for _ in range(steps):
-        _derivative_into(x, hw_dot, *args, k1)
-        for i in range(m):
-            xt[i] = x[i] + 0.5 * dt * k1[i]
-        _derivative_into(xt, hw_dot, *args, k2)
-        for i in range(m):
-            xt[i] = x[i] + 0.5 * dt * k2[i]
-        _derivative_into(xt, hw_dot, *args, k3)
-        for i in range(m):
-            xt[i] = x[i] + dt * k3[i]
-        _derivative_into(xt, hw_dot, *args, k4)
-        for i in range(m):
-            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-        norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
-        for i in range(4):
-            x[i] /= norm
-        for i in range(h_max.shape[0]):
-            x[7 + i] = min(max(x[7 + i], -h_max[i]), h_max[i])
+        rk4_step(x, hw_dot, dt, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, work)
     return x

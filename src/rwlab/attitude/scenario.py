@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,8 @@ class Scenario:
     wheel_inertia, wheel_max_torque, wheel_max_momentum, wheel_max_speed_rpm.
     wheel_model : "ideal" | "physics" | "identified".
     wheel_model_file : path to model.json for "identified".
+    wheel_faults : for "physics": a list of tables ``{wheel = 1..N, at_s = s, friction =
+        factor, torque_constant = factor, current_limit = A}`` (any of the last three).
     disturbances : DisturbanceModel.
     sun : "fixed" (paper B: fixed in the orbital frame) or "moving" (turns once a day).
     sun_declination_deg, sun_phase_deg : the Sun's direction (season and time of day).
@@ -51,6 +54,27 @@ class Scenario:
     initial_error_deg, initial_axis : initial attitude error; initial_rate : rad/s (body-orbital).
     estimator_error_deg : initial error of the filter's estimate.
     duration : default run length, s.  seed : noise seed.
+
+    The sky (``attitude.ephemeris``) and the sensors as hardware:
+    epoch : UTC instant of t = 0, ISO 8601; None (paper B): the fixed or
+        ``sun``-turning vectors above and a fixed Moon.  With an epoch the Sun
+        and Moon come from the ephemerides and the Earth's shadow is real.
+    station_longitude_deg : the GEO slot, degrees east.
+    sun_noise_incidence : the sun-sensor noise grows as 1/cos of the incidence
+        angle (``sun_noise_deg`` at normal incidence; needs ``sun_fov_deg`` < 90).
+    earth_sensor_sun_exclusion_deg, earth_sensor_moon_exclusion_deg : the earth
+        sensor (boresight +z body) is blinded while a visible Sun / Moon lies
+        within this angle of its boresight (0: never).
+    sun_sensor_bias_deg, earth_sensor_bias_deg : constant errors of each two-axis
+        sensor's output angles (about its transverse axes: y, z for the sun
+        sensor, x, y for the earth sensor).
+    sun_sensor_misalignment_deg, earth_sensor_misalignment_deg : the sensor
+        head's mounting error, a small rotation (x, y, z body), unknown to the filter.
+    innovation_gate : χ² bound on a measurement's normalised innovation; beyond
+        it the filter rejects the measurement (0: no gate).
+    innovation_gate_max_rejections : after this many rejections in a row a sensor's
+        next measurement is taken whatever its innovation (a drifted filter must
+        not lock its sensors out).
 
     Design (paper B's weights, from the requirement and the actuator):
     pointing_requirement_deg : the pointing requirement (paper B: ±0.1°).
@@ -86,6 +110,7 @@ class Scenario:
     wheel_max_speed_rpm: float = 6000.0
     wheel_model: str = "ideal"
     wheel_model_file: str | None = None
+    wheel_faults: tuple = ()
     disturbances: DisturbanceModel = field(default_factory=DisturbanceModel)
     sun: str = "fixed"
     sun_declination_deg: float = 10.0
@@ -103,6 +128,17 @@ class Scenario:
     estimator_error_deg: float = 1.0
     duration: float = 3600.0
     seed: int = 0
+    epoch: str | None = None
+    station_longitude_deg: float = 0.0
+    sun_noise_incidence: bool = False
+    earth_sensor_sun_exclusion_deg: float = 12.0
+    earth_sensor_moon_exclusion_deg: float = 10.0
+    sun_sensor_bias_deg: tuple = (0.0, 0.0)
+    sun_sensor_misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    earth_sensor_bias_deg: tuple = (0.0, 0.0)
+    earth_sensor_misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    innovation_gate: float = 25.0
+    innovation_gate_max_rejections: int = 10
     pointing_requirement_deg: float = 0.1
     lqr_attitude_deg: float = 0.1
     lqr_rate_deg_s: float = 0.05
@@ -140,6 +176,7 @@ class Scenario:
                 )
         if self.wheel_model == "identified" and not self.wheel_model_file:
             raise ConfigError("wheel_model 'identified' needs wheel_model_file = model.json")
+        _check_wheel_faults(self)
         for name in _POSITIVE:
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0:
@@ -170,8 +207,28 @@ class Scenario:
                 f"{self.name}: wheel_max_torque × dt exceeds wheel_max_momentum "
                 "(the wheel would saturate within one step)"
             )
+        self._check_sky()
         if abs(self.sensor_period / self.dt - round(self.sensor_period / self.dt)) > 1e-9:
             raise ConfigError("sensor_period must be a whole number of dt")
+
+    def _check_sky(self) -> None:
+        if self.epoch is not None:
+            from rwlab.attitude.ephemeris import parse_epoch
+
+            if not isinstance(self.epoch, str):
+                raise ConfigError(f"{self.name}: epoch must be an ISO 8601 string")
+            parse_epoch(self.epoch)
+        if not -180 <= self.station_longitude_deg <= 360:
+            raise ConfigError(f"{self.name}: station_longitude_deg must be in [-180, 360]")
+        for name in (
+            "earth_sensor_sun_exclusion_deg",
+            "earth_sensor_moon_exclusion_deg",
+            "innovation_gate",
+        ):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{self.name}: {name} must be ≥ 0")
+        if self.sun_noise_incidence and self.sun_fov_deg >= 90:
+            raise ConfigError(f"{self.name}: sun_noise_incidence needs sun_fov_deg < 90")
 
     @property
     def inertia_matrix(self) -> np.ndarray:
@@ -227,7 +284,50 @@ _FRACTIONS = (
     "unload_start_fraction",
     "unload_stop_fraction",
 )
-_VECTORS = {"inertia": (3, 9), "initial_axis": (3,), "initial_rate": (3,)}
+_VECTORS = {
+    "inertia": (3, 9),
+    "initial_axis": (3,),
+    "initial_rate": (3,),
+    "sun_sensor_bias_deg": (2,),
+    "sun_sensor_misalignment_deg": (3,),
+    "earth_sensor_bias_deg": (2,),
+    "earth_sensor_misalignment_deg": (3,),
+}
+
+
+_FAULT_KEYS = {
+    "friction": "a factor > 0",
+    "torque_constant": "a factor ≥ 0",
+    "current_limit": "A ≥ 0",
+}
+
+
+def _check_wheel_faults(sc: Scenario) -> None:
+    """Each fault names an existing wheel, a start time and at least one known change."""
+    if not isinstance(sc.wheel_faults, (tuple, list)):
+        raise ConfigError(f"{sc.name}: wheel_faults must be a list of tables")
+    if sc.wheel_faults and sc.wheel_model != "physics":
+        raise ConfigError(f"{sc.name}: wheel_faults need wheel_model = 'physics'")
+    for f in sc.wheel_faults:
+        if not isinstance(f, dict):
+            raise ConfigError(f"{sc.name}: each wheel fault must be a table, got {f!r}")
+        unknown = sorted(set(f) - {"wheel", "at_s", *_FAULT_KEYS})
+        wheel = f.get("wheel")
+        if unknown:
+            raise ConfigError(f"{sc.name}: wheel fault has unknown key(s) {unknown}")
+        if isinstance(wheel, bool) or not isinstance(wheel, int) or not 1 <= wheel <= sc.n_wheels:
+            raise ConfigError(f"{sc.name}: wheel fault needs wheel = 1..{sc.n_wheels}")
+        at = f.get("at_s")
+        if not (_is_number(at) and at >= 0):
+            raise ConfigError(f"{sc.name}: wheel fault needs at_s = a time ≥ 0 (s)")
+        if not set(f) & set(_FAULT_KEYS):
+            raise ConfigError(
+                f"{sc.name}: wheel fault changes nothing: give one of {list(_FAULT_KEYS)}"
+            )
+        for key, what in _FAULT_KEYS.items():
+            v = f.get(key, 1.0)
+            if not (_is_number(v) and (v > 0 if key == "friction" else v >= 0)):
+                raise ConfigError(f"{sc.name}: wheel fault {key} must be {what}, got {v!r}")
 
 
 def _check_types(sc: Scenario) -> None:
@@ -310,9 +410,13 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     extra = sorted(set(raw) - {"scenario", "disturbances"})
     if unknown or extra:
         raise ConfigError(f"{path}: unknown key(s) {unknown + extra}")
-    for key in ("inertia", "initial_axis", "initial_rate"):
+    if isinstance(table.get("wheel_faults"), list):
+        table["wheel_faults"] = tuple(table["wheel_faults"])
+    for key in _VECTORS:
         if isinstance(table.get(key), list):
             table[key] = tuple(table[key])
+    if isinstance(table.get("epoch"), datetime):  # TOML's own date-time type
+        table["epoch"] = table["epoch"].isoformat()
     for key in ("srp_offset", "constant_torque"):
         if key in dist:
             v = dist[key]

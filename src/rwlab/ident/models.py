@@ -250,6 +250,28 @@ class PolyModel:
     def n_params(self) -> int:
         return self.na + sum(self.nb) + self.nc + self.nd + sum(self._nf)
 
+    def with_parameters(self, theta) -> PolyModel:
+        """The same structure with :attr:`parameters` replaced by ``theta`` (no covariance)."""
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape != (self.n_params,):
+            raise ModelError(f"expected {self.n_params} parameters, got {theta.shape}")
+        parts = iter(np.split(theta, np.cumsum([self.na, *self.nb, self.nc, self.nd])))
+        A = np.concatenate([[1.0], next(parts)])
+        B = self._B.copy()
+        for row, k, n in zip(B, self.nk, self.nb, strict=True):
+            row[k : k + n] = next(parts)
+        C = np.concatenate([[1.0], next(parts)])
+        D = np.concatenate([[1.0], next(parts)])
+        F = self._F.copy()
+        fs = np.split(next(parts), np.cumsum(self._nf)[:-1])
+        for row, n, f in zip(F, self._nf, fs, strict=False):
+            row[1 : n + 1] = f
+        return PolyModel(
+            A, B if self.nu else None, C, D, F if self.nu else None, Ts=self.Ts, nk=self.nk,
+            nb=self.nb, nf=self._nf, noise_variance=self.noise_variance,
+            input_name=self.input_name, output_name=self.output_name,
+        )  # fmt: skip
+
     @property
     def parameter_std(self) -> np.ndarray | None:
         """One standard deviation per free parameter, or None without a covariance."""

@@ -13,7 +13,10 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
 6. continuous-time models by ZOH and Tustin at the record's real Ts, checked
    against the discrete model on a new input (Fig. 23), and the acceleration
    check (Fig. 24);
-7. the chosen model in physical units with the wheel's saturations.
+7. the chosen model in physical units with the wheel's saturations;
+8. beyond the paper (its future work): a nonlinear servo model with an estimated
+   rate limit (``rwlab.ident.nonlinear``), fitted in physical units by simulation
+   error from the chosen model, scored on the same validation data.
 
 Fit % and MSE are computed on the validation data by simulation, in the
 preprocessed units the paper reports. Every number (estimation, fit %, MSE,
@@ -38,6 +41,7 @@ from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
 from rwlab.ident.models import PolyModel
+from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
@@ -90,6 +94,9 @@ class StudyResult:
     continuous: dict
     acceleration: dict
     new_input: dict = field(repr=False)
+    servo: ServoModel | None = None
+    nonlinear: dict | None = None
+    physical_val: IOData | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""
@@ -119,6 +126,7 @@ class StudyResult:
             "residuals": self.residuals,
             "continuous": {k: v for k, v in self.continuous.items() if k != "tf"},
             "acceleration": self.acceleration,
+            "nonlinear": self.nonlinear,
         }
 
 
@@ -163,6 +171,8 @@ def identification_study(
     nk_max: int = 10,
     tolerance: float = 3.0,
     seed: int = 0,
+    nonlinear: bool = True,
+    limits_rpm: tuple[float, float] = (math.inf, math.inf),
     progress: Callable[[int, int, str], None] | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
@@ -184,6 +194,11 @@ def identification_study(
         (default 3: paper A kept ARX221 although ARX331 fitted 1.6 points better).
     seed : int
         For the new input of the continuous-time check.
+    nonlinear : bool
+        Add the nonlinear stage (step 8): ``servo`` and ``nonlinear`` stay None without it.
+    limits_rpm : (float, float)
+        Known input (command) and output saturations, ± in physical units, for
+        the nonlinear model; they are not estimated.
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (delay scan, each
         estimate, validation), for a progress bar.
@@ -207,7 +222,7 @@ def identification_study(
         preprocess
     ]()
     est, val = prepared.split(split)
-    total, done = len(orders) + 5, 0
+    total, done = len(orders) + 5 + int(nonlinear), 0
 
     def step(label: str) -> None:
         nonlocal done
@@ -264,6 +279,10 @@ def identification_study(
     new_u = _new_input(rng, est, val.N)
     continuous = _continuous(chosen, new_u)
     step("validation")
+    servo, nl = None, None
+    if nonlinear:
+        servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
+        step("nonlinear")
     return StudyResult(
         data=prepared,
         est=est,
@@ -279,7 +298,47 @@ def identification_study(
         continuous=continuous,
         acceleration=_acceleration(chosen, val),
         new_input={"u": new_u},
+        servo=servo,
+        nonlinear=nl,
+        physical_val=data.split(split)[1],
     )
+
+
+def _nonlinear_stage(data, split, chosen, trend, limits) -> tuple[ServoModel | None, dict]:
+    """Fit the servo model in physical units from the chosen model; score it on validation.
+
+    Fit % uses the study's 'steady' initial state, as every linear row. The
+    residuals are simulation errors (an output-error model predicts by
+    simulating) from the initial state fitted to the validation output: the
+    validation part starts in motion, and the loop's integral state cannot be
+    read off one sample the way a linear model's past outputs can.
+    """
+    est, val = data.split(split)
+    if np.any(trend.input_slope) or np.any(trend.output_slope):
+        return None, {"structure": "servo", "error": "needs offsets and scales, not a trend"}
+    u_lim, y_lim = (-limits[0], limits[0]), (-limits[1], limits[1])
+    try:
+        servo = servo_fit(est, _to_physical(chosen, trend), input_limits=u_lim, output_limits=y_lim)
+    except (EstimationError, ModelError, DataError) as exc:
+        return None, {"structure": "servo", "error": str(exc)}
+    cmp = compare(servo, val, initial=INITIAL)
+    res = resid(servo, val, max_lag=min(25, val.N // 2 - 1), initial="estimate")
+    hi = float(np.max(np.abs(est.y[:, 0])))
+    return servo, {
+        "structure": "servo",
+        "equations": "rwlab.ident.nonlinear (module docstring)",
+        "fit_percent": cmp.fit_percent,
+        "mse": cmp.mse,
+        "n_params": servo.n_params,
+        "accel_limit_rpm_s": servo.rate_limit,
+        "speed_limit_rpm": limits[1] if math.isfinite(limits[1]) else None,
+        "speed_limit_estimated": False,
+        "speed_limit_note": f"not estimated: the estimation data reach {hi:.0f}, "
+        "short of any limit; the value is the record's",
+        "parameters": servo.to_dict(),
+        "initial_conditions": {"fit_percent": INITIAL, "residuals": "estimate"},
+        "residuals": res.to_dict(),
+    }
 
 
 def _new_input(rng, est: IOData, n: int) -> np.ndarray:
@@ -360,22 +419,8 @@ def physical_model(
     trend = result.data.trend
     if np.any(trend.input_slope) or np.any(trend.output_slope):
         raise ModelError("a linear trend cannot be folded into model.json; use 'normalize'")
-    gain = float(trend.output_scale[0] / trend.input_scale[0])
-    physical = PolyModel(
-        m.A,
-        m.B * gain,
-        m.C,
-        m.D,
-        m.F,
-        Ts=m.Ts,
-        nk=m.nk,
-        noise_variance=None
-        if m.noise_variance is None
-        else m.noise_variance * trend.output_scale[0] ** 2,
-        input_name=result.data.input_names[0],
-        output_name=result.data.output_names[0],
-    )
-    return {
+    physical = _to_physical(m, trend, result.data.input_names[0], result.data.output_names[0])
+    info = {
         "format": "rwlab.WheelModel/1",
         "structure": m.structure,
         "Ts": m.Ts,
@@ -401,6 +446,30 @@ def physical_model(
         "note": "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
         "saturation before the model and the acceleration limit to its output.",
     }
+    if result.servo is not None:
+        fit = result.nonlinear["fit_percent"]
+        info["nonlinear"] = {**result.servo.to_dict(), "validation_fit_percent": fit}
+        info["preferred"] = "nonlinear" if fit > info["validation_fit_percent"] else "linear"
+    return info
+
+
+def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:
+    """The preprocessed model ``m`` between the physical signals (offsets aside)."""
+    gain = float(trend.output_scale[0] / trend.input_scale[0])
+    return PolyModel(
+        m.A,
+        m.B * gain,
+        m.C,
+        m.D,
+        m.F,
+        Ts=m.Ts,
+        nk=m.nk,
+        noise_variance=None
+        if m.noise_variance is None
+        else m.noise_variance * trend.output_scale[0] ** 2,
+        input_name=input_name,
+        output_name=output_name,
+    )
 
 
 def load_study_data(

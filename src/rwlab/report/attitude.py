@@ -286,6 +286,40 @@ def write_ltr(
     return targets
 
 
+def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
+    """(start, end) of each run of True in ``flag`` sampled at ``t``."""
+    edges = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def _mark_sky(axes, run, scale: float = 1.0) -> bool:
+    """Shade the Earth's shadow (grey) and the earth sensor's blinding (orange) on every
+    axis (time in units of ``scale`` s); False when the run had neither."""
+    if run.sky is None:
+        return False
+    marks = [
+        (run.sky[:, 0] < 1, "#777777", "eclipse (sun sensor off)"),
+        (run.sky[:, 2] == 1, "#ff7f0e", "earth sensor blinded"),
+    ]
+    axes = np.atleast_1d(axes)
+    shown = False
+    for flag, color, label in marks:
+        for i, (a, b) in enumerate(_spans(run.t, flag)):
+            for ax in axes:
+                first = i == 0 and ax is axes[0]
+                ax.axvspan(
+                    a / scale,
+                    b / scale,
+                    color=color,
+                    alpha=0.2,
+                    lw=0,
+                    label=label if first else None,
+                )
+            shown = True
+    return shown
+
+
 def _trace_table(r):
     """The decimated trace as a pyarrow table (one row per logged step)."""
     import pyarrow as pa
@@ -298,6 +332,9 @@ def _trace_table(r):
         cols[f"torque_{axis}_Nm"] = r.torque[:, i]
     for i in range(r.wheel_speed_rpm.shape[1]):
         cols[f"wheel{i + 1}_rpm"] = r.wheel_speed_rpm[:, i]
+    if r.sky is not None:
+        for i, name in enumerate(("sunlit_fraction", "sun_sensor_status", "earth_sensor_status")):
+            cols[name] = r.sky[:, i]
     return pa.table({k: np.ascontiguousarray(v, dtype=float) for k, v in cols.items()})
 
 
@@ -319,11 +356,19 @@ def write_simulation(
     atomic_write_bytes(targets["trace.parquet"], lambda tmp: pq.write_table(table, tmp))
     page = Page(f"Attitude simulation — {config['controller']} on {scenario.name}")
     req = scenario.pointing_requirement_deg
+    sky = (
+        f"Sky: the ephemerides from {scenario.epoch} (UTC), station at "
+        f"{scenario.station_longitude_deg:g}° E; in the Earth's shadow for "
+        f"{metrics['eclipse_s']:g} s, earth sensor blinded for "
+        f"{metrics['earth_sensor_blinded_s']:g} s."
+        if scenario.epoch
+        else "Sky: paper B's fixed vectors (no epoch)."
+    )
     page.text(
         f"{config['controller']} with estimator {config['estimator']}, {run.t[-1]:g} s at dt "
         f"{scenario.dt:g} s ({metrics['steps']} steps), seed {config['seed']}. Disturbances "
         f"{'known' if scenario.disturbances_known_to_filter else 'unknown'} to the filter. "
-        f"Steady state from t = {run.steady_from_s:g} s. Requirement ±{req:g}°."
+        f"Steady state from t = {run.steady_from_s:g} s. Requirement ±{req:g}°. {sky}"
     )
     rows = [[k, v] for k, v in metrics.items()]
     page.table(["metric", "value"], rows, table_id="table-metrics")
@@ -348,11 +393,21 @@ def write_simulation(
     axes[2].legend(fontsize=8, loc="upper right")
     for ax in axes:
         ax.grid(alpha=0.3)
+    marked = _mark_sky(axes, run, 3600)
+    if marked:
+        axes[0].legend(fontsize=8, loc="upper right")
     page.figure(
         fig,
         "fig-simulation",
         "Pointing and estimation error, wheel momentum (dotted: unloading threshold) and "
-        "control torque (decimated trace; maxima in the table come from every step).",
+        "control torque (decimated trace; maxima in the table come from every step)."
+        + (
+            " Shaded: the Earth's shadow (umbra and penumbra; the sun sensor is off) in grey, "
+            "the earth sensor blinded by the Sun or the Moon in orange: the filter only "
+            "propagates through these outages."
+            if marked
+            else ""
+        ),
     )
     page.save(targets["report.html"])
     return targets

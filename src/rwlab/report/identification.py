@@ -32,7 +32,9 @@ FIGURES = (
     "fig-oe-bj",
     "fig23-continuous",
     "fig24-acceleration",
+    "fig-uncertainty",
 )
+NONLINEAR_FIGURES = ("fig-nonlinear-validation", "fig-nonlinear-step", "fig-nonlinear-resid")
 
 
 def _poly(row: dict, letter: str) -> str:
@@ -200,6 +202,7 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         "fig20-compare",
         f"Simulated vs measured output of {ch['structure']} on validation data.",
     )
+    _uncertainty_figure(page, result.chosen, ch["structure"])
 
     page.heading("4. ARMAX, OE and BJ (paper Table 3, Fig. 21, Fig. 22)", "others")
     others = study["others"]
@@ -307,7 +310,65 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f"acceleration limit of ±{sat['accel_rpm_s']:g} rpm/s ({sat['source']}): the wheel "
         "is linear only inside them (paper A, section 5)."
     )
+    if result.servo is not None:
+        _nonlinear_section(page, result, study["nonlinear"])
     return page
+
+
+def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
+    """Beyond the paper: the servo model next to the chosen linear one, in physical units."""
+    servo, chosen = result.servo, result.chosen
+    trend = result.data.trend
+    ch = chosen.structure
+    page.heading("8. Nonlinear model: rate-limited servo (beyond the paper)", "nonlinear")
+    par = nl["parameters"]
+    page.text(
+        f"A feedback block model (rwlab.ident.nonlinear): input saturation, gain "
+        f"{par['gain']:.4g}, PI law kp = {par['kp']:.4g} s⁻¹, ki = {par['ki']:.4g} s⁻², "
+        f"rate limit α = {nl['accel_limit_rpm_s']:.4g} (output unit)/s, input delay "
+        f"{par['delay'] * 1e3:.0f} ms, fitted by simulation error from {ch}. Validation fit "
+        f"{nl['fit_percent']:.2f} % against {ch}'s {_study_fit(result):.2f} %. The speed limit "
+        f"is {nl['speed_limit_note']}."
+    )
+    val = result.physical_val
+    t = val.time - val.time[0]
+    y_lin = trend.output_to_physical(chosen.simulate(result.val, initial=INITIAL), result.val.time)
+    fig, ax = figure(9, 3.2)
+    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
+    ax.plot(t, y_lin, lw=1, label=f"{ch} (linear)")
+    ax.plot(t, servo.predict(val, initial=INITIAL), lw=1, ls="--", label="servo (nonlinear)")
+    ax.set_xlabel("time in validation record [s]")
+    ax.set_ylabel(f"{val.output_names[0]} [{val.output_units[0] or 'output unit'}]")
+    ax.legend(fontsize=8)
+    page.figure(fig, "fig-nonlinear-validation", "Both models on the validation data (simulation).")
+
+    # a large step from rest to 80 % of the largest level in the record
+    level = 0.8 * float(np.max(np.abs(val.u[:, 0]))) or 1.0
+    n = max(20, int(4 * level / max(nl["accel_limit_rpm_s"], 1e-12) / servo.Ts))
+    u = np.full(n, level)
+    u_p = (u - trend.input_offset[0]) / trend.input_scale[0]
+    rest_p = (0 - trend.input_offset[0]) / trend.input_scale[0]
+    y_lin = trend.output_to_physical(chosen.simulate(np.r_[rest_p, u_p], "steady"), np.zeros(n + 1))
+    y_nl = servo.simulate(np.r_[-servo.offset / servo.gain, u], 0.0)
+    tt = np.arange(n + 1) * servo.Ts
+    fig, ax = figure(9, 3.0)
+    ax.plot(tt, y_lin, lw=1, label=f"{ch} (linear, no limit)")
+    ax.plot(tt, y_nl, lw=1.5, label="servo (nonlinear)")
+    ax.plot(tt, np.minimum(tt * nl["accel_limit_rpm_s"], level), "k:", lw=1, label="±α ramp")
+    ax.set_xlabel("t [s]")
+    ax.legend(fontsize=8)
+    page.figure(
+        fig,
+        "fig-nonlinear-step",
+        f"A step of {level:.4g} from rest: the linear model jumps, the servo ramps at its "
+        "estimated rate limit and settles.",
+    )
+    _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
+
+
+def _study_fit(result: StudyResult) -> float:
+    rows = result.orders + result.others
+    return next(r["fit_percent"] for r in rows if r["structure"] == result.chosen.structure)
 
 
 def _tf_text(num, den) -> str:
@@ -321,3 +382,35 @@ def _tf_text(num, den) -> str:
         return " ".join(terms) or "0"
 
     return f"({poly(num)}) / ({poly(den)})"
+
+
+def _uncertainty_figure(page: Page, model, name: str, k: float = 3.0) -> None:
+    """Step response and Bode magnitude of the chosen model with ±kσ bands (first order)."""
+    from rwlab.ident.uncertainty import bode_band, step_band
+
+    if model.covariance is None:
+        page.text(f"{name} has no parameter covariance: no confidence bands.", note=True)
+        return
+    n = max(40, int(60 / model.Ts))
+    step = step_band(model, n)
+    omega = np.logspace(-2, 0, 100) * np.pi / model.Ts
+    mag, _ = bode_band(model, omega)
+    fig, (a1, a2) = figure(9, 3.0, 1, 2)
+    a1.plot(step.x, step.value[:, 0, 0], color="k", lw=1.2, label=name)
+    a1.fill_between(step.x, step.lower(k)[:, 0, 0], step.upper(k)[:, 0, 0], alpha=0.3,
+                    label=f"±{k:g}σ")  # fmt: skip
+    a1.set_xlabel("t [s]")
+    a1.set_ylabel("step response")
+    a1.legend(fontsize=8)
+    db = lambda x: 20 * np.log10(np.maximum(x, 1e-300))  # noqa: E731
+    a2.semilogx(omega, db(mag.value[:, 0, 0]), color="k", lw=1.2)
+    low = np.maximum(mag.lower(k), mag.value * 1e-3)  # a band through zero: floor at −60 dB
+    a2.fill_between(omega, db(low[:, 0, 0]), db(mag.upper(k)[:, 0, 0]), alpha=0.3)
+    a2.set_xlabel("ω [rad/s]")
+    a2.set_ylabel("|G| [dB]")
+    page.figure(
+        fig,
+        "fig-uncertainty",
+        f"Step response and Bode magnitude of {name} with ±{k:g}σ bands from its parameter "
+        "covariance (first-order propagation, rwlab.ident.uncertainty).",
+    )

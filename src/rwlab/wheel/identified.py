@@ -1,8 +1,15 @@
-"""A wheel simulated by the model that ``rwlab identify`` chose (``model.json``).
+"""A wheel simulated by a model that ``rwlab identify`` wrote (``model.json``).
 
-Paper A's linear model is only valid inside the wheel's limits, so it is
-wrapped as the paper prescribes: the speed command is saturated before the
-model, and the model's speed may change by at most the acceleration limit.
+Two models, one per sample step each (``IdentifiedWheel.step``):
+
+- ``"linear"``: paper A's chosen model, wrapped as the paper prescribes: the
+  speed command is saturated before the model, and the model's speed may change
+  by at most the acceleration limit (command clip → linear state-space step →
+  output rate limit ±a·Ts → speed clip);
+- ``"nonlinear"``: the servo model of ``rwlab.ident.nonlinear`` (its limits
+  estimated with its dynamics), stepped by ``servo_advance``.
+
+``model.json`` files from before the nonlinear model hold only the linear one.
 """
 
 from __future__ import annotations
@@ -13,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.errors import FileFormatError
+from rwlab.errors import FileFormatError, ModelError
 from rwlab.ident.models import PolyModel
+from rwlab.ident.nonlinear import ServoModel, servo_advance
 
 __all__ = ["IdentifiedWheel"]
 
@@ -30,6 +38,9 @@ class IdentifiedWheel:
         Operating point: ``y − output_offset = G·(u − input_offset)``, rpm.
     speed_limit_rpm, accel_limit_rpm_s : float
         The saturations (paper A: ±7800 rpm, ±314 rpm/s).
+    servo : ServoModel, optional
+        Fly this nonlinear model (rpm, rpm/s) instead of ``model``, which then
+        only gives the equilibrium for ``reset``.
     """
 
     def __init__(
@@ -40,6 +51,7 @@ class IdentifiedWheel:
         output_offset: float = 0.0,
         speed_limit_rpm: float = 7800.0,
         accel_limit_rpm_s: float = 314.0,
+        servo: ServoModel | None = None,
     ) -> None:
         if model.nu != 1:
             raise FileFormatError("an identified wheel model must have one input")
@@ -51,11 +63,21 @@ class IdentifiedWheel:
         ss = model.to_ss()
         self._A, self._B = np.asarray(ss.A), np.asarray(ss.B)[:, 0]
         self._C, self._D = np.asarray(ss.C)[0], float(np.asarray(ss.D)[0, 0])
+        self.servo = servo
+        self.kind = "linear" if servo is None else "nonlinear"
+        if servo is not None:
+            if servo.Ts != self.Ts:
+                raise FileFormatError(f"the servo model's Ts {servo.Ts} differs from {self.Ts}")
+            self._p = servo.vector
         self.reset()
 
     @classmethod
-    def from_json(cls, path: str | os.PathLike) -> IdentifiedWheel:
-        """Load ``model.json`` as written by ``rwlab identify``."""
+    def from_json(cls, path: str | os.PathLike, model: str | None = None) -> IdentifiedWheel:
+        """Load ``model.json`` as written by ``rwlab identify``.
+
+        ``model``: 'linear', 'nonlinear', or None for the file's ``preferred``
+        one (the better validation fit; 'linear' in files without a nonlinear model).
+        """
         try:
             info = json.loads(Path(path).read_text())
         except (OSError, json.JSONDecodeError) as exc:
@@ -63,12 +85,25 @@ class IdentifiedWheel:
         if info.get("format") != "rwlab.WheelModel/1":
             raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
         sat = info["saturation"]
+        kind = model or info.get("preferred", "linear")
+        if kind not in ("linear", "nonlinear"):
+            raise FileFormatError(f"model must be 'linear' or 'nonlinear', got {kind!r}")
+        if kind == "nonlinear" and "nonlinear" not in info:
+            raise FileFormatError(f"{path}: holds no nonlinear model; run rwlab identify again")
+        servo = None
+        if kind == "nonlinear":
+            fields = {k: v for k, v in info["nonlinear"].items() if k != "validation_fit_percent"}
+            try:
+                servo = ServoModel.from_dict(fields)
+            except ModelError as exc:
+                raise FileFormatError(f"{path}: bad nonlinear model ({exc})") from None
         return cls(
             PolyModel.from_dict(info["model"]),
             input_offset=info["input"]["offset"],
             output_offset=info["output"]["offset"],
             speed_limit_rpm=sat["speed_rpm"],
             accel_limit_rpm_s=sat["accel_rpm_s"],
+            servo=servo,
         )
 
     def reset(self, speed_rpm: float = 0.0) -> None:
@@ -78,9 +113,29 @@ class IdentifiedWheel:
         n = self._A.shape[0]
         self._x = np.linalg.solve(np.eye(n) - self._A, self._B * du) if n else np.zeros(0)
         self.speed_rpm = float(speed_rpm)
+        if self.servo is not None:  # at rest: the loop's integral is 0, the last command holds
+            self._integral = 0.0
+            self._u_prev = (speed_rpm - self.servo.offset) / self.servo.gain
+
+    def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The linear part (A, B, C, D) that :meth:`step` runs: (n, n), (n,), (n,), scalar."""
+        return self._A.copy(), self._B.copy(), self._C.copy(), self._D
+
+    def model_state(self) -> np.ndarray:
+        """A copy of the model's state: the linear part's x (n,), or the servo's [I, u_prev]."""
+        if self.servo is not None:
+            return np.array([self._integral, self._u_prev])
+        return self._x.copy()
 
     def step(self, command_rpm: float) -> float:
         """Apply a speed command for one sample time; returns the speed at the next sample, rpm."""
+        if self.servo is not None:
+            u = float(command_rpm)
+            self.speed_rpm, self._integral = servo_advance(
+                self.speed_rpm, self._integral, self._u_prev, u, self._p
+            )
+            self._u_prev = u
+            return self.speed_rpm
         u = min(max(float(command_rpm), -self.speed_limit_rpm), self.speed_limit_rpm) - self.u0
         self._x = self._A @ self._x + self._B * u
         linear = self.y0 + float(self._C @ self._x) + self._D * u
@@ -90,6 +145,9 @@ class IdentifiedWheel:
         return self.speed_rpm
 
     def simulate(self, command_rpm) -> np.ndarray:
-        """Speeds (rpm) for a command sequence sampled at Ts, from rest at 0 rpm."""
+        """Speeds (rpm) for a command sequence sampled at Ts, from rest at 0 rpm.
+
+        ``out[k]`` is the speed one sample after ``command_rpm[k]`` was applied.
+        """
         self.reset()
         return np.array([self.step(c) for c in np.asarray(command_rpm, dtype=float)])

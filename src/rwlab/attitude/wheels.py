@@ -1,0 +1,230 @@
+"""Every wheel model of the attitude loop, compiled: commanded torques → realised torques.
+
+The closed loop asks each wheel for a torque (N·m, along its axis); what the
+wheel delivers depends on the model (``Scenario.wheel_model``):
+
+- ``ideal``: the command, clipped to the rated torque.
+- ``physics``: the RW physics of :class:`rwlab.wheel.physics.WheelPhysics` in
+  acceleration mode — the motor torque needed for the commanded acceleration
+  plus the friction, limited by the current limit, and no drive beyond the
+  maximum speed; the wheel feels friction. Per-wheel faults (friction or
+  torque-constant factors, a lower current limit) switch on at a time.
+- ``identified``: the model ``rwlab identify`` chose (``model.json``: the linear
+  model with its saturations, or the nonlinear servo model where it validates
+  better), as :class:`rwlab.wheel.identified.IdentifiedWheel` steps it: the commanded
+  accelerations are integrated into a speed command (rpm) that drives the
+  identified speed loop at its own sample time Ts; the realised torque over
+  each model sample is I·Δspeed/Ts.
+
+:func:`wheel_setup` packs a scenario's model into flat arrays once;
+:func:`realise` runs inside the kernel's step (scalar, allocation-free). Tests
+hold each model equal to the Python class it compiles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from rwlab.ident.nonlinear import servo_advance
+from rwlab.wheel.physics import RW90, WheelParams, rad_s_to_rpm
+
+__all__ = ["IDEAL", "IDENTIFIED", "PHYSICS", "WheelArrays", "realise", "wheel_setup"]
+
+IDEAL, PHYSICS, IDENTIFIED = 0, 1, 2
+RPM = 30.0 / math.pi  # rad/s → rpm
+
+# physics parameter columns (per wheel): inertia, torque constant, current limit,
+# viscous and Coulomb friction, maximum speed (rad/s)
+P_I, P_KT, P_ILIM, P_VISC, P_COUL, P_WMAX = range(6)
+# identified state columns (per wheel): speed command (rpm), time since the last model
+# sample (s), model speed (rpm), realised torque (N·m), then the model's states (linear:
+# x, then n scratch; servo: the loop's integral and the last command)
+S_CMD, S_CLOCK, S_SPEED, S_TORQUE, S_X = range(5)
+# identified parameters: D, u0, y0, Ts, speed limit (rpm), acceleration limit (rpm/s),
+# wheel inertia (kg·m²), 1 for the servo model (then ``servo`` holds its vector)
+I_D, I_U0, I_Y0, I_TS, I_SPEED, I_ACCEL, I_INERTIA, I_SERVO = range(8)
+
+
+@dataclass
+class WheelArrays:
+    """A scenario's wheel model as the kernel reads it.
+
+    Attributes
+    ----------
+    kind : int
+        IDEAL, PHYSICS or IDENTIFIED.
+    healthy, faulty : (N, 6) arrays
+        Physics parameters before and after each wheel's fault (columns P_*).
+    fault_s : (N,) array
+        When each wheel's fault starts, s (inf: never).
+    state : (N, 4 + 2n) array
+        The identified model's per-wheel state (columns S_*, then n scratch), updated in place.
+    A, B, C : (n, n), (n,), (n,) arrays
+        The identified linear model (command clip → linear step → rate limit → speed clip).
+    ident : (8,) array
+        Its scalars (columns I_*).
+    servo : (12,) array
+        The nonlinear servo model's vector (``ServoModel.vector``) when ident[I_SERVO] = 1.
+    """
+
+    kind: int
+    healthy: np.ndarray
+    faulty: np.ndarray
+    fault_s: np.ndarray
+    state: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    ident: np.ndarray
+    servo: np.ndarray
+
+
+def physics_params(sc) -> WheelParams:
+    """The RW physics scaled to the scenario's wheel (RW90's friction and electrical model)."""
+    return WheelParams(
+        inertia=sc.wheel_inertia,
+        max_speed_rpm=sc.wheel_max_speed_rpm,
+        overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
+        max_accel_rpm_s=rad_s_to_rpm(sc.wheel_max_torque / sc.wheel_inertia),
+        # the current limit then allows 5 % more than the rated torque
+        torque_constant=sc.wheel_max_torque / RW90.current_limit * 1.05,
+    )
+
+
+def _physics_row(p: WheelParams) -> np.ndarray:
+    return np.array(
+        [
+            p.inertia,
+            p.torque_constant,
+            p.current_limit,
+            p.viscous_friction,
+            p.coulomb_friction,
+            p.max_speed,
+        ]
+    )
+
+
+def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
+    """Pack the scenario's wheel model, starting from wheel momenta ``hw0`` (N·m·s)."""
+    nw = sc.n_wheels
+    kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheel_model]
+    row = _physics_row(physics_params(sc))
+    healthy = np.tile(row, (nw, 1))
+    faulty = healthy.copy()
+    fault_s = np.full(nw, math.inf)
+    for f in sc.wheel_faults:
+        i = f["wheel"] - 1
+        fault_s[i] = f["at_s"]
+        faulty[i, P_VISC] *= f.get("friction", 1.0)
+        faulty[i, P_COUL] *= f.get("friction", 1.0)
+        faulty[i, P_KT] *= f.get("torque_constant", 1.0)
+        faulty[i, P_ILIM] = f.get("current_limit", faulty[i, P_ILIM])
+    A = np.zeros((0, 0))
+    B = C = np.zeros(0)
+    ident = np.zeros(8)
+    servo = np.zeros(12)
+    state = np.zeros((nw, S_X))
+    if kind == IDENTIFIED:
+        from rwlab.wheel.identified import IdentifiedWheel
+
+        unit = IdentifiedWheel.from_json(sc.wheel_model_file)
+        A, B, C, D = unit.state_space()
+        ident = np.array(
+            [
+                D,
+                unit.u0,
+                unit.y0,
+                unit.Ts,
+                unit.speed_limit_rpm,
+                unit.accel_limit_rpm_s,
+                sc.wheel_inertia,
+                float(unit.servo is not None),
+            ]
+        )
+        if unit.servo is not None:
+            servo = unit.servo.vector
+        state = np.zeros((nw, S_X + max(2 * A.shape[0], 2)))
+        for i, h in enumerate(hw0):
+            unit.reset(rad_s_to_rpm(h / sc.wheel_inertia))
+            state[i, S_CMD] = state[i, S_SPEED] = unit.speed_rpm
+            x = unit.model_state()
+            state[i, S_X : S_X + x.size] = x
+    return WheelArrays(kind, healthy, faulty, fault_s, state, A, B, C, ident, servo)
+
+
+@njit(cache=True, inline="always")
+def _friction(p, w):
+    return p[P_VISC] * w + (p[P_COUL] * math.copysign(1.0, w) if abs(w) > 1e-9 else 0.0)
+
+
+@njit(cache=True, inline="always")
+def _physics(p, cmd, h):
+    """WheelPhysics.step in acceleration mode, as the torque it puts on the rotor, N·m."""
+    w = h / p[P_I]
+    fr = _friction(p, w)
+    lim = p[P_ILIM]
+    current = min(max((cmd + fr) / p[P_KT], -lim), lim) if p[P_KT] > 0 else 0.0
+    if abs(w) >= p[P_WMAX] and current * w > 0:  # never drive beyond the maximum speed
+        current = min(max(fr / p[P_KT], -lim), lim)
+    return p[P_KT] * current - fr
+
+
+@njit(cache=True)
+def _identified_tick(s, A, B, C, ident, servo):
+    """One sample of IdentifiedWheel.step on the state row ``s`` (in place); the new speed."""
+    if ident[I_SERVO] > 0:
+        w, s[S_X] = servo_advance(s[S_SPEED], s[S_X], s[S_X + 1], s[S_CMD], servo)
+        s[S_X + 1] = s[S_CMD]
+        return w
+    D, u0, y0, Ts = ident[I_D], ident[I_U0], ident[I_Y0], ident[I_TS]
+    speed_lim, accel_lim = ident[I_SPEED], ident[I_ACCEL]
+    u = min(max(s[S_CMD], -speed_lim), speed_lim) - u0
+    n = A.shape[0]
+    y = y0 + D * u
+    for r in range(n):  # x ← A x + B u, column by column into the spare tail of the row
+        acc = B[r] * u
+        for c in range(n):
+            acc += A[r, c] * s[S_X + c]
+        s[S_X + n + r] = acc
+    for r in range(n):
+        s[S_X + r] = s[S_X + n + r]
+        y += C[r] * s[S_X + r]
+    step = accel_lim * Ts
+    speed = s[S_SPEED] + min(max(y - s[S_SPEED], -step), step)
+    return min(max(speed, -speed_lim), speed_lim)
+
+
+@njit(cache=True)
+def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, servo, out):
+    """Realised wheel torques ``out`` (N,) for the commands ``cmd`` (N,) over one step.
+
+    ``cmd`` is already clipped to the rated torque; ``x`` is the plant state (wheel
+    momenta from x[7], N·m·s).
+    """
+    nw = cmd.shape[0]
+    if kind == PHYSICS:
+        for i in range(nw):
+            p = faulty[i] if t >= fault_s[i] else healthy[i]
+            out[i] = _physics(p, cmd[i], x[7 + i])
+    elif kind == IDENTIFIED:
+        inertia, Ts = ident[I_INERTIA], ident[I_TS]
+        for i in range(nw):
+            s = state[i]
+            s[S_CMD] += cmd[i] / inertia * RPM * dt
+            s[S_CLOCK] += dt
+            ticks = 0
+            before = s[S_SPEED]
+            while s[S_CLOCK] >= Ts - 1e-9:
+                s[S_CLOCK] -= Ts
+                s[S_SPEED] = _identified_tick(s, A, B, C, ident, servo)
+                ticks += 1
+            if ticks:
+                s[S_TORQUE] = inertia * (s[S_SPEED] - before) / RPM / (ticks * Ts)
+            out[i] = s[S_TORQUE]
+    else:
+        for i in range(nw):
+            out[i] = cmd[i]

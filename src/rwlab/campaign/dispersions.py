@@ -1,0 +1,229 @@
+"""Dispersions: a distribution per scenario field, drawn per run from the run's own seed.
+
+A dispersion file is TOML (``[dispersions]`` or top-level keys), one table per
+field, e.g.::
+
+    [dispersions]
+    inertia.xx = { distribution = "normal", sigma = 0.033, bounds = [-0.1, 0.1], relative = true }
+    disturbances.srp_offset.z = { distribution = "uniform", bounds = [-0.05, 0.05] }
+
+A run's value is ``nominal + δ``, or ``nominal × (1 + δ)`` with ``relative = true``;
+δ is ``normal`` (``sigma``, optional ``mean`` = 0, optional ``bounds`` that
+truncate it) or ``uniform`` over ``bounds``. Products of inertia
+(``inertia.xy``, ``.xz``, ``.yz``) with ``relative = true`` are fractions of
+√(J_ii·J_jj) of the nominal inertia. The default set (``default_dispersions.toml``,
+package data) is what a reviewer of a GEO comsat's pointing budget expects.
+
+Each field draws from its own stream, seeded by the run's seed and the field's
+name: adding or removing a dispersion never changes the draws of the others.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass, replace
+from importlib import resources
+
+import numpy as np
+from scipy import stats
+
+from rwlab._toml import read_table
+from rwlab.attitude.scenario import Scenario
+from rwlab.errors import ConfigError
+
+__all__ = ["FIELDS", "Dispersion", "apply", "draw", "load_dispersions"]
+
+_AXES = ("x", "y", "z")
+_INERTIA = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+_SCALARS = (
+    "wheel_inertia",
+    "wheel_max_torque",
+    "wheel_max_momentum",
+    "wheel_max_speed_rpm",
+    "sun_noise_deg",
+    "earth_noise_deg",
+    "process_noise_torque",
+    "sun_declination_deg",
+    "sun_phase_deg",
+    "initial_error_deg",
+    "estimator_error_deg",
+    "thruster_torque",
+)
+_VECTORS = ("initial_axis", "initial_rate")
+_DIST_SCALARS = ("srp_area", "srp_reflectivity")
+_DIST_VECTORS = ("srp_offset", "constant_torque")
+
+#: Every field a dispersion may name: the physical truth the design does not choose.
+FIELDS = (
+    tuple(f"inertia.{k}" for k in _INERTIA)
+    + _SCALARS
+    + tuple(f"{v}.{a}" for v in _VECTORS for a in _AXES)
+    + tuple(f"disturbances.{s}" for s in _DIST_SCALARS)
+    + tuple(f"disturbances.{v}.{a}" for v in _DIST_VECTORS for a in _AXES)
+)
+_KEYS = {"distribution", "sigma", "mean", "bounds", "relative"}
+
+
+@dataclass(frozen=True)
+class Dispersion:
+    """One field's distribution.
+
+    Attributes
+    ----------
+    field : str
+        One of :data:`FIELDS`.
+    distribution : {'normal', 'uniform'}
+    sigma, mean : float
+        Normal: standard deviation and mean of δ (field units, or a fraction).
+    bounds : (lo, hi) or None
+        Uniform: its range; normal: truncation (None: none).
+    relative : bool
+        δ is a fraction of the nominal value (of √(J_ii·J_jj) for a product of inertia).
+    """
+
+    field: str
+    distribution: str
+    sigma: float = 0.0
+    mean: float = 0.0
+    bounds: tuple[float, float] | None = None
+    relative: bool = False
+
+    def sample(self, rng: np.random.Generator) -> float:
+        """One δ."""
+        if self.distribution == "uniform":
+            return float(rng.uniform(*self.bounds))
+        if self.bounds is None:
+            return float(rng.normal(self.mean, self.sigma))
+        lo, hi = ((b - self.mean) / self.sigma for b in self.bounds)
+        return float(stats.truncnorm.rvs(lo, hi, self.mean, self.sigma, random_state=rng))
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _parse(name: str, spec: dict, where: str) -> Dispersion:
+    """One field's table → :class:`Dispersion`; anything wrong is a ``ConfigError``."""
+    bad = sorted(set(spec) - _KEYS)
+    if bad:
+        raise ConfigError(f"{where}: {name}: unknown key(s) {bad}; allowed {sorted(_KEYS)}")
+    kind = spec["distribution"]
+    if kind not in ("normal", "uniform"):
+        raise ConfigError(
+            f"{where}: {name}: distribution must be 'normal' or 'uniform', got {kind!r}"
+        )
+    relative = spec.get("relative", False)
+    if not isinstance(relative, bool):
+        raise ConfigError(f"{where}: {name}: relative must be true or false")
+    bounds = spec.get("bounds")
+    if bounds is not None:
+        if not (isinstance(bounds, list) and len(bounds) == 2 and all(map(_is_number, bounds))):
+            raise ConfigError(f"{where}: {name}: bounds must be [low, high], two numbers")
+        if not bounds[0] < bounds[1]:
+            raise ConfigError(f"{where}: {name}: bounds {bounds} must have low < high")
+        bounds = (float(bounds[0]), float(bounds[1]))
+    if kind == "uniform":
+        extra = sorted({"sigma", "mean"} & set(spec))
+        if extra:
+            raise ConfigError(f"{where}: {name}: a uniform dispersion takes bounds, not {extra}")
+        if bounds is None:
+            raise ConfigError(f"{where}: {name}: a uniform dispersion needs bounds = [low, high]")
+        return Dispersion(name, kind, bounds=bounds, relative=relative)
+    sigma, mean = spec.get("sigma"), spec.get("mean", 0.0)
+    if not (_is_number(sigma) and sigma > 0):
+        raise ConfigError(f"{where}: {name}: a normal dispersion needs sigma > 0, got {sigma!r}")
+    if not _is_number(mean):
+        raise ConfigError(f"{where}: {name}: mean must be a number, got {mean!r}")
+    if bounds is not None and not bounds[0] <= mean <= bounds[1]:
+        raise ConfigError(f"{where}: {name}: bounds {list(bounds)} do not contain the mean {mean}")
+    return Dispersion(name, kind, float(sigma), float(mean), bounds, relative)
+
+
+def _leaves(table: dict, prefix: str, where: str):
+    """(dotted name, spec) of every table that has a ``distribution`` key."""
+    for key, value in table.items():
+        name = f"{prefix}{key}"
+        if not isinstance(value, dict):
+            raise ConfigError(
+                f"{where}: {name} must be a table such as "
+                '{ distribution = "normal", sigma = 0.05 }'
+            )
+        if "distribution" in value:
+            yield name, value
+        else:
+            yield from _leaves(value, f"{name}.", where)
+
+
+def load_dispersions(path=None) -> tuple[Dispersion, ...]:
+    """The dispersions of a TOML file (the default set when ``path`` is None)."""
+    if path is None:
+        path = resources.files("rwlab.campaign") / "default_dispersions.toml"
+    table = read_table(path, "dispersions", "dispersions")
+    out = []
+    for name, spec in _leaves(table, "", str(path)):
+        if name not in FIELDS:
+            raise ConfigError(
+                f"{path}: unknown field {name!r}; dispersible fields: {', '.join(FIELDS)}"
+            )
+        out.append(_parse(name, spec, str(path)))
+    return tuple(out)
+
+
+def _nominal(sc: Scenario, name: str) -> tuple[float, float]:
+    """(nominal value, scale of a relative δ) of a field."""
+    parts = name.split(".")
+    if parts[0] == "inertia":
+        J = sc.inertia_matrix
+        i, j = _INERTIA[parts[1]]
+        return float(J[i, j]), float(math.sqrt(J[i, i] * J[j, j]))
+    obj = sc.disturbances if parts[0] == "disturbances" else sc
+    parts = parts[1:] if parts[0] == "disturbances" else parts
+    value = getattr(obj, parts[0])
+    if len(parts) == 2:
+        value = value[_AXES.index(parts[1])]
+    return float(value), abs(float(value))
+
+
+def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
+    """Every dispersed field's value for one run (field units), from the run's seed alone."""
+    values = {}
+    for d in dispersions:
+        rng = np.random.default_rng([run_seed, zlib.crc32(d.field.encode())])
+        value, scale = _nominal(nominal, d.field)
+        delta = d.sample(rng)
+        values[d.field] = value + (delta * scale if d.relative else delta)
+    return values
+
+
+def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
+    """The scenario with the dispersed values (validated like any scenario: ConfigError)."""
+    J = nominal.inertia_matrix.copy()
+    top = {f: list(getattr(nominal, f)) for f in _VECTORS}
+    dist = {f: list(getattr(nominal.disturbances, f)) for f in _DIST_VECTORS}
+    scalars, dist_scalars = {}, {}
+    for name, value in values.items():
+        parts = name.split(".")
+        if parts[0] == "inertia":
+            i, j = _INERTIA[parts[1]]
+            J[i, j] = J[j, i] = value
+        elif parts[0] == "disturbances" and len(parts) == 3:
+            dist[parts[1]][_AXES.index(parts[2])] = value
+        elif parts[0] == "disturbances":
+            dist_scalars[parts[1]] = value
+        elif len(parts) == 2:
+            top[parts[0]][_AXES.index(parts[1])] = value
+        else:
+            scalars[name] = value
+    off_diagonal = np.any(J != np.diag(np.diag(J)))
+    inertia = J.ravel() if off_diagonal or np.size(nominal.inertia) == 9 else np.diag(J)
+    disturbances = replace(
+        nominal.disturbances, **{k: tuple(v) for k, v in dist.items()}, **dist_scalars
+    )
+    return replace(
+        nominal,
+        inertia=tuple(float(v) for v in inertia),
+        disturbances=disturbances,
+        **{k: tuple(v) for k, v in top.items()},
+        **scalars,
+    )

@@ -1,0 +1,227 @@
+"""Campaign reports: a Monte Carlo pointing budget, and a wheel fleet's identification.
+
+Monte Carlo figure ids: ``fig-histograms`` (per-run steady-state maximum error per
+axis and total), ``fig-cdf`` (its empirical CDF against the requirement),
+``fig-worst-run`` (the worst seed's time history, flown again).
+Fleet: ``table-fleet``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from rwlab.campaign.montecarlo import AXES, Campaign, axis_errors_deg
+from rwlab.data import atomic_write_bytes
+from rwlab.report.attitude import check_outputs
+from rwlab.report.html import Page, figure
+
+__all__ = ["CAMPAIGN_FILES", "FLEET_FILES", "write_campaign", "write_fleet"]
+
+CAMPAIGN_FILES = ["results.parquet", "budget.json", "report.html"]
+FLEET_FILES = ["fleet.json", "fleet.html"]
+_COLORS = {"x": "#1f77b4", "y": "#2ca02c", "z": "#d62728", "total": "#222222"}
+
+
+def _write_json(path: Path, payload) -> None:
+    text = json.dumps(payload, indent=2)
+    atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
+
+
+def _results_table(rows: list[dict], campaign: Campaign):
+    """One row per run as a pyarrow table (None → null); the campaign in the metadata."""
+    import pyarrow as pa
+
+    columns = {k: pa.array([r[k] for r in rows]) for k in rows[0]}
+    meta = {
+        "scenario": campaign.scenario.name,
+        "controller": campaign.controller,
+        "duration_s": campaign.duration,
+        "campaign_seed": campaign.seed,
+        "dispersions": [d.__dict__ for d in campaign.dispersions],
+    }
+    return pa.table(columns).replace_schema_metadata({b"rwlab": json.dumps(meta).encode()})
+
+
+def write_campaign(
+    rows: list[dict],
+    budget: dict,
+    campaign: Campaign,
+    worst,
+    out_dir: str | os.PathLike,
+    *,
+    force: bool = False,
+) -> dict[str, Path]:
+    """Write ``results.parquet``, ``budget.json`` and ``report.html``.
+
+    ``worst`` is the worst run's ``SimResult`` (flown again from its seed).
+    """
+    import pyarrow.parquet as pq
+
+    targets = check_outputs(out_dir, CAMPAIGN_FILES, force)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    table = _results_table(rows, campaign)
+    atomic_write_bytes(targets["results.parquet"], lambda tmp: pq.write_table(table, tmp))
+    _write_json(targets["budget.json"], budget)
+    _campaign_page(rows, budget, campaign, worst).save(targets["report.html"])
+    return targets
+
+
+def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
+    sc = campaign.scenario
+    req = budget["requirement_deg"]
+    page = Page(f"Monte Carlo pointing budget — {campaign.controller} on {sc.name}")
+    page.text(
+        f"{budget['runs']} runs of {campaign.duration:g} s, campaign seed {campaign.seed}; each "
+        "run's seed is a child of numpy's SeedSequence(campaign seed), and from it alone come "
+        "the run's dispersions and noise. The controller is designed on the nominal scenario "
+        "and flown on the dispersed one; the filter uses the dispersed inertia and sensor "
+        f"noise. Requirement ±{req:g}°. {budget['meets_requirement_fraction']:.1%} of the runs "
+        "meet it in steady state."
+    )
+    page.heading("Pointing budget", "budget")
+    stats = ["mean", "std", "p99_73", "mean_plus_3std", "max"]
+    rows_b = [
+        [axis, *[budget["pointing_error_deg"][axis][s] for s in stats]] for axis in (*AXES, "total")
+    ]
+    page.table(
+        ["axis", "mean [°]", "std [°]", "99.73 % [°]", "mean + 3σ [°]", "max [°]"],
+        rows_b,
+        table_id="table-budget",
+    )
+    page.text(
+        "Statistics over runs of each run's steady-state maximum |error| (total: every step; "
+        f"axes: the logged trace, the rotation vector's components). With "
+        f"{budget['runs']} runs the 99.73rd percentile is an interpolation between the largest "
+        "values (it needs ~370 runs to be observed); mean + 3σ assumes a normal spread.",
+        note=True,
+    )
+    peaks = [
+        [key, budget[key]["max"], budget[key]["seed"]]
+        for key in ("torque_peak_Nm", "wheel_momentum_peak_fraction", "torque_saturated_fraction")
+    ]
+    page.table(["maximum over runs", "value", "seed"], peaks, table_id="table-peaks")
+    data = {a: np.array([r[f"steady_max_error_{a}_deg"] for r in rows]) for a in AXES}
+    data["total"] = np.array([r["steady_max_error_deg"] for r in rows])
+    fig, axes = figure(10, 5.0, 2, 2)
+    for ax, (name, x) in zip(np.ravel(axes), data.items(), strict=True):
+        ax.hist(x, bins=max(5, min(40, len(x) // 3)), color=_COLORS[name], alpha=0.8)
+        ax.set_title(f"{name}: steady max |error|", fontsize=9)
+        ax.set_xlabel("[°]")
+        ax.set_ylabel("runs")
+        ax.grid(alpha=0.3)
+    page.figure(fig, "fig-histograms", "Each run's steady-state maximum error, per axis and total.")
+    fig, ax = figure(10, 3.2)
+    for name, x in data.items():
+        xs = np.sort(x)
+        ax.step(
+            xs, np.arange(1, xs.size + 1) / xs.size, where="post", color=_COLORS[name], label=name
+        )
+    ax.axvline(req, color="k", ls="--", lw=1, label=f"requirement ±{req:g}°")
+    ax.set_xlabel("steady-state maximum |error| [°]")
+    ax.set_ylabel("share of runs ≤")
+    ax.set_ylim(0, 1.02)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    page.figure(fig, "fig-cdf", "Empirical CDF of each run's steady-state maximum error.")
+    w = budget["worst_seeds"][0]
+    page.heading(f"Worst run: seed {w['seed']}", "worst")
+    _worst_figure(page, worst, req)
+    by_seed = {r["seed"]: r for r in rows}
+    fields = [d.field for d in campaign.dispersions]
+    page.table(
+        ["seed", "steady max error [°]", *fields],
+        [
+            [str(s["seed"]), s["steady_max_error_deg"], *[by_seed[s["seed"]][f] for f in fields]]
+            for s in budget["worst_seeds"]
+        ],
+        table_id="table-worst",
+    )
+    page.heading("Dispersions", "dispersions")
+    page.table(
+        ["field", "distribution", "sigma", "mean", "bounds", "relative"],
+        [
+            [
+                d.field,
+                d.distribution,
+                d.sigma if d.distribution == "normal" else None,
+                d.mean if d.distribution == "normal" else None,
+                d.bounds,
+                d.relative,
+            ]
+            for d in campaign.dispersions
+        ],
+        table_id="table-dispersions",
+    )
+    return page
+
+
+def _worst_figure(page: Page, run, req: float) -> None:
+    fig, axes = figure(10, 7.0, 3, 1, sharex=True)
+    err = axis_errors_deg(run.q)
+    axes[0].semilogy(run.t, np.maximum(run.error_deg, 1e-6), color="k", lw=0.8, label="total")
+    axes[0].axhline(req, color="k", ls="--", lw=1)
+    axes[0].set_ylabel("pointing error [°]")
+    for ax in axes:
+        ax.axvspan(run.steady_from_s, run.t[-1], color="#888", alpha=0.08)
+    for i, a in enumerate(AXES):
+        axes[1].plot(run.t, err[:, i], color=_COLORS[a], lw=0.8, label=a)
+        axes[2].plot(run.t, run.torque[:, i], color=_COLORS[a], lw=0.8, label=f"τ{a}")
+    axes[1].set_ylabel("error per axis [°]")
+    axes[1].set_ylim(-3 * req, 3 * req)
+    axes[2].set_ylabel("torque [N·m]")
+    axes[2].set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper right")
+    page.figure(
+        fig,
+        "fig-worst-run",
+        "The worst run flown again from its seed: pointing error (total, and per axis as the "
+        "rotation vector of the attitude) and control torque; shaded: the steady-state window "
+        "the budget uses.",
+    )
+
+
+def write_fleet(
+    records: list[dict], out_dir: str | os.PathLike, *, force: bool = False
+) -> dict[str, Path]:
+    """Write ``fleet.json`` and ``fleet.html``: one line per record (its study or its error)."""
+    targets = check_outputs(out_dir, FLEET_FILES, force)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    ok = [r for r in records if r["error"] is None]
+    fits = np.array([r["fit_percent"] for r in ok if r["fit_percent"] is not None], dtype=float)
+    summary = {
+        "records": len(records),
+        "identified": len(ok),
+        "fit_percent": {
+            "min": float(fits.min()),
+            "median": float(np.median(fits)),
+            "max": float(fits.max()),
+        }
+        if fits.size
+        else None,
+        "structures": {
+            s: sum(r["structure"] == s for r in ok) for s in sorted({r["structure"] for r in ok})
+        },
+        "per_record": records,
+    }
+    _write_json(targets["fleet.json"], summary)
+    page = Page(f"Fleet identification — {len(records)} records")
+    page.text(
+        f"{len(ok)} of {len(records)} records identified, each by the same study as "
+        "`rwlab identify` on one record (its folder holds report.html, study.json, model.json)."
+    )
+    page.table(
+        ["record", "study", "delay nk", "chosen", "fit %", "error"],
+        [
+            [r["record"], r["study"], r["nk"], r["structure"], r["fit_percent"], r["error"]]
+            for r in records
+        ],
+        table_id="table-fleet",
+    )
+    page.save(targets["fleet.html"])
+    return targets

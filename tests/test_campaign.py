@@ -1,0 +1,369 @@
+"""Monte Carlo campaigns: dispersions, seeds, the Dask engine, the budget, fleet identification."""
+
+import json
+import math
+import os
+import signal
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from rwlab import datasets
+from rwlab.attitude.frames import from_axis_angle
+from rwlab.attitude.scenario import load_scenario
+from rwlab.campaign.dispersions import Dispersion, apply, draw, load_dispersions
+from rwlab.campaign.engine import batches, dask_client
+from rwlab.campaign.montecarlo import (
+    Campaign,
+    _run_batch,
+    axis_errors_deg,
+    budget,
+    check_runs,
+    run_campaign,
+    run_seeds,
+)
+from rwlab.cli import main
+from rwlab.errors import ConfigError
+
+SMALLSAT = load_scenario("geo-smallsat")
+
+
+def _rwlab(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def _file(tmp_path, text):
+    path = tmp_path / "d.toml"
+    path.write_text(text)
+    return path
+
+
+# -- dispersion files -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('inertia.xw = { distribution = "normal", sigma = 0.1 }', "unknown field 'inertia.xw'"),
+        ('name = { distribution = "normal", sigma = 0.1 }', "unknown field 'name'"),
+        ('dt = { distribution = "normal", sigma = 0.1 }', "unknown field 'dt'"),
+        ('sun_noise_deg = { distribution = "lognormal", sigma = 0.1 }', "normal' or 'uniform"),
+        ('sun_noise_deg = { distribution = "normal" }', "sigma > 0"),
+        ('sun_noise_deg = { distribution = "normal", sigma = -1 }', "sigma > 0"),
+        ('sun_noise_deg = { distribution = "uniform" }', "needs bounds"),
+        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1, -0.1] }', "low < high"),
+        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1, 0.1] }', "low < high"),
+        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1] }', "two numbers"),
+        ('sun_noise_deg = { distribution = "uniform", bounds = ["a", 1] }', "two numbers"),
+        (
+            'sun_noise_deg = { distribution = "normal", sigma = 0.1, bounds = [0.2, 0.3] }',
+            "do not contain the mean",
+        ),
+        (
+            'sun_noise_deg = { distribution = "uniform", bounds = [0, 1], sigma = 1 }',
+            "takes bounds",
+        ),
+        ('sun_noise_deg = { distribution = "normal", sigma = 1, scale = 2 }', "unknown key"),
+        ('sun_noise_deg = { distribution = "normal", sigma = 1, relative = 1 }', "true or false"),
+        ("sun_noise_deg = 0.1", "must be a table"),
+        ("sun_noise_deg = {", "not a valid TOML"),
+    ],
+)
+def test_bad_dispersion_files_are_config_errors(tmp_path, text, message):
+    with pytest.raises(ConfigError, match=message):
+        load_dispersions(_file(tmp_path, "[dispersions]\n" + text))
+
+
+def test_the_default_set_covers_what_a_geo_reviewer_expects():
+    fields = {d.field for d in load_dispersions()}
+    for expected in (
+        "inertia.xx",
+        "inertia.xy",
+        "disturbances.srp_offset.z",
+        "sun_noise_deg",
+        "earth_noise_deg",
+        "wheel_max_torque",
+        "initial_error_deg",
+        "initial_rate.x",
+        "estimator_error_deg",
+    ):
+        assert expected in fields
+
+
+def test_a_cli_dispersion_error_is_one_line_and_status_2(tmp_path):
+    bad = _file(tmp_path, '[dispersions]\nfoo = { distribution = "normal", sigma = 1 }')
+    r = _rwlab(
+        "attitude",
+        "montecarlo",
+        "--runs",
+        2,
+        "--duration",
+        10,
+        "--dispersions",
+        bad,
+        "--out",
+        tmp_path / "o",
+    )
+    assert r.exit_code == 2 and "unknown field 'foo'" in r.output
+    assert not (tmp_path / "o").exists()
+
+
+# -- draws ------------------------------------------------------------------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**63 - 1),
+    lo=st.floats(-1, 0.5),
+    width=st.floats(1e-3, 1),
+    relative=st.booleans(),
+)
+def test_draws_stay_within_their_bounds(seed, lo, width, relative):
+    bounds = (lo, lo + width)
+    for d in (
+        Dispersion("sun_noise_deg", "uniform", bounds=bounds, relative=relative),
+        Dispersion("sun_noise_deg", "normal", 0.3, lo + width / 3, bounds, relative),
+    ):
+        value = draw([d], SMALLSAT, seed)["sun_noise_deg"]
+        delta = value / SMALLSAT.sun_noise_deg - 1 if relative else value - SMALLSAT.sun_noise_deg
+        assert bounds[0] - 1e-12 <= delta <= bounds[1] + 1e-12
+
+
+def test_a_truncated_normal_has_the_textbook_moments():
+    d = Dispersion("initial_error_deg", "normal", sigma=0.5, mean=0.2, bounds=(-0.3, 1.5))
+    x = np.array([draw([d], SMALLSAT, s)["initial_error_deg"] for s in range(4000)]) - 2.0
+    truth = stats.truncnorm((-0.3 - 0.2) / 0.5, (1.5 - 0.2) / 0.5, loc=0.2, scale=0.5)
+    se = truth.std() / math.sqrt(x.size)
+    assert abs(x.mean() - truth.mean()) < 4 * se
+    assert abs(x.std() / truth.std() - 1) < 0.05
+    assert x.min() >= -0.3 and x.max() <= 1.5
+
+
+def test_each_field_draws_from_its_own_stream():
+    full = load_dispersions()
+    some = [d for d in full if d.field.startswith("inertia")]
+    a, b = draw(full, SMALLSAT, 77), draw(some, SMALLSAT, 77)
+    assert all(a[k] == b[k] for k in b)
+    assert draw(full, SMALLSAT, 77) == a and draw(full, SMALLSAT, 78) != a
+
+
+def test_relative_products_of_inertia_scale_with_the_principal_moments():
+    d = [Dispersion("inertia.xy", "uniform", bounds=(0.02, 0.02 + 1e-12), relative=True)]
+    sc = apply(SMALLSAT, draw(d, SMALLSAT, 1))
+    J = sc.inertia_matrix
+    assert J[0, 1] == J[1, 0] == pytest.approx(0.02 * math.sqrt(14.0 * 12.0))
+    assert np.diag(J).tolist() == [14.0, 12.0, 10.0] and J[0, 2] == J[1, 2] == 0
+    assert apply(SMALLSAT, {}) == SMALLSAT
+    assert apply(SMALLSAT, {"disturbances.srp_offset.y": 0.5}).disturbances.srp_offset == (
+        0.05,
+        0.5,
+        0.08,
+    )
+
+
+def test_a_dispersion_that_breaks_a_scenario_fails_before_any_run():
+    bad = (Dispersion("inertia.zz", "uniform", bounds=(2.0, 3.0), relative=True),)
+    c = Campaign(SMALLSAT, bad, 10.0, "pd", seed=1, runs=3)
+    with pytest.raises(ConfigError, match=r"run 0 \(seed \d+\).*triangle"):
+        check_runs(c)
+
+
+# -- seeds, axes, budget ----------------------------------------------------------------
+
+
+def test_run_seeds_are_distinct_reproducible_and_extendable():
+    s = run_seeds(5, 500)
+    assert len(set(s)) == 500 and all(0 <= x < 2**63 for x in s)
+    assert run_seeds(5, 500) == s and run_seeds(5, 20) == s[:20] and run_seeds(6, 20) != s[:20]
+
+
+@given(
+    axis=st.lists(st.floats(-1, 1), min_size=3, max_size=3).filter(
+        lambda v: np.linalg.norm(v) > 1e-3
+    ),
+    angle=st.floats(1e-4, 179.0),
+)
+def test_axis_errors_are_the_rotation_vector(axis, angle):
+    q = from_axis_angle(np.array(axis), math.radians(angle))
+    unit = np.array(axis) / np.linalg.norm(axis)
+    for sign in (1, -1):  # q and −q are the same attitude
+        e = axis_errors_deg((sign * q)[None, :])[0]
+        assert np.allclose(e, angle * unit, atol=1e-9 * max(1, angle))
+
+
+def test_budget_statistics_over_runs():
+    rng = np.random.default_rng(3)
+    rows = []
+    for i in range(50):
+        rows.append(
+            {
+                "run": i,
+                "seed": 1000 + i,
+                "steady_max_error_deg": 0.01 * (i + 1),
+                **{f"steady_max_error_{a}_deg": rng.uniform() for a in "xyz"},
+                "torque_peak_Nm": 1.0 if i == 7 else 0.5,
+                "wheel_momentum_peak_fraction": 0.3,
+                "torque_saturated_fraction": 0.0,
+                "settling_time_s": None,
+            }
+        )
+    c = Campaign(SMALLSAT, (), 10.0)
+    b = budget(rows, c)
+    total = b["pointing_error_deg"]["total"]
+    assert b["runs"] == 50
+    assert total["mean"] == pytest.approx(0.255) and total["max"] == pytest.approx(0.5)
+    assert total["std"] == pytest.approx(0.01 * np.std(np.arange(1, 51), ddof=1))
+    assert b["meets_requirement_fraction"] == pytest.approx(10 / 50)
+    assert [w["seed"] for w in b["worst_seeds"]] == [1049, 1048, 1047, 1046, 1045]
+    assert b["torque_peak_Nm"] == {"max": 1.0, "seed": 1007}
+    x = np.array([r["steady_max_error_x_deg"] for r in rows])
+    assert b["pointing_error_deg"]["x"]["p99_73"] == pytest.approx(np.percentile(x, 99.73))
+
+
+def test_batches_keep_order_and_have_many_runs_each():
+    work = batches(list(range(100)), n_workers=2)
+    assert [x for b in work for x in b] == list(range(100))
+    assert len(work) == 8 and {len(b) for b in work} == {12, 13}
+    assert batches([1, 2, 3], n_workers=4) == [[1], [2], [3]]
+
+
+# -- on Dask ----------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_montecarlo_is_the_same_on_one_and_two_workers(tmp_path):
+    """The issue's "Must show": 24 runs, 24 seeds, identical rows on 1 and 2 workers."""
+    tables = {}
+    for k in (2, 1):
+        out = tmp_path / f"w{k}"
+        r = _rwlab(
+            "attitude",
+            "montecarlo",
+            "--scenario",
+            "geo-smallsat",
+            "--runs",
+            24,
+            "--duration",
+            600,
+            "--workers",
+            k,
+            "--seed",
+            5,
+            "--out",
+            out,
+        )
+        assert r.exit_code == 0, r.output
+        assert json.loads((out / "budget.json").read_text())["runs"] == 24
+        tables[k] = pq.read_table(out / "results.parquet").to_pylist()
+        html = (out / "report.html").read_text()
+        for fig in ("fig-histograms", "fig-cdf", "fig-worst-run"):
+            assert f'id="{fig}"' in html
+    assert len(tables[1]) == 24 and len({row["seed"] for row in tables[1]}) == 24
+    assert tables[1] == tables[2]
+    assert "inertia.xy" in tables[1][0] and "steady_max_error_z_deg" in tables[1][0]
+    assert len({row["inertia.xx"] for row in tables[1]}) == 24  # each run dispersed its own
+
+
+@pytest.mark.slow
+def test_a_killed_worker_is_replaced_and_every_run_still_comes_back():
+    c = Campaign(SMALLSAT, load_dispersions(), 300.0, "lqg", seed=11, runs=16)
+    expected = _run_batch(list(enumerate(run_seeds(11, 16))), c)
+    killed = []
+    with dask_client(2) as client:
+        before = client.run(os.getpid)
+
+        def kill_a_busy_worker(done):
+            if killed:
+                return
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert busy, "nothing in flight to lose"
+            killed.append(before[busy[0]])
+            os.kill(killed[0], signal.SIGKILL)  # a worker process this test started
+
+        rows = run_campaign(c, client, progress=kill_a_busy_worker)
+        client.wait_for_workers(2, timeout=120)
+        after = set(client.run(os.getpid).values())
+    assert killed and killed[0] not in after and len(after) == 2
+    assert rows == expected
+
+
+# -- fleet identification ---------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_identify_a_folder_is_the_single_record_study_for_each(tmp_path):
+    fleet = tmp_path / "fleet"
+    fleet.mkdir()
+    dryer = datasets.get("dryer")
+    dryer.write(fleet / "unit_a.csv")
+    dryer._with(dryer.u, dryer.y * 2.0 + 1.0).write(fleet / "unit_b.csv")
+    (fleet / "unit_c.csv").write_text("u,y\n1,2\n")  # a broken record
+    (fleet / "notes.md").write_text("not a record")
+    r = _rwlab(
+        "identify", fleet, "--preprocess", "detrend", "--workers", 1, "--out", tmp_path / "out"
+    )
+    assert r.exit_code == 2 and "1 of 3 records failed" in r.output and "unit_c" in r.output
+    summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    assert summary["records"] == 3 and summary["identified"] == 2
+    single = tmp_path / "single"
+    r = _rwlab("identify", fleet / "unit_a.csv", "--preprocess", "detrend", "--out", single)
+    assert r.exit_code == 0, r.output
+    one = json.loads((single / "study.json").read_text())
+    in_fleet = json.loads((tmp_path / "out" / "unit_a" / "study.json").read_text())
+    assert in_fleet == one
+    b = json.loads((tmp_path / "out" / "unit_b" / "study.json").read_text())
+    assert b["chosen"]["structure"] == one["chosen"]["structure"]  # an affine copy: same fit
+    assert b["chosen"]["fit_percent"] == pytest.approx(one["chosen"]["fit_percent"], abs=1e-3)
+
+
+@pytest.mark.slow
+def test_scheduler_sends_the_campaign_to_an_existing_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        r = _rwlab(
+            "attitude",
+            "montecarlo",
+            "--scenario",
+            "geo-smallsat",
+            "--controller",
+            "pd",
+            "--runs",
+            3,
+            "--duration",
+            20,
+            "--scheduler",
+            cluster.scheduler_address,
+            "--out",
+            tmp_path / "o",
+        )
+    assert r.exit_code == 0, r.output
+    rows = pq.read_table(tmp_path / "o" / "results.parquet").to_pylist()
+    assert [row["seed"] for row in rows] == run_seeds(0, 3)
+
+
+def test_engine_option_errors(tmp_path):
+    both = _rwlab(
+        "attitude",
+        "montecarlo",
+        "--runs",
+        1,
+        "--duration",
+        10,
+        "--workers",
+        1,
+        "--scheduler",
+        "tcp://127.0.0.1:1",
+        "--out",
+        tmp_path / "o",
+    )
+    assert both.exit_code == 2 and "not both" in both.output
+    r = _rwlab("identify", "dryer", "--workers", 2, "--out", tmp_path / "o")
+    assert r.exit_code == 2 and "folder of records" in r.output
