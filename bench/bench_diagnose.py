@@ -1,6 +1,7 @@
 """Detection delay, isolation and false-alarm rate of ``rwlab diagnose`` over seeded runs.
 
-Run:  python bench/bench_diagnose.py [--runs 5] [--healthy-hours 6]
+Run:  python bench/bench_diagnose.py [--runs 5] [--healthy-hours 6] [--model linear|nonlinear]
+                                     [--speed-test]
 
 A model is identified (paper A's study) from a fault-free 20-minute PRBS
 (seed 0). Then, on the simulated RW90 with PRBS commands of other seeds:
@@ -38,22 +39,30 @@ FAULTS = {
 }
 
 
-def _alarms(path: Path, wheel: IdentifiedWheel):
+def _alarms(path: Path, wheel: IdentifiedWheel, speed_test: bool):
     data = load_record(path, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
-    return diagnose(data, wheel).alarms
+    return diagnose(data, wheel, speed_test=speed_test).alarms
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5, help="seeded runs per fault")
     parser.add_argument("--healthy-hours", type=float, default=6.0, help="in 2-hour records")
+    parser.add_argument(
+        "--model",
+        choices=["linear", "nonlinear"],
+        default=None,
+        help="which model of model.json (default: the file's preferred one)",
+    )
+    parser.add_argument("--speed-test", action="store_true", help="also the speed CUSUM")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         run_experiment(ExperimentConfig(duration=1200, seed=0), out / "ident.mcap")
         result = CliRunner().invoke(cli, ["identify", str(out / "ident.mcap"), "--out", str(out)])
         assert result.exit_code == 0, result.output
-        wheel = IdentifiedWheel.from_json(out / "model.json")
+        wheel = IdentifiedWheel.from_json(out / "model.json", model=args.model)
+        print(f"model: {args.model or 'preferred'}; speed test: {args.speed_test}")
 
         start = time.perf_counter()
         n_healthy = max(1, round(args.healthy_hours / 2))
@@ -61,7 +70,7 @@ def main() -> None:
         for seed in range(1, n_healthy + 1):
             path = out / f"healthy{seed}.mcap"
             run_experiment(ExperimentConfig(duration=7200, seed=seed), path)
-            false_alarms += _alarms(path, wheel)
+            false_alarms += _alarms(path, wheel, args.speed_test)
         hours = 2 * n_healthy
         print(f"fault-free: {hours} h of PRBS (seeds 1..{n_healthy}), {len(false_alarms)} alarms")
         print(
@@ -80,7 +89,7 @@ def main() -> None:
                 path = out / "fault.mcap"
                 cfg = ExperimentConfig(duration=1200, seed=seed, faults=(fault,))
                 run_experiment(cfg, path, force=True)
-                alarms = _alarms(path, wheel)
+                alarms = _alarms(path, wheel, args.speed_test)
                 early += sum(a.t_s < t_fault for a in alarms)
                 after = [a for a in alarms if a.t_s >= t_fault]
                 if after:
