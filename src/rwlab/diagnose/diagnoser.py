@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -304,7 +304,6 @@ class Diagnosis:
     history: dict[str, np.ndarray]
     false_alarms_per_hour: float
     calibration_s: float
-    extra: dict = field(default_factory=dict)
 
     def residual_statistics(self) -> dict:
         """Mean, σ and largest |value| of each residual, before and after the first alarm."""
@@ -335,7 +334,6 @@ class Diagnosis:
             "calibration_s": self.calibration_s,
             "calibration": self.calibration,
             "residual_statistics": self.residual_statistics(),
-            **self.extra,
         }
 
 
