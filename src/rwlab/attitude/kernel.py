@@ -29,7 +29,6 @@ import numpy as np
 from numba import njit
 
 from rwlab.attitude.ekf import error_jacobian_into, gated_update_into, predict_covariance_into
-from rwlab.attitude.frames import dcm, qmul
 from rwlab.attitude.plant import rk4_step
 from rwlab.attitude.wheels import realise
 
@@ -112,6 +111,48 @@ def _sky_at(sky, u, sun, moon):
         a[7] + f * (b[7] - a[7]),
         a[8] + f * (b[8] - a[8]) > 0.5,
     )
+
+
+@njit(cache=True, inline="always")
+def _dcm_into(q, C):
+    """C = frames.dcm(q[:4]), element by element (tested equal)."""
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    C[0, 0], C[1, 1], C[2, 2] = s + 2 * q1 * q1, s + 2 * q2 * q2, s + 2 * q3 * q3
+    C[0, 1], C[1, 0] = 2 * (q1 * q2 + q4 * q3), 2 * (q1 * q2 - q4 * q3)
+    C[0, 2], C[2, 0] = 2 * (q1 * q3 - q4 * q2), 2 * (q1 * q3 + q4 * q2)
+    C[1, 2], C[2, 1] = 2 * (q2 * q3 + q4 * q1), 2 * (q2 * q3 - q4 * q1)
+
+
+@njit(cache=True)
+def _nees(x, q_hat, w_hat, P, L):
+    """Normalised estimation error squared δxᵀ P⁻¹ δx, δx = [2 (q ⊗ q̂⁻¹)_v, ω − ω̂], by a
+    Cholesky factor of P written into the (6, 6) scratch L."""
+    a1, a2, a3, a4 = x[0], x[1], x[2], x[3]
+    b1, b2, b3, b4 = q_hat[0], q_hat[1], q_hat[2], q_hat[3]
+    sign = 2.0 if a4 * b4 + a1 * b1 + a2 * b2 + a3 * b3 >= 0 else -2.0
+    e = (
+        sign * (b4 * a1 - a4 * b1 + a2 * b3 - a3 * b2),
+        sign * (b4 * a2 - a4 * b2 + a3 * b1 - a1 * b3),
+        sign * (b4 * a3 - a4 * b3 + a1 * b2 - a2 * b1),
+        x[4] - w_hat[0],
+        x[5] - w_hat[1],
+        x[6] - w_hat[2],
+    )
+    total = 0.0
+    z = np.empty(6)  # only at logged steps
+    for i in range(6):
+        for j in range(i + 1):
+            acc = P[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = math.sqrt(acc) if i == j else acc / L[j, j]
+        acc = e[i]
+        for k in range(i):
+            acc -= L[i, k] * z[k]
+        z[i] = acc / L[i, i]
+        total += z[i] * z[i]
+    return total
 
 
 @njit(cache=True)
@@ -271,6 +312,7 @@ def run_block(
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     F, W3, W6 = np.empty((6, 6)), np.empty((4, 3, 3)), np.empty((6, 6, 6))
+    C = np.empty((3, 3))
     q_hat, w_hat, P = q_hat.copy(), w_hat.copy(), P.copy()
     s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
@@ -285,7 +327,7 @@ def run_block(
         if sunlit < earth_lit:
             stats[MOON_STEPS] += 1
         if k % sensor_every == 0:
-            C = dcm(x[:4])
+            _dcm_into(x, C)
             _matvec(C, s_orb, sun_b)
             _matvec(C, m_orb, moon_b)
             # the sun sensor needs the whole disc inside its field; the earth sensor
@@ -429,13 +471,7 @@ def run_block(
                 for c in range(nw):
                     log_tau[log_k, i] -= G[i, c] * hw_real[c]
             if use_ekf:
-                dq = qmul(x[:4], np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
-                if dq[3] < 0:
-                    dq = -dq
-                ee = np.empty(6)
-                ee[:3] = 2 * dq[:3]
-                ee[3:] = x[4:7] - w_hat
-                log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
+                log_nees[log_k] = _nees(x, q_hat, w_hat, P, W6[0]) if measured else np.nan
             log_sky[log_k, 0] = sunlit
             log_sky[log_k, 1] = sun_status
             log_sky[log_k, 2] = earth_status
