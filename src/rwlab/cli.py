@@ -105,6 +105,12 @@ def _check_folder(folder) -> None:
         raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path))
     if not os.access(path, os.W_OK | os.X_OK):
         raise PermissionError(errno.EACCES, "permission denied", str(path))
+    target = Path(folder).absolute()
+    if not target.exists():  # e.g. /proc passes the access test: try, and leave nothing
+        target.mkdir(parents=True)
+        while target != path:
+            target.rmdir()
+            target = target.parent
 
 
 def _columns_option(func):
@@ -1521,6 +1527,8 @@ def attitude_simulate(
         "relinearize_period_s": relinearize,
         "disturbances_known_to_filter": sc.disturbances_known_to_filter,
         "momentum_unloading": sc.momentum_unloading,
+        "wheel_model": sc.wheel_model,
+        "wheel_faults": list(sc.wheel_faults),
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
     }
