@@ -458,3 +458,42 @@ def test_the_scalar_update_holds_on_ill_conditioned_innovations():
         assert np.max(np.abs(P2 - exact)[:3, :3]) < 1e-6 * block
         assert np.all(np.linalg.eigvalsh(P2) > 0)
         q, w, P = q2, w2, P2
+
+
+def test_report_envelope_keeps_every_peak_of_a_long_trace():
+    from rwlab.report.attitude import _envelope
+
+    t = np.arange(100_000) * 0.1
+    y = np.random.default_rng(5).standard_normal(t.size)
+    y[12_345], y[77_777] = 50.0, -40.0
+    t2, y2 = _envelope(t, y, bins=500)
+    assert t2.size <= 1000 + 2 * 200 and np.all(np.diff(t2) > 0)
+    assert y2.max() == 50.0 and y2.min() == -40.0
+    assert np.array_equal(_envelope(t[:900], y[:900], bins=500)[1], y[:900])
+
+
+def test_kernel_nees_is_the_textbook_quadratic_form():
+    from rwlab.attitude.kernel import _nees
+
+    rng = np.random.default_rng(6)
+    q = from_axis_angle(rng.standard_normal(3), 0.4)
+    q_hat = -from_axis_angle(rng.standard_normal(3), 0.01)  # the sign of q̂ must not matter
+    q_hat = qmul(q_hat, q)
+    x = np.concatenate([q, 1e-3 * rng.standard_normal(3), np.zeros(3)])
+    w_hat = x[4:7] + 1e-5 * rng.standard_normal(3)
+    L = 1e-3 * rng.standard_normal((6, 6))
+    P = L @ L.T + 1e-8 * np.eye(6)
+    dq = qmul(q, np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
+    dq = dq if dq[3] >= 0 else -dq
+    e = np.concatenate([2 * dq[:3], x[4:7] - w_hat])
+    expected = e @ np.linalg.solve(P, e)
+    assert _nees(x, q_hat, w_hat, P, np.empty((6, 6))) == pytest.approx(expected, rel=1e-9)
+
+
+def test_kernel_dcm_twin_equals_frames_dcm():
+    from rwlab.attitude.kernel import _dcm_into
+
+    q = from_axis_angle([0.3, -1.0, 0.2], 2.1)
+    C = np.empty((3, 3))
+    _dcm_into(np.concatenate([q, np.zeros(6)]), C)
+    assert np.allclose(C, dcm(q), rtol=0, atol=1e-15)

@@ -53,6 +53,30 @@ def test_compiled_physics_is_the_wheel_physics_in_acceleration_mode():
         assert unit.faults == 0
 
 
+@pytest.mark.parametrize(
+    "fault, attribute, value",
+    [
+        ({"friction": 5.0}, "friction_factor", 5.0),
+        ({"torque_constant": 0.5}, "torque_constant_factor", 0.5),
+        ({"current_limit": 0.2}, "current_limit", 0.2),
+    ],
+)
+def test_compiled_wheel_faults_are_the_wheel_physics_faults(fault, attribute, value):
+    """The drive does not know its fault: it feeds forward the nominal motor and friction."""
+    sc = SMALL.with_(wheel_model="physics", wheel_faults=({"wheel": 1, "at_s": 0.0, **fault},))
+    w = wheel_setup(sc, np.zeros(3))
+    unit = WheelPhysics(physics_params(sc))
+    setattr(unit, attribute, value)
+    dt = 0.1
+    for cmd, speed in ((0.0015, 300.0), (-0.01, -500.0), (0.012, 80.0), (0.0, 700.0)):
+        unit.speed = speed
+        unit.command(Mode.ACCELERATION, rad_s_to_rpm(cmd / sc.wheel_inertia))
+        unit.step(dt)
+        realised = sc.wheel_inertia * (unit.speed - speed) / dt
+        got = _realise(w, 0.0, dt, [cmd, 0.0, 0.0], [speed * sc.wheel_inertia, 0.0, 0.0])
+        assert got[0] == pytest.approx(realised, rel=1e-9, abs=1e-15)
+
+
 def test_physics_drive_compensates_friction_up_to_its_current_limit():
     worn = {"wheel": 2, "at_s": 0.0, "friction": 200.0}
     sc = SMALL.with_(wheel_model="physics", wheel_faults=(worn,))

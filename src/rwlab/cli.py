@@ -105,6 +105,12 @@ def _check_folder(folder) -> None:
         raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path))
     if not os.access(path, os.W_OK | os.X_OK):
         raise PermissionError(errno.EACCES, "permission denied", str(path))
+    target = Path(folder).absolute()
+    if not target.exists():  # e.g. /proc passes the access test: try, and leave nothing
+        target.mkdir(parents=True)
+        while target != path:
+            target.rmdir()
+            target = target.parent
 
 
 def _columns_option(func):
@@ -867,6 +873,21 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option(
+    "--fault",
+    "faults",
+    multiple=True,
+    metavar="NAME[=VALUE]@SECONDS",
+    help="Inject a fault into the simulated wheel (repeatable), e.g. friction=3@900: friction, "
+    "torque_constant (factors), current_limit (A), speed_sensor_bias (rpm), speed_sensor_stuck, "
+    "telemetry_dropout (s).",
+)
+@click.option(
+    "--model",
+    "model_file",
+    type=click.Path(dir_okay=False),
+    help="model.json: run the fault detector live; alarms become record events.",
+)
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(
     "--port", type=click.IntRange(1, 65535), default=5006, show_default=True, help="Monitor port."
@@ -889,6 +910,8 @@ def experiment(
     channel,
     node_id,
     raw_frames,
+    faults,
+    model_file,
     monitor,
     port,
     force,
@@ -915,6 +938,8 @@ def experiment(
         channel=channel,
         node_id=node_id,
         raw_frames=raw_frames,
+        faults=tuple(faults) or None,
+        model=model_file,
     )
     if config_file:
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
@@ -1112,6 +1137,62 @@ def identify(
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
+    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+
+
+@main.command("diagnose")
+@click.argument("record", type=click.Path(dir_okay=False))
+@click.option(
+    "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
+)
+@click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
+@click.option(
+    "--calibration",
+    "calibration_s",
+    type=float,
+    default=300.0,
+    show_default=True,
+    help="Healthy start of the record that calibrates the residuals, s.",
+)
+@click.option(
+    "--false-alarms",
+    "false_alarms_per_hour",
+    type=click.FloatRange(0, min_open=True),
+    default=1e-3,
+    show_default=True,
+    help="Wanted false alarms per hour per detector (sets the thresholds).",
+)
+@click.option("--speed-test", is_flag=True, help="Also test the speed residual (see docs).")
+@click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_friendly_errors
+def diagnose_cmd(record, model_file, out, calibration_s, false_alarms_per_hour, speed_test, force):
+    """Detect and isolate wheel faults in a record with an identified model.
+
+    Writes OUT/diagnosis.json (alarms, thresholds, residual statistics) and
+    OUT/report.html (residuals and test statistics with the alarms marked).
+    """
+    import numpy as np
+
+    from rwlab.diagnose import diagnose
+    from rwlab.report.diagnosis import write_diagnosis
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
+
+    _check_folder(out)
+    wheel = IdentifiedWheel.from_json(model_file)
+    data = load_record(record, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
+    result = diagnose(
+        data,
+        wheel,
+        calibration_s=calibration_s,
+        false_alarms_per_hour=false_alarms_per_hour,
+        speed_test=speed_test,
+    )
+    paths = write_diagnosis(result, out, title=Path(record).name, force=force)
+    for a in result.alarms:
+        click.echo(f"alarm at {a.t_s:.1f} s: {a.kind} ({a.detector} test, {a.statistic:.3g})")
+    if not result.alarms:
+        click.echo("no alarm")
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
 
 
@@ -1446,6 +1527,8 @@ def attitude_simulate(
         "relinearize_period_s": relinearize,
         "disturbances_known_to_filter": sc.disturbances_known_to_filter,
         "momentum_unloading": sc.momentum_unloading,
+        "wheel_model": sc.wheel_model,
+        "wheel_faults": list(sc.wheel_faults),
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
     }

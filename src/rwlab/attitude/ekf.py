@@ -1,26 +1,33 @@
 """Continuous–discrete multiplicative extended Kalman filter on attitude and rate.
 
 State: the attitude quaternion q̂ (orbital → body), the inertial body rate
-ω̂ and, optionally, a body-frame disturbance torque b̂ (N·m, a random walk:
-disturbance accommodation of the torques the filter does not model); the
-filter's error state is ``δx = [δθ, δω]`` (n = 6) or ``[δθ, δω, δb]`` (n = 9),
-with the true attitude ``A(q) = (I − [δθ×]) A(q̂)``. Keeping the quaternion out
-of the covariance keeps P n×n, symmetric positive definite and q̂ exactly unit
-(the reset folds δθ into q̂ after each update) — the standard MEKF (Markley &
-Crassidis, ch. 6). Every function takes n from P (or F); ``w`` is the rest of
-the state after q, ``[ω̂]`` (3,) or ``[ω̂, b̂]`` (6,).
+ω̂ and, optionally, a disturbance state b̂ (3 or 6 values, N·m, random walks:
+disturbance accommodation of torques the filter does not model) acting as the
+torque ``B b̂``; the filter's error state is ``δx = [δθ, δω]`` (n = 6) or
+``[δθ, δω, δb]`` (n = 9 or 12), with the true attitude ``A(q) = (I − [δθ×]) A(q̂)``.
+Keeping the quaternion out of the covariance keeps P n×n, symmetric positive
+definite and q̂ exactly unit (the reset folds δθ into q̂ after each update) —
+the standard MEKF (Markley & Crassidis, ch. 6). Every function takes n from P
+(or F); ``w`` is the rest of the state after q, ``[ω̂]`` (3,) or ``[ω̂, b̂]``.
+
+Two disturbance states, alone or together (``bias_map`` B, their columns side by
+side): a constant body torque, B = I; and solar pressure through an unknown
+centre of pressure, B = ν [ŝ×] with ŝ the Sun in
+body axes and ν the sunlit fraction (both known from the ephemeris): SRP's
+torque is ρ × F = P A C_r ν ŝ × ρ, linear in the lever arm β = P A C_r ρ,
+which is what b̂ estimates. It turns with the Sun in the body frame, so it
+stays right through an outage where a frozen torque would not.
 
 Error dynamics (analytic; ``F`` below, checked against finite differences):
 
     δθ̇ = −[ω̂×] δθ + δω
-    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + ν δb + w
+    J δω̇ = ([(Jω̂ + h)×] − [ω̂×] J) δω + 3n² ([r̂×] J − [(J r̂)×]) [r̂×] δθ + B δb + w
     δḃ = w_b
 
-with r̂ the nadir in body axes, w the process-noise torque, w_b the bias's
-random-walk noise and ν the share of b acting (1, or the sunlit fraction when b
-stands for solar pressure, whose shadows the filter knows from the ephemeris).
-A vector measurement ``b = A(q) r + v`` (sun or earth direction, r known in the
-orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
+with r̂ the nadir in body axes, w the process-noise torque and w_b the
+random-walk noise (the SRP state's dependence on δθ through ŝ is second order,
+|β|·|δθ|, and left out). A vector measurement ``b = A(q) r + v`` (sun or earth
+direction, r known in the orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
 
 Prediction propagates q̂, ω̂ with the plant's own RK4 (known wheel torques and
 momenta, modelled disturbances) and P with Φ = expm(F·dt) and the matching
@@ -46,18 +53,18 @@ __all__ = [
 
 
 @njit(cache=True)
-def error_jacobian(q, w, h, J, J_inv, n, gg_gain, dim=6, bias_gain=1.0):
-    """F (dim × dim, dim 6 or 9) of the error dynamics at (q̂, ω̂) with wheel momentum h
-    (body axes); with the bias state (dim 9) δω̇ gains ν J⁻¹ δb, ν = ``bias_gain`` (the
-    share of b̂ acting now: the sunlit fraction for an SRP-like torque, else 1)."""
+def error_jacobian(q, w, h, J, J_inv, n, gg_gain, bias_map=None):
+    """F (n × n) of the error dynamics at (q̂, ω̂) with wheel momentum h (body axes): n = 6,
+    or 6 + m with a disturbance state acting as the torque ``bias_map`` (3, m) @ b̂."""
     r = dcm(q)[:, 2].copy()
+    dim = 6 if bias_map is None else 6 + bias_map.shape[1]
     F = np.zeros((dim, dim))
     F[:3, :3] = -skew(w)
     F[:3, 3:6] = np.eye(3)
     F[3:6, :3] = J_inv @ (gg_gain * (skew(r) @ J - skew(J @ r)) @ skew(r))
     F[3:6, 3:6] = J_inv @ (skew(J @ w + h) - skew(w) @ J)
-    if dim == 9:
-        F[3:6, 6:] = bias_gain * J_inv
+    if bias_map is not None:
+        F[3:6, 6:] = J_inv @ bias_map
     return F
 
 
@@ -149,9 +156,9 @@ def _mmt(A, B, out):
 
 
 @njit(cache=True)
-def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_gain, F, W):
-    """:func:`error_jacobian` into F (n, n; n = 6, or 9 with the bias state), with a
-    (4, 3, 3) scratch W."""
+def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_map, F, W):
+    """:func:`error_jacobian` into F (n, n; n = 6, or 6 + m with the disturbance state and
+    its (3, m) ``bias_map``, unread when n = 6), with a (4, 3, 3) scratch W."""
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
     r0 = 2 * (q1 * q3 - q4 * q2)
     r1 = 2 * (q2 * q3 + q4 * q1)
@@ -192,8 +199,12 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_gain, F, W):
     for i in range(3):
         for j in range(3):
             F[3 + i, 3 + j] = S[i, j]
-            if F.shape[0] == 9:
-                F[3 + i, 6 + j] = bias_gain * J_inv[i, j]
+        for j in range(F.shape[0] - 6):
+            F[3 + i, 6 + j] = (
+                J_inv[i, 0] * bias_map[0, j]
+                + J_inv[i, 1] * bias_map[1, j]
+                + J_inv[i, 2] * bias_map[2, j]
+            )
 
 
 @njit(cache=True, inline="always")

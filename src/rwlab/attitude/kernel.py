@@ -33,8 +33,12 @@ import math
 import numpy as np
 from numba import njit
 
-from rwlab.attitude.ekf import error_jacobian_into, gated_update_into, predict_covariance_into
-from rwlab.attitude.frames import dcm, qmul
+from rwlab.attitude.ekf import (
+    _skew_into,
+    error_jacobian_into,
+    gated_update_into,
+    predict_covariance_into,
+)
 from rwlab.attitude.plant import rk4_step
 from rwlab.attitude.wheels import realise
 
@@ -119,6 +123,57 @@ def _sky_at(sky, u, sun, moon):
     )
 
 
+@njit(cache=True, inline="always")
+def _dcm_into(q, C):
+    """C = frames.dcm(q[:4]), element by element (tested equal)."""
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    C[0, 0], C[1, 1], C[2, 2] = s + 2 * q1 * q1, s + 2 * q2 * q2, s + 2 * q3 * q3
+    C[0, 1], C[1, 0] = 2 * (q1 * q2 + q4 * q3), 2 * (q1 * q2 - q4 * q3)
+    C[0, 2], C[2, 0] = 2 * (q1 * q3 - q4 * q2), 2 * (q1 * q3 + q4 * q2)
+    C[1, 2], C[2, 1] = 2 * (q2 * q3 + q4 * q1), 2 * (q2 * q3 - q4 * q1)
+
+
+@njit(cache=True)
+def _nees(x, q_hat, w_hat, P, b_true, L):
+    """Normalised estimation error squared δxᵀ P⁻¹ δx, δx = [2 (q ⊗ q̂⁻¹)_v, ω − ω̂] (n = 6)
+    or [.., b − b̂] (n = 9, b = ``b_true``), by a Cholesky factor of P written into the
+    (n, n) scratch L."""
+    a1, a2, a3, a4 = x[0], x[1], x[2], x[3]
+    b1, b2, b3, b4 = q_hat[0], q_hat[1], q_hat[2], q_hat[3]
+    sign = 2.0 if a4 * b4 + a1 * b1 + a2 * b2 + a3 * b3 >= 0 else -2.0
+    nx = P.shape[0]
+    e = np.empty(nx)  # only at logged steps
+    e[0] = sign * (b4 * a1 - a4 * b1 + a2 * b3 - a3 * b2)
+    e[1] = sign * (b4 * a2 - a4 * b2 + a3 * b1 - a1 * b3)
+    e[2] = sign * (b4 * a3 - a4 * b3 + a1 * b2 - a2 * b1)
+    for i in range(3, nx):
+        e[i] = x[1 + i] - w_hat[i - 3] if i < 6 else b_true[i - 6] - w_hat[i - 3]
+    total = 0.0
+    z = np.empty(nx)
+    for i in range(nx):
+        for j in range(i + 1):
+            acc = P[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = math.sqrt(acc) if i == j else acc / L[j, j]
+        acc = e[i]
+        for k in range(i):
+            acc -= L[i, k] * z[k]
+        z[i] = acc / L[i, i]
+        total += z[i] * z[i]
+    return total
+
+
+@njit(cache=True, inline="always")
+def _srp_map_into(q, s_orb, sunlit, C, s_body, out):
+    """out = ν [ŝ×], ŝ = A(q) s_orb the Sun in body axes: SRP's torque per unit lever arm
+    (C (3, 3) and s_body (3,) are scratch)."""
+    _dcm_into(q, C)
+    _matvec(C, s_orb, s_body)
+    _skew_into(sunlit * s_body[0], sunlit * s_body[1], sunlit * s_body[2], out)
+
+
 @njit(cache=True)
 def _noisy_into(b, sigma, e0, e1, e2, out):
     """out = unit vector b turned by a small angle: σ times the standard normals e (e × b)."""
@@ -188,7 +243,8 @@ def run_block(
     M,
     w_max,
     use_ekf,
-    bias_sunlit,
+    bias_kind,
+    bias_true,
     dt,
     sensor_every,
     log_every,
@@ -255,11 +311,11 @@ def run_block(
     no window starts and no pulse fires]; ``wheel_*`` the wheel model
     (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated in place);
     ``stats`` (see :data:`STATS`) is updated in place. ``w_hat`` is [ω̂] (3,) with P
-    6×6, or [ω̂, b̂] (6,) with P 9×9 (the disturbance-torque state); ``log_est`` rows
-    are [q̂, ω̂, b̂] (b̂ = 0 without the state); with the state, NEES takes as the true
-    b the constant torque the filter does not model (exact when that is all it does
-    not model); ``bias_sunlit``: b̂ acts scaled by the sunlit fraction (it stands
-    for SRP). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
+    6×6, or [ω̂, b̂] with P n×n and the disturbance state of kind ``bias_kind`` (1: a
+    body torque b (3), acting as b; 2: an SRP lever arm β (3), acting as ν ŝ × β
+    with ŝ the Sun in the estimated body axes and ν the sunlit fraction; 3: both,
+    [b, β]; see ``ekf``); ``bias_true`` (n − 6,) is its true value for NEES;
+    ``log_est`` rows are [q̂, ω̂, b, β] (zeros for a state the filter lacks). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
     its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
@@ -281,10 +337,15 @@ def run_block(
     x = x.copy()
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
-    nx = P.shape[0]  # 6, or 9 with the disturbance-torque state b̂ = w_hat[3:]
-    biased = use_ekf and nx == 9
+    nx = P.shape[0]  # 6, or 9 or 12 with the disturbance state b̂ = w_hat[3:]
+    biased = use_ekf and nx > 6
     F, W3, Wn = np.empty((nx, nx)), np.empty((4, 3, 3)), np.empty((6, nx, nx))
-    ee = np.empty(nx)
+    C, Bmap = np.empty((3, 3)), np.zeros((3, max(nx - 6, 3)))  # Bmap: torque per unit b̂
+    if bias_kind != 2:  # the constant torque's columns come first
+        for i in range(3):
+            Bmap[i, i] = 1.0
+    srp_map = Bmap[:, 3:] if bias_kind == 3 else Bmap[:, :3]
+    C_hat, sun_hat, tau_b = np.empty((3, 3)), np.empty(3), np.zeros(3)
     q_hat, w_hat, P = q_hat.copy(), w_hat.copy(), P.copy()
     s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
@@ -299,7 +360,7 @@ def run_block(
         if sunlit < earth_lit:
             stats[MOON_STEPS] += 1
         if k % sensor_every == 0:
-            C = dcm(x[:4])
+            _dcm_into(x, C)
             _matvec(C, s_orb, sun_b)
             _matvec(C, m_orb, moon_b)
             # the sun sensor needs the whole disc inside its field; the earth sensor
@@ -378,10 +439,12 @@ def run_block(
             est[i] = (q_hat[i] if i < 4 else w_hat[i - 4]) if use_ekf else x[i]
         _state_into(est, n, s)
         _control_into(K_w, M, w_max, s, work, tau)
-        nu_b = sunlit if bias_sunlit else 1.0  # the share of b̂ acting now
         if biased:  # disturbance accommodation: cancel the estimated torque
+            if bias_kind >= 2:
+                _srp_map_into(q_hat, s_orb, sunlit, C_hat, sun_hat, srp_map)
+            _matvec(Bmap, w_hat[3:], tau_b)
             for i in range(3):
-                tau[i] -= nu_b * w_hat[3 + i]
+                tau[i] -= tau_b[i]
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
         _matvec(G_pinv, work, hw_cmd)
@@ -442,22 +505,18 @@ def run_block(
                 log_x[log_k, i] = x[i]
             for i in range(7):
                 log_est[log_k, i] = est[i]
-            for i in range(3):
-                log_est[log_k, 7 + i] = w_hat[3 + i] if biased else 0.0
+            for i in range(6):
+                log_est[log_k, 7 + i] = 0.0
+            if biased:
+                at = 10 if bias_kind == 2 else 7  # log columns: b, then β
+                for i in range(nx - 6):
+                    log_est[log_k, at + i] = w_hat[3 + i]
             for i in range(3):
                 log_tau[log_k, i] = 0.0
                 for c in range(nw):
                     log_tau[log_k, i] -= G[i, c] * hw_real[c]
             if use_ekf:
-                dq = qmul(x[:4], np.array([-q_hat[0], -q_hat[1], -q_hat[2], q_hat[3]]))
-                if dq[3] < 0:
-                    dq = -dq
-                ee[:3] = 2 * dq[:3]
-                for i in range(3):
-                    ee[3 + i] = x[4 + i] - w_hat[i]
-                    if biased:  # the truth's part: the constant torque the filter does not model
-                        ee[6 + i] = dist[7 + i] - dist_model[7 + i] - w_hat[3 + i]
-                log_nees[log_k] = ee @ np.linalg.solve(P, ee) if measured else np.nan
+                log_nees[log_k] = _nees(x, q_hat, w_hat, P, bias_true, Wn[0]) if measured else np.nan
             log_sky[log_k, 0] = sunlit
             log_sky[log_k, 1] = sun_status
             log_sky[log_k, 2] = earth_status
@@ -469,14 +528,13 @@ def run_block(
         dm[1] = dist_model[1] * sunlit
         if use_ekf:
             if measured:  # covariance to the next measurement, F at this estimate
-                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], nu_b, F, W3)
+                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], Bmap, F, W3)
                 predict_covariance_into(P, F, Qc, T_sensor, Wn)
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
             xm[7:] = x[7:]
-            for i in range(3):  # the thruster command (and b̂) is known to the filter
-                b_i = nu_b * w_hat[3 + i] if biased else 0.0
-                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + b_i
+            for i in range(3):  # the thruster command (and b̂'s torque) is known to the filter
+                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + tau_b[i]
             # the filter knows the wheels' torques and momenta (their tachometers)
             rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):

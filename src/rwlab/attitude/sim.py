@@ -31,7 +31,7 @@ __all__ = [
     "PDController",
     "SimResult",
     "attitude_noise_psd",
-    "bias_torque_psd",
+    "disturbance_psd",
     "default_filter_psd",
     "simulate",
     "steady_start",
@@ -103,8 +103,9 @@ class SimResult:
     steady_from_s : start of the steady-state window, s.
     sky : (K, 3) sunlit fraction and the sun and earth sensors' status (0 used,
     1 unavailable: eclipse, field of view or blinding, 2 gated) at the logged steps.
-    torque_bias_est : (K, 3) the filter's disturbance-torque estimate b̂, N·m (zeros
-    without that state, see ``Scenario.filter_torque_bias``).
+    torque_est, srp_lever_est : (K, 3) the filter's disturbance states, N·m: a body
+    torque and the SRP lever arm P·A·C_r·ρ (zeros for a state it lacks, see
+    ``Scenario.filter_disturbance_state``).
     """
 
     t: np.ndarray
@@ -121,7 +122,8 @@ class SimResult:
     stats: dict
     steady_from_s: float
     sky: np.ndarray | None = None
-    torque_bias_est: np.ndarray | None = None
+    torque_est: np.ndarray | None = None
+    srp_lever_est: np.ndarray | None = None
 
 
 def _w_bo(q, w, n=GEO_RATE):
@@ -154,7 +156,7 @@ def unknown_torque_bound(sc: Scenario) -> float:
 def default_filter_psd(sc: Scenario) -> float:
     """The torque PSD the filter assumes on its rate, N²·m²·s.
 
-    With the disturbance-torque state (``filter_torque_bias``) the unknown torque
+    With a disturbance state (``filter_disturbance_state``) the unknown torque
     is that state's job (:func:`bias_torque_psd`) and the rate carries only the
     white ``process_noise_torque``. Without it (paper B: SRP as process noise)
     and with the disturbances unknown to the filter, its process noise is sized so
@@ -164,7 +166,7 @@ def default_filter_psd(sc: Scenario) -> float:
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
     """
     q = sc.process_noise_torque**2
-    if not (sc.disturbances_known_to_filter or sc.filter_torque_bias):
+    if not sc.disturbances_known_to_filter and sc.filter_disturbance_state == "none":
         r = attitude_noise_psd(sc)
         bound = sc.filter_torque_bound or unknown_torque_bound(sc)
         q += r * (bound / math.radians(sc.filter_disturbance_budget_deg)) ** 2
@@ -179,15 +181,34 @@ def filter_torque_scale(sc: Scenario) -> float:
     return sc.filter_torque_bound or unknown_torque_bound(sc)
 
 
-def bias_torque_psd(sc: Scenario) -> float:
-    """PSD of the filter's disturbance-torque random walk, N²·m²/s.
+def disturbance_psd(sc: Scenario) -> np.ndarray:
+    """PSDs of the filter's disturbance random walks, N²·m²/s, one per state (n − 6,).
 
-    ``filter_bias_torque_psd`` when set, else τ_u²·n (τ_u from
-    :func:`filter_torque_scale`, n the orbit rate): the walk spreads by τ_u in
-    1/n ≈ 3.8 h, the time the Sun takes to turn a radian in the body frame, which
-    is how fast SRP (the largest unmodelled torque at GEO) changes direction.
+    Each walk spreads by τ_u (:func:`filter_torque_scale`, at least the white
+    ``process_noise_torque``) over its drift time: the constant torque over
+    ``filter_torque_drift_s`` (a year: it is constant, the walk only keeps the
+    filter from locking onto a wrong value), the SRP lever arm over
+    ``filter_srp_drift_s`` (a day: the arrays turn once a day and the centre of
+    pressure moves with them and with the seasons).
     """
-    return sc.filter_bias_torque_psd or filter_torque_scale(sc) ** 2 * GEO_RATE
+    tau = max(filter_torque_scale(sc), sc.process_noise_torque)
+    kind = sc.filter_disturbance_state
+    psd = [tau**2 / sc.filter_torque_drift_s] * 3 if "torque" in kind else []
+    return np.array(psd + ([tau**2 / sc.filter_srp_drift_s] * 3 if "srp" in kind else []))
+
+
+# the kernel's codes for the disturbance state, and its size
+BIAS_KINDS = {"none": 0, "torque": 1, "srp": 2, "torque+srp": 3}
+BIAS_SIZES = {"none": 0, "torque": 3, "srp": 3, "torque+srp": 6}
+
+
+def _bias_truth(sc: Scenario, dist, dist_model) -> np.ndarray:
+    """What the disturbance state should converge to, N·m, for NEES: the constant torque
+    and the SRP lever arm P·A·C_r·ρ that the filter does not model."""
+    torque = np.asarray(dist[7:10] - dist_model[7:10])
+    lever = (dist[1] - dist_model[1]) * np.asarray(dist[2:5])
+    kind = sc.filter_disturbance_state
+    return np.concatenate([torque if "torque" in kind else [], lever if "srp" in kind else []])
 
 
 def attitude_noise_psd(sc: Scenario) -> float:
@@ -288,8 +309,7 @@ def simulate(
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
     """True and estimated initial states. The estimate after q̂ is [ω̂], or [ω̂, b̂] with b̂
-    drawn from its prior N(0, σ_b²): σ_b is the designer's a-priori torque
-    (``filter_torque_bound`` or :func:`unknown_torque_bound`, known or not to the filter)."""
+    at its prior mean 0 with σ the designer's torque bound (:func:`filter_torque_scale`)."""
     q0 = from_axis_angle(sc.initial_axis, math.radians(sc.initial_error_deg))
     w0 = dcm(q0) @ np.array([0.0, -GEO_RATE, 0.0]) + np.asarray(sc.initial_rate, float)
     hw0 = np.zeros(sc.n_wheels) if wheel_momentum0 is None else np.asarray(wheel_momentum0, float)
@@ -297,10 +317,11 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     s0 = math.radians(max(sc.estimator_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
-    if sc.filter_torque_bias:
-        sb = max(sc.filter_torque_bound or unknown_torque_bound(sc), sc.process_noise_torque)
-        P0 = np.diag(np.concatenate([np.diag(P0), [sb**2] * 3]))
-        w_hat = np.concatenate([w_hat, sb * rng.standard_normal(3)])
+    nb = BIAS_SIZES[sc.filter_disturbance_state]
+    if nb:
+        sb = max(filter_torque_scale(sc), sc.process_noise_torque)
+        P0 = np.diag(np.concatenate([np.diag(P0), [sb**2] * nb]))
+        w_hat = np.concatenate([w_hat, np.zeros(nb)])
     return q0, w0, hw0, qmul(dq, q0), w_hat, P0
 
 
@@ -396,12 +417,12 @@ def _simulate_compiled(
         q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
     n_log = steps // log_every + 2
     log_t, log_x, log_sky = np.zeros(n_log), np.zeros((n_log, x.size)), np.zeros((n_log, 3))
-    log_est, log_tau, log_nees = np.zeros((n_log, 10)), np.zeros((n_log, 3)), np.zeros(n_log)
+    log_est, log_tau, log_nees = np.zeros((n_log, 13)), np.zeros((n_log, 3)), np.zeros(n_log)
     dist = sc.disturbances.vector()
     dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
     Qc = np.zeros(P.shape)
     Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
-    Qc[6:, 6:] = bias_torque_psd(sc) * np.eye(Qc.shape[0] - 6)
+    Qc[6:, 6:] = np.diag(disturbance_psd(sc))
     m = noise_scale
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
     sensor_every = round(sc.sensor_period / sc.dt)
@@ -441,7 +462,8 @@ def _simulate_compiled(
             _rate_map(K),
             float(controller.rate_limit),
             use_ekf,
-            sc.filter_bias_sunlit_only,
+            BIAS_KINDS[sc.filter_disturbance_state],
+            _bias_truth(sc, dist, dist_model),
             sc.dt,
             sensor_every,
             log_every,
@@ -513,7 +535,7 @@ def _simulate_compiled(
         steady_from * sc.dt,
     )
     result.sky = log_sky[:log_k]
-    result.torque_bias_est = log_est[:, 7:]
+    result.torque_est, result.srp_lever_est = log_est[:, 7:10], log_est[:, 10:13]
     return result
 
 

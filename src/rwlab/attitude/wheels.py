@@ -162,15 +162,19 @@ def _friction(p, w):
 
 
 @njit(cache=True, inline="always")
-def _physics(p, cmd, h):
-    """WheelPhysics.step in acceleration mode, as the torque it puts on the rotor, N·m."""
-    w = h / p[P_I]
-    fr = _friction(p, w)
-    lim = p[P_ILIM]
-    current = min(max((cmd + fr) / p[P_KT], -lim), lim) if p[P_KT] > 0 else 0.0
-    if abs(w) >= p[P_WMAX] and current * w > 0:  # never drive beyond the maximum speed
-        current = min(max(fr / p[P_KT], -lim), lim)
-    return p[P_KT] * current - fr
+def _physics(nominal, true, cmd, h):
+    """WheelPhysics.step in acceleration mode, as the torque it puts on the rotor, N·m.
+
+    The drive computes its current from the ``nominal`` motor and friction (it does not
+    know a fault); the rotor feels the ``true`` ones, and the true current limit clamps.
+    """
+    w = h / nominal[P_I]
+    fr = _friction(nominal, w)
+    lim = true[P_ILIM]
+    current = min(max((cmd + fr) / nominal[P_KT], -lim), lim)
+    if abs(w) >= nominal[P_WMAX] and current * w > 0:  # never drive beyond the maximum speed
+        current = min(max(fr / nominal[P_KT], -lim), lim)
+    return true[P_KT] * current - _friction(true, w)
 
 
 @njit(cache=True)
@@ -208,8 +212,8 @@ def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident
     nw = cmd.shape[0]
     if kind == PHYSICS:
         for i in range(nw):
-            p = faulty[i] if t >= fault_s[i] else healthy[i]
-            out[i] = _physics(p, cmd[i], x[7 + i])
+            true = faulty[i] if t >= fault_s[i] else healthy[i]
+            out[i] = _physics(healthy[i], true, cmd[i], x[7 + i])
     elif kind == IDENTIFIED:
         inertia, Ts = ident[I_INERTIA], ident[I_TS]
         for i in range(nw):

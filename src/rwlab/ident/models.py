@@ -526,20 +526,12 @@ class PolyModel:
 
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write JSON atomically; refuses to replace a file unless ``overwrite``."""
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        text = json.dumps(self.to_dict(), indent=2, default=_json_default)
-        return atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
+        return save_model_json(path, self.to_dict(), overwrite=overwrite)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> PolyModel:
         """Read a model written by :meth:`save`."""
-        try:
-            d = json.loads(Path(path).read_text())
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{path}: not JSON ({exc})") from None
-        return cls.from_dict(d)
+        return cls.from_dict(load_model_json(path))
 
     # -- printing ------------------------------------------------------------------
     def __repr__(self) -> str:
@@ -590,6 +582,23 @@ class PolyModel:
                 f"MSE {rep.get('mse', float('nan')):.4g}, FPE {rep.get('fpe', float('nan')):.4g}"
             )
         return "\n".join(lines)
+
+
+def save_model_json(path: str | os.PathLike, d: dict, *, overwrite: bool) -> Path:
+    """Write a model's dict as JSON atomically; refuses to replace a file unless ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    text = json.dumps(d, indent=2, default=_json_default)
+    return atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
+
+
+def load_model_json(path: str | os.PathLike) -> dict:
+    """The dict of a model file written by :func:`save_model_json`."""
+    try:
+        return json.loads(Path(path).read_text())
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"{path}: not JSON ({exc})") from None
 
 
 def _json_default(obj):

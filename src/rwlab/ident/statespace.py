@@ -18,7 +18,6 @@ noise models (python-control has ERA only; SIPPY is unmaintained and slow).
 
 from __future__ import annotations
 
-import json
 import os
 import warnings
 from collections.abc import Sequence
@@ -31,7 +30,7 @@ from scipy import linalg, optimize
 from scipy import signal as sps
 from threadpoolctl import threadpool_limits
 
-from rwlab.data import IOData, as_experiments, atomic_write_bytes, check_Ts
+from rwlab.data import IOData, as_experiments, check_Ts
 from rwlab.errors import DataError, EstimationError, FileFormatError, ModelError, RwlabWarning
 
 __all__ = ["SSModel", "n4sid", "ssest"]
@@ -419,20 +418,16 @@ class SSModel:
 
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write JSON atomically; refuses to replace a file unless ``overwrite``."""
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        text = json.dumps(self.to_dict(), indent=2)
-        return atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
+        from rwlab.ident.models import save_model_json
+
+        return save_model_json(path, self.to_dict(), overwrite=overwrite)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> SSModel:
         """Read a model written by :meth:`save`."""
-        try:
-            d = json.loads(Path(path).read_text())
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{path}: not JSON ({exc})") from None
-        return cls.from_dict(d)
+        from rwlab.ident.models import load_model_json
+
+        return cls.from_dict(load_model_json(path))
 
     # -- printing ------------------------------------------------------------------
     def __repr__(self) -> str:

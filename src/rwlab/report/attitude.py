@@ -338,6 +338,19 @@ def _trace_table(r):
     return pa.table({k: np.ascontiguousarray(v, dtype=float) for k, v in cols.items()})
 
 
+def _envelope(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) thinned for a figure: each of ``bins`` equal slices keeps its minimum and
+    maximum in time order, so every peak of a long trace is still drawn."""
+    if t.size <= 2 * bins:
+        return t, y
+    m = t.size // bins
+    idx = np.arange(bins * m).reshape(bins, m)
+    lo = idx[np.arange(bins), np.argmin(y[idx], axis=1)]
+    hi = idx[np.arange(bins), np.argmax(y[idx], axis=1)]
+    keep = np.sort(np.concatenate([lo, hi, np.arange(bins * m, t.size)]))
+    return t[keep], y[keep]
+
+
 def write_simulation(
     run,
     metrics: dict,
@@ -374,20 +387,20 @@ def write_simulation(
     page.table(["metric", "value"], rows, table_id="table-metrics")
     fig, axes = figure(10, 7.5, 3, 1, sharex=True)
     t_h = run.t / 3600
-    axes[0].semilogy(t_h, np.maximum(run.error_deg, 1e-6), lw=0.8, label="pointing error")
-    axes[0].semilogy(t_h, np.maximum(run.est_error_deg, 1e-6), lw=0.6, label="estimation error")
+    for y, lw, label in ((run.error_deg, 0.8, "pointing"), (run.est_error_deg, 0.6, "estimation")):
+        axes[0].semilogy(*_envelope(t_h, np.maximum(y, 1e-6)), lw=lw, label=f"{label} error")
     axes[0].axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
     axes[0].set_ylabel("error [°]")
     axes[0].legend(fontsize=8, loc="upper right")
     h = run.wheel_speed_rpm * (np.pi / 30) * scenario.wheel_inertia / scenario.wheel_max_momentum
     for i in range(h.shape[1]):
-        axes[1].plot(t_h, h[:, i], lw=0.8, label=f"wheel {i + 1}")
+        axes[1].plot(*_envelope(t_h, h[:, i]), lw=0.8, label=f"wheel {i + 1}")
     axes[1].axhline(scenario.unload_start_fraction, color="k", ls=":", lw=1)
     axes[1].axhline(-scenario.unload_start_fraction, color="k", ls=":", lw=1)
     axes[1].set_ylabel("momentum / limit")
     axes[1].legend(fontsize=8, loc="upper right")
     for i, axis in enumerate("xyz"):
-        axes[2].plot(t_h, run.torque[:, i], lw=0.6, label=f"τ{axis}")
+        axes[2].plot(*_envelope(t_h, run.torque[:, i]), lw=0.6, label=f"τ{axis}")
     axes[2].set_ylabel("torque [N·m]")
     axes[2].set_xlabel("t [h]")
     axes[2].legend(fontsize=8, loc="upper right")

@@ -16,6 +16,7 @@ OUTPUTS = {
     "speed": ("speed_rpm", "rpm"),
     "acceleration": ("acceleration_rpm_s", "rpm/s"),
     "current": ("current_a", "A"),
+    "age": ("telemetry_age_s", "s"),
 }
 
 
@@ -48,9 +49,10 @@ def load_record(
         An ``.mcap`` record written by ``rwlab experiment``.
     Ts : float, optional
         Sample time in seconds (default: the record's command period).
-    outputs : tuple of {'speed', 'acceleration', 'current'}
+    outputs : tuple of {'speed', 'acceleration', 'current', 'age'}
         Output channels: measured speed (rpm), acceleration derived from it by a
-        backward difference over Ts (rpm/s), motor current (A).
+        backward difference over Ts (rpm/s), motor current (A), age of the
+        telemetry frame each sample repeats (s: large where frames were lost).
     max_gap : float, optional
         Longest accepted interval between telemetry frames, s (default Ts),
         beyond the timestamps' jitter (half the median frame interval). Longer
@@ -110,6 +112,7 @@ def load_record(
         "speed": speed,
         "acceleration": np.concatenate([[0.0], np.diff(speed) / Ts]),
         "current": np.array([m["current_a"] for m in telemetry])[last],
+        "age": grid - tt[last],
     }
     mode = meta.get("mode", "speed")
     return IOData(

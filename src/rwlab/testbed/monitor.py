@@ -14,6 +14,7 @@ Bokeh serves its own JavaScript from the server: no CDN, works offline.
 
 from __future__ import annotations
 
+import html
 import socket
 import subprocess
 import sys
@@ -143,7 +144,10 @@ def make_document(
         if beats and beats[-1]["faults"]:
             status.text += f" &nbsp; fault bits {beats[-1]['faults']}"
         for e in new.get("/event", []):
-            state["events"].append(f"{e['t']:.2f} s {e['kind']} {e['message']}")
+            line = html.escape(f"{e['t']:.2f} s {e['kind']} {e['message']}")
+            if e["kind"] in ("alarm", "fault_injected"):  # the live fault detector's verdicts
+                line = f'<b style="color:#c00">{line}</b>'
+            state["events"].append(line)
             events.text = "<br>".join(state["events"][-4:])
 
     doc.add_periodic_callback(refresh, REFRESH_MS)

@@ -28,6 +28,7 @@ from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
 from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 
 __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_experiment"]
@@ -75,6 +76,13 @@ class ExperimentConfig:
         CSV of setpoints for ``signal = 'file'`` (one column, or ``time_s`` + a column).
     raw_frames : bool
         Also record every CAN frame.
+    faults : tuple of str
+        Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
+        (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
+    model : str
+        ``model.json`` of an identified wheel: run the fault detector live
+        (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
+        each alarm as an ``alarm`` event.
     """
 
     signal: str = "prbs"
@@ -97,6 +105,8 @@ class ExperimentConfig:
     step_levels: tuple[float, ...] = (0.0, 1.0, 0.0, -1.0, 0.0)
     file: str | None = None
     raw_frames: bool = False
+    faults: tuple[str, ...] = ()
+    model: str | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -120,6 +130,7 @@ class ExperimentConfig:
             "f0": (number, "a number of Hz"),
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
+            "model": ((str, type(None)), "a path to model.json"),
             "f1": ((*number, type(None)), "a number of Hz"),
         }
         for name, (kind, text) in expected.items():
@@ -143,11 +154,22 @@ class ExperimentConfig:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
             raise ConfigError(f"duration {self.duration} s is shorter than Ts = {self.Ts} s")
+        if not isinstance(self.faults, tuple):
+            raise ConfigError(f"faults must be a list of NAME[=VALUE]@SECONDS, got {self.faults!r}")
+        for fault in self.scheduled_faults():
+            if self.interface != "virtual":
+                raise ConfigError("faults can only be injected into the simulated wheel (virtual)")
+            if fault.t_s > self.duration:
+                raise ConfigError(f"fault {fault} starts after the experiment ({self.duration} s)")
         if self.duration / self.Ts > MAX_COMMANDS:
             raise ConfigError(
                 f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
                 f"{MAX_COMMANDS:.0e} in one experiment"
             )
+
+    def scheduled_faults(self) -> list[ScheduledFault]:
+        """The faults, parsed (``ConfigError`` for a bad one)."""
+        return [parse_fault(text) for text in self.faults]
 
     def check_limits(self, params: WheelParams) -> None:
         """Refuse amplitudes beyond the wheel's limits."""
@@ -175,8 +197,9 @@ class ExperimentConfig:
                 f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}"
             )
         table.update({k: v for k, v in overrides.items() if v is not None})
-        if isinstance(table.get("step_levels"), list):
-            table["step_levels"] = tuple(table["step_levels"])
+        for key in ("step_levels", "faults"):
+            if isinstance(table.get(key), list):
+                table[key] = tuple(table[key])
         return cls(**table)
 
     def to_dict(self) -> dict:
@@ -303,10 +326,27 @@ def run_experiment(
     status, k = "error", 0
     t0 = clock.now() + 0.01
     writer.time_origin = t0
+    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
+    detector = _live_detector(cfg)
+    if node is not None:
+        node.schedule_faults(faults, origin=t0)
     try:
         writer.event(t0, "start", f"{cfg.signal} in {cfg.mode} mode, {len(command)} commands")
         for k, value in enumerate(command):
             _record_until(client, writer, clock, t0 + k * cfg.Ts, realtime)
+            while faults and faults[0].t_s <= k * cfg.Ts:
+                fault = faults.pop(0)
+                writer.event(t0 + fault.t_s, "fault_injected", str(fault))
+            if detector is not None and client.latest is not None:
+                held = command[k - 1] if k else command[0]
+                for alarm in detector.update(
+                    k * cfg.Ts,
+                    float(held),
+                    client.latest.speed_rpm,
+                    client.latest.current,
+                    clock.now() - client.latest_time,
+                ):
+                    writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
             writer.write(
                 "/command",
@@ -317,6 +357,8 @@ def run_experiment(
             if progress:
                 progress(k + 1, len(command))
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
+        for fault in faults:  # those that started after the last command
+            writer.event(t0 + fault.t_s, "fault_injected", str(fault))
         status = "completed"
     except KeyboardInterrupt:
         status = "interrupted"
@@ -349,6 +391,29 @@ def run_experiment(
         client.bad_frames,
         clock.now() - t0,
         status,
+    )
+
+
+def _live_detector(cfg: ExperimentConfig):
+    """The fault detector for ``cfg.model``, or None."""
+    if cfg.model is None:
+        return None
+    from rwlab.diagnose import Diagnoser
+    from rwlab.wheel.identified import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(cfg.model)
+    if cfg.mode != "speed" or not math.isclose(wheel.Ts, cfg.Ts, rel_tol=1e-6):
+        raise ConfigError(
+            f"live diagnosis needs speed mode at the model's Ts = {wheel.Ts:g} s "
+            f"(the experiment: {cfg.mode} mode, Ts = {cfg.Ts:g} s)"
+        )
+    return Diagnoser(wheel)
+
+
+def _alarm_text(alarm) -> str:
+    return (
+        f"{alarm.kind} at {alarm.t_s:.1f} s ({alarm.detector} test, statistic "
+        f"{alarm.statistic:.3g} > {alarm.threshold:.3g})"
     )
 
 

@@ -4,7 +4,9 @@
 ``rw.dbc``: it applies commands (after the configured latency), sends
 telemetry at a fixed rate and a heartbeat at 1 Hz and whenever a fault
 latches, and idles the wheel with a WATCHDOG fault when valid commands stop.
-``FaultInjection`` makes it misbehave on purpose.
+``FaultInjection`` makes it misbehave on purpose, and
+:meth:`WheelNode.schedule_faults` does so by name at given times
+(:mod:`rwlab.wheel.faults`).
 
 On a :class:`SimClock` the node advances whenever the clock does; on the wall
 clock, :meth:`WheelNode.start` runs it in a background thread.
@@ -22,6 +24,7 @@ import numpy as np
 from rwlab.errors import ConfigError
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.faults import ScheduledFault
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
 
 __all__ = ["FaultInjection", "WheelNode"]
@@ -45,6 +48,11 @@ class FaultInjection:
         Reported speed frozen at its value when this was switched on.
     overcurrent : bool
         The motor driver draws a current above the fault threshold.
+    speed_bias_rpm : float
+        Added to the reported speed, rpm.
+    dropout_until : float
+        No telemetry frames are sent before this clock time, s (their counter
+        still advances, so the driver counts them as lost).
     """
 
     drop_rate: float = 0.0
@@ -53,6 +61,8 @@ class FaultInjection:
     silent: bool = False
     stuck_speed: bool = False
     overcurrent: bool = False
+    speed_bias_rpm: float = 0.0
+    dropout_until: float = -math.inf
     _stuck_value: float | None = field(default=None, repr=False)
 
 
@@ -119,6 +129,7 @@ class WheelNode:
         self._next_telemetry = self.t
         self._next_heartbeat = self.t
         self._pending: list[tuple[float, proto.Command]] = []
+        self._scheduled: list[tuple[float, ScheduledFault]] = []
         self._outbox: list[tuple[float, can.Message]] = []
         self._last_command = self.t
         self._applied_seq = 0
@@ -131,6 +142,27 @@ class WheelNode:
         if isinstance(self.clock, SimClock):
             self.clock.attach(self.poll)
 
+    def schedule_faults(self, faults, origin: float) -> None:
+        """Apply each :class:`ScheduledFault` at clock time ``origin + fault.t_s``, s."""
+        with self._lock:
+            due = self._scheduled + [(origin + f.t_s, f) for f in faults]
+            self._scheduled = sorted(due, key=lambda item: item[0])
+
+    def _apply(self, fault: ScheduledFault) -> None:
+        wheel, inject, value = self.wheel, self.inject, fault.value
+        if fault.name == "friction":
+            wheel.friction_factor = value
+        elif fault.name == "torque_constant":
+            wheel.torque_constant_factor = value
+        elif fault.name == "current_limit":
+            wheel.current_limit = value
+        elif fault.name == "speed_sensor_bias":
+            inject.speed_bias_rpm = value
+        elif fault.name == "speed_sensor_stuck":
+            inject.stuck_speed = True
+        elif fault.name == "telemetry_dropout":
+            inject.dropout_until = self.t + value
+
     # -- running -------------------------------------------------------------------
     def poll(self, now: float) -> None:
         """Receive frames, then run physics and send frames up to time ``now``."""
@@ -140,6 +172,7 @@ class WheelNode:
                 events = [now, self._next_telemetry, self._next_heartbeat]
                 events += [t for t, _ in self._pending[:1]]
                 events += [t for t, _ in self._outbox[:1]]
+                events += [t for t, _ in self._scheduled[:1]]
                 t_next = max(self.t, min(events))
                 self._advance(t_next)
                 self._handle_events()
@@ -171,6 +204,8 @@ class WheelNode:
 
     def _handle_events(self) -> None:
         faults_before = self.wheel.faults
+        while self._scheduled and self._scheduled[0][0] <= self.t:
+            self._apply(self._scheduled.pop(0)[1])
         while self._pending and self._pending[0][0] <= self.t:
             _, cmd = self._pending.pop(0)
             self.commands_seen += 1
@@ -183,7 +218,9 @@ class WheelNode:
         if wd and self.wheel.mode != Mode.IDLE and self.t - self._last_command > wd:
             self.wheel.latch(Fault.WATCHDOG)
         if self.t >= self._next_telemetry:
-            self._queue(proto.encode_telemetry(self._telemetry()))
+            frame = proto.encode_telemetry(self._telemetry())
+            if self.t >= self.inject.dropout_until:
+                self._queue(frame)
             self._next_telemetry += self.period
             if self._next_telemetry <= self.t:  # fell behind (wall clock): do not burst
                 self._next_telemetry = self.t + self.period
@@ -205,7 +242,7 @@ class WheelNode:
         self._flush()
 
     def _telemetry(self) -> proto.Telemetry:
-        speed = self.wheel.measured_speed_rpm()
+        speed = self.wheel.measured_speed_rpm() + self.inject.speed_bias_rpm
         if self.inject.stuck_speed:
             if self.inject._stuck_value is None:
                 self.inject._stuck_value = speed

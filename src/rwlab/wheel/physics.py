@@ -218,6 +218,11 @@ class WheelPhysics:
         self.speed_limited = False
         self._integral = 0.0
         self.forced_current: float | None = None  # fault injection: a stalled/shorted driver
+        # Degradations of the rotor and driver (fault injection). The wheel's own
+        # controller does not know them: it keeps computing with ``params``.
+        self.friction_factor = 1.0  # bearing wear: the true friction is this × the nominal
+        self.torque_constant_factor = 1.0  # a weakened motor: the true k_t is this × nominal
+        self.current_limit = params.current_limit  # the driver's current clamp, A
 
     # -- commands ----------------------------------------------------------------
     def command(self, mode: Mode, setpoint_rpm: float) -> None:
@@ -255,7 +260,7 @@ class WheelPhysics:
         return 0.0
 
     def friction_torque(self, speed: float) -> float:
-        """Friction torque opposing the rotation, N·m."""
+        """Nominal friction torque opposing the rotation, N·m (the controller's feed-forward)."""
         p = self.params
         return p.viscous_friction * speed + p.coulomb_friction * math.copysign(1.0, speed) * (
             abs(speed) > 1e-9
@@ -269,15 +274,18 @@ class WheelPhysics:
             current = 0.0
         else:
             torque = p.inertia * alpha + self.friction_torque(self.speed)
-            current = _clip(torque / p.torque_constant, p.current_limit)
+            current = _clip(torque / p.torque_constant, self.current_limit)
         # speed limit: never drive further beyond the maximum speed
         self.speed_limited = abs(self.speed) >= p.max_speed and current * self.speed > 0
         if self.speed_limited:
-            current = _clip(self.friction_torque(self.speed) / p.torque_constant, p.current_limit)
+            current = _clip(
+                self.friction_torque(self.speed) / p.torque_constant, self.current_limit
+            )
         if self.forced_current is not None:
             current = self.forced_current
         self.current = current
-        net = p.torque_constant * current - self.friction_torque(self.speed)
+        k_t = self.torque_constant_factor * p.torque_constant  # the true motor, not the model
+        net = k_t * current - self.friction_factor * self.friction_torque(self.speed)
         new_speed = self.speed + net / p.inertia * dt
         if self.mode == Mode.IDLE and self.speed != 0 and new_speed * self.speed < 0:
             new_speed = 0.0  # friction stops the wheel; it does not reverse it
@@ -318,7 +326,7 @@ class WheelPhysics:
     @property
     def motor_torque(self) -> float:
         """Motor torque on the rotor, N·m (the satellite feels its negative)."""
-        return self.params.torque_constant * self.current
+        return self.torque_constant_factor * self.params.torque_constant * self.current
 
 
 def simulate_speed_command(
