@@ -349,15 +349,15 @@ def test_bad_configurations_exit_with_clear_errors(tmp_path):
 def test_ltr_rides_an_unexpected_torque_that_lqg_cannot():
     """Paper B's ranking, measured: a constant torque 14× the one the LQG filter was sized
     for pulls the 6-state LQG off the requirement; the LTR filter, recovered to the LQR
-    loop, tracks it. The filter's torque state removes the difference."""
+    loop, tracks it. The filter's disturbance state (the default) removes the difference."""
     from pathlib import Path
 
     from rwlab.attitude.scenario import load_scenario
 
     path = Path(__file__).parents[1] / "docs" / "scenarios" / "unknown-torque.toml"
     sc = load_scenario(str(path))
-    m = compare(sc.with_(filter_torque_bias=False), duration=1200).metrics
+    m = compare(sc.with_(filter_disturbance_state="none"), duration=1200).metrics
     assert m["lqg_ltr"]["steady_max_error_deg"] <= 0.1 < m["lqg"]["steady_max_error_deg"]
-    # with the disturbance-torque state (the default) LQG estimates the torque and cancels it
+    # with the disturbance state LQG estimates the torque and cancels it
     m = compare(sc, duration=1200).metrics
     assert m["lqg"]["steady_max_error_deg"] <= 0.1

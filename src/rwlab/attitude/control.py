@@ -50,6 +50,8 @@ from rwlab.attitude.sim import (
     SimResult,
     attitude_noise_psd,
     default_filter_psd,
+    disturbance_psd,
+    disturbance_state,
     simulate,
 )
 
@@ -228,11 +230,38 @@ def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
     )
 
 
+def _with_disturbance_state(scenario: Scenario, sysd, Qn, K):
+    """The filter's model, process noise and gain as the compensator sees them.
+
+    Without a disturbance state: the plant, ``Qn`` and K. With one: the plant
+    augmented with an input torque d (x⁺ = A x + B (u + d), d⁺ = d + walk) and the
+    gain [K, I] that cancels d̂. The loop analysis is time-invariant, so the Sun is
+    frozen: the SRP lever arm then acts as part of the same input torque, and the
+    walk's PSD is the sum of the states' (exact across the Sun line, an upper bound
+    along it, where a frozen lever arm has no effect).
+    """
+    if disturbance_state(scenario) == "none":
+        return sysd, Qn, K
+    A, B, C = (np.asarray(m) for m in (sysd.A, sysd.B, sysd.C))
+    n, dt = A.shape[0], scenario.dt
+    walk = disturbance_psd(scenario).reshape(-1, 3).sum(axis=0)  # per axis, N²·m²/s
+    # d is a torque like u (N·m); a walk of PSD q has increments of variance q·dt
+    Aa = np.block([[A, B], [np.zeros((3, n)), np.eye(3)]])
+    Ba, Ca = np.vstack([B, np.zeros((3, 3))]), np.hstack([C, np.zeros((3, 3))])
+    model = control.ss(Aa, Ba, Ca, 0, dt)
+    Qa = np.zeros((n + 3, n + 3))
+    Qa[:n, :n] = Qn
+    Qa[n:, n:] = np.diag(walk) * dt
+    return model, Qa, np.hstack([K, np.eye(3)])
+
+
 def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
     """Loop broken at the plant input, for each controller: crossover and robustness.
 
     LQR: K(zI − A)⁻¹B; LQG: the compensator with the filter's own noise model;
-    LQG/LTR: the compensator with the LTR filter at ρ. Returns, per controller,
+    LQG/LTR: the compensator with the LTR filter at ρ. With a disturbance state
+    (``filter_disturbance_state``) both compensators estimate an input torque and
+    cancel it (:func:`_with_disturbance_state`). Returns, per controller,
     ``crossover_rad_s`` (largest σ of L falls through 1) and
     ``return_difference_min`` = min over ω of σ_min(I + L): a multivariable
     stability margin (α: every loop tolerates a gain in [1/(1+α), 1/(1−α)] and a
@@ -249,9 +278,9 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
         ("lqg", default_filter_psd(scenario), r_c),
         ("lqg_ltr", q2, rho * r_c),
     ):
-        M = kalman_current(sysd, psd / dt * B @ B.T, np.eye(3) * r / dt)
-        comp = lqg_current(sysd, ctl.K, M)
-        loops[name] = control.series(sysd, comp)
+        model, Qn, K = _with_disturbance_state(scenario, sysd, psd / dt * B @ B.T, ctl.K)
+        M = kalman_current(model, Qn, np.eye(3) * r / dt)
+        loops[name] = control.series(sysd, lqg_current(model, K, M))
     out = {}
     for name, loop in loops.items():
         resp = np.moveaxis(np.asarray(loop.frequency_response(w).frdata), 2, 0)

@@ -315,8 +315,8 @@ def run_block(
     body torque b (3), acting as b; 2: an SRP lever arm β (3), acting as ν ŝ × β
     with ŝ the Sun in the estimated body axes and ν the sunlit fraction; 3: both,
     [b, β]; see ``ekf``); ``bias_true`` (n − 6,) is its true value for NEES;
-    ``log_est`` rows are [q̂, ω̂, b, β] (zeros for a state the filter lacks). Returns the new x, q̂, ŵ, P, log position and whether a wheel touched
-    its momentum limit.
+    ``log_est`` rows are [q̂, ω̂, b, β] (zeros for a state the filter lacks). Returns
+    the new x, q̂, ŵ, P, log position and whether a wheel touched its momentum limit.
     """
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
@@ -516,7 +516,8 @@ def run_block(
                 for c in range(nw):
                     log_tau[log_k, i] -= G[i, c] * hw_real[c]
             if use_ekf:
-                log_nees[log_k] = _nees(x, q_hat, w_hat, P, bias_true, Wn[0]) if measured else np.nan
+                nees = _nees(x, q_hat, w_hat, P, bias_true, Wn[0]) if measured else np.nan
+                log_nees[log_k] = nees
             log_sky[log_k, 0] = sunlit
             log_sky[log_k, 1] = sun_status
             log_sky[log_k, 2] = earth_status

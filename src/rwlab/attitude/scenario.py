@@ -96,8 +96,8 @@ class Scenario:
         (disturbance accommodation, see ``ekf``): ``"srp"`` solar pressure through
         an unknown centre of pressure (a lever arm, N·m, acting with the Sun's
         direction and the sunlit fraction); ``"torque"`` a constant body torque;
-        ``"torque+srp"`` both (12 states); ``"none"`` the 6-state filter with the unknown torque as inflated rate
-        noise (paper B).
+        ``"torque+srp"`` both (12 states); ``"none"`` the 6-state filter with the
+        unknown torque as inflated rate noise (paper B).
     filter_torque_drift_s, filter_srp_drift_s : the time over which each of those
         random walks may drift by the designer's torque bound, s (a year and a
         day; see ``sim.disturbance_psd``).

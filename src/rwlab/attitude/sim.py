@@ -31,8 +31,9 @@ __all__ = [
     "PDController",
     "SimResult",
     "attitude_noise_psd",
-    "disturbance_psd",
     "default_filter_psd",
+    "disturbance_psd",
+    "disturbance_state",
     "simulate",
     "steady_start",
     "sun_direction",
@@ -166,11 +167,20 @@ def default_filter_psd(sc: Scenario) -> float:
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
     """
     q = sc.process_noise_torque**2
-    if not sc.disturbances_known_to_filter and sc.filter_disturbance_state == "none":
+    if not sc.disturbances_known_to_filter and disturbance_state(sc) == "none":
         r = attitude_noise_psd(sc)
         bound = sc.filter_torque_bound or unknown_torque_bound(sc)
         q += r * (bound / math.radians(sc.filter_disturbance_budget_deg)) ** 2
     return q
+
+
+def disturbance_state(sc: Scenario) -> str:
+    """The filter's disturbance state as flown: ``filter_disturbance_state``, or "none"
+    when there is nothing left to estimate (every disturbance known to the filter, or a
+    torque bound of 0)."""
+    if filter_torque_scale(sc) == 0.0:
+        return "none"
+    return sc.filter_disturbance_state
 
 
 def filter_torque_scale(sc: Scenario) -> float:
@@ -184,15 +194,14 @@ def filter_torque_scale(sc: Scenario) -> float:
 def disturbance_psd(sc: Scenario) -> np.ndarray:
     """PSDs of the filter's disturbance random walks, N²·m²/s, one per state (n − 6,).
 
-    Each walk spreads by τ_u (:func:`filter_torque_scale`, at least the white
-    ``process_noise_torque``) over its drift time: the constant torque over
-    ``filter_torque_drift_s`` (a year: it is constant, the walk only keeps the
+    Each walk spreads by τ_u (:func:`filter_torque_scale`) over its drift time: the
+    constant torque over ``filter_torque_drift_s`` (a year: it is constant, the walk only keeps the
     filter from locking onto a wrong value), the SRP lever arm over
     ``filter_srp_drift_s`` (a day: the arrays turn once a day and the centre of
     pressure moves with them and with the seasons).
     """
-    tau = max(filter_torque_scale(sc), sc.process_noise_torque)
-    kind = sc.filter_disturbance_state
+    tau = filter_torque_scale(sc)
+    kind = disturbance_state(sc)
     psd = [tau**2 / sc.filter_torque_drift_s] * 3 if "torque" in kind else []
     return np.array(psd + ([tau**2 / sc.filter_srp_drift_s] * 3 if "srp" in kind else []))
 
@@ -207,7 +216,7 @@ def _bias_truth(sc: Scenario, dist, dist_model) -> np.ndarray:
     and the SRP lever arm P·A·C_r·ρ that the filter does not model."""
     torque = np.asarray(dist[7:10] - dist_model[7:10])
     lever = (dist[1] - dist_model[1]) * np.asarray(dist[2:5])
-    kind = sc.filter_disturbance_state
+    kind = disturbance_state(sc)
     return np.concatenate([torque if "torque" in kind else [], lever if "srp" in kind else []])
 
 
@@ -317,9 +326,9 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     s0 = math.radians(max(sc.estimator_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
-    nb = BIAS_SIZES[sc.filter_disturbance_state]
+    nb = BIAS_SIZES[disturbance_state(sc)]
     if nb:
-        sb = max(filter_torque_scale(sc), sc.process_noise_torque)
+        sb = filter_torque_scale(sc)
         P0 = np.diag(np.concatenate([np.diag(P0), [sb**2] * nb]))
         w_hat = np.concatenate([w_hat, np.zeros(nb)])
     return q0, w0, hw0, qmul(dq, q0), w_hat, P0
@@ -422,7 +431,8 @@ def _simulate_compiled(
     dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
     Qc = np.zeros(P.shape)
     Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
-    Qc[6:, 6:] = np.diag(disturbance_psd(sc))
+    if P.shape[0] > 6:
+        Qc[6:, 6:] = np.diag(disturbance_psd(sc))
     m = noise_scale
     fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
     sensor_every = round(sc.sensor_period / sc.dt)
@@ -462,7 +472,7 @@ def _simulate_compiled(
             _rate_map(K),
             float(controller.rate_limit),
             use_ekf,
-            BIAS_KINDS[sc.filter_disturbance_state],
+            BIAS_KINDS[disturbance_state(sc)],
             _bias_truth(sc, dist, dist_model),
             sc.dt,
             sensor_every,
