@@ -1492,6 +1492,7 @@ def attitude_simulate(
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
     from rwlab.attitude.scenario import load_scenario
+    from rwlab.attitude.sim import disturbance_state
     from rwlab.errors import ConfigError
     from rwlab.report.attitude import check_outputs, write_simulation
 
@@ -1526,6 +1527,7 @@ def attitude_simulate(
         "rho": rho if controller == "lqg_ltr" else None,
         "relinearize_period_s": relinearize,
         "disturbances_known_to_filter": sc.disturbances_known_to_filter,
+        "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
         "momentum_unloading": sc.momentum_unloading,
         "wheel_model": sc.wheel_model,
         "wheel_faults": list(sc.wheel_faults),

@@ -345,20 +345,24 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
 
 def _sky_metrics(st: dict) -> dict:
     """Eclipse time (the Earth's umbra + penumbra), pointing inside and outside it (steady
-    window), and the sensors' outages, blindings and gated measurements (sensor ticks)."""
+    window; None when the window has no step there), and the sensors' outages,
+    blindings and gated measurements (sensor ticks)."""
     n_ecl = st["steady_eclipse_steps"]
     n_out = st["steady_steps"] - n_ecl
     period = st.get("sensor_period_s", 0.0)
     return {
         "eclipse_s": st["eclipse_steps"] * st.get("dt_s", 0.0),
         "moon_shadow_s": st["moon_shadow_steps"] * st.get("dt_s", 0.0),
-        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"],
-        "steady_rms_error_in_eclipse_deg": math.sqrt(
-            st["steady_eclipse_error_sq_sum"] / max(n_ecl, 1)
+        # null, not 0, for a window with no step in it (no shadow in the steady state)
+        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"] if n_ecl else None,
+        "steady_rms_error_in_eclipse_deg": (
+            math.sqrt(st["steady_eclipse_error_sq_sum"] / n_ecl) if n_ecl else None
         ),
-        "steady_max_error_outside_eclipse_deg": st["steady_outside_eclipse_max_error_deg"],
-        "steady_rms_error_outside_eclipse_deg": math.sqrt(
-            st["steady_outside_eclipse_error_sq_sum"] / max(n_out, 1)
+        "steady_max_error_outside_eclipse_deg": (
+            st["steady_outside_eclipse_max_error_deg"] if n_out else None
+        ),
+        "steady_rms_error_outside_eclipse_deg": (
+            math.sqrt(st["steady_outside_eclipse_error_sq_sum"] / n_out) if n_out else None
         ),
         "sun_sensor_outage_count": int(st["sun_sensor_outages"]),
         "sun_sensor_outage_s": st["sun_sensor_outages"] * period,

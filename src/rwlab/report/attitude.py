@@ -335,7 +335,17 @@ def _trace_table(r):
     if r.sky is not None:
         for i, name in enumerate(("sunlit_fraction", "sun_sensor_status", "earth_sensor_status")):
             cols[name] = r.sky[:, i]
+    for name, est in _disturbance_estimates(r):
+        for i, axis in enumerate("xyz"):
+            cols[f"{name}_{axis}_Nm"] = est[:, i]
     return pa.table({k: np.ascontiguousarray(v, dtype=float) for k, v in cols.items()})
+
+
+def _disturbance_estimates(r) -> list[tuple[str, np.ndarray]]:
+    """The filter's disturbance states that it has (name, (K, 3) N·m): a body torque and
+    the SRP lever arm (see ``Scenario.filter_disturbance_state``)."""
+    pairs = (("torque_est", r.torque_est), ("srp_lever_est", r.srp_lever_est))
+    return [(name, est) for name, est in pairs if est is not None and np.any(est)]
 
 
 def _envelope(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
@@ -422,5 +432,24 @@ def write_simulation(
             else ""
         ),
     )
+    estimates = _disturbance_estimates(run)
+    if estimates:
+        rows = len(estimates)
+        fig, axes = figure(10, 2.2 * rows, rows, 1, sharex=True, squeeze=False)
+        axes = axes[:, 0]
+        for ax, (name, est) in zip(axes, estimates, strict=True):
+            for i, axis in enumerate("xyz"):
+                ax.plot(*_envelope(t_h, est[:, i]), lw=0.8, label=f"{axis}")
+            ax.set_ylabel("b̂ [N·m]" if name == "torque_est" else "β̂ [N·m]")
+            ax.legend(fontsize=8, loc="upper right")
+            ax.grid(alpha=0.3)
+        axes[-1].set_xlabel("t [h]")
+        page.figure(
+            fig,
+            "fig-disturbance",
+            "The filter's disturbance states: b̂ the constant body torque, β̂ the SRP lever "
+            "arm (its torque is ν ŝ × β̂, ŝ the Sun in body axes, ν the sunlit fraction); "
+            "the controller cancels their torque.",
+        )
     page.save(targets["report.html"])
     return targets
