@@ -429,6 +429,7 @@ def compare(
         table[name].update(margins.get(name, margins["lqg"]))
     config = {
         "disturbances_known_to_filter": scenario.disturbances_known_to_filter,
+        "filter_disturbance_state": disturbance_state(scenario),
         "seed": seed,
         "dt_s": scenario.dt,
         "sensor_period_s": scenario.sensor_period,
