@@ -1,0 +1,3 @@
+from rwlab.cli import main
+
+main()

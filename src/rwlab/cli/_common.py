@@ -1,0 +1,196 @@
+"""Plumbing shared by the ``rwlab`` command groups, and the ``main`` group."""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import sys
+import threading
+from pathlib import Path
+from typing import NoReturn
+
+import click
+
+from rwlab import __version__
+from rwlab.errors import ConfigError, RwlabError
+
+
+def _message(exc: BaseException) -> str:
+    """One line for an error a user caused (an OS error names its file)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror}" if where else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _fail(exc: BaseException) -> NoReturn:
+    click.echo(f"error: {_message(exc)}", err=True)
+    sys.exit(2)
+
+
+def _friendly_errors(func):
+    """Turn rwlab's typed errors and OS errors into a one-line message and exit status 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
+
+    return wrapper
+
+
+class _Cli(click.Group):
+    """The ``rwlab`` group: a usage error is one line and exit status 2, like any other."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.UsageError as exc:
+            where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+            hint = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
+            _fail(RwlabError(f"{where}{exc.format_message()}{hint}"))
+        except click.ClickException as exc:
+            _fail(RwlabError(exc.format_message()))
+        except (RwlabError, OSError) as exc:
+            _fail(exc)
+        except click.Abort:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+
+
+@contextlib.contextmanager
+def _stop_signals():
+    """SIGTERM and SIGHUP stop a run the way Ctrl-C does (KeyboardInterrupt).
+
+    So ``kill`` or a closed terminal also idles the wheel, closes the record and
+    stops the monitor. Only the first signal interrupts; later ones are ignored
+    so that the clean-up they would cut short can finish.
+    """
+    import signal
+
+    stops = (signal.SIGTERM, signal.SIGHUP)
+
+    def interrupt(signum, frame):
+        for s in stops:
+            signal.signal(s, signal.SIG_IGN)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set from the main thread
+        return
+    previous = {s: signal.signal(s, interrupt) for s in stops}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _check_folder(folder) -> None:
+    """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
+    import errno
+    import os
+
+    path = Path(folder).absolute()
+    while not path.exists():
+        path = path.parent
+    if not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path))
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "permission denied", str(path))
+    target = Path(folder).absolute()
+    if not target.exists():  # e.g. /proc passes the access test: try, and leave nothing
+        target.mkdir(parents=True)
+        while target != path:
+            target.rmdir()
+            target = target.parent
+
+
+def _columns_option(func):
+    for option in reversed(
+        [
+            click.option(
+                "--input",
+                "input_col",
+                help="Input column(s) or .mat variable(s), several as a,b (records: command).",
+            ),
+            click.option(
+                "--output",
+                "output_col",
+                help="Output column(s) or .mat variable(s), several as a,b (records: speed_rpm).",
+            ),
+        ]
+    ):
+        func = option(func)
+    return func
+
+
+def _engine_options(func):
+    """--workers / --scheduler: where a campaign's tasks run (rwlab.campaign.engine)."""
+    func = click.option(
+        "--scheduler",
+        help="Address of an existing Dask scheduler, e.g. tcp://host:8786.",
+    )(func)
+    return click.option(
+        "--workers",
+        type=click.IntRange(min=1),
+        help="Worker processes of the local Dask cluster [default: the cores].",
+    )(func)
+
+
+def _data_options(func):
+    """Options every identification command takes to load and preprocess a record."""
+    options = [
+        click.argument("file"),
+        click.option(
+            "--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."
+        ),
+        _columns_option,
+        click.option(
+            "--detrend",
+            type=click.Choice(["none", "constant", "linear"]),
+            default="none",
+            show_default=True,
+            help="Remove means or lines before estimation (MATLAB habit).",
+        ),
+        click.option("--normalize", is_flag=True, help="Scale every channel to [0, 1] (paper A)."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
+    """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
+    from rwlab import datasets
+    from rwlab.data import load
+
+    if not Path(file).exists() and file in datasets.NAMES:
+        if input_col or output_col:
+            raise ConfigError(f"{file} is a bundled data set: it has one input and one output")
+        data = datasets.get(file)
+    else:
+        data = load(file, Ts, input_columns=input_col, output_columns=output_col)
+    if detrend != "none":
+        data = data.detrend(detrend)
+    if normalize:
+        data = data.normalize()
+    return data
+
+
+def _echo_json(obj) -> None:
+    click.echo(
+        json.dumps(obj, indent=2, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+    )
+
+
+# -- commands --------------------------------------------------------------------------
+
+
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="rwlab")
+def main() -> None:
+    """rwlab: test a reaction wheel, identify it, and control a satellite with it."""
