@@ -251,6 +251,9 @@ class WheelParams:
                 f"breakaway_friction ({self.breakaway_friction}) must be ≥ coulomb_friction "
                 f"({self.coulomb_friction}): a wheel needs more torque to start than to keep going"
             )
+        for name, most in (("pole_pairs", 64), ("cogging_periods", 10_000)):
+            if getattr(self, name) > most:
+                raise ConfigError(f"{name} must be at most {most}, got {getattr(self, name)}")
         if not self.driver_max_duty <= 1:
             raise ConfigError(f"driver_max_duty must be in (0, 1], got {self.driver_max_duty}")
         if not self.frame_loss_rate < 1:
@@ -305,7 +308,7 @@ class WheelParams:
         -------
         WheelParams
         """
-        if name not in PRESETS:
+        if not isinstance(name, str) or name not in PRESETS:
             raise ConfigError(f"unknown wheel preset {name!r}; choose from {sorted(PRESETS)}")
         return PRESETS[name]
 
