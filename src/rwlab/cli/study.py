@@ -26,10 +26,11 @@ from rwlab.errors import ConfigError, RwlabError
 @_columns_option
 @click.option(
     "--preprocess",
-    type=click.Choice(["normalize", "detrend", "none"]),
-    default="normalize",
+    type=click.Choice(["detrend", "scale", "normalize", "none"]),
+    default="detrend",
     show_default=True,
-    help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
+    help="Statistics from the estimation part: remove means (default), scale without "
+    "shifting, or normalize to [0, 1] as paper A (biases a model without intercept).",
 )
 @click.option(
     "--split",
