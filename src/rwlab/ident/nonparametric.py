@@ -221,6 +221,83 @@ class FIRModel:
         """Sample index of each coefficient, shape (n,)."""
         return self.nk + np.arange(self.coefficients.shape[0])
 
+    @property
+    def nu(self) -> int:
+        """Number of inputs."""
+        return int(self.coefficients.shape[2])
+
+    @property
+    def ny(self) -> int:
+        """Number of outputs."""
+        return int(self.coefficients.shape[1])
+
+    def simulate(self, u, initial: str = "zero") -> np.ndarray:
+        """Noise-free output ``Σₖ gₖ u(t − nk − k)``, shape (N, ny).
+
+        Parameters
+        ----------
+        u : array_like, shape (N,) or (N, nu), or IOData
+            Inputs; an IOData with its outputs for ``initial='estimate'``.
+        initial : {'zero', 'steady', 'estimate'}
+            Pre-sample inputs zero; held at ``u[0]``; or fitted to the measured
+            outputs by least squares (the FIR's state is its past inputs; the
+            minimum-norm solution where they are not all determined).
+        """
+        from rwlab.ident.polynomials import check_initial
+
+        initial = check_initial(initial)
+        data = u if isinstance(u, IOData) else None
+        arr = np.asarray(data.u if data is not None else u, dtype=float)
+        arr = arr[:, None] if arr.ndim == 1 else arr
+        if arr.ndim != 2 or arr.shape[1] != self.nu or not np.all(np.isfinite(arr)):
+            raise DataError(f"u must be finite with shape (N, {self.nu}); got {np.shape(arr)}")
+        N, n = arr.shape[0], self.coefficients.shape[0]
+        memory = self.nk + n - 1
+        pad = np.repeat(arr[:1], memory, axis=0) if initial == "steady" else np.zeros((memory, self.nu))
+        full = np.vstack([pad, arr])
+        y = np.zeros((N, self.ny))
+        for j in range(self.nu):
+            for i in range(self.ny):
+                h = np.concatenate([np.zeros(self.nk), self.coefficients[:, i, j]])
+                y[:, i] += np.convolve(full[:, j], h)[memory : memory + N]
+        if initial != "estimate" or memory == 0:
+            return y
+        if data is None or data.ny != self.ny:
+            raise DataError("initial='estimate' needs an IOData with the measured outputs")
+        # y(t) gains Σ_m g[nk+... ] u(−m): one column per unknown past input sample and input
+        cols = []
+        for j in range(self.nu):
+            for m in range(1, memory + 1):
+                col = np.zeros((N, self.ny))
+                for i in range(self.ny):
+                    h = np.concatenate([np.zeros(self.nk), self.coefficients[:, i, j]])
+                    t = np.arange(N)
+                    idx = t + m
+                    ok = idx < h.size
+                    col[ok, i] = h[idx[ok]]
+                cols.append(col.ravel())
+        past, *_ = np.linalg.lstsq(np.column_stack(cols), (data.y - y).ravel(), rcond=None)
+        return y + (np.column_stack(cols) @ past).reshape(y.shape)
+
+    def predict(self, data: IOData, horizon: float = 1, initial: str = "zero") -> np.ndarray:
+        """k-step prediction, shape (N, ny): an FIR estimate has no noise model (its
+        disturbance is white, MATLAB's FIR ``idpoly`` with C = D = 1), so every
+        horizon's prediction is the simulation.
+
+        Parameters
+        ----------
+        data : IOData
+        horizon : int or numpy.inf
+            Samples ahead (≥ 1).
+        initial : {'zero', 'steady', 'estimate'}
+            As for :meth:`simulate`.
+        """
+        if not isinstance(data, IOData) or (data.nu, data.ny) != (self.nu, self.ny):
+            raise DataError(f"predict needs an IOData with {self.nu} inputs and {self.ny} outputs")
+        if horizon != np.inf and (int(horizon) != horizon or horizon < 1):
+            raise DataError(f"horizon must be a positive integer or inf, got {horizon}")
+        return self.simulate(data, initial)
+
     def step_response(self) -> np.ndarray:
         """Cumulative sum of the coefficients, shape (n, ny, nu)."""
         return np.cumsum(self.coefficients, axis=0)
