@@ -160,7 +160,9 @@ def oe_runs(runs: int, starts: int) -> None:
             if ratio > 1.001:
                 misses[key].append(seed)
     print(f"OE441, N = 2000, sigma = 5, {runs} seeded runs; optimum = best of rwlab and scipy LM")
-    print(f"from the truth, the ARX start and {starts} random starts; miss = loss > 1.001 x optimum")
+    print(
+        f"from the truth, the ARX start and {starts} random starts; miss = loss > 1.001 x optimum"
+    )
     print(f"{'estimator':<26} {'misses':>7} {'worst ratio':>12}  seeds missed")
     for key, seeds in misses.items():
         print(f"{key:<26} {len(seeds):>7} {worst[key]:12.5f}  {seeds[:10]}")

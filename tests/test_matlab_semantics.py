@@ -108,3 +108,32 @@ def test_resid_accepts_the_true_model_on_closed_loop_data_and_reports_the_feedba
         feedback += r.feedback
     assert rejected <= 5
     assert feedback >= 90  # the residual leads the input: reported, apart from the verdict
+
+
+def _integrator(seed: int) -> IOData:
+    r = np.random.default_rng(seed)
+    u = r.standard_normal(400)
+    return IOData(u, lfilter([0, 0.1], [1, -1.0], u) + 0.05 * r.standard_normal(400), 1.0)
+
+
+def test_n4sid_warns_on_an_unstable_estimate_and_can_enforce_stability():
+    from rwlab.errors import RwlabWarning
+
+    data = _integrator(1)  # a true pole at z = 1: noise puts the estimate just outside
+    with pytest.warns(RwlabWarning, match="unstable"):
+        free = n4sid(data, 2)
+    assert not free.is_stable() and not free.report["stability"]["stable"]
+    stable = n4sid(data, 2, enforce_stability=True)
+    assert stable.is_stable() and stable.report["stability"]["enforced"]
+    # B re-fitted with the reflected A: the simulation is as good as the unstable model's
+    fit = compare(stable, data).fit_percent
+    assert fit > 90 and fit > compare(free, data).fit_percent - 2
+
+
+def test_ssarx_weighting_is_consistent_on_closed_loop_data_where_cva_is_not():
+    data = _closed_loop(0, 2000)  # true pole 0.9, gain b = 0.5
+    cva = n4sid(data, 1)
+    ssarx = n4sid(data, 1, weighting="SSARX")
+    assert abs(ssarx.poles()[0] - 0.9) < 0.03
+    assert abs(cva.poles()[0] - 0.9) > 3 * abs(ssarx.poles()[0] - 0.9)
+    assert abs(float(ssarx.C[0, 0] * ssarx.B[0, 0]) - 0.5) < 0.05

@@ -253,7 +253,11 @@ class FIRModel:
             raise DataError(f"u must be finite with shape (N, {self.nu}); got {np.shape(arr)}")
         N, n = arr.shape[0], self.coefficients.shape[0]
         memory = self.nk + n - 1
-        pad = np.repeat(arr[:1], memory, axis=0) if initial == "steady" else np.zeros((memory, self.nu))
+        pad = (
+            np.repeat(arr[:1], memory, axis=0)
+            if initial == "steady"
+            else np.zeros((memory, self.nu))
+        )
         full = np.vstack([pad, arr])
         y = np.zeros((N, self.ny))
         for j in range(self.nu):

@@ -207,6 +207,18 @@ def _normal_equations(orders, theta, experiments):
     return H, g, sse
 
 
+def _stalled(Hs, gs, sse: float, tol: float) -> str:
+    """Why no step decreases the loss: the optimum itself (the Gauss–Newton step
+    promises less than the tolerance: rounding is all that is left), or not."""
+    try:
+        promised = float(gs @ linalg.solve(Hs + 1e-12 * np.eye(len(gs)), gs, assume_a="pos"))
+    except (linalg.LinAlgError, ValueError):
+        promised = np.inf
+    if promised / max(sse, 1e-300) < 10 * tol:
+        return "converged (no step decreases the loss further)"
+    return "no further decrease possible (local minimum)"
+
+
 def _minimize(orders, theta, experiments, max_iter: int, tol: float):
     """Levenberg–Marquardt on ½Σε². Returns θ, H, sse, iterations, reason."""
     theta = _stabilized(orders, theta)
@@ -234,7 +246,7 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float):
                     break
             mu *= 10.0
             if mu > 1e12:
-                return theta, H, sse, it, "no further decrease possible (local minimum)"
+                return theta, H, sse, it, _stalled(Hs, gs, sse, tol)
         improvement = (sse - sse_trial) / sse
         expected = float(-(g @ step)) / sse
         theta = trial
