@@ -433,6 +433,8 @@ def _response_table(fr, rows: int = 16) -> None:
 @_friendly_errors
 def ident_spa(file, Ts, input_col, output_col, detrend, normalize, window, as_json, save, force):
     """Frequency response by spectral analysis (MATLAB spa): Blackman–Tukey, Hann window."""
+    import numpy as np
+
     from rwlab.ident import spa
 
     if save:
@@ -445,6 +447,13 @@ def ident_spa(file, Ts, input_col, output_col, detrend, normalize, window, as_js
         _echo_json(fr.to_dict())
         return
     click.echo(f"data: {data!r}; spa at {len(fr.omega)} frequencies")
+    bias = fr.report.get("bias")
+    if bias:
+        click.echo(
+            f"the ±σ band is the variance only: the Hann window (M = {bias['window_size']}) "
+            f"smooths G over ~{bias['resolution_rad_s']:.3g} rad/s, a bias it leaves out "
+            f"(estimated up to {float(np.max(bias['estimate'])):.3g} here)"
+        )
     _response_table(fr)
     if save:
         click.echo(f"estimate written to {save}")

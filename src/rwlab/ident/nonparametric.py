@@ -54,6 +54,9 @@ class FrequencyResponse:
         Noise spectrum Φv (output spectrum for a time series), unit² · s.
     method : str
         'spa', 'etfe' or 'impulseest'.
+    report : dict
+        Method notes; for 'spa', ``bias``: the window's resolution and bias
+        indicator (see :func:`spa`).
     """
 
     omega: np.ndarray
@@ -62,6 +65,7 @@ class FrequencyResponse:
     response_sd: np.ndarray | None = None
     spectrum: np.ndarray | None = None
     method: str = ""
+    report: dict = field(default_factory=dict)
 
     def magnitude_db(self) -> np.ndarray:
         """20 log₁₀ |G|, shape (nw, ny, nu)."""
@@ -86,6 +90,7 @@ class FrequencyResponse:
             "response_imag": self.response.imag.tolist(),
             "response_sd": opt(self.response_sd),
             "spectrum_real": opt(None if self.spectrum is None else self.spectrum.real),
+            "report": self.report,
         }
 
 
@@ -105,7 +110,9 @@ def _one_record(data, what: str) -> IOData:
     return experiments[0]
 
 
-def spa(data: IOData, window_size: int | None = None, omega=None) -> FrequencyResponse:
+def spa(
+    data: IOData, window_size: int | None = None, omega=None, *, _bias_check: bool = True
+) -> FrequencyResponse:
     """Blackman–Tukey spectral analysis (MATLAB ``spa``).
 
     Parameters
@@ -122,7 +129,20 @@ def spa(data: IOData, window_size: int | None = None, omega=None) -> FrequencyRe
     -------
     FrequencyResponse
         ``response`` G, ``response_sd`` from Var Ĝᵢⱼ ≈ (Σ W²/N) Φvᵢᵢ [Φu⁻¹]ⱼⱼ,
-        and ``spectrum`` Φv (Φy for a time series).
+        and ``spectrum`` Φv (Φy for a time series). ``bias`` holds the
+        window's bias bound (below).
+
+    Notes
+    -----
+    ``response_sd`` is the variance part only. The lag window also smooths G
+    over a frequency band of width about 2π/(M Ts) rad/s, a bias of order
+    (1/M²)·|G''(ω)| that the ±σ band leaves out: at a resonance sharper than
+    the window (half-power width below 2π/(M Ts)) the band can miss the
+    truth most of the time (measured: 42 % coverage of a ±1σ band at a
+    lightly damped peak). ``report['bias']`` states the resolution and a
+    per-frequency bias estimate, ``|Ĝ − Ĝ_M/2|/3``: the bias grows as M⁻², so
+    halving the window quadruples it (Richardson); it is largest where
+    smoothing flattens a peak. Raise ``M`` there.
     """
     d = _one_record(data, "spa")
     N, ny, nu = d.N, d.ny, d.nu
@@ -151,7 +171,21 @@ def spa(data: IOData, window_size: int | None = None, omega=None) -> FrequencyRe
     cw = lag_window[0] ** 2 + 2 * np.sum(lag_window[1:] ** 2)
     var = cw / N * np.einsum("wi,wj->wij", np.real(np.diagonal(Phi_v, axis1=1, axis2=2)),
                              np.real(np.diagonal(Phi_u_inv, axis1=1, axis2=2)))  # fmt: skip
-    return FrequencyResponse(w, G, d.Ts, np.sqrt(np.clip(var, 0, None)), Phi_v, "spa")
+    bias = None
+    if M >= 4 and _bias_check:
+        coarse = spa(d, M // 2, w, _bias_check=False).response
+        bias = {
+            "window_size": M,
+            "resolution_rad_s": 2 * np.pi / (M * d.Ts),
+            "estimate": (np.abs(G - coarse) / 3).tolist(),
+            "note": "response_sd is the variance part only; the window smooths G over "
+            "about resolution_rad_s, a bias the ±σ band leaves out (largest at sharp "
+            "resonances). estimate = |G − G(M/2)|/3 (the bias grows as M⁻²: Richardson), "
+            "an indicator that also carries the estimates' noise.",
+        }
+    return FrequencyResponse(
+        w, G, d.Ts, np.sqrt(np.clip(var, 0, None)), Phi_v, "spa", {"bias": bias}
+    )
 
 
 def _dft(x: np.ndarray, w: np.ndarray, Ts: float, chunk: int = 4096) -> np.ndarray:
