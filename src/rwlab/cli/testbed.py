@@ -31,6 +31,17 @@ from rwlab.errors import ConfigError
 @click.option("--telemetry-rate", type=float, help="Simulated wheel's telemetry rate, Hz.")
 @click.option("--seed", type=int)
 @click.option(
+    "--unit",
+    type=click.IntRange(0),
+    help="Simulated wheel unit: another RW90 with parameters drawn within its tolerances.",
+)
+@click.option(
+    "--wheel",
+    "wheel_preset",
+    type=click.Choice(["rw90", "ideal"]),
+    help="Simulated wheel preset: rw90 (realistic, default) or ideal (no imperfections).",
+)
+@click.option(
     "--file",
     "setpoint_file",
     type=click.Path(dir_okay=False),
@@ -78,6 +89,8 @@ def experiment(
     realtime,
     telemetry_rate,
     seed,
+    unit,
+    wheel_preset,
     setpoint_file,
     interface,
     channel,
@@ -107,6 +120,8 @@ def experiment(
         realtime=realtime,
         telemetry_rate=telemetry_rate,
         seed=seed,
+        unit=unit,
+        wheel=wheel_preset,
         file=setpoint_file,
         interface=interface,
         channel=channel,
@@ -120,9 +135,7 @@ def experiment(
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:
         cfg = ExperimentConfig(**{k: v for k, v in overrides.items() if v is not None})
-    from rwlab.wheel import RW90
-
-    cfg.check_limits(RW90)
+    cfg.check_limits(cfg.wheel_params())
     if Path(out).exists() and not force:
         raise FileExistsError(f"{out} exists; pass --force to replace it")
     _check_folder(Path(out).parent)

@@ -60,10 +60,16 @@ def wheel() -> None:
     type=click.Path(exists=True, dir_okay=False),
     help="Wheel parameters as TOML (default RW90).",
 )
+@click.option(
+    "--unit",
+    type=click.IntRange(0),
+    default=None,
+    help="Wheel unit: parameters drawn within their tolerances around --params.",
+)
 @click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
 @_friendly_errors
 def wheel_serve(
-    interface, channel, node_id, telemetry_rate, latency_ms, watchdog, params, duration
+    interface, channel, node_id, telemetry_rate, latency_ms, watchdog, params, unit, duration
 ):
     """Run a simulated wheel on a bus, on the wall clock, until Ctrl-C."""
     import time
@@ -72,6 +78,8 @@ def wheel_serve(
     from rwlab.wheel.bus import DEFAULT_CHANNELS, open_bus
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
+    if unit is not None:
+        wheel_params = wheel_params.for_unit(unit)
     channel = channel or DEFAULT_CHANNELS[interface]
     bus = open_bus(interface, channel)
     node = WheelNode(

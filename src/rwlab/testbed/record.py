@@ -13,7 +13,7 @@ Channels (JSON messages, JSON-schema described):
 - ``/command``   — t (s), sequence, mode, setpoint (rpm or rpm/s)
 - ``/telemetry`` — t, speed_rpm, current_a, mode, fault_active, speed_limited,
   sequence_echo, counter
-- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s
+- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s, bus_voltage_v
 - ``/event``     — t, kind, message (start, stop, fault, interrupt, error)
 - ``/can``       — t, id, data (hex), direction (only if raw frames are recorded)
 
@@ -64,6 +64,7 @@ CHANNELS: dict[str, dict] = {
         "faults": _INT,
         "temperature_c": _NUM,
         "uptime_s": _INT,
+        "bus_voltage_v": _NUM,
     },
     "/event": {"t": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
     "/can": {"t": _NUM, "id": _INT, "data": {"type": "string"}, "direction": {"type": "string"}},

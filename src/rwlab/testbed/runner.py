@@ -83,6 +83,12 @@ class ExperimentConfig:
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
+    wheel : {'rw90', 'ideal'}
+        The simulated wheel's parameter preset: the realistic RW90 twin (default)
+        or the one without imperfections (:data:`rwlab.wheel.physics.IDEAL`).
+    unit : int, optional
+        Unit seed of the simulated wheel: another RW90 drawn within its tolerances
+        (:meth:`rwlab.wheel.WheelParams.for_unit`); None is the nominal wheel.
     model : str
         ``model.json`` of an identified wheel: run the fault detector live
         (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
@@ -111,6 +117,8 @@ class ExperimentConfig:
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
     model: str | None = None
+    wheel: str = "rw90"
+    unit: int | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -136,12 +144,15 @@ class ExperimentConfig:
             "file": ((str, type(None)), "a string"),
             "model": ((str, type(None)), "a path to model.json"),
             "f1": ((*number, type(None)), "a number of Hz"),
+            "wheel": (str, "a wheel preset name"),
+            "unit": ((int, type(None)), "an integer ≥ 0"),
         }
         for name, (kind, text) in expected.items():
             value = getattr(self, name)
             bad_bool = isinstance(value, bool) and kind is not bool
             if not isinstance(value, kind) or bad_bool:
                 raise ConfigError(f"{name} must be {text}, got {value!r}")
+        self.wheel_params()  # a bad preset or unit fails here, before any work
         if not 0 <= self.node_id <= 15:
             raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
         if not (math.isfinite(self.latency) and self.latency >= 0):
@@ -170,6 +181,20 @@ class ExperimentConfig:
                 f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
                 f"{MAX_COMMANDS:.0e} in one experiment"
             )
+
+    def wheel_params(self, base: WheelParams | None = None) -> WheelParams:
+        """The simulated wheel: ``base`` (default: the ``wheel`` preset), as unit ``unit``.
+
+        Parameters
+        ----------
+        base : WheelParams, optional
+
+        Returns
+        -------
+        WheelParams
+        """
+        params = WheelParams.preset(self.wheel) if base is None else base
+        return params if self.unit is None else params.for_unit(self.unit)
 
     def scheduled_faults(self) -> list[ScheduledFault]:
         """The faults, parsed (``ConfigError`` for a bad one)."""
@@ -267,16 +292,19 @@ def run_experiment(
     cfg: ExperimentConfig,
     out: str | os.PathLike,
     *,
-    params: WheelParams = RW90,
+    params: WheelParams | None = None,
     force: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> RunSummary:
     """Run ``cfg`` and write the record to ``out`` (an ``.mcap`` file).
 
+    ``params`` replaces the preset named by ``cfg.wheel`` (``cfg.unit`` still applies).
+
     ``progress(k, n)`` is called after each command. KeyboardInterrupt and
     errors idle the wheel, close the record (with an event saying why) and
     are re-raised.
     """
+    params = cfg.wheel_params(params)
     cfg.check_limits(params)
     command = make_signal(cfg, params)
     simulated = cfg.interface == "virtual"
@@ -459,6 +487,7 @@ def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
                     "mode": frame.mode.name,
                     "faults": int(frame.faults),
                     "temperature_c": frame.temperature,
+                    "bus_voltage_v": frame.bus_voltage,
                     "uptime_s": frame.uptime,
                 },
             )

@@ -124,6 +124,8 @@ class WheelNode:
         self.physics_dt = physics_dt
         self.inject = faults or FaultInjection()
         self.rng = np.random.default_rng(seed + 1)
+        # the wheel's own timing jitter and frame loss (WheelParams), a stream of their own
+        self._timing_rng = np.random.default_rng([seed, 0x4A4954])
         self.t = self.clock.now()
         self.t0 = self.t
         self._next_telemetry = self.t
@@ -234,6 +236,7 @@ class WheelNode:
                         self.wheel.temperature,
                         int(self.t - self.t0),
                         self.commands_seen,
+                        self.wheel.measured_bus_voltage(),
                     )
                 )
             )
@@ -251,7 +254,7 @@ class WheelNode:
         return proto.Telemetry(
             self.node_id,
             speed,
-            self.wheel.current,
+            self.wheel.measured_current(),
             self.wheel.mode,
             bool(self.wheel.faults),
             self.wheel.speed_limited,
@@ -260,7 +263,13 @@ class WheelNode:
         )
 
     def _queue(self, msg: can.Message) -> None:
-        self._outbox.append((self.t + self.inject.extra_delay, msg))
+        p = self.wheel.params
+        if p.frame_loss_rate and self._timing_rng.random() < p.frame_loss_rate:
+            return  # lost on the way (the telemetry counter shows it)
+        jitter = p.telemetry_jitter_s * self._timing_rng.random() if p.telemetry_jitter_s else 0.0
+        self._outbox.append((self.t + self.inject.extra_delay + jitter, msg))
+        if jitter:
+            self._outbox.sort(key=lambda item: item[0])
 
     def _flush(self) -> None:
         while self._outbox and self._outbox[0][0] <= self.t:

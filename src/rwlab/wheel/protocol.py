@@ -84,7 +84,7 @@ class Telemetry:
 
 @dataclass(frozen=True)
 class Heartbeat:
-    """A wheel's status frame: latched faults, temperature (°C), uptime (s)."""
+    """A wheel's status frame: latched faults, temperature (°C), uptime (s), bus voltage (V)."""
 
     node_id: int
     mode: Mode
@@ -92,6 +92,7 @@ class Heartbeat:
     temperature: float
     uptime: int
     commands_seen: int
+    bus_voltage: float = 10.0  # V; the field's floor (10 V) when the sender has none
 
 
 def _check_node(node_id: int) -> int:
@@ -148,6 +149,7 @@ def encode_heartbeat(h: Heartbeat) -> can.Message:
         "RW_Heartbeat",
         {
             "Mode": int(h.mode) & 0x3,
+            "BusVoltage": max(10.0, min(41.5, round(h.bus_voltage * 2) / 2)),
             "Faults": int(h.faults) & 0xFF,
             "Temperature": max(-40.0, min(87.5, round(h.temperature * 2) / 2)),
             "Uptime": min(int(h.uptime), 0xFFFF),
@@ -193,6 +195,7 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
             float(s["Temperature"]),
             int(s["Uptime"]),
             int(s["CommandsSeen"]),
+            float(s["BusVoltage"]),
         )
     except ValueError as exc:  # an out-of-range enum value
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X}: {exc}") from None
