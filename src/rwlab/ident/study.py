@@ -47,8 +47,8 @@ import numpy as np
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
-from rwlab.ident.models import PolyModel
 from rwlab.ident.greybox import WheelGreyBox, greybox_fit
+from rwlab.ident.models import PolyModel
 from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.ident.pem import armax, bj, oe
@@ -590,8 +590,9 @@ def load_study_data(
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
     the model: from the record's wheel parameters when present, else the RW90
-    defaults; ``current_limit_a`` is the driver's current limit (A). A record whose telemetry has a gap longer than the largest
-    model's memory (``max_orders + nk_max`` samples) is refused.
+    defaults; ``current_limit_a`` is the driver's current limit (A). A record
+    whose telemetry has a gap longer than the largest model's memory
+    (``max_orders + nk_max`` samples) is refused.
     """
     from pathlib import Path
 
