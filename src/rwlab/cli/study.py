@@ -26,10 +26,11 @@ from rwlab.errors import ConfigError, RwlabError
 @_columns_option
 @click.option(
     "--preprocess",
-    type=click.Choice(["normalize", "detrend", "none"]),
-    default="normalize",
+    type=click.Choice(["detrend", "scale", "normalize", "none"]),
+    default="detrend",
     show_default=True,
-    help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
+    help="Statistics from the estimation part: remove means (default), scale without "
+    "shifting, or normalize to [0, 1] as paper A (biases a model without intercept).",
 )
 @click.option(
     "--split",
@@ -188,6 +189,11 @@ def _identify_one(
         tolerance=tolerance,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
+        datasheet={
+            "current_limit": saturation.get("current_limit_a", 0.7),
+            "max_speed_rpm": saturation["speed_limit_rpm"],
+            "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
+        },
     )
     model = physical_model(
         result,

@@ -52,6 +52,12 @@ from rwlab.errors import ConfigError
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
 @click.option(
+    "--rate-limit/--no-rate-limit",
+    default=None,
+    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (default on: "
+    "ramps, not steps); --no-rate-limit plays true steps and lets the wheel saturate.",
+)
+@click.option(
     "--fault",
     "faults",
     multiple=True,
@@ -90,6 +96,7 @@ def experiment(
     channel,
     node_id,
     raw_frames,
+    rate_limit,
     faults,
     model_file,
     monitor,
@@ -120,6 +127,7 @@ def experiment(
         channel=channel,
         node_id=node_id,
         raw_frames=raw_frames,
+        rate_limit=rate_limit,
         faults=tuple(faults) or None,
         model=model_file,
     )

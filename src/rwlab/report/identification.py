@@ -99,9 +99,11 @@ def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
     """An axis label that says what the plotted numbers are."""
     unit = f" [{unit}]" if unit else ""
     if preprocess == "normalize":
-        return f"{name}, normalised to [0, 1]"
+        return f"{name}, normalised to [0, 1] over the estimation part"
     if preprocess == "detrend":
-        return f"{name} − its mean{unit}"
+        return f"{name} − its estimation-part mean{unit}"
+    if preprocess == "scale":
+        return f"{name} / its estimation-part peak"
     return f"{name}{unit}"
 
 

@@ -66,8 +66,12 @@ class ExperimentConfig:
     min_hold, max_hold : float
         PRBS hold times, s (paper A: ≥ 5 s).
     rate_limit : bool
-        Limit a speed-mode PRBS's slope to the wheel's maximum acceleration, so the
-        identification signal is one the wheel can follow (steps stay steps).
+        Limit a speed-mode PRBS's slope to the wheel's maximum acceleration
+        (default True; RW90: 314 rpm/s), so the identification signal is one
+        the wheel can follow: the command then ramps instead of stepping, and a
+        linear model identified from it never sees the acceleration limit bind.
+        ``false`` (TOML) or ``--no-rate-limit`` (CLI) plays true steps, which
+        the wheel follows at its limit: the record then shows the nonlinearity.
     f0, f1 : float
         Chirp / multisine band, Hz (f1 default: 0.4/Ts).
     step_levels : tuple of float
