@@ -114,9 +114,14 @@ class Alarm:
 class _BlockCusum:
     """Block means of one test's values, standardised, into a one- or two-sided CUSUM."""
 
-    def __init__(self, stats, tolerance: float, h: float, sides: str) -> None:
+    def __init__(
+        self, stats, tolerance: float, h: float, sides: str, baseline_blocks: int = 0
+    ) -> None:
         self.stats, self.h, self.sides = stats, h, sides
         self.k = CUSUM_K + tolerance / stats.sigma
+        self.baseline_blocks = baseline_blocks  # > 0: the mean of the record's first blocks
+        self._baseline: list[float] = []
+        self.mean = stats.mean
         self._values: list[float] = []
         self.up = self.down = 0.0
         self.means: deque = deque()  # (t_s, block mean, up, down) for sizing a fault
@@ -131,7 +136,11 @@ class _BlockCusum:
             return False
         mean = float(np.mean(self._values))
         self._values.clear()
-        z = (mean - self.stats.mean) / self.stats.sigma
+        if len(self._baseline) < self.baseline_blocks:
+            self._baseline.append(mean)
+            self.mean = float(np.mean(self._baseline))
+            return False
+        z = (mean - self.mean) / self.stats.sigma
         if self.sides in ("up", "both"):
             self.up = max(0.0, self.up + z - self.k)
         if self.sides in ("down", "both"):
@@ -234,6 +243,7 @@ class Diagnoser:
         self._recent_speed: deque = deque(maxlen=8)
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
+        self._moving = False
         self._was_stale = True
         self._lost: float | None = None
         self._command: tuple[float, float] = (math.nan, -math.inf)
@@ -254,6 +264,10 @@ class Diagnoser:
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
             self._detectors[name] = _BlockCusum(stats, tol, h, sides)
             self.thresholds[name] = h
+            if name == "friction":  # onsets smaller than the spread between units
+                tol = ref.tolerance.get("friction_change", DEFAULT_TOLERANCE["friction_change"])
+                self._detectors["friction_change"] = _BlockCusum(stats, tol, h, sides, 6)
+                self.thresholds["friction_change"] = h
         p = ref.repeat_probability
         self._detectors["stuck"] = RunTest(run_length(self.arl0, p))
         self.thresholds["stuck"] = self._detectors["stuck"].n
@@ -300,7 +314,11 @@ class Diagnoser:
         lost = 0.0 if self._lost is None else max(0.0, lost_frames - self._lost)
         self._lost = lost_frames
         repeat = speed_rpm != 0 and speed_rpm == self._last_speed
-        if usable and speed_rpm != 0 and self._last_speed not in (None, 0.0):
+        # a repeated reading is evidence only while the model says the wheel moves (in a
+        # hold a well-regulated wheel's Hall reading repeats; the speed and lag tests and
+        # the frozen check catch a sensor stuck there once the command changes)
+        self._moving = abs(r["acceleration"] - r["accel_rpm_s"]) >= QUIET_RPM_S
+        if usable and self._moving and speed_rpm != 0 and self._last_speed not in (None, 0.0):
             self.repeats[0] += repeat
             self.repeats[1] += 1
         self._last_speed = speed_rpm
@@ -310,10 +328,12 @@ class Diagnoser:
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
                 new += self._fire(t_s, "dropout")
+            if "friction" in values:
+                values["friction_change"] = values["friction"]
             for name, value in values.items():
                 if self._detectors[name].add(t_s, value):
                     new += self._fire(t_s, name)
-            if usable and self._detectors["stuck"].update(repeat):
+            if usable and self._detectors["stuck"].update(repeat and self._moving):
                 new += self._fire(t_s, "stuck")
         else:
             for name, value in values.items():
@@ -388,14 +408,24 @@ class Diagnoser:
             for name in BLOCKS
             if name in self._detectors and self._detectors[name].means
         }
+        change = self._detectors.get("friction_change")
+        if detector == "friction_change" and change is not None and change.means:
+            # the size relative to the record's start, not to the reference's unit
+            ev["friction"] = (1 + change.since_change()) / (1 + change.mean) - 1
+            detector = "friction"
         ev["sigma"] = {name: s.sigma for name, s in self.reference.tests.items()}
+        ev["ref_mean"] = {name: s.mean for name, s in self.reference.tests.items()}
+        motor = self._detectors.get("motor")
+        if motor is not None:
+            recent = [m[1] for m in motor.means if m[0] >= self.history["t_s"][-1] - 120.0]
+            ev["motor_recent"] = np.array(recent)
         ev["tolerance"] = dict(self.reference.tolerance)
         ev["recent_speed"] = np.array(self._recent_speed)
         lag = self._detectors.get("lag")
         n_lag = len(ev.get("lag", ())) * (lag.stats.block if lag is not None else 0)
         ev["lag_currents"] = np.array(list(self._lag_currents)[-max(n_lag, 1) :])
         ev["lost"] = self._detectors["dropout"].last_count
-        if detector == "motor" or detector == "friction":
+        if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)
                 if det is not None and det.means and name != detector:

@@ -46,6 +46,7 @@ __all__ = ["Finding", "isolate"]
 
 FROZEN = 3  # identical readings that point to a frozen sensor
 Z95 = 1.959964
+LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
 @dataclass(frozen=True)
@@ -115,14 +116,16 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return [
             Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")
         ]
-    if detector in ("friction", "motor"):
+    if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev)
     if detector == "speed":
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
-    motor = _motor(ev)
-    if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
-        return [_torque_constant(*motor)]
+    recent = np.asarray(ev.get("motor_recent", ()), dtype=float)
+    if recent.size:  # weak motor (e_α ≈ 1/F − 1) or a clamp (e_α ≈ 0): the nearer one
+        e, half = _mean_ci(recent, ev["sigma"]["motor"])
+        if e - ev.get("ref_mean", {}).get("motor", 0.0) > LAG_SPLIT:
+            return [_torque_constant(e, half)]
     currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
     currents = currents[np.isfinite(currents)]
     if currents.size == 0:
