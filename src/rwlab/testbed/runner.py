@@ -307,6 +307,7 @@ def run_experiment(
     params = cfg.wheel_params(params)
     cfg.check_limits(params)
     command = make_signal(cfg, params)
+    detector = _live_detector(cfg)  # before the clock starts: loading delays no command
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
@@ -359,7 +360,6 @@ def run_experiment(
     t0 = clock.now() + 0.01
     writer.time_origin = t0
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
-    detector = _live_detector(cfg)
     if node is not None:
         node.schedule_faults(faults, origin=t0)
     try:
@@ -377,6 +377,7 @@ def run_experiment(
                     client.latest.speed_rpm,
                     client.latest.current,
                     clock.now() - client.latest_time,
+                    client.lost_frames,
                 ):
                     writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
@@ -430,7 +431,7 @@ def _live_detector(cfg: ExperimentConfig):
     """The fault detector for ``cfg.model``, or None."""
     if cfg.model is None:
         return None
-    from rwlab.diagnose import Diagnoser
+    from rwlab.diagnose import Diagnoser, HealthyReference
     from rwlab.wheel.identified import IdentifiedWheel
 
     wheel = IdentifiedWheel.from_json(cfg.model)
@@ -439,13 +440,17 @@ def _live_detector(cfg: ExperimentConfig):
             f"live diagnosis needs speed mode at the model's Ts = {wheel.Ts:g} s "
             f"(the experiment: {cfg.mode} mode, Ts = {cfg.Ts:g} s)"
         )
-    return Diagnoser(wheel)
+    return Diagnoser(wheel, HealthyReference.from_model_file(cfg.model))
 
 
 def _alarm_text(alarm) -> str:
+    size = ""
+    if alarm.magnitude is not None:
+        ci = "" if alarm.ci is None else f" [{alarm.ci[0]:.4g}, {alarm.ci[1]:.4g}]"
+        size = f" {alarm.magnitude:.4g}{ci} {alarm.unit}"
     return (
         f"{alarm.kind} at {alarm.t_s:.1f} s ({alarm.detector} test, statistic "
-        f"{alarm.statistic:.3g} > {alarm.threshold:.3g})"
+        f"{alarm.statistic:.3g} > {alarm.threshold:.3g}){size}"
     )
 
 

@@ -82,6 +82,14 @@ class IdentifiedWheel:
             info = json.loads(Path(path).read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
+        return cls.from_info(info, model, source=str(path))
+
+    @classmethod
+    def from_info(
+        cls, info: dict, model: str | None = None, *, source: str = "model"
+    ) -> IdentifiedWheel:
+        """The wheel of a ``model.json`` already read (its dict); see :meth:`from_json`."""
+        path = source
         if info.get("format") != "rwlab.WheelModel/1":
             raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
         sat = info["saturation"]
