@@ -192,11 +192,29 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
     "--relinearize", type=float, default=None, help="Re-design the LQR every this many seconds."
 )
 @_EPOCH
+@click.option(
+    "--steady-after",
+    type=float,
+    default=None,
+    help="Seconds after which the steady-state metrics start [default: half the run, at "
+    "most its first hour].",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
 def attitude_simulate(
-    scenario, controller, estimator, dt, duration, seed, rho, relinearize, epoch, out, force
+    scenario,
+    controller,
+    estimator,
+    dt,
+    duration,
+    seed,
+    rho,
+    relinearize,
+    epoch,
+    steady_after,
+    out,
+    force,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
@@ -205,6 +223,12 @@ def attitude_simulate(
     from rwlab.report.attitude import check_outputs, write_simulation
 
     _check_run(duration, relinearize)
+    if steady_after is not None and not (
+        math.isfinite(steady_after) and 0 <= steady_after < duration
+    ):
+        raise ConfigError(
+            f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
+        )
     overrides = {"dt": dt} if dt is not None else {}
     sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
     _check_folder(out)
@@ -224,6 +248,7 @@ def attitude_simulate(
             update_period=relinearize,
             log_every=log_every,
             progress=progress,
+            steady_after=steady_after,
         )
     config = {
         "scenario": sc.name,
@@ -241,6 +266,9 @@ def attitude_simulate(
         "wheel_faults": list(sc.wheel_faults),
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
+        "steady_from_s": run.steady_from_s,
+        "gyro": sc.gyro is not None,
+        "star_tracker": sc.star_tracker is not None,
     }
     paths = write_simulation(run, metrics, config, sc, out, force=force)
     for key in (
