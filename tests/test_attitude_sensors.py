@@ -12,7 +12,7 @@ from rwlab.attitude.ekf import (
     predict_covariance,
     propagate_attitude_into,
 )
-from rwlab.attitude.frames import GEO_RATE, dcm, from_axis_angle, qmul
+from rwlab.attitude.frames import GEO_RATE, from_axis_angle, qmul
 from rwlab.attitude.plant import propagate
 from rwlab.attitude.scenario import SCENARIOS, load_scenario
 from rwlab.attitude.sensors import (
@@ -206,7 +206,7 @@ def test_scenario_tables_for_gyro_and_star_tracker(tmp_path):
     path.write_text('[scenario]\nbase = "geo-comsat-gyro"\n[gyro]\nfly = false\n')
     assert load_scenario(str(path)).gyro is None
     path.write_text("[gyro]\narw = 0.01\n")
-    with pytest.raises(ConfigError, match="gyro.arw"):
+    with pytest.raises(ConfigError, match=r"gyro\.arw"):
         load_scenario(str(path))
     path.write_text("[star_tracker]\nperiod_s = 0.7\n")
     with pytest.raises(ConfigError, match="whole multiple"):
