@@ -206,6 +206,10 @@ def test_budget_statistics_over_runs():
                 "seed": 1000 + i,
                 "steady_max_error_deg": 0.01 * (i + 1),
                 **{f"steady_max_error_{a}_deg": rng.uniform() for a in "xyz"},
+                **{f"rpe_{a}_deg": rng.uniform() / 10 for a in "xyz"},
+                **{f"knowledge_error_{a}_deg": rng.uniform() / 100 for a in "xyz"},
+                "eclipse_s": 600.0 + i,
+                "epoch": "2027-09-15T00:00:00+00:00",
                 "torque_peak_Nm": 1.0 if i == 7 else 0.5,
                 "wheel_momentum_peak_fraction": 0.3,
                 "torque_saturated_fraction": 0.0,
@@ -223,6 +227,23 @@ def test_budget_statistics_over_runs():
     assert b["torque_peak_Nm"] == {"max": 1.0, "seed": 1007}
     x = np.array([r["steady_max_error_x_deg"] for r in rows])
     assert b["pointing_error_deg"]["x"]["p99_73"] == pytest.approx(np.percentile(x, 99.73))
+    # the reviewer's figures: order statistics of the column, bounds from the binomial
+    assert b["statistic_column"] == "steady_max_error_deg"
+    q = {row["p"]: row for row in b["quantiles"]}
+    ordered = np.sort([r["steady_max_error_deg"] for r in rows])
+    assert q[0.5]["estimate"] == ordered[24] and q[0.9]["estimate"] == ordered[44]
+    for p, row in q.items():
+        if row["upper_bound"] is not None:
+            assert row["upper_bound"] in ordered and row["confidence"] == 0.95
+            r = int(np.searchsorted(ordered, row["upper_bound"])) + 1  # its rank
+            mass = sum(math.comb(50, i) * p**i * (1 - p) ** (50 - i) for i in range(r))
+            assert mass >= 0.95
+    assert q[0.9973]["upper_bound"] is None and q[0.9973]["runs_needed"] == 1109
+    met = b["meets_requirement"]
+    assert met["fraction"] == pytest.approx(10 / 50)
+    assert 0.1 < met["lower_bound_95"] < 0.2
+    assert set(b["APE"]) == set(b["knowledge_error"]) == {"x", "y", "z"}
+    assert b["RPE"]["window_s"] > 0 and b["APE"]["x"]["max"] == pytest.approx(x.max())
 
 
 def test_batches_keep_order_and_have_many_runs_each():

@@ -128,7 +128,8 @@ class Plant(NamedTuple):
     """The rigid body and its wheels: ``dt`` (s), orbit rate ``n`` (rad/s), J and J⁻¹ (3, 3),
     the wheel axes G (3, N) and G⁺, momentum limits ``h_max`` (N,), N·m·s, torque limit
     ``tau_max``, N·m, the disturbance vector ``dist`` (``DisturbanceModel.vector``), the
-    wheels' spin inertia, kg·m² (for their power)."""
+    wheels' spin inertia, kg·m² (for their power), and the factor by which every wheel's
+    realised torque differs from its command (motor constant, drive electronics)."""
 
     dt: float
     n: float
@@ -140,6 +141,7 @@ class Plant(NamedTuple):
     tau_max: float
     dist: np.ndarray
     wheel_inertia: float
+    torque_scale: float
 
 
 class Law(NamedTuple):
@@ -191,7 +193,8 @@ class Filter(NamedTuple):
     on the plant model, its disturbance state of kind ``bias_kind``, truth ``bias_true``
     for NEES, disturbances it models ``dist_model``) or GYRO (the gyro-driven MEKF); its
     continuous process noise Qc (n, n); the σ it assumes for the sun and earth sensors
-    (rad); the innovation ``gate`` (2,); the star tracker's covariance ``tracker_R`` (3, 3)."""
+    (rad); the innovation ``gate`` (2,); the star tracker's covariance ``tracker_R`` (3, 3);
+    the inertia J and J⁻¹ (3, 3) of the DYNAMICS filter's model (not necessarily the truth's)."""
 
     mode: int
     bias_kind: int
@@ -202,6 +205,8 @@ class Filter(NamedTuple):
     r_earth: float
     gate: np.ndarray
     tracker_R: np.ndarray
+    J: np.ndarray
+    J_inv: np.ndarray
 
 
 class Noise(NamedTuple):
@@ -664,6 +669,9 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             wheels.servo,
             hw_real,
         )
+        if plant.torque_scale != 1.0:  # the tachometers see what the wheels really did
+            for i in range(nw):
+                hw_real[i] *= plant.torque_scale
 
         in_desat = stats[UNLOADING] == 1 or t - stats[UNLOAD_END] <= unload[5]
         stats[MAX_ERR] = max(stats[MAX_ERR], err)
@@ -725,7 +733,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 gyro_jacobian_into(est[4:7], F)
             else:
                 error_jacobian_into(
-                    q_hat, w_hat, h_body, J, J_inv, n, filt.dist_model[0], Bmap, F, W3
+                    q_hat, w_hat, h_body, filt.J, filt.J_inv, n, filt.dist_model[0], Bmap, F, W3
                 )
             predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
         if mode == DYNAMICS:
@@ -735,7 +743,9 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             for i in range(3):  # the thruster command (and b̂'s torque) is known to the filter
                 dm[7 + i] = filt.dist_model[7 + i] + tau_thr[i] + tau_b[i]
             # the filter knows the wheels' torques and momenta (their tachometers)
-            rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
+            rk4_step(
+                xm, hw_real, dt, filt.J, filt.J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work
+            )
             for i in range(4):
                 q_hat[i] = xm[i]
             for i in range(3):

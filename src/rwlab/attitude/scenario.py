@@ -116,6 +116,14 @@ class Scenario:
         limit) that starts and ends an unloading window.
     unload_pulse_period_s : s between pulses.  unload_recovery_s : s after a
         window still counted as "during desaturation".
+
+    Sensors GEO satellites fly besides sun and earth sensors (``rwlab.attitude.sensors``):
+    gyro : GyroModel or None — gyros; with them the filter is the gyro-driven MEKF
+        (Lefferts–Markley–Shuster: attitude + gyro bias), the dynamics model unused.
+    star_tracker : StarTrackerModel or None — a star tracker's attitude updates.
+    filter_inertia : the inertia the filter's dynamics model uses (3 or 9 values;
+        empty: the truth's) — the model error of a flight filter.
+    wheel_torque_scale : realised wheel torque over the command (1: exact).
     """
 
     name: str = "custom"
@@ -178,6 +186,8 @@ class Scenario:
     unload_recovery_s: float = 300.0
     gyro: GyroModel | None = None
     star_tracker: StarTrackerModel | None = None
+    filter_inertia: tuple = ()
+    wheel_torque_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _check_types(self)
@@ -185,6 +195,9 @@ class Scenario:
         J = self.inertia_matrix
         if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(J) <= 0):
             raise ConfigError(f"{self.name}: inertia must be symmetric positive definite")
+        Jf = self.filter_inertia_matrix
+        if not np.allclose(Jf, Jf.T) or np.any(np.linalg.eigvalsh(Jf) <= 0):
+            raise ConfigError(f"{self.name}: filter_inertia must be symmetric positive definite")
         ev = np.linalg.eigvalsh(J)
         if ev[2] > ev[0] + ev[1] + 1e-9:
             raise ConfigError(f"{self.name}: inertia violates the triangle inequality")
@@ -255,6 +268,14 @@ class Scenario:
             raise ConfigError(f"{self.name}: sun_noise_incidence needs sun_fov_deg < 90")
 
     @property
+    def filter_inertia_matrix(self) -> np.ndarray:
+        """The inertia the filter's model uses, kg·m²: ``filter_inertia``, else the truth's."""
+        if not self.filter_inertia:
+            return self.inertia_matrix
+        v = np.asarray(self.filter_inertia, dtype=float)
+        return np.diag(v) if v.size == 3 else v.reshape(3, 3)
+
+    @property
     def inertia_matrix(self) -> np.ndarray:
         v = np.asarray(self.inertia, dtype=float)
         if v.size == 3:
@@ -280,6 +301,7 @@ class Scenario:
 
 
 _POSITIVE = (
+    "wheel_torque_scale",
     "filter_torque_drift_s",
     "filter_srp_drift_s",
     "wheel_inertia",
@@ -312,6 +334,7 @@ _FRACTIONS = (
 )
 _VECTORS = {
     "inertia": (3, 9),
+    "filter_inertia": (0, 3, 9),
     "initial_axis": (3,),
     "initial_rate": (3,),
     "sun_sensor_bias_deg": (2,),

@@ -447,6 +447,7 @@ def _plant_record(sc: Scenario) -> kernel.Plant:
         tau_max=sc.wheel_max_torque,
         dist=sc.disturbances.vector(),
         wheel_inertia=sc.wheel_inertia,
+        torque_scale=sc.wheel_torque_scale,
     )
 
 
@@ -490,7 +491,7 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
         mode = kernel.GYRO
         Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd())
     else:
-        J_inv = np.linalg.inv(sc.inertia_matrix)
+        J_inv = np.linalg.inv(sc.filter_inertia_matrix)
         Qc = np.zeros((nx, nx))
         Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
         if nx > 6:
@@ -506,6 +507,8 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
         r_earth=math.radians(sc.earth_noise_deg) * scale,
         gate=np.array([sc.innovation_gate, sc.innovation_gate_max_rejections], dtype=float),
         tracker_R=st.body_covariance() * scale**2 if st is not None else np.eye(3),
+        J=sc.filter_inertia_matrix,
+        J_inv=np.linalg.inv(sc.filter_inertia_matrix),
     )
 
 
