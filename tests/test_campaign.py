@@ -15,7 +15,7 @@ from scipy import stats
 
 from rwlab import datasets
 from rwlab.attitude.frames import from_axis_angle
-from rwlab.attitude.scenario import load_scenario
+from rwlab.attitude.scenario import SCENARIOS, load_scenario
 from rwlab.campaign.dispersions import Dispersion, apply, draw, load_dispersions
 from rwlab.campaign.engine import batches, dask_client
 from rwlab.campaign.montecarlo import (
@@ -388,3 +388,27 @@ def test_engine_option_errors(tmp_path):
     assert both.exit_code == 2 and "not both" in both.output
     r = _rwlab("identify", "dryer", "--workers", 2, "--out", tmp_path / "o")
     assert r.exit_code == 2 and "folder of records" in r.output
+
+
+def test_runs_get_their_own_epoch_in_the_spread_and_the_filter_keeps_the_nominal_inertia():
+    from datetime import datetime, timedelta
+
+    from rwlab.campaign.montecarlo import dispersed
+
+    sc = SCENARIOS["geo-comsat-gyro"]
+    c = Campaign(
+        sc, load_dispersions(), 86400.0, epoch="2027-09-01T00:00:00Z", epoch_spread_days=40
+    )
+    start = datetime.fromisoformat("2027-09-01T00:00:00+00:00")
+    epochs = set()
+    for s in run_seeds(1, 20):
+        run, values = dispersed(c, s)
+        offset = datetime.fromisoformat(run.epoch) - start
+        assert timedelta(0) <= offset < timedelta(days=40)
+        assert values["epoch"] == run.epoch
+        assert run.filter_inertia == tuple(sc.inertia) and run.inertia != sc.inertia
+        epochs.add(run.epoch)
+        assert dispersed(c, s)[0] == run  # from the seed alone
+    assert len(epochs) == 20
+    with pytest.raises(ConfigError, match="epoch"):
+        Campaign(sc, (), 10.0, epoch_spread_days=30)

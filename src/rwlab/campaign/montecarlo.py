@@ -105,13 +105,16 @@ def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
     epoch = campaign.epoch or campaign.scenario.epoch
     if epoch is not None:
         if campaign.epoch_spread_days > 0:
-            from datetime import timedelta
+            from datetime import UTC, datetime, timedelta
 
             from rwlab.attitude.ephemeris import parse_epoch
 
+            parse_epoch(epoch)  # a clear error for a bad one
+            start = datetime.fromisoformat(epoch.strip())
+            start = start.astimezone(UTC) if start.tzinfo else start.replace(tzinfo=UTC)
             rng = np.random.default_rng([run_seed, 0x45504F43])  # its own stream ("EPOC")
-            offset = timedelta(days=float(rng.uniform(0, campaign.epoch_spread_days)))
-            epoch = (parse_epoch(epoch) + offset).isoformat()
+            days = rng.uniform(0, campaign.epoch_spread_days)
+            epoch = (start + timedelta(seconds=round(days * 86400))).isoformat()
         sc = sc.with_(epoch=epoch)
         values["epoch"] = epoch
     return sc, values

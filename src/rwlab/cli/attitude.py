@@ -302,11 +302,31 @@ def attitude_simulate(
 )
 @_engine_options
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@_EPOCH
+@click.option(
+    "--epoch-spread-days",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Each run starts at --epoch plus a uniform draw of up to this many days "
+    "(e.g. 30 for an eclipse season, 365 for a year).",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
 def attitude_montecarlo(
-    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force
+    scenario,
+    runs,
+    duration,
+    controller,
+    dispersions,
+    workers,
+    scheduler,
+    seed,
+    epoch,
+    epoch_spread_days,
+    out,
+    force,
 ):
     """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
 
@@ -323,7 +343,16 @@ def attitude_montecarlo(
 
     _check_run(duration, None)
     sc = load_scenario(scenario)
-    campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
+    campaign = Campaign(
+        sc,
+        load_dispersions(dispersions),
+        duration,
+        controller,
+        seed,
+        runs,
+        epoch=epoch,
+        epoch_spread_days=epoch_spread_days,
+    )
     check_runs(campaign)  # before the cluster starts
     _check_folder(out)
     check_outputs(out, CAMPAIGN_FILES, force)
@@ -342,7 +371,18 @@ def attitude_montecarlo(
         click.echo(
             f"{axis:<6} {s['mean']:10.4g} {s['std']:10.4g} {s['p99_73']:11.4g} {s['max']:10.4g}"
         )
+    met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.pointing_requirement_deg:g}°: {stats['meets_requirement_fraction']:.1%}"
+        f"meeting ±{sc.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
+    for q in stats["quantiles"]:
+        bound = (
+            f"≤ {q['upper_bound']:.4g}° ({q['confidence']:.0%})"
+            if q["upper_bound"] is not None
+            else f"no {q['confidence']:.0%} bound: needs {q['runs_needed']} runs"
+        )
+        click.echo(
+            f"  {q['p']:.2%} quantile of {stats['statistic_column']}: {q['estimate']:.4g}°, {bound}"
+        )
     click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
