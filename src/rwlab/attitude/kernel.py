@@ -272,7 +272,7 @@ def new_stats() -> np.ndarray:
 @njit(cache=True)
 def _sky_at(sky, u, sun, moon):
     """Sun and Moon unit vectors (into ``sun``, ``moon``) and (sunlit, earth_lit,
-    moon_visible) at row position ``u`` of the sky table (linear interpolation,
+    moon_visible, srp_scale) at row position ``u`` of the sky table (linear interpolation,
     see ``ephemeris.SKY_COLUMNS``)."""
     i = min(max(int(u), 0), sky.shape[0] - 2)
     f = u - i
@@ -292,6 +292,7 @@ def _sky_at(sky, u, sun, moon):
         a[6] + f * (b[6] - a[6]),
         a[7] + f * (b[7] - a[7]),
         a[8] + f * (b[8] - a[8]) > 0.5,
+        a[9] + f * (b[9] - a[9]),
     )
 
 
@@ -528,7 +529,8 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     for j in range(steps):
         k = k0 + j
         t = k * dt
-        sunlit, earth_lit, moon_visible = _sky_at(sky.table, (t - sky.t0) / sky.step, s_orb, m_orb)
+        u = (t - sky.t0) / sky.step
+        sunlit, earth_lit, moon_visible, srp_scale = _sky_at(sky.table, u, s_orb, m_orb)
         if earth_lit < 1.0:
             stats[ECL_STEPS] += 1
         if sunlit < earth_lit:
@@ -636,7 +638,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
         _control_into(law.K_w, law.M, law.w_max, s, work, tau)
         if biased:  # disturbance accommodation: cancel the estimated torque
             if filt.bias_kind >= 2:
-                _srp_map_into(q_hat, s_orb, sunlit, C_hat, sun_hat, srp_map)
+                _srp_map_into(q_hat, s_orb, srp_scale, C_hat, sun_hat, srp_map)
             _matvec(Bmap, w_hat[3:], tau_b)
             for i in range(3):
                 tau[i] -= tau_b[i]
@@ -726,8 +728,8 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
 
         for i in range(3):
             d[7 + i] = plant.dist[7 + i] + noise.process[j, i] + tau_thr[i]
-        d[1] = plant.dist[1] * sunlit  # SRP in the shadow
-        dm[1] = filt.dist_model[1] * sunlit
+        d[1] = plant.dist[1] * srp_scale  # SRP: none in the shadow, ∝ 1/r² of the Sun
+        dm[1] = filt.dist_model[1] * srp_scale
         if measured:  # covariance to the next measurement, F at this estimate
             if mode == GYRO:
                 gyro_jacobian_into(est[4:7], F)

@@ -597,7 +597,9 @@ def _simulate_compiled(
         k += n_steps
         if progress is not None:
             progress(min(k, steps))
-    return _assemble(sc, log, log_k, saturated, state.stats, steady_from, filt.mode)
+    result = _assemble(sc, log, log_k, saturated, state.stats, steady_from, filt.mode)
+    result.stats["filter_states"] = P.shape[0] if filt.mode != kernel.TRUTH else 0
+    return result
 
 
 def astuple_shallow(obj) -> tuple:
