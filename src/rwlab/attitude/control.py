@@ -338,8 +338,30 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
         "desaturation_count": int(st["desaturation_count"]),
         "thruster_impulse_Nms": st["thruster_impulse_Nms"],
         "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
+        **_filter_metrics(r),
+        # torque jitter: RMS of the step-to-step change of each wheel's command over √2 (the
+        # σ of its white part); power: mean Σ|τ ω| of the wheels (mechanical, W)
+        "torque_jitter_rms_Nm": math.sqrt(st.get("steady_torque_jitter_sq_sum", 0.0) / steady_n),
+        "wheel_mechanical_power_W": st.get("steady_wheel_power_sum", 0.0) / steady_n,
         "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
         **_sky_metrics(st),
+    }
+
+
+def _filter_metrics(r: SimResult) -> dict:
+    """The filter's consistency over the steady window: mean NEES (against the right truth
+    for its state: ω, the disturbance state's true value, or the gyro bias), its state
+    count, and the share of attitude-error samples inside ±3σ."""
+    if r.sigma is None or not np.any(r.sigma):
+        return {"nees_mean": None, "nees_states": None, "inside_3sigma_fraction": None}
+    steady = r.t >= r.steady_from_s
+    nees = r.nees[steady]
+    nees = nees[np.isfinite(nees)]
+    inside = np.abs(r.est_error_axes[steady]) <= 3 * r.sigma[steady, :3]
+    return {
+        "nees_mean": float(np.mean(nees)) if nees.size else None,
+        "nees_states": int(r.stats.get("filter_states", 6)),
+        "inside_3sigma_fraction": float(np.mean(inside)) if inside.size else None,
     }
 
 
@@ -467,12 +489,14 @@ def fly(
     log_every: int = 10,
     progress=None,
     design: Scenario | None = None,
+    steady_after: float | None = None,
 ) -> tuple[SimResult, dict]:
     """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
     simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
     ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
     default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
-    design (the filter still uses the flown scenario's inertia and sensor noise)."""
+    design (the filter still uses the flown scenario's inertia and sensor noise).
+    ``steady_after``: seconds where the steady-state window starts (``sim.simulate``)."""
     if controller not in CONTROLLERS:
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
@@ -495,6 +519,7 @@ def fly(
         seed=seed,
         log_every=log_every,
         progress=progress,
+        steady_after=steady_after,
         **kw,
     )
     return run, metrics(run, scenario.pointing_requirement_deg)
