@@ -28,6 +28,7 @@ from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
 from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 
@@ -313,14 +314,8 @@ def run_experiment(
             node.start()
     client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
     if cfg.raw_frames:
-        client.frame_listener = lambda msg, direction: writer.write(
-            "/can",
-            {
-                "t": msg.timestamp if not realtime else clock.now(),
-                "id": msg.arbitration_id,
-                "data": bytes(msg.data).hex(),
-                "direction": direction,
-            },
+        client.frame_listener = lambda t, frame_id, data, direction: writer.write(
+            "/can", {"t": t, "id": frame_id, "data": data.hex(), "direction": direction}
         )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
@@ -433,7 +428,9 @@ def _record_until(
 
 def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
     for t, frame in client.drain():
-        if isinstance(frame, Telemetry):
+        if isinstance(frame, Implausible):  # flagged, never recorded as the wheel's state
+            writer.event(t, "implausible_telemetry", frame.reason)
+        elif isinstance(frame, Telemetry):
             writer.write(
                 "/telemetry",
                 {

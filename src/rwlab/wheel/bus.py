@@ -28,7 +28,8 @@ def open_bus(
     baudrate: int = 115200,
 ) -> can.BusABC:
     """A python-can bus: ``virtual`` (in-process), ``socketcan`` (a Linux CAN device),
-    ``udp_multicast`` (between processes on one machine) or ``serial`` (RS-232, SLIP).
+    ``udp_multicast`` (between processes on one machine: one group, on the loopback
+    interface unless the channel is ``GROUP@IFACE_ADDRESS``) or ``serial`` (RS-232, SLIP).
 
     ``simulated_clock=True`` keeps the senders' time stamps on virtual buses, which
     a node and a driver sharing a :class:`SimClock` need.
@@ -49,7 +50,9 @@ def open_bus(
             )
         if interface == "socketcan":
             return can.Bus(interface="socketcan", channel=channel, bitrate=1_000_000)
-        # hop limit / TTL 0: the frames never leave this host (loopback delivery only)
-        return can.Bus(interface="udp_multicast", channel=channel, hop_limit=0)
+        # one group, the loopback interface unless the channel names another (udp.py)
+        from rwlab.wheel.udp import LoopbackMulticastBus
+
+        return LoopbackMulticastBus(channel)
     except (OSError, can.CanError, ValueError) as exc:
         raise ConfigError(f"cannot open {interface} bus on {channel!r}: {exc}") from exc
