@@ -153,6 +153,7 @@ def experiment(
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
         f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
+        + (f"; {summary.bad_frames} damaged frames dropped" if summary.bad_frames else "")
     )
 
 

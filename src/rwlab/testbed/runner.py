@@ -369,6 +369,9 @@ def run_experiment(
         try:
             client.close()  # the wheel idles first, whatever else fails
             _drain(client, writer, clock)
+            dropped = _dropped_text(client)
+            if dropped:
+                writer.event(clock.now(), "dropped_frames", dropped)
             writer.event(clock.now(), "stop", status)
         finally:
             try:
@@ -387,6 +390,16 @@ def run_experiment(
         clock.now() - t0,
         status,
     )
+
+
+def _dropped_text(client: WheelClient) -> str:
+    """What the host dropped from the bus, or '' when nothing was."""
+    counts = {
+        "damaged": client.bad_frames,
+        "of other protocols": client.foreign_frames,
+        "implausible": client.implausible_frames,
+    }
+    return ", ".join(f"{n} {what}" for what, n in counts.items() if n)
 
 
 def _live_detector(cfg: ExperimentConfig):
