@@ -107,7 +107,7 @@ def test_the_node_refuses_setpoints_beyond_its_limits_with_a_fault_bit(bench, mo
 
 
 def test_a_non_finite_setpoint_is_a_damaged_frame(bench):
-    clock, node, client, rogue = bench
+    clock, node, _client, rogue = bench
     rogue.send(_raw_command(2, int(Mode.SPEED), math.inf, 9))
     clock.sleep(0.5)
     assert node.bad_frames == 1 and node.commands_seen == 0 and node.wheel.mode == Mode.IDLE
@@ -115,7 +115,7 @@ def test_a_non_finite_setpoint_is_a_damaged_frame(bench):
 
 @pytest.mark.parametrize(("speed", "current"), [(77_777.0, 0.1), (-9_400.0, 0.0)])
 def test_telemetry_beyond_physical_limits_is_an_event_not_the_state(bench, speed, current):
-    clock, _node, client, rogue = bench
+    _clock, _node, client, rogue = bench
     client.wait_ack(client.set_speed(500.0))
     truth = client.latest
     spoof = proto.Telemetry(2, speed, current, Mode.SPEED, False, False, truth.sequence_echo, 0)
@@ -161,18 +161,13 @@ def test_random_frames_are_counted_and_never_stop_the_wheel(junk):
         frames = [f for _, f in client.drain() if isinstance(f, proto.Telemetry)]
         assert len(frames) >= 45  # 50 Hz for 1 s, whatever came in between
         assert node.wheel.mode == Mode.SPEED and node.errors == 0
-        wheel_ids = {proto.COMMAND_ID + 2, proto.TELEMETRY_ID + 2, proto.HEARTBEAT_ID + 2}
-        ours = [m for m in junk if m.arbitration_id in wheel_ids]
         damaged = 0
-        for m in ours:
+        for m in junk:
             try:
                 proto.decode(m)
             except proto.ProtocolError:
                 damaged += 1
-        assert node.bad_frames + node.rejected_commands >= sum(
-            1 for m in ours if m.arbitration_id == proto.COMMAND_ID + 2
-        ) - (len(ours) - damaged)
-        assert client.bad_frames + client.implausible_frames >= 0
+        assert node.bad_frames == damaged and client.bad_frames == damaged
     finally:
         node.stop()
         for bus in buses:

@@ -22,9 +22,7 @@ def available() -> bool:
     """Whether a private network namespace can be made here."""
     if shutil.which("unshare") is None or shutil.which("ip") is None:
         return False
-    probe = subprocess.run(
-        ["unshare", "-n", "true"], capture_output=True, timeout=10, check=False
-    )
+    probe = subprocess.run(["unshare", "-n", "true"], capture_output=True, timeout=10, check=False)
     return probe.returncode == 0
 
 

@@ -3,6 +3,7 @@
 Run inside a private network namespace (tests/netns/run.py). Prints one JSON line.
 """
 
+import itertools
 import json
 import os
 import re
@@ -25,9 +26,21 @@ py = sys.executable
 tmp = tempfile.mkdtemp()
 out = os.path.join(tmp, "rec.mcap")
 serve = subprocess.Popen(
-    [py, "-m", "rwlab.cli", "wheel", "serve", "--interface", "udp_multicast",
-     "--telemetry-rate", str(RATE), "--duration", "60"],
-    stderr=subprocess.PIPE, text=True,
+    [
+        py,
+        "-m",
+        "rwlab.cli",
+        "wheel",
+        "serve",
+        "--interface",
+        "udp_multicast",
+        "--telemetry-rate",
+        str(RATE),
+        "--duration",
+        "60",
+    ],
+    stderr=subprocess.PIPE,
+    text=True,
 )
 monitor = LoopbackMulticastBus(GROUP)
 
@@ -55,11 +68,22 @@ def telemetry_rate(seconds: float) -> float:
 
 def junk() -> list[bytes]:
     """Datagrams that are not valid wheel frames, of every kind we could think of."""
+
     def frame(arb: int, data: bytes, **kw) -> bytes:
-        fields = {"timestamp": 0.0, "arbitration_id": arb, "is_extended_id": False,
-                  "is_remote_frame": False, "is_error_frame": False, "channel": None,
-                  "dlc": len(data), "data": data, "is_fd": len(data) > 8,
-                  "bitrate_switch": False, "error_state_indicator": False, **kw}
+        fields = {
+            "timestamp": 0.0,
+            "arbitration_id": arb,
+            "is_extended_id": False,
+            "is_remote_frame": False,
+            "is_error_frame": False,
+            "channel": None,
+            "dlc": len(data),
+            "data": data,
+            "is_fd": len(data) > 8,
+            "bitrate_switch": False,
+            "error_state_indicator": False,
+            **kw,
+        }
         return msgpack.packb(fields, use_bin_type=True)
 
     huge = bytearray(struct.pack("<f", 1e30) + bytes([1, 7, 0, 0]))
@@ -68,11 +92,21 @@ def junk() -> list[bytes]:
     bad_crc = bytearray(huge)
     bad_crc[7] ^= 1
     return [
-        b"", b"hello", os.urandom(200), b"\xc0" * 40, msgpack.packb([1, 2, 3]),
-        msgpack.packb({"what": "not a frame"}), msgpack.packb({"arbitration_id": "x"}),
-        frame(0x100, zero), frame(0x100, bytes(bad_crc)), frame(0x100, b"\x01\x02\x03"),
-        frame(0x100, os.urandom(64)), frame(0x555, os.urandom(8)), frame(0x100, bytes(huge)),
-        frame(0x180, bytes(8)), b"\x82\xa4data\xc4" + os.urandom(30),
+        b"",
+        b"hello",
+        os.urandom(200),
+        b"\xc0" * 40,
+        msgpack.packb([1, 2, 3]),
+        msgpack.packb({"what": "not a frame"}),
+        msgpack.packb({"arbitration_id": "x"}),
+        frame(0x100, zero),
+        frame(0x100, bytes(bad_crc)),
+        frame(0x100, b"\x01\x02\x03"),
+        frame(0x100, os.urandom(64)),
+        frame(0x555, os.urandom(8)),
+        frame(0x100, bytes(huge)),
+        frame(0x180, bytes(8)),
+        b"\x82\xa4data\xc4" + os.urandom(30),
     ]
 
 
@@ -97,9 +131,27 @@ try:
             raise SystemExit("the wheel never answered")
     result["rate_before"] = telemetry_rate(1.0)
     exp = subprocess.Popen(
-        [py, "-m", "rwlab.cli", "experiment", "--interface", "udp_multicast", "--signal", "step",
-         "--amplitude", "600", "--duration", "10", "--Ts", "0.5", "--out", out],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            py,
+            "-m",
+            "rwlab.cli",
+            "experiment",
+            "--interface",
+            "udp_multicast",
+            "--signal",
+            "step",
+            "--amplitude",
+            "600",
+            "--duration",
+            "10",
+            "--Ts",
+            "0.5",
+            "--out",
+            out,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     time.sleep(3.0)
     sent: list[int] = []
@@ -116,7 +168,7 @@ try:
     result["events"] = [(e["kind"], e["message"]) for e in record.topic("/event")]
     result["telemetry"] = len(record.topic("/telemetry"))
     times = [t["t"] for t in record.topic("/telemetry")]
-    result["max_gap"] = max(b - a for a, b in zip(times, times[1:], strict=False))
+    result["max_gap"] = max(b - a for a, b in itertools.pairwise(times))
     result["max_speed"] = max(abs(t["speed_rpm"]) for t in record.topic("/telemetry"))
     time.sleep(1.2)  # one more status line
 finally:

@@ -7,7 +7,6 @@ case. Prints one JSON line.
 import json
 import os
 import socket
-import struct
 import subprocess
 import sys
 import tempfile
@@ -24,9 +23,24 @@ py = sys.executable
 
 def serve(group: str, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [py, "-m", "rwlab.cli", "wheel", "serve", "--interface", "udp_multicast",
-         "--channel", group, "--telemetry-rate", "50", "--duration", "60", *extra],
-        stderr=subprocess.PIPE, text=True,
+        [
+            py,
+            "-m",
+            "rwlab.cli",
+            "wheel",
+            "serve",
+            "--interface",
+            "udp_multicast",
+            "--channel",
+            group,
+            "--telemetry-rate",
+            "50",
+            "--duration",
+            "60",
+            *extra,
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
     )
 
 
@@ -110,9 +124,29 @@ def twins() -> dict:
         result["late_rc"], result["late_err"] = late.returncode, late_err.strip()[-400:]
         out = os.path.join(tmp, "rec.mcap")
         exp = subprocess.run(
-            [py, "-m", "rwlab.cli", "experiment", "--interface", "udp_multicast", "--channel", A,
-             "--signal", "step", "--amplitude", "300", "--duration", "4", "--Ts", "0.5",
-             "--out", out], capture_output=True, text=True, timeout=90,
+            [
+                py,
+                "-m",
+                "rwlab.cli",
+                "experiment",
+                "--interface",
+                "udp_multicast",
+                "--channel",
+                A,
+                "--signal",
+                "step",
+                "--amplitude",
+                "300",
+                "--duration",
+                "4",
+                "--Ts",
+                "0.5",
+                "--out",
+                out,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=90,
         )
         result["exp_rc"], result["exp_err"] = exp.returncode, exp.stderr.strip()[-600:]
         record = read_record(out)

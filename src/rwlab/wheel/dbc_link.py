@@ -103,7 +103,9 @@ class RwlabNodeLink(NodeLink):
             out.append((msg.timestamp if self.simulated else now, frame))
         return out
 
-    def send(self, frame: proto.Telemetry | proto.Heartbeat, t: float, corrupt: int | None = None) -> None:
+    def send(
+        self, frame: proto.Telemetry | proto.Heartbeat, t: float, corrupt: int | None = None
+    ) -> None:
         if isinstance(frame, proto.Telemetry):
             msg = proto.encode_telemetry(frame)
         else:

@@ -268,10 +268,14 @@ class WheelNode:
             self._next_telemetry += self.period
             if self._next_telemetry <= self.t:  # fell behind (wall clock): do not burst
                 self._next_telemetry = self.t + self.period
-        if self.t >= self._next_heartbeat or (
-            self.wheel.faults,
-            self.command_rejected,
-        ) != faults_before:
+        if (
+            self.t >= self._next_heartbeat
+            or (
+                self.wheel.faults,
+                self.command_rejected,
+            )
+            != faults_before
+        ):
             self._queue(
                 proto.Heartbeat(
                     self.node_id,
