@@ -271,7 +271,11 @@ class WheelClient:
         """The newest telemetry; ``WheelTimeout`` if none arrived within ``max_age`` s."""
         self.poll()
         age = self.timeout if max_age is None else max_age
-        if self.latest is None or self.clock.now() - self.latest_time > age:
+        if (
+            self.latest is None
+            or self.latest_time is None
+            or self.clock.now() - self.latest_time > age
+        ):
             raise WheelTimeout(f"no telemetry from wheel {self.node_id} in the last {age:g} s")
         return self.latest
 

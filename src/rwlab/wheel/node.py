@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -163,14 +164,15 @@ class WheelNode:
         if isinstance(self.clock, SimClock):
             self.clock.attach(self.poll)
 
-    def schedule_faults(self, faults, origin: float) -> None:
+    def schedule_faults(self, faults: Iterable[ScheduledFault], origin: float) -> None:
         """Apply each :class:`ScheduledFault` at clock time ``origin + fault.t_s``, s."""
         with self._lock:
             due = self._scheduled + [(origin + f.t_s, f) for f in faults]
             self._scheduled = sorted(due, key=lambda item: item[0])
 
     def _apply(self, fault: ScheduledFault) -> None:
-        wheel, inject, value = self.wheel, self.inject, fault.value
+        wheel, inject = self.wheel, self.inject
+        value = 0.0 if fault.value is None else fault.value  # None only for speed_sensor_stuck
         if fault.name == "friction":
             wheel.friction_factor = value
         elif fault.name == "torque_constant":

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
+from typing import cast
 
 import can
 import cantools
@@ -53,7 +55,7 @@ class ProtocolError(RwlabError):
 def database() -> cantools.database.Database:
     """The parsed ``rw.dbc``."""
     text = resources.files(__package__).joinpath("rw.dbc").read_text()
-    return cantools.database.load_string(text, database_format="dbc")
+    return cast(cantools.database.Database, cantools.database.load_string(text, "dbc"))
 
 
 def dbc_sha256() -> str:
@@ -130,7 +132,7 @@ def crc8_sae_j1850(data: bytes, crc: int = 0xFF) -> int:
     return crc ^ 0xFF
 
 
-def frame_crc(arbitration_id: int, data: bytes) -> int:
+def frame_crc(arbitration_id: int, data: bytes | bytearray) -> int:
     """The wheel protocol's byte-7 check: CRC-8/SAE-J1850 over the 11-bit id and bytes 0..6.
 
     Parameters
@@ -151,7 +153,7 @@ def frame_crc(arbitration_id: int, data: bytes) -> int:
 def _frame(base: int, node_id: int, name: str, signals: dict[str, float]) -> can.Message:
     """One frame of ``rw.dbc`` with its check byte."""
     data = bytearray(database().get_message_by_name(name).encode({**signals, "Checksum": 0}))
-    data[7] = frame_crc(base + _check_node(node_id), data)
+    data[7] = frame_crc(base + _check_node(node_id), bytes(data))
     return can.Message(arbitration_id=base + _check_node(node_id), data=data, is_extended_id=False)
 
 
@@ -218,18 +220,19 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} has {len(data)} bytes, expected 8")
     if frame_crc(msg.arbitration_id, data) != data[7]:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} fails its checksum")
-    s = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    decoded = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    s = cast(Mapping[str, float], decoded)  # numbers only: choices are not decoded
     try:
         if base == COMMAND_ID:
             if not math.isfinite(s["Setpoint"]):
                 raise ProtocolError("command setpoint is not a finite number")
-            return Command(node, Mode(s["Mode"]), float(s["Setpoint"]), int(s["Sequence"]))
+            return Command(node, Mode(int(s["Mode"])), float(s["Setpoint"]), int(s["Sequence"]))
         if base == TELEMETRY_ID:
             return Telemetry(
                 node,
                 float(s["Speed"]),
                 float(s["Current"]),
-                Mode(s["Mode"]),
+                Mode(int(s["Mode"])),
                 bool(s["FaultActive"]),
                 bool(s["SpeedLimited"]),
                 int(s["SequenceEcho"]),
@@ -237,7 +240,7 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
             )
         return Heartbeat(
             node,
-            Mode(s["Mode"]),
+            Mode(int(s["Mode"])),
             Fault(int(s["Faults"]) & 0xF),
             float(s["Temperature"]),
             int(s["Uptime"]),
