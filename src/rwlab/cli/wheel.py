@@ -136,7 +136,7 @@ def _refuse_if_answered(bus, node_id: int, protocol: str) -> None:
     from rwlab.wheel.clock import WallClock
     from rwlab.wheel.link import get_protocol
 
-    link = get_protocol(protocol).host_link(bus, node_id, simulated=False)
+    link = get_protocol(protocol).host_link(bus, node_id, clock=WallClock())
     end = time.monotonic() + LISTEN_S
     while time.monotonic() < end:
         heard = link.receive(WallClock().now())

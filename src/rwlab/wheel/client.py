@@ -105,8 +105,9 @@ class WheelClient:
         self._inbox: list[tuple[float, proto.Telemetry | proto.Heartbeat | Implausible]] = []
         self.protocol = get_protocol(protocol)
         self.link = self.protocol.host_link(
-            bus, self.node_id, simulated=isinstance(self.clock, SimClock)
+            bus, self.node_id, clock=self.clock
         )
+        self.link.configure(params)
 
     @property
     def frame_listener(self) -> RawListener | None:
@@ -123,6 +124,11 @@ class WheelClient:
         bus = self.bus
         extra = int(getattr(bus, "bad_datagrams", 0)) + int(getattr(bus, "bad_frames", 0))
         return self.link.bad_frames + extra
+
+    @property
+    def lost_commands(self) -> int:
+        """Commands the protocol knows the wheel did not receive (no ACK, for nsp)."""
+        return self.link.lost_commands
 
     @property
     def foreign_frames(self) -> int:

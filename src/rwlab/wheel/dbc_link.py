@@ -7,7 +7,7 @@ from typing import Any
 import can
 
 from rwlab.wheel import protocol as proto
-from rwlab.wheel.link import HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
 
 __all__ = ["MAX_FRAMES_PER_READ", "RwlabHostLink", "RwlabNodeLink", "RwlabProtocol"]
 
@@ -128,11 +128,11 @@ class RwlabProtocol(WheelProtocol):
     description = "rwlab's DBC (rw.dbc, cantools) on any python-can bus; the RW90 twin's own"
     transports = ("can",)
 
-    def host_link(self, transport: Any, node_id: int, *, simulated: bool) -> RwlabHostLink:
-        return RwlabHostLink(transport, node_id, simulated)
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> RwlabHostLink:
+        return RwlabHostLink(transport, node_id, clock.simulated)
 
-    def node_link(self, transport: Any, node_id: int, *, simulated: bool) -> RwlabNodeLink:
-        return RwlabNodeLink(transport, node_id, simulated)
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> RwlabNodeLink:
+        return RwlabNodeLink(transport, node_id, clock.simulated)
 
     def identity(self) -> str:
         return f"rwlab dbc sha256 {proto.dbc_sha256()}"

@@ -30,7 +30,11 @@ from importlib import metadata
 from typing import Any, ClassVar
 
 from rwlab.errors import ConfigError
+from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.physics import WheelParams
 from rwlab.wheel.protocol import Command, Heartbeat, Telemetry
+
+Clock = WallClock | SimClock
 
 __all__ = [
     "PROTOCOL_GROUP",
@@ -80,7 +84,11 @@ class HostLink(abc.ABC):
     def __init__(self) -> None:
         self.bad_frames = 0
         self.foreign_frames = 0
+        self.lost_commands = 0  # commands the wheel is known not to have received
         self.raw_listener: RawListener | None = None
+
+    def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
+        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
 
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
@@ -100,6 +108,12 @@ class NodeLink(abc.ABC):
     def __init__(self) -> None:
         self.bad_frames = 0
         self.foreign_frames = 0
+
+    def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
+        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
+
+    def close(self) -> None:  # noqa: B027 - most links own nothing beyond the transport
+        """Release what the link opened (not the transport)."""
 
     @abc.abstractmethod
     def receive(self, now: float) -> list[tuple[float, Command]]:
@@ -131,7 +145,7 @@ class WheelProtocol(abc.ABC):
     transports: ClassVar[tuple[str, ...]] = ("can",)
 
     @abc.abstractmethod
-    def host_link(self, transport: Any, node_id: int, *, simulated: bool) -> HostLink:
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
         """The driver's link to wheel ``node_id`` on ``transport``.
 
         Parameters
@@ -140,8 +154,9 @@ class WheelProtocol(abc.ABC):
             What :func:`rwlab.wheel.bus.open_transport` opened for this protocol.
         node_id : int
             The wheel's node id, 0..15.
-        simulated : bool
-            True on a :class:`rwlab.wheel.SimClock`: use the senders' time stamps.
+        clock : WallClock or SimClock
+            The driver's clock. On a :class:`rwlab.wheel.SimClock` a link uses the
+            senders' time stamps, and a polling link attaches itself to the clock.
 
         Returns
         -------
@@ -149,7 +164,7 @@ class WheelProtocol(abc.ABC):
         """
 
     @abc.abstractmethod
-    def node_link(self, transport: Any, node_id: int, *, simulated: bool) -> NodeLink:
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
         """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
 
     def identity(self) -> str:

@@ -140,8 +140,9 @@ class WheelNode:
         self.rng = np.random.default_rng(seed + 1)
         self.protocol = get_protocol(protocol)
         self.link = self.protocol.node_link(
-            bus, self.node_id, simulated=isinstance(self.clock, SimClock)
+            bus, self.node_id, clock=self.clock
         )
+        self.link.configure(params)
         self.t = self.clock.now()
         self.t0 = self.t
         self._next_telemetry = self.t
@@ -360,6 +361,7 @@ class WheelNode:
             self._thread = None
         if isinstance(self.clock, SimClock):
             self.clock.detach(self.poll)
+        self.link.close()
 
     def __enter__(self) -> WheelNode:
         return self
