@@ -39,6 +39,11 @@ from rwlab.errors import ConfigError
 @click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
+@click.option(
+    "--protocol",
+    help="Wheel protocol: rwlab (default), canopen, nsp, or a registered one "
+    "(`rwlab wheel protocols`).",
+)
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
 @click.option(
     "--fault",
@@ -76,6 +81,7 @@ def experiment(
     interface,
     channel,
     node_id,
+    protocol,
     raw_frames,
     faults,
     model_file,
@@ -104,6 +110,7 @@ def experiment(
         interface=interface,
         channel=channel,
         node_id=node_id,
+        protocol=protocol,
         raw_frames=raw_frames,
         faults=tuple(faults) or None,
         model=model_file,

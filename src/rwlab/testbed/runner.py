@@ -27,8 +27,10 @@ from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
-from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.bus import INTERFACES, open_bus, open_transport
 from rwlab.wheel.client import Implausible
+from rwlab.wheel.link import get_protocol
+from rwlab.wheel.serial import open_pty
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 
@@ -77,6 +79,9 @@ class ExperimentConfig:
         CSV of setpoints for ``signal = 'file'`` (one column, or ``time_s`` + a column).
     raw_frames : bool
         Also record every CAN frame.
+    protocol : str
+        The wheel protocol (``rwlab``, ``canopen``, ``nsp`` or a registered one); on
+        the virtual interface a byte-stream protocol's twin answers over a pty pair.
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
@@ -108,6 +113,7 @@ class ExperimentConfig:
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
     model: str | None = None
+    protocol: str = "rwlab"
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -132,6 +138,7 @@ class ExperimentConfig:
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
             "model": ((str, type(None)), "a path to model.json"),
+            "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
         }
         for name, (kind, text) in expected.items():
@@ -151,6 +158,9 @@ class ExperimentConfig:
             isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in levels
         ):
             raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
+        from rwlab.wheel.link import get_protocol
+
+        get_protocol(self.protocol)  # ConfigError naming the known ones
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
@@ -282,6 +292,8 @@ def run_experiment(
     metadata = {
         "rwlab_version": __version__,
         "dbc_sha256": dbc_sha256(),
+        "protocol": cfg.protocol,
+        "protocol_identity": get_protocol(cfg.protocol).identity(),
         "Ts": cfg.Ts,
         "mode": cfg.mode,
         "experiment": cfg.to_dict(),
@@ -292,15 +304,22 @@ def run_experiment(
         "time_origin": "s since the first command",
     }
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
-        host_bus = open_bus(cfg.interface, channel, simulated_clock=not realtime)
+        if stream_twin:  # a serial protocol's twin answers over a pseudo-terminal pair
+            node_bus, host_bus = open_pty()
+        else:
+            host_bus = open_transport(
+                cfg.protocol, cfg.interface, channel, simulated_clock=not realtime
+            )
     except BaseException:
         writer.discard()  # nothing was recorded: keep the old record, if any
         raise
     node = None
     if simulated:
-        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+        if not stream_twin:
+            node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
         node = WheelNode(
             node_bus,
             cfg.node_id,
@@ -309,10 +328,19 @@ def run_experiment(
             telemetry_rate=cfg.telemetry_rate,
             latency=cfg.latency,
             seed=cfg.seed,
+            protocol=cfg.protocol,
         )
         if realtime:
             node.start()
-    client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
+    client = WheelClient(
+        host_bus,
+        cfg.node_id,
+        params,
+        clock=clock,
+        timeout=max(0.5, 2 * cfg.Ts),
+        protocol=cfg.protocol,
+    )
+    client.link.set_telemetry_rate(cfg.telemetry_rate)
     if cfg.raw_frames:
         client.frame_listener = lambda t, frame_id, data, direction: writer.write(
             "/can", {"t": t, "id": frame_id, "data": data.hex(), "direction": direction}
@@ -379,8 +407,8 @@ def run_experiment(
             finally:
                 if node is not None:
                     node.stop()
-                    node.bus.shutdown()
-                host_bus.shutdown()
+                    _close(node.bus)
+                _close(host_bus)
     return RunSummary(
         Path(out),
         writer.counts["/command"],
@@ -392,12 +420,20 @@ def run_experiment(
     )
 
 
+def _close(transport: object) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
+
+
 def _dropped_text(client: WheelClient) -> str:
     """What the host dropped from the bus, or '' when nothing was."""
     counts = {
         "damaged": client.bad_frames,
         "of other protocols": client.foreign_frames,
         "implausible": client.implausible_frames,
+        "commands not acknowledged": client.lost_commands,
     }
     return ", ".join(f"{n} {what}" for what, n in counts.items() if n)
 

@@ -90,6 +90,9 @@ class HostLink(abc.ABC):
     def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
         """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
 
+    def set_telemetry_rate(self, rate: float) -> None:  # noqa: B027 - streaming links ignore it
+        """Telemetry wanted per second, Hz (a polling protocol polls at this rate)."""
+
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
         """Send ``cmd`` at clock time ``now`` (s); ``ProtocolError`` if it cannot be encoded."""

@@ -358,6 +358,11 @@ class NspHostLink(HostLink):
         """The wheel's inertia turns rpm/s into the TORQUE (N·m) NSP speaks."""
         self.inertia = params.inertia
 
+    def set_telemetry_rate(self, rate: float) -> None:
+        """Poll the telemetry block ``rate`` times per second, Hz."""
+        self.period = 1.0 / rate
+        self._next_poll = self.clock.now()
+
     def _tick(self, now: float) -> float:
         if not self._busy and now >= self._next_poll - 1e-12:
             self._poll(now)
