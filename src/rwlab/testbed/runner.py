@@ -29,10 +29,10 @@ from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
 from rwlab.wheel.bus import INTERFACES, open_bus, open_transport
 from rwlab.wheel.client import Implausible
-from rwlab.wheel.link import get_protocol
-from rwlab.wheel.serial import open_pty
 from rwlab.wheel.faults import ScheduledFault, parse_fault
+from rwlab.wheel.link import get_protocol
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
+from rwlab.wheel.serial import open_pty
 
 __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_experiment"]
 

@@ -163,8 +163,10 @@ class CanopenNodeLink(NodeLink):
                 continue
             cob = msg.arbitration_id
             if cob in {0x180 + self.local.id, 0x280 + self.local.id, 0x700 + self.local.id}:
-                self._twin = str(msg.channel) if getattr(self.bus, "reports_sources", False) else (
-                    "another sender"
+                self._twin = (
+                    str(msg.channel)
+                    if getattr(self.bus, "reports_sources", False)
+                    else ("another sender")
                 )
                 continue
             if cob not in self._ids:

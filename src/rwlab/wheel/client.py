@@ -104,9 +104,7 @@ class WheelClient:
         self._sent_at: dict[int, float] = {}
         self._inbox: list[tuple[float, proto.Telemetry | proto.Heartbeat | Implausible]] = []
         self.protocol = get_protocol(protocol)
-        self.link = self.protocol.host_link(
-            bus, self.node_id, clock=self.clock
-        )
+        self.link = self.protocol.host_link(bus, self.node_id, clock=self.clock)
         self.link.configure(params)
 
     @property

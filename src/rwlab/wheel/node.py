@@ -139,9 +139,7 @@ class WheelNode:
         self.inject = faults or FaultInjection()
         self.rng = np.random.default_rng(seed + 1)
         self.protocol = get_protocol(protocol)
-        self.link = self.protocol.node_link(
-            bus, self.node_id, clock=self.clock
-        )
+        self.link = self.protocol.node_link(bus, self.node_id, clock=self.clock)
         self.link.configure(params)
         self.t = self.clock.now()
         self.t0 = self.t

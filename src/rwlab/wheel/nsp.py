@@ -249,9 +249,7 @@ class NspNodeLink(NodeLink):
         self, frame: proto.Telemetry | proto.Heartbeat, t: float, corrupt: int | None = None
     ) -> None:
         """Update the wheel's registers (NSP wheels answer polls; they do not stream)."""
-        mode, speed, current, faults, flags, temp, uptime, seen, counter = BLOCK.unpack(
-            self._block
-        )
+        mode, speed, current, faults, flags, temp, uptime, seen, counter = BLOCK.unpack(self._block)
         if isinstance(frame, proto.Telemetry):
             mode = _TO_NSP.get(frame.mode, NSP_IDLE)
             speed, current = rpm_to_rad_s(frame.speed_rpm), frame.current
@@ -376,9 +374,7 @@ class NspHostLink(HostLink):
         reply = self.transact(PEEK, bytes([TELEMETRY_BLOCK]))
         if reply is None or not reply.mcf & ACK or len(reply.payload) != 1 + BLOCK.size:
             return  # the counter skips: the driver counts a lost frame
-        mode, speed, current, faults, flags, temp, uptime, seen, _ = BLOCK.unpack(
-            reply.payload[1:]
-        )
+        mode, speed, current, faults, flags, temp, uptime, seen, _ = BLOCK.unpack(reply.payload[1:])
         telemetry = proto.Telemetry(
             self.node_id,
             rad_s_to_rpm(speed),

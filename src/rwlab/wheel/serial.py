@@ -201,7 +201,7 @@ class FdPort:
             pass
 
 
-def open_pty(baudrate: int = 115200):  # noqa: ANN201 - returns (FdPort, serial.Serial)
+def open_pty(baudrate: int = 115200):
     """A pseudo-terminal pair in raw mode: (the twin's end, a pyserial port on the other).
 
     Parameters
