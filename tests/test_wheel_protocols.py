@@ -307,3 +307,33 @@ def test_a_plugin_protocol_is_listed_and_usable(plugin_path):
     unknown = _rwlab(plugin_path, "experiment", "--protocol", "nope", "--out", "x.mcap")
     assert unknown.returncode == 2 and unknown.stderr.startswith("error:")
     assert "shifted" in unknown.stderr  # the message lists what is known, the plugin too
+
+
+@pytest.mark.slow
+def test_experiment_over_a_pty_to_a_served_nsp_wheel(tmp_path):
+    """`wheel serve --protocol nsp --interface serial --channel pty` and an experiment on it."""
+    env = {**os.environ, "PYTHONPATH": SRC}
+    rwlab = [sys.executable, "-m", "rwlab.cli"]
+    serve = subprocess.Popen(
+        [*rwlab, "wheel", "serve", "--protocol", "nsp", "--interface", "serial",
+         "--channel", "pty", "--duration", "60"],
+        stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    try:
+        first = serve.stderr.readline()
+        path = first.split("serial:")[1].split(";")[0]
+        assert path.startswith("/dev/pts/")
+        run = subprocess.run(
+            [*rwlab, "experiment", "--protocol", "nsp", "--interface", "serial",
+             "--channel", path, "--signal", "step", "--duration", "6", "--Ts", "0.5",
+             "--amplitude", "500", "--out", str(tmp_path / "r.mcap")],
+            capture_output=True, text=True, env=env, timeout=120,
+        )  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        assert "(completed)" in run.stdout and " 0 lost" in run.stdout
+        record = read_record(tmp_path / "r.mcap")
+        assert record.metadata["protocol"] == "nsp"
+        assert max(t["speed_rpm"] for t in record.topic("/telemetry")) > 200
+    finally:
+        serve.terminate()
+        serve.communicate(timeout=20)

@@ -25,7 +25,8 @@ def _bus_options(func):
                 "--channel",
                 default=None,
                 help="Bus channel (vcan0; a multicast group, GROUP@ADDRESS to leave the "
-                "loopback interface; /dev/ttyUSB0, ...).",
+                "loopback interface; /dev/ttyUSB0, ...; for `serve`, pty makes a "
+                "pseudo-terminal pair and prints the path clients open).",
             ),
             click.option("--node-id", type=click.IntRange(0, 15), default=0, show_default=True),
             click.option(
@@ -95,10 +96,18 @@ def wheel_serve(
     wheel_params = WheelParams.from_toml(params) if params else RW90
     channel = channel or DEFAULT_CHANNELS[interface]
     get_protocol(protocol)  # an unknown name fails before the bus opens
-    bus = open_transport(protocol, interface, channel)
+    keep_open = None
+    if interface == "serial" and channel == "pty":  # the twin makes its own pty pair
+        from rwlab.wheel.serial import open_pty
+
+        bus, keep_open = open_pty()  # the other end stays open: no hang-up between clients
+        channel = keep_open.port
+    else:
+        bus = open_transport(protocol, interface, channel)
     node = None
     try:
-        _refuse_if_answered(bus, node_id, protocol)
+        if "can" in get_protocol(protocol).transports:  # a shared bus; a serial line is not
+            _refuse_if_answered(bus, node_id, protocol)
         node = WheelNode(
             bus,
             node_id,
@@ -122,7 +131,16 @@ def wheel_serve(
     finally:
         if node is not None:
             node.stop()
-        bus.shutdown()
+        _close(bus)
+        if keep_open is not None:
+            keep_open.close()
+
+
+def _close(transport) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
 
 
 LISTEN_S = 1.5  # longer than the 1 Hz heartbeat every protocol's twin sends
@@ -226,8 +244,8 @@ def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeo
                 client.close()
             if node is not None:
                 node.stop()
-                node.bus.shutdown()
-            bus.shutdown()
+                _close(node.bus)
+            _close(bus)
 
 
 @wheel.command("protocols")

@@ -117,15 +117,16 @@ class _BusNetwork(canopen.Network):
 
     def __init__(self, bus: can.BusABC) -> None:
         super().__init__(bus)
-        self.time = 0.0
+        self.stamp = 0.0  # s, the time stamp of frames the package sends (SDO answers, EMCY)
+        self._bus = bus
 
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
         msg = can.Message(
             arbitration_id=can_id, data=bytes(data), is_extended_id=False, is_remote_frame=remote
         )
-        msg.timestamp = self.time
+        msg.timestamp = self.stamp
         with self.send_lock:
-            self.bus.send(msg)
+            self._bus.send(msg)
 
 
 class CanopenNodeLink(NodeLink):
@@ -135,7 +136,8 @@ class CanopenNodeLink(NodeLink):
         super().__init__()
         self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
         self.network = _BusNetwork(bus)
-        self.local = canopen.LocalNode(canopen_id(node_id), object_dictionary(node_id))
+        self.cid = canopen_id(node_id)
+        self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
         self.network.add_node(self.local)
         self.local.tpdo.read(from_od=True)
         self.local.rpdo.read(from_od=True)
@@ -150,7 +152,7 @@ class CanopenNodeLink(NodeLink):
         self._sequence = 0
         self._faults = Fault.NONE
         self._twin: str | None = None
-        self._ids = {0x000, 0x200 + self.local.id, 0x600 + self.local.id}
+        self._ids = {0x000, 0x200 + self.cid, 0x600 + self.cid}
 
     def configure(self, params: WheelParams) -> None:
         self._params = params
@@ -162,7 +164,7 @@ class CanopenNodeLink(NodeLink):
                 self.foreign_frames += 1
                 continue
             cob = msg.arbitration_id
-            if cob in {0x180 + self.local.id, 0x280 + self.local.id, 0x700 + self.local.id}:
+            if cob in {0x180 + self.cid, 0x280 + self.cid, 0x700 + self.cid}:
                 self._twin = (
                     str(msg.channel)
                     if getattr(self.bus, "reports_sources", False)
@@ -173,7 +175,7 @@ class CanopenNodeLink(NodeLink):
                 self.foreign_frames += 1
                 continue
             self._arrival = msg.timestamp if self.clock.simulated else now
-            self.network.time = self._arrival
+            self.network.stamp = self._arrival
             try:
                 self.network.notify(cob, bytearray(msg.data), self._arrival)
             except (struct.error, ValueError, IndexError, KeyError, TypeError):
@@ -238,8 +240,8 @@ class CanopenNodeLink(NodeLink):
         """
         if corrupt is not None:
             return
-        self.network.time = t
-        tpdo, cid = self.local.tpdo, self.local.id
+        self.network.stamp = t
+        tpdo, cid = self.local.tpdo, self.cid
         if isinstance(frame, proto.Telemetry):
             state = _TO_STATE.get(frame.mode, IDLE)
             values = {
@@ -292,12 +294,13 @@ class CanopenHostLink(HostLink):
         super().__init__()
         self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
         self.network = _BusNetwork(bus)
-        self.remote = canopen.RemoteNode(canopen_id(node_id), object_dictionary(node_id))
+        self.cid = canopen_id(node_id)
+        self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))
         self.network.add_node(self.remote)
         self.remote.tpdo.read(from_od=True)
         self.remote.rpdo.read(from_od=True)
         self.inertia = RW90.inertia
-        cid = self.remote.id
+        cid = self.cid
         self._telemetry_id, self._state_id = 0x180 + cid, 0x280 + cid
         self._status_id, self._heartbeat_id = 0x380 + cid, 0x700 + cid
         self._state: tuple[int, int, int] = (IDLE, 0, 0)
