@@ -53,3 +53,7 @@ class RwlabWarning(UserWarning):
 
 class RecordBusyError(RwlabError):
     """Another run is writing the same record."""
+
+
+class WheelConflict(RwlabError):
+    """Two sources answer under one wheel's node id: their telemetry cannot be told apart."""

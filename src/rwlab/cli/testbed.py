@@ -50,6 +50,11 @@ from rwlab.errors import ConfigError
 @click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
+@click.option(
+    "--protocol",
+    help="Wheel protocol: rwlab (default), canopen, nsp, or a registered one "
+    "(`rwlab wheel protocols`).",
+)
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
 @click.option(
     "--rate-limit/--no-rate-limit",
@@ -95,6 +100,7 @@ def experiment(
     interface,
     channel,
     node_id,
+    protocol,
     raw_frames,
     rate_limit,
     faults,
@@ -126,6 +132,7 @@ def experiment(
         interface=interface,
         channel=channel,
         node_id=node_id,
+        protocol=protocol,
         raw_frames=raw_frames,
         rate_limit=rate_limit,
         faults=tuple(faults) or None,
@@ -174,6 +181,7 @@ def experiment(
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
         f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
+        + (f"; {summary.bad_frames} damaged frames dropped" if summary.bad_frames else "")
     )
 
 

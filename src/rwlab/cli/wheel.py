@@ -24,9 +24,18 @@ def _bus_options(func):
             click.option(
                 "--channel",
                 default=None,
-                help="Bus channel (vcan0, a multicast group, /dev/ttyUSB0, ...).",
+                help="Bus channel (vcan0; a multicast group, GROUP@ADDRESS to leave the "
+                "loopback interface; /dev/ttyUSB0, ...; for `serve`, pty makes a "
+                "pseudo-terminal pair and prints the path clients open).",
             ),
             click.option("--node-id", type=click.IntRange(0, 15), default=0, show_default=True),
+            click.option(
+                "--protocol",
+                default="rwlab",
+                show_default=True,
+                help="Wheel protocol (rwlab, canopen, nsp, or a registered one; "
+                "see `rwlab wheel protocols`).",
+            ),
         ]
     ):
         func = option(func)
@@ -69,44 +78,117 @@ def wheel() -> None:
 @click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
 @_friendly_errors
 def wheel_serve(
-    interface, channel, node_id, telemetry_rate, latency_ms, watchdog, params, unit, duration
+    interface,
+    channel,
+    node_id,
+    protocol,
+    telemetry_rate,
+    latency_ms,
+    watchdog,
+    params,
+    unit,
+    duration,
 ):
-    """Run a simulated wheel on a bus, on the wall clock, until Ctrl-C."""
+    """Run a simulated wheel on a bus, on the wall clock, until Ctrl-C.
+
+    It first listens for LISTEN_S seconds and refuses to start if another wheel
+    already answers under its node id there; later it reports one in its status.
+    """
     import time
 
     from rwlab.wheel import RW90, WheelNode, WheelParams
-    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_bus
+    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport
+    from rwlab.wheel.link import get_protocol
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
     if unit is not None:
         wheel_params = wheel_params.for_unit(unit)
     channel = channel or DEFAULT_CHANNELS[interface]
-    bus = open_bus(interface, channel)
-    node = WheelNode(
-        bus,
-        node_id,
-        wheel_params,
-        telemetry_rate=telemetry_rate,
-        latency=latency_ms / 1000,
-        watchdog=watchdog,
-    ).start()
-    click.echo(f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True)
-    start = time.monotonic()
+    get_protocol(protocol)  # an unknown name fails before the bus opens
+    keep_open = None
+    if interface == "serial" and channel == "pty":  # the twin makes its own pty pair
+        from rwlab.wheel.serial import open_pty
+
+        bus, keep_open = open_pty()  # the other end stays open: no hang-up between clients
+        channel = keep_open.port
+    else:
+        bus = open_transport(protocol, interface, channel)
+    node = None
     try:
+        if "can" in get_protocol(protocol).transports:  # a shared bus; a serial line is not
+            _refuse_if_answered(bus, node_id, protocol)
+        node = WheelNode(
+            bus,
+            node_id,
+            wheel_params,
+            telemetry_rate=telemetry_rate,
+            latency=latency_ms / 1000,
+            watchdog=watchdog,
+            protocol=protocol,
+        ).start()
+        click.echo(
+            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop",
+            err=True,
+        )
+        start = time.monotonic()
         with _stop_signals():
             while duration is None or time.monotonic() - start < duration:
                 time.sleep(min(1.0, duration or 1.0))
-                w = node.wheel
-                click.echo(
-                    f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
-                    f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
-                    err=True,
-                )
+                click.echo(f"t={time.monotonic() - start:7.1f} s {_status(node)}", err=True)
     except KeyboardInterrupt:
         pass
     finally:
-        node.stop()
-        bus.shutdown()
+        if node is not None:
+            node.stop()
+        _close(bus)
+        if keep_open is not None:
+            keep_open.close()
+
+
+def _close(transport) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
+
+
+LISTEN_S = 1.5  # longer than the 1 Hz heartbeat every protocol's twin sends
+
+
+def _refuse_if_answered(bus, node_id: int, protocol: str) -> None:
+    """ConfigError if a wheel already answers under ``node_id`` on ``bus``."""
+    import time
+
+    from rwlab.errors import ConfigError
+    from rwlab.wheel.clock import WallClock
+    from rwlab.wheel.link import get_protocol
+
+    link = get_protocol(protocol).host_link(bus, node_id, clock=WallClock())
+    end = time.monotonic() + LISTEN_S
+    while time.monotonic() < end:
+        heard = link.receive(WallClock().now())
+        if heard:
+            where = heard[0].source or "this bus"
+            raise ConfigError(
+                f"a wheel already answers as node {node_id} from {where}; serve this one "
+                "with another --node-id or --channel"
+            )
+        time.sleep(0.02)
+
+
+def _status(node) -> str:
+    """One status line: the wheel, and what the bus brought that was not for it."""
+    w = node.wheel
+    text = (
+        f"mode={w.mode.name:<12} speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s} "
+        f"commands={node.commands_seen} rejected={node.rejected_commands} "
+        f"bad={node.bad_frames} foreign={node.foreign_frames}"
+    )
+    if node.errors:
+        text += f" errors={node.errors} (last: {node.last_error})"
+    if node.twin_source:
+        text += f" WARNING: another wheel answers as node {node.node_id} from {node.twin_source}"
+    return text
 
 
 @wheel.command("cmd")
@@ -122,20 +204,21 @@ def wheel_serve(
 )
 @click.option("--timeout", type=float, default=0.5, show_default=True)
 @_friendly_errors
-def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
+def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeout):
     """Send one command (speed rpm, accel rpm/s, idle, clear) and print telemetry.
 
     On the virtual interface an in-process simulated wheel answers. The wheel is
     idled when the command ends unless the action was idle or clear.
     """
     from rwlab.wheel import WheelClient, WheelNode
-    from rwlab.wheel.bus import open_bus
+    from rwlab.wheel.bus import open_transport
 
-    bus = open_bus(interface, channel)
+    bus = open_transport(protocol, interface, channel)
     node = None
     if interface == "virtual":
-        node = WheelNode(open_bus(interface, channel), node_id, latency=0.02).start()
-    client = WheelClient(bus, node_id, timeout=timeout)
+        node_bus = open_transport(protocol, interface, channel)
+        node = WheelNode(node_bus, node_id, latency=0.02, protocol=protocol).start()
+    client = WheelClient(bus, node_id, timeout=timeout, protocol=protocol)
     with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles
         try:
             send = {
@@ -170,5 +253,25 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
                 client.close()
             if node is not None:
                 node.stop()
-                node.bus.shutdown()
-            bus.shutdown()
+                _close(node.bus)
+            _close(bus)
+
+
+@wheel.command("protocols")
+@_friendly_errors
+def wheel_protocols():
+    """List the wheel protocols and transports (built in, and added by entry points)."""
+    from rwlab.wheel.bus import transport_names
+    from rwlab.wheel.link import get_protocol, protocol_names
+
+    click.echo("protocols:")
+    for name, target in protocol_names().items():
+        try:
+            protocol = get_protocol(name)
+            about = f"{protocol.description} [transports: {', '.join(protocol.transports)}]"
+        except Exception as exc:  # a broken plugin is listed with why, not fatal
+            about = f"cannot be loaded: {exc}"
+        click.echo(f"  {name:<10} {target}\n             {about}")
+    click.echo("interfaces:")
+    for name, target in transport_names().items():
+        click.echo(f"  {name:<14} {target}")

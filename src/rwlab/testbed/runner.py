@@ -27,9 +27,12 @@ from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
-from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.bus import INTERFACES, open_bus, open_transport
+from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
+from rwlab.wheel.link import get_protocol
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
+from rwlab.wheel.serial import open_pty
 
 __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_experiment"]
 
@@ -80,6 +83,9 @@ class ExperimentConfig:
         CSV of setpoints for ``signal = 'file'`` (one column, or ``time_s`` + a column).
     raw_frames : bool
         Also record every CAN frame.
+    protocol : str
+        The wheel protocol (``rwlab``, ``canopen``, ``nsp`` or a registered one); on
+        the virtual interface a byte-stream protocol's twin answers over a pty pair.
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
@@ -119,6 +125,7 @@ class ExperimentConfig:
     model: str | None = None
     wheel: str = "rw90"
     unit: int | None = None
+    protocol: str = "rwlab"
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -143,6 +150,7 @@ class ExperimentConfig:
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
             "model": ((str, type(None)), "a path to model.json"),
+            "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
             "wheel": (str, "a wheel preset name"),
             "unit": ((int, type(None)), "an integer ≥ 0"),
@@ -165,6 +173,9 @@ class ExperimentConfig:
             isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in levels
         ):
             raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
+        from rwlab.wheel.link import get_protocol
+
+        get_protocol(self.protocol)  # ConfigError naming the known ones
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
@@ -314,6 +325,8 @@ def run_experiment(
     metadata = {
         "rwlab_version": __version__,
         "dbc_sha256": dbc_sha256(),
+        "protocol": cfg.protocol,
+        "protocol_identity": get_protocol(cfg.protocol).identity(),
         "Ts": cfg.Ts,
         "mode": cfg.mode,
         "experiment": cfg.to_dict(),
@@ -324,15 +337,22 @@ def run_experiment(
         "time_origin": "s since the first command",
     }
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
-        host_bus = open_bus(cfg.interface, channel, simulated_clock=not realtime)
+        if stream_twin:  # a serial protocol's twin answers over a pseudo-terminal pair
+            node_bus, host_bus = open_pty()
+        else:
+            host_bus = open_transport(
+                cfg.protocol, cfg.interface, channel, simulated_clock=not realtime
+            )
     except BaseException:
         writer.discard()  # nothing was recorded: keep the old record, if any
         raise
     node = None
     if simulated:
-        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+        if not stream_twin:
+            node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
         node = WheelNode(
             node_bus,
             cfg.node_id,
@@ -341,19 +361,22 @@ def run_experiment(
             telemetry_rate=cfg.telemetry_rate,
             latency=cfg.latency,
             seed=cfg.seed,
+            protocol=cfg.protocol,
         )
         if realtime:
             node.start()
-    client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
+    client = WheelClient(
+        host_bus,
+        cfg.node_id,
+        params,
+        clock=clock,
+        timeout=max(0.5, 2 * cfg.Ts),
+        protocol=cfg.protocol,
+    )
+    client.link.set_telemetry_rate(cfg.telemetry_rate)
     if cfg.raw_frames:
-        client.frame_listener = lambda msg, direction: writer.write(
-            "/can",
-            {
-                "t": msg.timestamp if not realtime else clock.now(),
-                "id": msg.arbitration_id,
-                "data": bytes(msg.data).hex(),
-                "direction": direction,
-            },
+        client.frame_listener = lambda t, frame_id, data, direction: writer.write(
+            "/can", {"t": t, "id": frame_id, "data": data.hex(), "direction": direction}
         )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
@@ -407,6 +430,9 @@ def run_experiment(
         try:
             client.close()  # the wheel idles first, whatever else fails
             _drain(client, writer, clock)
+            dropped = _dropped_text(client)
+            if dropped:
+                writer.event(clock.now(), "dropped_frames", dropped)
             writer.event(clock.now(), "stop", status)
         finally:
             try:
@@ -414,8 +440,8 @@ def run_experiment(
             finally:
                 if node is not None:
                     node.stop()
-                    node.bus.shutdown()
-                host_bus.shutdown()
+                    _close(node.bus)
+                _close(host_bus)
     return RunSummary(
         Path(out),
         writer.counts["/command"],
@@ -425,6 +451,24 @@ def run_experiment(
         clock.now() - t0,
         status,
     )
+
+
+def _close(transport: object) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
+
+
+def _dropped_text(client: WheelClient) -> str:
+    """What the host dropped from the bus, or '' when nothing was."""
+    counts = {
+        "damaged": client.bad_frames,
+        "of other protocols": client.foreign_frames,
+        "implausible": client.implausible_frames,
+        "commands not acknowledged": client.lost_commands,
+    }
+    return ", ".join(f"{n} {what}" for what, n in counts.items() if n)
 
 
 def _live_detector(cfg: ExperimentConfig):
@@ -470,7 +514,9 @@ def _record_until(
 
 def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
     for t, frame in client.drain():
-        if isinstance(frame, Telemetry):
+        if isinstance(frame, Implausible):  # flagged, never recorded as the wheel's state
+            writer.event(t, "implausible_telemetry", frame.reason)
+        elif isinstance(frame, Telemetry):
             writer.write(
                 "/telemetry",
                 {
