@@ -105,7 +105,13 @@ def traces(tmp_path_factory):
     for name in ("rwlab", "canopen", "nsp"):
         path = tmp_path_factory.mktemp(name) / "r.mcap"
         cfg = ExperimentConfig(
-            signal="step", amplitude=1500, duration=60, Ts=0.5, seed=4, protocol=name
+            signal="step",
+            amplitude=1500,
+            duration=60,
+            Ts=0.5,
+            seed=4,
+            protocol=name,
+            wheel="ideal",  # no frame jitter: its draws would follow each protocol's frames
         )
         summary = run_experiment(cfg, path)
         out[name] = (summary, read_record(path))
