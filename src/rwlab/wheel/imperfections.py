@@ -121,7 +121,7 @@ def draw_unit(params: WheelParams, unit: int) -> WheelParams:
     if isinstance(unit, bool) or not isinstance(unit, int) or unit < 0:
         raise ConfigError(f"wheel unit must be an integer ≥ 0, got {unit!r}")
     rng = np.random.default_rng([unit, 0x52573930])  # "RW90": a stream of its own
-    drawn: dict[str, float | int] = {}
+    drawn: dict = {}  # field name → value; mixed types, checked by WheelParams
     for name, tol in TOLERANCES.items():
         nominal = getattr(params, name)
         u = rng.uniform(-1.0, 1.0)
