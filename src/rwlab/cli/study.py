@@ -207,7 +207,12 @@ def _identify_one(
     echo=None,
 ):
     """`rwlab identify` on one record: the study written into ``out``; (study dict, paths)."""
-    from rwlab.ident.study import identification_study, load_study_data, physical_model
+    from rwlab.ident.study import (
+        identification_study,
+        load_current,
+        load_study_data,
+        physical_model,
+    )
     from rwlab.report.identification import write_study
 
     data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
@@ -225,6 +230,7 @@ def _identify_one(
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
         },
+        current=load_current(file, Ts),
     )
     model = physical_model(
         result,

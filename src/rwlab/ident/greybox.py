@@ -7,26 +7,26 @@ block with a physical parameter (SI units inside; rpm only at the edges):
     r = sat(u, ±ω_max)                               speed command, rad/s
     z = kp·(r − ω) + I;  if |z| < α: I ← I + ki·(r − ω)·h     PI with anti-windup
     a = clip(z, ±α)                                  rate limit, rad/s²
-    i = clip((J·a + f̂(ω)) / k̂t, ±i_max)              driver: current command and limit
+    i = clip((J·a + τc·sign ω + b·ω) / kt, ±i_max)   driver: current command and limit
     J·ω̇ = kt·i − f(ω)                               rotor
     f(ω) = sign ω·(τc + (τbrk − τc)·exp(−(ω/ωs)²)) + b·ω;  stuck at ω = 0 while |kt·i| ≤ τbrk
 
-``f̂`` and ``k̂t`` are the firmware's nominal friction feed-forward and torque
-constant (datasheet values, given), ``f`` and ``kt`` the unit's own
-(estimated): their mismatch is what the PI loop has to reject, and what makes
-friction and kt identifiable from speed data. Integrated with ``substeps``
-explicit Euler steps per sample, the command held (ZOH).
+The firmware's feed-forward is calibrated on the unit (J, kt, τc, b), so in
+free motion the wheel follows the rate-limited PI loop, less the Stribeck
+excess it does not compensate; the current limit makes the acceleration
+depend on kt, J and friction. Integrated with ``substeps`` explicit Euler
+steps per sample, the command held (ZOH). Outputs: the speed and, when the
+record has it, the motor current.
 
-Identifiability (stated, not hidden): from the commanded and measured speed
-alone only ratios to the inertia are observable (kt/J, τ/J), so J is fixed at
-its datasheet value and kt, τc, τbrk and b are estimated relative to it; the
-current limit ``i_max`` is a known setting of the driver (it binds only in fast
-transients, and a record that never reaches it cannot tell where it is), as are
-ω_max and the firmware's nominal values. Estimated, each with its standard
-deviation (λ·(JᵀJ)⁻¹ at the optimum, λ the residual variance; simulation errors
-are correlated, so these are lower bounds): kt, τc, τbrk, b, α, kp, ki. ωs is
-fixed (10 rpm typical: a Stribeck speed is not identifiable from a PRBS that
-crosses zero a few times).
+Identifiability (stated, not hidden): with the current telemetry, kt/J, τc/kt
+and b/kt are observable (the current is what the driver commands), so with J
+fixed at its datasheet value kt, τc and b are estimated; without it they are
+observable only while the current limit binds. The current limit ``i_max`` is a
+known setting of the driver (a record that never reaches it cannot tell where
+it is), as is ω_max. Estimated, each with its standard deviation
+(λ·(JᵀJ)⁻¹ at the optimum; simulation errors are correlated, so these are lower
+bounds): kt, τc, τbrk, b, α, kp, ki. ωs is fixed (10 rpm typical: a Stribeck
+speed is not identifiable from a PRBS that crosses zero a few times).
 
 No library offers this model; the simulation is written here and compiled with
 numba, the fit is ``scipy.optimize.least_squares`` on the simulation error.
@@ -53,27 +53,20 @@ ESTIMATED = ("torque_constant", "coulomb", "breakaway", "viscous", "accel_limit"
 
 @njit(cache=True)
 def _simulate(u_rpm, w0_rpm, p):  # pragma: no cover - compiled
-    """Speed (rpm) sampled before each command is applied; p: see WheelGreyBox.vector."""
-    J, kt, imax, tc, tbrk, ws, b, alpha, kp, ki = (
-        p[0],
-        p[1],
-        p[2],
-        p[3],
-        p[4],
-        p[5],
-        p[6],
-        p[7],
-        p[8],
-        p[9],
-    )
-    kt_n, tc_n, b_n, wmax, Ts, m = p[10], p[11], p[12], p[13], p[14], int(p[15])
+    """Speed (rpm) sampled before each command is applied, and the motor current (A)
+    at the same instants; p: see WheelGreyBox.vector."""
+    J, kt, imax, tc, tbrk, ws = p[0], p[1], p[2], p[3], p[4], p[5]
+    b, alpha, kp, ki, wmax, Ts, m = p[6], p[7], p[8], p[9], p[13], p[14], int(p[15])
     h = Ts / m
     n = u_rpm.size
     y = np.empty(n)
+    cur = np.empty(n)
     w = w0_rpm * 0.10471975511965977
     integral = 0.0
+    i = 0.0
     for k in range(n):
         y[k] = w / 0.10471975511965977
+        cur[k] = i
         r = min(max(u_rpm[k] * 0.10471975511965977, -wmax), wmax)
         for _ in range(m):
             e = r - w
@@ -81,19 +74,18 @@ def _simulate(u_rpm, w0_rpm, p):  # pragma: no cover - compiled
             if abs(z) < alpha:
                 integral += ki * e * h
             a = min(max(z, -alpha), alpha)
-            ff = b_n * w + (tc_n if w > 0 else (-tc_n if w < 0 else 0.0))
-            i = min(max((J * a + ff) / kt_n, -imax), imax)
+            ff = b * w + (tc if w > 0 else (-tc if w < 0 else 0.0))
+            i = min(max((J * a + ff) / kt, -imax), imax)
             motor = kt * i
             if w == 0.0:
-                if abs(motor) <= tbrk:
-                    continue
-                w = (motor - (tbrk if motor > 0 else -tbrk)) / J * h
+                if abs(motor) > tbrk:
+                    w = (motor - (tbrk if motor > 0 else -tbrk)) / J * h
                 continue
             s = 1.0 if w > 0 else -1.0
             fr = s * (tc + (tbrk - tc) * math.exp(-((w / ws) ** 2))) + b * w
             nw = w + (motor - fr) / J * h
             w = 0.0 if nw * w < 0 else nw
-    return y
+    return y, cur
 
 
 @dataclass(frozen=True)
@@ -121,7 +113,8 @@ class WheelGreyBox:
     kp, ki : float
         PI gains, 1/s and 1/s² (estimated).
     nominal_torque_constant, nominal_coulomb, nominal_viscous : float
-        The firmware's feed-forward values, N·m/A, N·m, N·m·s/rad.
+        The datasheet values the fit started from, N·m/A, N·m, N·m·s/rad
+        (kept for the record: compare with the estimates).
     max_speed : float
         ω_max, rad/s (known).
     substeps : int
@@ -216,7 +209,22 @@ class WheelGreyBox:
         u = np.asarray(u_rpm, dtype=float).ravel()
         if u.size == 0 or not np.all(np.isfinite(u)):
             raise DataError("u must be a non-empty finite sequence")
-        return _simulate(u, float(w0_rpm), self.vector)
+        return _simulate(u, float(w0_rpm), self.vector)[0]
+
+    def simulate_current(self, u_rpm, w0_rpm: float = 0.0) -> np.ndarray:
+        """Motor currents (A) at the same instants as :meth:`simulate`'s speeds, shape (N,).
+
+        Parameters
+        ----------
+        u_rpm : array_like, shape (N,)
+            Speed commands, rpm.
+        w0_rpm : float
+            Initial speed, rpm.
+        """
+        u = np.asarray(u_rpm, dtype=float).ravel()
+        if u.size == 0 or not np.all(np.isfinite(u)):
+            raise DataError("u must be a non-empty finite sequence")
+        return _simulate(u, float(w0_rpm), self.vector)[1]
 
     def predict(self, data: IOData, horizon: float = np.inf, initial: str = "steady"):
         """Simulated speed on ``data`` (rpm), shape (N,): an output-error model predicts by
@@ -262,6 +270,7 @@ def greybox_fit(
     ki: float = 0.1,
     stribeck_speed_rpm: float = 10.0,
     substeps: int = 50,
+    current=None,
 ) -> WheelGreyBox:
     """Estimate the grey-box wheel by simulation error from its datasheet values.
 
@@ -281,6 +290,10 @@ def greybox_fit(
         ωs, fixed.
     substeps : int
         Euler steps per sample.
+    current : array_like, shape (N,), optional
+        The measured motor current (A) at the speed's instants: a second
+        output that makes kt, τc and b observable (module docstring). Speed
+        and current errors are each scaled by their output's spread.
 
     Returns
     -------
@@ -315,30 +328,42 @@ def greybox_fit(
     p = base.vector
     index = [1, 3, 4, 6, 7, 8, 9]  # positions of ESTIMATED in the vector
     sd_y = float(np.std(y)) or 1.0
+    i_meas = None
+    if current is not None:
+        i_meas = np.asarray(current, dtype=float).ravel()
+        if i_meas.shape != y.shape or not np.all(np.isfinite(i_meas)):
+            raise DataError("current must be finite with one sample per speed sample")
+    sd_i = float(np.std(i_meas)) if i_meas is not None else 1.0
+    sd_i = sd_i or 1.0
 
     def residuals(z):
         q = p.copy()
         q[index] = z * scale
         q[4] = max(q[4], q[3])
-        return (_simulate(u, float(y[0]), q) - y) / sd_y
+        speed, cur = _simulate(u, float(y[0]), q)
+        if i_meas is None:
+            return (speed - y) / sd_y
+        return np.concatenate([(speed - y) / sd_y, (cur - i_meas) / sd_i])
 
-    lower = np.array([0.2, 0.0, 0.0, 0.0, 0.2, 1e-3, 0.0]) * np.where(x0 > 0, 1.0, 0.0)
+    lower = np.array([0.2, 0.0, 0.0, 0.0, 0.2, 1e-3, 0.0])
     upper = np.array([5.0, 20.0, 30.0, 50.0, 5.0, 1e3, 1e3])
-    start = np.ones(len(x0))
-    sol = least_squares(residuals, start, bounds=(lower, upper), diff_step=1e-4)
+    sol = least_squares(residuals, np.ones(len(x0)), bounds=(lower, upper), diff_step=1e-4)
     if not np.all(np.isfinite(sol.x)):
         raise EstimationError(
             "the grey-box fit diverged; check the record and the datasheet values"
         )
     values = sol.x * scale
-    dof = max(data.N - len(x0), 1)
-    lam = float(sol.fun @ sol.fun) / dof * sd_y**2
-    Jac = sol.jac * sd_y / scale
-    try:
-        cov = lam * np.linalg.pinv(Jac.T @ Jac)
-        std = {k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(ESTIMATED)}
-    except np.linalg.LinAlgError:
-        std = {}
+    # covariance: each output's residual variance, in its own units
+    n_y = y.size
+    parts = [(sol.fun[:n_y], sol.jac[:n_y])]
+    if i_meas is not None:
+        parts.append((sol.fun[n_y:], sol.jac[n_y:]))
+    info = np.zeros((len(x0), len(x0)))
+    for res, jac in parts:
+        lam = float(res @ res) / max(res.size - len(x0), 1)  # in scaled units
+        info += (jac.T @ jac) / lam
+    cov = np.linalg.pinv(info) / np.outer(1 / scale, 1 / scale)
+    std = {k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(ESTIMATED)}
     fitted = dict(zip(ESTIMATED, (float(v) for v in values), strict=True))
     fitted["breakaway"] = max(fitted["breakaway"], fitted["coulomb"])
-    return replace(base, **fitted, std=std)
+    return replace(base, **fitted, std=std)  # type: ignore[arg-type]

@@ -232,7 +232,7 @@ def nlarx(
         sim = _simulate(u[cut:], y[cut : cut + first], na, nb, nk, theta, knots)
         ok = np.all(np.isfinite(sim)) and np.ptp(y[cut:]) > 0
         scores[int(count)] = fit_percent(y[cut:], sim) if ok else -np.inf
-    best = max(scores, key=scores.get)
+    best = max(scores, key=lambda k: scores[k])
     knots = _knots(u, y, nk, best)
     theta = _fit(u, y, na, nb, nk, knots)
     return NLARXModel(

@@ -186,6 +186,7 @@ def identification_study(
     limits_rpm: tuple[float, float] = (math.inf, math.inf),
     progress: Callable[[int, int, str], None] | None = None,
     datasheet: dict | None = None,
+    current=None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -227,6 +228,9 @@ def identification_study(
         :data:`DATASHEET`; default the RW90's, paper A Table 1). Only J, the
         current limit and the firmware's feed-forward stay fixed; the rest start
         the fit.
+    current : array_like, shape (N,), optional
+        The record's motor current (A) at the speed's instants: the grey box's
+        second output (it makes kt and the friction observable).
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -305,7 +309,8 @@ def identification_study(
     servo, nl, grey, black = None, None, None, None
     if nonlinear:
         servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
-        grey, black = _wheel_models(data, split, servo, nl, {**DATASHEET, **(datasheet or {})})
+        sheet = {**DATASHEET, **(datasheet or {})}
+        grey, black = _wheel_models(data, split, servo, nl, sheet, current)
         step("nonlinear")
     return StudyResult(
         data=prepared,
@@ -342,7 +347,7 @@ DATASHEET = {
 """RW90 datasheet values (paper A, Table 1; SPEC.md): the grey box's fixed and start values."""
 
 
-def _wheel_models(data, split, servo, nl, datasheet) -> tuple:
+def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
     """The grey-box wheel and the NLARX on the physical estimation part, scored on the
     validation part (simulation from its first measured speed); the better one is
     ``nl['chosen']``. Adds ``nl['greybox']`` and ``nl['nlarx']``."""
@@ -353,7 +358,8 @@ def _wheel_models(data, split, servo, nl, datasheet) -> tuple:
     if servo is not None:
         kp, ki = servo.kp, servo.ki
     try:
-        grey = greybox_fit(est, kp=kp, ki=ki, **datasheet)
+        i_est = None if current is None else np.asarray(current, dtype=float)[: est.N]
+        grey = greybox_fit(est, kp=kp, ki=ki, current=i_est, **datasheet)
         out["greybox"] = _nonlinear_row(grey, val)
     except (EstimationError, ModelError, DataError) as exc:
         out["greybox"] = {"error": str(exc)}
@@ -574,6 +580,29 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
         input_name=input_name,
         output_name=output_name,
     )
+
+
+def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
+    """The motor current (A) of a testbed record at the speed's instants, or None
+    for a file without one (the grey box then fits the speed alone).
+
+    Parameters
+    ----------
+    path : str
+        A record (``.mcap``); other files give None.
+    Ts : float, optional
+        Sample time, s (the record's own by default).
+    """
+    from pathlib import Path
+
+    from rwlab.data import load
+
+    if Path(path).suffix.lower() != ".mcap":
+        return None
+    try:
+        return load(path, Ts, input_columns="command", output_columns="current_a").y[:, 0]
+    except DataError:
+        return None
 
 
 def load_study_data(
