@@ -72,6 +72,7 @@ def main() -> None:
     parser.add_argument("--healthy-records", type=int, default=6, help="20-min healthy records")
     parser.add_argument("--runs", type=int, default=2, help="runs per fault and signal")
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 10.0, 100.0])
+    parser.add_argument("--part", choices=["all", "healthy", "faults"], default="all")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
@@ -87,65 +88,72 @@ def main() -> None:
             )
             return diagnose(data, wheel, ref, **kw)
 
-        counts = {rate: Counter() for rate in args.rates}
-        latched = 0
-        hours = 0.0
-        for i in range(args.healthy_records):
-            path = _record(out / "h.mcap", 1 + i, 1000 + i, SIGNALS[i % len(SIGNALS)])
-            hours += DURATION / 3600
-            latched += len(run(path).alarms)
-            for rate in args.rates:
-                counts[rate].update(
-                    a.detector for a in run(path, false_alarms_per_hour=rate, latch=False).alarms
-                )
-        print(
-            f"healthy: {hours:.2f} h on units 1..{args.healthy_records} "
-            f"({', '.join(SIGNALS)} in turn); alarms at the default 1e-3/h: {latched}"
-        )
-        print(f"{'requested /h':>12} " + " ".join(f"{d:>15}" for d in DETECTORS))
-        for rate in args.rates:
-            print(
-                f"{rate:>12g} " + " ".join(f"{counts[rate][d] / hours:>15.3g}" for d in DETECTORS)
-            )
-        print(f"(measured per hour over {hours:.2f} h each)\n")
+        if args.part != "faults":
+            _healthy(args, run, out)
+        if args.part != "healthy":
+            _faults_part(args, run, out)
 
-        confusion: dict[str, Counter] = defaultdict(Counter)
-        print(
-            f"{'fault':<36} {'signal':<6} {'runs':>4} {'det≤300s':>8} {'named':>5} "
-            f"{'early':>5} {'sizes (first alarm)'}"
-        )
-        unit = 10
-        for fault, truth in FAULTS.items():
-            for signal in ("prbs", "chirp"):
-                det = named = early = 0
-                sizes = []
-                for _r in range(args.runs):
-                    unit += 1
-                    path = _record(out / "f.mcap", unit, 2000 + unit, signal, _faults(fault))
-                    alarms = run(path).alarms
-                    early += sum(a.t_s < ONSET for a in alarms)
-                    after = [a for a in alarms if ONSET <= a.t_s <= ONSET + 300]
-                    kinds = {a.kind for a in after}
-                    det += bool(after)
-                    named += bool(after) and truth <= kinds
-                    confusion[fault][after[0].kind if after else "none"] += 1
-                    sizes += [f"{a.kind}:{a.magnitude:.3g}" for a in after[:2] if a.magnitude]
-                print(
-                    f"{fault:<36} {signal:<6} {args.runs:>4} {det:>8} {named:>5} {early:>5} "
-                    f"{' '.join(sizes)}"
-                )
-        print("\nconfusion (injected → first name within 300 s):")
-        for fault, c in confusion.items():
-            print(f"  {fault:<36} {dict(c)}")
-        print("\ndetection vs magnitude (PRBS, one run each):")
-        for name, values in CURVES.items():
-            row = []
-            for v in values:
+
+def _healthy(args, run, out: Path) -> None:
+    counts: dict[float, Counter] = {rate: Counter() for rate in args.rates}
+    latched = 0
+    hours = 0.0
+    for i in range(args.healthy_records):
+        path = _record(out / "h.mcap", 1 + i, 1000 + i, SIGNALS[i % 4])
+        hours += DURATION / 3600
+        latched += len(run(path).alarms)
+        for rate in args.rates:
+            counts[rate].update(
+                a.detector for a in run(path, false_alarms_per_hour=rate, latch=False).alarms
+            )
+    print(
+        f"healthy: {hours:.2f} h on units 1..{args.healthy_records} "
+        f"({', '.join(SIGNALS)} in turn); alarms at the default 1e-3/h: {latched}"
+    )
+    print(f"{'requested /h':>12} " + " ".join(f"{d:>15}" for d in DETECTORS))
+    for rate in args.rates:
+        print(f"{rate:>12g} " + " ".join(f"{counts[rate][d] / hours:>15.3g}" for d in DETECTORS))
+    print(f"(measured per hour over {hours:.2f} h each)\n")
+
+
+def _faults_part(args, run, out: Path) -> None:
+    confusion: dict[str, Counter] = defaultdict(Counter)
+    print(
+        f"{'fault':<36} {'signal':<6} {'runs':>4} {'det≤300s':>8} {'named':>5} "
+        f"{'early':>5} {'sizes (first alarm)'}"
+    )
+    unit = 10
+    for fault, truth in FAULTS.items():
+        for signal in ("prbs", "chirp"):
+            det = named = early = 0
+            sizes = []
+            for _r in range(args.runs):
                 unit += 1
-                path = _record(out / "c.mcap", unit, 3000 + unit, "prbs", _faults(f"{name}={v}"))
-                after = [a for a in run(path).alarms if ONSET <= a.t_s <= ONSET + 300]
-                row.append(f"{v:g}: {'%.0f s' % (after[0].t_s - ONSET) if after else 'missed'}")
-            print(f"  {name:<20} " + ", ".join(row))
+                path = _record(out / "f.mcap", unit, 2000 + unit, signal, _faults(fault))
+                alarms = run(path).alarms
+                early += sum(a.t_s < ONSET for a in alarms)
+                after = [a for a in alarms if ONSET <= a.t_s <= ONSET + 300]
+                kinds = {a.kind for a in after}
+                det += bool(after)
+                named += bool(after) and truth <= kinds
+                confusion[fault][after[0].kind if after else "none"] += 1
+                sizes += [f"{a.kind}:{a.magnitude:.3g}" for a in after[:2] if a.magnitude]
+            print(
+                f"{fault:<36} {signal:<6} {args.runs:>4} {det:>8} {named:>5} {early:>5} "
+                f"{' '.join(sizes)}"
+            )
+    print("\nconfusion (injected → first name within 300 s):")
+    for fault, c in confusion.items():
+        print(f"  {fault:<36} {dict(c)}")
+    print("\ndetection vs magnitude (PRBS, one run each):")
+    for name, values in CURVES.items():
+        row = []
+        for v in values:
+            unit += 1
+            path = _record(out / "c.mcap", unit, 3000 + unit, "prbs", _faults(f"{name}={v}"))
+            after = [a for a in run(path).alarms if ONSET <= a.t_s <= ONSET + 300]
+            row.append(f"{v:g}: {'%.0f s' % (after[0].t_s - ONSET) if after else 'missed'}")
+        print(f"  {name:<20} " + ", ".join(row))
 
 
 if __name__ == "__main__":

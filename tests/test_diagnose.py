@@ -146,7 +146,7 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
     # the inertial current per rpm/s is I·(2π/60)/k_t of the twin (physics, not the fit)
     expected = RW90.inertia * 2 * math.pi / 60 / RW90.torque_constant
     assert ref.current_model[0] == pytest.approx(expected, rel=0.05)
-    assert ref.repeat_samples >= 2000  # the repeat probability counted on the 20-min record
+    assert ref.repeat_samples >= 500  # moving samples of the 20-min record (issue: 36–214)
     assert set(ref.tests) == {"friction", "motor", "speed", "lag"}
     assert all(s.samples >= 4 * s.block for s in ref.tests.values())
     again = HealthyReference.from_dict(json.loads(json.dumps(ref.to_dict())))
@@ -154,13 +154,15 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
 
 
 def test_a_fault_present_at_power_up_is_a_fault(tmp_path, model_file):
+    # ×2: beyond the friction spread between healthy units (±30 % → up to ×1.86), which
+    # no comparison with another unit's reference can tell from wear present at power-up
     path = tmp_path / "worn.mcap"
-    run_experiment(ExperimentConfig(duration=600, seed=11, faults=("friction=1.5@0",)), path)
+    run_experiment(ExperimentConfig(duration=600, seed=11, faults=("friction=2@0",)), path)
     alarms = _diagnose(path, model_file).alarms
     assert alarms and alarms[0].kind == "friction", alarms
     assert alarms[0].t_s <= 300
     lo, hi = alarms[0].ci
-    assert lo <= 1.5 * 1.1 and hi >= 1.5 / 1.1  # within the unit tolerance of the truth
+    assert lo <= 2 * 1.1 and hi >= 2 / 1.1  # the same unit: the size is the fault's
 
 
 def test_a_weak_motor_is_not_called_friction(tmp_path, model_file):
@@ -213,7 +215,7 @@ def test_diagnose_refuses_a_model_without_reference(tmp_path, model_file):
 def test_diagnose_over_a_folder_writes_the_trend(tmp_path, model_file):
     folder = tmp_path / "wheel"
     folder.mkdir()
-    for week, factor in enumerate((1.6, 2.0)):
+    for week, factor in enumerate((2.0, 2.6)):
         cfg = ExperimentConfig(duration=600, seed=20 + week, faults=(f"friction={factor}@0",))
         run_experiment(cfg, folder / f"week{week}.mcap")
     args = ["diagnose", str(folder), "--model", str(model_file), "--out", str(tmp_path / "d")]

@@ -124,7 +124,8 @@ class _BlockCusum:
         self.mean = stats.mean
         self._values: list[float] = []
         self.up = self.down = 0.0
-        self.means: deque = deque()  # (t_s, block mean, up, down) for sizing a fault
+        self.means: deque = deque()  # (t_s, block mean, up, down)
+        self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
 
     @property
     def statistic(self) -> float:
@@ -132,6 +133,9 @@ class _BlockCusum:
 
     def add(self, t_s: float, value: float) -> bool:
         self._values.append(value)
+        self.raw.append((t_s, value))
+        while self.raw[0][0] < t_s - HISTORY_S:
+            self.raw.popleft()
         if len(self._values) < self.stats.block:
             return False
         mean = float(np.mean(self._values))
@@ -153,16 +157,24 @@ class _BlockCusum:
     def restart(self) -> None:
         self.up = self.down = 0.0
 
-    def since_change(self) -> np.ndarray:
-        """Block means since the statistic last left zero (the change's estimated start)."""
-        rows = list(self.means)
+    def change_time(self) -> float:
+        """Time of the last block at which the statistic was zero (−inf: none kept)."""
         side = 2 if self.up >= self.down else 3
-        start = 0
-        for i, row in enumerate(rows):
-            if row[side] == 0.0:
-                start = i + 1
-        means = [r[1] for r in rows[start:]] or [r[1] for r in rows[-1:]]
-        return np.array(means[1:] if len(means) > 1 else means)  # the first straddles the change
+        zeros = [row[0] for row in self.means if row[side] == 0.0]
+        return zeros[-1] if zeros else -math.inf
+
+    def since_change(self) -> np.ndarray:
+        """The single values since the change: the last zero of the statistic, then the
+        split that best explains a shift from the healthy mean (the maximum-likelihood
+        change point of a Gaussian mean), so a block straddling the onset does not dilute
+        the size."""
+        t0 = self.change_time()
+        v = np.array([x for t, x in self.raw if t > t0] or [x for _, x in self.raw][-1:])
+        d = v - self.mean
+        tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
+        n = np.arange(len(v), 0, -1)
+        j = int(np.argmax(tail**2 / n))
+        return v[j:]
 
 
 class _Dropout:
@@ -406,30 +418,34 @@ class Diagnoser:
         ev: dict = {
             name: self._detectors[name].since_change()
             for name in BLOCKS
-            if name in self._detectors and self._detectors[name].means
+            if name in self._detectors and self._detectors[name].raw
         }
         change = self._detectors.get("friction_change")
-        if detector == "friction_change" and change is not None and change.means:
+        if detector == "friction_change" and change is not None and change.raw:
             # the size relative to the record's start, not to the reference's unit
             ev["friction"] = (1 + change.since_change()) / (1 + change.mean) - 1
             detector = "friction"
-        ev["sigma"] = {name: s.sigma for name, s in self.reference.tests.items()}
-        ev["ref_mean"] = {name: s.mean for name, s in self.reference.tests.items()}
-        motor = self._detectors.get("motor")
-        if motor is not None:
-            recent = [m[1] for m in motor.means if m[0] >= self.history["t_s"][-1] - 120.0]
-            ev["motor_recent"] = np.array(recent)
-        ev["tolerance"] = dict(self.reference.tolerance)
+        ref = self.reference
+        assert ref is not None  # alarms come only from an armed detector
+        # σ of one value, the block-mean σ scaled back (correlation included)
+        ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
+        ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
+        motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
+        if motor is not None and lag is not None:  # the motor test before and after the lag
+            t_change = lag.change_time()
+            ev["motor_before"] = np.array([x for t, x in motor.raw if t < t_change])
+            ev["motor_after"] = np.array([x for t, x in motor.raw if t >= t_change])
+        ev["tolerance"] = dict(ref.tolerance)
         ev["recent_speed"] = np.array(self._recent_speed)
-        lag = self._detectors.get("lag")
+        ev["moving_repeats"] = self._detectors["stuck"].run
         n_lag = len(ev.get("lag", ())) * (lag.stats.block if lag is not None else 0)
         ev["lag_currents"] = np.array(list(self._lag_currents)[-max(n_lag, 1) :])
         ev["lost"] = self._detectors["dropout"].last_count
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)
-                if det is not None and det.means and name != detector:
-                    ev[name] = np.array([m[1] for m in list(det.means)[-6:]])
+                if det is not None and det.raw and name != detector:
+                    ev[name] = np.array([x for _, x in list(det.raw)[-60:]])
         return ev
 
     @property
@@ -507,7 +523,7 @@ class Diagnosis:
         """Mean, σ and largest |value| of each residual, before and after the first alarm."""
         t = self.history["t_s"]
         first = min((a.t_s for a in self.alarms), default=math.inf)
-        out = {}
+        out: dict[str, dict] = {}
         for name, unit in (("speed", "rpm"), ("acceleration", "rpm/s"), ("current", "A")):
             x = self.history[name]
             for part, mask in (("before_alarm", t < first), ("after_alarm", t >= first)):

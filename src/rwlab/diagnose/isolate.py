@@ -12,7 +12,7 @@ detector    signature                                         fault, size (unit)
 dropout     telemetry frames lost beyond the healthy rate     ``telemetry_dropout``,
                                                               frames in 10 s
 stuck       identical speed readings, longer than noise       ``speed_sensor_stuck``,
-            allows (also: the last 3 readings identical        the frozen reading (rpm)
+            allows (also: 2 repeats while the model moves     the frozen reading (rpm)
             when another test fires)
 friction,   current in excess under acceleration (motor       ``torque_constant``,
 motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 + e_α)
@@ -111,7 +111,9 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     speed = np.asarray(ev.get("recent_speed", ()), dtype=float)
     if detector == "dropout":
         return [Finding("telemetry_dropout", float(ev.get("lost", 0)), None, "frames")]
-    frozen = len(speed) >= FROZEN and speed[-1] != 0 and np.all(speed[-FROZEN:] == speed[-1])
+    # identical readings while the model says the wheel moves (in a hold a regulated
+    # wheel's reading repeats by itself)
+    frozen = ev.get("moving_repeats", 0) >= FROZEN - 1
     if detector == "stuck" or frozen:
         return [
             Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")
@@ -120,12 +122,15 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return _rotor(ev)
     if detector == "speed":
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
+        bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the model's own held error
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
-    recent = np.asarray(ev.get("motor_recent", ()), dtype=float)
-    if recent.size:  # weak motor (e_α ≈ 1/F − 1) or a clamp (e_α ≈ 0): the nearer one
-        e, half = _mean_ci(recent, ev["sigma"]["motor"])
-        if e - ev.get("ref_mean", {}).get("motor", 0.0) > LAG_SPLIT:
-            return [_torque_constant(e, half)]
+    after = np.asarray(ev.get("motor_after", ()), dtype=float)
+    before = np.asarray(ev.get("motor_before", ()), dtype=float)
+    if after.size:  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
+        base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
+        e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
+        if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one
+            return [_torque_constant((1 + e) / (1 + base) - 1, half)]
     currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
     currents = currents[np.isfinite(currents)]
     if currents.size == 0:
