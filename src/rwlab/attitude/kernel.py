@@ -36,6 +36,7 @@ from numba import njit
 
 from rwlab.attitude.ekf import (
     _skew_into,
+    aligned_update_into,
     attitude_error,
     attitude_update_into,
     error_jacobian_into,
@@ -486,9 +487,11 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     ``state.w_hat`` is [ω̂] with P 6×6, or [ω̂, b̂] with the disturbance state of kind
     ``filt.bias_kind`` (1: a body torque b (3); 2: an SRP lever arm β (3), acting as
     ν ŝ × β; 3: both, [b, β]; see ``ekf``); in the GYRO mode it is the gyro bias β̂ (3,)
-    with P 6×6. ``log.est`` rows are [q̂, ω̂, b, β, β̂_gyro] (zeros for a state the filter
-    lacks), ``log.sigma`` rows √diag P[:6] and ``log.sky`` rows the sunlit fraction and the
-    sun sensor's, earth sensor's and star tracker's status (0 used, 1 unavailable, 2 gated).
+    with P 6×6, or [β̂, φ̂] with P 9×9 and φ̂ the sun sensor's misalignment (body axes;
+    ``filt.bias_true`` its truth). ``log.est`` rows are [q̂, ω̂, b, β, β̂_gyro, φ̂] (zeros
+    for a state the filter lacks), ``log.sigma`` rows √diag P[:6] and ``log.sky`` rows the
+    sunlit fraction and the sun sensor's, earth sensor's and star tracker's status (0 used,
+    1 unavailable, 2 gated).
     """
     x, q_hat, w_hat, P, gs, stats = state
     J, J_inv, G, h_max, n, dt = plant.J, plant.J_inv, plant.G, plant.h_max, plant.n, plant.dt
@@ -514,6 +517,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     nx = P.shape[0]  # 6, or 9 or 12 with the disturbance state b̂ = w_hat[3:]
     biased = mode == DYNAMICS and nx > 6
+    aligned = mode == GYRO and nx == 9  # [δθ, δβ, φ_sun]
     F, W3, Wn = np.empty((nx, nx)), np.empty((4, 3, 3)), np.empty((6, nx, nx))
     C, Bmap = np.empty((3, 3)), np.zeros((3, max(nx - 6, 3)))  # Bmap: torque per unit b̂
     if filt.bias_kind != 2:  # the constant torque's columns come first
@@ -600,7 +604,10 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 _noisy_into(b_true, sensors.sig_sun / cos_i, e[0], e[1], e[2], b_meas)
                 r = filt.r_sun / max(-b_meas[0], 1e-3) if sensors.sun_incidence else filt.r_sun
                 g = filt.gate[0] if sun_rejected < filt.gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, Wn)
+                if aligned:  # the sun sensor's misalignment is in the state
+                    ok = aligned_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, 6, Wn)
+                else:
+                    ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, Wn)
                 sun_rejected = 0 if ok else sun_rejected + 1
                 if not ok:
                     stats[SUN_GATED] += 1
@@ -698,7 +705,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 for i in range(nx - 6):
                     log.est[log_k, at + i] = w_hat[3 + i]
             if mode == GYRO:
-                for i in range(3):
+                for i in range(nx - 3):  # β̂, then φ̂ of the sun sensor
                     log.est[log_k, 13 + i] = w_hat[i]
             for i in range(3):
                 log.tau[log_k, i] = 0.0
@@ -707,7 +714,9 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             if mode != TRUTH:
                 if measured:
                     for i in range(3, nx):
-                        if mode == GYRO:  # what β̂ stands for: the bias plus E ω
+                        if mode == GYRO and i >= 6:  # the sun sensor's misalignment
+                            e_nees[i] = filt.bias_true[i - 6] - w_hat[i - 3]
+                        elif mode == GYRO:  # what β̂ stands for: the bias plus E ω
                             e_nees[i] = gs[i - 3] + gs[i] - w_hat[i - 3]
                             for c in range(3):
                                 e_nees[i] += sensors.gyro_E[i - 3, c] * w_mean[c]
@@ -745,9 +754,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             for i in range(3):  # the thruster command (and b̂'s torque) is known to the filter
                 dm[7 + i] = filt.dist_model[7 + i] + tau_thr[i] + tau_b[i]
             # the filter knows the wheels' torques and momenta (their tachometers)
-            rk4_step(
-                xm, hw_real, dt, filt.J, filt.J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work
-            )
+            rk4_step(xm, hw_real, dt, filt.J, filt.J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):
                 q_hat[i] = xm[i]
             for i in range(3):

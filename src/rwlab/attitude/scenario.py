@@ -121,6 +121,10 @@ class Scenario:
     gyro : GyroModel or None — gyros; with them the filter is the gyro-driven MEKF
         (Lefferts–Markley–Shuster: attitude + gyro bias), the dynamics model unused.
     star_tracker : StarTrackerModel or None — a star tracker's attitude updates.
+    filter_sun_sensor_alignment : with gyros, the filter also estimates the sun sensor's
+        misalignment relative to the earth sensor (the pointing reference) — in-flight
+        calibration; about z it cannot be told from yaw and stays at its prior (carried
+        as uncertainty).
     filter_inertia : the inertia the filter's dynamics model uses (3 or 9 values;
         empty: the truth's) — the model error of a flight filter.
     wheel_torque_scale : realised wheel torque over the command (1: exact).
@@ -188,6 +192,7 @@ class Scenario:
     star_tracker: StarTrackerModel | None = None
     filter_inertia: tuple = ()
     wheel_torque_scale: float = 1.0
+    filter_sun_sensor_alignment: bool = True
 
     def __post_init__(self) -> None:
         _check_types(self)

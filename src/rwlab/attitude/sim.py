@@ -108,6 +108,8 @@ class SimResult:
     torque and the SRP lever arm P·A·C_r·ρ (zeros for a state it lacks, see
     ``Scenario.filter_disturbance_state``).
     gyro_bias_est : (K, 3) the gyro-driven filter's bias estimate β̂, rad/s (zeros without).
+    sun_sensor_alignment_est : (K, 3) its estimate of the sun sensor's misalignment (body
+    axes), rad (zeros without).
     sigma : (K, 6) the filter's 1σ: attitude (rad, body axes), then rate (rad/s) or gyro
     bias (rad/s) (zeros without a filter): the ±3σ envelopes of the estimation error.
     est_error_axes : (K, 3) the estimation error per body axis, rad, 2 (q ⊗ q̂⁻¹)_v.
@@ -131,6 +133,7 @@ class SimResult:
     torque_est: np.ndarray | None = None
     srp_lever_est: np.ndarray | None = None
     gyro_bias_est: np.ndarray | None = None
+    sun_sensor_alignment_est: np.ndarray | None = None
     sigma: np.ndarray | None = None
     est_error_axes: np.ndarray | None = None
     tracker_status: np.ndarray | None = None
@@ -340,6 +343,15 @@ def simulate(
     return result
 
 
+SUN_ALIGNMENT_PRIOR_DEG = 0.03  # 1σ of the sun sensor's misalignment the filter starts from
+SUN_ALIGNMENT_DRIFT_DEG_DAY = 0.005  # its random walk a day (thermal distortion)
+
+
+def _aligned(sc: Scenario) -> bool:
+    """Whether the gyro filter estimates the sun sensor's misalignment."""
+    return sc.gyro is not None and sc.filter_sun_sensor_alignment
+
+
 def _is_real(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -354,10 +366,11 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     s0 = math.radians(max(sc.estimator_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
-    if sc.gyro is not None:  # the gyro-driven filter: [δθ, δβ], β̂ = 0 at the turn-on σ
+    if sc.gyro is not None:  # the gyro-driven filter: [δθ, δβ (, φ)], β̂ = 0 at the turn-on σ
         sb = math.radians(max(sc.gyro.initial_bias_deg_h, 1e-3)) / 3600.0
-        P0 = np.diag([s0**2] * 3 + [sb**2] * 3)
-        return q0, w0, hw0, qmul(dq, q0), np.zeros(3), P0
+        sphi = [math.radians(SUN_ALIGNMENT_PRIOR_DEG) ** 2] * 3 if _aligned(sc) else []
+        P0 = np.diag([s0**2] * 3 + [sb**2] * 3 + sphi)
+        return q0, w0, hw0, qmul(dq, q0), np.zeros(3 + len(sphi)), P0
     nb = BIAS_SIZES[disturbance_state(sc)]
     if nb:
         sb = filter_torque_scale(sc)
@@ -487,9 +500,16 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
     dist = sc.disturbances.vector()
     dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
     mode = kernel.TRUTH if estimator == "truth" else kernel.DYNAMICS
+    bias_true = _bias_truth(sc, dist, dist_model)
     if sc.gyro is not None and estimator != "truth":
         mode = kernel.GYRO
-        Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd())
+        Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd(), nx)
+        if nx > 6:
+            Qc[6:, 6:] = np.eye(nx - 6) * math.radians(SUN_ALIGNMENT_DRIFT_DEG_DAY) ** 2 / 86400
+        # the truth of φ: the sun sensor's rotation (bias on y, z, and misalignment)
+        rot = np.radians(np.asarray(sc.sun_sensor_misalignment_deg, float))
+        rot[1:] += np.radians(np.asarray(sc.sun_sensor_bias_deg, float))
+        bias_true = rot[: nx - 6]
     else:
         J_inv = np.linalg.inv(sc.filter_inertia_matrix)
         Qc = np.zeros((nx, nx))
@@ -500,7 +520,7 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
     return kernel.Filter(
         mode=mode,
         bias_kind=BIAS_KINDS[disturbance_state(sc)] if mode == kernel.DYNAMICS else 0,
-        bias_true=_bias_truth(sc, dist, dist_model),
+        bias_true=bias_true,
         dist_model=dist_model,
         Qc=Qc,
         r_sun=math.radians(sc.sun_noise_deg) * scale,
@@ -519,7 +539,7 @@ def _log_record(steps: int, log_every: int, steady_from: int, m: int) -> kernel.
         steady_from=steady_from,
         t=np.zeros(n_log),
         x=np.zeros((n_log, m)),
-        est=np.zeros((n_log, 16)),
+        est=np.zeros((n_log, 19)),
         tau=np.zeros((n_log, 3)),
         nees=np.zeros(n_log),
         sky=np.zeros((n_log, 4)),
@@ -631,6 +651,7 @@ def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:
     result.tracker_status = log.sky[:log_k, 3]
     result.torque_est, result.srp_lever_est = log_est[:, 7:10], log_est[:, 10:13]
     result.gyro_bias_est = log_est[:, 13:16]
+    result.sun_sensor_alignment_est = log_est[:, 16:19]
     result.sigma = log.sigma[:log_k]
     result.est_error_axes = _axis_errors(result.q, result.q_est)
     return result
