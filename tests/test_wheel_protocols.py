@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from rwlab.errors import ConfigError
 from rwlab.testbed import ExperimentConfig, read_record, run_experiment
-from rwlab.wheel import WheelNode, nsp
+from rwlab.wheel import Mode, WheelNode, nsp
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.link import get_protocol, protocol_names
 from rwlab.wheel.serial import crc16_ccitt, open_pty, slip_encode
@@ -343,3 +343,43 @@ def test_experiment_over_a_pty_to_a_served_nsp_wheel(tmp_path):
     finally:
         serve.terminate()
         serve.communicate(timeout=20)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    speed=st.floats(-8000, 8000, allow_nan=False),
+    current=st.floats(-2.0, 2.0, allow_nan=False),
+    mode=st.sampled_from([Mode.IDLE, Mode.SPEED, Mode.ACCELERATION]),
+    limited=st.booleans(),
+    seq=st.integers(0, 255),
+    counter=st.integers(0, 255),
+)
+def test_canopen_tpdos_carry_telemetry_through_the_object_dictionary(
+    speed, current, mode, limited, seq, counter
+):
+    from rwlab.wheel import SimClock
+    from rwlab.wheel.canopen_wheel import CanopenHostLink, CanopenNodeLink
+
+    channel = f"tpdo{next(_channels)}"
+    buses = [can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)]
+    buses.append(can.Bus(interface="virtual", channel=channel, preserve_timestamps=True))
+    try:
+        clock = SimClock()
+        node = CanopenNodeLink(buses[0], 5, clock)
+        host = CanopenHostLink(buses[1], 5, clock)
+        sent = proto.Telemetry(5, speed, current, mode, False, limited, seq, counter)
+        node.send(sent, 1.25)
+        (got,) = [i for i in host.receive(1.25) if isinstance(i.frame, proto.Telemetry)]
+        t = got.frame
+        assert got.t == 1.25
+        assert t.speed_rpm == pytest.approx(speed, rel=1e-6, abs=1e-6)  # float32 rad/s
+        assert t.current == pytest.approx(round(current * 1000) / 1000, abs=1e-12)
+        assert (t.mode, t.speed_limited, t.sequence_echo, t.counter) == (
+            mode,
+            limited,
+            seq,
+            counter,
+        )
+    finally:
+        for bus in buses:
+            bus.shutdown()

@@ -47,7 +47,11 @@ from rwlab.errors import ConfigError
     type=click.Path(dir_okay=False),
     help="CSV of setpoints for --signal file.",
 )
-@click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
+@click.option(
+    "--interface",
+    help="virtual (a simulated wheel), socketcan, udp_multicast, serial, or one added by an "
+    "entry point.",
+)
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
 @click.option(

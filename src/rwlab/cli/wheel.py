@@ -10,16 +10,14 @@ from rwlab.cli._common import _friendly_errors, _stop_signals, main
 
 
 def _bus_options(func):
-    from rwlab.wheel.bus import INTERFACES
-
     for option in reversed(
         [
             click.option(
                 "--interface",
-                type=click.Choice(INTERFACES),
                 default="virtual",
                 show_default=True,
-                help="python-can interface (serial = RS-232 with SLIP).",
+                help="virtual, socketcan, udp_multicast, serial (RS-232), or one added by "
+                "an entry point (`rwlab wheel protocols` lists them).",
             ),
             click.option(
                 "--channel",
@@ -96,15 +94,20 @@ def wheel_serve(
     """
     import time
 
+    from rwlab.errors import ConfigError
     from rwlab.wheel import RW90, WheelNode, WheelParams
-    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport
+    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport, transport_names
     from rwlab.wheel.link import get_protocol
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
     if unit is not None:
         wheel_params = wheel_params.for_unit(unit)
-    channel = channel or DEFAULT_CHANNELS[interface]
     get_protocol(protocol)  # an unknown name fails before the bus opens
+    if interface not in transport_names():
+        raise ConfigError(
+            f"unknown interface {interface!r}; choose from {', '.join(transport_names())}"
+        )
+    channel = channel or DEFAULT_CHANNELS.get(interface)
     keep_open = None
     if interface == "serial" and channel == "pty":  # the twin makes its own pty pair
         from rwlab.wheel.serial import open_pty
@@ -212,11 +215,16 @@ def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeo
     """
     from rwlab.wheel import WheelClient, WheelNode
     from rwlab.wheel.bus import open_transport
+    from rwlab.wheel.link import get_protocol
+    from rwlab.wheel.serial import open_pty
 
-    bus = open_transport(protocol, interface, channel)
     node = None
-    if interface == "virtual":
-        node_bus = open_transport(protocol, interface, channel)
+    if interface == "virtual" and "can" not in get_protocol(protocol).transports:
+        node_bus, bus = open_pty()  # a serial protocol's twin answers over a pty pair
+    else:
+        bus = open_transport(protocol, interface, channel)
+        node_bus = open_transport(protocol, interface, channel) if interface == "virtual" else None
+    if node_bus is not None:
         node = WheelNode(node_bus, node_id, latency=0.02, protocol=protocol).start()
     client = WheelClient(bus, node_id, timeout=timeout, protocol=protocol)
     with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles

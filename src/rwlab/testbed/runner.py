@@ -27,7 +27,7 @@ from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
-from rwlab.wheel.bus import INTERFACES, open_bus, open_transport
+from rwlab.wheel.bus import open_bus, open_transport, transport_names
 from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
@@ -132,8 +132,10 @@ class ExperimentConfig:
             raise ConfigError(f"unknown signal {self.signal!r}; choose from {', '.join(SIGNALS)}")
         if self.mode not in MODES:
             raise ConfigError(f"unknown mode {self.mode!r}; choose 'speed' or 'acceleration'")
-        if self.interface not in INTERFACES:
-            raise ConfigError(f"unknown interface {self.interface!r}")
+        if not isinstance(self.interface, str) or self.interface not in transport_names():
+            raise ConfigError(
+                f"unknown interface {self.interface!r}; choose from {', '.join(transport_names())}"
+            )
         for name in ("amplitude", "duration", "Ts", "telemetry_rate", "min_hold", "max_hold"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
