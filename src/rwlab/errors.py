@@ -53,3 +53,11 @@ class RwlabWarning(UserWarning):
 
 class RecordBusyError(RwlabError):
     """Another run is writing the same record."""
+
+
+class OutputBusyError(RwlabError):
+    """Another run is writing the same output folder."""
+
+
+class LostWorkerError(RwlabError):
+    """A campaign's batch lost its worker more often than it is retried."""

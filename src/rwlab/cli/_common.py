@@ -47,7 +47,8 @@ class _Cli(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
-            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            with _stop_signals():
+                return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
             where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
             hint = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
@@ -56,8 +57,10 @@ class _Cli(click.Group):
             _fail(RwlabError(exc.format_message()))
         except (RwlabError, OSError) as exc:
             _fail(exc)
-        except click.Abort:
-            click.echo("interrupted", err=True)
+        except click.Abort as exc:
+            cause = exc.__cause__ or exc.__context__
+            why = cause.args[0] if isinstance(cause, KeyboardInterrupt) and cause.args else ""
+            click.echo(f"interrupted{f' ({why})' if why else ''}", err=True)
             sys.exit(130)
 
 
@@ -107,6 +110,29 @@ def _check_folder(folder) -> None:
         while target != path:
             target.rmdir()
             target = target.parent
+
+
+@contextlib.contextmanager
+def _output(out, names, force: bool, what: str = "rwlab run", *, replace_previous=False):
+    """The command's output folder, locked now and written whole or not at all.
+
+    ``with _output(out, FILES, force, "simulation") as stage:`` around the whole
+    command: a second run on ``out`` is refused at once, the files are written
+    into ``stage`` and appear in ``out`` only when the block succeeds (see
+    :func:`rwlab._io.output_folder`).
+    """
+    from rwlab._io import output_folder
+
+    _check_folder(Path(out).absolute().parent)
+    with output_folder(
+        out, names, force=force, replace_previous=replace_previous, what=what
+    ) as stage:
+        yield stage
+
+
+def _wrote(out, paths) -> str:
+    """The "wrote …" line naming the files in ``out`` (not the staging folder)."""
+    return "wrote " + ", ".join(str(Path(out) / Path(p).name) for p in paths)
 
 
 def _columns_option(func):

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
+import shutil
 import sys
+from pathlib import Path
 
 import click
 
-from rwlab.cli._common import _check_folder, _engine_options, _friendly_errors, main
-from rwlab.errors import ConfigError
+from rwlab.cli._common import _engine_options, _friendly_errors, _output, _wrote, main
+from rwlab.errors import ConfigError, RwlabError
 
 # -- attitude control -----------------------------------------------------------------
 
@@ -65,7 +68,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.design import DesignError
     from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import check_outputs, write_comparison
+    from rwlab.report.attitude import write_comparison
 
     if not (math.isfinite(rho) and rho > 0):
         raise DesignError(f"--rho must be a positive number, got {rho:g}")
@@ -77,24 +80,23 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
         from rwlab.wheel.identified import IdentifiedWheel
 
         IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
-    _check_folder(out)
-    check_outputs(out, ["report.html", "metrics.json", "sigma.json"], force)
-    click.echo(
-        f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
-        f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
-        "~30 s)...",
-        err=True,
-    )
-    comp = compare(
-        sc,
-        duration=duration,
-        seed=seed,
-        rho=rho,
-        wheel_model_file=wheel_model,
-        update_period=relinearize,
-        progress=lambda name: click.echo(f"  flying {name}", err=True),
-    )
-    paths = write_comparison(comp, out, force=force, ltr_result=ltr_study(sc))
+    with _output(out, ["report.html", "metrics.json", "sigma.json"], force, "comparison") as stage:
+        click.echo(
+            f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
+            f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
+            "~30 s)...",
+            err=True,
+        )
+        comp = compare(
+            sc,
+            duration=duration,
+            seed=seed,
+            rho=rho,
+            wheel_model_file=wheel_model,
+            update_period=relinearize,
+            progress=lambda name: click.echo(f"  flying {name}", err=True),
+        )
+        paths = write_comparison(comp, stage, force=force, ltr_result=ltr_study(sc))
     click.echo(
         f"{'controller':<22} {'max err [°]':>11} {'rms [°]':>9} {'settle [s]':>10} "
         f"{'τ-saturated':>11} {'crossover [rad/s]':>17}"
@@ -105,7 +107,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
             f"{name:<22} {m['steady_max_error_deg']:11.3g} {m['steady_rms_error_deg']:9.3g} "
             f"{settle:>10} {m['torque_saturated_fraction']:11.3g} {m['crossover_rad_s']:17.3g}"
         )
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 @attitude.command("ltr")
@@ -127,14 +129,36 @@ def attitude_ltr(scenario, rho, out, force):
     from rwlab.attitude.scenario import load_scenario
     from rwlab.report.attitude import ltr_rows, write_ltr
 
-    _check_folder(out)
     sc = load_scenario(scenario)
-    res = ltr_study(sc, rhos=rho)
-    paths = write_ltr(res, sc.name, out, force=force)
+    with _output(out, ["sigma.json", "report.html"], force, "LTR study") as stage:
+        res = ltr_study(sc, rhos=rho)
+        paths = write_ltr(res, sc.name, stage, force=force)
     click.echo("rho        gap 1e-3..1e-1 [dB]  gap to crossover [dB]  crossover / LQR [rad/s]")
     for rho, gap, gap_c, w, w_c in ltr_rows(res):
         click.echo(f"{rho:<10} {gap:19.2f} {gap_c:22.2f}  {w:.3g} / {w_c:.3g}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
+
+
+def _run_store(out, campaign, *, force: bool, resume: bool):
+    """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
+    from rwlab.campaign.montecarlo import RunStore
+
+    base = Path(os.path.abspath(out))
+    store = RunStore(base.with_name(base.name + ".partial"), campaign)
+    if store.exists() and resume:
+        store.check()
+        click.echo(f"resuming: {len(store.rows())} runs kept in {store.folder}", err=True)
+        return store
+    if resume:
+        raise ConfigError(f"nothing to resume: {store.folder} holds no interrupted campaign")
+    if store.exists() and not force:
+        raise FileExistsError(
+            f"{store.folder} holds an interrupted campaign ({len(store.rows())} runs kept); "
+            "continue it with --resume, or start over with --force"
+        )
+    shutil.rmtree(store.folder, ignore_errors=True)
+    store.create()
+    return store
 
 
 def _check_run(duration: float, relinearize: float | None) -> None:
@@ -202,29 +226,15 @@ def attitude_simulate(
     from rwlab.attitude.control import fly
     from rwlab.attitude.scenario import load_scenario
     from rwlab.attitude.sim import disturbance_state
-    from rwlab.report.attitude import check_outputs, write_simulation
+    from rwlab.report.attitude import write_simulation
 
     _check_run(duration, relinearize)
     overrides = {"dt": dt} if dt is not None else {}
     sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
-    _check_folder(out)
-    check_outputs(out, ["metrics.json", "trace.parquet", "report.html"], force)
     steps = round(duration / sc.dt)
     if steps > 1e9:
         raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
     log_every = max(10, -(-steps // 100_000))
-    with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
-        run, metrics = fly(
-            sc,
-            controller,
-            estimator=estimator,
-            duration=duration,
-            seed=seed,
-            rho=rho,
-            update_period=relinearize,
-            log_every=log_every,
-            progress=progress,
-        )
     config = {
         "scenario": sc.name,
         "controller": controller,
@@ -242,7 +252,23 @@ def attitude_simulate(
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
     }
-    paths = write_simulation(run, metrics, config, sc, out, force=force)
+    files = ["metrics.json", "trace.parquet", "report.html"]
+    with (
+        _output(out, files, force, "simulation") as stage,
+        _steps_progress(steps, f"{controller} on {sc.name}") as progress,
+    ):
+        run, metrics = fly(
+            sc,
+            controller,
+            estimator=estimator,
+            duration=duration,
+            seed=seed,
+            rho=rho,
+            update_period=relinearize,
+            log_every=log_every,
+            progress=progress,
+        )
+        paths = write_simulation(run, metrics, config, sc, stage, force=force)
     for key in (
         "max_error_deg",
         "steady_max_error_deg",
@@ -254,7 +280,7 @@ def attitude_simulate(
         "earth_sensor_blinded_s",
     ):
         click.echo(f"{key:<40} {metrics[key]:.6g}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 @attitude.command("montecarlo")
@@ -275,40 +301,76 @@ def attitude_simulate(
 @_engine_options
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out (and start over).")
+@click.option(
+    "--resume",
+    is_flag=True,
+    help="Continue the interrupted campaign kept in OUT.partial (same options).",
+)
 @_friendly_errors
 def attitude_montecarlo(
-    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force
+    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force, resume
 ):
     """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
 
     Every run flies the controller (designed on the nominal scenario) on a
     scenario dispersed from its own seed, a child of --seed: a run is the same
     whatever the number of workers.
+
+    Finished runs are kept in OUT.partial as they finish: an interrupted
+    campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
+    computing only the runs it lacks, with the results of an uninterrupted one.
     """
     from rwlab.attitude.scenario import load_scenario
     from rwlab.campaign.dispersions import load_dispersions
     from rwlab.campaign.engine import dask_client
-    from rwlab.campaign.montecarlo import Campaign, budget, check_runs, fly_run, run_campaign
-    from rwlab.report.attitude import check_outputs
+    from rwlab.campaign.montecarlo import (
+        Campaign,
+        Execution,
+        budget,
+        check_runs,
+        check_size,
+        fly_run,
+        run_campaign,
+    )
     from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
 
+    check_size(runs)
     _check_run(duration, None)
     sc = load_scenario(scenario)
     campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
-    check_runs(campaign)  # before the cluster starts
-    _check_folder(out)
-    check_outputs(out, CAMPAIGN_FILES, force)
-    where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
-    click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
-    with (
-        dask_client(workers, scheduler) as client,
-        _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
-    ):
-        rows = run_campaign(campaign, client, progress=progress)
-    stats = budget(rows, campaign)
-    worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
-    paths = write_campaign(rows, stats, campaign, worst, out, force=force)
+    with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
+        store = _run_store(out, campaign, force=force, resume=resume)
+        check_runs(campaign)  # before the cluster starts
+        where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
+        click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
+        execution = Execution()
+        try:
+            with (
+                dask_client(workers, scheduler) as client,
+                _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
+            ):
+                rows = run_campaign(
+                    campaign, client, progress=progress, store=store, execution=execution
+                )
+        except (KeyboardInterrupt, RwlabError, OSError):
+            kept = len(store.rows())
+            click.echo(
+                f"\ncampaign stopped: {kept} of {runs} runs kept in {store.folder}; "
+                "continue it with the same options and --resume",
+                err=True,
+            )
+            raise
+        stats = {**budget(rows, campaign), "execution": execution.to_dict()}
+        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
+        paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
+    shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
+    if execution.retries:
+        ex = stats["execution"]
+        click.echo(
+            f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}",
+            err=True,
+        )
     click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
     for axis, s in stats["pointing_error_deg"].items():
         click.echo(
@@ -317,4 +379,4 @@ def attitude_montecarlo(
     click.echo(
         f"meeting ±{sc.pointing_requirement_deg:g}°: {stats['meets_requirement_fraction']:.1%}"
     )
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))

@@ -8,11 +8,12 @@ from pathlib import Path
 import click
 
 from rwlab.cli._common import (
-    _check_folder,
     _columns_option,
     _engine_options,
     _friendly_errors,
     _message,
+    _output,
+    _wrote,
     main,
 )
 from rwlab.cli.attitude import _steps_progress
@@ -61,7 +62,6 @@ def identify(
     studied in parallel on a Dask cluster (--workers, --scheduler), into
     OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
     """
-    _check_folder(out)
     options = dict(
         Ts=Ts,
         input_col=input_col,
@@ -76,7 +76,10 @@ def identify(
         return
     if workers is not None or scheduler is not None:
         raise ConfigError("--workers and --scheduler apply to a folder of records")
-    with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
+    with (
+        _output(out, STUDY_FILES, force, "identification study") as stage,
+        click.progressbar(length=1, label="identification study", file=sys.stderr) as bar,
+    ):
 
         def progress(done: int, total: int, label: str) -> None:
             bar.length = total
@@ -84,7 +87,7 @@ def identify(
             bar.update(1)
 
         study, paths = _identify_one(
-            file, out, progress=progress, echo=lambda t: click.echo(t, err=True), **options
+            file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
         )
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
@@ -97,11 +100,20 @@ def identify(
     if nl and "error" not in nl:
         click.echo(
             f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
-            f"{nl['accel_limit_rpm_s']:.4g} (output unit)/s"
+            f"{nl['accel_limit_rpm_s']:.4g} {_rate_unit(study)}"
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
+
+
+STUDY_FILES = ("report.html", "study.json", "model.json")
+
+
+def _rate_unit(study: dict) -> str:
+    """The rate limit's unit: the output's unit per second (rpm/s for a wheel record)."""
+    unit = (study.get("data") or {}).get("output_unit") or ""
+    return f"{unit}/s" if unit else "(output unit)/s"
 
 
 @main.command("diagnose")
@@ -142,22 +154,22 @@ def diagnose_cmd(record, model_file, out, calibration_s, false_alarms_per_hour, 
     from rwlab.testbed import load_record
     from rwlab.wheel import IdentifiedWheel
 
-    _check_folder(out)
-    wheel = IdentifiedWheel.from_json(model_file)
-    data = load_record(record, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
-    result = diagnose(
-        data,
-        wheel,
-        calibration_s=calibration_s,
-        false_alarms_per_hour=false_alarms_per_hour,
-        speed_test=speed_test,
-    )
-    paths = write_diagnosis(result, out, title=Path(record).name, force=force)
+    with _output(out, ("diagnosis.json", "report.html"), force, "diagnosis") as stage:
+        wheel = IdentifiedWheel.from_json(model_file)
+        data = load_record(record, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
+        result = diagnose(
+            data,
+            wheel,
+            calibration_s=calibration_s,
+            false_alarms_per_hour=false_alarms_per_hour,
+            speed_test=speed_test,
+        )
+        paths = write_diagnosis(result, stage, title=Path(record).name, force=force)
     for a in result.alarms:
         click.echo(f"alarm at {a.t_s:.1f} s: {a.kind} ({a.detector} test, {a.statistic:.3g})")
     if not result.alarms:
         click.echo("no alarm")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 def _identify_one(
@@ -195,7 +207,10 @@ def _identify_one(
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
         saturation_source=saturation["saturation_source"],
     )
-    return result.to_dict(), write_study(result, model, out, force=force)
+    paths = write_study(result, model, out, force=force)
+    study = result.to_dict()
+    study["data"]["output_unit"] = data.output_units[0]  # for the messages only
+    return study, paths
 
 
 _RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")
@@ -225,7 +240,6 @@ def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
 def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
     """`rwlab identify FOLDER`: every record's study on the Dask engine, and a fleet summary."""
     from rwlab.campaign.engine import dask_client, map_batches
-    from rwlab.report.attitude import check_outputs
     from rwlab.report.campaign import FLEET_FILES, write_fleet
 
     records = sorted(
@@ -241,21 +255,19 @@ def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force)
     twins = sorted({s for s in stems if stems.count(s) > 1})
     if twins:
         raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
-    check_outputs(out, FLEET_FILES, force)
-    for stem in stems:
-        check_outputs(out / stem, ["report.html", "study.json", "model.json"], force)
-    jobs = [[(str(p), str(out / p.stem))] for p in records]
-    click.echo(f"identifying {len(records)} records on Dask...", err=True)
-    with (
-        dask_client(workers, scheduler) as client,
-        _steps_progress(len(records), "fleet identification", unit="records") as progress,
-    ):
-        lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
-    paths = write_fleet(lines, out, force=force)
+    with _output(out, [*FLEET_FILES, *stems], force, "fleet identification") as stage:
+        jobs = [[(str(p), str(stage / p.stem))] for p in records]
+        click.echo(f"identifying {len(records)} records on Dask...", err=True)
+        with (
+            dask_client(workers, scheduler) as client,
+            _steps_progress(len(records), "fleet identification", unit="records") as progress,
+        ):
+            lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
+        paths = write_fleet(lines, stage, force=force)
     for line in lines:
         fit = "" if line["fit_percent"] is None else f"{line['fit_percent']:8.2f}"
         click.echo(f"{line['record']:<32} {line['structure'] or 'failed':<12} {fit:>8}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
     failed = [line for line in lines if line["error"]]
     if failed:
         raise RwlabError(
