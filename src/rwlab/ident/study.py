@@ -486,8 +486,11 @@ def load_study_data(
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
     the model: from the record's wheel parameters when present, else the RW90
-    defaults. A record whose telemetry has a gap longer than the largest
-    model's memory (``max_orders + nk_max`` samples) is refused.
+    defaults. A record whose telemetry has a gap longer than one sample time,
+    or a ``Ts`` shorter than its telemetry period, is refused (``DataError``):
+    its samples there would repeat a stale frame, and the estimates take that
+    hold for wheel dynamics (a 2-s dropout in a 600-s PRBS turned ARX221 into
+    ARX222 and the rate limit from 314 to 8499 rpm/s).
     """
     from pathlib import Path
 
@@ -503,10 +506,17 @@ def load_study_data(
     if Path(path).suffix.lower() == ".mcap":
         from rwlab.testbed import read_record
 
+        from rwlab.errors import RecordGapError
+
         meta = read_record(path).metadata
-        Ts_rec = Ts if Ts is not None else meta.get("Ts")
-        memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load(path, Ts, **columns, max_gap=memory or None)
+        try:
+            data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
+        except RecordGapError as exc:
+            raise RecordGapError(
+                f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
+                "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
+                "or export the gap-free parts and identify each."
+            ) from None
         wheel = meta.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
