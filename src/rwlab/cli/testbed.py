@@ -152,8 +152,24 @@ def experiment(
             stop_process(server)
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
-        f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
+        f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status}); "
+        f"timing: {_timing_line(summary.timing)}"
     )
+
+
+def _timing_line(t: dict) -> str:
+    """The run's real-time quality in one line (see rwlab.testbed.runner.Timing)."""
+    if not t.get("commands"):
+        return "no command sent"
+    lat, per, ms = t["lateness_s"], t["period_s"], 1e3
+    text = (
+        f"lateness p50/p99/max {lat['p50'] * ms:.3g}/{lat['p99'] * ms:.3g}/{lat['max'] * ms:.3g}"
+        f" ms, {t['late']} of {t['commands']} commands late by > {t['tolerance_s'] * ms:.3g} ms"
+    )
+    if per["p50"] is not None:
+        text += f"; period p50/p99/max {per['p50'] * ms:.4g}/{per['p99'] * ms:.4g}/"
+        text += f"{per['max'] * ms:.4g} ms"
+    return text
 
 
 @main.command("export")

@@ -504,9 +504,8 @@ def load_study_data(
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
-        from rwlab.testbed import read_record
-
         from rwlab.errors import RecordGapError
+        from rwlab.testbed import read_record
 
         meta = read_record(path).metadata
         try:

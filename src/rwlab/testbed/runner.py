@@ -13,6 +13,7 @@ default (a 20-minute PRBS finishes in seconds, through real CAN frames);
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 from collections.abc import Callable
@@ -83,6 +84,10 @@ class ExperimentConfig:
         ``model.json`` of an identified wheel: run the fault detector live
         (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
         each alarm as an ``alarm`` event.
+    late_tolerance : float, optional
+        Seconds a command may go out late before the run counts a timing fault
+        (default: 10 % of Ts, at least 1 ms, at most Ts). The lateness
+        statistics are recorded as a ``timing`` event before ``stop``.
     """
 
     signal: str = "prbs"
@@ -107,6 +112,7 @@ class ExperimentConfig:
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
     model: str | None = None
+    late_tolerance: float | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -138,6 +144,15 @@ class ExperimentConfig:
             bad_bool = isinstance(value, bool) and kind is not bool
             if not isinstance(value, kind) or bad_bool:
                 raise ConfigError(f"{name} must be {text}, got {value!r}")
+        if self.seed < 0:
+            raise ConfigError(f"seed must be an integer ≥ 0, got {self.seed}")
+        tol = self.late_tolerance
+        if tol is not None and (
+            isinstance(tol, bool)
+            or not isinstance(tol, number)
+            or not (math.isfinite(tol) and tol > 0)
+        ):
+            raise ConfigError(f"late_tolerance must be a positive number of seconds, got {tol!r}")
         if not 0 <= self.node_id <= 15:
             raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
         if not (math.isfinite(self.latency) and self.latency >= 0):
@@ -166,6 +181,13 @@ class ExperimentConfig:
                 f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
                 f"{MAX_COMMANDS:.0e} in one experiment"
             )
+
+    def tolerance(self) -> float:
+        """How late a command may go out, s: ``late_tolerance``, else 10 % of Ts (≥ 1 ms,
+        ≤ Ts): a later command shifts the signal the model is identified from."""
+        if self.late_tolerance is not None:
+            return float(self.late_tolerance)
+        return min(self.Ts, max(0.1 * self.Ts, 1e-3))
 
     def scheduled_faults(self) -> list[ScheduledFault]:
         """The faults, parsed (``ConfigError`` for a bad one)."""
@@ -256,7 +278,57 @@ class RunSummary:
     lost_frames: int
     bad_frames: int
     duration: float
-    status: str  # "completed", "interrupted", "fault", "error"
+    status: str  # "completed", "completed with timing faults", "interrupted", "fault", "error"
+    timing: dict = dataclasses.field(default_factory=dict)
+    """Command timing (:class:`Timing`): period and lateness p50/p99/max, commands late."""
+
+
+class Timing:
+    """When each command went out against when it was due (real-time quality).
+
+    Lateness is the send time minus the due time t₀ + k·Ts; the period is the
+    interval between consecutive sends. A command later than ``tolerance`` is
+    *late*; a run with a late command did not hold its sample time, and its
+    record says so ("completed with timing faults").
+
+    Parameters
+    ----------
+    Ts : float
+        The command period, s.
+    tolerance : float
+        Lateness beyond which a command counts as late, s.
+    """
+
+    def __init__(self, Ts: float, tolerance: float) -> None:
+        self.Ts, self.tolerance = Ts, tolerance
+        self.due: list[float] = []
+        self.sent: list[float] = []
+
+    def add(self, due: float, sent: float) -> None:
+        """One command: due and sent clock times, s."""
+        self.due.append(due)
+        self.sent.append(sent)
+
+    def summary(self) -> dict:
+        """Plain JSON: ``lateness_s`` and ``period_s`` as p50/p99/max, ``late`` (count)."""
+        late = np.asarray(self.sent) - np.asarray(self.due)
+        period = np.diff(self.sent)
+
+        def stats(x: np.ndarray) -> dict:
+            if not x.size:
+                return {"p50": None, "p99": None, "max": None}
+            return {k: float(np.percentile(x, q)) for k, q in (("p50", 50), ("p99", 99))} | {
+                "max": float(np.max(x))
+            }
+
+        return {
+            "Ts_s": self.Ts,
+            "tolerance_s": self.tolerance,
+            "commands": int(late.size),
+            "late": int(np.sum(late > self.tolerance)),
+            "lateness_s": stats(late),
+            "period_s": stats(period),
+        }
 
 
 def run_experiment(
@@ -324,6 +396,7 @@ def run_experiment(
         )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
+    timing = Timing(cfg.Ts, cfg.tolerance())
     t0 = clock.now() + 0.01
     writer.time_origin = t0
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
@@ -348,9 +421,11 @@ def run_experiment(
                 ):
                     writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
+            sent = clock.now()
+            timing.add(t0 + k * cfg.Ts, sent)
             writer.write(
                 "/command",
-                {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
+                {"t": sent, "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
             )
             if k == 0:
                 client.wait_ack(seq)  # no wheel on the bus: WheelTimeout now, not an empty record
@@ -359,7 +434,7 @@ def run_experiment(
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
         for fault in faults:  # those that started after the last command
             writer.event(t0 + fault.t_s, "fault_injected", str(fault))
-        status = "completed"
+        status = "completed" if not timing.summary()["late"] else "completed with timing faults"
     except KeyboardInterrupt:
         status = "interrupted"
         raise
@@ -374,6 +449,7 @@ def run_experiment(
         try:
             client.close()  # the wheel idles first, whatever else fails
             _drain(client, writer, clock)
+            writer.event(clock.now(), "timing", json.dumps(timing.summary()))
             writer.event(clock.now(), "stop", status)
         finally:
             try:
@@ -391,6 +467,7 @@ def run_experiment(
         client.bad_frames,
         clock.now() - t0,
         status,
+        timing.summary(),
     )
 
 
