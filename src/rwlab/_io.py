@@ -270,6 +270,7 @@ def _unstaged(exc: OSError, stage: Path, out: Path) -> OSError:
 
 # -- data files (IOData) --------------------------------------------------------------
 _META_PREFIX = "# rwlab "
+_HUGE = 1e100  # beyond this a sample's square overflows a double in any sum
 _TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
 
 
@@ -369,13 +370,22 @@ def _check_finite(table, cols, names, path, lines=None) -> None:
     """A NaN or Inf in a chosen column is an error naming its row and column."""
     if not cols:
         return
-    bad = np.argwhere(~np.isfinite(table[:, cols]))
+    values = table[:, cols]
+    bad = np.argwhere(~np.isfinite(values))
     if bad.size:
         r, c = bad[0]
         where = f"line {lines[r]}" if lines is not None else f"row {r + 1}"
         raise DataError(
             f"{path}: {where}, column {names[cols[c]]!r} is {float(table[r, cols[c]])}, not a "
             "finite number; remove or interpolate the bad samples (no column is dropped)"
+        )
+    huge = np.argwhere(np.abs(values) > _HUGE)
+    if huge.size:  # its square overflows: every estimate would be inf or NaN
+        r, c = huge[0]
+        where = f"line {lines[r]}" if lines is not None else f"row {r + 1}"
+        raise DataError(
+            f"{path}: {where}, column {names[cols[c]]!r} is {float(table[r, cols[c]]):g}, too "
+            f"large to compute with (beyond ±{_HUGE:g}); check the file's units"
         )
 
 
@@ -467,7 +477,7 @@ def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     with open(tmp, "w", newline="") as fh:
         if not plain:
             fh.write(_META_PREFIX + _meta(data) + "\n")
-        writer = csv.writer(fh)
+        writer = csv.writer(fh, lineterminator="\n")  # LF: what every tool reads
         writer.writerow(names)
         writer.writerows([[repr(float(v)) for v in row] for row in table])
 

@@ -92,6 +92,51 @@ def _stop_signals():
             signal.signal(s, handler)
 
 
+class Number(click.ParamType):
+    """A finite number within bounds: NaN, ±inf and absurd magnitudes are refused here.
+
+    ``click.FloatRange`` lets NaN through (every comparison with NaN is false)
+    and has no notion of "too large to mean anything"; this type says which
+    values an option takes in its error, e.g. ``--rho: nan is not a number in
+    (0, 1e+06]``. ``allow_inf`` admits +inf ("no limit").
+    """
+
+    name = "number"
+
+    def __init__(self, low=None, high=None, *, low_open=False, high_open=False, allow_inf=False):
+        self.low, self.high = low, high
+        self.low_open, self.high_open, self.allow_inf = low_open, high_open, allow_inf
+
+    def _range(self) -> str:
+        lo = "(" if self.low_open else "["
+        hi = ")" if self.high_open else "]"
+        low = "-inf" if self.low is None else f"{self.low:g}"
+        high = "inf" if self.high is None or self.allow_inf else f"{self.high:g}"
+        return f"{lo}{low}, {high}{hi}"
+
+    def convert(self, value, param, ctx):
+        import math
+
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        ok = not math.isnan(x) and (math.isfinite(x) or (self.allow_inf and x == math.inf))
+        if ok and self.low is not None:
+            ok = x > self.low if self.low_open else x >= self.low
+        if ok and self.high is not None and not (self.allow_inf and x == math.inf):
+            ok = x < self.high if self.high_open else x <= self.high
+        if not ok:
+            bounded = self.low is not None or self.high is not None
+            where = f" in {self._range()}" if bounded else ""
+            self.fail(f"{value} is not a finite number{where}", param, ctx)
+        return x
+
+
+SECONDS = Number(0, 1e9, low_open=True)  # > 0 and below 30 years
+POSITIVE = Number(0, 1e6, low_open=True)
+
+
 def _check_folder(folder) -> None:
     """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
     import errno

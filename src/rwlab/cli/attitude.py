@@ -11,7 +11,16 @@ from pathlib import Path
 
 import click
 
-from rwlab.cli._common import _engine_options, _friendly_errors, _output, _wrote, main
+from rwlab.cli._common import (
+    POSITIVE,
+    SECONDS,
+    Number,
+    _engine_options,
+    _friendly_errors,
+    _output,
+    _wrote,
+    main,
+)
 from rwlab.errors import ConfigError, RwlabError
 
 # -- attitude control -----------------------------------------------------------------
@@ -46,17 +55,17 @@ _EPOCH = click.option(
     help="geo-smallsat, geo-comsat, or a scenario TOML file.",
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--duration", type=float, default=1800.0, show_default=True, help="Seconds.")
+@click.option("--duration", type=SECONDS, default=1800.0, show_default=True, help="Seconds.")
 @click.option(
     "--wheel-model",
     type=click.Path(exists=True, dir_okay=False),
     help="model.json from `rwlab identify`: also fly it as the actuator.",
 )
-@click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ.")
+@click.option("--rho", type=POSITIVE, default=0.7692, show_default=True, help="LTR ρ.")
 @click.option("--seed", type=click.IntRange(min=0), default=None)
 @click.option(
     "--relinearize",
-    type=float,
+    type=SECONDS,
     default=None,
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
@@ -74,6 +83,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
         raise DesignError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
     sc = load_scenario(scenario, **({"epoch": epoch} if epoch else {}))
+    _check_steps(duration, sc)
     if wheel_model and sc.epoch:
         raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
     if wheel_model:
@@ -114,7 +124,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
 @click.option("--scenario", default="geo-smallsat", show_default=True)
 @click.option(
     "--rho",
-    type=float,
+    type=POSITIVE,
     multiple=True,
     default=(76.92, 7.692, 0.7692, 0.007692),
     show_default=True,
@@ -159,6 +169,14 @@ def _run_store(out, campaign, *, force: bool, resume: bool):
     shutil.rmtree(store.folder, ignore_errors=True)
     store.create()
     return store
+
+
+def _check_steps(duration: float, sc) -> int:
+    """The run's number of steps; more than 1e9 (years at 0.1 s) is a typo, refused now."""
+    steps = round(duration / sc.dt)
+    if steps > 1e9:
+        raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
+    return steps
 
 
 def _check_run(duration: float, relinearize: float | None) -> None:
@@ -208,12 +226,16 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
     type=click.Choice(["ekf", "truth"]),
     help="Default: truth for pd and lqr, ekf for lqg and lqg_ltr.",
 )
-@click.option("--dt", type=float, help="Control and physics step, s (the scenario's by default).")
-@click.option("--duration", type=float, required=True, help="Seconds.")
-@click.option("--seed", type=click.IntRange(min=0), default=None)
-@click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ (lqg_ltr).")
 @click.option(
-    "--relinearize", type=float, default=None, help="Re-design the LQR every this many seconds."
+    "--dt",
+    type=Number(0, 3600, low_open=True),
+    help="Control and physics step, s (the scenario's by default).",
+)
+@click.option("--duration", type=SECONDS, required=True, help="Seconds.")
+@click.option("--seed", type=click.IntRange(min=0), default=None)
+@click.option("--rho", type=POSITIVE, default=0.7692, show_default=True, help="LTR ρ (lqg_ltr).")
+@click.option(
+    "--relinearize", type=SECONDS, default=None, help="Re-design the LQR every this many seconds."
 )
 @_EPOCH
 @click.option("--out", type=click.Path(file_okay=False), required=True)
@@ -231,9 +253,7 @@ def attitude_simulate(
     _check_run(duration, relinearize)
     overrides = {"dt": dt} if dt is not None else {}
     sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
-    steps = round(duration / sc.dt)
-    if steps > 1e9:
-        raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
+    steps = _check_steps(duration, sc)
     log_every = max(10, -(-steps // 100_000))
     config = {
         "scenario": sc.name,
@@ -286,7 +306,7 @@ def attitude_simulate(
 @attitude.command("montecarlo")
 @click.option("--scenario", default="geo-comsat", show_default=True)
 @click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
-@click.option("--duration", type=float, required=True, help="Seconds per run.")
+@click.option("--duration", type=SECONDS, required=True, help="Seconds per run.")
 @click.option(
     "--controller",
     type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
@@ -338,6 +358,7 @@ def attitude_montecarlo(
     check_size(runs)
     _check_run(duration, None)
     sc = load_scenario(scenario)
+    _check_steps(duration, sc)
     campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
     with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
         store = _run_store(out, campaign, force=force, resume=resume)

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 
 import click
 
 from rwlab.cli._common import (
+    POSITIVE,
+    SECONDS,
+    Number,
     _columns_option,
     _engine_options,
     _friendly_errors,
@@ -23,7 +27,7 @@ from rwlab.errors import ConfigError, RwlabError
 @main.command("identify")
 @click.argument("file")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
-@click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (a record's own by default).")
 @_columns_option
 @click.option(
     "--preprocess",
@@ -34,14 +38,14 @@ from rwlab.errors import ConfigError, RwlabError
 )
 @click.option(
     "--split",
-    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    type=Number(0, 1, low_open=True, high_open=True),
     default=0.7,
     show_default=True,
     help="Estimation share.",
 )
 @click.option(
     "--tolerance",
-    type=click.FloatRange(min=0),
+    type=Number(0, 100),
     default=3.0,
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
@@ -78,13 +82,16 @@ def identify(
         raise ConfigError("--workers and --scheduler apply to a folder of records")
     with (
         _output(out, STUDY_FILES, force, "identification study") as stage,
-        click.progressbar(length=1, label="identification study", file=sys.stderr) as bar,
+        contextlib.ExitStack() as stack,
     ):
+        bars: list = []
 
         def progress(done: int, total: int, label: str) -> None:
-            bar.length = total
-            bar.label = f"identification study: {label}"
-            bar.update(1)
+            if not bars:  # from the first stage on: a refused record prints only its error
+                bar = click.progressbar(length=total, label="identification study", file=sys.stderr)
+                bars.append(stack.enter_context(bar))
+            bars[0].label = f"identification study: {label}"
+            bars[0].update(1)
 
         study, paths = _identify_one(
             file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
@@ -125,7 +132,7 @@ def _rate_unit(study: dict) -> str:
 @click.option(
     "--calibration",
     "calibration_s",
-    type=float,
+    type=SECONDS,
     default=300.0,
     show_default=True,
     help="Healthy start of the record that calibrates the residuals, s.",
@@ -133,7 +140,7 @@ def _rate_unit(study: dict) -> str:
 @click.option(
     "--false-alarms",
     "false_alarms_per_hour",
-    type=click.FloatRange(0, min_open=True),
+    type=POSITIVE,
     default=1e-3,
     show_default=True,
     help="Wanted false alarms per hour per detector (sets the thresholds).",

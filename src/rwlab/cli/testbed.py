@@ -8,13 +8,41 @@ from pathlib import Path
 
 import click
 
-from rwlab.cli._common import _check_folder, _friendly_errors, _stop_signals, main
+from rwlab.cli._common import (
+    POSITIVE,
+    Number,
+    _check_folder,
+    _friendly_errors,
+    _stop_signals,
+    main,
+)
 from rwlab.errors import ConfigError
 
 # -- the testbed ----------------------------------------------------------------------
 
 
-@main.command("experiment")
+class _ExperimentCommand(click.Command):
+    """``experiment --help`` shows ExperimentConfig's defaults (the options default to None so
+    that a --config file's values are not overridden)."""
+
+    def format_options(self, ctx, formatter):
+        from dataclasses import fields
+
+        from rwlab.testbed import ExperimentConfig
+
+        defaults = {f.name: f.default for f in fields(ExperimentConfig)}
+        for p in self.params:
+            name = {"setpoint_file": "file", "model_file": "model"}.get(p.name or "", p.name)
+            value = defaults.get(name)
+            unset = p.get_default(ctx) in (None, getattr(click.core, "UNSET", None))
+            if isinstance(p, click.Option) and unset and value not in (None, ()):
+                shown = ("on" if value else "off") if isinstance(value, bool) else value
+                if "[default:" not in (p.help or ""):
+                    p.help = f"{p.help or ''}  [default: {shown}]".strip()
+        super().format_options(ctx, formatter)
+
+
+@main.command("experiment", cls=_ExperimentCommand)
 @click.option(
     "--config",
     "config_file",
@@ -115,6 +143,8 @@ def experiment(
     from rwlab.wheel import RW90
 
     cfg.check_limits(RW90)
+    if Path(out).suffix.lower() != ".mcap":
+        raise ConfigError(f"--out {out}: a record is an .mcap file; name it NAME.mcap")
     if Path(out).exists() and not force:
         raise FileExistsError(f"{out} exists; pass --force to replace it")
     _check_folder(Path(out).parent)
@@ -176,10 +206,10 @@ def _timing_line(t: dict) -> str:
 @click.argument("record", type=click.Path(dir_okay=False))
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "mat"]), required=True)
 @click.option("--out", type=click.Path(dir_okay=False), required=True)
-@click.option("--Ts", "Ts", type=float, help="Sample time, s (default: the record's).")
+@click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (default: the record's).")
 @click.option(
     "--max-gap",
-    type=float,
+    type=Number(0, allow_inf=True),
     default=None,
     help="Accept telemetry gaps up to this many seconds (default Ts).",
 )
@@ -192,11 +222,22 @@ def export(record, fmt, out, Ts, max_gap, force):
     """
     from rwlab.testbed import load_record
 
-    _check_folder(Path(out).parent)
-    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
     path = Path(out)
-    if path.suffix.lower() != f".{fmt}":
-        path = path.with_suffix(f".{fmt}") if not path.suffix else path
+    if path.suffix and path.suffix.lower() != f".{fmt}":
+        raise ConfigError(
+            f"--format {fmt} contradicts --out {out} (a {path.suffix} name); "
+            f"name the file .{fmt} or choose the format its name says"
+        )
+    path = path.with_suffix(f".{fmt}") if not path.suffix else path
+    if path.exists() and not force:
+        raise FileExistsError(f"{path} exists; pass --force to replace it")
+    _check_folder(path.parent)
+    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
+    if data.N < 2:
+        raise ConfigError(
+            f"--Ts {data.Ts:g} s leaves {data.N} sample of the record; choose a Ts shorter "
+            "than the record"
+        )
     data.write(path, overwrite=force, plain=True)
     click.echo(f"{path}: {data.N} samples at Ts = {data.Ts:g} s")
 
@@ -213,7 +254,7 @@ def export(record, fmt, out, Ts, max_gap, force):
 @click.option("--replay", is_flag=True, help="Play a finished record back instead of following it.")
 @click.option(
     "--speed",
-    type=click.FloatRange(0, min_open=True),
+    type=POSITIVE,
     default=1.0,
     show_default=True,
     help="Replay speed factor.",
@@ -226,6 +267,13 @@ def monitor_cmd(record, host, port, replay, speed):
     if not host.strip():
         raise ConfigError("--host must name an address, e.g. 127.0.0.1")
     check_port(host, port)
+    from rwlab.testbed.record import partial_path
+
+    if not Path(record).is_file() and not partial_path(record).is_file():
+        raise FileNotFoundError(
+            f"no such record: {record} (nor {partial_path(record).name} being written); "
+            "start the experiment first, or give the path of an existing record"
+        )
     if replay:
         from rwlab.testbed import read_record
 

@@ -212,6 +212,11 @@ class ExperimentConfig:
         from rwlab._toml import read_table
 
         table = read_table(path, "experiment", "experiment")
+        if not table:
+            raise ConfigError(
+                f"{path}: the experiment file is empty; give an [experiment] table with at "
+                "least the signal and its duration"
+            )
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
@@ -362,6 +367,8 @@ def run_experiment(
         "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
         "time_origin": "s since the first command",
     }
+    detector = _live_detector(cfg)  # every check before the record opens: no empty record
+    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
@@ -369,21 +376,32 @@ def run_experiment(
     except BaseException:
         writer.discard()  # nothing was recorded: keep the old record, if any
         raise
-    node = None
-    if simulated:
-        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
-        node = WheelNode(
-            node_bus,
-            cfg.node_id,
-            params,
-            clock=clock,
-            telemetry_rate=cfg.telemetry_rate,
-            latency=cfg.latency,
-            seed=cfg.seed,
+    node = node_bus = None
+    try:
+        if simulated:
+            node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+            node = WheelNode(
+                node_bus,
+                cfg.node_id,
+                params,
+                clock=clock,
+                telemetry_rate=cfg.telemetry_rate,
+                latency=cfg.latency,
+                seed=cfg.seed,
+            )
+            if realtime:
+                node.start()
+        client = WheelClient(
+            host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts)
         )
-        if realtime:
-            node.start()
-    client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
+    except BaseException:  # refused before the first command: no record, no bus left open
+        writer.discard()
+        if node is not None:
+            node.stop()
+        for bus in (node_bus, host_bus):
+            if bus is not None:
+                bus.shutdown()
+        raise
     if cfg.raw_frames:
         client.frame_listener = lambda msg, direction: writer.write(
             "/can",
@@ -399,8 +417,6 @@ def run_experiment(
     timing = Timing(cfg.Ts, cfg.tolerance())
     t0 = clock.now() + 0.01
     writer.time_origin = t0
-    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
-    detector = _live_detector(cfg)
     if node is not None:
         node.schedule_faults(faults, origin=t0)
     try:
