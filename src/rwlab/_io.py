@@ -270,7 +270,7 @@ def _unstaged(exc: OSError, stage: Path, out: Path) -> OSError:
 
 # -- data files (IOData) --------------------------------------------------------------
 _META_PREFIX = "# rwlab "
-_HUGE = 1e100  # beyond this a sample's square overflows a double in any sum
+_HUGE = 1e150  # beyond this, sums of a few million squares overflow a double
 _TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
 
 
@@ -366,6 +366,37 @@ def _choose(names, data_cols, inputs, outputs, path) -> tuple[list[int], list[in
     return in_idx, out_idx
 
 
+def check_magnitude(data: IOData, source) -> IOData:
+    """Refuse samples too large to estimate from (their sums of squares overflow).
+
+    Files keep any finite double exactly; an estimator cannot: beyond ±1e150 the
+    regressions' sums of squares are inf and every result NaN.
+
+    Parameters
+    ----------
+    data : IOData
+    source : str or path
+        Named in the message.
+
+    Returns
+    -------
+    IOData
+        ``data``, unchanged.
+    """
+    for name, x, names in (
+        ("input", data.u, data.input_names),
+        ("output", data.y, data.output_names),
+    ):
+        big = np.argwhere(np.abs(x) > _HUGE)
+        if big.size:
+            k, c = big[0]
+            raise DataError(
+                f"{source}: sample {k} of {name} {names[c]!r} is {float(x[k, c]):g}, too large "
+                f"to estimate from (beyond ±{_HUGE:g}); check the file's units"
+            )
+    return data
+
+
 def _check_finite(table, cols, names, path, lines=None) -> None:
     """A NaN or Inf in a chosen column is an error naming its row and column."""
     if not cols:
@@ -378,14 +409,6 @@ def _check_finite(table, cols, names, path, lines=None) -> None:
         raise DataError(
             f"{path}: {where}, column {names[cols[c]]!r} is {float(table[r, cols[c]])}, not a "
             "finite number; remove or interpolate the bad samples (no column is dropped)"
-        )
-    huge = np.argwhere(np.abs(values) > _HUGE)
-    if huge.size:  # its square overflows: every estimate would be inf or NaN
-        r, c = huge[0]
-        where = f"line {lines[r]}" if lines is not None else f"row {r + 1}"
-        raise DataError(
-            f"{path}: {where}, column {names[cols[c]]!r} is {float(table[r, cols[c]]):g}, too "
-            f"large to compute with (beyond ±{_HUGE:g}); check the file's units"
         )
 
 

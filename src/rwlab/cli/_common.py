@@ -237,6 +237,7 @@ def _data_options(func):
 def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
     """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
     from rwlab import datasets
+    from rwlab._io import check_magnitude
     from rwlab.data import load
 
     if not Path(file).exists() and file in datasets.NAMES:
@@ -245,6 +246,7 @@ def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
         data = datasets.get(file)
     else:
         data = load(file, Ts, input_columns=input_col, output_columns=output_col)
+    check_magnitude(data, file)
     if detrend != "none":
         data = data.detrend(detrend)
     if normalize:

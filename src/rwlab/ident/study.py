@@ -528,4 +528,6 @@ def load_study_data(
         if input_col or output_col:
             raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    return load(path, Ts, **columns), saturation
+    from rwlab._io import check_magnitude
+
+    return check_magnitude(load(path, Ts, **columns), path), saturation
