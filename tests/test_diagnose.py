@@ -128,9 +128,10 @@ def model_file(tmp_path_factory):
     """A model identified (paper A's study) from a fault-free 20-minute PRBS, seed 0."""
     out = tmp_path_factory.mktemp("ident")
     run_experiment(ExperimentConfig(duration=1200, seed=0), out / "prbs.mcap")
-    result = CliRunner().invoke(main, ["identify", str(out / "prbs.mcap"), "--out", str(out)])
+    study = out / "study"
+    result = CliRunner().invoke(main, ["identify", str(out / "prbs.mcap"), "--out", str(study)])
     assert result.exit_code == 0, result.output
-    return out / "model.json"
+    return study / "model.json"
 
 
 def _diagnose(path, model_file):

@@ -61,7 +61,7 @@ def test_record_keeps_every_frame_with_metadata(prbs_record):
     seqs = [c["sequence"] for c in rec.topic("/command")]
     echoed = {m["sequence_echo"] for m in rec.topic("/telemetry")}
     assert set(seqs[-200:]) <= echoed  # every command was acknowledged
-    assert [e["kind"] for e in rec.topic("/event")] == ["start", "stop"]
+    assert [e["kind"] for e in rec.topic("/event")] == ["start", "timing", "stop"]
     times = [c["t"] for c in rec.topic("/command")]
     assert np.allclose(np.diff(times), 0.5)  # absolute scheduling: no drift
 

@@ -13,10 +13,8 @@ Nothing here modifies the caller's arrays.
 
 from __future__ import annotations
 
-import errno
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -482,35 +480,3 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
     from rwlab import _io
 
     return _io.read(Path(path), Ts, **options)
-
-
-def _umask_mode() -> int:
-    """The mode a plainly created file gets here (0666 less the umask)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def atomic_write_bytes(path: Path, writer) -> Path:
-    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file.
-
-    The file gets the usual permissions (0666 less the umask), not the
-    temporary file's private 0600.
-    """
-    path = Path(path)
-    if path.parent.exists() and not path.parent.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path.parent))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:  # name the file the caller asked for, not the temporary one
-        raise OSError(exc.errno, f"cannot write here ({exc.strerror})", str(path)) from None
-    os.close(fd)
-    try:
-        writer(Path(tmp))
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path

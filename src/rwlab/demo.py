@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import errno
 import html
 import json
 import os
@@ -22,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -104,22 +103,6 @@ def _experiments(cfg: DemoConfig):
     ]
 
 
-def check_out(out: Path, force: bool) -> None:
-    """Refuse an ``out`` that holds anything but a previous demo, unless ``force``.
-
-    A previous demo's folder (it has ``summary.json``) is simply replaced, so
-    running the Quick start twice works.
-    """
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(out))
-    if force or not out.exists() or (out / "summary.json").exists():
-        return
-    if any(out.iterdir()):
-        raise FileExistsError(
-            f"{out} exists and is not a previous demo's output; use --force or another --out"
-        )
-
-
 def run_demo(
     out: str | os.PathLike,
     cfg: DemoConfig = DemoConfig(),
@@ -132,7 +115,23 @@ def run_demo(
 
     ``echo(text)`` reports each stage; ``progress(label, n)`` returns a context
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
+    ``out`` is written whole when the demo succeeds, or not at all; a previous
+    demo there is replaced then (``force`` also replaces a previous output).
     """
+    from rwlab._io import output_folder
+
+    out = Path(out)
+    with output_folder(out, DEMO_FILES, force=force, replace_previous=True, what="demo") as stage:
+        summary = _run(stage, cfg, echo, progress)
+    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
+    return summary
+
+
+DEMO_FILES = ("records", "identification", "attitude", "summary.json", "index.html")
+
+
+def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
+    """The demo's work, every file written into ``out`` (the staging folder)."""
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.scenario import SCENARIOS
     from rwlab.ident.study import identification_study, physical_model
@@ -140,8 +139,6 @@ def run_demo(
     from rwlab.report.identification import write_study
     from rwlab.testbed import load_record, run_experiment
 
-    out = Path(out)
-    check_out(out, force)
     (out / "records").mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     records = []
@@ -226,7 +223,6 @@ def run_demo(
     atomic_write_bytes(out / "summary.json", lambda tmp: tmp.write_text(text))
     page = _index(summary, _pointing_png(comparison))
     atomic_write_bytes(out / "index.html", lambda tmp: tmp.write_text(page, encoding="utf-8"))
-    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
     return summary
 
 

@@ -501,6 +501,11 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    if not raw or not any(raw.values()):
+        raise ConfigError(
+            f"{path}: the scenario file is empty; give a [scenario] table (base = "
+            f"{' or '.join(map(repr, sorted(SCENARIOS)))} and the values that differ)"
+        )
     if not isinstance(raw.get("scenario", {}), dict) or not isinstance(
         raw.get("disturbances", {}), dict
     ):

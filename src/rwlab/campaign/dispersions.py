@@ -175,6 +175,11 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
                 f"{path}: unknown field {name!r}; dispersible fields: {', '.join(FIELDS)}"
             )
         out.append(_parse(name, spec, str(path)))
+    if not out:
+        raise ConfigError(
+            f"{path}: no dispersion in the file; a campaign disperses at least one field "
+            "(leave out the file for rwlab's GEO set)"
+        )
     return tuple(out)
 
 

@@ -396,7 +396,7 @@ _state_space_command(
 
 
 def _write_json(path, payload: dict, force: bool) -> None:
-    from rwlab.data import atomic_write_bytes
+    from rwlab._io import atomic_write_bytes
 
     if Path(path).exists() and not force:
         raise FileExistsError(f"{path} exists; use --force to overwrite")

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 
 import click
 
 from rwlab.cli._common import (
+    POSITIVE,
+    Number,
     _check_folder,
     _columns_option,
     _engine_options,
     _friendly_errors,
     _message,
+    _output,
+    _wrote,
     main,
 )
 from rwlab.cli.attitude import _steps_progress
@@ -22,7 +27,7 @@ from rwlab.errors import ConfigError, RwlabError
 @main.command("identify")
 @click.argument("file")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
-@click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (a record's own by default).")
 @_columns_option
 @click.option(
     "--preprocess",
@@ -34,14 +39,14 @@ from rwlab.errors import ConfigError, RwlabError
 )
 @click.option(
     "--split",
-    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    type=Number(0, 1, low_open=True, high_open=True),
     default=0.7,
     show_default=True,
     help="Estimation share.",
 )
 @click.option(
     "--tolerance",
-    type=click.FloatRange(min=0),
+    type=Number(0, 100),
     default=3.0,
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
@@ -62,7 +67,6 @@ def identify(
     studied in parallel on a Dask cluster (--workers, --scheduler), into
     OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
     """
-    _check_folder(out)
     options = dict(
         Ts=Ts,
         input_col=input_col,
@@ -77,15 +81,21 @@ def identify(
         return
     if workers is not None or scheduler is not None:
         raise ConfigError("--workers and --scheduler apply to a folder of records")
-    with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
+    with (
+        _output(out, STUDY_FILES, force, "identification study") as stage,
+        contextlib.ExitStack() as stack,
+    ):
+        bars: list = []
 
         def progress(done: int, total: int, label: str) -> None:
-            bar.length = total
-            bar.label = f"identification study: {label}"
-            bar.update(1)
+            if not bars:  # from the first stage on: a refused record prints only its error
+                bar = click.progressbar(length=total, label="identification study", file=sys.stderr)
+                bars.append(stack.enter_context(bar))
+            bars[0].label = f"identification study: {label}"
+            bars[0].update(1)
 
         study, paths = _identify_one(
-            file, out, progress=progress, echo=lambda t: click.echo(t, err=True), **options
+            file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
         )
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
@@ -98,11 +108,20 @@ def identify(
     if nl and "error" not in nl:
         click.echo(
             f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
-            f"{nl['accel_limit_rpm_s']:.4g} (output unit)/s"
+            f"{nl['accel_limit_rpm_s']:.4g} {_rate_unit(study)}"
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
+
+
+STUDY_FILES = ("report.html", "study.json", "model.json")
+
+
+def _rate_unit(study: dict) -> str:
+    """The rate limit's unit: the output's unit per second (rpm/s for a wheel record)."""
+    unit = (study.get("data") or {}).get("output_unit") or ""
+    return f"{unit}/s" if unit else "(output unit)/s"
 
 
 @main.command("diagnose")
@@ -114,7 +133,7 @@ def identify(
 @click.option(
     "--false-alarms",
     "false_alarms_per_hour",
-    type=click.FloatRange(0, min_open=True),
+    type=POSITIVE,
     default=1e-3,
     show_default=True,
     help="Wanted false alarms per hour per detector (sets the thresholds).",
@@ -147,7 +166,7 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
         click.echo(f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)")
     if not result.alarms:
         click.echo("no alarm")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 def _finding_text(a) -> str:
@@ -164,11 +183,13 @@ def _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force):
     from rwlab.report.diagnosis import write_diagnosis
     from rwlab.testbed import load_record
 
-    data = load_record(
-        record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
-    )
-    result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
-    return result, write_diagnosis(result, out, title=Path(record).name, force=force)
+    with _output(out, ("diagnosis.json", "report.html"), force, "diagnosis") as stage:
+        data = load_record(
+            record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
+        result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
+        paths = write_diagnosis(result, stage, title=Path(record).name, force=force)
+    return result, paths
 
 
 def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> None:
@@ -189,7 +210,7 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
         named = ", ".join(_finding_text(a) for a in result.alarms) or "no alarm"
         click.echo(f"{path.name:<32} {named}")
     paths = write_trend(points, out, force=force)
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 def _identify_one(
@@ -243,7 +264,10 @@ def _identify_one(
         model["healthy_reference"] = reference
     elif echo is not None:
         echo(f"no healthy reference for fault diagnosis: {reference}")
-    return result.to_dict(), write_study(result, model, out, force=force)
+    paths = write_study(result, model, out, force=force)
+    study = result.to_dict()
+    study["data"]["output_unit"] = data.output_units[0]  # for the messages only
+    return study, paths
 
 
 def _healthy_reference(file, model: dict) -> dict | str:
@@ -293,7 +317,6 @@ def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
 def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
     """`rwlab identify FOLDER`: every record's study on the Dask engine, and a fleet summary."""
     from rwlab.campaign.engine import dask_client, map_batches
-    from rwlab.report.attitude import check_outputs
     from rwlab.report.campaign import FLEET_FILES, write_fleet
 
     records = sorted(
@@ -309,21 +332,19 @@ def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force)
     twins = sorted({s for s in stems if stems.count(s) > 1})
     if twins:
         raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
-    check_outputs(out, FLEET_FILES, force)
-    for stem in stems:
-        check_outputs(out / stem, ["report.html", "study.json", "model.json"], force)
-    jobs = [[(str(p), str(out / p.stem))] for p in records]
-    click.echo(f"identifying {len(records)} records on Dask...", err=True)
-    with (
-        dask_client(workers, scheduler) as client,
-        _steps_progress(len(records), "fleet identification", unit="records") as progress,
-    ):
-        lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
-    paths = write_fleet(lines, out, force=force)
+    with _output(out, [*FLEET_FILES, *stems], force, "fleet identification") as stage:
+        jobs = [[(str(p), str(stage / p.stem))] for p in records]
+        click.echo(f"identifying {len(records)} records on Dask...", err=True)
+        with (
+            dask_client(workers, scheduler) as client,
+            _steps_progress(len(records), "fleet identification", unit="records") as progress,
+        ):
+            lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
+        paths = write_fleet(lines, stage, force=force)
     for line in lines:
         fit = "" if line["fit_percent"] is None else f"{line['fit_percent']:8.2f}"
         click.echo(f"{line['record']:<32} {line['structure'] or 'failed':<12} {fit:>8}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
     failed = [line for line in lines if line["error"]]
     if failed:
         raise RwlabError(

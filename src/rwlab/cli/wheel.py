@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rwlab.cli._common import _friendly_errors, _stop_signals, main
+from rwlab.cli._common import SECONDS, Number, _friendly_errors, _stop_signals, main
 
 # -- the wheel ------------------------------------------------------------------------
 
@@ -47,17 +47,23 @@ def wheel() -> None:
 
 @wheel.command("serve")
 @_bus_options
-@click.option("--telemetry-rate", type=float, default=100.0, show_default=True, help="Hz.")
+@click.option(
+    "--telemetry-rate",
+    type=Number(0, 10_000, low_open=True),
+    default=100.0,
+    show_default=True,
+    help="Hz.",
+)
 @click.option(
     "--latency-ms",
-    type=float,
+    type=Number(0, 10_000),
     default=20.0,
     show_default=True,
     help="Command-to-effect latency (paper A measured ~20 ms).",
 )
 @click.option(
     "--watchdog",
-    type=float,
+    type=Number(0, 3600),
     default=1.0,
     show_default=True,
     help="Idle the wheel after this many seconds without a command (0: off).",
@@ -73,7 +79,7 @@ def wheel() -> None:
     default=None,
     help="Wheel unit: parameters drawn within their tolerances around --params.",
 )
-@click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
+@click.option("--duration", type=SECONDS, default=None, help="Stop after this many seconds.")
 @_friendly_errors
 def wheel_serve(
     interface,
@@ -197,15 +203,15 @@ def _status(node) -> str:
 @wheel.command("cmd")
 @_bus_options
 @click.argument("action", type=click.Choice(["speed", "accel", "idle", "clear"]))
-@click.argument("value", type=float, required=False, default=0.0)
+@click.argument("value", type=Number(), required=False, default=0.0)
 @click.option(
     "--watch",
-    type=float,
+    type=Number(0, 86_400),
     default=2.0,
     show_default=True,
     help="Seconds to print telemetry after the command.",
 )
-@click.option("--timeout", type=float, default=0.5, show_default=True)
+@click.option("--timeout", type=Number(0, 3600, low_open=True), default=0.5, show_default=True)
 @_friendly_errors
 def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeout):
     """Send one command (speed rpm, accel rpm/s, idle, clear) and print telemetry.

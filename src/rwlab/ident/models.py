@@ -25,7 +25,8 @@ import numpy as np
 from scipy import linalg
 from scipy import signal as sps
 
-from rwlab.data import IOData, atomic_write_bytes, check_Ts
+from rwlab._io import atomic_write_bytes
+from rwlab.data import IOData, check_Ts
 from rwlab.errors import DataError, FileFormatError, ModelError
 from rwlab.ident.polynomials import check_initial, filt, fit_initial, is_stable, roots_z, to_z
 

@@ -619,9 +619,11 @@ def load_study_data(
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
     the model: from the record's wheel parameters when present, else the RW90
-    defaults; ``current_limit_a`` is the driver's current limit (A). A record
-    whose telemetry has a gap longer than the largest model's memory
-    (``max_orders + nk_max`` samples) is refused.
+    defaults; ``current_limit_a`` is the driver's current limit (A). A record whose
+    telemetry has a gap longer than one sample time, or a ``Ts`` shorter than its
+    telemetry period, is refused (``DataError``): its samples there would repeat a
+    stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
+    a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
     """
     from pathlib import Path
 
@@ -636,12 +638,18 @@ def load_study_data(
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
+        from rwlab.errors import RecordGapError
         from rwlab.testbed import read_record
 
         meta = read_record(path).metadata
-        Ts_rec = Ts if Ts is not None else meta.get("Ts")
-        memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load(path, Ts, **columns, max_gap=memory or None)
+        try:
+            data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
+        except RecordGapError as exc:
+            raise RecordGapError(
+                f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
+                "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
+                "or export the gap-free parts and identify each."
+            ) from None
         wheel = meta.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
@@ -656,4 +664,6 @@ def load_study_data(
         if input_col or output_col:
             raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    return load(path, Ts, **columns), saturation
+    from rwlab._io import check_magnitude
+
+    return check_magnitude(load(path, Ts, **columns), path), saturation

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rwlab._io import atomic_write_bytes
 from rwlab.attitude.control import Comparison
 from rwlab.attitude.design import LTRResult
-from rwlab.data import atomic_write_bytes
 from rwlab.report.html import Page, figure
 
 __all__ = ["write_comparison", "write_ltr"]

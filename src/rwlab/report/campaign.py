@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rwlab._io import atomic_write_bytes
 from rwlab.campaign.montecarlo import AXES, Campaign, axis_errors_deg
-from rwlab.data import atomic_write_bytes
 from rwlab.report.attitude import check_outputs
 from rwlab.report.html import Page, figure
 
@@ -123,6 +123,26 @@ def _confidence_section(page: Page, budget: dict, req: float) -> None:
     )
 
 
+def _execution_note(page: Page, execution: dict | None) -> None:
+    """How the campaign ran: runs resumed from an interrupted one, batches retried."""
+    if not execution:
+        return
+    parts = []
+    if execution.get("resumed_runs"):
+        parts.append(
+            f"{execution['resumed_runs']} runs were kept from an interrupted campaign and "
+            "resumed (each run depends only on its seed, so the rows are those of an "
+            "uninterrupted campaign)"
+        )
+    if execution.get("retries"):
+        parts.append(
+            f"{execution['retries']} batch(es) were computed again after their worker was "
+            f"lost: runs {execution['retried_runs']}"
+        )
+    if parts:
+        page.html(f'<p class="note" id="execution">{"; ".join(parts)}.</p>')
+
+
 def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
     sc = campaign.scenario
     req = budget["requirement_deg"]
@@ -136,6 +156,7 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
         f"{budget['meets_requirement_fraction']:.1%} of the runs meet it in steady state."
     )
     _confidence_section(page, budget, req)
+    _execution_note(page, budget.get("execution"))
     page.heading("Pointing budget", "budget")
     stats = ["mean", "std", "p99_73", "mean_plus_3std", "max"]
     rows_b = [

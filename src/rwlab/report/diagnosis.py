@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 from rwlab.diagnose import Diagnosis
 from rwlab.report.html import Page, figure
 

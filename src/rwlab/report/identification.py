@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import Page, figure
 

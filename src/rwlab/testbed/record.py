@@ -263,6 +263,12 @@ def read_record(path: str | os.PathLike) -> Record:
     """
     path = Path(path)
     if not path.is_file():
+        partial = partial_path(path)
+        if partial.is_file() and partial != path:
+            raise FileNotFoundError(
+                f"no such record: {path}; the run that wrote it did not finish and left "
+                f"{partial} (readable up to where it stopped): use that file"
+            )
         raise FileNotFoundError(f"no such record: {path}")
     data = path.read_bytes()
     if not data.startswith(MAGIC):

@@ -13,6 +13,7 @@ default (a 20-minute PRBS finishes in seconds, through real CAN frames);
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 from collections.abc import Callable
@@ -99,6 +100,10 @@ class ExperimentConfig:
         ``model.json`` of an identified wheel: run the fault detector live
         (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
         each alarm as an ``alarm`` event.
+    late_tolerance : float, optional
+        Seconds a command may go out late before the run counts a timing fault
+        (default: 10 % of Ts, at least 1 ms, at most Ts). The lateness
+        statistics are recorded as a ``timing`` event before ``stop``.
     """
 
     signal: str = "prbs"
@@ -126,6 +131,7 @@ class ExperimentConfig:
     wheel: str = "rw90"
     unit: int | None = None
     protocol: str = "rwlab"
+    late_tolerance: float | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
@@ -162,6 +168,15 @@ class ExperimentConfig:
             bad_bool = isinstance(value, bool) and kind is not bool
             if not isinstance(value, kind) or bad_bool:
                 raise ConfigError(f"{name} must be {text}, got {value!r}")
+        if self.seed < 0:
+            raise ConfigError(f"seed must be an integer ≥ 0, got {self.seed}")
+        tol = self.late_tolerance
+        if tol is not None and (
+            isinstance(tol, bool)
+            or not isinstance(tol, number)
+            or not (math.isfinite(tol) and tol > 0)
+        ):
+            raise ConfigError(f"late_tolerance must be a positive number of seconds, got {tol!r}")
         self.wheel_params()  # a bad preset or unit fails here, before any work
         if not 0 <= self.node_id <= 15:
             raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
@@ -209,6 +224,13 @@ class ExperimentConfig:
         params = WheelParams.preset(self.wheel) if base is None else base
         return params if self.unit is None else params.for_unit(self.unit)
 
+    def tolerance(self) -> float:
+        """How late a command may go out, s: ``late_tolerance``, else 10 % of Ts (≥ 1 ms,
+        ≤ Ts): a later command shifts the signal the model is identified from."""
+        if self.late_tolerance is not None:
+            return float(self.late_tolerance)
+        return min(self.Ts, max(0.1 * self.Ts, 1e-3))
+
     def scheduled_faults(self) -> list[ScheduledFault]:
         """The faults, parsed (``ConfigError`` for a bad one)."""
         return [parse_fault(text) for text in self.faults]
@@ -232,6 +254,11 @@ class ExperimentConfig:
         from rwlab._toml import read_table
 
         table = read_table(path, "experiment", "experiment")
+        if not table:
+            raise ConfigError(
+                f"{path}: the experiment file is empty; give an [experiment] table with at "
+                "least the signal and its duration"
+            )
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
@@ -298,7 +325,57 @@ class RunSummary:
     lost_frames: int
     bad_frames: int
     duration: float
-    status: str  # "completed", "interrupted", "fault", "error"
+    status: str  # "completed", "completed with timing faults", "interrupted", "fault", "error"
+    timing: dict = dataclasses.field(default_factory=dict)
+    """Command timing (:class:`Timing`): period and lateness p50/p99/max, commands late."""
+
+
+class Timing:
+    """When each command went out against when it was due (real-time quality).
+
+    Lateness is the send time minus the due time t₀ + k·Ts; the period is the
+    interval between consecutive sends. A command later than ``tolerance`` is
+    *late*; a run with a late command did not hold its sample time, and its
+    record says so ("completed with timing faults").
+
+    Parameters
+    ----------
+    Ts : float
+        The command period, s.
+    tolerance : float
+        Lateness beyond which a command counts as late, s.
+    """
+
+    def __init__(self, Ts: float, tolerance: float) -> None:
+        self.Ts, self.tolerance = Ts, tolerance
+        self.due: list[float] = []
+        self.sent: list[float] = []
+
+    def add(self, due: float, sent: float) -> None:
+        """One command: due and sent clock times, s."""
+        self.due.append(due)
+        self.sent.append(sent)
+
+    def summary(self) -> dict:
+        """Plain JSON: ``lateness_s`` and ``period_s`` as p50/p99/max, ``late`` (count)."""
+        late = np.asarray(self.sent) - np.asarray(self.due)
+        period = np.diff(self.sent)
+
+        def stats(x: np.ndarray) -> dict:
+            if not x.size:
+                return {"p50": None, "p99": None, "max": None}
+            return {k: float(np.percentile(x, q)) for k, q in (("p50", 50), ("p99", 99))} | {
+                "max": float(np.max(x))
+            }
+
+        return {
+            "Ts_s": self.Ts,
+            "tolerance_s": self.tolerance,
+            "commands": int(late.size),
+            "late": int(np.sum(late > self.tolerance)),
+            "lateness_s": stats(late),
+            "period_s": stats(period),
+        }
 
 
 def run_experiment(
@@ -338,6 +415,8 @@ def run_experiment(
         "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
         "time_origin": "s since the first command",
     }
+    detector = _live_detector(cfg)  # every check before the record opens: no empty record
+    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
     stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
@@ -352,39 +431,50 @@ def run_experiment(
         writer.discard()  # nothing was recorded: keep the old record, if any
         raise
     node = None
-    if simulated:
-        if not stream_twin:
-            node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
-        node = WheelNode(
-            node_bus,
+    if not stream_twin:
+        node_bus = None
+    try:
+        if simulated:
+            if not stream_twin:
+                node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+            node = WheelNode(
+                node_bus,
+                cfg.node_id,
+                params,
+                clock=clock,
+                telemetry_rate=cfg.telemetry_rate,
+                latency=cfg.latency,
+                seed=cfg.seed,
+                protocol=cfg.protocol,
+            )
+            if realtime:
+                node.start()
+        client = WheelClient(
+            host_bus,
             cfg.node_id,
             params,
             clock=clock,
-            telemetry_rate=cfg.telemetry_rate,
-            latency=cfg.latency,
-            seed=cfg.seed,
+            timeout=max(0.5, 2 * cfg.Ts),
             protocol=cfg.protocol,
         )
-        if realtime:
-            node.start()
-    client = WheelClient(
-        host_bus,
-        cfg.node_id,
-        params,
-        clock=clock,
-        timeout=max(0.5, 2 * cfg.Ts),
-        protocol=cfg.protocol,
-    )
-    client.link.set_telemetry_rate(cfg.telemetry_rate)
+        client.link.set_telemetry_rate(cfg.telemetry_rate)
+    except BaseException:  # refused before the first command: no record, no bus left open
+        writer.discard()
+        if node is not None:
+            node.stop()
+        for bus in (node_bus, host_bus):
+            if bus is not None:
+                bus.shutdown()
+        raise
     if cfg.raw_frames:
         client.frame_listener = lambda t, frame_id, data, direction: writer.write(
             "/can", {"t": t, "id": frame_id, "data": data.hex(), "direction": direction}
         )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
+    timing = Timing(cfg.Ts, cfg.tolerance())
     t0 = clock.now() + 0.01
     writer.time_origin = t0
-    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     if node is not None:
         node.schedule_faults(faults, origin=t0)
     try:
@@ -406,9 +496,11 @@ def run_experiment(
                 ):
                     writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
+            sent = clock.now()
+            timing.add(t0 + k * cfg.Ts, sent)
             writer.write(
                 "/command",
-                {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
+                {"t": sent, "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
             )
             if k == 0:
                 client.wait_ack(seq)  # no wheel on the bus: WheelTimeout now, not an empty record
@@ -417,7 +509,7 @@ def run_experiment(
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
         for fault in faults:  # those that started after the last command
             writer.event(t0 + fault.t_s, "fault_injected", str(fault))
-        status = "completed"
+        status = "completed" if not timing.summary()["late"] else "completed with timing faults"
     except KeyboardInterrupt:
         status = "interrupted"
         raise
@@ -435,6 +527,7 @@ def run_experiment(
             dropped = _dropped_text(client)
             if dropped:
                 writer.event(clock.now(), "dropped_frames", dropped)
+            writer.event(clock.now(), "timing", json.dumps(timing.summary()))
             writer.event(clock.now(), "stop", status)
         finally:
             try:
@@ -452,6 +545,7 @@ def run_experiment(
         client.bad_frames,
         clock.now() - t0,
         status,
+        timing.summary(),
     )
 
 

@@ -80,7 +80,7 @@ class IdentifiedWheel:
         """
         try:
             info = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
         return cls.from_info(info, model, source=str(path))
 
@@ -90,8 +90,42 @@ class IdentifiedWheel:
     ) -> IdentifiedWheel:
         """The wheel of a ``model.json`` already read (its dict); see :meth:`from_json`."""
         path = source
-        if info.get("format") != "rwlab.WheelModel/1":
+        if not isinstance(info, dict) or info.get("format") != "rwlab.WheelModel/1":
             raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
+        try:
+            wheel = cls._from_info(info, path, model)
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+            if isinstance(exc, ModelError):
+                raise FileFormatError(f"{path}: bad model ({exc})") from None
+            raise FileFormatError(
+                f"{path}: a malformed model file ({type(exc).__name__}: {exc}); write it with "
+                "rwlab identify"
+            ) from None
+        wheel._check(path)
+        return wheel
+
+    def _check(self, path) -> None:
+        """Refuse a model no wheel can have: unstable, or limits that are not positive."""
+        for name in ("speed_limit_rpm", "accel_limit_rpm_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ModelError(
+                    f"{path}: saturation {name} must be a positive number, got {value}"
+                )
+        coeffs = [np.ravel(m) for m in (self._A, self._B, self._C, self._D)]
+        if not all(np.all(np.isfinite(m)) for m in coeffs):
+            raise ModelError(f"{path}: the model holds non-finite coefficients")
+        if max(float(np.max(np.abs(m), initial=0.0)) for m in coeffs) > 1e12:
+            raise ModelError(f"{path}: the model's coefficients exceed 1e12: not a wheel's model")
+        poles = np.linalg.eigvals(self._A) if self._A.size else np.zeros(0)
+        if poles.size and np.max(np.abs(poles)) >= 1:
+            raise ModelError(
+                f"{path}: the model is unstable (largest pole |z| = {np.max(np.abs(poles)):.4g}); "
+                "a wheel's speed loop is stable, so the file is wrong: identify the wheel again"
+            )
+
+    @classmethod
+    def _from_info(cls, info: dict, path, model: str | None) -> IdentifiedWheel:
         sat = info["saturation"]
         kind = model or info.get("preferred", "linear")
         if kind not in ("linear", "nonlinear"):
