@@ -11,6 +11,7 @@ whatever made it close.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +25,6 @@ from rwlab.wheel.node import WheelNode
 from rwlab.wheel.physics import Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["WheelBank", "WheelReading"]
-
 
 
 class _Only:
@@ -193,7 +193,7 @@ class WheelBank:
                     f"wheel {c.node_id} sent no telemetry in {listen_s:g} s; check that it is "
                     f"powered and on the {self.interface} bus, and its node id"
                 )
-            steps = [(b.counter - a.counter) % 256 for a, b in zip(frames, frames[1:])]
+            steps = [(b.counter - a.counter) % 256 for a, b in itertools.pairwise(frames)]
             if any(s == 0 or s > 128 for s in steps):
                 raise ConfigError(
                     f"node {c.node_id} answers from two sources (its telemetry counter repeats "
@@ -278,9 +278,7 @@ class WheelBank:
                     if isinstance(f, proto.Heartbeat) and t >= deadline - wait_s:
                         seen[c.node_id] = f.commands_seen
             self.clock.sleep_until(min(deadline, self.clock.now() + 0.05))
-        return {
-            n: (self.sent[n] - seen[n]) % 65536 if n in seen else None for n in self.nodes
-        }
+        return {n: (self.sent[n] - seen[n]) % 65536 if n in seen else None for n in self.nodes}
 
     def lost_telemetry(self) -> dict[int, int]:
         """Telemetry frames lost per wheel (gaps in the frame counter)."""
@@ -294,7 +292,7 @@ class WheelBank:
                 seq = c.idle()
                 self.sent[c.node_id] += 1
                 c.wait_ack(seq)
-            except Exception as exc:  # noqa: BLE001 - every wheel must get its idle
+            except Exception as exc:  # every wheel must get its idle
                 problems.append(f"wheel {c.node_id}: {exc}")
         return problems
 
@@ -306,7 +304,7 @@ class WheelBank:
         for bus in self.buses:
             try:
                 bus.shutdown()
-            except Exception:  # noqa: BLE001 - closing a broken bus must not hide the cause
+            except Exception:  # a broken bus must not hide the cause
                 pass
         self.clients, self.twins, self.buses = [], [], []
         return problems

@@ -114,6 +114,9 @@ class HilConfig:
         Control periods between satellite records (rounded to sensor periods).
     timeout_s : float
         A wheel silent this long stops the run.
+    reference : bool
+        Also fly ``attitude simulate`` on the same scenario and seed with the physics
+        wheel (healthy, from the same wheel momenta) for the side-by-side comparison.
     """
 
     scenario: str = "geo-smallsat"
@@ -136,6 +139,7 @@ class HilConfig:
     false_alarms_per_hour: float = 1e-3
     log_every: int = 5
     timeout_s: float = 0.5
+    reference: bool = True
 
 
 @dataclass
@@ -154,6 +158,10 @@ class HilResult:
     wheel_log : dict
         node → arrays ``t``, ``speed_rpm``, ``command_rpm_s`` at each control period.
     scenario : Scenario
+    wheel_momentum0 : (N,) array
+        The wheels' momenta at the start, N·m·s.
+    reference : SimResult or None
+        ``attitude simulate``'s run of the same scenario and seed with the physics wheel.
     paths : dict
         name → path of each file written.
     """
@@ -164,6 +172,7 @@ class HilResult:
     wheel_log: dict
     scenario: Scenario
     wheel_momentum0: np.ndarray
+    reference: SimResult | None = None
     paths: dict = field(default_factory=dict)
 
 
@@ -256,7 +265,12 @@ def _frame_writer(record, node: int, clock):
         if isinstance(frame, proto.Command):
             record.write(
                 f"/wheel{node}/command",
-                {"t": t, "sequence": frame.sequence, "mode": frame.mode.name, "setpoint": frame.setpoint},
+                {
+                    "t": t,
+                    "sequence": frame.sequence,
+                    "mode": frame.mode.name,
+                    "setpoint": frame.setpoint,
+                },
             )
         elif isinstance(frame, proto.Telemetry):
             record.write(
@@ -296,7 +310,9 @@ def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
     if not (math.isfinite(cfg.duration) and cfg.duration >= sc.dt):
         raise ConfigError(f"--duration must be at least one control period ({sc.dt:g} s)")
     if cfg.realtime and sc.dt > 0.1 + 1e-12:
-        raise ConfigError(f"the wall-clock loop runs at 10 Hz or faster; {sc.name} has dt {sc.dt:g} s")
+        raise ConfigError(
+            f"the wall-clock loop runs at 10 Hz or faster; {sc.name} has dt {sc.dt:g} s"
+        )
     for node, fault in cfg.faults:
         if node not in nodes:
             raise ConfigError(f"--fault names node {node}, not one of the wheels {nodes}")
@@ -420,18 +436,83 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     problems = bank.close()
     run = loop.sat.result()
     m = metrics(run, sc.pointing_requirement_deg)
+    reference = ref_metrics = None
+    if cfg.reference:
+        reference, ref_metrics = reference_simulation(sc, cfg, seed, loop.h0, run.t.size)
     payload = {
         **m,
         "timing": loop.timing(),
         "wheel_faults": loop.wheel_faults,
         "bench": {**loop.bench, "idle_problems": problems},
+        "measurement": measurement_effects(loop.wheel_log(), params, sc.dt, cfg.latency_s),
+        "reference_simulation": ref_metrics,
         "config": config,
     }
     text = json.dumps(payload, indent=2, default=_json_default)
     atomic_write_bytes(targets["metrics.json"], lambda tmp: tmp.write_text(text))
     record.event(clock.now(), "stop", "end of run; every wheel idled")
     record.close()
-    return HilResult(run, payload, loop.events, loop.wheel_log(), sc, loop.h0, dict(targets))
+    wheel_log = loop.wheel_log()
+    return HilResult(run, payload, loop.events, wheel_log, sc, loop.h0, reference, dict(targets))
+
+
+def reference_simulation(sc: Scenario, cfg: HilConfig, seed: int, h0: np.ndarray, rows: int):
+    """``attitude simulate``'s run of the same scenario, controller and seed with the
+    physics wheel from the same momenta: (SimResult, its metrics)."""
+    from rwlab.attitude.sim import simulate
+
+    ref = sc.with_(wheel_model="physics")
+    ctl, estimator, kw = build_controller(ref, cfg.controller)
+    run = simulate(
+        ref,
+        ctl,
+        duration=cfg.duration,
+        estimator=estimator,
+        seed=seed,
+        log_every=cfg.log_every,
+        wheel_momentum0=np.asarray(h0, float),
+        **kw,
+    )
+    m = metrics(run, sc.pointing_requirement_deg)
+    m["wheel_model"] = "physics (healthy: the injected faults are not flown here)"
+    return run, m
+
+
+def measurement_effects(wheel_log: dict, params, dt: float, latency: float) -> dict:
+    """What the wheels on the bus do that the simulated wheel does not, measured.
+
+    Per wheel: the RMS difference between the torque commanded and the torque the
+    reported speeds imply (N·m), the reported speed's quantum as a momentum (N·m·s)
+    and as a torque over one period, and the zero crossings of the reported speed
+    (where Coulomb friction turns over and the Hall sensor reads 0).
+    """
+    quantum_rpm = params.speed_resolution_rpm
+    h_q = params.inertia * quantum_rpm * np.pi / 30
+    out: dict = {
+        "speed_quantum_rpm": quantum_rpm,
+        "momentum_quantum_Nms": h_q,
+        "torque_quantum_per_period_Nm": h_q / dt,
+        "hall_dead_zone_rpm": params.min_measurable_rpm,
+        "twin_latency_s": latency,
+        "wheels": {},
+    }
+    for node, log in wheel_log.items():
+        speed, cmd = log["speed_rpm"], log["command_rpm_s"]
+        if speed.size < 3:
+            continue
+        realised = np.diff(speed) / dt  # rpm/s over each period after the first
+        diff = (realised - cmd[1:]) * params.inertia * np.pi / 30
+        s = np.sign(speed[np.abs(speed) > 0])
+        out["wheels"][str(node)] = {
+            "torque_error_rms_Nm": float(np.sqrt(np.mean(diff**2))),
+            "torque_error_mean_Nm": float(np.mean(diff)),
+            "torque_command_rms_Nm": float(
+                np.sqrt(np.mean((cmd * params.inertia * np.pi / 30) ** 2))
+            ),
+            "zero_crossings": int(np.sum(s[1:] != s[:-1])),
+            "time_reading_zero_s": float(np.sum(speed == 0) * dt),
+        }
+    return out
 
 
 def _json_default(o):
@@ -523,7 +604,9 @@ class _Loop:
             if k % sat.log_every == 0:
                 self._write_satellite(torques)
             for i, n in enumerate(self.nodes):
-                acc_sum[n] += rad_s_to_rpm(torques[i] / bank.params.inertia) if bank.active[n] else 0.0
+                acc_sum[n] += (
+                    rad_s_to_rpm(torques[i] / bank.params.inertia) if bank.active[n] else 0.0
+                )
             target = t0 + (k + 1) * sc.dt + delay
             clock.sleep_until(target)
             wake = clock.now()

@@ -1,4 +1,4 @@
-"""The satellite on the host: plant, sky, sensors, MEKF and controller, one control period at a time.
+"""The satellite on the host: plant, sky, sensors, MEKF and controller, period by period.
 
 :class:`Satellite` is the attitude loop of :func:`rwlab.attitude.sim.simulate`
 cut open at the wheels. Each control period the host asks it for the wheel
@@ -38,8 +38,8 @@ from rwlab.attitude.sim import (
     _bias_truth,
     _initial,
     _known_only,
-    _result,
     _rate_map,
+    _result,
     _Streams,
     _unload_vector,
     _w_bo,
@@ -141,7 +141,10 @@ class Satellite:
         if self.bias_kind != 2:
             self.Bmap[:, :3] = np.eye(3)
         m = sc.noise_margin * filter_noise_scale
-        self.sig_sun, self.sig_earth = math.radians(sc.sun_noise_deg), math.radians(sc.earth_noise_deg)
+        self.sig_sun, self.sig_earth = (
+            math.radians(sc.sun_noise_deg),
+            math.radians(sc.earth_noise_deg),
+        )
         self.r_sun, self.r_earth = self.sig_sun * m, self.sig_earth * m
         self.fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
         self.sun_align = sensor_alignment(
@@ -210,9 +213,7 @@ class Satellite:
             self.controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
         )
         self.K_w, self.M = np.ascontiguousarray(K[:, 3:]), _rate_map(K)
-        self.process, self.sensor = self.streams.block(
-            k, n_steps, self.sensor_every, self.noise_sd
-        )
+        self.process, self.sensor = self.streams.block(k, n_steps, self.sensor_every, self.noise_sd)
         self.block_k0, self.i_sensor = k, 0
         self.sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
         rows = math.ceil(((k + n_steps) * sc.dt - self.sky_t0) / SKY_STEP) + 2
@@ -266,7 +267,9 @@ class Satellite:
             b = _noisy(self.earth_align @ self._C[:, 2], self.sig_earth, e[3:])
             g = gate if self._earth_rejected < sc.innovation_gate_max_rejections else 0.0
             nadir = np.array([0.0, 0.0, 1.0])
-            ok = gated_update_into(self.q_hat, self.w_hat, self.P, b, nadir, self.r_earth, g, self._Wn)
+            ok = gated_update_into(
+                self.q_hat, self.w_hat, self.P, b, nadir, self.r_earth, g, self._Wn
+            )
             self._earth_rejected = 0 if ok else self._earth_rejected + 1
             sensors["earth"] = b
             if not ok:
@@ -345,9 +348,7 @@ class Satellite:
         at_limit = bool(np.any(np.abs(hw_cmd) >= tau_max))
         hw_cmd = np.clip(hw_cmd, -tau_max, tau_max)
         st[_S["torque_peak_Nm"]] = max(st[_S["torque_peak_Nm"]], float(np.max(np.abs(hw_cmd))))
-        in_desat = (
-            st[_S["unloading"]] == 1 or t - st[_S["unload_end_s"]] <= self.unload[5]
-        )
+        in_desat = st[_S["unloading"]] == 1 or t - st[_S["unload_end_s"]] <= self.unload[5]
         st[_S["max_error_deg"]] = max(st[_S["max_error_deg"]], err)
         if k >= self.steady_from:
             self._steady_stats(err, hw_cmd, at_limit, in_desat, earth_lit)
@@ -434,7 +435,7 @@ class Satellite:
             raise ConfigError(f"need {self.nw} finite wheel momenta, got {wheel_momentum!r}")
         if not self._step:
             raise ConfigError("advance() before wheel_torques()")
-        sc, x, s = self.scenario, self.x, self._step
+        x, s = self.x, self._step
         hw_real = (h_new - x[7:]) / self.dt
         if self._log["tau"] and self._log["tau"][-1] is None:
             self._log["tau"][-1] = -(self.G @ hw_real)
