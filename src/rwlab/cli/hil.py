@@ -69,7 +69,12 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     show_default=True,
     help="Spin the wheels up along the null space first (pyramid): no zero crossings.",
 )
-@click.option("--no-diagnosis", is_flag=True, help="No live diagnosis of the wheels.")
+@click.option(
+    "--diagnosis/--no-diagnosis",
+    default=None,
+    help="Live diagnosis of every wheel [default: on with --wheel-bias-rpm, whose wheels "
+    "never hover at zero speed where the current test false-alarms].",
+)
 @click.option(
     "--calibration",
     type=float,
@@ -95,7 +100,7 @@ def hil(
     wheels_running,
     telemetry_rate,
     wheel_bias_rpm,
-    no_diagnosis,
+    diagnosis,
     calibration,
     no_reference,
     out,
@@ -130,12 +135,14 @@ def hil(
         twins=False if wheels_running else None,
         telemetry_rate=telemetry_rate,
         wheel_bias_rpm=wheel_bias_rpm,
-        diagnosis=not no_diagnosis,
+        diagnosis=diagnosis,
         calibration_s=calibration,
         reference=not no_reference,
     )
+    from rwlab.attitude.scenario import load_scenario
+
     _check_folder(out)
-    steps = round(duration / 0.1)
+    steps = round(duration / load_scenario(scenario).dt) + 1
     with _stop_signals(), _steps_progress(steps, f"hil {controller}", unit="periods") as progress:
         result = run_hil(cfg, out, force=force, progress=progress)
     report = write_hil_report(result, out)

@@ -52,6 +52,8 @@ from rwlab.wheel.physics import rad_s_to_rpm
 __all__ = ["HilConfig", "HilResult", "HilStopped", "parse_node_fault", "run_hil"]
 
 SIM_READ_DELAY = 1e-6  # s after each control instant the simulated host reads (see run_hil)
+SPIN_UP_RPM_S = 20.0  # the bias spin-up's ramp, rpm/s
+SPIN_UP_HOLD_S = 10.0  # and its hold before the run, s
 LATE_S = 0.005  # a wall-clock period that starts this late counts as a late step
 
 
@@ -105,8 +107,13 @@ class HilConfig:
     wheel_bias_rpm : float
         Spin the wheels up to this speed along the null space of the wheel matrix
         before the run (a pyramid's momentum bias: no zero crossings, no body momentum).
-    diagnosis : bool
-        Live diagnosis of every wheel's telemetry.
+    diagnosis : bool, optional
+        Live diagnosis of every wheel's telemetry. By default on when the wheels carry
+        a momentum bias (``wheel_bias_rpm``): the diagnosers' current balance holds for
+        a spinning wheel, and a wheel that hovers in the Hall sensors' dead zone (it
+        reads 0 below ``min_measurable_rpm``) flips its drive's friction feed-forward
+        with a sign the reading cannot show, which the current test takes for a fault
+        (measured: a false alarm within 300 s on the orthogonal smallsat).
     diagnosis_period_s : float
         The diagnosers' sample time, s (a whole number of control periods).
     calibration_s, false_alarms_per_hour : the diagnosers' (:class:`rwlab.diagnose.Diagnoser`).
@@ -133,7 +140,7 @@ class HilConfig:
     telemetry_rate: float | None = None
     latency_s: float = 0.02
     wheel_bias_rpm: float = 0.0
-    diagnosis: bool = True
+    diagnosis: bool | None = None
     diagnosis_period_s: float = 0.5
     calibration_s: float = 300.0
     false_alarms_per_hour: float = 1e-3
@@ -319,7 +326,7 @@ def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
         if fault.t_s > cfg.duration:
             raise ConfigError(f"--fault {node}:{fault} starts after the run ends")
     every = cfg.diagnosis_period_s / sc.dt
-    if cfg.diagnosis and (every < 1 or abs(every - round(every)) > 1e-9):
+    if cfg.diagnosis is not False and (every < 1 or abs(every - round(every)) > 1e-9):
         raise ConfigError("the diagnosis period must be a whole number of control periods")
     return tuple(nodes)
 
@@ -366,6 +373,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     if existing and not force:
         raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
     params = physics_params(sc)
+    diagnosis = bool(cfg.wheel_bias_rpm) if cfg.diagnosis is None else cfg.diagnosis
     clock = WallClock() if cfg.realtime else SimClock()
     rate = cfg.telemetry_rate or (50.0 if cfg.realtime else 1.0 / sc.dt)
     config = {
@@ -386,7 +394,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "faults": [f"{n}:{f}" for n, f in cfg.faults],
         "wheel_params": params.to_dict(),
         "epoch": sc.epoch,
-        "diagnosis": cfg.diagnosis,
+        "diagnosis": diagnosis,
         "wheel_model": "bus",
     }
     bank = WheelBank(
@@ -412,6 +420,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
             channels=_channels(nodes),
         )
         loop = _Loop(cfg, sc, nodes, bank, clock, record, ctl, estimator, sim_kw, seed)
+        loop.diagnosis = diagnosis
         loop.fly(progress)
     except BaseException as exc:
         problems = bank.close()  # first of all: every wheel idle
@@ -543,6 +552,7 @@ class _Loop:
         self._cmd: list[list[float]] = []
         self._t: list[float] = []
         self.t0 = 0.0
+        self.diagnosis = False
         for c in bank.clients:
             c.frame_listener = _frame_writer(record, c.node_id, clock)
 
@@ -551,25 +561,39 @@ class _Loop:
         self.record.event(t, kind, message)
         self.events.append({"t": t - self.t0, "kind": kind, "message": message})
 
-    def _spin_up(self) -> None:
-        """Bring the wheels to their null-space bias in speed mode, then hold them there."""
-        cfg, bank = self.cfg, self.bank
-        target = _null_space_bias(self.sc, cfg.wheel_bias_rpm)
+    def _spin_up(self, target: np.ndarray, diag: dict) -> None:
+        """Ramp the wheels to their null-space bias in speed mode (``SPIN_UP_RPM_S``), hold
+        ``SPIN_UP_HOLD_S``; the diagnosers calibrate on it (a range of speeds and
+        accelerations pins the current balance better than a steady hold)."""
+        bank, clock, dt = self.bank, self.clock, self.sc.dt
         self.event("spin_up", f"wheels to {np.round(target, 1).tolist()} rpm (null space)")
-        need = float(np.max(np.abs(target))) / bank.params.max_accel_rpm_s + 5.0
-        end = self.clock.now() + need
-        while self.clock.now() < end:
-            for c, v in zip(bank.clients, target, strict=True):
+        start = clock.now()
+        every = round(self.cfg.diagnosis_period_s / dt)
+        k = 0
+        while clock.now() < self.t0 - 1e-9:
+            ramp = np.sign(target) * np.minimum(
+                np.abs(target), (clock.now() - start) * SPIN_UP_RPM_S
+            )
+            for c, v in zip(bank.clients, ramp, strict=True):
                 c.set_speed(float(v))
                 bank.sent[c.node_id] += 1
-            self.clock.sleep_until(self.clock.now() + 0.1)
-        bank.read()
+            k += 1
+            clock.sleep_until(min(self.t0, start + k * dt))
+            readings = bank.read()
+            if diag and k % every == 0:
+                self._diagnose(diag, readings, dict.fromkeys(self.nodes, SPIN_UP_RPM_S), 1)
 
     def fly(self, progress) -> None:
         cfg, sc, bank, clock = self.cfg, self.sc, self.bank, self.clock
         simulated = isinstance(clock, SimClock)
+        readings = bank.read()
+        diag = self._diagnosers(readings) if self.diagnosis else {}
         if cfg.wheel_bias_rpm:
-            self._spin_up()
+            target = _null_space_bias(sc, cfg.wheel_bias_rpm)
+            spin_s = float(np.max(np.abs(target))) / SPIN_UP_RPM_S + SPIN_UP_HOLD_S
+            self.t0 = clock.now() + spin_s
+            self.record.time_origin = self.t0
+            self._spin_up(target, diag)
         delay = SIM_READ_DELAY if simulated else 0.0
         readings = bank.read()
         self.h0 = bank.momenta(readings)
@@ -583,13 +607,14 @@ class _Loop:
             log_every=cfg.log_every,
             **self.sim_kw,
         )
-        self.t0 = t0 = clock.now()
-        self.record.time_origin = t0
+        if not cfg.wheel_bias_rpm:
+            self.t0 = clock.now()
+            self.record.time_origin = self.t0
+        t0 = self.t0
         self.event("start", f"{cfg.controller} on {sc.name}, {len(self.nodes)} wheels", t0)
         for node, fault in cfg.faults:
             bank.twins[self.nodes.index(node)].schedule_faults([fault], origin=t0)
             self.event("fault_scheduled", f"node {node}: {fault}", t0)
-        diag = self._diagnosers(readings) if cfg.diagnosis else {}
         every = round(cfg.diagnosis_period_s / sc.dt)
         acc_sum = {n: 0.0 for n in self.nodes}
         report_every = max(1, sat.steps // 100)
@@ -620,7 +645,7 @@ class _Loop:
                 self._compute.append(sent - t_start)
                 self._wake.append(wake)
             if diag and (k + 1) % every == 0:
-                self._diagnose(diag, readings, acc_sum, every, wake - t0)
+                self._diagnose(diag, readings, acc_sum, every)
                 acc_sum = {n: 0.0 for n in self.nodes}
             if progress is not None and (sat.k % report_every == 0 or sat.done):
                 progress(min(sat.k, sat.steps))
@@ -671,14 +696,17 @@ class _Loop:
             for r in readings
         }
 
-    def _diagnose(self, diag, readings, acc_sum, every, t_rel) -> None:
+    def _diagnose(self, diag, readings, acc_sum, every) -> None:
+        now = self.clock.now()
         for r in readings:
             if not self.bank.active[r.node]:
                 continue
             d = diag[r.node]
-            alarms = d.update(t_rel, acc_sum[r.node] / every, r.speed_rpm, r.current_a, r.age_s)
+            alarms = d.update(
+                now - self.t0, acc_sum[r.node] / every, r.speed_rpm, r.current_a, r.age_s
+            )
             for a in alarms:
-                self._wheel_failed(r.node, a.kind, f"{a.detector} detector", self.t0 + t_rel)
+                self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
 
     def _wheel_failed(self, node: int, kind: str, how: str, t: float) -> None:
         """An alarm: record it, idle the wheel and reallocate when the others span 3 axes."""
