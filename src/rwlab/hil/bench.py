@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -24,7 +25,10 @@ from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.node import WheelNode
 from rwlab.wheel.physics import Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
-__all__ = ["WheelBank", "WheelReading"]
+if TYPE_CHECKING:
+    import can
+
+__all__ = ["WheelBank", "WheelReading", "twin_params_toml"]
 
 
 class _Only:
@@ -139,11 +143,14 @@ class WheelBank:
         self._seen: dict[int, int] = {}
         try:
             for n in nodes:
-                bus = _Only(self._open(channel), proto.TELEMETRY_ID + n, proto.HEARTBEAT_ID + n)
+                bus = cast(
+                    "can.BusABC",
+                    _Only(self._open(channel), proto.TELEMETRY_ID + n, proto.HEARTBEAT_ID + n),
+                )
                 self.clients.append(WheelClient(bus, n, params, clock=clock, timeout=timeout))
             if twins:
                 for n in nodes:
-                    bus = _Only(self._open(channel), proto.COMMAND_ID + n)
+                    bus = cast("can.BusABC", _Only(self._open(channel), proto.COMMAND_ID + n))
                     node = WheelNode(
                         bus,
                         n,
@@ -234,7 +241,8 @@ class WheelBank:
         for c in self.clients:
             before = c.latest
             c.poll()
-            if c.latest is None or now - c.latest_time > self.timeout:
+            last = c.latest_time
+            if c.latest is None or last is None or now - last > self.timeout:
                 raise WheelTimeout(
                     f"wheel {c.node_id} sent no telemetry for {self.timeout:g} s; the wheels "
                     "were idled"
@@ -243,9 +251,7 @@ class WheelBank:
             if not fresh:
                 self.stale[c.node_id] += 1
             out.append(
-                WheelReading(
-                    c.node_id, c.latest.speed_rpm, c.latest.current, now - c.latest_time, fresh
-                )
+                WheelReading(c.node_id, c.latest.speed_rpm, c.latest.current, now - last, fresh)
             )
         return out
 

@@ -42,7 +42,7 @@ from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
 from rwlab.errors import ConfigError, RwlabError
-from rwlab.hil.bench import WheelBank, WheelReading
+from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
@@ -190,13 +190,13 @@ def build_controller(sc: Scenario, name: str):
     estimator = "truth" if name in ("pd", "lqr") else "ekf"
     kw: dict = {}
     if name == "pd":
-        ctl = PDController(*pd_gains(sc))
-        ctl.rate_limit = slew_rate_limit(sc, ctl.K)
-    else:
-        ctl = LQRController(sc)
+        pd = PDController(*pd_gains(sc))
+        pd.rate_limit = slew_rate_limit(sc, pd.K)
+        return pd, estimator, kw
+    lqr = LQRController(sc)
     if name == "lqg_ltr":
-        kw = dict(filter_torque_psd=ltr_noise(sc, ctl)[0], filter_noise_scale=math.sqrt(CHOSEN_RHO))
-    return ctl, estimator, kw
+        kw = dict(filter_torque_psd=ltr_noise(sc, lqr)[0], filter_noise_scale=math.sqrt(CHOSEN_RHO))
+    return lqr, estimator, kw
 
 
 class _AccelerationModel:
@@ -562,6 +562,7 @@ class _Loop:
         self._t: list[float] = []
         self.t0 = 0.0
         self.diagnosis = False
+        self.diag: dict = {}
         for c in bank.clients:
             c.frame_listener = _frame_writer(record, c.node_id, clock)
 
@@ -570,14 +571,12 @@ class _Loop:
         self.record.event(t, kind, message)
         self.events.append({"t": t - self.t0, "kind": kind, "message": message})
 
-    def _spin_up(self, target: np.ndarray, diag: dict) -> None:
+    def _spin_up(self, target: np.ndarray) -> None:
         """Ramp the wheels to their null-space bias in speed mode (``SPIN_UP_RPM_S``), hold
-        ``SPIN_UP_HOLD_S``; the diagnosers calibrate on it (a range of speeds and
-        accelerations pins the current balance better than a steady hold)."""
+        ``SPIN_UP_HOLD_S``."""
         bank, clock, dt = self.bank, self.clock, self.sc.dt
         self.event("spin_up", f"wheels to {np.round(target, 1).tolist()} rpm (null space)")
         start = clock.now()
-        every = round(self.cfg.diagnosis_period_s / dt)
         k = 0
         while clock.now() < self.t0 - 1e-9:
             ramp = np.sign(target) * np.minimum(
@@ -588,21 +587,17 @@ class _Loop:
                 bank.sent[c.node_id] += 1
             k += 1
             clock.sleep_until(min(self.t0, start + k * dt))
-            readings = bank.read()
-            if diag and k % every == 0:
-                self._diagnose(diag, readings, dict.fromkeys(self.nodes, SPIN_UP_RPM_S), 1)
+            bank.read()
 
     def fly(self, progress) -> None:
         cfg, sc, bank, clock = self.cfg, self.sc, self.bank, self.clock
         simulated = isinstance(clock, SimClock)
-        readings = bank.read()
-        diag = self._diagnosers(readings) if self.diagnosis else {}
         if cfg.wheel_bias_rpm:
             target = _null_space_bias(sc, cfg.wheel_bias_rpm)
             spin_s = float(np.max(np.abs(target))) / SPIN_UP_RPM_S + SPIN_UP_HOLD_S
             self.t0 = clock.now() + spin_s
             self.record.time_origin = self.t0
-            self._spin_up(target, diag)
+            self._spin_up(target)
         delay = SIM_READ_DELAY if simulated else 0.0
         readings = bank.read()
         self.h0 = bank.momenta(readings)
@@ -624,6 +619,7 @@ class _Loop:
         for node, fault in cfg.faults:
             bank.twins[self.nodes.index(node)].schedule_faults([fault], origin=t0)
             self.event("fault_scheduled", f"node {node}: {fault}", t0)
+        diag = self.diag = self._diagnosers(self.nodes) if self.diagnosis else {}
         every = round(cfg.diagnosis_period_s / sc.dt)
         acc_sum = {n: 0.0 for n in self.nodes}
         report_every = max(1, sat.steps // 100)
@@ -692,17 +688,19 @@ class _Loop:
         )
 
     # -- diagnosis -----------------------------------------------------------------------
-    def _diagnosers(self, readings: list[WheelReading]) -> dict:
+    def _diagnosers(self, nodes) -> dict:
+        """A fresh diagnoser per node; each calibrates on its first ``calibration_s`` of
+        the loop (the regime it will watch: a spin-up's speed-mode ramp is another)."""
         from rwlab.diagnose import Diagnoser
 
         cfg = self.cfg
         return {
-            r.node: Diagnoser(
+            n: Diagnoser(
                 _AccelerationModel(cfg.diagnosis_period_s),
                 calibration_s=cfg.calibration_s,
                 false_alarms_per_hour=cfg.false_alarms_per_hour,
             )
-            for r in readings
+            for n in nodes
         }
 
     def _diagnose(self, diag, readings, acc_sum, every) -> None:
@@ -741,7 +739,15 @@ class _Loop:
             entry["action"] = "idled; torque reallocated to " + ", ".join(
                 str(n) for n, a in zip(self.nodes, active, strict=True) if a
             )
-            self.event("reallocate", f"node {node} idled; {entry['action']}", t)
+            self.event("reallocate", f"node {node}: {entry['action']}", t)
+            if self.diag:  # the others now carry its torque and its coast-down: a new regime
+                left = [n for n, a in zip(self.nodes, active, strict=True) if a]
+                self.diag.update(self._diagnosers(left))
+                self.event(
+                    "recalibrate",
+                    f"diagnosis of nodes {left} recalibrates over {self.cfg.calibration_s:g} s",
+                    t,
+                )
         self.wheel_faults.append(entry)
 
     # -- figures -------------------------------------------------------------------------
