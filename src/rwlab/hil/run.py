@@ -563,6 +563,7 @@ class _Loop:
         self.t0 = 0.0
         self.diagnosis = False
         self.diag: dict = {}
+        self._recalibrate_when_still = False
         for c in bank.clients:
             c.frame_listener = _frame_writer(record, c.node_id, clock)
 
@@ -704,7 +705,22 @@ class _Loop:
         }
 
     def _diagnose(self, diag, readings, acc_sum, every) -> None:
+        """Feed each active wheel's diagnoser. After a reallocation the others are not
+        watched until the idled wheel has coasted to rest (its momentum flows into them
+        meanwhile); then they recalibrate over ``calibration_s`` in the new regime."""
         now = self.clock.now()
+        if self._recalibrate_when_still:
+            if any(r.speed_rpm != 0 for r in readings if not self.bank.active[r.node]):
+                return
+            self._recalibrate_when_still = False
+            left = [n for n in self.nodes if self.bank.active[n]]
+            self.diag.update(self._diagnosers(left))
+            self.event(
+                "recalibrate",
+                f"the idled wheel is at rest: nodes {left} recalibrate over "
+                f"{self.cfg.calibration_s:g} s",
+                now,
+            )
         for r in readings:
             if not self.bank.active[r.node]:
                 continue
@@ -740,12 +756,11 @@ class _Loop:
                 str(n) for n, a in zip(self.nodes, active, strict=True) if a
             )
             self.event("reallocate", f"node {node}: {entry['action']}", t)
-            if self.diag:  # the others now carry its torque and its coast-down: a new regime
-                left = [n for n, a in zip(self.nodes, active, strict=True) if a]
-                self.diag.update(self._diagnosers(left))
+            if self.diag:  # the others now absorb its coast-down: a regime of its own
+                self._recalibrate_when_still = True
                 self.event(
-                    "recalibrate",
-                    f"diagnosis of nodes {left} recalibrates over {self.cfg.calibration_s:g} s",
+                    "diagnosis_paused",
+                    f"the other wheels' diagnosis pauses until node {node} has coasted to rest",
                     t,
                 )
         self.wheel_faults.append(entry)
