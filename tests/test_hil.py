@@ -158,6 +158,7 @@ def test_dead_motor_in_a_pyramid_is_named_idled_and_survived(tmp_path):
     assert 800 <= fault["detected_s"] <= 860
     assert "idled" in fault["action"]
     assert m["steady_max_error_deg"] <= 0.1  # the steady window (700 s on) spans the fault
+    assert m["max_error_from_first_fault_deg"] <= 0.1  # every step from the fault on
     rec = read_record(tmp_path / "out" / "record.mcap")
     after = [c for c in rec.topic("/wheel2/command") if c["t"] > fault["detected_s"] + 1]
     assert after and all(c["mode"] == "IDLE" for c in after)
@@ -210,6 +211,28 @@ def test_a_silent_wheel_stops_the_run_safely(tmp_path):
     assert [e["kind"] for e in rec.topic("/event")][-1] == "stop"
     for n in (1, 2, 3):
         assert rec.topic(f"/wheel{n}/command")[-1]["mode"] == "IDLE"
+
+
+def test_a_host_stall_past_the_watchdog_stops_the_run_safely(tmp_path, monkeypatch):
+    """The host freezes for 1.5 s (longer than the wheels' 1 s watchdog): every wheel
+    idles itself with WATCHDOG; with no spare the run must stop, not fly on blind."""
+    real = WheelBank.command
+    calls = []
+
+    def command(self, torques):
+        calls.append(1)
+        if len(calls) == 50:
+            self.clock.sleep(1.5)
+        return real(self, torques)
+
+    monkeypatch.setattr(WheelBank, "command", command)
+    cfg = HilConfig(duration=60.0, channel=_channel(), reference=False)
+    with pytest.raises(HilStopped, match="WATCHDOG"):
+        run_hil(cfg, tmp_path)
+    rec = read_record(tmp_path / "record.mcap")
+    assert [e["kind"] for e in rec.topic("/event")][-2:] == ["error", "stop"]
+    for n in (1, 2, 3):
+        assert rec.topic(f"/wheel{n}/telemetry")[-1]["mode"] == "IDLE"
 
 
 def test_a_node_answering_from_two_sources_is_refused():

@@ -41,7 +41,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
-from rwlab.errors import ConfigError, RwlabError
+from rwlab.errors import ConfigError, RwlabError, WheelFault
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
@@ -453,6 +453,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         **m,
         "timing": loop.timing(),
         "wheel_faults": loop.wheel_faults,
+        "max_error_from_first_fault_deg": loop.max_error_from_fault if cfg.faults else None,
         "bench": {**loop.bench, "idle_problems": problems},
         "measurement": measurement_effects(loop.wheel_log(), params, sc.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
@@ -564,6 +565,8 @@ class _Loop:
         self.diagnosis = False
         self.diag: dict = {}
         self._recalibrate_when_still = False
+        self._first_fault_s = min((f.t_s for _, f in cfg.faults), default=math.inf)
+        self.max_error_from_fault = 0.0
         for c in bank.clients:
             c.frame_listener = _frame_writer(record, c.node_id, clock)
 
@@ -629,8 +632,8 @@ class _Loop:
             t_start = clock.now()
             torques = sat.wheel_torques()
             refused = bank.command(torques)
-            for node, exc in refused.items():
-                self._wheel_failed(node, "latched_fault", str(exc), t_start)
+            for node, exc in refused.items():  # the wheel idled itself: it is lost
+                self._wheel_failed(node, "latched_fault", str(exc), t_start, hard=True)
             sent = clock.now()
             if k % sat.log_every == 0:
                 self._write_satellite(torques)
@@ -643,6 +646,8 @@ class _Loop:
             wake = clock.now()
             readings = bank.read()
             sat.advance(bank.momenta(readings))
+            if sat.t >= self._first_fault_s:
+                self.max_error_from_fault = max(self.max_error_from_fault, sat.error_deg)
             self._t.append((k + 1) * sc.dt)
             self._speed.append([r.speed_rpm for r in readings])
             self._cmd.append([rad_s_to_rpm(x / bank.params.inertia) for x in torques])
@@ -731,8 +736,13 @@ class _Loop:
             for a in alarms:
                 self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
 
-    def _wheel_failed(self, node: int, kind: str, how: str, t: float) -> None:
-        """An alarm: record it, idle the wheel and reallocate when the others span 3 axes."""
+    def _wheel_failed(self, node: int, kind: str, how: str, t: float, hard: bool = False) -> None:
+        """An alarm: record it, idle the wheel and reallocate when the others span 3 axes.
+
+        A diagnosis alarm on a wheel that cannot be spared is recorded and the wheel kept;
+        a ``hard`` failure (the wheel latched a fault and idled itself) that cannot be
+        spared stops the run (``WheelFault``): the satellite is no longer controlled.
+        """
         injected = [f for n, f in self.cfg.faults if n == node]
         entry = {
             "node": node,
@@ -748,6 +758,9 @@ class _Loop:
         try:
             self.sat.set_active(active)
         except ConfigError as exc:
+            if hard:
+                self.wheel_faults.append({**entry, "action": "run stopped: no spare wheel"})
+                raise WheelFault(f"wheel {node} is lost ({how}) and {exc}; the run stops") from None
             entry["action"] = "kept in the loop: no spare wheel"
             self.event("no_reallocation", f"node {node}: {exc}", t)
         else:

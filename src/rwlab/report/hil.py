@@ -204,6 +204,12 @@ def _events(page: Page, result) -> None:
     rows = [[f"{e['t']:.1f}", e["kind"], e["message"]] for e in result.events]
     page.table(["t [s]", "event", "message"], rows, table_id="table-events")
     faults = result.metrics["wheel_faults"]
+    worst = result.metrics.get("max_error_from_first_fault_deg")
+    if worst is not None:
+        page.text(
+            f"Largest pointing error from the first injected fault to the end (every control "
+            f"period): {worst:.4g}°."
+        )
     if faults:
         rows = [
             [
