@@ -39,6 +39,12 @@ def main() -> None:
     ap.add_argument("--telemetry-rate", type=float, default=50.0)
     ap.add_argument("--channel", default="239.74.163.25")
     ap.add_argument("--out", default=None)
+    ap.add_argument(
+        "--rt-priority",
+        type=int,
+        default=None,
+        help="SCHED_FIFO priority for the loop and the wheel servers (chrt; CAP_SYS_NICE)",
+    )
     args = ap.parse_args()
     sc = load_scenario(args.scenario)
     work = Path(tempfile.mkdtemp(prefix="rwlab-hil-bench-"))
@@ -46,10 +52,12 @@ def main() -> None:
     params = work / "wheel.toml"
     params.write_text(twin_params_toml(physics_params(sc)))
     rwlab = [sys.executable, "-m", "rwlab.cli"]
+    rt = ["chrt", "-f", str(args.rt_priority)] if args.rt_priority else []
     servers = []
     try:
         for node in range(1, sc.n_wheels + 1):
             cmd = [
+                *rt,
                 *rwlab,
                 "wheel", "serve", "--interface", "udp_multicast", "--channel", args.channel,
                 "--node-id", str(node), "--params", str(params),
@@ -64,6 +72,8 @@ def main() -> None:
             "--channel", args.channel, "--wheels-running", "--realtime",
             "--duration", str(args.duration), "--no-reference", "--out", str(out), "--force",
         ]  # fmt: skip
+        if args.rt_priority:
+            hil += ["--rt-priority", str(args.rt_priority)]
         started = time.monotonic()
         subprocess.run(hil, check=True)
         wall = time.monotonic() - started
@@ -78,7 +88,8 @@ def main() -> None:
                 p.kill()
     m = json.loads((out / "metrics.json").read_text())
     t, b = m["timing"], m["bench"]
-    print(f"\n{args.duration:g} s over udp_multicast, {sc.n_wheels} wheel processes, "
+    policy = f"SCHED_FIFO {args.rt_priority}" if args.rt_priority else "default scheduling"
+    print(f"\n{args.duration:g} s over udp_multicast, {sc.n_wheels} wheel processes, {policy}, "
           f"control period {t['period_s']:g} s; load average before {load[0]:.1f} "
           f"(1 min) on {os.cpu_count()} cores; wall {wall:.0f} s")  # fmt: skip
     rows = [

@@ -82,6 +82,12 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     show_default=True,
     help="Seconds of healthy telemetry that calibrate the diagnosis.",
 )
+@click.option(
+    "--rt-priority",
+    type=click.IntRange(1, 99),
+    default=None,
+    help="With --realtime: run the loop under SCHED_FIFO at this priority (needs CAP_SYS_NICE).",
+)
 @click.option("--no-reference", is_flag=True, help="Do not fly the simulation beside it.")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
@@ -102,6 +108,7 @@ def hil(
     wheel_bias_rpm,
     diagnosis,
     calibration,
+    rt_priority,
     no_reference,
     out,
     force,
@@ -138,6 +145,7 @@ def hil(
         diagnosis=diagnosis,
         calibration_s=calibration,
         reference=not no_reference,
+        rt_priority=rt_priority,
     )
     from rwlab.attitude.scenario import load_scenario
 

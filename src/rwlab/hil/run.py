@@ -121,6 +121,10 @@ class HilConfig:
         Control periods between satellite records (rounded to sensor periods).
     timeout_s : float
         A wheel silent this long stops the run.
+    rt_priority : int, optional
+        On the wall clock, run the control loop under the SCHED_FIFO real-time policy at
+        this priority (1..99; Linux, needs CAP_SYS_NICE), as a bench computer would: a
+        loaded machine then cannot make a control period start late.
     reference : bool
         Also fly ``attitude simulate`` on the same scenario and seed with the physics
         wheel (healthy, from the same wheel momenta) for the side-by-side comparison.
@@ -147,6 +151,7 @@ class HilConfig:
     log_every: int = 5
     timeout_s: float = 0.5
     reference: bool = True
+    rt_priority: int | None = None
 
 
 @dataclass
@@ -411,6 +416,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         timeout=cfg.timeout_s,
     )
     record = None
+    restore = _real_time(cfg.rt_priority) if cfg.realtime else None
     try:
         bank.preflight()
         out.mkdir(parents=True, exist_ok=True)
@@ -443,6 +449,9 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 f"{exc} — every wheel was idled and the record {targets['record.mcap']} closed"
             ) from exc
         raise
+    finally:
+        if restore is not None:
+            restore()
     problems = bank.close()
     run = loop.sat.result()
     m = metrics(run, sc.pointing_requirement_deg)
@@ -524,6 +533,25 @@ def measurement_effects(wheel_log: dict, params, dt: float, latency: float) -> d
             "time_reading_zero_s": float(np.sum(speed == 0) * dt),
         }
     return out
+
+
+def _real_time(priority: int | None):
+    """Switch this thread to SCHED_FIFO at ``priority``; returns the undo (None: nothing)."""
+    import os
+
+    if priority is None:
+        return None
+    if not 1 <= priority <= 99:
+        raise ConfigError(f"--rt-priority must be 1..99, got {priority}")
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        raise ConfigError(
+            f"cannot run the loop real-time ({exc}); run as a user with CAP_SYS_NICE "
+            "(e.g. `sudo setcap cap_sys_nice+ep $(which python3)`) or leave --rt-priority out"
+        ) from None
+    return lambda: os.sched_setscheduler(0, before[0], before[1])
 
 
 def _warm_up(sc: Scenario, ctl, estimator: str, sim_kw: dict) -> None:
