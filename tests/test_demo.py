@@ -53,6 +53,9 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
         "chirp",
     ]
     assert all(r["lost_frames"] == 0 and r["telemetry"] > r["commands"] for r in summary["records"])
+    hil = json.loads((demo_dir / "hil" / "metrics.json").read_text())
+    assert summary["hil"]["steady_max_error_deg"] == pytest.approx(hil["steady_max_error_deg"])
+    assert summary["hil"]["lost_commands"] == 0 < summary["hil"]["commands_sent"]
     parser = _Links()
     parser.feed((demo_dir / "index.html").read_text())
     assert parser.links and all((demo_dir / link).exists() for link in parser.links)

@@ -1,10 +1,11 @@
 """Named, validated simulation scenarios (paper B's numbers are illegible: documented defaults).
 
-Two built-ins:
+Three built-ins:
 
 - ``geo-smallsat`` — a 150 kg GEO smallsat (J ≈ diag(14, 12, 10) kg·m²) with
   three orthogonal RW90 wheels (the wheel on our testbed: 0.34 N·m·s,
   7800 rpm, 0.015 N·m), 1.5 m² of arrays;
+- ``geo-smallsat-pyramid`` — the same with four RW90 in a pyramid (54.74° from z);
 - ``geo-comsat`` — a comsat (J = diag(1200, 1000, 1500) kg·m², as in the
   Basilisk peer scenario) with three HR16-class wheels (50 N·m·s, 0.2 N·m,
   6000 rpm) and 30 m² of arrays.
@@ -456,6 +457,10 @@ SCENARIOS = {
         name="geo-comsat-star", gyro=GyroModel(), star_tracker=StarTrackerModel()
     ),
 }
+# the smallsat with four RW90 in a pyramid: any three still span the body (a wheel may fail)
+SCENARIOS["geo-smallsat-pyramid"] = replace(
+    SCENARIOS["geo-smallsat"], name="geo-smallsat-pyramid", wheel_axes="pyramid"
+)
 
 
 def _sensor_tables(raw: dict, base: Scenario, path: Path) -> dict:
