@@ -40,13 +40,14 @@ import numpy as np
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
+from rwlab.ident.model_file import Channel, WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
 
-__all__ = ["StudyResult", "identification_study", "physical_model"]
+__all__ = ["StudyResult", "identification_study", "physical_model", "wheel_model"]
 
 PREPROCESSING = ("normalize", "detrend", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
@@ -408,49 +409,64 @@ def physical_model(
     accel_limit_rpm_s: float = 314.0,
     saturation_source: str = "RW90 defaults",
 ) -> dict:
+    """The JSON form of :func:`wheel_model` (``model.json``), same arguments."""
+    return wheel_model(
+        result,
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+    ).to_dict()
+
+
+def wheel_model(
+    result: StudyResult,
+    *,
+    speed_limit_rpm: float = 7800.0,
+    accel_limit_rpm_s: float = 314.0,
+    saturation_source: str = "RW90 defaults",
+) -> WheelModelFile:
     """The chosen model in physical units, with the saturations any control use needs.
 
     The study's model maps preprocessed input to preprocessed output. With
     ``u_p = (u − u_off)/u_scale`` and ``y = y_off + y_scale·y_p``, the physical
     model is ``y − y_off = G(q)·(u − u_off)`` with G's numerator scaled by
     ``y_scale/u_scale``; ``model.json`` stores G and both offsets.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    WheelModelFile
+        The content of ``model.json`` (``.save(path)`` writes it).
     """
     m = result.chosen
     trend = result.data.trend
     if np.any(trend.input_slope) or np.any(trend.output_slope):
         raise ModelError("a linear trend cannot be folded into model.json; use 'normalize'")
-    physical = _to_physical(m, trend, result.data.input_names[0], result.data.output_names[0])
-    info = {
-        "format": "rwlab.WheelModel/1",
-        "structure": m.structure,
-        "Ts": m.Ts,
-        "input": {
-            "name": result.data.input_names[0],
-            "unit": result.data.input_units[0] or "rpm",
-            "offset": float(trend.input_offset[0]),
-        },
-        "output": {
-            "name": result.data.output_names[0],
-            "unit": result.data.output_units[0] or "rpm",
-            "offset": float(trend.output_offset[0]),
-        },
-        "model": physical.to_dict(),
-        "saturation": {
-            "speed_rpm": speed_limit_rpm,
-            "accel_rpm_s": accel_limit_rpm_s,
-            "source": saturation_source,
-        },
-        "validation_fit_percent": next(
-            r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
-        ),
-        "note": "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
-        "saturation before the model and the acceleration limit to its output.",
-    }
-    if result.servo is not None:
-        fit = result.nonlinear["fit_percent"]
-        info["nonlinear"] = {**result.servo.to_dict(), "validation_fit_percent": fit}
-        info["preferred"] = "nonlinear" if fit > info["validation_fit_percent"] else "linear"
-    return info
+    d = result.data
+    fit = next(
+        r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
+    )
+    servo_fit = None if result.servo is None else result.nonlinear["fit_percent"]
+    return WheelModelFile(
+        _to_physical(m, trend, d.input_names[0], d.output_names[0]),
+        Channel(d.input_names[0], d.input_units[0] or "rpm", float(trend.input_offset[0])),
+        Channel(d.output_names[0], d.output_units[0] or "rpm", float(trend.output_offset[0])),
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+        validation_fit_percent=fit,
+        servo=result.servo,
+        servo_fit_percent=servo_fit,
+        preferred="nonlinear" if servo_fit is not None and servo_fit > fit else "linear",
+    )
 
 
 def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:

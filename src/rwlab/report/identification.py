@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 
 from rwlab.data import atomic_write_bytes
+from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import Page, figure
 
@@ -113,9 +114,15 @@ def _minus(name: str, offset: float) -> str:
 
 
 def write_study(
-    result: StudyResult, model_info: dict, out_dir: str | os.PathLike, *, force: bool = False
+    result: StudyResult,
+    model_info: dict | WheelModelFile,
+    out_dir: str | os.PathLike,
+    *,
+    force: bool = False,
 ) -> dict[str, Path]:
     """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``."""
+    if isinstance(model_info, WheelModelFile):
+        model_info = model_info.to_dict()
     out = Path(out_dir)
     targets = {name: out / name for name in ("report.html", "study.json", "model.json")}
     existing = [str(p) for p in targets.values() if p.exists()]

@@ -14,13 +14,12 @@ Two models, one per sample step each (``IdentifiedWheel.step``):
 
 from __future__ import annotations
 
-import json
 import os
-from pathlib import Path
 
 import numpy as np
 
-from rwlab.errors import FileFormatError, ModelError
+from rwlab.errors import FileFormatError
+from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_advance
 
@@ -78,32 +77,36 @@ class IdentifiedWheel:
         ``model``: 'linear', 'nonlinear', or None for the file's ``preferred``
         one (the better validation fit; 'linear' in files without a nonlinear model).
         """
-        try:
-            info = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
-        if info.get("format") != "rwlab.WheelModel/1":
-            raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
-        sat = info["saturation"]
-        kind = model or info.get("preferred", "linear")
+        info = WheelModelFile.load(path)
+        kind = model or info.preferred
         if kind not in ("linear", "nonlinear"):
             raise FileFormatError(f"model must be 'linear' or 'nonlinear', got {kind!r}")
-        if kind == "nonlinear" and "nonlinear" not in info:
+        if kind == "nonlinear" and info.servo is None:
             raise FileFormatError(f"{path}: holds no nonlinear model; run rwlab identify again")
-        servo = None
-        if kind == "nonlinear":
-            fields = {k: v for k, v in info["nonlinear"].items() if k != "validation_fit_percent"}
-            try:
-                servo = ServoModel.from_dict(fields)
-            except ModelError as exc:
-                raise FileFormatError(f"{path}: bad nonlinear model ({exc})") from None
+        return cls.from_file(info, servo=kind == "nonlinear")
+
+    @classmethod
+    def from_file(cls, info: WheelModelFile, *, servo: bool = False) -> IdentifiedWheel:
+        """The wheel a :class:`~rwlab.ident.model_file.WheelModelFile` describes.
+
+        Parameters
+        ----------
+        info : WheelModelFile
+            The model file's content.
+        servo : bool
+            Fly its servo model (it must have one) instead of the linear one.
+
+        Returns
+        -------
+        IdentifiedWheel
+        """
         return cls(
-            PolyModel.from_dict(info["model"]),
-            input_offset=info["input"]["offset"],
-            output_offset=info["output"]["offset"],
-            speed_limit_rpm=sat["speed_rpm"],
-            accel_limit_rpm_s=sat["accel_rpm_s"],
-            servo=servo,
+            info.model,
+            input_offset=info.input.offset,
+            output_offset=info.output.offset,
+            speed_limit_rpm=info.speed_limit_rpm,
+            accel_limit_rpm_s=info.accel_limit_rpm_s,
+            servo=info.servo if servo else None,
         )
 
     def reset(self, speed_rpm: float = 0.0) -> None:
