@@ -13,20 +13,29 @@ Nothing here modifies the caller's arrays.
 
 from __future__ import annotations
 
-import errno
+import copy
+import importlib
 import math
 import os
-import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy import signal as sps
 
-from rwlab.errors import DataError
+from rwlab._io import atomic_write_bytes  # re-exported: it lived here before rwlab._io
+from rwlab.errors import DataError, FileFormatError, RwlabError
 
-__all__ = ["IOData", "Trend", "load", "merge"]
+__all__ = [
+    "IOData",
+    "Trend",
+    "atomic_write_bytes",
+    "load",
+    "merge",
+    "register_reader",
+    "register_writer",
+]
 
 
 @dataclass(frozen=True)
@@ -159,6 +168,10 @@ class IOData:
         What preprocessing removed (default: nothing).
     name : str, optional
         A label for reports.
+    source : dict, optional
+        What the file said about where the samples came from (a testbed
+        record's metadata: its wheel's parameters, mode, Ts); copied, kept
+        through slicing and preprocessing.
 
     Notes
     -----
@@ -179,6 +192,7 @@ class IOData:
         tstart: float = 0.0,
         trend: Trend | None = None,
         name: str = "",
+        source: dict | None = None,
     ) -> None:
         self.Ts = check_Ts(Ts)
         self.y = _as_matrix(y, "y")
@@ -199,6 +213,7 @@ class IOData:
         self.tstart = float(tstart)
         self.trend = trend if trend is not None else Trend.identity(self.nu, self.ny)
         self.name = name
+        self.source = copy.deepcopy(dict(source or {}))
 
     # -- shape ---------------------------------------------------------------
     @property
@@ -239,6 +254,7 @@ class IOData:
             tstart=self.tstart,
             trend=self.trend,
             name=self.name,
+            source=self.source,
         )
         kwargs.update(changes)
         Ts = kwargs.pop("Ts", self.Ts)
@@ -349,9 +365,11 @@ class IOData:
         expect: no rwlab metadata (CSV header first, Parquet without schema
         metadata) and a .mat with one vector per channel, named after it.
         """
-        from rwlab import _io
-
-        return _io.write(self, Path(path), overwrite=overwrite, plain=plain)
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        writer = _registered(_WRITERS, path.suffix.lower(), "write")
+        return atomic_write_bytes(path, lambda tmp: writer(self, tmp, plain=plain))
 
 
 def merge(*datasets: IOData) -> list[IOData]:
@@ -412,38 +430,68 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
     FileFormatError
         A file that cannot be parsed.
     """
-    from rwlab import _io
-
-    return _io.read(Path(path), Ts, **options)
-
-
-def _umask_mode() -> int:
-    """The mode a plainly created file gets here (0666 less the umask)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def atomic_write_bytes(path: Path, writer) -> Path:
-    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file.
-
-    The file gets the usual permissions (0666 less the umask), not the
-    temporary file's private 0600.
-    """
     path = Path(path)
-    if path.parent.exists() and not path.parent.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path.parent))
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such data file: {path}")
+    suffix = path.suffix.lower()
+    reader = _registered(_READERS, suffix, "read")
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:  # name the file the caller asked for, not the temporary one
-        raise OSError(exc.errno, f"cannot write here ({exc.strerror})", str(path)) from None
-    os.close(fd)
-    try:
-        writer(Path(tmp))
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        return reader(path, Ts, **options)
+    except (RwlabError, OSError, TypeError):
         raise
-    return path
+    except Exception as exc:  # any parser failure becomes one typed, named error
+        raise FileFormatError(f"{path}: not a readable {suffix} data file ({exc})") from exc
+
+
+# -- file formats: registered by the layer that owns each ----------------------------
+# The data layer only names the module that registers a suffix (rwlab.datafiles for
+# tables, rwlab.testbed.load for testbed records) and imports it by name on first use:
+# it never depends on a higher layer's code, and a new layer adds its format by calling
+# register_reader/register_writer.
+_OWNERS = {
+    ".csv": "rwlab.datafiles",
+    ".dat": "rwlab.datafiles",
+    ".txt": "rwlab.datafiles",
+    ".parquet": "rwlab.datafiles",
+    ".mat": "rwlab.datafiles",
+    ".mcap": "rwlab.testbed.load",
+}
+_READERS: dict[str, Callable[..., IOData]] = {}
+_WRITERS: dict[str, Callable[..., None]] = {}
+
+
+def register_reader(suffix: str, reader: Callable[..., IOData]) -> None:
+    """Make :func:`load` read files ending in ``suffix`` with ``reader``.
+
+    Parameters
+    ----------
+    suffix : str
+        The file suffix with its dot, e.g. ``".mcap"`` (case-insensitive).
+    reader : callable
+        ``reader(path, Ts, **options) -> IOData``; it raises ``FileFormatError``
+        or ``DataError`` for a bad file.
+    """
+    _READERS[suffix.lower()] = reader
+
+
+def register_writer(suffix: str, writer: Callable[..., None]) -> None:
+    """Make :meth:`IOData.write` write files ending in ``suffix`` with ``writer``.
+
+    Parameters
+    ----------
+    suffix : str
+        The file suffix with its dot, e.g. ``".csv"`` (case-insensitive).
+    writer : callable
+        ``writer(data, tmp_path, plain=bool)``; it writes the temporary file that
+        is then renamed onto the target.
+    """
+    _WRITERS[suffix.lower()] = writer
+
+
+def _registered(table: dict[str, Callable], suffix: str, what: str) -> Callable:
+    if suffix not in table and suffix in _OWNERS:
+        importlib.import_module(_OWNERS[suffix])
+    if suffix not in table:
+        known = sorted(s for s in _OWNERS if what == "read" or s in (".csv", ".parquet", ".mat"))
+        raise DataError(f"unknown data file type {suffix!r}; use {', '.join(known)}")
+    return table[suffix]

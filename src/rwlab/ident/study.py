@@ -516,14 +516,9 @@ def load_study_data(
         "saturation_source": "RW90 defaults (paper A)",
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
-    if Path(path).suffix.lower() == ".mcap":
-        from rwlab.testbed import read_record
-
-        meta = read_record(path).metadata
-        Ts_rec = Ts if Ts is not None else meta.get("Ts")
-        memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load(path, Ts, **columns, max_gap=memory or None)
-        wheel = meta.get("wheel", {})
+    if Path(path).suffix.lower() == ".mcap":  # a record: no gap longer than the model memory
+        data = load(path, Ts, **columns, max_gap_samples=max_orders + nk_max)
+        wheel = data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
                 "speed_limit_rpm": float(wheel["max_speed_rpm"]),
