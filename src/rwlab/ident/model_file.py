@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from rwlab.errors import FileFormatError, ModelError
-from rwlab.ident.models import PolyModel, save_model_json
+from rwlab.ident.base import save_model_json
+from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
 from rwlab.schemas import format_tag, read_versioned
 

@@ -33,8 +33,6 @@ every sample. The covariance is
 
 from __future__ import annotations
 
-import sys
-import types
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -699,16 +697,3 @@ def pem(
     return _finish(
         orders, [init.parameters], experiments, series, "pem (prediction error, LM)", max_iter, tol
     )
-
-
-class _CallableModule(types.ModuleType):
-    """``rwlab.ident.pem`` is this module (``import rwlab.ident.pem`` reaches ``armax``, ``oe``,
-    ...), and calling it calls the estimator :func:`pem`, MATLAB's name for both."""
-
-    def __call__(self, data, init, **options) -> PolyModel:
-        return pem(data, init, **options)
-
-    __call__.__doc__ = pem.__doc__
-
-
-sys.modules[__name__].__class__ = _CallableModule
