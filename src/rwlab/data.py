@@ -245,6 +245,46 @@ class IOData:
             f"inputs={list(self.input_names)}, outputs={list(self.output_names)})"
         )
 
+    def _repr_html_(self) -> str:
+        """A table of the channels (name, unit, range), for Jupyter."""
+        import html
+
+        rows = []
+        for kind, names, units, x in (
+            ("input", self.input_names, self.input_units, self.u),
+            ("output", self.output_names, self.output_units, self.y),
+        ):
+            for j, (n, unit) in enumerate(zip(names, units, strict=True)):
+                lo, hi = (float(x[:, j].min()), float(x[:, j].max())) if self.N else (0.0, 0.0)
+                rows.append(
+                    f"<tr><td>{kind}</td><td>{html.escape(n)}</td><td>{html.escape(unit)}</td>"
+                    f"<td>{lo:.4g} … {hi:.4g}</td></tr>"
+                )
+        head = (
+            f"<strong>IOData</strong> {html.escape(self.name)}: N = {self.N}, "
+            f"Ts = {self.Ts:g} s ({self.N * self.Ts:g} s)"
+        )
+        return (
+            f"<div>{head}<table><tr><th></th><th>channel</th><th>unit</th><th>range</th></tr>"
+            f"{''.join(rows)}</table></div>"
+        )
+
+    def to_pandas(self):
+        """The samples as a ``pandas.DataFrame``: one column per channel, indexed by time.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Shape (N, nu + ny); index ``time_s`` (s); columns the channel names.
+        """
+        from rwlab._display import pandas
+
+        pd = pandas()
+        names = [*self.input_names, *self.output_names]
+        frame = pd.DataFrame(np.hstack([self.u, self.y]), columns=names)
+        frame.index = pd.Index(self.time, name="time_s")
+        return frame
+
     def _with(self, u, y, **changes) -> IOData:
         kwargs = dict(
             input_names=self.input_names,

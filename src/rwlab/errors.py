@@ -43,6 +43,14 @@ class WheelCommandError(RwlabError, ValueError):
     """A command outside the wheel's limits, refused before it was sent."""
 
 
+class ProtocolError(RwlabError):
+    """A frame that is not a valid wheel message (bad length, checksum or value)."""
+
+
+class DesignError(RwlabError, ValueError):
+    """Weights or a plant for which the requested design does not exist."""
+
+
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
 

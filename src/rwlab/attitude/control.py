@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.attitude.design import (
     DesignError,
     LTRResult,
@@ -374,8 +375,8 @@ def _sky_metrics(st: dict) -> dict:
     }
 
 
-@dataclass
-class Comparison:
+@dataclass(repr=False)
+class Comparison(ShortRepr):
     """Runs and metrics of the three controllers (and the identified-wheel run)."""
 
     scenario: Scenario
@@ -383,6 +384,21 @@ class Comparison:
     metrics: dict
     rho: float
     config: dict
+
+    def to_pandas(self):
+        """The metrics as a table: one row per controller flown, one column per metric.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``controller``; the columns of ``metrics`` (SI units, degrees where named).
+        """
+        from rwlab._display import pandas
+
+        pd = pandas()
+        frame = pd.DataFrame.from_dict(self.metrics, orient="index")
+        frame.index.name = "controller"
+        return frame
 
 
 def compare(

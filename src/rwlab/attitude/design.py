@@ -27,7 +27,8 @@ import control
 import numpy as np
 import scipy.linalg
 
-from rwlab.errors import RwlabError
+from rwlab._display import ShortRepr
+from rwlab.errors import DesignError  # DesignError re-exported here, where it was
 
 __all__ = [
     "DesignError",
@@ -41,10 +42,6 @@ __all__ = [
     "ltr",
     "sigma",
 ]
-
-
-class DesignError(RwlabError, ValueError):
-    """Weights or a plant for which the requested design does not exist."""
 
 
 def _check_weight(name: str, M, n: int, definite: bool) -> np.ndarray:
@@ -255,8 +252,8 @@ def sigma(sys, omega) -> np.ndarray:
     return np.array([np.linalg.svd(H[:, :, i], compute_uv=False) for i in range(w.size)])
 
 
-@dataclass
-class LTRResult:
+@dataclass(repr=False)
+class LTRResult(ShortRepr):
     """Loop transfer recovery over a list of ρ.
 
     Attributes

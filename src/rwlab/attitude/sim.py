@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.attitude import kernel
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
 from rwlab.attitude.kernel import control_torque
@@ -88,8 +89,8 @@ class PDController(LinearController):
         return self.K
 
 
-@dataclass
-class SimResult:
+@dataclass(repr=False)
+class SimResult(ShortRepr):
     """Time histories of one run (rows are logged steps) and statistics over every step.
 
     Attributes

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
@@ -57,8 +58,8 @@ def _kind(structure: str) -> str:
     return structure.rstrip("0123456789[], ")
 
 
-@dataclass
-class StudyResult:
+@dataclass(repr=False)
+class StudyResult(ShortRepr):
     """Everything the study computed; ``to_dict()`` is ``study.json``.
 
     Attributes
@@ -98,6 +99,20 @@ class StudyResult:
     servo: ServoModel | None = None
     nonlinear: dict | None = None
     physical_val: IOData | None = field(default=None, repr=False)
+
+    def to_pandas(self):
+        """The structures tried (orders and other structures), one row each.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``structure``; fit %, MSE, FPE, parameter count, stability.
+        """
+        from rwlab._display import pandas
+
+        keep = ("structure", "n_params", "fit_percent", "prediction_fit_percent", "mse", "fpe")
+        rows = [{k: r.get(k) for k in (*keep, "stable")} for r in self.orders + self.others]
+        return pandas().DataFrame(rows).set_index("structure")
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""

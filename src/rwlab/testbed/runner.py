@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab import __version__, signals
+from rwlab._display import ShortRepr
 from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
@@ -246,8 +247,8 @@ def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
     return x[: round(cfg.duration / cfg.Ts)]
 
 
-@dataclass
-class RunSummary:
+@dataclass(repr=False)
+class RunSummary(ShortRepr):
     """What an experiment produced."""
 
     path: Path

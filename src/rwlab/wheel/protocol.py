@@ -19,7 +19,7 @@ from importlib import resources
 import can
 import cantools
 
-from rwlab.errors import RwlabError
+from rwlab.errors import ProtocolError  # ProtocolError re-exported here, where it was
 from rwlab.wheel.physics import Fault, Mode
 
 __all__ = [
@@ -40,10 +40,6 @@ __all__ = [
 COMMAND_ID, TELEMETRY_ID, HEARTBEAT_ID = 0x100, 0x180, 0x700
 BITRATE = 1_000_000
 MAX_NODE_ID = 15
-
-
-class ProtocolError(RwlabError):
-    """A frame that is not a valid wheel message (bad length, checksum or value)."""
 
 
 @cache
