@@ -20,6 +20,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import signal as sps
@@ -286,7 +287,7 @@ class IOData:
         return frame
 
     def _with(self, u, y, **changes) -> IOData:
-        kwargs = dict(
+        kwargs: dict[str, Any] = dict(
             input_names=self.input_names,
             output_names=self.output_names,
             input_units=self.input_units,

@@ -11,7 +11,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -262,7 +264,8 @@ def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
         bad = [n for n in names if not n.isidentifier()]
         if bad:
             raise DataError(f"channel names {bad} are not MATLAB variable names")
-        variables = {n: table[:, [i]] for i, n in enumerate(names)} | {"Ts": data.Ts}
+        variables: dict[str, Any] = {n: table[:, [i]] for i, n in enumerate(names)}
+        variables["Ts"] = data.Ts
     else:
         variables = {
             "u": data.u,
@@ -321,17 +324,19 @@ def _read_mat(path: Path, Ts, input_columns=None, output_columns=None) -> IOData
 
 
 # -- registration -------------------------------------------------------------------
-for _suffix, _reader in {
+_READERS: dict[str, Callable[..., IOData]] = {
     ".csv": _read_csv,
     ".dat": _read_text,
     ".txt": _read_text,
     ".parquet": _read_parquet,
     ".mat": _read_mat,
-}.items():
-    register_reader(_suffix, _reader)
-for _suffix, _writer in {
+}
+_WRITERS: dict[str, Callable[..., None]] = {
     ".csv": _write_csv,
     ".parquet": _write_parquet,
     ".mat": _write_mat,
-}.items():
+}
+for _suffix, _reader in _READERS.items():
+    register_reader(_suffix, _reader)
+for _suffix, _writer in _WRITERS.items():
     register_writer(_suffix, _writer)

@@ -158,11 +158,11 @@ def run_demo(
         try:
             if progress:
                 with progress(name, n) as bar:
-                    summary = run_experiment(
-                        exp, path, force=True, progress=lambda k, total, b=bar: b.update(1)
+                    run = run_experiment(
+                        exp, path, force=True, progress=lambda k, total: bar.update(1)
                     )
             else:
-                summary = run_experiment(exp, path, force=True)
+                run = run_experiment(exp, path, force=True)
         finally:
             if monitor is not None:
                 from rwlab.testbed.monitor import stop_process
@@ -173,9 +173,9 @@ def run_demo(
                 "name": name,
                 "title": title,
                 "file": f"records/{name}.mcap",
-                "commands": summary.commands,
-                "telemetry": summary.telemetry,
-                "lost_frames": summary.lost_frames,
+                "commands": run.commands,
+                "telemetry": run.telemetry,
+                "lost_frames": run.lost_frames,
             }
         )
 

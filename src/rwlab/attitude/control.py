@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import control
 import numpy as np
@@ -141,7 +142,7 @@ def slew_rate_limit(scenario: Scenario, K: np.ndarray) -> float:
     """Rate limit of the saturation-aware law, rad/s: what K_ω can hold with the torque
     reserve, and what the momentum reserve allows on the largest inertia."""
     by_torque = scenario.slew_torque_fraction * torque_capacity(scenario)
-    by_torque /= np.linalg.norm(K[:, 3:], 2)
+    by_torque /= float(np.linalg.norm(K[:, 3:], 2))
     h_cap = scenario.wheel_max_momentum * torque_capacity(scenario) / scenario.wheel_max_torque
     by_momentum = (
         scenario.slew_momentum_fraction * h_cap / np.linalg.eigvalsh(scenario.inertia_matrix).max()
@@ -421,7 +422,7 @@ def compare(
     """
     seed = scenario.seed if seed is None else seed
     q2, _ = ltr_noise(scenario)
-    plans = {
+    plans: dict[str, tuple[Scenario, dict[str, Any]]] = {
         "lqr": (scenario, dict(estimator="truth")),
         "lqg": (scenario, dict(estimator="ekf")),
         "lqg_ltr": (
@@ -493,16 +494,18 @@ def fly(
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
     design = scenario if design is None else design
-    kw = {}
+    kw: dict[str, Any] = {}
+    ctl: PDController | LQRController
     if controller == "pd":
         ctl = PDController(*pd_gains(design))
         ctl.rate_limit = slew_rate_limit(design, ctl.K)
     else:
-        ctl = LQRController(design, update_period=update_period)
-    if controller == "lqg_ltr":
-        if not (math.isfinite(rho) and rho > 0):
-            raise DesignError(f"ρ must be a positive number, got {rho}")
-        kw = dict(filter_torque_psd=ltr_noise(design, ctl)[0], filter_noise_scale=math.sqrt(rho))
+        ctl = lqr = LQRController(design, update_period=update_period)
+        if controller == "lqg_ltr":
+            if not (math.isfinite(rho) and rho > 0):
+                raise DesignError(f"ρ must be a positive number, got {rho}")
+            psd = ltr_noise(design, lqr)[0]
+            kw = dict(filter_torque_psd=psd, filter_noise_scale=math.sqrt(rho))
     run = simulate(
         scenario,
         ctl,

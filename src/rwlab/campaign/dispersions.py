@@ -24,6 +24,7 @@ import math
 import zlib
 from dataclasses import dataclass, replace
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -92,7 +93,8 @@ class Dispersion:
     def sample(self, rng: np.random.Generator) -> float:
         """One δ."""
         if self.distribution == "uniform":
-            return float(rng.uniform(*self.bounds))
+            low, high = self.bounds  # type: ignore[misc]  # a uniform one always has them
+            return float(rng.uniform(low, high))
         if self.bounds is None:
             return float(rng.normal(self.mean, self.sigma))
         lo, hi = ((b - self.mean) / self.sigma for b in self.bounds)
@@ -130,7 +132,8 @@ def _parse(name: str, spec: dict, where: str) -> Dispersion:
         if bounds is None:
             raise ConfigError(f"{where}: {name}: a uniform dispersion needs bounds = [low, high]")
         return Dispersion(name, kind, bounds=bounds, relative=relative)
-    sigma, mean = spec.get("sigma"), spec.get("mean", 0.0)
+    sigma: Any = spec.get("sigma")
+    mean: Any = spec.get("mean", 0.0)
     if not (_is_number(sigma) and sigma > 0):
         raise ConfigError(f"{where}: {name}: a normal dispersion needs sigma > 0, got {sigma!r}")
     if not _is_number(mean):
@@ -217,13 +220,11 @@ def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
             scalars[name] = value
     off_diagonal = np.any(J != np.diag(np.diag(J)))
     inertia = J.ravel() if off_diagonal or np.size(nominal.inertia) == 9 else np.diag(J)
-    disturbances = replace(
-        nominal.disturbances, **{k: tuple(v) for k, v in dist.items()}, **dist_scalars
-    )
+    dist_fields: dict[str, Any] = {k: tuple(v) for k, v in dist.items()} | dist_scalars
+    fields: dict[str, Any] = {k: tuple(v) for k, v in top.items()} | scalars
     return replace(
         nominal,
         inertia=tuple(float(v) for v in inertia),
-        disturbances=disturbances,
-        **{k: tuple(v) for k, v in top.items()},
-        **scalars,
+        disturbances=replace(nominal.disturbances, **dist_fields),
+        **fields,
     )

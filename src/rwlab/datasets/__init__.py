@@ -6,6 +6,7 @@ Origins are listed in ``ORIGIN.md`` beside this file.
 from __future__ import annotations
 
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy.io import loadmat
@@ -71,7 +72,9 @@ def cascaded_tanks() -> tuple[IOData, IOData]:
     with resources.as_file(_path("cascaded_tanks_dataBenchmark.csv")) as p:
         est = load(p, Ts=4.0, input_columns="uEst", output_columns="yEst")
         val = load(p, Ts=4.0, input_columns="uVal", output_columns="yVal")
-    kw = dict(input_names=["pump"], output_names=["level"], input_units=["V"], output_units=["V"])
+    kw: dict[str, Any] = dict(
+        input_names=["pump"], output_names=["level"], input_units=["V"], output_units=["V"]
+    )
     return (
         IOData(est.u, est.y, 4.0, name="cascaded_tanks_est", **kw),
         IOData(val.u, val.y, 4.0, name="cascaded_tanks_val", **kw),

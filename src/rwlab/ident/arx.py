@@ -74,9 +74,9 @@ def _triangular_factor(M: np.ndarray, block: int = 65536) -> np.ndarray:
     cache: about 3× faster than a single LAPACK call on 10⁶ × 5 regressors.
     """
     if M.shape[0] <= 2 * block:
-        return np.linalg.qr(M, mode="r")
+        return np.asarray(np.linalg.qr(M, mode="r"))
     parts = [np.linalg.qr(M[i : i + block], mode="r") for i in range(0, M.shape[0], block)]
-    return np.linalg.qr(np.vstack(parts), mode="r")
+    return np.asarray(np.linalg.qr(np.vstack(parts), mode="r"))
 
 
 def _check_excitation(experiments: list[IOData], nb: list[int]) -> None:

@@ -74,7 +74,7 @@ def delayest(
     Scans nk_min..nk_max (default ``nk_min + 20``, MATLAB's); see :func:`delay_scan`.
     """
     losses = delay_scan(data, na, nb, nk_min, nk_max)
-    return min(losses, key=losses.get)
+    return min(losses, key=lambda k: losses[k])
 
 
 def struc(na: Iterable[int], nb: Iterable[int], nk: Iterable[int]) -> list[tuple[int, int, int]]:

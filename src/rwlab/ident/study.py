@@ -248,7 +248,7 @@ def identification_study(
 
     losses = delay_scan(est, 2, 2, 0, nk_max)
     step("delay scan")
-    nk = min(losses, key=losses.get)
+    nk = min(losses, key=lambda k: losses[k])
     if nk == 0:
         nk = 1 if losses.get(1, math.inf) <= losses[0] * 1.001 else 0
 
@@ -469,7 +469,8 @@ def wheel_model(
     fit = next(
         r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
     )
-    servo_fit = None if result.servo is None else result.nonlinear["fit_percent"]
+    nl = result.nonlinear
+    servo_fit = None if result.servo is None or nl is None else nl["fit_percent"]
     return WheelModelFile(
         _to_physical(m, trend, d.input_names[0], d.output_names[0]),
         Channel(d.input_names[0], d.input_units[0] or "rpm", float(trend.input_offset[0])),

@@ -265,7 +265,7 @@ def _choose_order(sv: np.ndarray, candidates: list[int]) -> int:
         return candidates[0]
     logs = np.log10(np.maximum(sv, 1e-300 + sv[0] * 1e-16))
     gaps = {n: logs[n - 1] - logs[n] for n in candidates if n < len(sv)}
-    return max(gaps, key=gaps.get)
+    return max(gaps, key=lambda n: gaps[n])
 
 
 def _kalman_gain(A, C, Q, S, R) -> np.ndarray:

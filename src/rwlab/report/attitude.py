@@ -434,8 +434,8 @@ def write_simulation(
     )
     estimates = _disturbance_estimates(run)
     if estimates:
-        rows = len(estimates)
-        fig, axes = figure(10, 2.2 * rows, rows, 1, sharex=True, squeeze=False)
+        n_rows = len(estimates)
+        fig, axes = figure(10, 2.2 * n_rows, n_rows, 1, sharex=True, squeeze=False)
         axes = axes[:, 0]
         for ax, (name, est) in zip(axes, estimates, strict=True):
             for i, axis in enumerate("xyz"):

@@ -324,7 +324,9 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
 
 def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
     """Beyond the paper: the servo model next to the chosen linear one, in physical units."""
-    servo, chosen = result.servo, result.chosen
+    servo, chosen, val = result.servo, result.chosen, result.physical_val
+    if servo is None or val is None:  # the caller checked: a study with a servo model has both
+        raise ValueError("the nonlinear section needs the study's servo model and data")
     trend = result.data.trend
     ch = chosen.structure
     page.heading("8. Nonlinear model: rate-limited servo (beyond the paper)", "nonlinear")
@@ -337,7 +339,6 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         f"{nl['fit_percent']:.2f} % against {ch}'s {_study_fit(result):.2f} %. The speed limit "
         f"is {nl['speed_limit_note']}."
     )
-    val = result.physical_val
     t = val.time - val.time[0]
     y_lin = trend.output_to_physical(chosen.simulate(result.val, initial=INITIAL), result.val.time)
     fig, ax = figure(9, 3.2)

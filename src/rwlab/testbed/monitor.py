@@ -22,6 +22,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import Any
 
 from rwlab.errors import ConfigError
 from rwlab.testbed.record import RecordFollower, read_record
@@ -79,7 +80,8 @@ def make_document(
 ) -> None:
     """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler)."""
     from bokeh.layouts import column, row
-    from bokeh.models import ColumnDataSource, Div
+    from bokeh.models import ColumnDataSource
+    from bokeh.models.widgets import Div
     from bokeh.plotting import figure
 
     path = Path(path)
@@ -88,7 +90,9 @@ def make_document(
     tel = ColumnDataSource(
         {"t": [], "speed": [], "acceleration": [], "current": []}, name="telemetry"
     )
-    opts = dict(height=260, sizing_mode="stretch_width", tools="pan,wheel_zoom,box_zoom,reset")
+    opts: dict[str, Any] = dict(
+        height=260, sizing_mode="stretch_width", tools="pan,wheel_zoom,box_zoom,reset"
+    )
     f_speed = figure(title="command and measured speed [rpm]", x_axis_label="t [s]", **opts)
     f_speed.step("t", "command", source=cmd, mode="after", color="#d62728", legend_label="command")
     f_speed.line("t", "speed", source=tel, color="#1f77b4", legend_label="speed")
@@ -105,7 +109,7 @@ def make_document(
     )
     doc.title = f"rwlab monitor: {path.name}"
     recent: deque[tuple[float, float]] = deque()
-    state = {"frames": 0, "lost": 0, "counter": None, "events": []}
+    state: dict[str, Any] = {"frames": 0, "lost": 0, "counter": None, "events": []}
 
     def refresh() -> None:
         new = feed.poll()
@@ -228,8 +232,9 @@ def serve(
 
 
 class _ThreadedServer:
-    def __init__(self, server, loop, thread) -> None:
+    def __init__(self, server, loop, thread, url: str = "") -> None:
         self._server, self._loop, self._thread = server, loop, thread
+        self.url = url
 
     def stop(self) -> None:
         self._loop.add_callback(self._server.stop)
@@ -254,7 +259,7 @@ def serve_in_thread(
 
     port = port or free_port(host)
     ready = threading.Event()
-    holder = {}
+    holder: dict[str, Any] = {}
 
     def run() -> None:
         asyncio.set_event_loop(asyncio.new_event_loop())
@@ -275,9 +280,7 @@ def serve_in_thread(
     thread.start()
     if not ready.wait(15):
         raise RuntimeError("the monitor server did not start")
-    handle = _ThreadedServer(holder["server"], holder["loop"], thread)
-    handle.url = f"http://{host}:{port}/"
-    return handle
+    return _ThreadedServer(holder["server"], holder["loop"], thread, f"http://{host}:{port}/")
 
 
 def start_process(path, *, host: str = "127.0.0.1", port: int = 5006) -> subprocess.Popen:

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -121,7 +122,7 @@ class ExperimentConfig:
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
         number = (int, float)
-        expected = {
+        expected: dict[str, tuple[Any, str]] = {
             "seed": (int, "an integer"),
             "node_id": (int, "an integer 0..15"),
             "realtime": (bool, "true or false"),
@@ -238,7 +239,8 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
 
 
 def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
-    data = load_data(cfg.file, Ts=cfg.Ts) if Path(cfg.file).suffix == ".csv" else None
+    file = str(cfg.file)
+    data = load_data(file, Ts=cfg.Ts) if Path(file).suffix == ".csv" else None
     if data is None:
         raise ConfigError(f"setpoint file {cfg.file} must be a .csv")
     x = data.y[:, 0]  # a one-column file is read as the output channel
@@ -300,7 +302,8 @@ def run_experiment(
         raise
     node = None
     if simulated:
-        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+        channel = host_bus.channel_id  # type: ignore[attr-defined]  # a VirtualBus has one
+        node_bus = open_bus("virtual", channel, simulated_clock=not realtime)
         node = WheelNode(
             node_bus,
             cfg.node_id,
