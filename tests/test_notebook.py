@@ -5,8 +5,7 @@ import inspect
 import numpy as np
 import pytest
 
-import rwlab.errors
-from rwlab import datasets
+from rwlab import datasets, errors
 from rwlab._display import summarize
 from rwlab.attitude.scenario import SCENARIOS
 from rwlab.attitude.sim import PDController, simulate
@@ -71,8 +70,8 @@ def test_every_error_class_lives_in_rwlab_errors():
     from rwlab.attitude.design import DesignError
     from rwlab.wheel.protocol import ProtocolError
 
-    assert DesignError is rwlab.errors.DesignError and ProtocolError is rwlab.errors.ProtocolError
-    assert issubclass(DesignError, rwlab.errors.RwlabError)
+    assert DesignError is errors.DesignError and ProtocolError is errors.ProtocolError
+    assert issubclass(DesignError, errors.RwlabError)
 
 
 def _walk(package):

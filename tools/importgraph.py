@@ -21,7 +21,7 @@ SRC = Path(__file__).resolve().parent.parent / "src"
 # Lowest first. A module may import its own layer and those below, never above.
 # testbed sits above diagnose (the runner diagnoses live), both above wheel.
 LAYERS: list[set[str]] = [
-    {"__init__", "errors", "_toml", "_io", "schemas"},  # __init__: the root package
+    {"__init__", "errors", "_toml", "_io", "_display", "_optional", "schemas"},  # __init__: root
     {"data", "signals", "datafiles", "datasets"},
     {"ident"},
     {"wheel"},

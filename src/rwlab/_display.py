@@ -82,8 +82,6 @@ def pandas():
     module
         ``pandas``.
     """
-    try:
-        import pandas as pd
-    except ImportError:
-        raise ImportError("to_pandas needs pandas: pip install 'rwlab[notebook]'") from None
-    return pd
+    from rwlab._optional import require
+
+    return require("pandas", "to_pandas")

@@ -51,6 +51,10 @@ class DesignError(RwlabError, ValueError):
     """Weights or a plant for which the requested design does not exist."""
 
 
+class MissingDependencyError(RwlabError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install."""
+
+
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
 

@@ -16,6 +16,7 @@ import itertools
 import logging
 import os
 
+from rwlab._optional import require
 from rwlab.errors import ConfigError
 
 __all__ = ["batches", "dask_client", "map_batches", "worker_count"]
@@ -25,10 +26,11 @@ __all__ = ["batches", "dask_client", "map_batches", "worker_count"]
 def dask_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://host:8786), or on
     a new local cluster of ``workers`` processes (default: the machine's cores)."""
+    require("distributed", "running on Dask")
     from distributed import Client, LocalCluster
 
     if workers is not None and scheduler is not None:
-        raise ConfigError("give --workers or --scheduler, not both")
+        raise ConfigError("give workers or scheduler, not both")
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")
@@ -39,7 +41,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         return
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
-        raise ConfigError(f"--workers must be ≥ 1, got {n}")
+        raise ConfigError(f"workers must be ≥ 1, got {n}")
     with (
         LocalCluster(
             n_workers=n,

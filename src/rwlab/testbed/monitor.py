@@ -24,6 +24,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
+from rwlab._optional import require
 from rwlab.errors import ConfigError
 from rwlab.testbed.record import RecordFollower, read_record
 
@@ -79,6 +80,7 @@ def make_document(
     doc, path: str | Path, *, replay: bool = False, speed: float = 1.0, max_points: int = 20_000
 ) -> None:
     """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler)."""
+    require("bokeh", "the live monitor")
     from bokeh.layouts import column, row
     from bokeh.models import ColumnDataSource
     from bokeh.models.widgets import Div
@@ -172,6 +174,7 @@ def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:
 
 
 def _application(path, replay, speed):
+    require("bokeh", "the live monitor")
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
 
