@@ -8,7 +8,7 @@ plot (drop-oldest, for the display only: the record keeps everything).
 
 It shows command vs speed, acceleration (derived from speed over ≥ 0.1 s),
 motor current, and the wheel's mode, faults and the experiment's events. Given
-a finished record with ``replay=True`` it plays the record back at ``speed``×.
+a finished record with ``replay=True`` it plays the record back at ``speed`` times real time.
 Bokeh serves its own JavaScript from the server: no CDN, works offline.
 """
 
