@@ -26,6 +26,18 @@ def atomic_write_bytes(path: Path, writer) -> Path:
 
     The file gets the usual permissions (0666 less the umask), not the
     temporary file's private 0600.
+
+    Parameters
+    ----------
+    path : Path
+        The file to write; its folder is created if missing.
+    writer : callable
+        ``writer(tmp_path)`` writes the whole content to the temporary file.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     path = Path(path)
     if path.parent.exists() and not path.parent.is_dir():

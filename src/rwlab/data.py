@@ -418,6 +418,16 @@ def merge(*datasets: IOData) -> list[IOData]:
 
     Every estimator in ``rwlab.ident`` accepts the returned list: regressions and
     prediction errors are formed per experiment and never cross a boundary.
+
+    Parameters
+    ----------
+    *datasets : IOData
+        The experiments, with the same channels and sample time.
+
+    Returns
+    -------
+    list of IOData
+        One element per experiment.
     """
     if not datasets:
         raise DataError("merge needs at least one IOData")
@@ -462,6 +472,11 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
         with more than one input/output split is an error (``DataError``),
         never a guess, unless rwlab's own metadata says which is which.
         ``max_gap`` (s) for a record: see :func:`rwlab.testbed.load_record`.
+
+    Returns
+    -------
+    IOData
+        The record, with ``source`` holding what the file said about its origin.
 
     Raises
     ------

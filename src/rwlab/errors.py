@@ -32,7 +32,15 @@ class WheelTimeout(RwlabError, TimeoutError):
 
 
 class WheelFault(RwlabError):
-    """The wheel reports a latched fault; clear it with ``WheelClient.clear_fault()``."""
+    """The wheel reports a latched fault; clear it with ``WheelClient.clear_fault()``.
+
+    Parameters
+    ----------
+    message : str
+        What happened, and what to do.
+    faults : int
+        The wheel's latched fault bits (``rwlab.wheel.physics.Fault``).
+    """
 
     def __init__(self, message: str, faults: int = 0) -> None:
         super().__init__(message)

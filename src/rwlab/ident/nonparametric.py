@@ -189,6 +189,18 @@ def etfe(data: IOData, omega=None) -> FrequencyResponse:
     One input (any number of outputs), or a time series, for which the result
     is the periodogram Ts |Y(ω)|²/N in ``spectrum``. Exact at the excited
     frequencies for a noise-free record with a periodic input over whole periods.
+
+    Parameters
+    ----------
+    data : IOData
+        One input (or none), any number of outputs.
+    omega : array_like, optional
+        Frequencies, rad/s (default the FFT grid up to Nyquist).
+
+    Returns
+    -------
+    FrequencyResponse
+        ``response`` of shape (nw, ny, 1) (``spectrum`` for a time series).
     """
     d = _one_record(data, "etfe")
     w = _frequencies(omega, d.Ts)

@@ -615,6 +615,22 @@ def oe(
 
     ``nb`` (≥ 1), ``nf`` and ``nk`` are one value per input, or one for all
     (MATLAB's order vectors); options as for :func:`armax`.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    nb, nf : int or sequence of int
+        Orders of B (≥ 1) and F, per input.
+    nk : int or sequence of int
+        Input delay, samples, per input.
+    max_iter, tol, initial
+        As for :func:`armax`.
+
+    Returns
+    -------
+    PolyModel
+        The output-error model with its covariance and estimation report.
     """
     nu = _nu(data)
     _needs_input("oe", nu)
@@ -650,6 +666,24 @@ def bj(
     """Estimate ``y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + (C/D) e`` (MATLAB ``bj(data,[nb nc nd nf nk])``).
 
     ``nb``, ``nf`` and ``nk`` per input as for :func:`oe`; options as for :func:`armax`.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    nb, nf : int or sequence of int
+        Orders of B and F, per input.
+    nc, nd : int
+        Orders of the noise model's C and D.
+    nk : int or sequence of int
+        Input delay, samples, per input.
+    max_iter, tol, initial
+        As for :func:`armax`.
+
+    Returns
+    -------
+    PolyModel
+        The Box–Jenkins model with its covariance and estimation report.
     """
     nu = _nu(data)
     _needs_input("bj", nu)
@@ -680,6 +714,20 @@ def pem(
     """Refine any ``PolyModel`` structure by prediction-error minimisation from ``init``.
 
     ``max_iter``, ``tol`` and ``initial`` as for :func:`armax`.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    init : PolyModel
+        Initial model; its structure (orders, delays) is kept.
+    max_iter, tol, initial
+        As for :func:`armax`.
+
+    Returns
+    -------
+    PolyModel
+        The refined model with its covariance and estimation report.
     """
     nu = init.nu
     orders = _Orders(

@@ -218,6 +218,11 @@ def identification_study(
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (delay scan, each
         estimate, validation), for a progress bar.
+
+    Returns
+    -------
+    StudyResult
+        Every number of the report; ``to_dict()`` is ``study.json``.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -424,7 +429,22 @@ def physical_model(
     accel_limit_rpm_s: float = 314.0,
     saturation_source: str = "RW90 defaults",
 ) -> dict:
-    """The JSON form of :func:`wheel_model` (``model.json``), same arguments."""
+    """The JSON form of :func:`wheel_model` (``model.json``), same arguments.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    dict
+        ``model.json``'s content (schema ``model``).
+    """
     return wheel_model(
         result,
         speed_limit_rpm=speed_limit_rpm,
