@@ -92,7 +92,29 @@ def _f(s, tau, h_body, J, J_inv, n, gg):
 
 
 def linearize(q, w_bo, h_body, J, n: float = GEO_RATE, gravity_gradient: bool = True):
-    """A (6×6), B (6×3) of ṡ = f(s, τ) about s = [2 q_v, ω_bo] (central differences)."""
+    """A (6×6), B (6×3) of ṡ = f(s, τ) about s = [2 q_v, ω_bo] (central differences).
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (4,)
+        Attitude quaternion (orbital → body, scalar last).
+    w_bo : numpy.ndarray, shape (3,)
+        Body rate relative to the orbital frame, rad/s.
+    h_body : numpy.ndarray, shape (3,)
+        Wheel momentum in body axes, N·m·s.
+    J : numpy.ndarray, shape (3, 3)
+        Inertia, kg·m².
+    n : float
+        Orbital rate, rad/s.
+    gravity_gradient : bool
+        Include the gravity-gradient torque.
+
+    Returns
+    -------
+    A : numpy.ndarray, shape (6, 6)
+    B : numpy.ndarray, shape (6, 3)
+        Per N·m of body torque.
+    """
     J = np.asarray(J, float)
     J_inv = np.linalg.inv(J)
     gg = 3 * n * n if gravity_gradient else 0.0
@@ -111,13 +133,37 @@ def linearize(q, w_bo, h_body, J, n: float = GEO_RATE, gravity_gradient: bool = 
 
 
 def torque_capacity(scenario: Scenario) -> float:
-    """Largest body torque (N·m) in any direction that no wheel's limit clips (G⁺ allocation)."""
+    """Largest body torque (N·m) in any direction that no wheel's limit clips (G⁺ allocation).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its wheels (axes and torque limit).
+
+    Returns
+    -------
+    float
+        The torque, N·m.
+    """
     rows = np.linalg.norm(np.linalg.pinv(scenario.wheel_matrix), axis=1)
     return scenario.wheel_max_torque / float(rows.max())
 
 
 def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous Bryson weights Q (6×6), R (3×3) from the scenario's design fields."""
+    """Continuous Bryson weights Q (6×6), R (3×3) from the scenario's design fields.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``lqr_*`` fields set the Bryson scales.
+
+    Returns
+    -------
+    Q : numpy.ndarray, shape (6, 6)
+        State weight on [2 q_v, ω_bo].
+    R : numpy.ndarray, shape (3, 3)
+        Torque weight, 1/(N·m)².
+    """
     theta0 = math.radians(scenario.lqr_attitude_deg)
     rate0 = math.radians(scenario.lqr_rate_deg_s)
     tau0 = scenario.lqr_torque_fraction * torque_capacity(scenario)
@@ -184,7 +230,20 @@ def _omega_grid(dt: float) -> np.ndarray:
 
 
 def crossover(loop_sigma: np.ndarray, omega: np.ndarray) -> float:
-    """Highest frequency (rad/s) where the largest singular value falls through 1."""
+    """Highest frequency (rad/s) where the largest singular value falls through 1.
+
+    Parameters
+    ----------
+    loop_sigma : numpy.ndarray, shape (nw, k)
+        Singular values of the loop, largest first.
+    omega : numpy.ndarray, shape (nw,)
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    float
+        The crossover frequency, rad/s.
+    """
     s = loop_sigma[:, 0]
     above = np.flatnonzero(s >= 1)
     if above.size == 0:
@@ -202,6 +261,20 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
     q² = (κ ω_c)⁴ J_slow² r_c puts a double integrator's Kalman bandwidth
     (q²/(J² r_c))^¼ at κ = ``ltr_bandwidth_factor`` times the LQR crossover ω_c
     on the slowest axis, J_slow = 1/σ_min(B) from the SVD of B.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+    ctl : LQRController, optional
+        The regulator whose crossover sets the bandwidth (designed here if None).
+
+    Returns
+    -------
+    q2 : float
+        Fictitious torque PSD, N²·m²·s.
+    r_c : float
+        Attitude measurement noise PSD, rad²·s.
     """
     ctl = LQRController(scenario) if ctl is None else ctl
     w = _omega_grid(scenario.dt)
@@ -215,7 +288,22 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
 
 
 def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
-    """Paper B Fig. 8 on the discrete loop: σ of K(z)G(z) at the plant input for each ρ."""
+    """Paper B Fig. 8 on the discrete loop: σ of K(z)G(z) at the plant input for each ρ.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+    rhos : sequence of float
+        The recovery parameters ρ.
+    omega : array_like, optional
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    LTRResult
+        Target and recovered loops' singular values.
+    """
     ctl = LQRController(scenario)
     q2, r_c = ltr_noise(scenario, ctl)
     dt = scenario.dt
@@ -305,6 +393,18 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
     ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
     slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
     and settling come from the logged trace.
+
+    Parameters
+    ----------
+    r : SimResult
+        One run.
+    band_deg : float
+        Settling band on the pointing error, degrees.
+
+    Returns
+    -------
+    dict
+        The metrics (``metrics.json``'s per-controller entries), SI units or named.
     """
     st = r.stats
     steady_n = max(st["steady_steps"], 1)
@@ -419,6 +519,28 @@ def compare(
     disturbances. With ``wheel_model_file`` the LQG loop is also run with the
     identified wheel model as the actuator (``lqg_identified_wheel``).
     ``progress(name)`` is called before each run.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The spacecraft, sky and sensors.
+    duration : float, optional
+        Length of each run, s (the scenario's by default).
+    seed : int, optional
+        Noise seed (the scenario's by default).
+    rho : float
+        LTR's recovery parameter ρ for the LQG/LTR run.
+    wheel_model_file : str, optional
+        A ``model.json`` to fly as the actuator of an extra LQG run.
+    update_period : float, optional
+        Re-linearisation period of the LQR gains, s (None: fixed gains).
+    progress : callable, optional
+        ``progress(name)`` before each run.
+
+    Returns
+    -------
+    Comparison
+        The runs, their metrics, ρ and the configuration.
     """
     seed = scenario.seed if seed is None else seed
     q2, _ = ltr_noise(scenario)
@@ -465,7 +587,20 @@ CONTROLLERS = ("pd", "lqr", "lqg", "lqg_ltr")
 def pd_gains(scenario: Scenario) -> tuple[float, float]:
     """(kp N·m/rad, kd N·m·s/rad) of a PD law with the LQR design's proportional gain
     (Bryson: ``lqr_torque_fraction`` of the torque at ``lqr_attitude_deg``) and ζ = 0.707
-    on the largest inertia."""
+    on the largest inertia.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+
+    Returns
+    -------
+    kp : float
+        Proportional gain, N·m/rad.
+    kd : float
+        Derivative gain, N·m·s/rad.
+    """
     kp = scenario.lqr_torque_fraction * torque_capacity(scenario)
     kp /= math.radians(scenario.lqr_attitude_deg)
     j_max = float(np.linalg.eigvalsh(scenario.inertia_matrix).max())
@@ -489,7 +624,38 @@ def fly(
     simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
     ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
     default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
-    design (the filter still uses the flown scenario's inertia and sensor noise)."""
+    design (the filter still uses the flown scenario's inertia and sensor noise).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario flown (the truth).
+    controller : {'pd', 'lqr', 'lqg', 'lqg_ltr'}
+        The control law.
+    estimator : {'truth', 'ekf'}, optional
+        What the law sees.
+    duration : float, optional
+        Run length, s.
+    seed : int, optional
+        Noise seed.
+    rho : float
+        LTR's ρ (``lqg_ltr`` only).
+    update_period : float, optional
+        Re-linearisation period of the LQR gains, s.
+    log_every : int
+        Steps between logged rows.
+    progress : callable, optional
+        Passed to :func:`rwlab.attitude.sim.simulate`.
+    design : Scenario, optional
+        The scenario the gains are designed on.
+
+    Returns
+    -------
+    run : SimResult
+        The time histories.
+    metrics : dict
+        :func:`metrics` of the run.
+    """
     if controller not in CONTROLLERS:
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
