@@ -29,7 +29,21 @@ __all__ = ["DemoConfig", "run_demo"]
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Durations (simulated seconds) of each part; the defaults are the full demo."""
+    """Durations (simulated seconds) of each part; the defaults are the full demo.
+
+    Parameters
+    ----------
+    step_duration, accel_duration, prbs_duration, chirp_duration : float
+        Length of each testbed record, simulated s.
+    attitude_duration : float
+        Length of each attitude run, s.
+    realtime : bool
+        Run the testbed at wall-clock speed.
+    monitor : bool
+        Open the live monitor during the records.
+    seed : int
+        Seed of the records and the runs.
+    """
 
     step_duration: float = 240.0
     accel_duration: float = 120.0
@@ -132,6 +146,24 @@ def run_demo(
 
     ``echo(text)`` reports each stage; ``progress(label, n)`` returns a context
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+    cfg : DemoConfig
+        Durations and options.
+    force : bool
+        Replace a folder that is not a previous demo's.
+    echo : callable
+        Prints each stage.
+    progress : callable, optional
+        ``progress(label, n)`` returns a context manager with ``update(k)``.
+
+    Returns
+    -------
+    dict
+        ``summary.json``'s content (schema ``demo``).
     """
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.scenario import SCENARIOS

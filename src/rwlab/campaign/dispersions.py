@@ -159,7 +159,17 @@ def _leaves(table: dict, prefix: str, where: str):
 
 
 def load_dispersions(path=None) -> tuple[Dispersion, ...]:
-    """The dispersions of a TOML file (the default set when ``path`` is None)."""
+    """The dispersions of a TOML file (the default set when ``path`` is None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike, optional
+        A dispersions TOML file.
+
+    Returns
+    -------
+    tuple of Dispersion
+    """
     if path is None:
         path = resources.files("rwlab.campaign") / "default_dispersions.toml"
     table = read_table(path, "dispersions", "dispersions")
@@ -189,7 +199,22 @@ def _nominal(sc: Scenario, name: str) -> tuple[float, float]:
 
 
 def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
-    """Every dispersed field's value for one run (field units), from the run's seed alone."""
+    """Every dispersed field's value for one run (field units), from the run's seed alone.
+
+    Parameters
+    ----------
+    dispersions : sequence of Dispersion
+        What is dispersed, and how.
+    nominal : Scenario
+        The nominal values (relative dispersions scale them).
+    run_seed : int
+        The run's seed.
+
+    Returns
+    -------
+    dict of str to float
+        Field name → value.
+    """
     values = {}
     for d in dispersions:
         rng = np.random.default_rng([run_seed, zlib.crc32(d.field.encode())])
@@ -200,7 +225,20 @@ def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
 
 
 def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
-    """The scenario with the dispersed values (validated like any scenario: ConfigError)."""
+    """The scenario with the dispersed values (validated like any scenario: ConfigError).
+
+    Parameters
+    ----------
+    nominal : Scenario
+        The scenario dispersed.
+    values : dict of str to float
+        Field name (``inertia.xx``, ``disturbances.srp_torque.x``, ...) → value, field units.
+
+    Returns
+    -------
+    Scenario
+        A new scenario (``nominal`` is unchanged).
+    """
     J = nominal.inertia_matrix.copy()
     top = {f: list(getattr(nominal, f)) for f in _VECTORS}
     dist = {f: list(getattr(nominal.disturbances, f)) for f in _DIST_VECTORS}

@@ -25,7 +25,20 @@ __all__ = ["batches", "dask_client", "map_batches", "worker_count"]
 @contextlib.contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://host:8786), or on
-    a new local cluster of ``workers`` processes (default: the machine's cores)."""
+    a new local cluster of ``workers`` processes (default: the machine's cores).
+
+    Parameters
+    ----------
+    workers : int, optional
+        Processes of a new local cluster.
+    scheduler : str, optional
+        Address of a running scheduler (not with ``workers``).
+
+    Yields
+    ------
+    distributed.Client
+        Closed, with its local cluster, when the block ends.
+    """
     require("distributed", "running on Dask")
     from distributed import Client, LocalCluster
 
@@ -57,13 +70,38 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
 
 
 def worker_count(client) -> int:
-    """Workers the scheduler knows now (at least 1)."""
+    """Workers the scheduler knows now (at least 1).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster.
+
+    Returns
+    -------
+    int
+    """
     return max(1, len(client.scheduler_info().get("workers", {})))
 
 
 def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     """Split ``items`` in order into ``per_worker`` tasks per worker (fewer when there are
-    fewer items), of sizes that differ by at most one."""
+    fewer items), of sizes that differ by at most one.
+
+    Parameters
+    ----------
+    items : list
+        The work, in order.
+    n_workers : int
+        Number of workers.
+    per_worker : int
+        Tasks per worker (more balance the load, fewer cost less overhead).
+
+    Returns
+    -------
+    list of list
+        The batches; concatenated, they are ``items``.
+    """
     n = max(1, min(len(items), per_worker * max(1, n_workers)))
     edges = [len(items) * i // n for i in range(n + 1)]
     return [items[a:b] for a, b in itertools.pairwise(edges)]
@@ -82,6 +120,24 @@ def map_batches(client, fn, work: list[list], *args, progress=None) -> list:
 
     ``fn`` returns one result per item of its batch; ``progress(done)`` is called with
     the number of items finished after each batch.
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster.
+    fn : callable
+        ``fn(batch, *args)`` returns one result per item.
+    work : list of list
+        The batches (see :func:`batches`).
+    *args
+        Passed to every call (scattered once).
+    progress : callable, optional
+        ``progress(done)`` after each batch.
+
+    Returns
+    -------
+    list
+        Every item's result, in order.
     """
     from distributed import as_completed
 

@@ -120,7 +120,24 @@ def write_study(
     *,
     force: bool = False,
 ) -> dict[str, Path]:
-    """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``."""
+    """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    model_info : WheelModelFile or dict
+        ``model.json``'s content.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     if isinstance(model_info, WheelModelFile):
         model_info = model_info.to_dict()
     out = Path(out_dir)

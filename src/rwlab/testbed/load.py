@@ -28,6 +28,18 @@ def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float
     Frame times jitter around the telemetry period, so an interval counts as a
     gap only when it exceeds ``max_gap`` by more than half the typical (median)
     interval: at 10 Hz, a 0.1000001 s step is not a gap, a lost frame's 0.2 s is.
+
+    Parameters
+    ----------
+    times : numpy.ndarray, shape (n,)
+        Frame times, s, increasing.
+    max_gap : float
+        Longest accepted interval, s.
+
+    Returns
+    -------
+    list of (float, float)
+        Start time and length of each gap, s.
     """
     if times.size < 2:
         return []

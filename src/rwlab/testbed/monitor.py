@@ -79,7 +79,21 @@ class _Feed:
 def make_document(
     doc, path: str | Path, *, replay: bool = False, speed: float = 1.0, max_points: int = 20_000
 ) -> None:
-    """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler)."""
+    """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler).
+
+    Parameters
+    ----------
+    doc : bokeh.document.Document
+        The page to fill.
+    path : str or Path
+        The record (being written, or finished with ``replay``).
+    replay : bool
+        Play a finished record back.
+    speed : float
+        Replay speed, times real time.
+    max_points : int
+        Samples kept per plot.
+    """
     require("bokeh", "the live monitor")
     from bokeh.layouts import column, row
     from bokeh.models import ColumnDataSource
@@ -165,6 +179,20 @@ def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:
     ``recent`` holds the (t, speed) pairs seen so far and is trimmed in place. The
     oldest frame kept is the newest one at least ``ACCEL_WINDOW`` old, so the
     difference always spans a frame interval, whatever the telemetry rate.
+
+    Parameters
+    ----------
+    recent : collections.deque of (float, float)
+        (t s, speed rpm) pairs, oldest first; trimmed in place.
+    t : float
+        The newest frame's time, s.
+    speed : float
+        Its speed, rpm.
+
+    Returns
+    -------
+    float
+        Acceleration, rpm/s (0 until a window has passed).
     """
     recent.append((t, speed))
     while len(recent) > 2 and t - recent[1][0] >= ACCEL_WINDOW:
@@ -184,14 +212,32 @@ def _application(path, replay, speed):
 
 
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that is free on ``host`` right now."""
+    """A TCP port that is free on ``host`` right now.
+
+    Parameters
+    ----------
+    host : str
+        The address.
+
+    Returns
+    -------
+    int
+    """
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
 
 
 def check_port(host: str, port: int) -> None:
-    """Raise ``ConfigError`` now if the monitor could not listen on ``host:port``."""
+    """Raise ``ConfigError`` now if the monitor could not listen on ``host:port``.
+
+    Parameters
+    ----------
+    host : str
+        The address to listen on.
+    port : int
+        The TCP port.
+    """
     with socket.socket() as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as tornado binds
         try:
@@ -205,7 +251,13 @@ def check_port(host: str, port: int) -> None:
 
 
 def stop_process(child: subprocess.Popen) -> None:
-    """Stop a monitor started by :func:`start_process` and wait for it to release its port."""
+    """Stop a monitor started by :func:`start_process` and wait for it to release its port.
+
+    Parameters
+    ----------
+    child : subprocess.Popen
+        As :func:`start_process` returned it.
+    """
     child.terminate()
     try:
         child.wait(timeout=5)
@@ -217,7 +269,21 @@ def stop_process(child: subprocess.Popen) -> None:
 def serve(
     path, *, host: str = "127.0.0.1", port: int = 5006, replay: bool = False, speed: float = 1.0
 ) -> None:
-    """Serve the monitor until interrupted (blocking)."""
+    """Serve the monitor until interrupted (blocking).
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int
+        TCP port.
+    replay : bool
+        Play a finished record back.
+    speed : float
+        Replay speed, times real time.
+    """
     from bokeh.server.server import Server
 
     check_port(host, port)
@@ -254,7 +320,26 @@ def serve_in_thread(
     speed: float = 1.0,
     wait_for_file: bool = False,
 ):
-    """Serve the monitor from a background thread; returns a handle with ``stop()`` and ``url``."""
+    """Serve the monitor from a background thread; returns a handle with ``stop()`` and ``url``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int, optional
+        TCP port (a free one by default).
+    replay, speed
+        As for :func:`serve`.
+    wait_for_file : bool
+        Let the page wait until the record appears.
+
+    Returns
+    -------
+    handle
+        With ``url`` and ``stop()``.
+    """
     import asyncio
 
     from bokeh.server.server import Server
@@ -290,6 +375,20 @@ def start_process(path, *, host: str = "127.0.0.1", port: int = 5006) -> subproc
     """Run the monitor in its own process (what ``rwlab experiment --monitor`` does).
 
     Raises ``ConfigError`` at once if the port is taken; stop it with :func:`stop_process`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int
+        TCP port.
+
+    Returns
+    -------
+    subprocess.Popen
+        The monitor's process.
     """
     check_port(host, port)
     return subprocess.Popen(

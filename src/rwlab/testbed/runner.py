@@ -209,7 +209,20 @@ class ExperimentConfig:
 
 
 def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray:
-    """The command samples, one per Ts, in rpm or rpm/s."""
+    """The command samples, one per Ts, in rpm or rpm/s.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    params : WheelParams
+        The wheel's limits.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(duration / Ts),)
+        The commands.
+    """
     if cfg.signal == "prbs":
         x = signals.prbs(
             cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
@@ -251,7 +264,21 @@ def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
 
 @dataclass(repr=False)
 class RunSummary(ShortRepr):
-    """What an experiment produced."""
+    """What an experiment produced.
+
+    Parameters
+    ----------
+    path : Path
+        The record written.
+    commands, telemetry : int
+        Frames sent and received.
+    lost_frames, bad_frames : int
+        Telemetry frames missing, and refused (bad checksum or length).
+    duration : float
+        Length of the experiment, s.
+    status : {'completed', 'interrupted', 'fault', 'error'}
+        How it ended.
+    """
 
     path: Path
     commands: int
@@ -275,6 +302,23 @@ def run_experiment(
     ``progress(k, n)`` is called after each command. KeyboardInterrupt and
     errors idle the wheel, close the record (with an event saying why) and
     are re-raised.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    out : str or os.PathLike
+        The ``.mcap`` file.
+    params : WheelParams
+        The simulated wheel's parameters.
+    force : bool
+        Replace an existing record.
+    progress : callable, optional
+        ``progress(k, n)`` after each command.
+
+    Returns
+    -------
+    RunSummary
     """
     cfg.check_limits(params)
     command = make_signal(cfg, params)
