@@ -54,7 +54,21 @@ SETTLE_S = 30.0  # steady: the command has not changed for this long, s (wheel a
 
 @dataclass(frozen=True)
 class Alarm:
-    """One alarm: when (s, sample time), which fault is likely, which detector fired."""
+    """One alarm: when (s, sample time), which fault is likely, which detector fired.
+
+    Parameters
+    ----------
+    t_s : float
+        Time of the alarm, s from the record's start.
+    kind : str
+        The likely fault (``friction``, ``speed_sensor_stuck``, ...).
+    statistic : float
+        The detector's statistic when it fired.
+    detector : str
+        Which detector fired.
+    threshold : float
+        Its threshold.
+    """
 
     t_s: float
     kind: str
@@ -296,7 +310,23 @@ class Diagnoser:
 
 @dataclass
 class Diagnosis:
-    """What :func:`diagnose` found in a record."""
+    """What :func:`diagnose` found in a record.
+
+    Parameters
+    ----------
+    alarms : list of Alarm
+        In time order.
+    thresholds : dict
+        Each detector's threshold.
+    calibration : dict
+        What the healthy start of the record calibrated (whitening, current model).
+    history : dict of str to numpy.ndarray
+        The residuals and statistics at every sample (``t_s``, ``speed``, ...).
+    false_alarms_per_hour : float
+        The false-alarm rate the thresholds were set for, per detector.
+    calibration_s : float
+        Length of the calibration window, s.
+    """
 
     alarms: list[Alarm]
     thresholds: dict
@@ -356,6 +386,11 @@ def diagnose(
     wheel : IdentifiedWheel
     calibration_s, false_alarms_per_hour, speed_test :
         See :class:`Diagnoser`.
+
+    Returns
+    -------
+    Diagnosis
+        The alarms, thresholds and residual histories.
     """
     if not math.isclose(data.Ts, wheel.Ts, rel_tol=1e-6):
         raise DataError(f"the data are sampled at {data.Ts} s, the model at {wheel.Ts} s")

@@ -45,6 +45,11 @@ def isolate(detector: str, window: np.ndarray, calibration: dict) -> str:
         Recent samples: speed residual, acceleration, speed, current residual, current.
     calibration : dict
         The diagnoser's calibration (``current_model``, ``current_peak_a``).
+
+    Returns
+    -------
+    str
+        The fault's name (``Alarm.kind``).
     """
     if detector in _DIRECT:
         return _DIRECT[detector]

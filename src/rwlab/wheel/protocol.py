@@ -50,7 +50,13 @@ def database() -> cantools.database.Database:
 
 
 def dbc_sha256() -> str:
-    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol."""
+    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol.
+
+    Returns
+    -------
+    str
+        Hexadecimal digest.
+    """
     return hashlib.sha256(resources.files(__package__).joinpath("rw.dbc").read_bytes()).hexdigest()
 
 
@@ -103,7 +109,17 @@ def _frame(base: int, node_id: int, name: str, signals: dict) -> can.Message:
 
 
 def encode_command(cmd: Command) -> can.Message:
-    """CAN frame for a command; raises ProtocolError for values the frame cannot carry."""
+    """CAN frame for a command; raises ProtocolError for values the frame cannot carry.
+
+    Parameters
+    ----------
+    cmd : Command
+        The command.
+
+    Returns
+    -------
+    can.Message
+    """
     if not math.isfinite(cmd.setpoint) or abs(cmd.setpoint) > 1e6:
         raise ProtocolError(f"setpoint must be finite and within ±1e6, got {cmd.setpoint}")
     return _frame(
@@ -119,7 +135,17 @@ def encode_command(cmd: Command) -> can.Message:
 
 
 def encode_telemetry(t: Telemetry) -> can.Message:
-    """CAN frame for telemetry (speed clipped to the field's range)."""
+    """CAN frame for telemetry (speed clipped to the field's range).
+
+    Parameters
+    ----------
+    t : Telemetry
+        The telemetry.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         TELEMETRY_ID,
         t.node_id,
@@ -137,7 +163,17 @@ def encode_telemetry(t: Telemetry) -> can.Message:
 
 
 def encode_heartbeat(h: Heartbeat) -> can.Message:
-    """CAN frame for a heartbeat."""
+    """CAN frame for a heartbeat.
+
+    Parameters
+    ----------
+    h : Heartbeat
+        The status.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         HEARTBEAT_ID,
         h.node_id,
@@ -153,7 +189,17 @@ def encode_heartbeat(h: Heartbeat) -> can.Message:
 
 
 def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
-    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones."""
+    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones.
+
+    Parameters
+    ----------
+    msg : can.Message
+        A received frame.
+
+    Returns
+    -------
+    Command, Telemetry, Heartbeat or None
+    """
     if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return None
     base, node = msg.arbitration_id & ~0xF, msg.arbitration_id & 0xF
