@@ -45,6 +45,7 @@ from rwlab.attitude.design import (
     sigma,
 )
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
+from rwlab.attitude.metrics import metrics  # re-exported: it lived here
 from rwlab.attitude.scenario import Scenario
 from rwlab.attitude.sim import (
     LinearController,
@@ -380,100 +381,6 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
             "return_difference_min": float(ret.min()),
         }
     return out
-
-
-def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
-    """Pointing, torque and momentum metrics of one run.
-
-    Maxima and RMS come from every step; the steady window starts at
-    ``r.steady_from_s`` (half the run, at most its first hour), and every
-    ``steady_*``, ``*_desaturation*`` and ``torque_saturated_fraction`` /
-    ``torque_rms_Nm`` figure is over that window ("excluding desaturation" also
-    leaves out unloading windows and ``unload_recovery_s`` after each).
-    ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
-    slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
-    and settling come from the logged trace.
-
-    Parameters
-    ----------
-    r : SimResult
-        One run.
-    band_deg : float
-        Settling band on the pointing error, degrees.
-
-    Returns
-    -------
-    dict
-        The metrics (``metrics.json``'s per-controller entries), SI units or named.
-    """
-    st = r.stats
-    steady_n = max(st["steady_steps"], 1)
-    outside = np.flatnonzero(r.error_deg > band_deg)
-    settled = outside.size == 0 or outside[-1] < len(r.t) - 1
-    theta = np.degrees(2 * r.q[:, :3])
-    sign0 = np.sign(theta[0])
-    overshoot = float(max(0.0, np.max(-sign0 * theta))) if np.any(sign0) else 0.0
-    dt = float(np.median(np.diff(r.t))) if len(r.t) > 1 else 0.0
-    est = r.est_error_deg[r.t >= r.steady_from_s]
-    steady_log = r.error_deg[r.t >= r.steady_from_s]
-    return {
-        "steps": int(st["steps"]),
-        "max_error_deg": st["max_error_deg"],
-        "steady_max_error_deg": st["steady_max_error_deg"],
-        "steady_rms_error_deg": math.sqrt(st["steady_error_sq_sum"] / steady_n),
-        "steady_p99_73_error_deg": float(np.percentile(steady_log, 99.73))
-        if steady_log.size
-        else 0.0,
-        "max_error_deg_excluding_desaturation": st["steady_max_error_excl_desat_deg"],
-        "max_error_during_desaturation_deg": st["max_error_in_desat_deg"],
-        "settling_time_s": (float(r.t[outside[-1] + 1]) if outside.size else 0.0)
-        if settled
-        else None,
-        "overshoot_deg": overshoot,
-        "control_effort_Nms": float(np.sum(np.abs(r.torque)) * dt),
-        "torque_saturated_fraction": st["steady_torque_saturated_steps"] / steady_n,
-        "torque_peak_Nm": st["torque_peak_Nm"],
-        "torque_rms_Nm": math.sqrt(st["steady_torque_sq_sum"] / steady_n),
-        "peak_wheel_speed_rpm": float(np.max(np.abs(r.wheel_speed_rpm))),
-        "wheel_momentum_peak_fraction": st["momentum_peak_fraction"],
-        "wheel_saturated": bool(r.wheel_saturated),
-        "desaturation_count": int(st["desaturation_count"]),
-        "thruster_impulse_Nms": st["thruster_impulse_Nms"],
-        "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
-        "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
-        **_sky_metrics(st),
-    }
-
-
-def _sky_metrics(st: dict) -> dict:
-    """Eclipse time (the Earth's umbra + penumbra), pointing inside and outside it (steady
-    window; None when the window has no step there), and the sensors' outages,
-    blindings and gated measurements (sensor ticks)."""
-    n_ecl = st["steady_eclipse_steps"]
-    n_out = st["steady_steps"] - n_ecl
-    period = st.get("sensor_period_s", 0.0)
-    return {
-        "eclipse_s": st["eclipse_steps"] * st.get("dt_s", 0.0),
-        "moon_shadow_s": st["moon_shadow_steps"] * st.get("dt_s", 0.0),
-        # null, not 0, for a window with no step in it (no shadow in the steady state)
-        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"] if n_ecl else None,
-        "steady_rms_error_in_eclipse_deg": (
-            math.sqrt(st["steady_eclipse_error_sq_sum"] / n_ecl) if n_ecl else None
-        ),
-        "steady_max_error_outside_eclipse_deg": (
-            st["steady_outside_eclipse_max_error_deg"] if n_out else None
-        ),
-        "steady_rms_error_outside_eclipse_deg": (
-            math.sqrt(st["steady_outside_eclipse_error_sq_sum"] / n_out) if n_out else None
-        ),
-        "sun_sensor_outage_count": int(st["sun_sensor_outages"]),
-        "sun_sensor_outage_s": st["sun_sensor_outages"] * period,
-        "earth_sensor_blinded_count": int(st["earth_sensor_blinded"]),
-        "earth_sensor_blinded_s": st["earth_sensor_blinded"] * period,
-        "no_sensor_s": st["no_update_ticks"] * period,
-        "sun_sensor_gated_count": int(st["sun_sensor_gated"]),
-        "earth_sensor_gated_count": int(st["earth_sensor_gated"]),
-    }
 
 
 @dataclass(repr=False)
