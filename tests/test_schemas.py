@@ -132,3 +132,18 @@ def test_a_newer_model_file_is_refused_with_what_to_do(study_out, tmp_path):
     (tmp_path / "n.json").write_text(json.dumps({k: v for k, v in d.items() if k != "format"}))
     with pytest.raises(FileFormatError, match="not an rwlab wheel model"):
         WheelModelFile.load(tmp_path / "n.json")
+
+
+@pytest.mark.parametrize(
+    ("args", "name"),
+    [
+        (["arx", "dryer", 2, 2, 3], "polymodel"),
+        (["armax", "dryer", 2, 2, 1, 3], "polymodel"),
+        (["n4sid", "dryer", 2], "ssmodel"),
+        (["spa", "dryer"], "frequency_response"),
+        (["impulse", "dryer", "--n", 20], "fir"),
+    ],
+)
+def test_ident_save_writes_valid_model_files(tmp_path, args, name):
+    _rwlab("ident", *args, "--save", tmp_path / "m.json")
+    _valid(tmp_path / "m.json", name)

@@ -26,7 +26,21 @@ from rwlab.errors import FileFormatError
 
 __all__ = ["NAMES", "format_tag", "read_versioned", "schema"]
 
-NAMES = ("model", "study", "metrics", "compare", "sigma", "budget", "fleet", "diagnosis", "demo")
+NAMES = (
+    "model",
+    "study",
+    "metrics",
+    "compare",
+    "sigma",
+    "budget",
+    "fleet",
+    "diagnosis",
+    "demo",
+    "polymodel",
+    "ssmodel",
+    "frequency_response",
+    "fir",
+)
 
 
 def format_tag(kind: str, version: int) -> str:
