@@ -16,8 +16,7 @@ from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.study import DATASHEET
 from rwlab.signals import prbs, rate_limit
 from rwlab.wheel import RW90, IdentifiedWheel
-from rwlab.wheel.physics import IDEAL
-from rwlab.wheel.physics import simulate_speed_command
+from rwlab.wheel.physics import IDEAL, simulate_speed_command
 
 TS = 0.5
 

@@ -30,7 +30,21 @@ __all__ = ["DemoConfig", "run_demo"]
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Durations (simulated seconds) of each part; the defaults are the full demo."""
+    """Durations (simulated seconds) of each part; the defaults are the full demo.
+
+    Parameters
+    ----------
+    step_duration, accel_duration, prbs_duration, chirp_duration : float
+        Length of each testbed record, simulated s.
+    attitude_duration : float
+        Length of each attitude run, s.
+    realtime : bool
+        Run the testbed at wall-clock speed.
+    monitor : bool
+        Open the live monitor during the records.
+    seed : int
+        Seed of the records and the runs.
+    """
 
     step_duration: float = 240.0
     accel_duration: float = 120.0
@@ -121,6 +135,24 @@ def run_demo(
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
     ``out`` is written whole when the demo succeeds, or not at all; a previous
     demo there is replaced then (``force`` also replaces a previous output).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+    cfg : DemoConfig
+        Durations and options.
+    force : bool
+        Replace a folder that is not a previous demo's.
+    echo : callable
+        Prints each stage.
+    progress : callable, optional
+        ``progress(label, n)`` returns a context manager with ``update(k)``.
+
+    Returns
+    -------
+    dict
+        ``summary.json``'s content (schema ``demo``).
     """
     from rwlab._io import output_folder
 
@@ -159,11 +191,11 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
         try:
             if progress:
                 with progress(name, n) as bar:
-                    summary = run_experiment(
-                        exp, path, force=True, progress=lambda k, total, b=bar: b.update(1)
+                    run = run_experiment(
+                        exp, path, force=True, progress=lambda k, total: bar.update(1)
                     )
             else:
-                summary = run_experiment(exp, path, force=True)
+                run = run_experiment(exp, path, force=True)
         finally:
             if monitor is not None:
                 from rwlab.testbed.monitor import stop_process
@@ -174,9 +206,9 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
                 "name": name,
                 "title": title,
                 "file": f"records/{name}.mcap",
-                "commands": summary.commands,
-                "telemetry": summary.telemetry,
-                "lost_frames": summary.lost_frames,
+                "commands": run.commands,
+                "telemetry": run.telemetry,
+                "lost_frames": run.lost_frames,
             }
         )
 

@@ -67,7 +67,15 @@ SKY_COLUMNS = (
 
 @dataclass(frozen=True)
 class Epoch:
-    """A UTC instant as a two-part TAI Julian date (``tai1 + tai2`` days)."""
+    """A UTC instant as a two-part TAI Julian date (``tai1 + tai2`` days).
+
+    Parameters
+    ----------
+    text : str
+        The epoch as given (ISO 8601).
+    tai1, tai2 : float
+        The two parts of the TAI Julian date, days.
+    """
 
     text: str
     tai1: float
@@ -86,6 +94,15 @@ def parse_epoch(text: str) -> Epoch:
 
     Raises :class:`~rwlab.errors.ConfigError` when the text is not an ISO 8601
     date-time, or lies outside 1900–2100 (the ephemerides' range of validity).
+
+    Parameters
+    ----------
+    text : str
+        ISO 8601 date-time.
+
+    Returns
+    -------
+    Epoch
     """
     try:
         when = datetime.fromisoformat(str(text).strip())
@@ -174,7 +191,22 @@ def sun_moon_orbital(epoch: Epoch, longitude_deg: float, t) -> tuple[np.ndarray,
 
 def occulted_fraction(a, b, c) -> np.ndarray:
     """Share of a disc of angular radius ``a`` covered by a disc of radius ``b`` at centre
-    separation ``c`` (rad; arrays broadcast), 0…1 (Montenbruck & Gill eq. 3.86)."""
+    separation ``c`` (rad; arrays broadcast), 0…1 (Montenbruck & Gill eq. 3.86).
+
+    Parameters
+    ----------
+    a : array_like
+        Angular radius of the occulted disc, rad.
+    b : array_like
+        Angular radius of the occulting disc, rad.
+    c : array_like
+        Separation of the centres, rad.
+
+    Returns
+    -------
+    numpy.ndarray
+        The covered share, broadcast shape.
+    """
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
     out = np.zeros(a.shape)
     full = c <= b - a  # the occulter covers the whole disc
@@ -208,6 +240,16 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
     the Earth's umbra or penumbra); ``moon_visible`` = 1 where the Moon is not
     behind the Earth; ``srp_scale`` = sunlit × (1 AU / Sun distance)²: solar pressure
     falls with the square of the distance (±3.4 % over the year).
+
+    Parameters
+    ----------
+    sun, moon : numpy.ndarray, shape (N, 3)
+        Satellite-relative positions in the orbital frame, m.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, len(SKY_COLUMNS))
+        Columns :data:`SKY_COLUMNS`.
     """
     earth = np.broadcast_to([0.0, 0.0, GEO_RADIUS], sun.shape)
     d_sun = np.linalg.norm(sun, axis=-1)

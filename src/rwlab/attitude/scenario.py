@@ -493,7 +493,19 @@ def _sensor_tables(raw: dict, base: Scenario, path: Path) -> dict:
 
 
 def load_scenario(name_or_path: str, **overrides) -> Scenario:
-    """A built-in scenario by name, or a TOML file (``[scenario]`` and ``[disturbances]``)."""
+    """A built-in scenario by name, or a TOML file (``[scenario]`` and ``[disturbances]``).
+
+    Parameters
+    ----------
+    name_or_path : str
+        ``"geo-smallsat"``, ``"geo-comsat"`` or a TOML file.
+    **overrides
+        Fields to change after loading.
+
+    Returns
+    -------
+    Scenario
+    """
     if name_or_path in SCENARIOS:
         base = SCENARIOS[name_or_path]
         return replace(base, **overrides) if overrides else base

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.attitude import kernel
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
 from rwlab.attitude.kernel import control_torque
@@ -43,7 +44,19 @@ MOON_DIRECTION = np.array([0.6, -0.1, 0.79])  # orbital frame, slowly varying; f
 
 
 def sun_direction(scenario: Scenario, t: float) -> np.ndarray:
-    """Unit vector to the Sun in the orbital frame at time t (s)."""
+    """Unit vector to the Sun in the orbital frame at time t (s).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``sun`` model.
+    t : float
+        Time since the start, s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3,)
+    """
     d = math.radians(scenario.sun_declination_deg)
     theta = math.radians(scenario.sun_phase_deg)
     if scenario.sun == "moving":
@@ -78,7 +91,17 @@ def _rate_map(K: np.ndarray) -> np.ndarray:
 
 
 class PDController(LinearController):
-    """Quaternion PD law τ = −Kp·2q_v·sign(q4) − Kd·ω_bo (like Basilisk's MRP feedback)."""
+    """Quaternion PD law τ = −Kp·2q_v·sign(q4) − Kd·ω_bo (like Basilisk's MRP feedback).
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain, N·m/rad.
+    kd : float
+        Derivative gain, N·m·s/rad.
+    rate_limit : float
+        Largest commanded rate in a large slew, rad/s.
+    """
 
     def __init__(self, kp: float, kd: float, rate_limit: float = math.inf) -> None:
         self.K = np.hstack([kp * np.eye(3), kd * np.eye(3)])
@@ -88,8 +111,8 @@ class PDController(LinearController):
         return self.K
 
 
-@dataclass
-class SimResult:
+@dataclass(repr=False)
+class SimResult(ShortRepr):
     """Time histories of one run (rows are logged steps) and statistics over every step.
 
     Attributes
@@ -148,7 +171,18 @@ def _w_bo(q, w, n=GEO_RATE):
 
 
 def steady_start(duration: float) -> float:
-    """Start of the steady-state window, s: half the run, at most its first hour."""
+    """Start of the steady-state window, s: half the run, at most its first hour.
+
+    Parameters
+    ----------
+    duration : float
+        Run length, s.
+
+    Returns
+    -------
+    float
+        The window's start, s.
+    """
     return min(duration / 2, 3600.0)
 
 
@@ -177,6 +211,16 @@ def default_filter_psd(sc: Scenario) -> float:
     ``filter_disturbance_budget_deg`` (τ_u: ``filter_torque_bound``, or
     :func:`unknown_torque_bound` when that is 0): a Kalman filter on J θ̈ = τ measuring θ
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    float
+        The PSD, N²·m²·s.
     """
     q = sc.process_noise_torque**2
     if not sc.disturbances_known_to_filter and disturbance_state(sc) == "none":
@@ -189,7 +233,17 @@ def default_filter_psd(sc: Scenario) -> float:
 def disturbance_state(sc: Scenario) -> str:
     """The filter's disturbance state as flown: ``filter_disturbance_state``, or "none"
     when there is nothing left to estimate (every disturbance known to the filter, or a
-    torque bound of 0)."""
+    torque bound of 0).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    {'none', 'torque', 'srp', 'torque+srp'}
+    """
     if filter_torque_scale(sc) == 0.0:
         return "none"
     return sc.filter_disturbance_state
@@ -211,6 +265,16 @@ def disturbance_psd(sc: Scenario) -> np.ndarray:
     filter from locking onto a wrong value), the SRP lever arm over
     ``filter_srp_drift_s`` (a day: the arrays turn once a day and the centre of
     pressure moves with them and with the seasons).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n − 6,)
+        The PSDs, N²·m²/s.
     """
     tau = filter_torque_scale(sc)
     kind = disturbance_state(sc)
@@ -234,7 +298,18 @@ def _bias_truth(sc: Scenario, dist, dist_model) -> np.ndarray:
 
 def attitude_noise_psd(sc: Scenario) -> float:
     """Attitude measurement noise as a continuous PSD, rad²·s: the sensors' mean σ (with the
-    filter's margin) squared, times the sensor period."""
+    filter's margin) squared, times the sensor period.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    float
+        The PSD, rad²·s.
+    """
     sigma = math.radians((sc.sun_noise_deg + sc.earth_noise_deg) / 2) * sc.noise_margin
     return sigma**2 * sc.sensor_period
 
@@ -305,6 +380,11 @@ def simulate(
 
     Every wheel model runs in the compiled kernel (``kernel.run_block``), in blocks
     of at most an hour of steps (shorter when the controller re-linearises).
+
+    Returns
+    -------
+    SimResult
+        The logged time histories and the statistics over every step.
     """
     if estimator not in ("ekf", "truth"):
         raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")

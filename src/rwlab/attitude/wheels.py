@@ -115,7 +115,20 @@ def _physics_row(p: WheelParams) -> np.ndarray:
 
 
 def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
-    """Pack the scenario's wheel model, starting from wheel momenta ``hw0`` (N·m·s)."""
+    """Pack the scenario's wheel model, starting from wheel momenta ``hw0`` (N·m·s).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its wheel fields.
+    hw0 : numpy.ndarray, shape (N,)
+        Initial wheel momenta, N·m·s.
+
+    Returns
+    -------
+    WheelArrays
+        The arrays the compiled kernel steps.
+    """
     nw = sc.n_wheels
     kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheel_model]
     row = _physics_row(physics_params(sc))

@@ -102,7 +102,19 @@ class Campaign:
 
 
 def run_seeds(seed: int, runs: int) -> list[int]:
-    """The runs' seeds: a 63-bit word from each of ``SeedSequence(seed).spawn(runs)``."""
+    """The runs' seeds: a 63-bit word from each of ``SeedSequence(seed).spawn(runs)``.
+
+    Parameters
+    ----------
+    seed : int
+        The campaign's seed.
+    runs : int
+        Number of runs.
+
+    Returns
+    -------
+    list of int
+    """
     children = np.random.SeedSequence(seed).spawn(runs)
     return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children]
 
@@ -136,7 +148,18 @@ def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
 
 def axis_errors_deg(q: np.ndarray) -> np.ndarray:
     """(K, 3) pointing error about body x, y, z, degrees: the rotation vector of q (K, 4)
-    (orbital → body, scalar last); its norm is the total error."""
+    (orbital → body, scalar last); its norm is the total error.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (K, 4)
+        Attitude quaternions, orbital → body, scalar last.
+
+    Returns
+    -------
+    numpy.ndarray, shape (K, 3)
+        Error about x, y, z, degrees.
+    """
     qv, q4 = q[:, :3], q[:, 3:4]
     s = np.linalg.norm(qv, axis=1, keepdims=True)
     angle = 2 * np.arctan2(s, np.abs(q4))
@@ -180,7 +203,24 @@ def _rpe(e: np.ndarray, width: int) -> float:
 
 
 def fly_run(campaign: Campaign, run_seed: int, log_every: int = 1) -> tuple[SimResult, dict]:
-    """Fly one run: its trace and its row (seed, dispersed values, metrics)."""
+    """Fly one run: its trace and its row (seed, dispersed values, metrics).
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The campaign.
+    run_seed : int
+        The run's seed.
+    log_every : int
+        Steps between logged rows of the trace.
+
+    Returns
+    -------
+    run : SimResult
+        The trace.
+    row : dict
+        Seed, dispersed values and metrics.
+    """
     sc, values = dispersed(campaign, run_seed)
     steps = round(campaign.duration / sc.dt)
     run, metrics = fly(
@@ -221,6 +261,16 @@ def check_runs(campaign: Campaign) -> list[int]:
     A dispersion that makes a scenario invalid (a negative inertia, the triangle
     inequality) fails here, naming the run, not minutes later on a worker. A
     campaign too large to end or to hold in memory fails first (:func:`check_size`).
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The campaign.
+
+    Returns
+    -------
+    list of int
+        The runs' seeds.
     """
     check_size(campaign.runs)
     seeds = run_seeds(campaign.seed, campaign.runs)
@@ -248,7 +298,10 @@ def run_campaign(
     Parameters
     ----------
     campaign : Campaign
+    campaign : Campaign
+        The campaign.
     client : distributed.Client
+        The cluster.
     progress : callable, optional
         ``progress(runs done)`` after each batch (runs kept from before included).
     store : RunStore, optional
@@ -460,6 +513,18 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
     requirement and its Clopper–Pearson lower bound, and ``APE``, ``RPE`` and
     ``knowledge_error`` (ECSS-E-ST-60-10C, per axis, each run's steady-state maximum) the
     same per axis.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per run (:func:`fly_run`'s rows).
+    campaign : Campaign
+        The campaign flown.
+
+    Returns
+    -------
+    dict
+        ``budget.json``'s content (schema ``budget``).
     """
     if not rows:
         raise ConfigError("a budget needs at least one run")

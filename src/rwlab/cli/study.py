@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -261,7 +262,7 @@ def _identify_one(
     )
     reference = _healthy_reference(file, model)
     if isinstance(reference, dict):
-        model["healthy_reference"] = reference
+        model = dataclasses.replace(model, healthy_reference=reference)
     elif echo is not None:
         echo(f"no healthy reference for fault diagnosis: {reference}")
     paths = write_study(result, model, out, force=force)
@@ -270,7 +271,7 @@ def _identify_one(
     return study, paths
 
 
-def _healthy_reference(file, model: dict) -> dict | str:
+def _healthy_reference(file, model) -> dict | str:
     """The healthy reference measured on a testbed record, or why there is none."""
     import numpy as np
 
@@ -281,7 +282,7 @@ def _healthy_reference(file, model: dict) -> dict | str:
     if Path(file).suffix.lower() != ".mcap":
         return "not a testbed record (.mcap with motor current)"
     try:
-        wheel = IdentifiedWheel.from_info(model)
+        wheel = IdentifiedWheel.from_file(model)
         data = load_record(
             file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
         )

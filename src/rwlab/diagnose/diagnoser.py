@@ -73,7 +73,7 @@ HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 class Alarm:
     """One alarm: when, which fault, how large, which detector fired.
 
-    Attributes
+    Parameters
     ----------
     t_s : float
         Sample time of the alarm, s.
@@ -506,7 +506,23 @@ def healthy_reference(
 
 @dataclass
 class Diagnosis:
-    """What :func:`diagnose` found in a record."""
+    """What :func:`diagnose` found in a record.
+
+    Parameters
+    ----------
+    alarms : list of Alarm
+        In time order.
+    thresholds : dict
+        Each detector's threshold.
+    calibration : dict
+        What the healthy start of the record calibrated (whitening, current model).
+    history : dict of str to numpy.ndarray
+        The residuals and statistics at every sample (``t_s``, ``speed``, ...).
+    false_alarms_per_hour : float
+        The false-alarm rate the thresholds were set for, per detector.
+    calibration_s : float
+        Length of the calibration window, s.
+    """
 
     alarms: list[Alarm]
     thresholds: dict

@@ -28,14 +28,15 @@ import numpy as np
 from scipy import optimize
 from threadpoolctl import threadpool_limits
 
+from rwlab._display import ShortRepr
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError
 
 __all__ = ["FIRModel", "FrequencyResponse", "etfe", "impulseest", "spa"]
 
 
-@dataclass(frozen=True)
-class FrequencyResponse:
+@dataclass(frozen=True, repr=False)
+class FrequencyResponse(ShortRepr):
     """A frequency response estimate (MATLAB ``idfrd``).
 
     Attributes
@@ -78,6 +79,25 @@ class FrequencyResponse:
     def magnitude_sd(self) -> np.ndarray | None:
         """Standard deviation of |G| (circular complex Gaussian error assumed)."""
         return None if self.response_sd is None else self.response_sd / np.sqrt(2)
+
+    def to_pandas(self):
+        """Magnitude (dB) and phase (deg) per channel pair, one row per frequency.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``omega_rad_s``; columns ``magnitude_db[y,u]`` and ``phase_deg[y,u]``.
+        """
+        from rwlab._display import pandas
+
+        pd = pandas()
+        mag, ph = self.magnitude_db(), self.phase_deg()
+        cols = {}
+        for i in range(mag.shape[1]):
+            for j in range(mag.shape[2]):
+                cols[f"magnitude_db[{i},{j}]"] = mag[:, i, j]
+                cols[f"phase_deg[{i},{j}]"] = ph[:, i, j]
+        return pd.DataFrame(cols, index=pd.Index(self.omega, name="omega_rad_s"))
 
     def to_dict(self) -> dict:
         """Plain-JSON form: real and imaginary parts separately."""
@@ -203,6 +223,18 @@ def etfe(data: IOData, omega=None) -> FrequencyResponse:
     One input (any number of outputs), or a time series, for which the result
     is the periodogram Ts |Y(ω)|²/N in ``spectrum``. Exact at the excited
     frequencies for a noise-free record with a periodic input over whole periods.
+
+    Parameters
+    ----------
+    data : IOData
+        One input (or none), any number of outputs.
+    omega : array_like, optional
+        Frequencies, rad/s (default the FFT grid up to Nyquist).
+
+    Returns
+    -------
+    FrequencyResponse
+        ``response`` of shape (nw, ny, 1) (``spectrum`` for a time series).
     """
     d = _one_record(data, "etfe")
     w = _frequencies(omega, d.Ts)
@@ -220,8 +252,8 @@ def etfe(data: IOData, omega=None) -> FrequencyResponse:
     return FrequencyResponse(w, (Y / U[:, None])[:, :, None], d.Ts, method="etfe")
 
 
-@dataclass(frozen=True)
-class FIRModel:
+@dataclass(frozen=True, repr=False)
+class FIRModel(ShortRepr):
     """A finite impulse response estimate (MATLAB ``impulseest``'s FIR model).
 
     ``y_i(t) = Σⱼ Σₖ g[k, i, j] u_j(t − nk − k) + v_i(t)``, k = 0 … n−1.

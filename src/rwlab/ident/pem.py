@@ -37,8 +37,6 @@ every sample. The covariance is
 
 from __future__ import annotations
 
-import sys
-import types
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -700,6 +698,24 @@ def oe(
     :func:`armax`. ``starts`` (≥ 0) random stable F's, with B by least squares
     given each, are searched besides the instrumental-variable and ARX starts;
     the lowest loss wins (the output-error loss has local minima).
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    nb, nf : int or sequence of int
+        Orders of B (≥ 1) and F, per input.
+    nk : int or sequence of int
+        Input delay, samples, per input.
+    max_iter, tol, initial
+        As for :func:`armax`.
+    starts : int
+        Random stable starts besides the instrumental-variable and ARX ones (≥ 0).
+
+    Returns
+    -------
+    PolyModel
+        The output-error model with its covariance and estimation report.
     """
     nu = _nu(data)
     _needs_input("oe", nu)
@@ -738,6 +754,24 @@ def bj(
     ``nb``, ``nf``, ``nk`` and ``starts`` as for :func:`oe` (the noise model of
     each start by Hannan–Rissanen on its output error); other options as for
     :func:`armax`.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    nb, nf : int or sequence of int
+        Orders of B and F, per input.
+    nc, nd : int
+        Orders of the noise model's C and D.
+    nk : int or sequence of int
+        Input delay, samples, per input.
+    max_iter, tol, initial, starts
+        As for :func:`oe` and :func:`armax`.
+
+    Returns
+    -------
+    PolyModel
+        The Box–Jenkins model with its covariance and estimation report.
     """
     nu = _nu(data)
     _needs_input("bj", nu)
@@ -770,6 +804,20 @@ def pem(
     """Refine any ``PolyModel`` structure by prediction-error minimisation from ``init``.
 
     ``max_iter``, ``tol`` and ``initial`` as for :func:`armax`.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Estimation record(s).
+    init : PolyModel
+        Initial model; its structure (orders, delays) is kept.
+    max_iter, tol, initial
+        As for :func:`armax`.
+
+    Returns
+    -------
+    PolyModel
+        The refined model with its covariance and estimation report.
     """
     nu = init.nu
     orders = _Orders(
@@ -787,16 +835,3 @@ def pem(
     return _finish(
         orders, [init.parameters], experiments, series, "pem (prediction error, LM)", max_iter, tol
     )
-
-
-class _CallableModule(types.ModuleType):
-    """``rwlab.ident.pem`` is this module (``import rwlab.ident.pem`` reaches ``armax``, ``oe``,
-    ...), and calling it calls the estimator :func:`pem`, MATLAB's name for both."""
-
-    def __call__(self, data, init, **options) -> PolyModel:
-        return pem(data, init, **options)
-
-    __call__.__doc__ = pem.__doc__
-
-
-sys.modules[__name__].__class__ = _CallableModule

@@ -44,10 +44,12 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
 from rwlab.ident.greybox import WheelGreyBox, greybox_fit
+from rwlab.ident.model_file import Channel, WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.nonlinear import ServoModel, servo_fit
@@ -55,7 +57,7 @@ from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
 
-__all__ = ["StudyResult", "identification_study", "physical_model"]
+__all__ = ["StudyResult", "identification_study", "physical_model", "wheel_model"]
 
 PREPROCESSING = ("detrend", "scale", "normalize", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
@@ -65,8 +67,8 @@ def _kind(structure: str) -> str:
     return structure.rstrip("0123456789[], ")
 
 
-@dataclass
-class StudyResult:
+@dataclass(repr=False)
+class StudyResult(ShortRepr):
     """Everything the study computed; ``to_dict()`` is ``study.json``.
 
     Attributes
@@ -108,6 +110,20 @@ class StudyResult:
     greybox: WheelGreyBox | None = None
     nlarx: NLARXModel | None = None
     physical_val: IOData | None = field(default=None, repr=False)
+
+    def to_pandas(self):
+        """The structures tried (orders and other structures), one row each.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``structure``; fit %, MSE, FPE, parameter count, stability.
+        """
+        from rwlab._display import pandas
+
+        keep = ("structure", "n_params", "fit_percent", "prediction_fit_percent", "mse", "fpe")
+        rows = [{k: r.get(k) for k in (*keep, "stable")} for r in self.orders + self.others]
+        return pandas().DataFrame(rows).set_index("structure")
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""
@@ -231,6 +247,11 @@ def identification_study(
     current : array_like, shape (N,), optional
         The record's motor current (A) at the speed's instants: the grey box's
         second output (it makes kt and the friction observable).
+
+    Returns
+    -------
+    StudyResult
+        Every number of the report; ``to_dict()`` is ``study.json``.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -259,7 +280,7 @@ def identification_study(
 
     losses = delay_scan(est, 2, 2, 0, nk_max)
     step("delay scan")
-    nk = min(losses, key=losses.get)
+    nk = min(losses, key=lambda k: losses[k])
     if nk == 0:
         nk = 1 if losses.get(1, math.inf) <= losses[0] * 1.001 else 0
 
@@ -508,59 +529,89 @@ def physical_model(
     accel_limit_rpm_s: float = 314.0,
     saturation_source: str = "RW90 defaults",
 ) -> dict:
+    """The JSON form of :func:`wheel_model` (``model.json``), same arguments.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    dict
+        ``model.json``'s content (schema ``model``).
+    """
+    return wheel_model(
+        result,
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+    ).to_dict()
+
+
+def wheel_model(
+    result: StudyResult,
+    *,
+    speed_limit_rpm: float = 7800.0,
+    accel_limit_rpm_s: float = 314.0,
+    saturation_source: str = "RW90 defaults",
+) -> WheelModelFile:
     """The chosen model in physical units, with the saturations any control use needs.
 
     The study's model maps preprocessed input to preprocessed output. With
     ``u_p = (u − u_off)/u_scale`` and ``y = y_off + y_scale·y_p``, the physical
     model is ``y − y_off = G(q)·(u − u_off)`` with G's numerator scaled by
     ``y_scale/u_scale``; ``model.json`` stores G and both offsets.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    WheelModelFile
+        The content of ``model.json`` (``.save(path)`` writes it).
     """
     m = result.chosen
     trend = result.data.trend
     if np.any(trend.input_slope) or np.any(trend.output_slope):
         raise ModelError("a linear trend cannot be folded into model.json; use 'normalize'")
-    physical = _to_physical(m, trend, result.data.input_names[0], result.data.output_names[0])
-    info = {
-        "format": "rwlab.WheelModel/1",
-        "structure": m.structure,
-        "Ts": m.Ts,
-        "input": {
-            "name": result.data.input_names[0],
-            "unit": result.data.input_units[0] or "rpm",
-            "offset": float(trend.input_offset[0]),
-        },
-        "output": {
-            "name": result.data.output_names[0],
-            "unit": result.data.output_units[0] or "rpm",
-            "offset": float(trend.output_offset[0]),
-        },
-        "model": physical.to_dict(),
-        "saturation": {
-            "speed_rpm": speed_limit_rpm,
-            "accel_rpm_s": accel_limit_rpm_s,
-            "source": saturation_source,
-        },
-        "validation_fit_percent": next(
-            r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
-        ),
-        "note": "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
-        "saturation before the model and the acceleration limit to its output.",
-    }
-    if result.servo is not None:
-        fit = result.nonlinear["fit_percent"]
-        info["nonlinear"] = {**result.servo.to_dict(), "validation_fit_percent": fit}
-        info["preferred"] = "nonlinear" if fit > info["validation_fit_percent"] else "linear"
-    nl = result.nonlinear or {}
-    for name, model in (("greybox", result.greybox), ("nlarx", result.nlarx)):
-        if model is not None and nl.get(name, {}).get("fit_percent") is not None:
-            info[name] = {**model.to_dict(), "validation_fit_percent": nl[name]["fit_percent"]}
-    if "chosen" in nl:
-        info["nonlinear_chosen"] = nl["chosen"]
-        info["nonlinear_choice"] = nl["choice"]
-    info["saturation"]["current_limit_a"] = (
-        result.greybox.current_limit if result.greybox is not None else None
+    d = result.data
+    fit = next(
+        r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
     )
-    return info
+    nl = result.nonlinear or {}
+    servo_fit = None if result.servo is None or not nl else nl["fit_percent"]
+    others = {
+        name: {**model.to_dict(), "validation_fit_percent": nl[name]["fit_percent"]}
+        for name, model in (("greybox", result.greybox), ("nlarx", result.nlarx))
+        if model is not None and nl.get(name, {}).get("fit_percent") is not None
+    }
+    return WheelModelFile(
+        _to_physical(m, trend, d.input_names[0], d.output_names[0]),
+        Channel(d.input_names[0], d.input_units[0] or "rpm", float(trend.input_offset[0])),
+        Channel(d.output_names[0], d.output_units[0] or "rpm", float(trend.output_offset[0])),
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+        validation_fit_percent=fit,
+        servo=result.servo,
+        servo_fit_percent=servo_fit,
+        preferred="nonlinear" if servo_fit is not None and servo_fit > fit else "linear",
+        current_limit_a=result.greybox.current_limit if result.greybox is not None else None,
+        nonlinear_models=others,
+        nonlinear_chosen=nl.get("chosen"),
+        nonlinear_choice=nl.get("choice"),
+    )
 
 
 def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:
@@ -639,9 +690,7 @@ def load_study_data(
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
         from rwlab.errors import RecordGapError
-        from rwlab.testbed import read_record
 
-        meta = read_record(path).metadata
         try:
             data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
         except RecordGapError as exc:
@@ -650,7 +699,7 @@ def load_study_data(
                 "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
                 "or export the gap-free parts and identify each."
             ) from None
-        wheel = meta.get("wheel", {})
+        wheel = data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
                 "speed_limit_rpm": float(wheel["max_speed_rpm"]),
@@ -664,6 +713,6 @@ def load_study_data(
         if input_col or output_col:
             raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    from rwlab._io import check_magnitude
+    from rwlab.datafiles import check_magnitude
 
     return check_magnitude(load(path, Ts, **columns), path), saturation

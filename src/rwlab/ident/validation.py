@@ -40,7 +40,18 @@ __all__ = [
 
 
 def fit_percent(y, yhat) -> float:
-    """NRMSE fit in percent: 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖)."""
+    """NRMSE fit in percent: 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖).
+
+    Parameters
+    ----------
+    y, yhat : array_like, shape (N,) or (N, ny)
+        Measured and model outputs.
+
+    Returns
+    -------
+    float
+        The fit, % (100 is perfect; negative is worse than the mean).
+    """
     y = np.asarray(y, float).ravel()
     yhat = np.asarray(yhat, float).ravel()
     if y.shape != yhat.shape:
@@ -52,13 +63,39 @@ def fit_percent(y, yhat) -> float:
 
 
 def mse(y, yhat) -> float:
-    """Mean squared error (1/N) Σ (y − ŷ)² (paper A, eq. 4)."""
+    """Mean squared error (1/N) Σ (y − ŷ)² (paper A, eq. 4).
+
+    Parameters
+    ----------
+    y, yhat : array_like, shape (N,) or (N, ny)
+        Measured and model outputs.
+
+    Returns
+    -------
+    float
+        The mean squared error, in the output's unit squared.
+    """
     e = np.asarray(y, float).ravel() - np.asarray(yhat, float).ravel()
     return float(e @ e / e.size)
 
 
 def fpe(loss: float, n_params: int, n_samples: int) -> float:
-    """Akaike's final prediction error V·(1 + d/N)/(1 − d/N)."""
+    """Akaike's final prediction error V·(1 + d/N)/(1 − d/N).
+
+    Parameters
+    ----------
+    loss : float
+        Loss V (mean squared prediction error).
+    n_params : int
+        Number of estimated parameters d.
+    n_samples : int
+        Number of samples N.
+
+    Returns
+    -------
+    float
+        The final prediction error.
+    """
     if n_params >= n_samples:
         return math.inf
     return loss * (1 + n_params / n_samples) / (1 - n_params / n_samples)
@@ -67,7 +104,27 @@ def fpe(loss: float, n_params: int, n_samples: int) -> float:
 def estimation_report(
     model, experiments: list[IOData], *, method: str, loss: float, **extra
 ) -> dict:
-    """The numbers MATLAB puts in ``Report.Fit``: one-step prediction fit on the estimation data."""
+    """The numbers MATLAB puts in ``Report.Fit``: one-step prediction fit on the estimation data.
+
+    Parameters
+    ----------
+    model : PolyModel or SSModel
+        The estimated model.
+    experiments : list of IOData
+        The estimation records.
+    method : str
+        The estimator's name.
+    loss : float
+        Its final loss.
+    **extra
+        More entries for the report.
+
+    Returns
+    -------
+    dict
+        ``method``, ``loss``, ``mse``, ``fit_percent``, sample and parameter
+        counts, and the extras.
+    """
     y = np.concatenate([d.y[:, 0] for d in experiments])
     initial = extra.get("initial_conditions", "zero")
     yhat = np.concatenate([model.predict(d, 1, initial=initial) for d in experiments])
@@ -156,6 +213,7 @@ def compare(
     Returns
     -------
     CompareResult
+        Measured and model outputs, fit % and MSE.
     """
     if horizon is None:
         horizon = np.inf if getattr(model, "nu", data.nu) else 1
@@ -337,6 +395,7 @@ def resid(
     Returns
     -------
     ResidResult
+        Auto- and cross-correlations, their bounds and the test outcomes.
     """
     if not 0 < confidence < 1:
         raise DataError(f"confidence must be in (0, 1), got {confidence}")

@@ -82,7 +82,24 @@ def write_comparison(
     force: bool = False,
     ltr_result: LTRResult | None = None,
 ) -> dict[str, Path]:
-    """Write ``report.html`` and ``metrics.json`` (and ``sigma.json`` with an LTR result)."""
+    """Write ``report.html`` and ``metrics.json`` (and ``sigma.json`` with an LTR result).
+
+    Parameters
+    ----------
+    comp : Comparison
+        The runs and metrics.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+    ltr_result : LTRResult, optional
+        Adds ``sigma.json`` and the σ plot.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     names = ["report.html", "metrics.json"] + (["sigma.json"] if ltr_result else [])
     targets = _check_out(Path(out_dir), names, force)
     payload = {
@@ -276,7 +293,24 @@ def _sigma_figure(page: Page, res: LTRResult) -> None:
 def write_ltr(
     res: LTRResult, scenario_name: str, out_dir: str | os.PathLike, *, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``sigma.json`` and ``report.html`` for the ρ sweep (paper Fig. 8)."""
+    """Write ``sigma.json`` and ``report.html`` for the ρ sweep (paper Fig. 8).
+
+    Parameters
+    ----------
+    res : LTRResult
+        The ρ sweep.
+    scenario_name : str
+        For the title.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     targets = _check_out(Path(out_dir), ["sigma.json", "report.html"], force)
     _write_json(targets["sigma.json"], res.to_dict())
     page = Page(f"Loop transfer recovery — {scenario_name}")
@@ -482,8 +516,8 @@ def write_simulation(
     _estimation_figure(page, run)
     estimates = _disturbance_estimates(run)
     if estimates:
-        rows = len(estimates)
-        fig, axes = figure(10, 2.2 * rows, rows, 1, sharex=True, squeeze=False)
+        n_rows = len(estimates)
+        fig, axes = figure(10, 2.2 * n_rows, n_rows, 1, sharex=True, squeeze=False)
         axes = axes[:, 0]
         for ax, (name, est) in zip(axes, estimates, strict=True):
             for i, axis in enumerate("xyz"):

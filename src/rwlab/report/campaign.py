@@ -58,6 +58,26 @@ def write_campaign(
     """Write ``results.parquet``, ``budget.json`` and ``report.html``.
 
     ``worst`` is the worst run's ``SimResult`` (flown again from its seed).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per run.
+    budget : dict
+        :func:`rwlab.campaign.montecarlo.budget` of the rows.
+    campaign : Campaign
+        The campaign flown.
+    worst : SimResult
+        The worst run, flown again.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
     """
     import pyarrow.parquet as pq
 
@@ -264,7 +284,22 @@ def _worst_figure(page: Page, run, req: float) -> None:
 def write_fleet(
     records: list[dict], out_dir: str | os.PathLike, *, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``fleet.json`` and ``fleet.html``: one line per record (its study or its error)."""
+    """Write ``fleet.json`` and ``fleet.html``: one line per record (its study or its error).
+
+    Parameters
+    ----------
+    records : list of dict
+        One per record: its name, study summary or error.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     targets = check_outputs(out_dir, FLEET_FILES, force)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     ok = [r for r in records if r["error"] is None]

@@ -22,7 +22,24 @@ __all__ = ["write_diagnosis"]
 def write_diagnosis(
     diagnosis: Diagnosis, out_dir: str | os.PathLike, *, title: str, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``."""
+    """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        The alarms and statistics.
+    out_dir : str or os.PathLike
+        The folder.
+    title : str
+        The page's title.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     out = Path(out_dir)
     targets = {name: out / name for name in ("diagnosis.json", "report.html")}
     existing = [str(p) for p in targets.values() if p.exists()]

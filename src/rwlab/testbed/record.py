@@ -84,7 +84,17 @@ def _schema(topic: str, props: dict | None = None) -> bytes:
 
 
 def partial_path(path: str | os.PathLike) -> Path:
-    """Where a record is written until it closes: ``name.partial.mcap`` beside ``path``."""
+    """Where a record is written until it closes: ``name.partial.mcap`` beside ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final record's path.
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     return path.with_name(f"{path.stem}.partial{path.suffix or '.mcap'}")
 
@@ -273,6 +283,16 @@ def read_record(path: str | os.PathLike) -> Record:
     """Read a record, tolerating a truncated end (a crashed recorder).
 
     Raises ``FileFormatError`` for a file that is not an MCAP record at all.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.mcap`` file.
+
+    Returns
+    -------
+    Record
+        Its metadata and topics.
     """
     path = Path(path)
     if not path.is_file():

@@ -20,10 +20,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rwlab import __version__, signals
+from rwlab._display import ShortRepr
 from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
@@ -147,7 +149,7 @@ class ExperimentConfig:
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
         number = (int, float)
-        expected = {
+        expected: dict[str, tuple[Any, str]] = {
             "seed": (int, "an integer"),
             "node_id": (int, "an integer 0..15"),
             "realtime": (bool, "true or false"),
@@ -276,7 +278,20 @@ class ExperimentConfig:
 
 
 def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray:
-    """The command samples, one per Ts, in rpm or rpm/s."""
+    """The command samples, one per Ts, in rpm or rpm/s.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    params : WheelParams
+        The wheel's limits.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(duration / Ts),)
+        The commands.
+    """
     if cfg.signal == "prbs":
         x = signals.prbs(
             cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
@@ -306,7 +321,8 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
 
 
 def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
-    data = load_data(cfg.file, Ts=cfg.Ts) if Path(cfg.file).suffix == ".csv" else None
+    file = str(cfg.file)
+    data = load_data(file, Ts=cfg.Ts) if Path(file).suffix == ".csv" else None
     if data is None:
         raise ConfigError(f"setpoint file {cfg.file} must be a .csv")
     x = data.y[:, 0]  # a one-column file is read as the output channel
@@ -315,9 +331,23 @@ def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
     return x[: round(cfg.duration / cfg.Ts)]
 
 
-@dataclass
-class RunSummary:
-    """What an experiment produced."""
+@dataclass(repr=False)
+class RunSummary(ShortRepr):
+    """What an experiment produced.
+
+    Parameters
+    ----------
+    path : Path
+        The record written.
+    commands, telemetry : int
+        Frames sent and received.
+    lost_frames, bad_frames : int
+        Telemetry frames missing, and refused (bad checksum or length).
+    duration : float
+        Length of the experiment, s.
+    status : {'completed', 'interrupted', 'fault', 'error'}
+        How it ended.
+    """
 
     path: Path
     commands: int
@@ -393,6 +423,23 @@ def run_experiment(
     ``progress(k, n)`` is called after each command. KeyboardInterrupt and
     errors idle the wheel, close the record (with an event saying why) and
     are re-raised.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    out : str or os.PathLike
+        The ``.mcap`` file.
+    params : WheelParams
+        The simulated wheel's parameters.
+    force : bool
+        Replace an existing record.
+    progress : callable, optional
+        ``progress(k, n)`` after each command.
+
+    Returns
+    -------
+    RunSummary
     """
     params = cfg.wheel_params(params)
     cfg.check_limits(params)
@@ -436,7 +483,8 @@ def run_experiment(
     try:
         if simulated:
             if not stream_twin:
-                node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
+                channel = host_bus.channel_id  # type: ignore[attr-defined]  # a VirtualBus has one
+                node_bus = open_bus("virtual", channel, simulated_clock=not realtime)
             node = WheelNode(
                 node_bus,
                 cfg.node_id,

@@ -67,6 +67,21 @@ def open_bus(
 
     ``simulated_clock=True`` keeps the senders' time stamps on virtual buses, which
     a node and a driver sharing a :class:`SimClock` need.
+
+    Parameters
+    ----------
+    interface : {'virtual', 'socketcan', 'udp_multicast', 'serial'}
+        python-can's interface name (``serial``: rwlab's SLIP bus).
+    channel : str, optional
+        The channel or device (a default per interface).
+    simulated_clock : bool
+        Keep the senders' time stamps (virtual buses).
+    baudrate : int
+        Line speed of a serial bus.
+
+    Returns
+    -------
+    can.BusABC
     """
     if interface not in INTERFACES:
         return _open_plugin(interface, channel, False, simulated_clock, baudrate)

@@ -46,12 +46,34 @@ RPM = 2 * math.pi / 60  # rad/s per rpm
 
 
 def rpm_to_rad_s(rpm):
-    """Convert rpm to rad/s."""
+    """Convert rpm to rad/s.
+
+    Parameters
+    ----------
+    rpm : float or array_like
+        Angular rate, rpm.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The same rate, rad/s.
+    """
     return rpm * RPM
 
 
 def rad_s_to_rpm(rad_s):
-    """Convert rad/s to rpm."""
+    """Convert rad/s to rpm.
+
+    Parameters
+    ----------
+    rad_s : float or array_like
+        Angular rate, rad/s.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The same rate, rpm.
+    """
     return rad_s / RPM
 
 

@@ -23,7 +23,7 @@ from typing import cast
 import can
 import cantools
 
-from rwlab.errors import RwlabError
+from rwlab.errors import ProtocolError  # ProtocolError re-exported here, where it was
 from rwlab.wheel.physics import Fault, Mode
 
 __all__ = [
@@ -47,10 +47,6 @@ MAX_NODE_ID = 15
 REJECTED_BIT = 0x10  # heartbeat Faults: a setpoint beyond the wheel's limits was refused
 
 
-class ProtocolError(RwlabError):
-    """A frame that is not a valid wheel message (bad length, checksum or value)."""
-
-
 @cache
 def database() -> cantools.database.Database:
     """The parsed ``rw.dbc``."""
@@ -59,7 +55,13 @@ def database() -> cantools.database.Database:
 
 
 def dbc_sha256() -> str:
-    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol."""
+    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol.
+
+    Returns
+    -------
+    str
+        Hexadecimal digest.
+    """
     return hashlib.sha256(resources.files(__package__).joinpath("rw.dbc").read_bytes()).hexdigest()
 
 
@@ -159,7 +161,17 @@ def _frame(base: int, node_id: int, name: str, signals: dict[str, float]) -> can
 
 
 def encode_command(cmd: Command) -> can.Message:
-    """CAN frame for a command; raises ProtocolError for values the frame cannot carry."""
+    """CAN frame for a command; raises ProtocolError for values the frame cannot carry.
+
+    Parameters
+    ----------
+    cmd : Command
+        The command.
+
+    Returns
+    -------
+    can.Message
+    """
     if not math.isfinite(cmd.setpoint) or abs(cmd.setpoint) > 1e6:
         raise ProtocolError(f"setpoint must be finite and within ±1e6, got {cmd.setpoint}")
     return _frame(
@@ -175,7 +187,17 @@ def encode_command(cmd: Command) -> can.Message:
 
 
 def encode_telemetry(t: Telemetry) -> can.Message:
-    """CAN frame for telemetry (speed clipped to the field's range)."""
+    """CAN frame for telemetry (speed clipped to the field's range).
+
+    Parameters
+    ----------
+    t : Telemetry
+        The telemetry.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         TELEMETRY_ID,
         t.node_id,
@@ -193,7 +215,17 @@ def encode_telemetry(t: Telemetry) -> can.Message:
 
 
 def encode_heartbeat(h: Heartbeat) -> can.Message:
-    """CAN frame for a heartbeat."""
+    """CAN frame for a heartbeat.
+
+    Parameters
+    ----------
+    h : Heartbeat
+        The status.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         HEARTBEAT_ID,
         h.node_id,
@@ -210,7 +242,17 @@ def encode_heartbeat(h: Heartbeat) -> can.Message:
 
 
 def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
-    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones."""
+    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones.
+
+    Parameters
+    ----------
+    msg : can.Message
+        A received frame.
+
+    Returns
+    -------
+    Command, Telemetry, Heartbeat or None
+    """
     if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return None
     base, node = msg.arbitration_id & ~0xF, msg.arbitration_id & 0xF

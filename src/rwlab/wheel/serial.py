@@ -22,7 +22,20 @@ END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
 
 
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE of ``data``."""
+    """CRC-16/CCITT-FALSE of ``data``.
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes.
+    crc : int
+        Initial value (chain calls over pieces).
+
+    Returns
+    -------
+    int
+        The CRC, 0..65535.
+    """
     for byte in data:
         crc ^= byte << 8
         for _ in range(8):
@@ -32,7 +45,18 @@ def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
 
 
 def slip_encode(payload: bytes) -> bytes:
-    """Frame ``payload`` with SLIP: END, escaped bytes, END."""
+    """Frame ``payload`` with SLIP: END, escaped bytes, END.
+
+    Parameters
+    ----------
+    payload : bytes
+        The bytes to send.
+
+    Returns
+    -------
+    bytes
+        The framed bytes.
+    """
     body = payload.replace(bytes([ESC]), bytes([ESC, ESC_ESC])).replace(
         bytes([END]), bytes([ESC, ESC_END])
     )
@@ -40,7 +64,18 @@ def slip_encode(payload: bytes) -> bytes:
 
 
 def slip_decode(body: bytes) -> bytes:
-    """Undo SLIP escaping of one frame body (without its END bytes); ValueError if malformed."""
+    """Undo SLIP escaping of one frame body (without its END bytes); ValueError if malformed.
+
+    Parameters
+    ----------
+    body : bytes
+        One frame's escaped bytes.
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
     out = bytearray()
     it = iter(body)
     for byte in it:
