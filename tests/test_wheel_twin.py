@@ -181,3 +181,10 @@ def test_heartbeat_carries_the_bus_voltage_to_half_a_volt(volts, temp):
     back = proto.decode(proto.encode_heartbeat(beat))
     assert abs(back.bus_voltage - volts) <= 0.25 + 1e-9
     assert abs(back.temperature - temp) <= 0.25 + 1e-9 and back.commands_seen == 7
+
+
+def test_the_documented_wheel_toml_is_the_default_twin():
+    from pathlib import Path
+
+    path = Path(__file__).parent.parent / "docs" / "wheels" / "rw90.toml"
+    assert WheelParams.from_toml(path) == RW90
