@@ -6,6 +6,7 @@ from click.testing import CliRunner
 
 from rwlab.cli import main
 from rwlab.demo import check_out
+from rwlab.wheel import RW90
 from tests.conftest import needs_chromium
 
 
@@ -51,7 +52,11 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
         "prbs",
         "chirp",
     ]
-    assert all(r["lost_frames"] == 0 and r["telemetry"] > r["commands"] for r in summary["records"])
+    loss = RW90.frame_loss_rate  # the realistic twin loses a frame now and then, on purpose
+    assert all(
+        r["lost_frames"] <= 3 + 5 * loss * r["telemetry"] and r["telemetry"] > r["commands"]
+        for r in summary["records"]
+    )
     parser = _Links()
     parser.feed((demo_dir / "index.html").read_text())
     assert parser.links and all((demo_dir / link).exists() for link in parser.links)

@@ -121,7 +121,7 @@ def draw_unit(params: WheelParams, unit: int) -> WheelParams:
     if isinstance(unit, bool) or not isinstance(unit, int) or unit < 0:
         raise ConfigError(f"wheel unit must be an integer ≥ 0, got {unit!r}")
     rng = np.random.default_rng([unit, 0x52573930])  # "RW90": a stream of its own
-    drawn: dict[str, float | int] = {}
+    drawn: dict = {}  # field name → value; mixed types, checked by WheelParams
     for name, tol in TOLERANCES.items():
         nominal = getattr(params, name)
         u = rng.uniform(-1.0, 1.0)
@@ -137,12 +137,14 @@ class HallSpeedSensor:
     Three Hall sensors give ``6·p`` edges per revolution (``p`` pole pairs), each
     misplaced by a fixed angle of its own (``hall_misalignment_deg``, electrical,
     drawn once per unit). The firmware captures each edge's time with a timer of
-    ``hall_timer_hz`` (plus a capture jitter ``hall_jitter_s``) and reports
-    ``n·Δθ / (t_last − t_first)`` over the last ``n`` edges: a whole revolution
-    when one fits in ``hall_window_s`` (the placement errors cancel: fine at high
-    speed), else the edges within the window, at least one interval (the
-    placement error of one interval shows: coarse at low speed). No edge for
-    longer than one edge interval at ``min_measurable_rpm`` reads 0.
+    ``hall_timer_hz`` (plus a capture jitter ``hall_jitter_s``) and, at each edge,
+    computes ``n·Δθ / (t_last − t_first)`` over the last ``n`` edges: a whole
+    revolution when one fits in ``hall_window_s`` (the placement errors cancel:
+    fine at high speed), else the edges within the window, at least one interval
+    (the placement error of one interval shows: coarse at low speed). When the
+    next edge is overdue by half an interval the estimate becomes ``Δθ / (time
+    since the last edge)``, so a stopping wheel reads a falling speed; no edge for longer than one edge
+    interval at ``min_measurable_rpm`` reads 0. A reversal restarts the estimate.
 
     Parameters
     ----------
@@ -157,64 +159,66 @@ class HallSpeedSensor:
         self.pitch = 2 * math.pi / self.edges_per_rev  # rad between nominal edges
         rng = np.random.default_rng([int(params.hall_pattern_seed), 0x48414C4C])
         misplace = math.radians(params.hall_misalignment_deg) / params.pole_pairs  # mechanical
-        self.offsets = misplace * rng.standard_normal(self.edges_per_rev)
-        self.offsets -= self.offsets.mean()  # a pattern around the nominal edges
-        self.jitter = params.hall_jitter_s * rng.standard_normal(4096)  # per edge, repeatable
+        offsets = misplace * rng.standard_normal(self.edges_per_rev)
+        self.offsets = (offsets - offsets.mean()).tolist()  # a pattern around nominal edges
+        self.jitter = (params.hall_jitter_s * rng.standard_normal(4096)).tolist()  # per edge
         self.tick = 1.0 / params.hall_timer_hz
         self.window = params.hall_window_s
         min_speed = params.min_measurable_rpm * 2 * math.pi / 60
         self.timeout = self.pitch / min_speed if min_speed > 0 else math.inf
-        self.keep = max(self.window, min(self.timeout, 5.0)) * 2.5  # s of history kept
-        self._t: deque[float] = deque()
-        self._theta: deque[float] = deque()
+        self._edges: deque[float] = deque(maxlen=self.edges_per_rev + 1)  # captured times
+        self._direction = 0.0
+        self._k: int | None = None  # the last edge at or below the rotor angle
+        self._t = 0.0
+        self._theta = 0.0
+        self._estimate = 0.0  # rad/s, at the last edge
+        self._last_edge = -math.inf
+
+    def _edge_angle(self, k: int) -> float:
+        return k * self.pitch + self.offsets[k % self.edges_per_rev]
 
     def record(self, t: float, theta: float) -> None:
         """Log the rotor angle ``theta`` (rad, unwrapped) at time ``t`` (s), every step."""
-        self._t.append(t)
-        self._theta.append(theta)
-        while self._t[0] < t - self.keep:
-            self._t.popleft()
-            self._theta.popleft()
+        k = self._k
+        if k is None:
+            k = math.floor(theta / self.pitch)
+            k = k if self._edge_angle(k) <= theta else k - 1
+        else:
+            while self._edge_angle(k + 1) <= theta:  # edges passed going forward
+                k += 1
+                self._edge(k, 1.0, t, theta)
+            while self._edge_angle(k) > theta:  # going backward
+                self._edge(k, -1.0, t, theta)
+                k -= 1
+        self._k, self._t, self._theta = k, t, theta
 
-    def _edge_angle(self, k: int) -> float:
-        return k * self.pitch + float(self.offsets[k % self.edges_per_rev])
+    def _edge(self, k: int, direction: float, t: float, theta: float) -> None:
+        a = self._edge_angle(k)
+        frac = (a - self._theta) / (theta - self._theta)
+        exact = self._t + frac * (t - self._t)
+        captured = round((exact + self.jitter[k % 4096]) / self.tick) * self.tick
+        if direction != self._direction:
+            self._edges.clear()  # a reversal: intervals across it mean nothing
+            self._direction = direction
+        edges = self._edges
+        edges.append(captured)
+        self._last_edge = captured
+        if len(edges) < 2:
+            self._estimate = 0.0
+            return
+        n = len(edges) - 1
+        if n < self.edges_per_rev or captured - edges[0] > self.window:
+            n = 1  # fewer edges: those within the window, at least one interval
+            while n + 1 < len(edges) and captured - edges[-n - 2] <= self.window:
+                n += 1
+        span = max(captured - edges[-n - 1], self.tick)
+        self._estimate = direction * n * self.pitch / span
 
     def read(self) -> float:
-        """The firmware's speed, rad/s (0 when no edge came within the timeout)."""
-        if len(self._t) < 2:
+        """The firmware's speed now, rad/s (0 when no edge came within the timeout)."""
+        since = self._t - self._last_edge
+        if since > self.timeout:
             return 0.0
-        t = np.fromiter(self._t, float, len(self._t))
-        th = np.fromiter(self._theta, float, len(self._theta))
-        moved = np.nonzero(th != th[-1])[0]
-        if not len(moved):
-            return 0.0
-        s = 1.0 if th[-1] > th[moved[-1]] else -1.0
-        u = s * th  # increasing along the trailing monotonic stretch
-        back = np.nonzero(np.diff(u) < 0)[0]
-        start = back[-1] + 1 if len(back) else 0
-        t, u = t[start:], u[start:]
-        k = math.floor(th[-1] / self.pitch) + (1 if s < 0 else 0)
-        for cand in (k + s, k, k - s, k - 2 * s):  # the latest edge passed
-            if s * self._edge_angle(int(cand)) <= u[-1]:
-                k = int(cand)
-                break
-        t_last = self._edge_time(k, s, t, u)
-        if t_last is None or t[-1] - t_last > self.timeout:
-            return 0.0
-        n = self.edges_per_rev
-        t_first = self._edge_time(k - int(s) * n, s, t, u)
-        if t_first is None or t_last - t_first > self.window:
-            u_window = np.interp(t_last - self.window, t, u)
-            n = max(1, math.floor((s * self._edge_angle(k) - u_window) / self.pitch))
-            t_first = self._edge_time(k - int(s) * n, s, t, u)
-            if t_first is None:
-                return 0.0
-        return s * n * self.pitch / max(t_last - t_first, self.tick)
-
-    def _edge_time(self, k: int, s: float, t: np.ndarray, u: np.ndarray) -> float | None:
-        """Captured time of edge ``k`` (timer ticks, with jitter), or None if not in view."""
-        a = s * self._edge_angle(k)
-        if a < u[0] or a > u[-1]:
-            return None
-        exact = float(np.interp(a, u, t))
-        return round((exact + self.jitter[k % 4096]) / self.tick) * self.tick
+        if abs(self._estimate) * since > 1.5 * self.pitch:  # an edge is well overdue:
+            return math.copysign(self.pitch / since, self._estimate)  # slower than it was
+        return self._estimate

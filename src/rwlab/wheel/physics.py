@@ -251,6 +251,9 @@ class WheelParams:
                 f"breakaway_friction ({self.breakaway_friction}) must be ≥ coulomb_friction "
                 f"({self.coulomb_friction}): a wheel needs more torque to start than to keep going"
             )
+        for name, most in (("pole_pairs", 64), ("cogging_periods", 10_000)):
+            if getattr(self, name) > most:
+                raise ConfigError(f"{name} must be at most {most}, got {getattr(self, name)}")
         if not self.driver_max_duty <= 1:
             raise ConfigError(f"driver_max_duty must be in (0, 1], got {self.driver_max_duty}")
         if not self.frame_loss_rate < 1:
@@ -305,7 +308,7 @@ class WheelParams:
         -------
         WheelParams
         """
-        if name not in PRESETS:
+        if not isinstance(name, str) or name not in PRESETS:
             raise ConfigError(f"unknown wheel preset {name!r}; choose from {sorted(PRESETS)}")
         return PRESETS[name]
 
@@ -466,11 +469,19 @@ class WheelPhysics:
         self.mode, self.setpoint, self._integral = Mode.IDLE, 0.0, 0.0
 
     # -- dynamics ----------------------------------------------------------------
-    def _accel_request(self, dt: float) -> float:
+    def feedback_speed(self) -> float:
+        """The speed the wheel's own controller sees, rad/s.
+
+        With ``hall_speed`` the firmware's Hall estimate (it has no other speed
+        sensor: coarse and late at low speed, 0 near standstill); else the true speed.
+        """
+        return self.hall.read() if self.hall is not None else self.speed
+
+    def _accel_request(self, dt: float, speed: float) -> float:
         p = self.params
         if self.mode == Mode.SPEED:
             target = _clip(self.setpoint, p.max_speed)
-            error = target - self.speed
+            error = target - speed
             request = p.speed_kp * error + self._integral
             if abs(request) < p.max_accel:  # anti-windup: integrate only when unsaturated
                 self._integral += p.speed_ki * error * dt
@@ -546,11 +557,12 @@ class WheelPhysics:
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (use ≤ 1 ms for the inner loop's accuracy)."""
         p = self.params
-        alpha = self._accel_request(dt)
+        sensed = self.feedback_speed()
+        alpha = self._accel_request(dt, sensed)
         if self.mode == Mode.IDLE:
             current = 0.0
         else:
-            torque = p.inertia * alpha + self.friction_torque(self.speed)
+            torque = p.inertia * alpha + self.friction_torque(sensed)
             current = _clip(torque / p.torque_constant, self.current_limit)
         # speed limit: never drive further beyond the maximum speed
         self.speed_limited = abs(self.speed) >= p.max_speed and current * self.speed > 0
