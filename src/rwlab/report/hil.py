@@ -76,7 +76,7 @@ def _comparison(page: Page, m: dict) -> None:
         ratio = a / b if isinstance(a, float) and isinstance(b, float) and b else None
         rows.append([k, a, b, ratio])
     page.text(
-        "The simulation is `attitude simulate` on the same scenario, controller and seed with "
+        "The simulation is rwlab attitude simulate on the same scenario, controller and seed with "
         "the physics wheel (healthy) started at the bench's wheel momenta: it draws the same "
         "sensor and disturbance noise, so the difference is the wheels' (next section)."
     )
