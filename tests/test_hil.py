@@ -121,6 +121,23 @@ def test_the_report_sets_bench_beside_simulation(short_run):
     assert meas["momentum_quantum_Nms"] == pytest.approx(4.2e-4 * 0.5 * np.pi / 30)
 
 
+def test_export_reads_one_wheel_of_the_record(short_run, tmp_path):
+    result, out = short_run
+    runner = CliRunner()
+    csv = tmp_path / "w2.csv"
+    res = runner.invoke(
+        main,
+        ["export", str(out / "record.mcap"), "--node", "2", "--format", "csv", "--out", str(csv)],
+    )
+    assert res.exit_code == 0, res.output
+    rows = csv.read_text().splitlines()
+    assert len(rows) - 1 >= result.run.stats["steps"]  # one sample per control period
+    res = runner.invoke(
+        main, ["export", str(out / "record.mcap"), "--format", "csv", "--out", str(csv), "--force"]
+    )
+    assert res.exit_code == 2 and "several wheels" in res.output
+
+
 def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
     _, out = short_run
     rec = read_record(out / "record.mcap")

@@ -167,9 +167,12 @@ def experiment(
     default=None,
     help="Accept telemetry gaps up to this many seconds (default Ts).",
 )
+@click.option(
+    "--node", type=click.IntRange(0, 15), help="The wheel, in a record of several (rwlab hil)."
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def export(record, fmt, out, Ts, max_gap, force):
+def export(record, fmt, out, Ts, max_gap, node, force):
     """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
 
     Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a.
@@ -177,7 +180,9 @@ def export(record, fmt, out, Ts, max_gap, force):
     from rwlab.testbed import load_record
 
     _check_folder(Path(out).parent)
-    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
+    data = load_record(
+        record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap, node=node
+    )
     path = Path(out)
     if path.suffix.lower() != f".{fmt}":
         path = path.with_suffix(f".{fmt}") if not path.suffix else path

@@ -422,7 +422,13 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         out.mkdir(parents=True, exist_ok=True)
         record = RecordWriter(
             targets["record.mcap"],
-            {"kind": "rwlab.hil/1", "config": config, "dbc_sha256": proto.dbc_sha256()},
+            {
+                "kind": "rwlab.hil/1",
+                "config": config,
+                "dbc_sha256": proto.dbc_sha256(),
+                "Ts": sc.dt,  # what `rwlab export --node N` samples a wheel at
+                "mode": "acceleration",
+            },
             force=force,
             channels=_channels(nodes),
         )

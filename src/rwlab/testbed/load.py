@@ -40,6 +40,7 @@ def load_record(
     *,
     outputs: tuple[str, ...] = ("speed",),
     max_gap: float | None = None,
+    node: int | None = None,
 ) -> IOData:
     """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
 
@@ -59,6 +60,9 @@ def load_record(
         gaps raise ``RecordGapError`` listing them; pass ``numpy.inf`` to accept
         them. Without ``max_gap``, a ``Ts`` shorter than the telemetry period is
         refused (``DataError``).
+    node : int, optional
+        The wheel to read from a record of several (``rwlab hil``: topics
+        ``/wheelN/command`` and ``/wheelN/telemetry``).
 
     Returns
     -------
@@ -74,8 +78,16 @@ def load_record(
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs:
         raise DataError(f"outputs must be chosen from {sorted(OUTPUTS)}, got {list(outputs)}")
-    commands = record.topic("/command")
-    telemetry = record.topic("/telemetry")
+    prefix = "" if node is None else f"/wheel{node}"
+    wheels = sorted(
+        t.split("/")[1] for t in record.messages if t.endswith("/telemetry") and t[1:6] == "wheel"
+    )
+    if node is None and wheels and not record.topic("/telemetry"):
+        raise DataError(
+            f"{path} holds several wheels ({', '.join(wheels)}): choose one (node=, CLI --node)"
+        )
+    commands = record.topic(f"{prefix}/command")
+    telemetry = record.topic(f"{prefix}/telemetry")
     if not commands or len(telemetry) < 2:
         raise DataError(f"{path}: the record holds no experiment (no commands or telemetry)")
     tc = np.array([c["t"] for c in commands])
