@@ -138,6 +138,23 @@ def test_export_reads_one_wheel_of_the_record(short_run, tmp_path):
     assert res.exit_code == 2 and "several wheels" in res.output
 
 
+def test_monitor_shows_the_satellite_view_in_replay(short_run):
+    from bokeh.document import Document
+
+    from rwlab.testbed.monitor import make_document
+
+    _, out = short_run
+    doc = Document()
+    make_document(doc, out / "record.mcap", replay=True, speed=1e9)
+    [callback] = doc.session_callbacks
+    callback.callback()
+    rows = read_record(out / "record.mcap").topic("/satellite")
+    sat = doc.select_one({"name": "satellite"}).data
+    assert sat["error"] == [r["error_deg"] for r in rows]
+    momentum = doc.select_one({"name": "momentum"}).data
+    assert momentum["h3"] == [r["wheel_momentum_Nms"][2] for r in rows]
+
+
 def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
     _, out = short_run
     rec = read_record(out / "record.mcap")
