@@ -266,3 +266,21 @@ def test_the_gyro_filter_calibrates_a_misaligned_sun_sensor():
     assert np.allclose(phi[:2], [0.03, -0.03], atol=0.008)
     blind = simulate(sc.with_(filter_sun_sensor_alignment=False), ctl, **kw)
     assert cal.stats["steady_max_error_deg"] < blind.stats["steady_max_error_deg"]
+
+
+def test_cli_steady_after(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from rwlab.cli import main
+
+    base = ["attitude", "simulate", "--scenario", "geo-comsat-gyro", "--duration", "20"]
+    out = tmp_path / "run"
+    res = CliRunner().invoke(main, [*base, "--steady-after", "5", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["config"]["steady_from_s"] == 5.0 and metrics["config"]["gyro"] is True
+    assert metrics["nees_states"] == 9
+    bad = CliRunner().invoke(main, [*base, "--steady-after", "30", "--out", str(tmp_path / "b")])
+    assert bad.exit_code == 2 and "--steady-after" in bad.output
