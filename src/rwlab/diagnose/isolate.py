@@ -121,6 +121,9 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev)
     if detector == "speed":
+        held = np.asarray(ev["speed"], dtype=float)
+        if held.size >= 5 and np.ptp(held) == 0:  # one reading, over and over: not noise
+            return [Finding("speed_sensor_stuck", float(speed[-1]), None, "rpm")]
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
