@@ -276,3 +276,22 @@ def test_a_killed_simulation_leaves_no_folder_and_keeps_the_previous_one(tmp_pat
     assert f"interrupted ({signal.Signals(sig).name})" in err and "Traceback" not in err
     assert {p.name: p.read_text() for p in out.iterdir()} == previous
     assert _leftovers(out) == []
+
+
+@pytest.mark.slow
+def test_a_fleet_killed_with_sigterm_leaves_no_folder(tmp_path):
+    """The issue's case: SIGTERM during a fleet `identify` once left model.json, no report."""
+    from rwlab import datasets
+
+    fleet = tmp_path / "fleet"
+    for k in range(3):
+        datasets.get("dryer").write(fleet / f"unit_{k}.csv")
+    out = tmp_path / "studies"
+    child = _start("identify", fleet, "--preprocess", "detrend", "--workers", "1", "--out", out)
+    _wait_for(lambda: any(".partial-" in n for n in _leftovers(out)))
+    time.sleep(3.0)  # the cluster starts, the studies begin
+    child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 130, err
+    assert "Traceback" not in err.split("interrupted")[-1]
+    assert not out.exists() and _leftovers(out) == []
