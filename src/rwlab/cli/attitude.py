@@ -361,8 +361,8 @@ def attitude_montecarlo(
     _check_steps(duration, sc)
     campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
     with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
+        check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume)
-        check_runs(campaign)  # before the cluster starts
         where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
         click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
         execution = Execution()
