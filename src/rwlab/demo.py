@@ -6,7 +6,9 @@
 2. Paper A's identification study runs on the PRBS record.
 3. The chosen wheel model flies as the actuator of the GEO smallsat (three RW90)
    next to LQR, LQG and LQG/LTR with ideal wheels, and the ρ sweep runs.
-4. ``index.html`` links everything, with a summary on top; ``summary.json``
+4. Hardware in the loop: the LQG flies the smallsat with its three wheels as
+   twins on the virtual bus (simulated clock), beside the same run simulated.
+5. ``index.html`` links everything, with a summary on top; ``summary.json``
    holds the chosen model and each controller's pointing error.
 """
 
@@ -28,13 +30,28 @@ __all__ = ["DemoConfig", "run_demo"]
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Durations (simulated seconds) of each part; the defaults are the full demo."""
+    """Durations (simulated seconds) of each part; the defaults are the full demo.
+
+    Parameters
+    ----------
+    step_duration, accel_duration, prbs_duration, chirp_duration : float
+        Length of each testbed record, simulated s.
+    attitude_duration : float
+        Length of each attitude run, s.
+    realtime : bool
+        Run the testbed at wall-clock speed.
+    monitor : bool
+        Open the live monitor during the records.
+    seed : int
+        Seed of the records and the runs.
+    """
 
     step_duration: float = 240.0
     accel_duration: float = 120.0
     prbs_duration: float = 1200.0
     chirp_duration: float = 600.0
     attitude_duration: float = 900.0
+    hil_duration: float = 600.0
     realtime: bool = False
     monitor: bool = False
     seed: int = 1
@@ -48,6 +65,7 @@ class DemoConfig:
             prbs_duration=600.0,
             chirp_duration=120.0,
             attitude_duration=300.0,
+            hil_duration=120.0,
         )
 
 
@@ -117,6 +135,24 @@ def run_demo(
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
     ``out`` is written whole when the demo succeeds, or not at all; a previous
     demo there is replaced then (``force`` also replaces a previous output).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+    cfg : DemoConfig
+        Durations and options.
+    force : bool
+        Replace a folder that is not a previous demo's.
+    echo : callable
+        Prints each stage.
+    progress : callable, optional
+        ``progress(label, n)`` returns a context manager with ``update(k)``.
+
+    Returns
+    -------
+    dict
+        ``summary.json``'s content (schema ``demo``).
     """
     from rwlab._io import output_folder
 
@@ -155,11 +191,11 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
         try:
             if progress:
                 with progress(name, n) as bar:
-                    summary = run_experiment(
-                        exp, path, force=True, progress=lambda k, total, b=bar: b.update(1)
+                    run = run_experiment(
+                        exp, path, force=True, progress=lambda k, total: bar.update(1)
                     )
             else:
-                summary = run_experiment(exp, path, force=True)
+                run = run_experiment(exp, path, force=True)
         finally:
             if monitor is not None:
                 from rwlab.testbed.monitor import stop_process
@@ -170,9 +206,9 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
                 "name": name,
                 "title": title,
                 "file": f"records/{name}.mcap",
-                "commands": summary.commands,
-                "telemetry": summary.telemetry,
-                "lost_frames": summary.lost_frames,
+                "commands": run.commands,
+                "telemetry": run.telemetry,
+                "lost_frames": run.lost_frames,
             }
         )
 
@@ -195,6 +231,7 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
         progress=lambda name: echo(f"[attitude]   flying {name}"),
     )
     write_comparison(comparison, out / "attitude", force=True, ltr_result=ltr_study(scenario))
+    hil = _hil_stage(out, cfg, echo)
 
     summary = {
         "chosen_model": {
@@ -216,6 +253,7 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
         "attitude_wheel_model": "identification/model.json",
         "scenario": scenario.name,
         "records": records,
+        "hil": hil,
         "elapsed_s": round(time.monotonic() - t_start, 1),
         "realtime": cfg.realtime,
     }
@@ -224,6 +262,34 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
     page = _index(summary, _pointing_png(comparison))
     atomic_write_bytes(out / "index.html", lambda tmp: tmp.write_text(page, encoding="utf-8"))
     return summary
+
+
+def _hil_stage(out: Path, cfg: DemoConfig, echo) -> dict:
+    """The LQG on the smallsat with its wheels as twins on the bus (simulated clock)."""
+    from rwlab.hil.run import HilConfig, run_hil
+    from rwlab.report.hil import write_hil_report
+
+    echo(f"[hil] GEO smallsat, LQG through three wheel twins on the bus, {cfg.hil_duration:g} s")
+    result = run_hil(
+        HilConfig(duration=cfg.hil_duration, seed=cfg.seed, channel="rwlab-demo-hil"),
+        out / "hil",
+        force=True,
+    )
+    write_hil_report(result, out / "hil")
+    m = result.metrics
+    lost = sum(v or 0 for v in m["bench"]["lost_commands"].values())
+    echo(
+        f"[hil] steady max {m['steady_max_error_deg']:.3g}° on the bus, "
+        f"{m['reference_simulation']['steady_max_error_deg']:.3g}° simulated; {lost} lost commands"
+    )
+    return {
+        "steady_max_error_deg": m["steady_max_error_deg"],
+        "simulated_steady_max_error_deg": m["reference_simulation"]["steady_max_error_deg"],
+        "commands_sent": sum(m["bench"]["commands_sent"].values()),
+        "lost_commands": lost,
+        "duration_s": cfg.hil_duration,
+        "report": "hil/report.html",
+    }
 
 
 def _pointing_png(comparison) -> str:
@@ -286,5 +352,13 @@ requirement:</p>
 <h2>3. Attitude control (paper B)</h2>
 <p><a href="attitude/report.html">LQR vs LQG vs LQG/LTR report</a> (with the identified wheel) ·
 <a href="attitude/metrics.json">metrics.json</a> · <a href="attitude/sigma.json">sigma.json</a></p>
+<h2>4. Hardware in the loop</h2>
+<p id="hil">The LQG flew the smallsat for {s["hil"]["duration_s"]:g} s with its three wheels as
+twins on the virtual bus: every command crossed the bus ({s["hil"]["commands_sent"]} sent,
+{s["hil"]["lost_commands"]} lost) and the plant took each wheel's momentum from its
+telemetry. Steady maximum {s["hil"]["steady_max_error_deg"]:.3g}° on the bus against
+{s["hil"]["simulated_steady_max_error_deg"]:.3g}° simulated.
+<a href="hil/report.html">HIL report</a> · <a href="hil/metrics.json">metrics.json</a> ·
+<a href="hil/record.mcap">record.mcap</a></p>
 <p>Ran in {s["elapsed_s"]} s{" on the wall clock" if s["realtime"] else " (simulated clock)"}.</p>
 </body></html>"""

@@ -18,6 +18,7 @@ import itertools
 import logging
 import os
 
+from rwlab._optional import require
 from rwlab.errors import ConfigError, LostWorkerError
 
 __all__ = ["MAX_RETRIES", "batches", "dask_client", "map_batches", "worker_count"]
@@ -28,11 +29,26 @@ MAX_RETRIES = 3  # times one batch is submitted again after its worker died
 @contextlib.contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://host:8786), or on
-    a new local cluster of ``workers`` processes (default: the machine's cores)."""
+    a new local cluster of ``workers`` processes (default: the machine's cores).
+
+    Parameters
+    ----------
+    workers : int, optional
+        Processes of a new local cluster.
+    scheduler : str, optional
+        Address of a running scheduler (not with ``workers``).
+
+    Yields
+    ------
+    distributed.Client
+        Closed, with its local cluster, when the block ends.
+    """
+    require("distributed", "running on Dask")
+    import dask
     from distributed import Client, LocalCluster
 
     if workers is not None and scheduler is not None:
-        raise ConfigError("give --workers or --scheduler, not both")
+        raise ConfigError("give workers or scheduler, not both")
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")
@@ -43,8 +59,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         return
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
-        raise ConfigError(f"--workers must be ≥ 1, got {n}")
-    import dask
+        raise ConfigError(f"workers must be ≥ 1, got {n}")
     from distributed.deploy.spec import SpecCluster
 
     before = set(SpecCluster._instances)
@@ -84,13 +99,38 @@ def _close_quietly(clusters) -> None:
 
 
 def worker_count(client) -> int:
-    """Workers the scheduler knows now (at least 1)."""
+    """Workers the scheduler knows now (at least 1).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster.
+
+    Returns
+    -------
+    int
+    """
     return max(1, len(client.scheduler_info().get("workers", {})))
 
 
 def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     """Split ``items`` in order into ``per_worker`` tasks per worker (fewer when there are
-    fewer items), of sizes that differ by at most one."""
+    fewer items), of sizes that differ by at most one.
+
+    Parameters
+    ----------
+    items : list
+        The work, in order.
+    n_workers : int
+        Number of workers.
+    per_worker : int
+        Tasks per worker (more balance the load, fewer cost less overhead).
+
+    Returns
+    -------
+    list of list
+        The batches; concatenated, they are ``items``.
+    """
     n = max(1, min(len(items), per_worker * max(1, n_workers)))
     edges = [len(items) * i // n for i in range(n + 1)]
     return [items[a:b] for a, b in itertools.pairwise(edges)]
@@ -119,10 +159,13 @@ def map_batches(
     Parameters
     ----------
     client : distributed.Client
+        The cluster.
     fn : callable
         ``fn(batch, *args)`` returns one result per item of its batch (runs on a worker).
     work : list of list
-        The batches.
+        The batches (see :func:`batches`).
+    *args
+        Passed to every call (scattered once).
     progress : callable, optional
         ``progress(done)``: items finished so far, after each batch.
     on_batch : callable, optional

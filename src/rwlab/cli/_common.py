@@ -237,8 +237,8 @@ def _data_options(func):
 def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
     """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
     from rwlab import datasets
-    from rwlab._io import check_magnitude
     from rwlab.data import load
+    from rwlab.datafiles import check_magnitude
 
     if not Path(file).exists() and file in datasets.NAMES:
         if input_col or output_col:

@@ -238,11 +238,29 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
     "--relinearize", type=SECONDS, default=None, help="Re-design the LQR every this many seconds."
 )
 @_EPOCH
+@click.option(
+    "--steady-after",
+    type=float,
+    default=None,
+    help="Seconds after which the steady-state metrics start [default: half the run, at "
+    "most its first hour].",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
 def attitude_simulate(
-    scenario, controller, estimator, dt, duration, seed, rho, relinearize, epoch, out, force
+    scenario,
+    controller,
+    estimator,
+    dt,
+    duration,
+    seed,
+    rho,
+    relinearize,
+    epoch,
+    steady_after,
+    out,
+    force,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
@@ -251,6 +269,12 @@ def attitude_simulate(
     from rwlab.report.attitude import write_simulation
 
     _check_run(duration, relinearize)
+    if steady_after is not None and not (
+        math.isfinite(steady_after) and 0 <= steady_after < duration
+    ):
+        raise ConfigError(
+            f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
+        )
     overrides = {"dt": dt} if dt is not None else {}
     sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
     steps = _check_steps(duration, sc)
@@ -271,6 +295,9 @@ def attitude_simulate(
         "wheel_faults": list(sc.wheel_faults),
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
+        "steady_from_s": None,  # the run's own, filled in below
+        "gyro": sc.gyro is not None,
+        "star_tracker": sc.star_tracker is not None,
     }
     files = ["metrics.json", "trace.parquet", "report.html"]
     with (
@@ -287,7 +314,9 @@ def attitude_simulate(
             update_period=relinearize,
             log_every=log_every,
             progress=progress,
+            steady_after=steady_after,
         )
+        config["steady_from_s"] = run.steady_from_s
         paths = write_simulation(run, metrics, config, sc, stage, force=force)
     for key in (
         "max_error_deg",
@@ -320,6 +349,15 @@ def attitude_simulate(
 )
 @_engine_options
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@_EPOCH
+@click.option(
+    "--epoch-spread-days",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Each run starts at --epoch plus a uniform draw of up to this many days "
+    "(e.g. 30 for an eclipse season, 365 for a year).",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out (and start over).")
 @click.option(
@@ -329,7 +367,19 @@ def attitude_simulate(
 )
 @_friendly_errors
 def attitude_montecarlo(
-    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force, resume
+    scenario,
+    runs,
+    duration,
+    controller,
+    dispersions,
+    workers,
+    scheduler,
+    seed,
+    epoch,
+    epoch_spread_days,
+    out,
+    force,
+    resume,
 ):
     """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
 
@@ -359,7 +409,16 @@ def attitude_montecarlo(
     _check_run(duration, None)
     sc = load_scenario(scenario)
     _check_steps(duration, sc)
-    campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
+    campaign = Campaign(
+        sc,
+        load_dispersions(dispersions),
+        duration,
+        controller,
+        seed,
+        runs,
+        epoch=epoch,
+        epoch_spread_days=epoch_spread_days,
+    )
     with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
         check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume)
@@ -397,7 +456,18 @@ def attitude_montecarlo(
         click.echo(
             f"{axis:<6} {s['mean']:10.4g} {s['std']:10.4g} {s['p99_73']:11.4g} {s['max']:10.4g}"
         )
+    met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.pointing_requirement_deg:g}°: {stats['meets_requirement_fraction']:.1%}"
+        f"meeting ±{sc.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
+    for q in stats["quantiles"]:
+        bound = (
+            f"≤ {q['upper_bound']:.4g}° ({q['confidence']:.0%})"
+            if q["upper_bound"] is not None
+            else f"no {q['confidence']:.0%} bound: needs {q['runs_needed']} runs"
+        )
+        click.echo(
+            f"  {q['p']:.2%} quantile of {stats['statistic_column']}: {q['estimate']:.4g}°, {bound}"
+        )
     click.echo(_wrote(out, paths.values()))

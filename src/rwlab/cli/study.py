@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -10,8 +11,8 @@ import click
 
 from rwlab.cli._common import (
     POSITIVE,
-    SECONDS,
     Number,
+    _check_folder,
     _columns_option,
     _engine_options,
     _friendly_errors,
@@ -31,10 +32,11 @@ from rwlab.errors import ConfigError, RwlabError
 @_columns_option
 @click.option(
     "--preprocess",
-    type=click.Choice(["normalize", "detrend", "none"]),
-    default="normalize",
+    type=click.Choice(["detrend", "scale", "normalize", "none"]),
+    default="detrend",
     show_default=True,
-    help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
+    help="Statistics from the estimation part: remove means (default), scale without "
+    "shifting, or normalize to [0, 1] as paper A (biases a model without intercept).",
 )
 @click.option(
     "--split",
@@ -124,19 +126,11 @@ def _rate_unit(study: dict) -> str:
 
 
 @main.command("diagnose")
-@click.argument("record", type=click.Path(dir_okay=False))
+@click.argument("record", type=click.Path(exists=True))
 @click.option(
     "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
-@click.option(
-    "--calibration",
-    "calibration_s",
-    type=SECONDS,
-    default=300.0,
-    show_default=True,
-    help="Healthy start of the record that calibrates the residuals, s.",
-)
 @click.option(
     "--false-alarms",
     "false_alarms_per_hour",
@@ -145,37 +139,78 @@ def _rate_unit(study: dict) -> str:
     show_default=True,
     help="Wanted false alarms per hour per detector (sets the thresholds).",
 )
-@click.option("--speed-test", is_flag=True, help="Also test the speed residual (see docs).")
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
-def diagnose_cmd(record, model_file, out, calibration_s, false_alarms_per_hour, speed_test, force):
-    """Detect and isolate wheel faults in a record with an identified model.
+def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
+    """Detect, name and size wheel faults in a record with an identified model.
 
-    Writes OUT/diagnosis.json (alarms, thresholds, residual statistics) and
-    OUT/report.html (residuals and test statistics with the alarms marked).
+    The detectors compare the record, from its first sample, with the healthy
+    reference that rwlab identify stored in model.json. Writes
+    OUT/diagnosis.json (alarms with fault sizes and 95 % intervals, thresholds,
+    residual statistics) and OUT/report.html.
+
+    RECORD may be a folder of records of one wheel: each is diagnosed into
+    OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
+    fault's size over the records (in the order of their start times).
     """
+    from rwlab.diagnose import HealthyReference
+    from rwlab.wheel import IdentifiedWheel
+
+    _check_folder(out)
+    wheel = IdentifiedWheel.from_json(model_file)
+    reference = HealthyReference.from_model_file(model_file)
+    if Path(record).is_dir():
+        _diagnose_folder(Path(record), Path(out), wheel, reference, false_alarms_per_hour, force)
+        return
+    result, paths = _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force)
+    for a in result.alarms:
+        click.echo(f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)")
+    if not result.alarms:
+        click.echo("no alarm")
+    click.echo(_wrote(out, paths.values()))
+
+
+def _finding_text(a) -> str:
+    if a.magnitude is None:
+        return a.kind
+    ci = "" if a.ci is None else f" [{a.ci[0]:.4g}, {a.ci[1]:.4g}]"
+    return f"{a.kind} {a.magnitude:.4g}{ci} {a.unit}"
+
+
+def _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force):
     import numpy as np
 
     from rwlab.diagnose import diagnose
     from rwlab.report.diagnosis import write_diagnosis
     from rwlab.testbed import load_record
-    from rwlab.wheel import IdentifiedWheel
 
     with _output(out, ("diagnosis.json", "report.html"), force, "diagnosis") as stage:
-        wheel = IdentifiedWheel.from_json(model_file)
-        data = load_record(record, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
-        result = diagnose(
-            data,
-            wheel,
-            calibration_s=calibration_s,
-            false_alarms_per_hour=false_alarms_per_hour,
-            speed_test=speed_test,
+        data = load_record(
+            record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
         )
+        result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
         paths = write_diagnosis(result, stage, title=Path(record).name, force=force)
-    for a in result.alarms:
-        click.echo(f"alarm at {a.t_s:.1f} s: {a.kind} ({a.detector} test, {a.statistic:.3g})")
-    if not result.alarms:
-        click.echo("no alarm")
+    return result, paths
+
+
+def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> None:
+    """Every record of ``folder`` diagnosed, and the trend of each fault's size."""
+    from rwlab.report.diagnosis import trend_point, write_trend
+    from rwlab.testbed import read_record
+
+    records = sorted(
+        p for p in folder.iterdir() if p.suffix == ".mcap" and not p.name.endswith(".partial.mcap")
+    )
+    if not records:
+        raise ConfigError(f"{folder}: no records (.mcap) in the folder")
+    points = []
+    for path in records:
+        result, _ = _diagnose_one(path, out / path.stem, wheel, reference, rate, force)
+        start = read_record(path).metadata.get("start_utc", "")
+        points.append(trend_point(path.name, start, result))
+        named = ", ".join(_finding_text(a) for a in result.alarms) or "no alarm"
+        click.echo(f"{path.name:<32} {named}")
+    paths = write_trend(points, out, force=force)
     click.echo(_wrote(out, paths.values()))
 
 
@@ -194,7 +229,12 @@ def _identify_one(
     echo=None,
 ):
     """`rwlab identify` on one record: the study written into ``out``; (study dict, paths)."""
-    from rwlab.ident.study import identification_study, load_study_data, physical_model
+    from rwlab.ident.study import (
+        identification_study,
+        load_current,
+        load_study_data,
+        physical_model,
+    )
     from rwlab.report.identification import write_study
 
     data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
@@ -207,6 +247,14 @@ def _identify_one(
         tolerance=tolerance,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
+        datasheet=None
+        if "current_limit_a" not in saturation
+        else {
+            "current_limit": saturation["current_limit_a"],
+            "max_speed_rpm": saturation["speed_limit_rpm"],
+            "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
+        },
+        current=load_current(file, Ts),
     )
     model = physical_model(
         result,
@@ -214,10 +262,35 @@ def _identify_one(
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
         saturation_source=saturation["saturation_source"],
     )
+    reference = _healthy_reference(file, model)
+    if isinstance(reference, dict):
+        model = dataclasses.replace(model, healthy_reference=reference)
+    elif echo is not None:
+        echo(f"no healthy reference for fault diagnosis: {reference}")
     paths = write_study(result, model, out, force=force)
     study = result.to_dict()
     study["data"]["output_unit"] = data.output_units[0]  # for the messages only
     return study, paths
+
+
+def _healthy_reference(file, model) -> dict | str:
+    """The healthy reference measured on a testbed record, or why there is none."""
+    import numpy as np
+
+    from rwlab.diagnose import healthy_reference
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
+
+    if Path(file).suffix.lower() != ".mcap":
+        return "not a testbed record (.mcap with motor current)"
+    try:
+        wheel = IdentifiedWheel.from_file(model)
+        data = load_record(
+            file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
+        return healthy_reference(data, wheel, source=Path(file).name).to_dict()
+    except RwlabError as exc:
+        return _message(exc)
 
 
 _RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")

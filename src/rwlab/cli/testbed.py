@@ -59,15 +59,41 @@ class _ExperimentCommand(click.Command):
 @click.option("--telemetry-rate", type=float, help="Simulated wheel's telemetry rate, Hz.")
 @click.option("--seed", type=int)
 @click.option(
+    "--unit",
+    type=click.IntRange(0),
+    help="Simulated wheel unit: another RW90 with parameters drawn within its tolerances.",
+)
+@click.option(
+    "--wheel",
+    "wheel_preset",
+    type=click.Choice(["rw90", "ideal"]),
+    help="Simulated wheel preset: rw90 (realistic, default) or ideal (no imperfections).",
+)
+@click.option(
     "--file",
     "setpoint_file",
     type=click.Path(dir_okay=False),
     help="CSV of setpoints for --signal file.",
 )
-@click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
+@click.option(
+    "--interface",
+    help="virtual (a simulated wheel), socketcan, udp_multicast, serial, or one added by an "
+    "entry point.",
+)
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
+@click.option(
+    "--protocol",
+    help="Wheel protocol: rwlab (default), canopen, nsp, or a registered one "
+    "(`rwlab wheel protocols`).",
+)
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option(
+    "--rate-limit/--no-rate-limit",
+    default=None,
+    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (default on: "
+    "ramps, not steps); --no-rate-limit plays true steps and lets the wheel saturate.",
+)
 @click.option(
     "--fault",
     "faults",
@@ -100,11 +126,15 @@ def experiment(
     realtime,
     telemetry_rate,
     seed,
+    unit,
+    wheel_preset,
     setpoint_file,
     interface,
     channel,
     node_id,
+    protocol,
     raw_frames,
+    rate_limit,
     faults,
     model_file,
     monitor,
@@ -128,11 +158,15 @@ def experiment(
         realtime=realtime,
         telemetry_rate=telemetry_rate,
         seed=seed,
+        unit=unit,
+        wheel=wheel_preset,
         file=setpoint_file,
         interface=interface,
         channel=channel,
         node_id=node_id,
+        protocol=protocol,
         raw_frames=raw_frames,
+        rate_limit=rate_limit,
         faults=tuple(faults) or None,
         model=model_file,
     )
@@ -140,9 +174,7 @@ def experiment(
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:
         cfg = ExperimentConfig(**{k: v for k, v in overrides.items() if v is not None})
-    from rwlab.wheel import RW90
-
-    cfg.check_limits(RW90)
+    cfg.check_limits(cfg.wheel_params())
     if Path(out).suffix.lower() != ".mcap":
         raise ConfigError(f"--out {out}: a record is an .mcap file; name it NAME.mcap")
     if Path(out).exists() and not force:
@@ -184,6 +216,7 @@ def experiment(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
         f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status}); "
         f"timing: {_timing_line(summary.timing)}"
+        + (f"; {summary.bad_frames} damaged frames dropped" if summary.bad_frames else "")
     )
 
 
@@ -213,9 +246,12 @@ def _timing_line(t: dict) -> str:
     default=None,
     help="Accept telemetry gaps up to this many seconds (default Ts).",
 )
+@click.option(
+    "--node", type=click.IntRange(0, 15), help="The wheel, in a record of several (rwlab hil)."
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def export(record, fmt, out, Ts, max_gap, force):
+def export(record, fmt, out, Ts, max_gap, node, force):
     """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
 
     Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a.
@@ -232,7 +268,9 @@ def export(record, fmt, out, Ts, max_gap, force):
     if path.exists() and not force:
         raise FileExistsError(f"{path} exists; pass --force to replace it")
     _check_folder(path.parent)
-    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
+    data = load_record(
+        record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap, node=node
+    )
     if data.N < 2:
         raise ConfigError(
             f"--Ts {data.Ts:g} s leaves {data.N} sample of the record; choose a Ts shorter "
