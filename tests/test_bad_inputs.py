@@ -352,6 +352,36 @@ def cases() -> list[tuple[str, list[str]]]:
                 [*mc, "--runs", "2", "--dispersions", f"{{D}}/{f}"],
             )
         )
+    # compare (every model of a model.json on a record)
+    for f in (
+        "binary.json",
+        "list.json",
+        "abc.json",
+        "unstable.json",
+        "empty.json",
+        "no_such.json",
+    ):
+        c.append((f"compare {f}", ["compare", f"{{D}}/{f}", "{D}/rec.mcap"]))
+    c += [
+        ("compare a binary record", ["compare", "{D}/model.json", "{D}/binary.mcap"]),
+        ("compare a missing record", ["compare", "{D}/model.json", "{D}/no.mcap"]),
+        ("compare a NaN CSV", ["compare", "{D}/model.json", "{D}/nan.csv"]),
+    ]
+    c += _numbers(
+        ["compare", "{D}/model.json", "{D}/rec.mcap"], "--Ts", ("nan", "inf", "neg", "zero")
+    )
+    # hil (simulated wheels on a virtual bus)
+    hil = ["hil", "--duration", "60", *out]
+    c += _numbers(["hil", *out], "--duration", ALL)
+    c += _numbers(hil, "--telemetry-rate", ("nan", "inf", "neg", "zero"))
+    c += _numbers(hil, "--wheel-bias-rpm", ("nan", "inf", "1e300"))
+    c += _numbers(hil, "--calibration", ("nan", "inf", "neg"))
+    c += [
+        ("hil --seed -1", [*hil, "--seed", "-1"]),
+        ("hil --nodes garbage", [*hil, "--nodes", "a,b"]),
+        ("hil --scenario empty.toml", [*hil, "--scenario", "{D}/empty.toml"]),
+        ("hil --fault bogus", [*hil, "--fault", "9:bogus@1"]),
+    ]
     # demo, monitor, wheel, datasets
     c += [
         ("demo --out a file", ["demo", "--quick", "--out", "{D}/afile"]),
@@ -381,6 +411,7 @@ def cases() -> list[tuple[str, list[str]]]:
         ("wheel serve --params nan", ["wheel", "serve", "--params", "{D}/params-nan.toml"]),
         ("wheel serve --params binary", ["wheel", "serve", "--params", "{D}/binary.toml"]),
         ("datasets with an argument", ["datasets", "dryer"]),
+        ("wheel protocols with an argument", ["wheel", "protocols", "canopen"]),
         ("an unknown command", ["identifyy", "dryer"]),
     ]
     return c

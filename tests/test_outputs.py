@@ -182,6 +182,9 @@ def test_a_second_run_on_a_busy_output_is_refused_before_computing(tmp_path, mon
     def computing(*args, **kwargs):
         raise AssertionError("computed although the output folder is busy")
 
+    monkeypatch.setattr(  # the valid model below has no healthy reference: not the point here
+        diagnose.HealthyReference, "from_model_file", staticmethod(lambda path: None)
+    )
     for module, name in [
         (study, "identification_study"),
         (study, "load_study_data"),
@@ -196,7 +199,9 @@ def test_a_second_run_on_a_busy_output_is_refused_before_computing(tmp_path, mon
     fleet = tmp_path / "fleet"
     fleet.mkdir()
     (fleet / "a.csv").write_text("u,y\n1,2\n2,3\n")
-    (tmp_path / "model.json").write_text("{}")
+    from tests.test_bad_inputs import _model
+
+    (tmp_path / "model.json").write_text(_model())  # a valid model: the lock refuses the run
     (tmp_path / "rec.mcap").write_bytes(b"")
     paths = {"FLEET": fleet, "REC": tmp_path / "rec.mcap", "MODEL": tmp_path / "model.json"}
     args = [str(paths.get(a, a)) for a in BUSY[command]]
