@@ -329,33 +329,67 @@ class IOData:
         return self[:k], self[k:]
 
     # -- preprocessing ---------------------------------------------------------
-    def detrend(self, kind: str = "constant") -> IOData:
+    def _reference(self, reference: IOData | None) -> IOData:
+        if reference is None:
+            return self
+        if not isinstance(reference, IOData) or (reference.nu, reference.ny) != (self.nu, self.ny):
+            raise DataError(
+                "reference must be an IOData with the same inputs and outputs as the data "
+                "(typically its estimation part)"
+            )
+        return reference
+
+    def detrend(self, kind: str = "constant", *, reference: IOData | None = None) -> IOData:
         """Remove the mean (``kind='constant'``) or a straight line (``'linear'``).
 
         The removed offsets and slopes are kept in ``trend`` (MATLAB's TrendInfo).
+
+        Parameters
+        ----------
+        kind : {'constant', 'linear'}
+            What to remove.
+        reference : IOData, optional
+            Take the means (or lines) from this record, typically the estimation
+            part, and remove them from every sample of ``self``: validation data
+            then carry no information into the model. Default: ``self``.
         """
         if kind not in ("constant", "linear"):
             raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
-        t = self.time
+        ref = self._reference(reference)
+        t_ref = ref.time
 
         def fit(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            if kind == "constant" or self.N < 2:
+            if kind == "constant" or ref.N < 2:
                 return x.mean(axis=0), np.zeros(x.shape[1])
-            coef = np.polyfit(t, x, 1) if x.shape[1] else np.zeros((2, 0))
+            coef = np.polyfit(t_ref, x, 1) if x.shape[1] else np.zeros((2, 0))
             return coef[1], coef[0]
 
-        ou, su = fit(self.u)
-        oy, sy = fit(self.y)
+        ou, su = fit(ref.u)
+        oy, sy = fit(ref.y)
+        t = self.time
         u = self.u - ou - np.outer(t, su)
         y = self.y - oy - np.outer(t, sy)
         trend = self.trend.then(ou, su, np.ones(self.nu), oy, sy, np.ones(self.ny))
         return self._with(u, y, trend=trend)
 
-    def normalize(self) -> IOData:
+    def normalize(self, *, reference: IOData | None = None) -> IOData:
         """Scale every channel to [0, 1] (min → 0, max → 1), as paper A does.
+
+        Beware the bias it brings to a model without an intercept (ARX, OE, BJ):
+        physical zero maps to ``−min/(max − min)`` of each channel, not to 0, so
+        ``A y = B u`` between normalised signals forces the static map through
+        the two minima; unless ``y_min = G(1)·u_min`` the model's gain absorbs
+        the offset. Prefer :meth:`detrend` or :meth:`scale` for estimation.
+
+        Parameters
+        ----------
+        reference : IOData, optional
+            Take minimum and range from this record (typically the estimation
+            part). Default: ``self``.
 
         Raises ``DataError`` for a constant channel, whose range is zero.
         """
+        ref = self._reference(reference)
 
         def span(x: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
             lo, hi = x.min(axis=0), x.max(axis=0)
@@ -364,10 +398,43 @@ class IOData:
                 raise DataError(f"channel {names[flat[0]]!r} is constant; it cannot be normalised")
             return lo, hi - lo
 
-        lu, ru = span(self.u, self.input_names) if self.nu else (np.zeros(0), np.ones(0))
-        ly, ry = span(self.y, self.output_names)
+        lu, ru = span(ref.u, self.input_names) if self.nu else (np.zeros(0), np.ones(0))
+        ly, ry = span(ref.y, self.output_names)
         trend = self.trend.then(lu, np.zeros(self.nu), ru, ly, np.zeros(self.ny), ry)
         return self._with((self.u - lu) / ru, (self.y - ly) / ry, trend=trend)
+
+    def scale(self, *, reference: IOData | None = None) -> IOData:
+        """Divide every channel by its largest magnitude, without shifting it.
+
+        Physical zero stays zero, so a model without intercept keeps its
+        meaning (a wheel at rest under a zero command). The divisors are in
+        ``trend.input_scale`` / ``trend.output_scale``.
+
+        Parameters
+        ----------
+        reference : IOData, optional
+            Take the magnitudes from this record (typically the estimation
+            part). Default: ``self``.
+
+        Raises ``DataError`` for a channel that is zero throughout.
+        """
+        ref = self._reference(reference)
+
+        def peak(x: np.ndarray, names) -> np.ndarray:
+            m = np.max(np.abs(x), axis=0) if x.shape[0] else np.zeros(x.shape[1])
+            flat = np.flatnonzero(m <= 0)
+            if flat.size:
+                raise DataError(
+                    f"channel {names[flat[0]]!r} is zero throughout; it cannot be scaled"
+                )
+            return m
+
+        su = peak(ref.u, self.input_names) if self.nu else np.ones(0)
+        sy = peak(ref.y, self.output_names)
+        trend = self.trend.then(
+            np.zeros(self.nu), np.zeros(self.nu), su, np.zeros(self.ny), np.zeros(self.ny), sy
+        )
+        return self._with(self.u / su, self.y / sy, trend=trend)
 
     def resample(self, p: int, q: int) -> IOData:
         """Resample by the rational factor ``p/q`` with an anti-aliasing filter.

@@ -82,6 +82,40 @@ def _choose(names, data_cols, inputs, outputs, path) -> tuple[list[int], list[in
     return in_idx, out_idx
 
 
+_HUGE = 1e150  # beyond this, sums of a few million squares overflow a double
+
+
+def check_magnitude(data: IOData, source) -> IOData:
+    """Refuse samples too large to estimate from (their sums of squares overflow).
+
+    Files keep any finite double exactly; an estimator cannot: beyond ±1e150 the
+    regressions' sums of squares are inf and every result NaN.
+
+    Parameters
+    ----------
+    data : IOData
+    source : str or path
+        Named in the message.
+
+    Returns
+    -------
+    IOData
+        ``data``, unchanged.
+    """
+    for name, x, names in (
+        ("input", data.u, data.input_names),
+        ("output", data.y, data.output_names),
+    ):
+        big = np.argwhere(np.abs(x) > _HUGE)
+        if big.size:
+            k, c = big[0]
+            raise DataError(
+                f"{source}: sample {k} of {name} {names[c]!r} is {float(x[k, c]):g}, too large "
+                f"to estimate from (beyond ±{_HUGE:g}); check the file's units"
+            )
+    return data
+
+
 def _check_finite(table, cols, names, path, lines=None) -> None:
     """A NaN or Inf in a chosen column is an error naming its row and column."""
     if not cols:
@@ -184,7 +218,7 @@ def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     with open(tmp, "w", newline="") as fh:
         if not plain:
             fh.write(_META_PREFIX + _meta(data) + "\n")
-        writer = csv.writer(fh)
+        writer = csv.writer(fh, lineterminator="\n")  # LF: what every tool reads
         writer.writerow(names)
         writer.writerows([[repr(float(v)) for v in row] for row in table])
 

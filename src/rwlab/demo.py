@@ -6,13 +6,14 @@
 2. Paper A's identification study runs on the PRBS record.
 3. The chosen wheel model flies as the actuator of the GEO smallsat (three RW90)
    next to LQR, LQG and LQG/LTR with ideal wheels, and the ρ sweep runs.
-4. ``index.html`` links everything, with a summary on top; ``summary.json``
+4. Hardware in the loop: the LQG flies the smallsat with its three wheels as
+   twins on the virtual bus (simulated clock), beside the same run simulated.
+5. ``index.html`` links everything, with a summary on top; ``summary.json``
    holds the chosen model and each controller's pointing error.
 """
 
 from __future__ import annotations
 
-import errno
 import html
 import json
 import os
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -50,6 +51,7 @@ class DemoConfig:
     prbs_duration: float = 1200.0
     chirp_duration: float = 600.0
     attitude_duration: float = 900.0
+    hil_duration: float = 600.0
     realtime: bool = False
     monitor: bool = False
     seed: int = 1
@@ -63,6 +65,7 @@ class DemoConfig:
             prbs_duration=600.0,
             chirp_duration=120.0,
             attitude_duration=300.0,
+            hil_duration=120.0,
         )
 
 
@@ -118,22 +121,6 @@ def _experiments(cfg: DemoConfig):
     ]
 
 
-def check_out(out: Path, force: bool) -> None:
-    """Refuse an ``out`` that holds anything but a previous demo, unless ``force``.
-
-    A previous demo's folder (it has ``summary.json``) is simply replaced, so
-    running the Quick start twice works.
-    """
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(out))
-    if force or not out.exists() or (out / "summary.json").exists():
-        return
-    if any(out.iterdir()):
-        raise FileExistsError(
-            f"{out} exists and is not a previous demo's output; use --force or another --out"
-        )
-
-
 def run_demo(
     out: str | os.PathLike,
     cfg: DemoConfig = DemoConfig(),
@@ -146,6 +133,8 @@ def run_demo(
 
     ``echo(text)`` reports each stage; ``progress(label, n)`` returns a context
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
+    ``out`` is written whole when the demo succeeds, or not at all; a previous
+    demo there is replaced then (``force`` also replaces a previous output).
 
     Parameters
     ----------
@@ -165,6 +154,20 @@ def run_demo(
     dict
         ``summary.json``'s content (schema ``demo``).
     """
+    from rwlab._io import output_folder
+
+    out = Path(out)
+    with output_folder(out, DEMO_FILES, force=force, replace_previous=True, what="demo") as stage:
+        summary = _run(stage, cfg, echo, progress)
+    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
+    return summary
+
+
+DEMO_FILES = ("records", "identification", "attitude", "summary.json", "index.html")
+
+
+def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
+    """The demo's work, every file written into ``out`` (the staging folder)."""
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.scenario import SCENARIOS
     from rwlab.ident.study import identification_study, physical_model
@@ -172,8 +175,6 @@ def run_demo(
     from rwlab.report.identification import write_study
     from rwlab.testbed import load_record, run_experiment
 
-    out = Path(out)
-    check_out(out, force)
     (out / "records").mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     records = []
@@ -230,6 +231,7 @@ def run_demo(
         progress=lambda name: echo(f"[attitude]   flying {name}"),
     )
     write_comparison(comparison, out / "attitude", force=True, ltr_result=ltr_study(scenario))
+    hil = _hil_stage(out, cfg, echo)
 
     summary = {
         "chosen_model": {
@@ -251,6 +253,7 @@ def run_demo(
         "attitude_wheel_model": "identification/model.json",
         "scenario": scenario.name,
         "records": records,
+        "hil": hil,
         "elapsed_s": round(time.monotonic() - t_start, 1),
         "realtime": cfg.realtime,
     }
@@ -258,8 +261,35 @@ def run_demo(
     atomic_write_bytes(out / "summary.json", lambda tmp: tmp.write_text(text))
     page = _index(summary, _pointing_png(comparison))
     atomic_write_bytes(out / "index.html", lambda tmp: tmp.write_text(page, encoding="utf-8"))
-    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
     return summary
+
+
+def _hil_stage(out: Path, cfg: DemoConfig, echo) -> dict:
+    """The LQG on the smallsat with its wheels as twins on the bus (simulated clock)."""
+    from rwlab.hil.run import HilConfig, run_hil
+    from rwlab.report.hil import write_hil_report
+
+    echo(f"[hil] GEO smallsat, LQG through three wheel twins on the bus, {cfg.hil_duration:g} s")
+    result = run_hil(
+        HilConfig(duration=cfg.hil_duration, seed=cfg.seed, channel="rwlab-demo-hil"),
+        out / "hil",
+        force=True,
+    )
+    write_hil_report(result, out / "hil")
+    m = result.metrics
+    lost = sum(v or 0 for v in m["bench"]["lost_commands"].values())
+    echo(
+        f"[hil] steady max {m['steady_max_error_deg']:.3g}° on the bus, "
+        f"{m['reference_simulation']['steady_max_error_deg']:.3g}° simulated; {lost} lost commands"
+    )
+    return {
+        "steady_max_error_deg": m["steady_max_error_deg"],
+        "simulated_steady_max_error_deg": m["reference_simulation"]["steady_max_error_deg"],
+        "commands_sent": sum(m["bench"]["commands_sent"].values()),
+        "lost_commands": lost,
+        "duration_s": cfg.hil_duration,
+        "report": "hil/report.html",
+    }
 
 
 def _pointing_png(comparison) -> str:
@@ -322,5 +352,13 @@ requirement:</p>
 <h2>3. Attitude control (paper B)</h2>
 <p><a href="attitude/report.html">LQR vs LQG vs LQG/LTR report</a> (with the identified wheel) ·
 <a href="attitude/metrics.json">metrics.json</a> · <a href="attitude/sigma.json">sigma.json</a></p>
+<h2>4. Hardware in the loop</h2>
+<p id="hil">The LQG flew the smallsat for {s["hil"]["duration_s"]:g} s with its three wheels as
+twins on the virtual bus: every command crossed the bus ({s["hil"]["commands_sent"]} sent,
+{s["hil"]["lost_commands"]} lost) and the plant took each wheel's momentum from its
+telemetry. Steady maximum {s["hil"]["steady_max_error_deg"]:.3g}° on the bus against
+{s["hil"]["simulated_steady_max_error_deg"]:.3g}° simulated.
+<a href="hil/report.html">HIL report</a> · <a href="hil/metrics.json">metrics.json</a> ·
+<a href="hil/record.mcap">record.mcap</a></p>
 <p>Ran in {s["elapsed_s"]} s{" on the wall clock" if s["realtime"] else " (simulated clock)"}.</p>
 </body></html>"""

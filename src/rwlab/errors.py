@@ -73,3 +73,15 @@ class RwlabWarning(UserWarning):
 
 class RecordBusyError(RwlabError):
     """Another run is writing the same record."""
+
+
+class WheelConflict(RwlabError):
+    """Two sources answer under one wheel's node id: their telemetry cannot be told apart."""
+
+
+class OutputBusyError(RwlabError):
+    """Another run is writing the same output folder."""
+
+
+class LostWorkerError(RwlabError):
+    """A campaign's batch lost its worker more often than it is retried."""

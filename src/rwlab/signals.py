@@ -12,7 +12,11 @@ speed command, rpm/s for an acceleration command).
 - :func:`chirp` — linear or logarithmic swept sine (paper A: 0.0001–2 Hz).
 - :func:`steps` — a staircase of levels.
 - :func:`multisine` — Schroeder-phased sum of sines on the period's frequency grid.
-- :func:`rate_limit` — limit the slope of any of the above.
+- :func:`rate_limit` — limit the slope of any of the above. The testbed applies
+  it to a speed-mode PRBS by default (``ExperimentConfig.rate_limit``, the
+  wheel's acceleration limit, 314 rpm/s for the RW90): the identification
+  command then ramps rather than steps. Switch it off (``rate_limit = false``,
+  ``rwlab testbed experiment --no-rate-limit``) for true steps.
 """
 
 from __future__ import annotations

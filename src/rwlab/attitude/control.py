@@ -526,12 +526,14 @@ def fly(
     log_every: int = 10,
     progress=None,
     design: Scenario | None = None,
+    steady_after: float | None = None,
 ) -> tuple[SimResult, dict]:
     """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
     simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
     ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
     default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
     design (the filter still uses the flown scenario's inertia and sensor noise).
+    ``steady_after``: seconds where the steady-state window starts (``sim.simulate``).
 
     Parameters
     ----------
@@ -555,6 +557,8 @@ def fly(
         Passed to :func:`rwlab.attitude.sim.simulate`.
     design : Scenario, optional
         The scenario the gains are designed on.
+    steady_after : float, optional
+        Where the steady-state window starts, s (default: half the run, at most an hour).
 
     Returns
     -------
@@ -587,6 +591,7 @@ def fly(
         seed=seed,
         log_every=log_every,
         progress=progress,
+        steady_after=steady_after,
         **kw,
     )
     return run, metrics(run, scenario.pointing_requirement_deg)

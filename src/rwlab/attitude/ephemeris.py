@@ -61,6 +61,7 @@ SKY_COLUMNS = (
     "sunlit",
     "earth_lit",
     "moon_visible",
+    "srp_scale",
 )
 
 
@@ -237,7 +238,8 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
     ``sunlit`` = the share of the Sun's disc neither the Earth nor the Moon
     hides (the SRP scale); ``earth_lit`` = the same for the Earth alone (< 1: in
     the Earth's umbra or penumbra); ``moon_visible`` = 1 where the Moon is not
-    behind the Earth.
+    behind the Earth; ``srp_scale`` = sunlit × (1 AU / Sun distance)²: solar pressure
+    falls with the square of the distance (±3.4 % over the year).
 
     Parameters
     ----------
@@ -246,7 +248,7 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray, shape (N, 9)
+    numpy.ndarray, shape (N, len(SKY_COLUMNS))
         Columns :data:`SKY_COLUMNS`.
     """
     earth = np.broadcast_to([0.0, 0.0, GEO_RADIUS], sun.shape)
@@ -263,4 +265,5 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
     table[:, 6] = (1 - by_earth) * (1 - by_moon * moon_visible)  # both at once: a bound
     table[:, 7] = 1 - by_earth
     table[:, 8] = moon_visible
+    table[:, 9] = table[:, 6] * (AU / d_sun) ** 2
     return table

@@ -26,18 +26,6 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
     ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
     slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
     and settling come from the logged trace.
-
-    Parameters
-    ----------
-    r : SimResult
-        One run.
-    band_deg : float
-        Settling band on the pointing error, degrees.
-
-    Returns
-    -------
-    dict
-        The metrics (``metrics.json``'s per-controller entries), SI units or named.
     """
     st = r.stats
     steady_n = max(st["steady_steps"], 1)
@@ -73,8 +61,30 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
         "desaturation_count": int(st["desaturation_count"]),
         "thruster_impulse_Nms": st["thruster_impulse_Nms"],
         "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
+        **_filter_metrics(r),
+        # torque jitter: RMS of the step-to-step change of each wheel's command over √2 (the
+        # σ of its white part); power: mean Σ|τ ω| of the wheels (mechanical, W)
+        "torque_jitter_rms_Nm": math.sqrt(st.get("steady_torque_jitter_sq_sum", 0.0) / steady_n),
+        "wheel_mechanical_power_W": st.get("steady_wheel_power_sum", 0.0) / steady_n,
         "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
         **_sky_metrics(st),
+    }
+
+
+def _filter_metrics(r: SimResult) -> dict:
+    """The filter's consistency over the steady window: mean NEES (against the right truth
+    for its state: ω, the disturbance state's true value, or the gyro bias), its state
+    count, and the share of attitude-error samples inside ±3σ."""
+    if r.sigma is None or not np.any(r.sigma):
+        return {"nees_mean": None, "nees_states": None, "inside_3sigma_fraction": None}
+    steady = r.t >= r.steady_from_s
+    nees = r.nees[steady]
+    nees = nees[np.isfinite(nees)]
+    inside = np.abs(r.est_error_axes[steady]) <= 3 * r.sigma[steady, :3]
+    return {
+        "nees_mean": float(np.mean(nees)) if nees.size else None,
+        "nees_states": int(r.stats.get("filter_states", 6)),
+        "inside_3sigma_fraction": float(np.mean(inside)) if inside.size else None,
     }
 
 

@@ -50,8 +50,15 @@ _SCALARS = (
     "initial_error_deg",
     "estimator_error_deg",
     "thruster_torque",
+    "wheel_torque_scale",
 )
-_VECTORS = ("initial_axis", "initial_rate")
+_VECTORS = (
+    "initial_axis",
+    "initial_rate",
+    "sun_sensor_misalignment_deg",
+    "earth_sensor_misalignment_deg",
+)
+_VECTORS2 = ("sun_sensor_bias_deg", "earth_sensor_bias_deg")  # two transverse axes
 _DIST_SCALARS = ("srp_area", "srp_reflectivity")
 _DIST_VECTORS = ("srp_offset", "constant_torque")
 
@@ -60,6 +67,7 @@ FIELDS = (
     tuple(f"inertia.{k}" for k in _INERTIA)
     + _SCALARS
     + tuple(f"{v}.{a}" for v in _VECTORS for a in _AXES)
+    + tuple(f"{v}.{a}" for v in _VECTORS2 for a in _AXES[:2])
     + tuple(f"disturbances.{s}" for s in _DIST_SCALARS)
     + tuple(f"disturbances.{v}.{a}" for v in _DIST_VECTORS for a in _AXES)
 )
@@ -180,6 +188,11 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
                 f"{path}: unknown field {name!r}; dispersible fields: {', '.join(FIELDS)}"
             )
         out.append(_parse(name, spec, str(path)))
+    if not out:
+        raise ConfigError(
+            f"{path}: no dispersion in the file; a campaign disperses at least one field "
+            "(leave out the file for rwlab's GEO set)"
+        )
     return tuple(out)
 
 
@@ -240,7 +253,7 @@ def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
         A new scenario (``nominal`` is unchanged).
     """
     J = nominal.inertia_matrix.copy()
-    top = {f: list(getattr(nominal, f)) for f in _VECTORS}
+    top = {f: list(getattr(nominal, f)) for f in _VECTORS + _VECTORS2}
     dist = {f: list(getattr(nominal.disturbances, f)) for f in _DIST_VECTORS}
     scalars, dist_scalars = {}, {}
     for name, value in values.items():

@@ -154,3 +154,7 @@ class RunTest:
     def update(self, event: bool) -> bool:
         self.run = self.run + 1 if event else 0
         return self.run >= self.n
+
+    def restart(self) -> None:
+        """Forget the current run (after an alarm, when counting false alarms)."""
+        self.run = 0

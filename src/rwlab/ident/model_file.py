@@ -7,7 +7,12 @@ the testbed. Its JSON Schema is ``rwlab/schemas/model.schema.json``; the
 reading rule for older versions is :func:`rwlab.schemas.read_versioned`.
 
 Version history: 1 — linear model with offsets and saturations, optionally the
-servo model (``nonlinear``) and which one to fly (``preferred``).
+servo model (``nonlinear``) and which one to fly (``preferred``); added within
+version 1 as optional keys (older files simply lack them): the physical grey box
+(``greybox``), the nonlinear ARX (``nlarx``), which of the nonlinear models the
+study chose and why (``nonlinear_chosen``, ``nonlinear_choice``), the driver's
+current limit (``saturation.current_limit_a``) and the diagnosis's healthy
+reference (``healthy_reference``).
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +34,7 @@ __all__ = ["KIND", "VERSION", "Channel", "WheelModelFile"]
 
 KIND = "WheelModel"
 VERSION = 1
+NONLINEAR_MODELS = ("greybox", "nlarx")  # beside the servo model (``nonlinear``)
 NOTE = (
     "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
     "saturation before the model and the acceleration limit to its output."
@@ -88,6 +94,16 @@ class WheelModelFile:
         Its validation fit, %.
     preferred : {"linear", "nonlinear"}
         The model to fly by default (the better validation fit).
+    current_limit_a : float, optional
+        The driver's current limit, A (the grey box's, when estimated).
+    nonlinear_models : dict of str to dict
+        The other nonlinear models' JSON forms (``"greybox"``, ``"nlarx"``), each
+        with its ``validation_fit_percent``.
+    nonlinear_chosen, nonlinear_choice : str, optional
+        Which nonlinear model the study chose on held-out data, and why.
+    healthy_reference : dict, optional
+        What the fault detectors need of the healthy identification record
+        (:class:`rwlab.diagnose.HealthyReference`'s JSON form).
     """
 
     model: PolyModel
@@ -100,6 +116,11 @@ class WheelModelFile:
     servo: ServoModel | None = None
     servo_fit_percent: float | None = None
     preferred: str = "linear"
+    current_limit_a: float | None = None
+    nonlinear_models: dict[str, dict] = field(default_factory=dict)
+    nonlinear_chosen: str | None = None
+    nonlinear_choice: str | None = None
+    healthy_reference: dict | None = None
 
     def __post_init__(self) -> None:
         if self.model.nu != 1:
@@ -160,6 +181,14 @@ class WheelModelFile:
             fit = _json_float(self.servo_fit_percent)
             d["nonlinear"] = {**self.servo.to_dict(), "validation_fit_percent": fit}
             d["preferred"] = self.preferred
+        for name, model in self.nonlinear_models.items():
+            d[name] = model
+        if self.nonlinear_chosen is not None:
+            d["nonlinear_chosen"] = self.nonlinear_chosen
+            d["nonlinear_choice"] = self.nonlinear_choice
+        d["saturation"]["current_limit_a"] = _json_float(self.current_limit_a)
+        if self.healthy_reference is not None:
+            d["healthy_reference"] = self.healthy_reference
         return d
 
     @classmethod
@@ -203,6 +232,11 @@ class WheelModelFile:
                 servo=servo,
                 servo_fit_percent=None if nl is None else _float(nl.get("validation_fit_percent")),
                 preferred=d.get("preferred", "linear"),
+                current_limit_a=_optional_float(sat.get("current_limit_a")),
+                nonlinear_models={k: d[k] for k in NONLINEAR_MODELS if isinstance(d.get(k), dict)},
+                nonlinear_chosen=d.get("nonlinear_chosen"),
+                nonlinear_choice=d.get("nonlinear_choice"),
+                healthy_reference=d.get("healthy_reference"),
             )
         except (KeyError, TypeError) as exc:
             raise FileFormatError(f"{source}: missing or malformed field {exc}") from None
@@ -257,6 +291,10 @@ def _channel(d: dict) -> dict:
         "unit": str(d.get("unit") or ""),
         "offset": float(d["offset"]),
     }
+
+
+def _optional_float(v: Any) -> float | None:
+    return None if v is None else float(v)
 
 
 def _float(v: Any) -> float:

@@ -24,7 +24,7 @@ from rwlab.ident.base import IdentifiedModel
 __all__ = ["SSModel"]
 
 _FORMAT = "rwlab.SSModel/1"
-_WEIGHTINGS = ("auto", "CVA", "MOESP", "N4SID")
+_WEIGHTINGS = ("auto", "CVA", "MOESP", "N4SID", "SSARX")
 _INITIAL = ("auto", "zero", "estimate", "steady")
 
 
@@ -233,13 +233,26 @@ class SSModel(IdentifiedModel):
         Db = np.hstack([self.D, np.zeros((self.ny, self.ny))])
         return Ab, Bb, Db
 
-    def predict(self, data: IOData, initial="zero") -> np.ndarray:
-        """One-step-ahead prediction ŷ(t | t−1) from measured inputs and outputs, shape (N, ny).
+    def predict(self, data: IOData, horizon: float = 1, initial="zero") -> np.ndarray:
+        """k-step-ahead prediction ŷ(t | t−k) from measured inputs and outputs, shape (N, ny).
 
-        ``initial``: 'zero', 'steady' (the predictor at rest with every signal
-        held at its first sample), 'estimate' (the initial state fitted to the
-        output by least squares, MATLAB's 'e'), or an (nx,) initial state.
+        Parameters
+        ----------
+        data : IOData
+            Measured inputs and outputs.
+        horizon : int or numpy.inf
+            Samples ahead (MATLAB ``predict(sys, data, K)``); ``inf`` simulates
+            (MATLAB ``sim``). The one-step predictor runs the Kalman filter
+            ``A − K C``; k steps propagate its state k − 1 samples with the
+            inputs only.
+        initial : {'zero', 'steady', 'estimate'} or array_like, shape (nx,)
+            'zero'; 'steady' (the predictor, or the simulation, at rest with
+            every signal held at its first sample); 'estimate' (the initial
+            state fitted to the output by least squares, MATLAB's 'e'); or an
+            initial state.
         """
+        if isinstance(horizon, str) or np.ndim(horizon):  # the old predict(data, initial)
+            horizon, initial = 1, horizon
         if not isinstance(data, IOData):
             raise DataError("predict needs an IOData (it uses the measured outputs)")
         if (data.nu, data.ny) != (self.nu, self.ny):
@@ -247,11 +260,17 @@ class SSModel(IdentifiedModel):
                 f"the model has {self.nu} inputs and {self.ny} outputs; "
                 f"the data have {data.nu} and {data.ny}"
             )
-        return _predict(self, data.u, data.y, initial)[0]
+        if horizon != np.inf and (int(horizon) != horizon or horizon < 1):
+            raise DataError(f"horizon must be a positive integer or inf, got {horizon}")
+        if horizon == np.inf or horizon >= data.N:
+            return _simulate_from(self, data, initial)
+        if horizon == 1:
+            return _predict(self, data.u, data.y, initial)[0]
+        return _k_step(self, data, int(horizon), initial)
 
     def residuals(self, data: IOData, initial="zero") -> np.ndarray:
         """One-step prediction errors e(t) = y(t) − ŷ(t | t−1), shape (N, ny)."""
-        return data.y - self.predict(data, initial)
+        return data.y - self.predict(data, 1, initial)
 
     def step_response(self, n: int) -> np.ndarray:
         """Unit-step responses from rest, shape (n, ny, nu): ``[t, output, input]``."""
@@ -446,6 +465,52 @@ def _predict(model: SSModel, u, y, initial) -> tuple[np.ndarray, np.ndarray]:
         yhat = yhat + (free @ dx).reshape(yhat.shape)
         x0 = dx
     return yhat, x0
+
+
+def _simulate_from(model: SSModel, data: IOData, initial) -> np.ndarray:
+    """Simulation ``y = C x + D u`` from the initial state ``initial`` asks for."""
+    u = data.u
+    if isinstance(initial, str):
+        if initial not in ("zero", "steady", "estimate"):
+            raise DataError(f"initial must be 'zero', 'steady' or 'estimate', got {initial!r}")
+        x0 = np.zeros(model.nx)
+        if initial == "steady" and model.nx and model.nu:
+            try:
+                x0 = np.linalg.solve(np.eye(model.nx) - model.A, model.B @ u[0])
+            except np.linalg.LinAlgError:
+                raise ModelError("the model has a pole at z = 1: no steady state") from None
+    else:
+        x0 = np.asarray(initial, float).reshape(model.nx)
+    yhat = model.simulate(u, x0) if model.nu else np.zeros((data.N, model.ny))
+    if isinstance(initial, str) and initial == "estimate" and model.nx:
+        free = _free_responses(np.ascontiguousarray(model.A), np.ascontiguousarray(model.C), data.N)
+        dx, *_ = np.linalg.lstsq(free, (data.y - yhat).ravel(), rcond=None)
+        yhat = yhat + (free @ dx).reshape(yhat.shape)
+    return yhat
+
+
+def _k_step(model: SSModel, data: IOData, k: int, initial) -> np.ndarray:
+    """ŷ(t | t−k): the one-step predicted state x̂(t−k+1 | t−k) propagated k − 1 samples
+    through ``x ← A x + B u``; the first samples, with no data k back, from the initial state."""
+    # x̂(t | t−1) for every t: the predictor's state (its "output" with C = I)
+    Ab, Bb, _ = model._predictor()
+    w = np.ascontiguousarray(np.hstack([data.u, data.y]))
+    x0 = _predict(model, data.u, data.y, initial)[1]
+    states = _run(
+        np.ascontiguousarray(Ab),
+        np.ascontiguousarray(Bb),
+        np.eye(model.nx),
+        np.zeros((model.nx, w.shape[1])),
+        w,
+        np.ascontiguousarray(x0, dtype=float),
+    )
+    u = data.u
+    for _ in range(k - 1):
+        nxt = np.empty_like(states)
+        nxt[0] = states[0]
+        nxt[1:] = states[:-1] @ model.A.T + u[:-1] @ model.B.T
+        states = nxt
+    return states @ model.C.T + u @ model.D.T
 
 
 def _free_responses(Ab: np.ndarray, C: np.ndarray, N: int) -> np.ndarray:

@@ -14,8 +14,14 @@ import numpy as np
 from scipy import linalg
 
 from rwlab.data import IOData, as_experiments
-from rwlab.errors import DataError, EstimationError
-from rwlab.ident.ssmodel import _WEIGHTINGS, SSModel, _finish, _fit_report
+from rwlab.errors import DataError, EstimationError, RwlabWarning
+from rwlab.ident.ssmodel import (
+    _WEIGHTINGS,
+    SSModel,
+    _finish,
+    _fit_report,
+    _free_responses,
+)
 
 __all__ = ["n4sid"]
 
@@ -121,6 +127,7 @@ def n4sid(
     feedthrough: bool = False,
     disturbance: str = "estimate",
     initial: str = "estimate",
+    enforce_stability: bool = False,
 ) -> SSModel:
     """Estimate a state-space model by a subspace method (MATLAB ``n4sid``).
 
@@ -133,9 +140,14 @@ def n4sid(
         Model order, or candidate orders (default 'best' = 1…10) from which the
         order after the largest relative gap in the singular values is chosen.
         ``report['singular_values']`` holds the values for an order plot.
-    weighting : {'auto', 'CVA', 'MOESP', 'N4SID'}
+    weighting : {'auto', 'CVA', 'MOESP', 'N4SID', 'SSARX'}
         Weighting of the oblique projection before the SVD (MATLAB
-        ``N4Weight``; 'auto' is CVA).
+        ``N4Weight``; 'auto' is CVA). CVA, MOESP and N4SID assume the future
+        inputs uncorrelated with past noise, which feedback breaks: on
+        closed-loop data use 'SSARX' (Jansson 2003): a high-order ARX
+        predictor first removes the future inputs' and outputs' contribution
+        from the future outputs, whose regression on the past is then weighted
+        as CVA does.
     horizon : (r, sy, su) or 'auto'
         Future (prediction) horizon and past output / input horizons in samples
         (MATLAB ``N4Horizon``). 'auto' (default): r = sy = su = max(nx + 1, 10).
@@ -145,6 +157,14 @@ def n4sid(
         Estimate K (MATLAB ``DisturbanceModel``) or fix it to zero.
     initial : {'estimate', 'zero'}
         How the initial state is handled in the reported fit and noise variance.
+    enforce_stability : bool
+        A subspace estimate can be unstable (noise, short records, high
+        orders). Without this option an unstable A is returned with a
+        ``RwlabWarning``; with it (MATLAB ``EnforceStability``) each eigenvalue
+        of A outside the unit circle is reflected inside (λ → 1/λ̄, at most
+        radius ``1 − 1e-4``), B and D are re-estimated by least squares on the
+        simulation error with A and C fixed, and K is recomputed from the
+        Riccati equation. ``report['stability']`` says what was done.
 
     Returns
     -------
@@ -196,8 +216,11 @@ def n4sid(
     else:
         proj = sub
     w = "CVA" if weighting == "auto" else weighting
-    Rpp = sub(ip, ip) if w == "N4SID" else proj(ip, ip)
-    W1 = _sqrtm_inv(proj(iy, iy)) if w == "CVA" else np.eye(len(iy))
+    if w == "SSARX":
+        Lp, Rpp, W1 = _ssarx(G, ix, feedthrough)
+    else:
+        Rpp = sub(ip, ip) if w == "N4SID" else proj(ip, ip)
+        W1 = _sqrtm_inv(proj(iy, iy)) if w == "CVA" else np.eye(len(iy))
     M = W1 @ Lp @ Rpp @ Lp.T @ W1.T
     ev, U = np.linalg.eigh((M + M.T) / 2)
     order = np.argsort(ev)[::-1]
@@ -223,7 +246,25 @@ def n4sid(
     D = CD[:, n:] if feedthrough else np.zeros((ny, nu))
     Sres = np.vstack([Sx1 - AB @ phi, Sy - CD @ phi_y])
     R = Sres @ G @ Sres.T
-    K = _kalman_gain(A, C, R[:n, :n], R[:n, n:], R[n:, n:]) if disturbance == "estimate" else None
+    K_ssarx = None
+    if w == "SSARX":
+        # under feedback u(t) correlates with e(t): regress x(t+1) on [x, u, ê] with
+        # ê = y − C x − D u, so A and B are not biased by it (Jansson 2003)
+        Se = Sy - CD @ phi_y
+        phi_e = np.vstack([Sx, Su, Se])
+        ABK = _solve_psd(phi_e @ G @ phi_e.T, phi_e @ G @ Sx1.T).T
+        A, B, K_ssarx = ABK[:, :n], ABK[:, n : n + nu], ABK[:, n + nu :]
+    stability = _stability(A, enforce_stability)
+    if stability["enforced"]:
+        A = stability.pop("_A")
+        B, D = _refit_b_d(A, C, experiments, feedthrough)
+        K_ssarx = None
+    if disturbance != "estimate":
+        K = None
+    elif K_ssarx is not None and np.all(np.abs(np.linalg.eigvals(A - K_ssarx @ C)) < 1):
+        K = K_ssarx
+    else:
+        K = _kalman_gain(A, C, R[:n, :n], R[:n, n:], R[n:, n:])
     model = SSModel(
         A,
         B,
@@ -245,8 +286,103 @@ def n4sid(
             "horizon": [r, sy, su],
             "singular_values": sv.tolist(),
             "order_candidates": candidates,
+            "stability": stability,
         },
     )
+
+
+def _ssarx(G: np.ndarray, ix: _Index, feedthrough: bool):
+    """SSARX (Jansson 2003): the future outputs less what a high-order ARX predictor
+    attributes to the future inputs and outputs, z(t+k) ≈ C Āᵏ x(t) + e(t+k); their
+    regression on the past Lp, the past's covariance and the CVA weight of z."""
+    ny, nu, r, sy, su = ix.ny, ix.nu, ix.r, ix.sy, ix.su
+    ip = ix.past()
+    regs = ip + (ix.u([0]) if feedthrough else [])
+    theta = _solve_psd(G[np.ix_(regs, regs)], G[np.ix_(regs, ix.y([0]))]).T  # (ny, len(regs))
+    Z = np.zeros((r * ny, G.shape[0]))
+    for k in range(r):
+        for i in range(ny):
+            row = Z[k * ny + i]
+            row[ix.y([k])[i]] = 1.0
+            for lag in range(1, min(k, sy) + 1):
+                for c in range(ny):
+                    row[ix.y([k - lag])[c]] -= theta[i, (lag - 1) * ny + c]
+            for lag in range(1, min(k, su) + 1):
+                for c in range(nu):
+                    row[ix.u([k - lag])[c]] -= theta[i, sy * ny + (lag - 1) * nu + c]
+            if feedthrough and k:
+                for c in range(nu):
+                    row[ix.u([k])[c]] -= theta[i, len(ip) + c]
+    Rpp = G[np.ix_(ip, ip)]
+    ZGp = Z @ G[:, ip]
+    Lp = _solve_psd(Rpp, ZGp.T).T
+    residual = Z @ G @ Z.T - Lp @ Rpp @ Lp.T
+    return Lp, Rpp, _sqrtm_inv(residual)
+
+
+STABLE_RADIUS = 1.0 - 1e-4
+
+
+def _stability(A: np.ndarray, enforce: bool) -> dict:
+    """Check A's spectral radius; warn, or reflect the unstable eigenvalues inside."""
+    ev, V = np.linalg.eig(A)
+    radius = float(np.max(np.abs(ev))) if ev.size else 0.0
+    out: dict = {"spectral_radius": radius, "stable": radius < 1.0, "enforced": False}
+    if radius < 1.0:
+        return out
+    if not enforce:
+        warnings.warn(
+            f"n4sid: the estimated A is unstable (spectral radius {radius:.4f}); pass "
+            "enforce_stability=True (MATLAB EnforceStability), lower the order, or try "
+            "another weighting or horizon",
+            RwlabWarning,
+            stacklevel=3,
+        )
+        return out
+    outside = np.abs(ev) >= STABLE_RADIUS
+    new = ev.copy()
+    new[outside] = 1.0 / np.conj(ev[outside])
+    new[outside] *= np.minimum(1.0, STABLE_RADIUS / np.abs(new[outside]))
+    A_new = np.real(V @ np.diag(new) @ np.linalg.inv(V))
+    out.update(
+        enforced=True,
+        reflected=int(outside.sum()),
+        spectral_radius_after=float(np.max(np.abs(np.linalg.eigvals(A_new)))),
+        _A=A_new,
+    )
+    return out
+
+
+def _refit_b_d(A, C, experiments, feedthrough: bool):
+    """B (and D) by least squares on the simulation error with A and C fixed (and a
+    free initial state per experiment): the output is linear in B, D and x0."""
+    nx, ny = A.shape[0], C.shape[0]
+    nu = experiments[0].nu
+    n_b, n_d = nx * nu, (ny * nu if feedthrough else 0)
+    blocks, targets = [], []
+    n_x0 = nx * len(experiments)
+    for e_i, d in enumerate(experiments):
+        cols = np.zeros((d.N * ny, n_b + n_d + n_x0))
+        zero = np.zeros((ny, nu))
+        for a in range(nx):
+            for j in range(nu):
+                Bu = np.zeros((nx, nu))
+                Bu[a, j] = 1.0
+                cols[:, a * nu + j] = SSModel(A, Bu, C, zero, Ts=d.Ts).simulate(d.u).ravel()
+        for i in range(n_d // max(nu, 1)):
+            for j in range(nu):
+                col = np.zeros((d.N, ny))
+                col[:, i] = d.u[:, j]
+                cols[:, n_b + i * nu + j] = col.ravel()
+        cols[:, n_b + n_d + e_i * nx : n_b + n_d + (e_i + 1) * nx] = _free_responses(
+            np.ascontiguousarray(A), np.ascontiguousarray(C), d.N
+        )
+        blocks.append(cols)
+        targets.append(d.y.ravel())
+    theta, *_ = np.linalg.lstsq(np.vstack(blocks), np.concatenate(targets), rcond=None)
+    B = theta[:n_b].reshape(nx, nu)
+    D = theta[n_b : n_b + n_d].reshape(ny, nu) if feedthrough else np.zeros((ny, nu))
+    return B, D
 
 
 def _orders(nx) -> list[int]:

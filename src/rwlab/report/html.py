@@ -17,7 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 
 __all__ = ["Page", "figure", "png_uri"]
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import Page, figure
@@ -100,9 +100,11 @@ def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
     """An axis label that says what the plotted numbers are."""
     unit = f" [{unit}]" if unit else ""
     if preprocess == "normalize":
-        return f"{name}, normalised to [0, 1]"
+        return f"{name}, normalised to [0, 1] over the estimation part"
     if preprocess == "detrend":
-        return f"{name} − its mean{unit}"
+        return f"{name} − its estimation-part mean{unit}"
+    if preprocess == "scale":
+        return f"{name} / its estimation-part peak"
     return f"{name}{unit}"
 
 

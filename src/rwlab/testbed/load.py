@@ -19,6 +19,7 @@ OUTPUTS = {
     "acceleration": ("acceleration_rpm_s", "rpm/s"),
     "current": ("current_a", "A"),
     "age": ("telemetry_age_s", "s"),
+    "lost": ("lost_frames", "frames"),
 }
 
 
@@ -64,10 +65,12 @@ def load_record(
         An ``.mcap`` record written by ``rwlab experiment``.
     Ts : float, optional
         Sample time in seconds (default: the record's command period).
-    outputs : tuple of {'speed', 'acceleration', 'current', 'age'}
+    outputs : tuple of {'speed', 'acceleration', 'current', 'age', 'lost'}
         Output channels: measured speed (rpm), acceleration derived from it by a
         backward difference over Ts (rpm/s), motor current (A), age of the
-        telemetry frame each sample repeats (s: large where frames were lost).
+        telemetry frame each sample repeats (s: large where frames were lost),
+        telemetry frames lost so far by the frames' 8-bit counter (as
+        :attr:`rwlab.wheel.WheelClient.lost_frames` counts them live).
     max_gap : float, optional
         Longest accepted interval between telemetry frames, s (default Ts),
         beyond the timestamps' jitter (half the median frame interval). Longer
@@ -81,8 +84,10 @@ def load_record(
     Returns
     -------
     IOData
-        u = the command (rpm or rpm/s), y = the chosen outputs; sample k is the
-        last value received at or before t₀ + k·Ts, t₀ the first command.
+        u = the command (rpm or rpm/s) issued at sample k (sent within Ts/2 after
+        t₀ + k·Ts: on the wall clock a command leaves a little after its
+        instant), y = the chosen outputs; sample k is the last value received
+        at or before t₀ + k·Ts, t₀ the first command.
     """
     record = read_record(path)
     meta = record.metadata
@@ -122,7 +127,7 @@ def load_record(
     n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1
     grid = t0 + Ts * np.arange(n)
     eps = 1e-9 * max(1.0, abs(grid[-1]))
-    u = uc[np.searchsorted(tc, grid + eps, side="right") - 1]
+    u = uc[np.maximum(np.searchsorted(tc, grid + 0.5 * Ts, side="right") - 1, 0)]
     last = np.searchsorted(tt, grid + eps, side="right") - 1
     if last[0] < 0:  # no telemetry yet at the first command: start the grid at the first frame
         keep = last >= 0
@@ -133,6 +138,7 @@ def load_record(
         "acceleration": np.concatenate([[0.0], np.diff(speed) / Ts]),
         "current": np.array([m["current_a"] for m in telemetry])[last],
         "age": grid - tt[last],
+        "lost": _lost_frames(telemetry)[last],
     }
     mode = meta.get("mode", "speed")
     return IOData(
@@ -147,6 +153,13 @@ def load_record(
         name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
         source=meta,
     )
+
+
+def _lost_frames(telemetry: list[dict]) -> np.ndarray:
+    """Frames lost up to each telemetry frame, from the gaps of its 8-bit counter."""
+    counter = np.array([m.get("counter", 0) for m in telemetry], dtype=np.int64)
+    gaps = (np.diff(counter) - 1) % 256
+    return np.concatenate([[0], np.cumsum(gaps)]).astype(float)
 
 
 def read_mcap(

@@ -125,7 +125,7 @@ def make_document(
     )
     doc.title = f"rwlab monitor: {path.name}"
     recent: deque[tuple[float, float]] = deque()
-    state: dict[str, Any] = {"frames": 0, "lost": 0, "counter": None, "events": []}
+    state: dict[str, Any] = {"frames": 0, "lost": 0, "counter": None, "events": [], "alarms": []}
 
     def refresh() -> None:
         new = feed.poll()
@@ -153,8 +153,20 @@ def make_document(
                 },
                 rollover=max_points,
             )
+        for e in new.get("/event", []):
+            line = html.escape(f"{e['t']:.2f} s {e['kind']} {e['message']}")
+            if e["kind"] == "alarm":  # the live fault detector's verdicts: every one stays shown
+                state["alarms"].append(f'<b style="color:#c00">{line}</b>')
+            elif e["kind"] == "fault_injected":
+                state["events"].append(f'<b style="color:#c00">{line}</b>')
+            else:
+                state["events"].append(line)
+        events.text = "<br>".join(state["alarms"] + state["events"][-4:])
+        if frames:
             last = frames[-1]
             fault = "<b style='color:#c00'>FAULT</b>" if last["fault_active"] else "ok"
+            if state["alarms"]:  # an alarm is a verdict on the wheel: red until the run ends
+                fault = f"<b style='color:#c00'>ALARM ({len(state['alarms'])})</b>"
             status.text = (
                 f"t = {last['t']:.2f} s &nbsp; mode <b>{last['mode']}</b> &nbsp; "
                 f"speed {last['speed_rpm']:.1f} rpm &nbsp; {fault} &nbsp; "
@@ -163,12 +175,6 @@ def make_document(
         beats = new.get("/heartbeat", [])
         if beats and beats[-1]["faults"]:
             status.text += f" &nbsp; fault bits {beats[-1]['faults']}"
-        for e in new.get("/event", []):
-            line = html.escape(f"{e['t']:.2f} s {e['kind']} {e['message']}")
-            if e["kind"] in ("alarm", "fault_injected"):  # the live fault detector's verdicts
-                line = f'<b style="color:#c00">{line}</b>'
-            state["events"].append(line)
-            events.text = "<br>".join(state["events"][-4:])
 
     doc.add_periodic_callback(refresh, REFRESH_MS)
 

@@ -13,7 +13,7 @@ Channels (JSON messages, JSON-schema described):
 - ``/command``   — t (s), sequence, mode, setpoint (rpm or rpm/s)
 - ``/telemetry`` — t, speed_rpm, current_a, mode, fault_active, speed_limited,
   sequence_echo, counter
-- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s
+- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s, bus_voltage_v
 - ``/event``     — t, kind, message (start, stop, fault, interrupt, error)
 - ``/can``       — t, id, data (hex), direction (only if raw frames are recorded)
 
@@ -64,14 +64,15 @@ CHANNELS: dict[str, dict] = {
         "faults": _INT,
         "temperature_c": _NUM,
         "uptime_s": _INT,
+        "bus_voltage_v": _NUM,
     },
     "/event": {"t": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
     "/can": {"t": _NUM, "id": _INT, "data": {"type": "string"}, "direction": {"type": "string"}},
 }
 
 
-def _schema(topic: str) -> bytes:
-    props = CHANNELS[topic]
+def _schema(topic: str, props: dict | None = None) -> bytes:
+    props = CHANNELS[topic] if props is None else props
     return json.dumps(
         {
             "title": f"rwlab{topic.replace('/', '.')}",
@@ -144,9 +145,19 @@ class RecordWriter:
         JSON-serialisable description (wheel, signal, Ts, versions).
     force : bool
         Replace an existing file (when this record closes).
+    channels : dict, optional
+        More topics beside :data:`CHANNELS` (topic → JSON-schema properties), for
+        records that carry more than one wheel (``rwlab hil``).
     """
 
-    def __init__(self, path: str | os.PathLike, metadata: dict, *, force: bool = False) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        metadata: dict,
+        *,
+        force: bool = False,
+        channels: dict[str, dict] | None = None,
+    ) -> None:
         self.path = Path(path)
         self.partial = partial_path(self.path)
         if self.path.exists() and not force:
@@ -160,9 +171,12 @@ class RecordWriter:
         self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
         self._writer.start(profile="rwlab", library="rwlab")
         self._channels = {}
-        for topic in CHANNELS:
+        topics = {**CHANNELS, **(channels or {})}
+        for topic, props in topics.items():
             sid = self._writer.register_schema(
-                name=f"rwlab{topic.replace('/', '.')}", encoding="jsonschema", data=_schema(topic)
+                name=f"rwlab{topic.replace('/', '.')}",
+                encoding="jsonschema",
+                data=_schema(topic, props),
             )
             self._channels[topic] = self._writer.register_channel(
                 topic=topic, message_encoding="json", schema_id=sid
@@ -170,7 +184,7 @@ class RecordWriter:
         self._writer.add_metadata("rwlab", {"json": json.dumps(metadata)})
         self._fh.flush()
         self._last_flush = time.monotonic()
-        self.counts = dict.fromkeys(CHANNELS, 0)
+        self.counts = dict.fromkeys(topics, 0)
         self.closed = False
         self.time_origin = 0.0
         """Subtracted from every message's ``t`` (the runner sets it to its first command)."""
@@ -257,8 +271,8 @@ def _parse(stream, record: Record, topics: dict[int, str]) -> None:
             topics[r.id] = r.topic
         elif isinstance(r, Message):
             topic = topics.get(r.channel_id)
-            if topic in record.messages:
-                record.messages[topic].append(json.loads(r.data))
+            if topic is not None:  # the testbed's topics, and any a record added
+                record.messages.setdefault(topic, []).append(json.loads(r.data))
         elif isinstance(r, Metadata) and r.name == "rwlab":
             record.metadata = json.loads(r.metadata.get("json", "{}"))
         elif isinstance(r, Footer):
@@ -282,6 +296,12 @@ def read_record(path: str | os.PathLike) -> Record:
     """
     path = Path(path)
     if not path.is_file():
+        partial = partial_path(path)
+        if partial.is_file() and partial != path:
+            raise FileNotFoundError(
+                f"no such record: {path}; the run that wrote it did not finish and left "
+                f"{partial} (readable up to where it stopped): use that file"
+            )
         raise FileNotFoundError(f"no such record: {path}")
     data = path.read_bytes()
     if not data.startswith(MAGIC):

@@ -9,7 +9,7 @@ applies it at that instant of its clock; it then stays (faults do not heal).
 name                          value      what changes
 ============================  =========  =============================================
 ``friction``                  factor     rotor friction (viscous and Coulomb) × factor
-``torque_constant``           factor     the motor's true k_t × factor (a weak magnet)
+``torque_constant``           factor     the motor's true k_t × factor (a weak magnet; 0: dead)
 ``current_limit``             A          the driver clamps the current at this value
 ``speed_sensor_bias``         rpm        reported speed + bias
 ``speed_sensor_stuck``        —          reported speed frozen at its current value
@@ -40,7 +40,8 @@ FAULTS: dict[str, str | None] = {
     "speed_sensor_stuck": None,
     "telemetry_dropout": "s",
 }
-_SIGNED = {"speed_sensor_bias"}  # every other value must be > 0
+_SIGNED = {"speed_sensor_bias"}  # every other value must be > 0 ...
+_ZERO_OK = {"torque_constant"}  # ... or ≥ 0 for these: torque_constant=0 is a dead motor
 
 _SYNTAX = re.compile(r"^\s*([a-z_]+)\s*(?:=\s*([^@]+?))?\s*@\s*(\S+)\s*$")
 
@@ -72,7 +73,9 @@ class ScheduledFault:
         if unit is not None:
             if self.value is None or not math.isfinite(self.value):
                 raise ConfigError(f"fault {self.name} needs a finite value in {unit}")
-            if self.name not in _SIGNED and self.value <= 0:
+            if self.name in _ZERO_OK and self.value < 0:
+                raise ConfigError(f"fault {self.name} needs a value ≥ 0 {unit}, got {self.value}")
+            if self.name not in _SIGNED | _ZERO_OK and self.value <= 0:
                 raise ConfigError(f"fault {self.name} needs a value > 0 {unit}, got {self.value}")
         if not (math.isfinite(self.t_s) and self.t_s >= 0):
             raise ConfigError(f"fault {self.name}: the start must be ≥ 0 s, got {self.t_s}")

@@ -175,3 +175,90 @@ class SlipSerialBus(can.BusABC):
     def shutdown(self) -> None:
         super().shutdown()
         self.port.close()
+
+
+class FdPort:
+    """A pyserial-like port on a file descriptor (a pseudo-terminal's master side).
+
+    Writes never block: bytes the other side does not read in time are dropped
+    and counted in :attr:`dropped_writes`, as a UART would overrun.
+
+    Parameters
+    ----------
+    fd : int
+        An open descriptor; the port owns it and closes it.
+    name : str
+        What to call it in messages.
+    """
+
+    def __init__(self, fd: int, name: str = "pty") -> None:
+        import os
+
+        os.set_blocking(fd, False)
+        self.fd, self.name = fd, name
+        self.dropped_writes = 0
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes ready to read."""
+        import fcntl
+        import termios
+
+        buf = fcntl.ioctl(self.fd, termios.FIONREAD, b"\0\0\0\0")
+        return int.from_bytes(buf, "little")
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, b'' when none are waiting."""
+        import os
+
+        try:
+            return os.read(self.fd, size)
+        except (BlockingIOError, OSError):
+            return b""
+
+    def write(self, data: bytes) -> int:
+        """Write ``data``; what does not fit is dropped (counted)."""
+        import os
+
+        try:
+            return os.write(self.fd, data)
+        except (BlockingIOError, OSError):
+            self.dropped_writes += 1
+            return 0
+
+    def close(self) -> None:
+        """Close the descriptor."""
+        import os
+
+        try:
+            os.close(self.fd)
+        except OSError:
+            pass
+
+
+def open_pty(baudrate: int = 115200):
+    """A pseudo-terminal pair in raw mode: (the twin's end, a pyserial port on the other).
+
+    Parameters
+    ----------
+    baudrate : int
+        Nominal line speed for the pyserial end (a pty does not throttle).
+
+    Returns
+    -------
+    tuple
+        (:class:`FdPort` on the master side, ``serial.Serial`` on the slave path).
+        The slave path is ``port.port`` of the second.
+    """
+    import os
+    import tty
+
+    import serial
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    host = serial.serial_for_url(path, baudrate=baudrate, timeout=0)
+    os.close(slave)
+    return FdPort(master, path), host

@@ -1,0 +1,175 @@
+"""``rwlab hil``: the satellite's attitude loop closed through the wheels on a bus."""
+
+from __future__ import annotations
+
+import click
+
+from rwlab.cli._common import _check_folder, _friendly_errors, _stop_signals, main
+from rwlab.errors import ConfigError
+
+
+def _nodes(text: str | None) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    try:
+        nodes = tuple(int(n) for n in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--nodes must be node ids like 1,2,3, got {text!r}") from None
+    if any(not 0 <= n <= 15 for n in nodes):
+        raise ConfigError(f"--nodes must be 0..15, got {text!r}")
+    return nodes
+
+
+@main.command("hil")
+@click.option(
+    "--scenario",
+    default="geo-smallsat",
+    show_default=True,
+    help="geo-smallsat, geo-comsat, or a scenario TOML file.",
+)
+@click.option(
+    "--controller",
+    type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
+    default="lqg",
+    show_default=True,
+)
+@click.option(
+    "--interface",
+    type=click.Choice(["virtual", "udp_multicast", "socketcan", "serial"]),
+    default="virtual",
+    show_default=True,
+)
+@click.option("--channel", default=None, help="Bus channel (the interface's default).")
+@click.option("--nodes", default=None, help="Node id of each wheel, e.g. 1,2,3 [default: 1..N].")
+@click.option("--duration", type=float, required=True, help="Seconds of flight.")
+@click.option("--seed", type=click.IntRange(min=0), default=None)
+@click.option("--realtime", is_flag=True, help="Wall clock (10 Hz or faster) instead of simulated.")
+@click.option("--epoch", help="UTC start, ISO 8601: the real Sun, Moon and eclipses.")
+@click.option(
+    "--fault",
+    "faults",
+    multiple=True,
+    help="NODE:NAME[=VALUE]@SECONDS injected into a twin, e.g. 2:torque_constant=0@1800.",
+)
+@click.option(
+    "--wheels-running",
+    is_flag=True,
+    help="The wheels are already on the bus (e.g. `rwlab wheel serve`): start no twins.",
+)
+@click.option(
+    "--telemetry-rate",
+    type=float,
+    default=None,
+    help="Twins' telemetry, Hz [default: one per control period; 50 on the wall clock].",
+)
+@click.option(
+    "--wheel-bias-rpm",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Spin the wheels up along the null space first (pyramid): no zero crossings.",
+)
+@click.option(
+    "--diagnosis/--no-diagnosis",
+    default=None,
+    help="Live diagnosis of every wheel [default: on with --wheel-bias-rpm, whose wheels "
+    "never hover at zero speed where the current test false-alarms].",
+)
+@click.option(
+    "--calibration",
+    type=float,
+    default=300.0,
+    show_default=True,
+    help="Seconds of healthy telemetry that calibrate the diagnosis.",
+)
+@click.option(
+    "--rt-priority",
+    type=click.IntRange(1, 99),
+    default=None,
+    help="With --realtime: run the loop under SCHED_FIFO at this priority (needs CAP_SYS_NICE).",
+)
+@click.option("--no-reference", is_flag=True, help="Do not fly the simulation beside it.")
+@click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@_friendly_errors
+def hil(
+    scenario,
+    controller,
+    interface,
+    channel,
+    nodes,
+    duration,
+    seed,
+    realtime,
+    epoch,
+    faults,
+    wheels_running,
+    telemetry_rate,
+    wheel_bias_rpm,
+    diagnosis,
+    calibration,
+    rt_priority,
+    no_reference,
+    out,
+    force,
+):
+    """Fly the satellite on the host with its wheels on a bus: record.mcap, metrics.json,
+    report.html.
+
+    Each control period the attitude controller's wheel torques go out as
+    acceleration commands through the wheel driver; the plant takes each wheel's
+    momentum from the speed it reports. Twins answer on the virtual and
+    udp_multicast buses unless --wheels-running. Whatever ends the run (its end,
+    a silent wheel, a broken bus, Ctrl-C, SIGTERM, an error), every wheel is
+    idled and the record closed with a stop event.
+    """
+    from rwlab.cli.attitude import _single_thread_blas, _steps_progress
+    from rwlab.hil.run import HilConfig, parse_node_fault, run_hil
+    from rwlab.report.hil import write_hil_report
+
+    _single_thread_blas()
+    cfg = HilConfig(
+        scenario=scenario,
+        controller=controller,
+        interface=interface,
+        channel=channel,
+        nodes=_nodes(nodes),
+        duration=duration,
+        seed=seed,
+        realtime=realtime,
+        epoch=epoch,
+        faults=tuple(parse_node_fault(f) for f in faults),
+        twins=False if wheels_running else None,
+        telemetry_rate=telemetry_rate,
+        wheel_bias_rpm=wheel_bias_rpm,
+        diagnosis=diagnosis,
+        calibration_s=calibration,
+        reference=not no_reference,
+        rt_priority=rt_priority,
+    )
+    from rwlab.attitude.scenario import load_scenario
+
+    _check_folder(out)
+    steps = round(duration / load_scenario(scenario).dt) + 1
+    with _stop_signals(), _steps_progress(steps, f"hil {controller}", unit="periods") as progress:
+        result = run_hil(cfg, out, force=force, progress=progress)
+    report = write_hil_report(result, out)
+    m = result.metrics
+    for key in ("steady_max_error_deg", "steady_rms_error_deg", "max_error_deg"):
+        ref = m["reference_simulation"]
+        sim = f"   simulation {ref[key]:.4g}" if ref else ""
+        click.echo(f"{key:<28} {m[key]:.4g}{sim}")
+    for f in m["wheel_faults"]:
+        click.echo(
+            f"wheel {f['node']}: {f['named_kind']} detected at {f['detected_s']:.1f} s "
+            f"(injected {f['kind']} at {f['injected_s']} s); {f['action']}"
+        )
+    t = m["timing"]
+    if t["clock"] == "wall":
+        click.echo(
+            f"period p50 {t['period_p50_s'] * 1e3:.2f} ms, p99 {t['period_p99_s'] * 1e3:.2f} ms; "
+            f"late p99 {t['lateness_p99_s'] * 1e3:.2f} ms; late steps {t['late_steps']}"
+        )
+    b = m["bench"]
+    click.echo(f"lost commands {b['lost_commands']}, lost telemetry {b['lost_telemetry_frames']}")
+    click.echo(f"wrote {', '.join(str(p) for p in (*result.paths.values(), report))}")

@@ -1,0 +1,279 @@
+"""Hardware in the loop (issue 25): the attitude loop closed through wheel nodes on a bus."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rwlab.attitude.control import LQRController, metrics
+from rwlab.attitude.scenario import load_scenario
+from rwlab.attitude.sim import simulate
+from rwlab.cli import main
+from rwlab.errors import ConfigError, WheelTimeout
+from rwlab.hil.bench import WheelBank
+from rwlab.hil.run import HilConfig, HilStopped, parse_node_fault, run_hil
+from rwlab.hil.satellite import Satellite
+from rwlab.testbed.record import read_record
+from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.node import WheelNode
+from rwlab.wheel.physics import RW90, rpm_to_rad_s
+
+_channels = itertools.count()
+
+
+def _channel() -> str:
+    return f"hil-test-{next(_channels)}"  # the virtual bus is process-wide: one per test
+
+
+# -- the satellite loop, cut open at the wheels ---------------------------------------------
+
+
+def test_satellite_with_ideal_wheels_repeats_the_compiled_simulation():
+    """Independent truth: the compiled kernel. Same scenario, seed and ideal wheels: the
+    Python loop that hands the wheels out must fly the same trajectory."""
+    sc = load_scenario("geo-smallsat")
+    ctl = LQRController(sc)
+    ref = simulate(sc, ctl, duration=300.0, seed=4)
+    sat = Satellite(sc, ctl, duration=300.0, seed=4)
+    while not sat.done:
+        torques = sat.wheel_torques()
+        sat.advance(sat.x[7:] + torques * sc.dt)  # an ideal wheel delivers its command
+    run = sat.result()
+    np.testing.assert_allclose(run.error_deg, ref.error_deg, rtol=0, atol=1e-9)
+    a, b = metrics(run), metrics(ref)
+    for key in ("steady_max_error_deg", "steady_rms_error_deg", "torque_rms_Nm"):
+        assert a[key] == pytest.approx(b[key], rel=1e-9)
+
+
+def test_the_plant_feels_the_reported_momentum_not_the_command():
+    """A wheel that does nothing (reports zero momentum) leaves the body's angular momentum
+    unchanged: ω moves only by the disturbances, whatever the controller asked."""
+    sc = load_scenario("geo-smallsat").with_(process_noise_torque=0.0)
+    sat = Satellite(sc, LQRController(sc), duration=20.0, seed=1, estimator="truth")
+    H0 = sc.inertia_matrix @ sat.x[4:7]
+    asked = []
+    while not sat.done:
+        asked.append(np.abs(sat.wheel_torques()).max())
+        sat.advance(np.zeros(3))
+    assert max(asked) > 1e-3  # the controller did ask (a 2° error)
+    dH = np.linalg.norm(sc.inertia_matrix @ sat.x[4:7] - H0)
+    assert dH < 1e-5  # disturbances over 20 s and the orbit's rotation only
+
+
+def test_reallocation_needs_three_axes():
+    sc = load_scenario("geo-smallsat").with_(wheel_axes="pyramid")
+    sat = Satellite(sc, LQRController(sc), duration=1.0, seed=0)
+    sat.set_active(np.array([True, False, True, True]))  # any three of a pyramid span
+    assert np.allclose(sc.wheel_matrix[:, sat.active] @ sat._pinv[sat.active], np.eye(3))
+    with pytest.raises(ConfigError, match="span"):
+        sat.set_active(np.array([True, False, False, True]))
+
+
+# -- the run on the virtual bus ---------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hil")
+    cfg = HilConfig(duration=300.0, seed=2, channel=_channel(), calibration_s=120.0)
+    return run_hil(cfg, out), out
+
+
+def test_short_run_points_and_commands_cross_the_bus(short_run):
+    result, out = short_run
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["steady_max_error_deg"] <= 0.1
+    ref = m["reference_simulation"]  # the same seed with the physics wheel in simulation
+    assert abs(m["steady_max_error_deg"] - ref["steady_max_error_deg"]) <= max(
+        0.02, ref["steady_max_error_deg"]
+    )
+    for key in ("steady_rms_error_deg", "settling_time_s", "meets_requirement", "eclipse_s"):
+        assert key in m  # attitude simulate's keys
+    assert m["wheel_faults"] == []
+    assert all(v == 0 for v in m["bench"]["lost_commands"].values())
+    rec = read_record(out / "record.mcap")
+    assert rec.complete
+    steps = result.run.stats["steps"]
+    for n in (1, 2, 3):
+        commands = rec.topic(f"/wheel{n}/command")
+        accel = [c for c in commands if c["mode"] == "ACCELERATION"]
+        assert len(accel) == steps + 1  # one per control period
+        assert commands[-1]["mode"] == "IDLE"
+        assert len(rec.topic(f"/wheel{n}/telemetry")) >= steps
+    assert len(rec.topic("/satellite")) == len(result.run.t)
+    kinds = [e["kind"] for e in rec.topic("/event")]
+    assert kinds[0] == "start" and kinds[-1] == "stop"
+
+
+def test_the_report_sets_bench_beside_simulation(short_run):
+    from rwlab.report.hil import write_hil_report
+
+    result, out = short_run
+    page = write_hil_report(result, out).read_text()
+    for anchor in ("fig-hil-pointing", "fig-hil-wheels", "fig-hil-torque", "table-comparison"):
+        assert f'id="{anchor}"' in page
+    meas = result.metrics["measurement"]
+    # the reading's quantum as a momentum: I·Δω of one 0.5 rpm step
+    assert meas["momentum_quantum_Nms"] == pytest.approx(4.2e-4 * 0.5 * np.pi / 30)
+
+
+def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
+    _, out = short_run
+    rec = read_record(out / "record.mcap")
+    sat = rec.topic("/satellite")
+    for n in (1, 2, 3):
+        tel = {round(m["t"], 6): m["speed_rpm"] for m in rec.topic(f"/wheel{n}/telemetry")}
+        for row in sat[10:40]:
+            # the satellite row at t holds the momentum reported by the frame at t
+            speed = tel[round(row["t"], 6)]
+            h = row["wheel_momentum_Nms"][n - 1]
+            assert h == pytest.approx(
+                load_scenario("geo-smallsat").wheel_inertia * rpm_to_rad_s(speed)
+            )
+
+
+# -- a wheel failure survived ------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_dead_motor_in_a_pyramid_is_named_idled_and_survived(tmp_path):
+    cfg = HilConfig(
+        scenario="geo-smallsat-pyramid",
+        duration=1400.0,
+        seed=3,
+        channel=_channel(),
+        wheel_bias_rpm=1000.0,
+        calibration_s=200.0,
+        faults=(parse_node_fault("2:torque_constant=0@800"),),
+        reference=False,
+    )
+    result = run_hil(cfg, tmp_path / "out")
+    m = result.metrics
+    [fault] = m["wheel_faults"]
+    assert fault["node"] == 2 and fault["injected_s"] == 800
+    assert 800 <= fault["detected_s"] <= 860
+    assert "idled" in fault["action"]
+    assert m["steady_max_error_deg"] <= 0.1  # the steady window (700 s on) spans the fault
+    assert m["max_error_from_first_fault_deg"] <= 0.1  # every step from the fault on
+    rec = read_record(tmp_path / "out" / "record.mcap")
+    after = [c for c in rec.topic("/wheel2/command") if c["t"] > fault["detected_s"] + 1]
+    assert after and all(c["mode"] == "IDLE" for c in after)
+    kinds = [e["kind"] for e in rec.topic("/event")]
+    assert kinds.index("alarm") < kinds.index("reallocate") < kinds.index("stop")
+    assert "recalibrate" in kinds  # the others watched again once wheel 2 was at rest
+
+
+# -- safety --------------------------------------------------------------------------------------
+
+
+def _assert_idled_and_closed(out, kind):
+    rec = read_record(out / "record.mcap")
+    assert rec.complete
+    events = [e["kind"] for e in rec.topic("/event")]
+    assert kind in events and events[-1] == "stop"
+    for n in (1, 2, 3):
+        assert rec.topic(f"/wheel{n}/command")[-1]["mode"] == "IDLE"
+        assert rec.topic(f"/wheel{n}/telemetry")[-1]["mode"] == "IDLE"  # and they obeyed
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("boom"), KeyboardInterrupt()])
+def test_an_error_or_ctrl_c_idles_every_wheel_and_closes_the_record(tmp_path, monkeypatch, exc):
+    real = Satellite.advance
+
+    def advance(self, h):
+        if self.k == 50:
+            raise exc
+        real(self, h)
+
+    monkeypatch.setattr(Satellite, "advance", advance)
+    cfg = HilConfig(duration=60.0, channel=_channel(), reference=False)
+    with pytest.raises(HilStopped, match="idled"):
+        run_hil(cfg, tmp_path)
+    _assert_idled_and_closed(
+        tmp_path, "interrupt" if isinstance(exc, KeyboardInterrupt) else "error"
+    )
+
+
+def test_a_silent_wheel_stops_the_run_safely(tmp_path):
+    cfg = HilConfig(
+        duration=60.0,
+        channel=_channel(),
+        faults=(parse_node_fault("1:telemetry_dropout=5@20"),),
+        reference=False,
+    )
+    with pytest.raises(HilStopped, match="wheel 1 sent no telemetry"):
+        run_hil(cfg, tmp_path)
+    rec = read_record(tmp_path / "record.mcap")
+    assert [e["kind"] for e in rec.topic("/event")][-1] == "stop"
+    for n in (1, 2, 3):
+        assert rec.topic(f"/wheel{n}/command")[-1]["mode"] == "IDLE"
+
+
+def test_a_host_stall_past_the_watchdog_stops_the_run_safely(tmp_path, monkeypatch):
+    """The host freezes for 1.5 s (longer than the wheels' 1 s watchdog): every wheel
+    idles itself with WATCHDOG; with no spare the run must stop, not fly on blind."""
+    real = WheelBank.command
+    calls = []
+
+    def command(self, torques):
+        calls.append(1)
+        if len(calls) == 50:
+            self.clock.sleep(1.5)
+        return real(self, torques)
+
+    monkeypatch.setattr(WheelBank, "command", command)
+    cfg = HilConfig(duration=60.0, channel=_channel(), reference=False)
+    with pytest.raises(HilStopped, match="WATCHDOG"):
+        run_hil(cfg, tmp_path)
+    rec = read_record(tmp_path / "record.mcap")
+    assert [e["kind"] for e in rec.topic("/event")][-2:] == ["error", "stop"]
+    for n in (1, 2, 3):
+        assert rec.topic(f"/wheel{n}/telemetry")[-1]["mode"] == "IDLE"
+
+
+def test_a_node_answering_from_two_sources_is_refused():
+    clock, channel = SimClock(), _channel()
+    bank = WheelBank("virtual", channel, [1, 2, 3], RW90, clock=clock, twins=True)
+    from rwlab.wheel.bus import open_bus
+
+    intruder = WheelNode(open_bus("virtual", channel, simulated_clock=True), 2, clock=clock)
+    try:
+        with pytest.raises(ConfigError, match="node 2 answers from two sources"):
+            bank.preflight()
+    finally:
+        intruder.stop()
+        intruder.bus.shutdown()
+        bank.close()
+
+
+def test_a_wheel_that_does_not_answer_is_refused():
+    bank = WheelBank("virtual", _channel(), [4], RW90, clock=WallClock(), twins=False)
+    try:
+        with pytest.raises(WheelTimeout, match="wheel 4 sent no telemetry"):
+            bank.preflight(listen_s=0.2)
+    finally:
+        bank.close()
+
+
+@pytest.mark.parametrize("text", ["2:torque_constant=0@1800", " 3 : friction=2@5"])
+def test_parse_node_fault(text):
+    node, fault = parse_node_fault(text)
+    assert node in (2, 3) and fault.t_s in (1800, 5)
+
+
+@pytest.mark.parametrize("text", ["torque_constant=0@1800", "x:friction=2@5", "2:wear=1@3"])
+def test_bad_node_faults_are_config_errors(text):
+    with pytest.raises(ConfigError):
+        parse_node_fault(text)
+
+
+def test_cli_refuses_a_wrong_number_of_nodes(tmp_path):
+    res = CliRunner().invoke(
+        main, ["hil", "--duration", "10", "--nodes", "1,2", "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 2
+    assert "has 3 wheels" in res.output
