@@ -21,6 +21,7 @@ Paper A reached 76.5 % on the real wheel. Usage::
 from __future__ import annotations
 
 import argparse
+import itertools
 import tempfile
 from pathlib import Path
 
@@ -39,7 +40,7 @@ def measured_steady_gain(u: np.ndarray, y: np.ndarray, Ts: float) -> float:
     edges = np.flatnonzero(np.diff(u) != 0) + 1
     bounds = np.concatenate([[0], edges, [len(u)]])
     c, s = [], []
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         if (b - a) * Ts >= 30 and u[a] != 0:
             tail = slice(b - round(5 / Ts), b)
             c.append(u[a])

@@ -75,7 +75,7 @@ def _filter_metrics(r: SimResult) -> dict:
     """The filter's consistency over the steady window: mean NEES (against the right truth
     for its state: ω, the disturbance state's true value, or the gyro bias), its state
     count, and the share of attitude-error samples inside ±3σ."""
-    if r.sigma is None or not np.any(r.sigma):
+    if r.sigma is None or r.est_error_axes is None or not np.any(r.sigma):
         return {"nees_mean": None, "nees_states": None, "inside_3sigma_fraction": None}
     steady = r.t >= r.steady_from_s
     nees = r.nees[steady]
