@@ -26,6 +26,18 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
     ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
     slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
     and settling come from the logged trace.
+
+    Parameters
+    ----------
+    r : SimResult
+        One run.
+    band_deg : float
+        Settling band on the pointing error, degrees.
+
+    Returns
+    -------
+    dict
+        The metrics (``metrics.json``'s per-controller entries), SI units or named.
     """
     st = r.stats
     steady_n = max(st["steady_steps"], 1)
