@@ -44,7 +44,9 @@ def study_out(tmp_path_factory):
 def test_every_shipped_schema_is_a_valid_2020_12_schema(name):
     sch = schemas.schema(name)
     jsonschema.Draft202012Validator.check_schema(sch)
-    assert sch["x-rwlab-version"] == 1 and sch["$id"].endswith(f":{name}:1")
+    version = sch["x-rwlab-version"]
+    assert sch["$id"].endswith(f":{name}:{version}")
+    assert sch["x-rwlab-format"].endswith(f"/{version}")
 
 
 def test_identify_writes_a_valid_model_and_study(study_out):

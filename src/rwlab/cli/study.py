@@ -233,7 +233,7 @@ def _identify_one(
         identification_study,
         load_current,
         load_study_data,
-        physical_model,
+        wheel_model,
     )
     from rwlab.report.identification import write_study
 
@@ -254,7 +254,7 @@ def _identify_one(
         },
         current=load_current(file, Ts),
     )
-    model = physical_model(
+    model = wheel_model(  # the owner class: the healthy reference is added below
         result,
         speed_limit_rpm=saturation["speed_limit_rpm"],
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
