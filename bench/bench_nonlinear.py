@@ -1,15 +1,24 @@
-"""Nonlinear wheel models on one PRBS record of the simulated RW90: fit and residual whiteness.
+"""Nonlinear wheel models judged on wheel units they were not identified on (issue 22).
 
-Rows: paper A's chosen linear model (the study's ARX221), the same model wrapped
-with the record's limits as ``IdentifiedWheel`` flew it before (Hammerstein–Wiener
-form, limits copied, not estimated), rwlab's servo model, and a polynomial NARX
-from sysidentpy (FROLS, degree 2), simulated free-run on the same validation part.
+One 20-minute rate-limited PRBS record (Ts = 0.5 s) of twin unit ``--unit``
+is studied as ``rwlab identify`` does (its ``model.json``: the linear model,
+the servo model, the grey-box wheel, the NLARX). Then every model is scored
+by ``rwlab compare``'s function (simulation from the record's first speed, the
+record's saturations applied) on records of *other* units, other seeds:
 
-sysidentpy pins an older numpy, so it never goes into rwlab's environment: give
-the Python of a separate venv (``python -m venv /tmp/sysidenv &&
-/tmp/sysidenv/bin/pip install sysidentpy``); it gets the data as a .npz.
+- ``unit B``: a nominal unit, the default rate-limited PRBS;
+- ``unit B, steps``: the same unit, PRBS without the rate limit (true steps);
+- ``unit B, ±300 rpm``: the same unit at low speed (friction, Hall quantisation);
+- ``unit C, 0.35 A``: a unit whose driver limits the current to 0.35 A, so the
+  current limit binds in every fast transient (it cannot reach 314 rpm/s).
 
-    python bench/bench_nonlinear.py [--minutes 25] [--seed 0] [--sysidentpy VENV/bin/python]
+The last column is sysidentpy's polynomial NARX (FROLS, degree 2, ylag = xlag = 2,
+AIC term selection), fitted on the same estimation part of unit A and simulated
+free-run on the same records. sysidentpy pins an older numpy, so it runs in a
+separate venv (``python -m venv /tmp/sysidenv && /tmp/sysidenv/bin/pip install
+sysidentpy``) and gets the data as .npz.
+
+    python bench/bench_nonlinear.py [--unit 1] [--sysidentpy /tmp/sysidenv/bin/python]
 """
 
 from __future__ import annotations
@@ -19,14 +28,16 @@ import json
 import subprocess
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from rwlab.ident import arx, fit_percent
-from rwlab.ident.study import identification_study
-from rwlab.testbed import ExperimentConfig, load_record, run_experiment
-from rwlab.wheel import IdentifiedWheel
+from rwlab.ident import fit_percent
+from rwlab.ident.study import identification_study, load_current, load_study_data, physical_model
+from rwlab.testbed import ExperimentConfig, run_experiment
+from rwlab.wheel import RW90
+from rwlab.wheel.compare import compare_wheel_models
 
 NARX = """
 import json, sys, time
@@ -38,123 +49,95 @@ t = time.perf_counter()
 m = FROLS(order_selection=True, n_info_values=15, ylag=2, xlag=2, info_criteria="aic",
           basis_function=Polynomial(degree=2))
 m.fit(X=z["ue"][:, None], y=z["ye"][:, None])
-yhat = m.predict(X=z["uv"][:, None], y=z["yv"][:2, None])[:, 0]
-print(json.dumps({"yhat": yhat.tolist(), "seconds": time.perf_counter() - t,
-                  "terms": int(m.final_model.shape[0])}))
+fit_s = time.perf_counter() - t
+out = {"seconds": fit_s, "terms": int(m.final_model.shape[0]), "yhat": {}}
+for k in z.files:
+    if k.startswith("u_"):
+        name = k[2:]
+        y = z["y_" + name]
+        yhat = m.predict(X=z[k][:, None], y=y[:2, None])[:, 0]
+        out["yhat"][name] = yhat.tolist()
+print(json.dumps(out))
 """
 
-
-def _acf_max(e: np.ndarray, lags: int = 25) -> float:
-    e = e - e.mean()
-    r = np.correlate(e, e, "full")[e.size - 1 : e.size + lags]
-    return float(np.max(np.abs(r[1:] / r[0])))
+RECORDS = {
+    "unit B": dict(seed=11, unit=2),
+    "unit B, steps": dict(seed=12, unit=2, rate_limit=False),
+    "unit B, ±300 rpm": dict(seed=13, unit=2, amplitude=300.0),
+    "unit C, 0.35 A": dict(seed=23, unit=3),
+}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, default=25.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--unit", type=int, default=1, help="the unit identified on")
+    ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--sysidentpy", help="python of a venv with sysidentpy installed")
     args = ap.parse_args()
-
     with tempfile.TemporaryDirectory() as tmp:
-        record = Path(tmp) / "prbs.mcap"
-        run_experiment(ExperimentConfig(duration=60 * args.minutes, seed=args.seed), record)
-        data = load_record(record)
+        root = Path(tmp)
+        ident = root / "unit_a.mcap"
+        run_experiment(
+            ExperimentConfig(duration=1200, Ts=0.5, seed=args.seed, unit=args.unit), ident
+        )
+        data, sat = load_study_data(str(ident))
         t = time.perf_counter()
-        study = identification_study(data, limits_rpm=(7800.0, 7800.0))
+        study = identification_study(
+            data,
+            limits_rpm=(sat["speed_limit_rpm"],) * 2,
+            datasheet={"current_limit": sat["current_limit_a"]},
+            current=load_current(str(ident)),
+        )
         seconds = time.perf_counter() - t
-        s = study.to_dict()
-        val, trend = study.physical_val, study.data.trend
-        y = val.y[:, 0]
-        rows = []
-        y_lin = trend.output_to_physical(
-            study.chosen.simulate(study.val, initial="steady"), study.val.time
-        )
-        res = s["residuals"][s["chosen"]["structure"]]
-        rows.append(
-            (
-                f"linear {s['chosen']['structure']} (paper A)",
-                s["chosen"]["fit_percent"],
-                max(abs(a) for a in res["acf"][1:]),
-                _acf_max(y - y_lin),
-                "—",
-                seconds,
-            )
-        )
-        # the same structure on the physical (not normalised) data
+        model = root / "model.json"
+        model.write_text(json.dumps(physical_model(study)))
+        grey = study.greybox
+        print(f"identified on twin unit {args.unit}, seed {args.seed} ({seconds:.0f} s, study)")
+        print(f"chosen nonlinear model: {study.nonlinear['choice']}")
+        print("grey box (J fixed at the datasheet 4.2e-4 kg·m²), estimate ± std:")
+        for k, v in grey.std.items():
+            print(f"  {k:<16} {getattr(grey, k):.5g} ± {v:.2g}")
+        scores, npz = {}, {}
         est = data.split(0.7)[0]
-        phys = arx(est, 2, 2, 1)
-        y_phys = phys.simulate(val, initial="steady")
-        e_pred = y - phys.predict(val, 1, initial="steady")
-        rows.append(
-            (
-                "ARX221 on physical units",
-                fit_percent(y, y_phys),
-                _acf_max(e_pred),
-                _acf_max(y - y_phys),
-                "—",
-                None,
-            )
-        )
-        # the Hammerstein–Wiener wrapping with copied limits, as IdentifiedWheel flew it
-        from rwlab.ident.study import physical_model
-
-        info = physical_model(study)
-        model_file = Path(tmp) / "model.json"
-        model_file.write_text(json.dumps(info))
-        hw = IdentifiedWheel.from_json(model_file, model="linear")
-        hw.reset(float(y[0]))
-        y_hw = np.r_[y[0], [hw.step(c) for c in val.u[:-1, 0]]]
-        rows.append(
-            (
-                "linear + copied limits (HW)",
-                fit_percent(y, y_hw),
-                None,
-                _acf_max(y - y_hw),
-                "314 (copied)",
-                0.0,
-            )
-        )
-        nl = s["nonlinear"]
-        y_nl = study.servo.predict(val, initial="steady")
-        rows.append(
-            (
-                "rwlab servo (nonlinear)",
-                nl["fit_percent"],
-                max(abs(a) for a in nl["residuals"]["acf"][1:]),
-                _acf_max(y - y_nl),
-                f"{nl['accel_limit_rpm_s']:.1f}",
-                None,
-            )
-        )
+        npz["ue"], npz["ye"] = est.u[:, 0], est.y[:, 0]
+        i = 0
+        for name, options in RECORDS.items():
+            path = root / f"{name.replace(' ', '_').replace(',', '')}.mcap"
+            params = replace(RW90, current_limit=0.35) if "0.35" in name else None
+            cfg = ExperimentConfig(duration=1200, Ts=0.5, **options)
+            run_experiment(cfg, path, params=params)
+            rec, rec_sat = load_study_data(str(path))
+            scores[name] = compare_wheel_models(model, rec, rec_sat)
+            npz[f"u_{i}"], npz[f"y_{i}"] = rec.u[:, 0], rec.y[:, 0]
+            scores[name]["_y"] = rec.y[:, 0]
+            i += 1
+        narx = None
         if args.sysidentpy:
-            npz = Path(tmp) / "z.npz"
-            np.savez(npz, ue=est.u[:, 0], ye=est.y[:, 0], uv=val.u[:, 0], yv=val.y[:, 0])
+            np.savez(root / "z.npz", **npz)
             out = subprocess.run(
-                [args.sysidentpy, "-c", NARX, str(npz)], capture_output=True, text=True, check=True
+                [args.sysidentpy, "-c", NARX, str(root / "z.npz")],
+                capture_output=True,
+                text=True,
+                check=True,
             )
             narx = json.loads(out.stdout.strip().splitlines()[-1])
-            y_narx = np.asarray(narx["yhat"])
-            rows.append(
-                (
-                    f"sysidentpy NARX, {narx['terms']} terms",
-                    fit_percent(y, y_narx),
-                    None,
-                    _acf_max(y - y_narx),
-                    "—",
-                    narx["seconds"],
-                )
-            )
-    print(f"{args.minutes:g}-min PRBS, seed {args.seed}, validation = last 30 %, 'steady' start")
-    print(f"{'model':<34} {'fit %':>7} {'resid acf':>10} {'sim-err acf':>12} {'α rpm/s':>13}")
-    for name, fit, acf, sim_acf, alpha, _ in rows:
-        acf_s = "—" if acf is None else f"{acf:.3f}"
-        print(f"{name:<34} {fit:7.2f} {acf_s:>10} {sim_acf:12.3f} {alpha:>13}")
-    print("resid acf: max |acf| over lags 1–25 of the residuals study.json reports (linear:")
-    print("one-step prediction errors; servo: simulation errors from an estimated initial state);")
-    print("sim-err acf: the same of the free-run simulation error from the 'steady' start.")
-    print(f"study incl. the servo fit: {rows[0][5]:.1f} s")
+    names = ["linear", "servo", "greybox", "nlarx"]
+    head = f"{'record':<18}" + "".join(f"{n:>9}" for n in names)
+    head += f"{'NARX(sysidentpy)':>18}{'grey − linear':>15}"
+    print("\nsimulated fit % (rwlab compare), whole record, from its first speed")
+    print(head)
+    for i, (name, row) in enumerate(scores.items()):
+        line = f"{name:<18}" + "".join(f"{row[n]['fit_percent']:9.2f}" for n in names)
+        if narx is not None:
+            yhat = np.asarray(narx["yhat"][str(i)], dtype=float)
+            ok = np.all(np.isfinite(yhat))
+            line += f"{fit_percent(row['_y'], yhat):18.2f}" if ok else f"{'diverged':>18}"
+        else:
+            line += f"{'—':>18}"
+        gain = row["greybox"]["fit_percent"] - row["linear"]["fit_percent"]
+        print(line + f"{gain:15.2f}")
+    if narx is not None:
+        print(f"sysidentpy NARX: {narx['terms']} terms, fitted in {narx['seconds']:.2f} s")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ from click.testing import CliRunner
 from rwlab._io import output_folder
 from rwlab.cli import main
 from rwlab.demo import DEMO_FILES
+from rwlab.wheel import RW90
 from tests.conftest import needs_chromium
 
 
@@ -52,7 +53,11 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
         "prbs",
         "chirp",
     ]
-    assert all(r["lost_frames"] == 0 and r["telemetry"] > r["commands"] for r in summary["records"])
+    loss = RW90.frame_loss_rate  # the realistic twin loses a frame now and then, on purpose
+    assert all(
+        r["lost_frames"] <= 3 + 5 * loss * r["telemetry"] and r["telemetry"] > r["commands"]
+        for r in summary["records"]
+    )
     hil = json.loads((demo_dir / "hil" / "metrics.json").read_text())
     assert summary["hil"]["steady_max_error_deg"] == pytest.approx(hil["steady_max_error_deg"])
     assert summary["hil"]["lost_commands"] == 0 < summary["hil"]["commands_sent"]

@@ -8,6 +8,8 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
 
 from rwlab.attitude.control import LQRController, metrics
 from rwlab.attitude.scenario import load_scenario
@@ -19,6 +21,7 @@ from rwlab.hil.run import HilConfig, HilStopped, parse_node_fault, run_hil
 from rwlab.hil.satellite import Satellite
 from rwlab.testbed.record import read_record
 from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.faults import FAULTS, ScheduledFault, parse_fault
 from rwlab.wheel.node import WheelNode
 from rwlab.wheel.physics import RW90, rpm_to_rad_s
 
@@ -119,6 +122,40 @@ def test_the_report_sets_bench_beside_simulation(short_run):
     meas = result.metrics["measurement"]
     # the reading's quantum as a momentum: I·Δω of one 0.5 rpm step
     assert meas["momentum_quantum_Nms"] == pytest.approx(4.2e-4 * 0.5 * np.pi / 30)
+
+
+def test_export_reads_one_wheel_of_the_record(short_run, tmp_path):
+    result, out = short_run
+    runner = CliRunner()
+    csv = tmp_path / "w2.csv"
+    res = runner.invoke(
+        main,
+        ["export", str(out / "record.mcap"), "--node", "2", "--format", "csv", "--out", str(csv)],
+    )
+    assert res.exit_code == 0, res.output
+    rows = csv.read_text().splitlines()
+    assert len(rows) - 1 >= result.run.stats["steps"]  # one sample per control period
+    res = runner.invoke(
+        main, ["export", str(out / "record.mcap"), "--format", "csv", "--out", str(csv), "--force"]
+    )
+    assert res.exit_code == 2 and "several wheels" in res.output
+
+
+def test_monitor_shows_the_satellite_view_in_replay(short_run):
+    from bokeh.document import Document
+
+    from rwlab.testbed.monitor import make_document
+
+    _, out = short_run
+    doc = Document()
+    make_document(doc, out / "record.mcap", replay=True, speed=1e9)
+    [callback] = doc.session_callbacks
+    callback.callback()
+    rows = read_record(out / "record.mcap").topic("/satellite")
+    sat = doc.select_one({"name": "satellite"}).data
+    assert sat["error"] == [r["error_deg"] for r in rows]
+    momentum = doc.select_one({"name": "momentum"}).data
+    assert momentum["h3"] == [r["wheel_momentum_Nms"][2] for r in rows]
 
 
 def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
@@ -257,6 +294,42 @@ def test_a_wheel_that_does_not_answer_is_refused():
             bank.preflight(listen_s=0.2)
     finally:
         bank.close()
+
+
+def test_a_broken_bus_stops_the_run_and_closes_the_record(tmp_path, monkeypatch):
+    import can
+
+    from rwlab.hil import bench
+
+    real = bench._Only.send
+    sends = []
+
+    def send(self, msg, timeout=None):
+        sends.append(1)
+        if len(sends) > 150:  # 50 periods of 3 wheels, then the bus is gone
+            raise can.CanOperationError("bus off")
+        real(self, msg, timeout)
+
+    monkeypatch.setattr(bench._Only, "send", send)
+    cfg = HilConfig(duration=60.0, channel=_channel(), reference=False)
+    with pytest.raises(HilStopped, match="bus off"):
+        run_hil(cfg, tmp_path)
+    rec = read_record(tmp_path / "record.mcap")
+    assert rec.complete
+    stop = rec.topic("/event")[-1]
+    assert stop["kind"] == "stop" and "bus off" in stop["message"]  # the idle could not go out
+
+
+@given(
+    node=st.integers(0, 15),
+    name=st.sampled_from(sorted(FAULTS)),
+    value=st.floats(0.01, 1e3),
+    t=st.floats(0, 1e6),
+)
+def test_node_faults_round_trip(node, name, value, t):
+    fault = ScheduledFault(name, None if FAULTS[name] is None else value, t)
+    # the NODE: prefix adds the node and changes nothing else (%g text on both sides)
+    assert parse_node_fault(f"{node}:{fault}") == (node, parse_fault(str(fault)))
 
 
 @pytest.mark.parametrize("text", ["2:torque_constant=0@1800", " 3 : friction=2@5"])

@@ -219,3 +219,30 @@ def test_default_preprocessing_leaves_the_arx_gain_unbiased_and_normalize_does_n
     g_norm = float(biased.models["ARX221"].dc_gain()) * t.output_scale[0] / t.input_scale[0]
     # physical zero maps to −min/range: the model's static map through the origin is off
     assert abs(g_norm - 1) > 3 * abs(gain - 1)
+
+
+def test_rwlab_compare_scores_every_model_in_model_json_on_a_record(study_dir):
+    record = study_dir.parent / "prbs.mcap"
+    model = study_dir / "model.json"
+    info = json.loads(model.read_text())
+    assert {"greybox", "nlarx", "nonlinear_chosen"} <= set(info)
+    assert info["nonlinear_chosen"] in ("greybox", "nlarx")
+    assert set(info["greybox"]["std"]) == set(info["greybox"]["estimated"])
+    result = CliRunner().invoke(main, ["compare", str(model), str(record), "--json"])
+    assert result.exit_code == 0, result.output
+    scores = json.loads(result.output)
+    assert set(scores) == {"linear", "servo", "greybox", "nlarx"}
+    assert all(isinstance(s["fit_percent"], float) for s in scores.values())
+    # the physical model follows the rate-limited transients the linear one smooths
+    assert scores["greybox"]["fit_percent"] > scores["linear"]["fit_percent"]
+    plain = CliRunner().invoke(main, ["compare", str(model), str(record)])
+    assert plain.exit_code == 0 and "greybox" in plain.output
+
+
+def test_rwlab_compare_refuses_what_is_not_a_model(tmp_path, study_dir):
+    bad = tmp_path / "model.json"
+    bad.write_text("{}")
+    record = study_dir.parent / "prbs.mcap"
+    result = CliRunner().invoke(main, ["compare", str(bad), str(record), "--json"])
+    assert result.exit_code == 2
+    assert result.output.startswith("error:") and "rwlab.WheelModel/1" in result.output

@@ -202,11 +202,12 @@ def test_a_burst_of_junk_leaves_the_served_wheel_and_the_experiment_running():
     r = _scenario(NETNS / "scenario_burst.py")
     assert r["junk_sent"] > 1000
     for phase in ("rate_before", "rate_during", "rate_after"):
-        assert 40 <= r[phase] <= 60, r  # served at 50 Hz
+        assert r[phase] >= 35, r  # served at 50 Hz (counted on arrival: a lower bound)
     assert r["exp_rc"] == 0 and "(completed)" in r["exp_stdout"], r
+    assert " 0 lost" in r["exp_stdout"], r  # the wheel's frame counter never skipped
     assert r["complete"] and ("stop", "completed") in [tuple(e) for e in r["events"]]
-    assert r["max_gap"] < 0.1, r  # 50 Hz in the record throughout, the burst included
-    assert r["telemetry"] > 400 and r["max_speed"] < 700  # the 1e30 rpm request refused
+    assert r["telemetry"] >= 0.95 * 50 * 10, r  # 50 Hz for the 10 s run, the burst included
+    assert r["max_speed"] < 700  # the 1e30 rpm requests were refused
     counts = r["serve_counts"]
     assert counts["bad"] > 1000 and counts["rejected"] > 0 and counts["commands"] >= 20
 

@@ -171,3 +171,20 @@ def test_telemetry_carries_jitter_bus_voltage_and_the_unit(tmp_path):
     run_experiment(ExperimentConfig(signal="step", duration=60, wheel="ideal"), ideal)
     t = np.array([m["t"] for m in read_record(ideal).messages["/telemetry"]])
     assert np.std(np.diff(t)) < 1e-9  # the ideal twin sends exactly on time
+
+
+@given(volts=st.floats(10.0, 41.5), temp=st.floats(-40.0, 87.5))
+def test_heartbeat_carries_the_bus_voltage_to_half_a_volt(volts, temp):
+    from rwlab.wheel import protocol as proto
+
+    beat = proto.Heartbeat(3, Mode.SPEED, proto.Fault.NONE, temp, 12, 7, volts)
+    back = proto.decode(proto.encode_heartbeat(beat))
+    assert abs(back.bus_voltage - volts) <= 0.25 + 1e-9
+    assert abs(back.temperature - temp) <= 0.25 + 1e-9 and back.commands_seen == 7
+
+
+def test_the_documented_wheel_toml_is_the_default_twin():
+    from pathlib import Path
+
+    path = Path(__file__).parent.parent / "docs" / "wheels" / "rw90.toml"
+    assert WheelParams.from_toml(path) == RW90

@@ -7,6 +7,7 @@ import itertools
 import json
 import os
 import re
+import select
 import socket
 import struct
 import subprocess
@@ -50,8 +51,8 @@ wheel_source: list[str] = []
 
 def telemetry_rate(seconds: float) -> float:
     """Valid telemetry frames per second from the served wheel, counted by a listener."""
-    while monitor.recv(timeout=0) is not None:
-        pass  # the backlog is not this window's
+    while monitor.recv(timeout=0) is not None or select.select([monitor], [], [], 0)[0]:
+        pass  # the backlog is not this window's (recv stops after a bounded bite of junk)
     n, end = 0, time.monotonic() + seconds
     while time.monotonic() < end:
         msg = monitor.recv(timeout=0.05)

@@ -247,8 +247,10 @@ def _identify_one(
         tolerance=tolerance,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
-        datasheet={
-            "current_limit": saturation.get("current_limit_a", 0.7),
+        datasheet=None
+        if "current_limit_a" not in saturation
+        else {
+            "current_limit": saturation["current_limit_a"],
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
         },

@@ -246,9 +246,12 @@ def _timing_line(t: dict) -> str:
     default=None,
     help="Accept telemetry gaps up to this many seconds (default Ts).",
 )
+@click.option(
+    "--node", type=click.IntRange(0, 15), help="The wheel, in a record of several (rwlab hil)."
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def export(record, fmt, out, Ts, max_gap, force):
+def export(record, fmt, out, Ts, max_gap, node, force):
     """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
 
     Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a.
@@ -265,7 +268,9 @@ def export(record, fmt, out, Ts, max_gap, force):
     if path.exists() and not force:
         raise FileExistsError(f"{path} exists; pass --force to replace it")
     _check_folder(path.parent)
-    data = load_record(record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap)
+    data = load_record(
+        record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap, node=node
+    )
     if data.N < 2:
         raise ConfigError(
             f"--Ts {data.Ts:g} s leaves {data.N} sample of the record; choose a Ts shorter "

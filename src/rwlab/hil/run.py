@@ -386,7 +386,8 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         raise ConfigError("--fault is injected into twins; these wheels are not twins")
     out = Path(out_dir)
     targets = {name: out / name for name in ("record.mcap", "metrics.json")}
-    existing = [str(p) for p in targets.values() if p.exists()]
+    # report.html is the report layer's, written after: refused here too, before the run
+    existing = [str(p) for p in [*targets.values(), out / "report.html"] if p.exists()]
     if existing and not force:
         raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
     params = physics_params(sc)
@@ -434,7 +435,13 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         out.mkdir(parents=True, exist_ok=True)
         record = RecordWriter(
             targets["record.mcap"],
-            {"kind": "rwlab.hil/1", "config": config, "dbc_sha256": proto.dbc_sha256()},
+            {
+                "kind": "rwlab.hil/1",
+                "config": config,
+                "dbc_sha256": proto.dbc_sha256(),
+                "Ts": sc.dt,  # what `rwlab export --node N` samples a wheel at
+                "mode": "acceleration",
+            },
             force=force,
             channels=_channels(nodes),
         )

@@ -347,7 +347,23 @@ def greybox_fit(
 
     lower = np.array([0.2, 0.0, 0.0, 0.0, 0.2, 1e-3, 0.0])
     upper = np.array([5.0, 20.0, 30.0, 50.0, 5.0, 1e3, 1e3])
-    sol = least_squares(residuals, np.ones(len(x0)), bounds=(lower, upper), diff_step=1e-4)
+    # the loss is piecewise smooth (anti-windup switching, stiction): from a few starts
+    # of the PI gains, with finite differences wide enough to see across the kinks
+    sol = None
+    for fk, fi in ((1.0, 1.0), (0.7, 1.4), (1.4, 0.7), (1.0, 2.0), (1.0, 0.5)):
+        z0 = np.ones(len(x0))
+        z0[5], z0[6] = fk, fi
+        trial = least_squares(
+            residuals,
+            np.clip(z0, lower, upper),
+            bounds=(lower, upper),
+            diff_step=1e-3,
+            x_scale="jac",
+            ftol=1e-10,
+            xtol=1e-10,
+        )
+        if sol is None or trial.cost < sol.cost:
+            sol = trial
     if not np.all(np.isfinite(sol.x)):
         raise EstimationError(
             "the grey-box fit diverged; check the record and the datasheet values"

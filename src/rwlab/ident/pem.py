@@ -56,6 +56,7 @@ __all__ = ["armax", "bj", "oe", "pem"]
 
 START_SAMPLES = 10_000
 RANDOM_STARTS = 6  # random stable F starts of oe and bj, besides the IV and ARX ones
+SCREEN_ITER = 15  # iterations from each of many starts before the best is followed
 MAX_ITER = "maximum iterations reached"
 EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-free and fitted exactly
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
@@ -513,8 +514,12 @@ def _search(orders, starts, series, max_iter, tol):
     """
     subset = _init_subset(series)
     whole = all(len(y) <= START_SAMPLES for y, _ in series)
-    fits = [_minimize(orders, theta, subset, max_iter, tol) for theta in starts]
+    # many starts: a short search from each, then the best one's to convergence
+    first = min(max_iter, SCREEN_ITER) if len(starts) > 2 else max_iter
+    fits = [_minimize(orders, theta, subset, first, tol) for theta in starts]
     best = min(fits, key=lambda fit: fit[2] if np.isfinite(fit[2]) else np.inf)
+    if best[4] == MAX_ITER and first < max_iter:
+        best = _minimize(orders, best[0], subset, max_iter, tol)
     return best if whole else _minimize(orders, best[0], series, max_iter, tol)
 
 

@@ -240,10 +240,10 @@ def identification_study(
         ``progress(done, total, label)`` after each stage (delay scan, each
         estimate, validation), for a progress bar.
     datasheet : dict, optional
-        The wheel's datasheet values for the grey-box model (keys of
-        :data:`DATASHEET`; default the RW90's, paper A Table 1). Only J, the
-        current limit and the firmware's feed-forward stay fixed; the rest start
-        the fit.
+        A wheel record: the wheel's datasheet values for the grey-box model
+        (keys of :data:`DATASHEET`, missing ones the RW90's, paper A Table 1;
+        ``{}`` for all of them). J and the current limit stay fixed; the rest
+        start the fit. None (default): not a wheel, no grey box.
     current : array_like, shape (N,), optional
         The record's motor current (A) at the speed's instants: the grey box's
         second output (it makes kt and the friction observable).
@@ -330,7 +330,7 @@ def identification_study(
     servo, nl, grey, black = None, None, None, None
     if nonlinear:
         servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
-        sheet = {**DATASHEET, **(datasheet or {})}
+        sheet = None if datasheet is None else {**DATASHEET, **datasheet}
         grey, black = _wheel_models(data, split, servo, nl, sheet, current)
         step("nonlinear")
     return StudyResult(
@@ -378,12 +378,13 @@ def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
     kp, ki = 0.5, 0.1
     if servo is not None:
         kp, ki = servo.kp, servo.ki
-    try:
-        i_est = None if current is None else np.asarray(current, dtype=float)[: est.N]
-        grey = greybox_fit(est, kp=kp, ki=ki, current=i_est, **datasheet)
-        out["greybox"] = _nonlinear_row(grey, val)
-    except (EstimationError, ModelError, DataError) as exc:
-        out["greybox"] = {"error": str(exc)}
+    if datasheet is not None:
+        try:
+            i_est = None if current is None else np.asarray(current, dtype=float)[: est.N]
+            grey = greybox_fit(est, kp=kp, ki=ki, current=i_est, **datasheet)
+            out["greybox"] = _nonlinear_row(grey, val)
+        except (EstimationError, ModelError, DataError) as exc:
+            out["greybox"] = {"error": str(exc)}
     try:
         black = nlarx(est)
         out["nlarx"] = _nonlinear_row(black, val)
@@ -607,7 +608,6 @@ def wheel_model(
         servo=result.servo,
         servo_fit_percent=servo_fit,
         preferred="nonlinear" if servo_fit is not None and servo_fit > fit else "linear",
-        current_limit_a=result.greybox.current_limit if result.greybox is not None else None,
         nonlinear_models=others,
         nonlinear_chosen=nl.get("chosen"),
         nonlinear_choice=nl.get("choice"),
@@ -670,9 +670,9 @@ def load_study_data(
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
     the model: from the record's wheel parameters when present, else the RW90
-    defaults; ``current_limit_a`` is the driver's current limit (A). A record whose
-    telemetry has a gap longer than one sample time, or a ``Ts`` shorter than its
-    telemetry period, is refused (``DataError``): its samples there would repeat a
+    defaults; ``current_limit_a`` (a record's only) is the driver's current limit (A). A
+    record whose telemetry has a gap longer than one sample time, or a ``Ts`` shorter than
+    its telemetry period, is refused (``DataError``): its samples there would repeat a
     stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
     a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
     """
@@ -685,7 +685,6 @@ def load_study_data(
         "speed_limit_rpm": 7800.0,
         "accel_limit_rpm_s": 314.0,
         "saturation_source": "RW90 defaults (paper A)",
-        "current_limit_a": 0.7,
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":

@@ -89,7 +89,7 @@ def _comparison(page: Page, m: dict) -> None:
         ratio = a / b if isinstance(a, float) and isinstance(b, float) and b else None
         rows.append([k, a, b, ratio])
     page.text(
-        "The simulation is `attitude simulate` on the same scenario, controller and seed with "
+        "The simulation is rwlab attitude simulate on the same scenario, controller and seed with "
         "the physics wheel (healthy) started at the bench's wheel momenta: it draws the same "
         "sensor and disturbance noise, so the difference is the wheels' (next section)."
     )
@@ -99,7 +99,11 @@ def _comparison(page: Page, m: dict) -> None:
 
 
 def _pointing_figure(page: Page, run, ref, req: float) -> None:
-    fig, ax = figure(10, 3.6)
+    paired = ref is not None and ref.t.shape == run.t.shape and np.allclose(ref.t, run.t)
+    fig, axes = figure(
+        10, 6.0 if paired else 3.6, 2 if paired else 1, 1, sharex=True, squeeze=False
+    )
+    ax = axes[0, 0]
     t_h = run.t / 3600
     ax.semilogy(*_envelope(t_h, np.maximum(run.error_deg, 1e-6)), lw=0.8, label="bench")
     if ref is not None:
@@ -111,11 +115,21 @@ def _pointing_figure(page: Page, run, ref, req: float) -> None:
         )
     ax.axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
     ax.axvline(run.steady_from_s / 3600, color="grey", ls=":", lw=1, label="steady window")
-    ax.set_xlabel("t [h]")
     ax.set_ylabel("pointing error [°]")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
-    page.figure(fig, "fig-hil-pointing", "True pointing error, bench and simulation.")
+    if paired:  # same noise, same rows: the difference is the wheels'
+        diff = run.error_deg - ref.error_deg
+        axes[1, 0].plot(*_envelope(t_h, diff), lw=0.6, color="k")
+        axes[1, 0].set_ylabel("bench − simulation [°]")
+        axes[1, 0].grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("t [h]")
+    page.figure(
+        fig,
+        "fig-hil-pointing",
+        "True pointing error, bench and simulation"
+        + (" (same noise streams), and their difference." if paired else "."),
+    )
 
 
 def _wheel_figure(page: Page, result) -> None:

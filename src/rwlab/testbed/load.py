@@ -56,6 +56,7 @@ def load_record(
     outputs: tuple[str, ...] = ("speed",),
     max_gap: float | None = None,
     max_gap_samples: int | None = None,
+    node: int | None = None,
 ) -> IOData:
     """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
 
@@ -80,6 +81,9 @@ def load_record(
     max_gap_samples : int, optional
         The same limit as a number of samples (``max_gap = max_gap_samples·Ts``),
         for callers that know a model's memory but not the record's Ts.
+    node : int, optional
+        The wheel to read from a record of several (``rwlab hil``: topics
+        ``/wheelN/command`` and ``/wheelN/telemetry``).
 
     Returns
     -------
@@ -99,8 +103,16 @@ def load_record(
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs:
         raise DataError(f"outputs must be chosen from {sorted(OUTPUTS)}, got {list(outputs)}")
-    commands = record.topic("/command")
-    telemetry = record.topic("/telemetry")
+    prefix = "" if node is None else f"/wheel{node}"
+    wheels = sorted(
+        t.split("/")[1] for t in record.messages if t.endswith("/telemetry") and t[1:6] == "wheel"
+    )
+    if node is None and wheels and not record.topic("/telemetry"):
+        raise DataError(
+            f"{path} holds several wheels ({', '.join(wheels)}): choose one (node=, CLI --node)"
+        )
+    commands = record.topic(f"{prefix}/command")
+    telemetry = record.topic(f"{prefix}/telemetry")
     if not commands or len(telemetry) < 2:
         raise DataError(f"{path}: the record holds no experiment (no commands or telemetry)")
     tc = np.array([c["t"] for c in commands])

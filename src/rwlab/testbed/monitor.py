@@ -7,8 +7,11 @@ page refreshes at 20 Hz and keeps only the last ``max_points`` samples per
 plot (drop-oldest, for the display only: the record keeps everything).
 
 It shows command vs speed, acceleration (derived from speed over ≥ 0.1 s),
-motor current, and the wheel's mode, faults and the experiment's events. Given
-a finished record with ``replay=True`` it plays the record back at ``speed`` times real time.
+motor current, and the wheel's mode, faults and the experiment's events. A
+record of ``rwlab hil`` (a ``/satellite`` channel) adds the satellite view on
+top: true and estimated pointing error against the requirement, every wheel's
+momentum, the wheels still in the loop, and the alarms among the events. Given
+a finished record with ``replay=True`` it plays the record back at ``speed``×.
 Bokeh serves its own JavaScript from the server: no CDN, works offline.
 """
 
@@ -117,11 +120,21 @@ def make_document(
     f_acc.line("t", "acceleration", source=tel, color="#2ca02c")
     f_cur = figure(title="motor current [A]", x_range=f_speed.x_range, **opts)
     f_cur.line("t", "current", source=tel, color="#9467bd")
+    sat, mom, f_point, f_mom = _satellite_figures(opts)
     title = Div(text=f"<h2>rwlab monitor — {path.name}{' (replay)' if replay else ''}</h2>")
     status = Div(text="waiting for data…", name="status")
     events = Div(text="", name="events")
     doc.add_root(
-        column(title, row(status, events), f_speed, f_acc, f_cur, sizing_mode="stretch_width")
+        column(
+            title,
+            row(status, events),
+            f_point,
+            f_mom,
+            f_speed,
+            f_acc,
+            f_cur,
+            sizing_mode="stretch_width",
+        )
     )
     doc.title = f"rwlab monitor: {path.name}"
     recent: deque[tuple[float, float]] = deque()
@@ -172,11 +185,66 @@ def make_document(
                 f"speed {last['speed_rpm']:.1f} rpm &nbsp; {fault} &nbsp; "
                 f"frames {state['frames']} (lost {state['lost']})"
             )
+        rows = new.get("/satellite", [])
+        if rows:
+            _stream_satellite(rows, sat, mom, max_points)
+            f_point.visible = f_mom.visible = True
+            last = rows[-1]
+            status.text = (
+                f"t = {last['t']:.1f} s &nbsp; pointing error <b>{last['error_deg']:.4f}°</b> "
+                f"&nbsp; estimation {last['estimation_error_deg']:.4f}° &nbsp; wheels in the "
+                f"loop {', '.join(map(str, last['active_wheels']))}"
+            )
         beats = new.get("/heartbeat", [])
         if beats and beats[-1]["faults"]:
             status.text += f" &nbsp; fault bits {beats[-1]['faults']}"
 
     doc.add_periodic_callback(refresh, REFRESH_MS)
+
+
+MAX_WHEELS_SHOWN = 6
+
+
+def _satellite_figures(opts: dict):
+    """The satellite view's sources and figures (hidden until a ``/satellite`` row comes)."""
+    from bokeh.models import ColumnDataSource, Span
+    from bokeh.plotting import figure
+
+    sat = ColumnDataSource({"t": [], "error": [], "estimation": []}, name="satellite")
+    mom = ColumnDataSource(
+        {"t": [], **{f"h{i}": [] for i in range(1, MAX_WHEELS_SHOWN + 1)}}, name="momentum"
+    )
+    f_point = figure(title="satellite: pointing error [°]", x_axis_label="t [s]", **opts)
+    f_point.line("t", "error", source=sat, color="#d62728", legend_label="true")
+    f_point.line("t", "estimation", source=sat, color="#1f77b4", legend_label="estimation")
+    f_point.add_layout(Span(location=0.1, dimension="width", line_dash="dashed"))
+    f_mom = figure(title="wheel momentum [N·m·s]", x_range=f_point.x_range, **opts)
+    colors = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
+    for i, c in enumerate(colors, start=1):
+        f_mom.line("t", f"h{i}", source=mom, color=c, legend_label=f"wheel {i}")
+    for f in (f_point, f_mom):
+        f.visible = False
+        f.legend.location = "top_left"
+    return sat, mom, f_point, f_mom
+
+
+def _stream_satellite(rows: list[dict], sat, mom, max_points: int) -> None:
+    t = [r["t"] for r in rows]
+    sat.stream(
+        {
+            "t": t,
+            "error": [r["error_deg"] for r in rows],
+            "estimation": [r["estimation_error_deg"] for r in rows],
+        },
+        rollover=max_points,
+    )
+    h = {f"h{i}": [] for i in range(1, MAX_WHEELS_SHOWN + 1)}
+    for r in rows:
+        values = list(r["wheel_momentum_Nms"])[:MAX_WHEELS_SHOWN]
+        values += [float("nan")] * (MAX_WHEELS_SHOWN - len(values))
+        for i, v in enumerate(values, start=1):
+            h[f"h{i}"].append(v)
+    mom.stream({"t": t, **h}, rollover=max_points)
 
 
 def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:

@@ -143,8 +143,9 @@ class HallSpeedSensor:
     fine at high speed), else the edges within the window, at least one interval
     (the placement error of one interval shows: coarse at low speed). When the
     next edge is overdue by half an interval the estimate becomes ``Δθ / (time
-    since the last edge)``, so a stopping wheel reads a falling speed; no edge for longer
-    than one edge interval at ``min_measurable_rpm`` reads 0. A reversal restarts the estimate.
+    since the last edge)``, so a stopping wheel reads a falling speed; no edge
+    for longer than one edge interval at ``min_measurable_rpm`` reads 0. A
+    reversal restarts the estimate.
 
     Parameters
     ----------

@@ -40,6 +40,7 @@ __all__ = ["DEFAULT_GROUP", "PORT", "LoopbackMulticastBus", "parse_channel"]
 DEFAULT_GROUP = "239.74.163.2"
 PORT = 43113  # python-can's udp_multicast port
 IP_MULTICAST_ALL = 49  # Linux <linux/in.h>; Python's socket module does not name it
+RECEIVE_BUFFER = 4 << 20  # bytes
 MAX_DATAGRAMS_PER_READ = 512  # a flood of junk costs one bounded read, then the caller runs
 
 
@@ -125,6 +126,8 @@ class LoopbackMulticastBus(can.BusABC):
             rx.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             rx.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
             rx.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+            # room for a burst (the kernel caps it at net.core.rmem_max)
+            rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
             rx.bind((group, port))  # only datagrams addressed to this group
             mreq = socket.inet_aton(group) + socket.inet_aton(iface)
             rx.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, mreq)
