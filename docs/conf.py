@@ -53,11 +53,12 @@ html_theme_options = {"description": "reaction wheels: testbed, identification, 
 
 
 def _plain_bars(app, what, name, obj, options, lines):
-    """Docstrings write |G| for a magnitude; reST would read a substitution. Escape the
-    bars, except on table lines (which start with | or +)."""
+    """Docstrings write |G| for a magnitude; reST would read a substitution. Show each bar
+    as U+2223 (same width, so simple tables keep their columns), except on grid-table
+    and line-block lines (which start with "+" or "| ")."""
     for i, line in enumerate(lines):
-        if "|" in line and not line.lstrip().startswith(("|", "+")):
-            lines[i] = line.replace("|", r"\|")
+        if "|" in line and not line.lstrip().startswith(("+", "| ")):
+            lines[i] = line.replace("|", "\u2223")
 
 
 def setup(app):

@@ -38,7 +38,12 @@ ax.set_ylabel("validation fit [%]")
 
 # %%
 # The model file, read back as the simulated wheel the attitude loop flies.
-path = wheel_model(result, **saturation).save(work / "model.json")
+path = wheel_model(
+    result,
+    speed_limit_rpm=saturation["speed_limit_rpm"],
+    accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
+    saturation_source=saturation["saturation_source"],
+).save(work / "model.json")
 wheel = IdentifiedWheel.from_json(path)
 step = wheel.simulate(np.full(80, 3000.0))
 fig, ax = plt.subplots(figsize=(8, 3), constrained_layout=True)

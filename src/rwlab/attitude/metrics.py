@@ -26,6 +26,18 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
     ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
     slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
     and settling come from the logged trace.
+
+    Parameters
+    ----------
+    r : SimResult
+        One run.
+    band_deg : float
+        Settling band on the pointing error, degrees.
+
+    Returns
+    -------
+    dict
+        The metrics (``metrics.json``'s per-controller entries), SI units or named.
     """
     st = r.stats
     steady_n = max(st["steady_steps"], 1)
@@ -75,7 +87,7 @@ def _filter_metrics(r: SimResult) -> dict:
     """The filter's consistency over the steady window: mean NEES (against the right truth
     for its state: ω, the disturbance state's true value, or the gyro bias), its state
     count, and the share of attitude-error samples inside ±3σ."""
-    if r.sigma is None or not np.any(r.sigma):
+    if r.sigma is None or r.est_error_axes is None or not np.any(r.sigma):
         return {"nees_mean": None, "nees_states": None, "inside_3sigma_fraction": None}
     steady = r.t >= r.steady_from_s
     nees = r.nees[steady]

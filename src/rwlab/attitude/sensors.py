@@ -185,7 +185,17 @@ class StarTrackerModel:
 
 
 def star_tracker_frame(boresight) -> np.ndarray:
-    """The rotation (3, 3) from body axes to the tracker's (its z the boresight)."""
+    """The rotation (3, 3) from body axes to the tracker's (its z the boresight).
+
+    Parameters
+    ----------
+    boresight : array_like, shape (3,)
+        The boresight in body axes.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+    """
     z = np.asarray(boresight, float) / np.linalg.norm(boresight)
     helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     x = np.cross(helper, z)
@@ -195,7 +205,22 @@ def star_tracker_frame(boresight) -> np.ndarray:
 
 def draw_gyro_errors(model: GyroModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """One unit's fixed errors: E (3, 3) = scale factors + misalignment, and the turn-on bias
-    (3,), rad/s."""
+    (3,), rad/s.
+
+    Parameters
+    ----------
+    model : GyroModel
+        The gyro's error budget.
+    rng : numpy.random.Generator
+        The random source.
+
+    Returns
+    -------
+    E : numpy.ndarray, shape (3, 3)
+        Scale factors and misalignment.
+    bias : numpy.ndarray, shape (3,)
+        Turn-on bias, rad/s.
+    """
     E = np.diag(rng.standard_normal(3) * model.scale_factor_ppm * 1e-6)
     off = ~np.eye(3, dtype=bool)
     E[off] = rng.standard_normal(6) * math.radians(model.misalignment_deg)

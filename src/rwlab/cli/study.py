@@ -256,7 +256,7 @@ def _identify_one(
         },
         current=load_current(file, Ts),
     )
-    model = wheel_model(
+    model = wheel_model(  # the owner class: the healthy reference is added below
         result,
         speed_limit_rpm=saturation["speed_limit_rpm"],
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],

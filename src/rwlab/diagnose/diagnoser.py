@@ -473,6 +473,11 @@ def healthy_reference(
     source : str
         Where the record came from.
 
+    Returns
+    -------
+    HealthyReference
+        Block statistics per test, for ``model.json``.
+
     Raises
     ------
     DataError
@@ -624,6 +629,11 @@ def diagnose(
         From the model file (:meth:`HealthyReference.from_model_file`).
     false_alarms_per_hour, latch :
         See :class:`Diagnoser`.
+
+    Returns
+    -------
+    Diagnosis
+        The alarms, thresholds and residual histories.
 
     Raises
     ------

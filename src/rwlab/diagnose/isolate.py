@@ -51,7 +51,19 @@ LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.
 
 @dataclass(frozen=True)
 class Finding:
-    """A named fault with its estimated size and 95 % confidence interval."""
+    """A named fault with its estimated size and 95 % confidence interval.
+
+    Parameters
+    ----------
+    kind : str
+        The fault's name.
+    magnitude : float or None
+        Its estimated size, in ``unit``.
+    ci : (float, float) or None
+        95 % confidence interval of the size.
+    unit : str
+        The size's unit.
+    """
 
     kind: str
     magnitude: float | None

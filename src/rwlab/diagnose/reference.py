@@ -95,6 +95,10 @@ def block_stats(values: np.ndarray, block: int, total_samples: int) -> BlockStat
     total_samples : int
         All samples of the record (for the qualifying share).
 
+    Returns
+    -------
+    BlockStats
+
     Raises
     ------
     DataError

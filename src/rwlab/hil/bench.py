@@ -321,6 +321,17 @@ class WheelBank:
 
 
 def twin_params_toml(params: WheelParams) -> str:
-    """The wheel parameters as a TOML ``[wheel]`` table (for ``rwlab wheel serve --params``)."""
+    """The wheel parameters as a TOML ``[wheel]`` table (for ``rwlab wheel serve --params``).
+
+    Parameters
+    ----------
+    params : WheelParams
+        The wheel's parameters.
+
+    Returns
+    -------
+    str
+        The TOML text.
+    """
     lines = ["[wheel]"] + [f"{k} = {float(v)!r}" for k, v in params.to_dict().items()]
     return "\n".join(lines) + "\n"

@@ -21,6 +21,7 @@ them equal) and every difference on the bench is the wheels'.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -63,6 +64,11 @@ def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
     """Unit vector b turned by the small angle σ·e (e: three standard normals)."""
     v = b + sigma * np.cross(e, b)
     return v / np.linalg.norm(v)
+
+
+# the host flies the sun and earth sensors only (sim._Streams.block draws no gyro or
+# tracker noise for them)
+_SUN_EARTH_ONLY = SimpleNamespace(gyro=False, tracker=False)
 
 
 class Satellite:
@@ -213,7 +219,9 @@ class Satellite:
             self.controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
         )
         self.K_w, self.M = np.ascontiguousarray(K[:, 3:]), _rate_map(K)
-        self.process, self.sensor = self.streams.block(k, n_steps, self.sensor_every, self.noise_sd)
+        every = (self.sensor_every, self.sensor_every)  # no star tracker, no gyros on the host
+        noise = self.streams.block(k, n_steps, every, self.noise_sd, _SUN_EARTH_ONLY)
+        self.process, self.sensor = noise.process, noise.sensor
         self.block_k0, self.i_sensor = k, 0
         self.sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
         rows = math.ceil(((k + n_steps) * sc.dt - self.sky_t0) / SKY_STEP) + 2

@@ -364,7 +364,7 @@ def greybox_fit(
         )
         if sol is None or trial.cost < sol.cost:
             sol = trial
-    if not np.all(np.isfinite(sol.x)):
+    if sol is None or not np.all(np.isfinite(sol.x)):
         raise EstimationError(
             "the grey-box fit diverged; check the record and the datasheet values"
         )

@@ -392,7 +392,7 @@ def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
         out["nlarx"] = {"error": str(exc)}
     scored = {k: v["fit_percent"] for k, v in out.items() if v.get("fit_percent") is not None}
     if scored:
-        best = max(scored, key=scored.get)
+        best = max(scored, key=lambda k: scored[k])
         out["chosen"] = best
         out["choice"] = f"{best}: the better simulation fit on the validation part " + ", ".join(
             f"{k} {v:.2f} %" for k, v in scored.items()

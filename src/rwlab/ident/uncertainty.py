@@ -183,7 +183,7 @@ def bode_band(
     Returns
     -------
     magnitude, phase : Band
-        |G| and its phase in degrees, each with one standard deviation.
+        The magnitude |G| and the phase in degrees, each with one standard deviation.
     """
     w = np.atleast_1d(np.asarray(omega, dtype=float))
     G0 = _freq(model, w)

@@ -32,7 +32,20 @@ _COMPARED = (
 
 
 def write_hil_report(result, out_dir: str | os.PathLike) -> Path:
-    """Write ``report.html`` of a :class:`rwlab.hil.HilResult` into ``out_dir``; its path."""
+    """Write ``report.html`` of a :class:`rwlab.hil.HilResult` into ``out_dir``; its path.
+
+    Parameters
+    ----------
+    result : HilResult
+        The run.
+    out_dir : str or os.PathLike
+        The folder.
+
+    Returns
+    -------
+    Path
+        ``report.html``.
+    """
     page = _page(result)
     return page.save(Path(out_dir) / "report.html")
 

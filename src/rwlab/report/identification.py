@@ -152,7 +152,11 @@ def write_study(
     study["model_file"] = "model.json"
     for name, payload in (("study.json", study), ("model.json", model_info)):
         text = json.dumps(payload, indent=2)
-        atomic_write_bytes(targets[name], lambda tmp, text=text: tmp.write_text(text))
+
+        def write(tmp: Path, text: str = text) -> None:
+            tmp.write_text(text)
+
+        atomic_write_bytes(targets[name], write)
     _page(result, study, model_info).save(targets["report.html"])
     return targets
 

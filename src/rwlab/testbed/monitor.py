@@ -207,7 +207,8 @@ MAX_WHEELS_SHOWN = 6
 
 def _satellite_figures(opts: dict):
     """The satellite view's sources and figures (hidden until a ``/satellite`` row comes)."""
-    from bokeh.models import ColumnDataSource, Span
+    from bokeh.models import ColumnDataSource
+    from bokeh.models.annotations import Span
     from bokeh.plotting import figure
 
     sat = ColumnDataSource({"t": [], "error": [], "estimation": []}, name="satellite")
@@ -238,7 +239,7 @@ def _stream_satellite(rows: list[dict], sat, mom, max_points: int) -> None:
         },
         rollover=max_points,
     )
-    h = {f"h{i}": [] for i in range(1, MAX_WHEELS_SHOWN + 1)}
+    h: dict[str, list[float]] = {f"h{i}": [] for i in range(1, MAX_WHEELS_SHOWN + 1)}
     for r in rows:
         values = list(r["wheel_momentum_Nms"])[:MAX_WHEELS_SHOWN]
         values += [float("nan")] * (MAX_WHEELS_SHOWN - len(values))

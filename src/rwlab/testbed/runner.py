@@ -483,7 +483,7 @@ def run_experiment(
     try:
         if simulated:
             if not stream_twin:
-                channel = host_bus.channel_id  # type: ignore[attr-defined]  # a VirtualBus has one
+                channel = host_bus.channel_id
                 node_bus = open_bus("virtual", channel, simulated_clock=not realtime)
             node = WheelNode(
                 node_bus,

@@ -73,7 +73,12 @@ EMCY_CODES = {  # CiA 301 error code classes
 
 
 def eds_path() -> str:
-    """Path of the shipped object dictionary, ``rw_canopen.eds``."""
+    """Path of the shipped object dictionary, ``rw_canopen.eds``.
+
+    Returns
+    -------
+    str
+    """
     return str(resources.files(__package__).joinpath("rw_canopen.eds"))
 
 

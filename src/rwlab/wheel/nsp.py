@@ -63,7 +63,17 @@ MAX_BYTES_PER_READ = 1 << 16  # a flood is read in bounded bites
 
 
 def wheel_address(node_id: int) -> int:
-    """The NSP address of wheel ``node_id`` (0..15): ``0x20 + node_id``."""
+    """The NSP address of wheel ``node_id`` (0..15): ``0x20 + node_id``.
+
+    Parameters
+    ----------
+    node_id : int
+        The wheel, 0..15.
+
+    Returns
+    -------
+    int
+    """
     return 0x20 + proto._check_node(node_id)
 
 
