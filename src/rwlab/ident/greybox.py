@@ -364,6 +364,7 @@ def greybox_fit(
         )
         if sol is None or trial.cost < sol.cost:
             sol = trial
+    assert sol is not None  # the loop above ran
     if not np.all(np.isfinite(sol.x)):
         raise EstimationError(
             "the grey-box fit diverged; check the record and the datasheet values"
