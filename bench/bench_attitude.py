@@ -11,6 +11,9 @@ cost over the minimal loop's, both measured in this run, best of three):
   ideal wheels and with the RW physics;
 - "full LQG loop": the LQR on the MEKF's estimate (sun + earth sensors every
   0.5 s, the filter's estimate propagated every step);
+- "full LQG loop, gyros": geo-comsat-gyro — gyros sampled every step, the
+  gyro-driven MEKF (attitude + gyro bias) with sun + earth sensors (the issue's
+  target: ≤ 15× the floor); "…, gyros + star tracker": geo-comsat-star;
 - "whole process": ``rwlab attitude simulate --scenario geo-comsat --controller
   pd --estimator truth --dt 0.1 --duration 86400`` as a subprocess (numba cache
   warm: run once before): start-up, imports, the day's loop, metrics and the
@@ -42,10 +45,12 @@ DAY_CMD = (
 )
 
 
-def rwlab_case(hours: float, controller: str, wheel_model: str = "ideal") -> float:
+def rwlab_case(
+    hours: float, controller: str, wheel_model: str = "ideal", scenario: str = "geo-comsat"
+) -> float:
     """µs per step of ``fly``'s loop: best of three of (time for 2h − time for h) / steps,
     so the fixed costs (the design, the metrics) cancel."""
-    sc = SCENARIOS["geo-comsat"].with_(wheel_model=wheel_model)
+    sc = SCENARIOS[scenario].with_(wheel_model=wheel_model)
     fly(sc, controller, duration=10)  # compile or load the kernels outside the timing
 
     def timed(h: float) -> float:
@@ -92,6 +97,9 @@ def basilisk_case(hours: float, peer: str | None, python: str) -> float | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hours", type=float, default=6.0, help="simulated hours per case")
+    parser.add_argument(
+        "--quick", action="store_true", help="only the floor and the gyro LQG loops"
+    )
     parser.add_argument("--peer", help="the Basilisk peer script (not kept in the project)")
     parser.add_argument(
         "--basilisk-python",
@@ -100,11 +108,27 @@ def main() -> None:
     )
     args = parser.parse_args()
     floor = minimal_loop.us_per_step()
+    if args.quick:
+        for name, sc in (("gyros", "geo-comsat-gyro"), ("gyros + star tracker", "geo-comsat-star")):
+            us = rwlab_case(args.hours, "lqg", "ideal", sc)
+            print(
+                f"full LQG loop, {name}: {us:.3f} µs/step = {us / floor:.1f} × floor "
+                f"({floor:.3f} µs/step); 30 days: {us * 30 * STEPS_PER_DAY / 1e6:.0f} s"
+            )
+        return
     rows = [
         ("minimal loop (floor)", floor),
         ("PD (truth), ideal wheels", rwlab_case(args.hours, "pd")),
         ("PD (truth), RW physics wheels", rwlab_case(args.hours, "pd", "physics")),
         ("full LQG loop (sensors + MEKF)", rwlab_case(args.hours, "lqg")),
+        (
+            "full LQG loop, gyros (gyro MEKF)",
+            rwlab_case(args.hours, "lqg", "ideal", "geo-comsat-gyro"),
+        ),
+        (
+            "full LQG loop, gyros + star tracker",
+            rwlab_case(args.hours, "lqg", "ideal", "geo-comsat-star"),
+        ),
         ("whole process: rwlab " + DAY_CMD.split()[1], whole_process() / STEPS_PER_DAY * 1e6),
     ]
     bsk = basilisk_case(args.hours, args.peer, args.basilisk_python)

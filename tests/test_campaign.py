@@ -15,7 +15,7 @@ from scipy import stats
 
 from rwlab import datasets
 from rwlab.attitude.frames import from_axis_angle
-from rwlab.attitude.scenario import load_scenario
+from rwlab.attitude.scenario import SCENARIOS, load_scenario
 from rwlab.campaign.dispersions import Dispersion, apply, draw, load_dispersions
 from rwlab.campaign.engine import batches, dask_client
 from rwlab.campaign.montecarlo import (
@@ -206,6 +206,10 @@ def test_budget_statistics_over_runs():
                 "seed": 1000 + i,
                 "steady_max_error_deg": 0.01 * (i + 1),
                 **{f"steady_max_error_{a}_deg": rng.uniform() for a in "xyz"},
+                **{f"rpe_{a}_deg": rng.uniform() / 10 for a in "xyz"},
+                **{f"knowledge_error_{a}_deg": rng.uniform() / 100 for a in "xyz"},
+                "eclipse_s": 600.0 + i,
+                "epoch": "2027-09-15T00:00:00+00:00",
                 "torque_peak_Nm": 1.0 if i == 7 else 0.5,
                 "wheel_momentum_peak_fraction": 0.3,
                 "torque_saturated_fraction": 0.0,
@@ -223,6 +227,23 @@ def test_budget_statistics_over_runs():
     assert b["torque_peak_Nm"] == {"max": 1.0, "seed": 1007}
     x = np.array([r["steady_max_error_x_deg"] for r in rows])
     assert b["pointing_error_deg"]["x"]["p99_73"] == pytest.approx(np.percentile(x, 99.73))
+    # the reviewer's figures: order statistics of the column, bounds from the binomial
+    assert b["statistic_column"] == "steady_max_error_deg"
+    q = {row["p"]: row for row in b["quantiles"]}
+    ordered = np.sort([r["steady_max_error_deg"] for r in rows])
+    assert q[0.5]["estimate"] == ordered[24] and q[0.9]["estimate"] == ordered[44]
+    for p, row in q.items():
+        if row["upper_bound"] is not None:
+            assert row["upper_bound"] in ordered and row["confidence"] == 0.95
+            r = int(np.searchsorted(ordered, row["upper_bound"])) + 1  # its rank
+            mass = sum(math.comb(50, i) * p**i * (1 - p) ** (50 - i) for i in range(r))
+            assert mass >= 0.95
+    assert q[0.9973]["upper_bound"] is None and q[0.9973]["runs_needed"] == 1109
+    met = b["meets_requirement"]
+    assert met["fraction"] == pytest.approx(10 / 50)
+    assert 0.1 < met["lower_bound_95"] < 0.2
+    assert set(b["APE"]) == set(b["knowledge_error"]) == {"x", "y", "z"}
+    assert b["RPE"]["window_s"] > 0 and b["APE"]["x"]["max"] == pytest.approx(x.max())
 
 
 def test_batches_keep_order_and_have_many_runs_each():
@@ -367,3 +388,27 @@ def test_engine_option_errors(tmp_path):
     assert both.exit_code == 2 and "not both" in both.output
     r = _rwlab("identify", "dryer", "--workers", 2, "--out", tmp_path / "o")
     assert r.exit_code == 2 and "folder of records" in r.output
+
+
+def test_runs_get_their_own_epoch_in_the_spread_and_the_filter_keeps_the_nominal_inertia():
+    from datetime import datetime, timedelta
+
+    from rwlab.campaign.montecarlo import dispersed
+
+    sc = SCENARIOS["geo-comsat-gyro"]
+    c = Campaign(
+        sc, load_dispersions(), 86400.0, epoch="2027-09-01T00:00:00Z", epoch_spread_days=40
+    )
+    start = datetime.fromisoformat("2027-09-01T00:00:00+00:00")
+    epochs = set()
+    for s in run_seeds(1, 20):
+        run, values = dispersed(c, s)
+        offset = datetime.fromisoformat(run.epoch) - start
+        assert timedelta(0) <= offset < timedelta(days=40)
+        assert values["epoch"] == run.epoch
+        assert run.filter_inertia == tuple(sc.inertia) and run.inertia != sc.inertia
+        epochs.add(run.epoch)
+        assert dispersed(c, s)[0] == run  # from the seed alone
+    assert len(epochs) == 20
+    with pytest.raises(ConfigError, match="epoch"):
+        Campaign(sc, (), 10.0, epoch_spread_days=30)

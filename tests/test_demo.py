@@ -4,8 +4,9 @@ from html.parser import HTMLParser
 import pytest
 from click.testing import CliRunner
 
+from rwlab._io import output_folder
 from rwlab.cli import main
-from rwlab.demo import check_out
+from rwlab.demo import DEMO_FILES
 from tests.conftest import needs_chromium
 
 
@@ -62,7 +63,10 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
 
 @pytest.mark.slow
 def test_a_rerun_replaces_a_demo_but_never_a_foreign_folder(demo_dir, tmp_path):
-    check_out(demo_dir, force=False)  # the Quick start run twice: the old demo is replaced
+    # the Quick start run twice: the old demo is accepted for replacement (on success only)
+    with pytest.raises(RuntimeError), output_folder(demo_dir, DEMO_FILES, replace_previous=True):
+        raise RuntimeError("the new demo failed")
+    assert (demo_dir / "index.html").exists()
     (tmp_path / "thesis.tex").write_text("mine")
     r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(tmp_path)])
     assert r.exit_code == 2 and "not a previous demo" in r.output

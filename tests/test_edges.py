@@ -375,7 +375,10 @@ def test_report_labels_fold_signs_and_name_the_preprocessing():
 
     assert _minus("output", -4772.0) == "output + 4772"
     assert _minus("input", 31.4) == "input − 31.4" and _minus("input", 0.0) == "input"
-    assert _preprocessed_label("speed_rpm", "rpm", "normalize") == "speed_rpm, normalised to [0, 1]"
+    assert (
+        _preprocessed_label("speed_rpm", "rpm", "normalize")
+        == "speed_rpm, normalised to [0, 1] over the estimation part"
+    )
     assert _preprocessed_label("speed_rpm", "rpm", "none") == "speed_rpm [rpm]"
 
 

@@ -304,3 +304,16 @@ def test_the_equinox_day_holds_the_requirement_through_the_shadow(tmp_path):
     beta = [trace[f"srp_lever_est_{a}_Nm"][-1] for a in "xyz"]
     assert np.allclose(beta, d[1] * d[2:5], atol=0.15 * d[1] * np.linalg.norm(d[2:5]))
     assert 'id="fig-disturbance"' in (out / "report.html").read_text()
+
+
+def test_srp_scale_falls_with_the_square_of_the_suns_distance():
+    from rwlab.attitude.ephemeris import AU, SKY_COLUMNS, sky_table
+
+    sun = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]]) * np.array([[0.9833 * AU], [1.0167 * AU]])
+    moon = np.array([[1.0, 0.0, 0.0]] * 2) * 3.844e8
+    table = sky_table(sun, moon)
+    col = SKY_COLUMNS.index("srp_scale")
+    assert table[0, col] == pytest.approx(1 / 0.9833**2) and table[1, col] == pytest.approx(
+        1 / 1.0167**2
+    )
+    assert np.all(table[:, SKY_COLUMNS.index("sunlit")] == 1.0)

@@ -73,10 +73,14 @@ def test_bad_models_and_data_are_refused():
 
 @pytest.fixture(scope="module")
 def prbs_study(tmp_path_factory):
-    """`rwlab identify` on a 25-minute PRBS record of the simulated RW90 (issue 14)."""
+    """`rwlab identify` on a 25-minute PRBS record of the ideal RW90 twin (issue 14).
+
+    The ideal twin: the servo model's structure is its inner loop, exactly (on the
+    realistic twin the servo model's residuals are far from white).
+    """
     root = tmp_path_factory.mktemp("nl")
     record = root / "prbs.mcap"
-    run_experiment(ExperimentConfig(duration=1500, Ts=0.5, seed=0), record)
+    run_experiment(ExperimentConfig(duration=1500, Ts=0.5, seed=0, wheel="ideal"), record)
     result = CliRunner().invoke(main, ["identify", str(record), "--out", str(root / "out")])
     assert result.exit_code == 0, result.output
     return root / "out"

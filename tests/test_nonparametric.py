@@ -117,3 +117,26 @@ def test_bad_input_is_a_clear_error():
         impulseest(d, 10, kernel="DC")
     with pytest.raises(DataError):
         etfe(IOData(np.ones((200, 2)), d.y, 1.0))
+
+
+def test_spa_reports_the_window_bias_that_its_band_leaves_out():
+    # a resonance sharper than the window: the bias indicator is largest at the peak
+    from scipy.signal import lfilter
+
+    from rwlab.data import IOData
+    from rwlab.ident import spa
+
+    r = np.random.default_rng(2)
+    u = r.standard_normal(4000)
+    den = [1, -2 * 0.98 * np.cos(0.6), 0.98**2]
+    y = lfilter([0, 0.1], den, u) + 0.05 * r.standard_normal(4000)
+    fr = spa(IOData(u, y, 1.0), 30)
+    bias = fr.report["bias"]
+    assert bias["window_size"] == 30 and bias["resolution_rad_s"] == pytest.approx(2 * np.pi / 30)
+    est = np.asarray(bias["estimate"])[:, 0, 0]
+    peak = np.argmin(np.abs(fr.omega - 0.6))
+    assert est[peak] > 5 * np.median(est)
+    # and there the ±σ band misses the truth: the bias is the larger error
+    z = np.exp(1j * fr.omega[peak])
+    true = 0.1 / z / (1 + den[1] / z + den[2] / z**2)
+    assert abs(fr.response[peak, 0, 0] - true) > 2 * fr.response_sd[peak, 0, 0]

@@ -255,17 +255,20 @@ def test_noise_free_data_converge_without_warning():
     assert m.report["termination"] == "converged (exact fit)"
 
 
-def test_rwlab_ident_pem_is_the_module_and_still_the_estimator():
-    import types
+def test_rwlab_ident_pem_is_a_plain_function_and_the_module_still_imports():
+    import inspect
+    import sys
 
-    import rwlab.ident.pem as module
     from rwlab import ident
 
-    assert isinstance(module, types.ModuleType) and module.armax is armax
-    assert ident.pem is module
+    module = sys.modules["rwlab.ident.pem"]
+    assert inspect.isfunction(ident.pem) and ident.pem is module.pem
+    assert module.armax is armax  # from rwlab.ident.pem import armax still works
     data = _simulate(ARMAX, 800, seed=14)
     start = PolyModel([1, -1.4, 0.6], [0, 0.9, 0.4], C=[1, 0.0], Ts=data.Ts)
-    assert np.array_equal(ident.pem(data, start).parameters, module.pem(data, start).parameters)
+    refined = ident.pem(data, start)
+    assert refined.structure == start.structure and refined.n_params == start.n_params
+    assert refined.report["loss"] <= armax(data, 2, 2, 1, 1).report["loss"] * (1 + 1e-6)
 
 
 def test_armax_escapes_the_local_minimum_of_the_cascaded_tanks():
@@ -400,3 +403,23 @@ def test_a_two_input_model_with_one_f_per_input_behaves_as_its_sum(tmp_path):
             nf=[2, 1],
             Ts=0.1,
         )
+
+
+def test_oe_multi_start_escapes_the_local_minimum_a_single_start_stops_in():
+    # bench/check_pem_optimum.py --oe-runs 300: seed 31 is the record (of 300) where a
+    # single start stops 0.26 % above the optimum; the truth-started search is the reference
+    from scipy.signal import lfilter
+
+    from rwlab.ident import pem as P
+
+    B = np.array([0, 1.0, 0.5, -0.3, 0.2])
+    F = np.convolve([1, -1.5, 0.9], [1, 0.4, 0.6])
+    r = np.random.default_rng(31)
+    u = r.standard_normal(2000)
+    y = lfilter(B, F, u) + 5 * r.standard_normal(2000)
+    data = IOData(u, y, 1.0)
+    orders = P._Orders(0, (4,), 0, 0, (4,), (1,), False)
+    truth = np.concatenate([B[1:], F[1:]])
+    best = P._minimize(orders, truth, [(y, u[:, None])], 100, 1e-10)[2] / 2000
+    assert oe(data, 4, 4, 1, starts=0).report["loss"] > 1.001 * best
+    assert oe(data, 4, 4, 1).report["loss"] <= 1.0001 * best

@@ -172,3 +172,50 @@ def test_report_renders_in_headless_chromium_without_network(study_dir, browser)
     )
     assert len(widths) >= len(FIGURES) and min(widths) > 100
     assert re.search(r"Chosen model: ARX221", driver.page_source)
+
+
+def _offset_record(seed: int, N: int = 3000) -> IOData:
+    """A first-order servo y = 0.2/(1 − 0.8 q⁻¹) q⁻¹ u (DC gain 1) driven around 2000 rpm,
+    with white output noise: physical zero is far outside the data's range."""
+    from scipy.signal import lfilter
+
+    r = np.random.default_rng(seed)
+    u = prbs(N * 0.5, 0.5, 1000.0, 4.0, offset=2000.0, seed=seed)
+    y = lfilter([0, 0.2], [1, -0.8], u - 2000, zi=[0.0])[0] + 2000 + 3 * r.standard_normal(N)
+    return IOData(u, y, 0.5, input_names="command", output_names="speed")
+
+
+@pytest.mark.parametrize("name", ["detrend", "scale", "normalize"])
+def test_preprocessing_statistics_come_from_the_estimation_part_only(name):
+    data = _offset_record(0)
+    wild = IOData(
+        data.u[:, 0] + np.where(np.arange(data.N) >= 2100, 5000.0, 0.0),
+        data.y[:, 0] * np.where(np.arange(data.N) >= 2100, 3.0, 1.0),
+        0.5,
+    )
+    from rwlab.ident.study import _preprocessed
+
+    a, b = _preprocessed(data, name, 0.7), _preprocessed(wild, name, 0.7)
+    np.testing.assert_array_equal(a.u[:2100], b.u[:2100])
+    np.testing.assert_array_equal(a.y[:2100], b.y[:2100])
+    assert all(np.array_equal(getattr(a.trend, k), getattr(b.trend, k)) for k in a.trend.__dict__)
+
+
+def test_default_preprocessing_leaves_the_arx_gain_unbiased_and_normalize_does_not():
+    # truth: DC gain 1. The default removes the estimation part's means, so ARX
+    # (no intercept) has no offset to absorb; min–max normalisation leaves one.
+    data = _offset_record(3)
+    default = identification_study(data, orders=(2,), nonlinear=False)
+    arx = default.models["ARX221"]
+    assert default.preprocess == "detrend"
+    gain = (
+        float(arx.dc_gain())
+        * default.data.trend.output_scale[0]
+        / default.data.trend.input_scale[0]
+    )
+    assert abs(gain - 1) < 0.01
+    biased = identification_study(data, orders=(2,), nonlinear=False, preprocess="normalize")
+    t = biased.data.trend
+    g_norm = float(biased.models["ARX221"].dc_gain()) * t.output_scale[0] / t.input_scale[0]
+    # physical zero maps to −min/range: the model's static map through the origin is off
+    assert abs(g_norm - 1) > 3 * abs(gain - 1)

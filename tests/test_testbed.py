@@ -27,9 +27,14 @@ def _umask() -> int:
 
 @pytest.fixture(scope="module")
 def prbs_record(tmp_path_factory):
-    """A 20-minute PRBS experiment on the simulated wheel and clock (paper A's set-up)."""
+    """A 20-minute PRBS experiment on the simulated wheel and clock (paper A's set-up).
+
+    The ideal twin: these tests check that every frame sent is recorded, so the
+    realistic twin's rare frame loss would blur them.
+    """
     path = tmp_path_factory.mktemp("rec") / "prbs.mcap"
-    summary = run_experiment(ExperimentConfig(duration=1200, Ts=0.5, seed=3), path)
+    cfg = ExperimentConfig(duration=1200, Ts=0.5, seed=3, wheel="ideal")
+    summary = run_experiment(cfg, path)
     return path, summary
 
 
@@ -56,7 +61,7 @@ def test_record_keeps_every_frame_with_metadata(prbs_record):
     seqs = [c["sequence"] for c in rec.topic("/command")]
     echoed = {m["sequence_echo"] for m in rec.topic("/telemetry")}
     assert set(seqs[-200:]) <= echoed  # every command was acknowledged
-    assert [e["kind"] for e in rec.topic("/event")] == ["start", "stop"]
+    assert [e["kind"] for e in rec.topic("/event")] == ["start", "timing", "stop"]
     times = [c["t"] for c in rec.topic("/command")]
     assert np.allclose(np.diff(times), 0.5)  # absolute scheduling: no drift
 

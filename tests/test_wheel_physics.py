@@ -6,7 +6,7 @@ from rwlab.errors import ConfigError
 from rwlab.ident import arx, compare, delayest
 from rwlab.signals import chirp, prbs, rate_limit
 from rwlab.wheel import RW90, Fault, Mode, WheelParams, WheelPhysics
-from rwlab.wheel.physics import rpm_to_rad_s, simulate_speed_command
+from rwlab.wheel.physics import IDEAL, rpm_to_rad_s, simulate_speed_command
 
 
 def test_rw90_parameters_are_paper_a_table_1_and_consistent():
@@ -90,7 +90,7 @@ def test_overspeed_latches_above_the_hard_limit():
 
 
 def test_measured_speed_is_quantised_and_blind_near_standstill():
-    wheel = WheelPhysics(seed=1)
+    wheel = WheelPhysics(IDEAL, seed=1)  # the plain sensor: true speed + noise, quantised
     wheel.speed = rpm_to_rad_s(1.0)
     assert wheel.measured_speed_rpm() == 0.0
     wheel.speed = rpm_to_rad_s(1234.56)

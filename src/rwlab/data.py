@@ -13,20 +13,30 @@ Nothing here modifies the caller's arrays.
 
 from __future__ import annotations
 
-import errno
+import copy
+import importlib
 import math
 import os
-import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import signal as sps
 
-from rwlab.errors import DataError
+from rwlab._io import atomic_write_bytes  # re-exported: it lived here before rwlab._io
+from rwlab.errors import DataError, FileFormatError, RwlabError
 
-__all__ = ["IOData", "Trend", "load", "merge"]
+__all__ = [
+    "IOData",
+    "Trend",
+    "atomic_write_bytes",
+    "load",
+    "merge",
+    "register_reader",
+    "register_writer",
+]
 
 
 @dataclass(frozen=True)
@@ -159,6 +169,10 @@ class IOData:
         What preprocessing removed (default: nothing).
     name : str, optional
         A label for reports.
+    source : dict, optional
+        What the file said about where the samples came from (a testbed
+        record's metadata: its wheel's parameters, mode, Ts); copied, kept
+        through slicing and preprocessing.
 
     Notes
     -----
@@ -179,6 +193,7 @@ class IOData:
         tstart: float = 0.0,
         trend: Trend | None = None,
         name: str = "",
+        source: dict | None = None,
     ) -> None:
         self.Ts = check_Ts(Ts)
         self.y = _as_matrix(y, "y")
@@ -199,6 +214,7 @@ class IOData:
         self.tstart = float(tstart)
         self.trend = trend if trend is not None else Trend.identity(self.nu, self.ny)
         self.name = name
+        self.source = copy.deepcopy(dict(source or {}))
 
     # -- shape ---------------------------------------------------------------
     @property
@@ -230,8 +246,48 @@ class IOData:
             f"inputs={list(self.input_names)}, outputs={list(self.output_names)})"
         )
 
+    def _repr_html_(self) -> str:
+        """A table of the channels (name, unit, range), for Jupyter."""
+        import html
+
+        rows = []
+        for kind, names, units, x in (
+            ("input", self.input_names, self.input_units, self.u),
+            ("output", self.output_names, self.output_units, self.y),
+        ):
+            for j, (n, unit) in enumerate(zip(names, units, strict=True)):
+                lo, hi = (float(x[:, j].min()), float(x[:, j].max())) if self.N else (0.0, 0.0)
+                rows.append(
+                    f"<tr><td>{kind}</td><td>{html.escape(n)}</td><td>{html.escape(unit)}</td>"
+                    f"<td>{lo:.4g} … {hi:.4g}</td></tr>"
+                )
+        head = (
+            f"<strong>IOData</strong> {html.escape(self.name)}: N = {self.N}, "
+            f"Ts = {self.Ts:g} s ({self.N * self.Ts:g} s)"
+        )
+        return (
+            f"<div>{head}<table><tr><th></th><th>channel</th><th>unit</th><th>range</th></tr>"
+            f"{''.join(rows)}</table></div>"
+        )
+
+    def to_pandas(self):
+        """The samples as a ``pandas.DataFrame``: one column per channel, indexed by time.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Shape (N, nu + ny); index ``time_s`` (s); columns the channel names.
+        """
+        from rwlab._display import pandas
+
+        pd = pandas()
+        names = [*self.input_names, *self.output_names]
+        frame = pd.DataFrame(np.hstack([self.u, self.y]), columns=names)
+        frame.index = pd.Index(self.time, name="time_s")
+        return frame
+
     def _with(self, u, y, **changes) -> IOData:
-        kwargs = dict(
+        kwargs: dict[str, Any] = dict(
             input_names=self.input_names,
             output_names=self.output_names,
             input_units=self.input_units,
@@ -239,6 +295,7 @@ class IOData:
             tstart=self.tstart,
             trend=self.trend,
             name=self.name,
+            source=self.source,
         )
         kwargs.update(changes)
         Ts = kwargs.pop("Ts", self.Ts)
@@ -272,33 +329,67 @@ class IOData:
         return self[:k], self[k:]
 
     # -- preprocessing ---------------------------------------------------------
-    def detrend(self, kind: str = "constant") -> IOData:
+    def _reference(self, reference: IOData | None) -> IOData:
+        if reference is None:
+            return self
+        if not isinstance(reference, IOData) or (reference.nu, reference.ny) != (self.nu, self.ny):
+            raise DataError(
+                "reference must be an IOData with the same inputs and outputs as the data "
+                "(typically its estimation part)"
+            )
+        return reference
+
+    def detrend(self, kind: str = "constant", *, reference: IOData | None = None) -> IOData:
         """Remove the mean (``kind='constant'``) or a straight line (``'linear'``).
 
         The removed offsets and slopes are kept in ``trend`` (MATLAB's TrendInfo).
+
+        Parameters
+        ----------
+        kind : {'constant', 'linear'}
+            What to remove.
+        reference : IOData, optional
+            Take the means (or lines) from this record, typically the estimation
+            part, and remove them from every sample of ``self``: validation data
+            then carry no information into the model. Default: ``self``.
         """
         if kind not in ("constant", "linear"):
             raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
-        t = self.time
+        ref = self._reference(reference)
+        t_ref = ref.time
 
         def fit(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            if kind == "constant" or self.N < 2:
+            if kind == "constant" or ref.N < 2:
                 return x.mean(axis=0), np.zeros(x.shape[1])
-            coef = np.polyfit(t, x, 1) if x.shape[1] else np.zeros((2, 0))
+            coef = np.polyfit(t_ref, x, 1) if x.shape[1] else np.zeros((2, 0))
             return coef[1], coef[0]
 
-        ou, su = fit(self.u)
-        oy, sy = fit(self.y)
+        ou, su = fit(ref.u)
+        oy, sy = fit(ref.y)
+        t = self.time
         u = self.u - ou - np.outer(t, su)
         y = self.y - oy - np.outer(t, sy)
         trend = self.trend.then(ou, su, np.ones(self.nu), oy, sy, np.ones(self.ny))
         return self._with(u, y, trend=trend)
 
-    def normalize(self) -> IOData:
+    def normalize(self, *, reference: IOData | None = None) -> IOData:
         """Scale every channel to [0, 1] (min → 0, max → 1), as paper A does.
+
+        Beware the bias it brings to a model without an intercept (ARX, OE, BJ):
+        physical zero maps to ``−min/(max − min)`` of each channel, not to 0, so
+        ``A y = B u`` between normalised signals forces the static map through
+        the two minima; unless ``y_min = G(1)·u_min`` the model's gain absorbs
+        the offset. Prefer :meth:`detrend` or :meth:`scale` for estimation.
+
+        Parameters
+        ----------
+        reference : IOData, optional
+            Take minimum and range from this record (typically the estimation
+            part). Default: ``self``.
 
         Raises ``DataError`` for a constant channel, whose range is zero.
         """
+        ref = self._reference(reference)
 
         def span(x: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
             lo, hi = x.min(axis=0), x.max(axis=0)
@@ -307,10 +398,43 @@ class IOData:
                 raise DataError(f"channel {names[flat[0]]!r} is constant; it cannot be normalised")
             return lo, hi - lo
 
-        lu, ru = span(self.u, self.input_names) if self.nu else (np.zeros(0), np.ones(0))
-        ly, ry = span(self.y, self.output_names)
+        lu, ru = span(ref.u, self.input_names) if self.nu else (np.zeros(0), np.ones(0))
+        ly, ry = span(ref.y, self.output_names)
         trend = self.trend.then(lu, np.zeros(self.nu), ru, ly, np.zeros(self.ny), ry)
         return self._with((self.u - lu) / ru, (self.y - ly) / ry, trend=trend)
+
+    def scale(self, *, reference: IOData | None = None) -> IOData:
+        """Divide every channel by its largest magnitude, without shifting it.
+
+        Physical zero stays zero, so a model without intercept keeps its
+        meaning (a wheel at rest under a zero command). The divisors are in
+        ``trend.input_scale`` / ``trend.output_scale``.
+
+        Parameters
+        ----------
+        reference : IOData, optional
+            Take the magnitudes from this record (typically the estimation
+            part). Default: ``self``.
+
+        Raises ``DataError`` for a channel that is zero throughout.
+        """
+        ref = self._reference(reference)
+
+        def peak(x: np.ndarray, names) -> np.ndarray:
+            m = np.max(np.abs(x), axis=0) if x.shape[0] else np.zeros(x.shape[1])
+            flat = np.flatnonzero(m <= 0)
+            if flat.size:
+                raise DataError(
+                    f"channel {names[flat[0]]!r} is zero throughout; it cannot be scaled"
+                )
+            return m
+
+        su = peak(ref.u, self.input_names) if self.nu else np.ones(0)
+        sy = peak(ref.y, self.output_names)
+        trend = self.trend.then(
+            np.zeros(self.nu), np.zeros(self.nu), su, np.zeros(self.ny), np.zeros(self.ny), sy
+        )
+        return self._with(self.u / su, self.y / sy, trend=trend)
 
     def resample(self, p: int, q: int) -> IOData:
         """Resample by the rational factor ``p/q`` with an anti-aliasing filter.
@@ -349,9 +473,11 @@ class IOData:
         expect: no rwlab metadata (CSV header first, Parquet without schema
         metadata) and a .mat with one vector per channel, named after it.
         """
-        from rwlab import _io
-
-        return _io.write(self, Path(path), overwrite=overwrite, plain=plain)
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        writer = _registered(_WRITERS, path.suffix.lower(), "write")
+        return atomic_write_bytes(path, lambda tmp: writer(self, tmp, plain=plain))
 
 
 def merge(*datasets: IOData) -> list[IOData]:
@@ -359,6 +485,16 @@ def merge(*datasets: IOData) -> list[IOData]:
 
     Every estimator in ``rwlab.ident`` accepts the returned list: regressions and
     prediction errors are formed per experiment and never cross a boundary.
+
+    Parameters
+    ----------
+    *datasets : IOData
+        The experiments, with the same channels and sample time.
+
+    Returns
+    -------
+    list of IOData
+        One element per experiment.
     """
     if not datasets:
         raise DataError("merge needs at least one IOData")
@@ -404,6 +540,11 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
         never a guess, unless rwlab's own metadata says which is which.
         ``max_gap`` (s) for a record: see :func:`rwlab.testbed.load_record`.
 
+    Returns
+    -------
+    IOData
+        The record, with ``source`` holding what the file said about its origin.
+
     Raises
     ------
     DataError
@@ -412,38 +553,68 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
     FileFormatError
         A file that cannot be parsed.
     """
-    from rwlab import _io
-
-    return _io.read(Path(path), Ts, **options)
-
-
-def _umask_mode() -> int:
-    """The mode a plainly created file gets here (0666 less the umask)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def atomic_write_bytes(path: Path, writer) -> Path:
-    """Call ``writer(tmp_path)`` then rename onto ``path``: never a half-written file.
-
-    The file gets the usual permissions (0666 less the umask), not the
-    temporary file's private 0600.
-    """
     path = Path(path)
-    if path.parent.exists() and not path.parent.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(path.parent))
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such data file: {path}")
+    suffix = path.suffix.lower()
+    reader = _registered(_READERS, suffix, "read")
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:  # name the file the caller asked for, not the temporary one
-        raise OSError(exc.errno, f"cannot write here ({exc.strerror})", str(path)) from None
-    os.close(fd)
-    try:
-        writer(Path(tmp))
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        return reader(path, Ts, **options)
+    except (RwlabError, OSError, TypeError):
         raise
-    return path
+    except Exception as exc:  # any parser failure becomes one typed, named error
+        raise FileFormatError(f"{path}: not a readable {suffix} data file ({exc})") from exc
+
+
+# -- file formats: registered by the layer that owns each ----------------------------
+# The data layer only names the module that registers a suffix (rwlab.datafiles for
+# tables, rwlab.testbed.load for testbed records) and imports it by name on first use:
+# it never depends on a higher layer's code, and a new layer adds its format by calling
+# register_reader/register_writer.
+_OWNERS = {
+    ".csv": "rwlab.datafiles",
+    ".dat": "rwlab.datafiles",
+    ".txt": "rwlab.datafiles",
+    ".parquet": "rwlab.datafiles",
+    ".mat": "rwlab.datafiles",
+    ".mcap": "rwlab.testbed.load",
+}
+_READERS: dict[str, Callable[..., IOData]] = {}
+_WRITERS: dict[str, Callable[..., None]] = {}
+
+
+def register_reader(suffix: str, reader: Callable[..., IOData]) -> None:
+    """Make :func:`load` read files ending in ``suffix`` with ``reader``.
+
+    Parameters
+    ----------
+    suffix : str
+        The file suffix with its dot, e.g. ``".mcap"`` (case-insensitive).
+    reader : callable
+        ``reader(path, Ts, **options) -> IOData``; it raises ``FileFormatError``
+        or ``DataError`` for a bad file.
+    """
+    _READERS[suffix.lower()] = reader
+
+
+def register_writer(suffix: str, writer: Callable[..., None]) -> None:
+    """Make :meth:`IOData.write` write files ending in ``suffix`` with ``writer``.
+
+    Parameters
+    ----------
+    suffix : str
+        The file suffix with its dot, e.g. ``".csv"`` (case-insensitive).
+    writer : callable
+        ``writer(data, tmp_path, plain=bool)``; it writes the temporary file that
+        is then renamed onto the target.
+    """
+    _WRITERS[suffix.lower()] = writer
+
+
+def _registered(table: dict[str, Callable], suffix: str, what: str) -> Callable:
+    if suffix not in table and suffix in _OWNERS:
+        importlib.import_module(_OWNERS[suffix])
+    if suffix not in table:
+        known = sorted(s for s in _OWNERS if what == "read" or s in (".csv", ".parquet", ".mat"))
+        raise DataError(f"unknown data file type {suffix!r}; use {', '.join(known)}")
+    return table[suffix]

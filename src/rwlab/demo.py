@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import errno
 import html
 import json
 import os
@@ -24,14 +23,28 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 
 __all__ = ["DemoConfig", "run_demo"]
 
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Durations (simulated seconds) of each part; the defaults are the full demo."""
+    """Durations (simulated seconds) of each part; the defaults are the full demo.
+
+    Parameters
+    ----------
+    step_duration, accel_duration, prbs_duration, chirp_duration : float
+        Length of each testbed record, simulated s.
+    attitude_duration : float
+        Length of each attitude run, s.
+    realtime : bool
+        Run the testbed at wall-clock speed.
+    monitor : bool
+        Open the live monitor during the records.
+    seed : int
+        Seed of the records and the runs.
+    """
 
     step_duration: float = 240.0
     accel_duration: float = 120.0
@@ -108,22 +121,6 @@ def _experiments(cfg: DemoConfig):
     ]
 
 
-def check_out(out: Path, force: bool) -> None:
-    """Refuse an ``out`` that holds anything but a previous demo, unless ``force``.
-
-    A previous demo's folder (it has ``summary.json``) is simply replaced, so
-    running the Quick start twice works.
-    """
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(out))
-    if force or not out.exists() or (out / "summary.json").exists():
-        return
-    if any(out.iterdir()):
-        raise FileExistsError(
-            f"{out} exists and is not a previous demo's output; use --force or another --out"
-        )
-
-
 def run_demo(
     out: str | os.PathLike,
     cfg: DemoConfig = DemoConfig(),
@@ -136,7 +133,41 @@ def run_demo(
 
     ``echo(text)`` reports each stage; ``progress(label, n)`` returns a context
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
+    ``out`` is written whole when the demo succeeds, or not at all; a previous
+    demo there is replaced then (``force`` also replaces a previous output).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+    cfg : DemoConfig
+        Durations and options.
+    force : bool
+        Replace a folder that is not a previous demo's.
+    echo : callable
+        Prints each stage.
+    progress : callable, optional
+        ``progress(label, n)`` returns a context manager with ``update(k)``.
+
+    Returns
+    -------
+    dict
+        ``summary.json``'s content (schema ``demo``).
     """
+    from rwlab._io import output_folder
+
+    out = Path(out)
+    with output_folder(out, DEMO_FILES, force=force, replace_previous=True, what="demo") as stage:
+        summary = _run(stage, cfg, echo, progress)
+    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
+    return summary
+
+
+DEMO_FILES = ("records", "identification", "attitude", "summary.json", "index.html")
+
+
+def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
+    """The demo's work, every file written into ``out`` (the staging folder)."""
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.scenario import SCENARIOS
     from rwlab.ident.study import identification_study, physical_model
@@ -144,8 +175,6 @@ def run_demo(
     from rwlab.report.identification import write_study
     from rwlab.testbed import load_record, run_experiment
 
-    out = Path(out)
-    check_out(out, force)
     (out / "records").mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     records = []
@@ -162,11 +191,11 @@ def run_demo(
         try:
             if progress:
                 with progress(name, n) as bar:
-                    summary = run_experiment(
-                        exp, path, force=True, progress=lambda k, total, b=bar: b.update(1)
+                    run = run_experiment(
+                        exp, path, force=True, progress=lambda k, total: bar.update(1)
                     )
             else:
-                summary = run_experiment(exp, path, force=True)
+                run = run_experiment(exp, path, force=True)
         finally:
             if monitor is not None:
                 from rwlab.testbed.monitor import stop_process
@@ -177,9 +206,9 @@ def run_demo(
                 "name": name,
                 "title": title,
                 "file": f"records/{name}.mcap",
-                "commands": summary.commands,
-                "telemetry": summary.telemetry,
-                "lost_frames": summary.lost_frames,
+                "commands": run.commands,
+                "telemetry": run.telemetry,
+                "lost_frames": run.lost_frames,
             }
         )
 
@@ -232,7 +261,6 @@ def run_demo(
     atomic_write_bytes(out / "summary.json", lambda tmp: tmp.write_text(text))
     page = _index(summary, _pointing_png(comparison))
     atomic_write_bytes(out / "index.html", lambda tmp: tmp.write_text(page, encoding="utf-8"))
-    echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
     return summary
 
 

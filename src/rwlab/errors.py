@@ -32,7 +32,15 @@ class WheelTimeout(RwlabError, TimeoutError):
 
 
 class WheelFault(RwlabError):
-    """The wheel reports a latched fault; clear it with ``WheelClient.clear_fault()``."""
+    """The wheel reports a latched fault; clear it with ``WheelClient.clear_fault()``.
+
+    Parameters
+    ----------
+    message : str
+        What happened, and what to do.
+    faults : int
+        The wheel's latched fault bits (``rwlab.wheel.physics.Fault``).
+    """
 
     def __init__(self, message: str, faults: int = 0) -> None:
         super().__init__(message)
@@ -41,6 +49,18 @@ class WheelFault(RwlabError):
 
 class WheelCommandError(RwlabError, ValueError):
     """A command outside the wheel's limits, refused before it was sent."""
+
+
+class ProtocolError(RwlabError):
+    """A frame that is not a valid wheel message (bad length, checksum or value)."""
+
+
+class DesignError(RwlabError, ValueError):
+    """Weights or a plant for which the requested design does not exist."""
+
+
+class MissingDependencyError(RwlabError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install."""
 
 
 class RecordGapError(DataError):
@@ -53,3 +73,15 @@ class RwlabWarning(UserWarning):
 
 class RecordBusyError(RwlabError):
     """Another run is writing the same record."""
+
+
+class WheelConflict(RwlabError):
+    """Two sources answer under one wheel's node id: their telemetry cannot be told apart."""
+
+
+class OutputBusyError(RwlabError):
+    """Another run is writing the same output folder."""
+
+
+class LostWorkerError(RwlabError):
+    """A campaign's batch lost its worker more often than it is retried."""

@@ -12,7 +12,11 @@ speed command, rpm/s for an acceleration command).
 - :func:`chirp` — linear or logarithmic swept sine (paper A: 0.0001–2 Hz).
 - :func:`steps` — a staircase of levels.
 - :func:`multisine` — Schroeder-phased sum of sines on the period's frequency grid.
-- :func:`rate_limit` — limit the slope of any of the above.
+- :func:`rate_limit` — limit the slope of any of the above. The testbed applies
+  it to a speed-mode PRBS by default (``ExperimentConfig.rate_limit``, the
+  wheel's acceleration limit, 314 rpm/s for the RW90): the identification
+  command then ramps rather than steps. Switch it off (``rate_limit = false``,
+  ``rwlab testbed experiment --no-rate-limit``) for true steps.
 """
 
 from __future__ import annotations
@@ -142,6 +146,22 @@ def rbs(n: int, amplitude: float, *, band: float = 1.0, seed=0) -> np.ndarray:
 
     ``band`` is the upper band edge as a fraction of the Nyquist frequency
     (MATLAB ``idinput(n, 'rbs', [0 band])``): each level is held ≈ 1/band samples.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    amplitude : float
+        The two levels are ±amplitude.
+    band : float
+        Upper band edge as a fraction of the Nyquist frequency, in (0, 1].
+    seed : int or numpy.random.Generator
+        The random source.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        The samples.
     """
     if not (isinstance(n, int) and n >= 1):
         raise ConfigError(f"n must be a positive integer, got {n!r}")
@@ -168,6 +188,26 @@ def chirp(
     ``method`` is 'linear' or 'logarithmic' (the paper's 0.0001–2 Hz sweep
     spans four decades, so logarithmic is the default). ``f1`` must be below
     the Nyquist frequency 1/(2 Ts).
+
+    Parameters
+    ----------
+    duration : float
+        Length of the signal, s.
+    Ts : float
+        Sample time, s.
+    f0, f1 : float
+        Start and end frequencies, Hz (0 < f0 < f1 < 1/(2 Ts)).
+    amplitude : float
+        Peak value, in the signal's unit.
+    method : {'logarithmic', 'linear'}
+        How the frequency sweeps.
+    offset : float
+        Added to every sample.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(duration / Ts),)
+        The samples.
     """
     n = _count(duration, Ts)
     f0, f1 = _positive("f0", f0), _positive("f1", f1)
@@ -186,7 +226,22 @@ def chirp(
 
 
 def steps(levels, hold: float, Ts: float) -> np.ndarray:
-    """A staircase: each of ``levels`` held for ``hold`` seconds in turn."""
+    """A staircase: each of ``levels`` held for ``hold`` seconds in turn.
+
+    Parameters
+    ----------
+    levels : sequence of float
+        The successive levels.
+    hold : float
+        How long each is held, s.
+    Ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (len(levels) · round(hold / Ts),)
+        The staircase.
+    """
     values = np.asarray(levels, dtype=float)
     if values.ndim != 1 or values.size == 0 or not np.all(np.isfinite(values)):
         raise ConfigError("levels must be a non-empty list of finite numbers")
@@ -208,6 +263,26 @@ def multisine(
     Frequencies are whole multiples of 1/duration between ``f_min`` and
     ``f_max`` Hz (so the record holds whole periods); ``n_freqs`` picks that
     many of them, log-spaced (default all, at most 200).
+
+    Parameters
+    ----------
+    duration : float
+        Length of the signal (one period), s.
+    Ts : float
+        Sample time, s.
+    f_min, f_max : float
+        Frequency band, Hz.
+    amplitude : float
+        Peak value after normalisation.
+    n_freqs : int, optional
+        Number of frequencies (default all in the band, at most 200).
+    seed : int or numpy.random.Generator
+        Chooses the frequencies when fewer than all are taken.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(duration / Ts),)
+        The samples.
     """
     n = _count(duration, Ts)
     f_min, f_max = _positive("f_min", f_min), _positive("f_max", f_max)
@@ -232,6 +307,22 @@ def rate_limit(x, max_rate: float, Ts: float, initial: float | None = None) -> n
 
     ``initial`` is the value before the first sample (default: ``x[0]``, no
     initial jump limited); pass 0 for a wheel starting at rest.
+
+    Parameters
+    ----------
+    x : array_like, shape (N,)
+        The signal to follow.
+    max_rate : float
+        Largest change per second, in x's unit per second (> 0).
+    Ts : float
+        Sample time, s.
+    initial : float, optional
+        The value before the first sample.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+        The rate-limited signal (``x`` is not modified).
     """
     Ts = check_Ts(Ts)
     max_rate = _positive("max_rate", max_rate)

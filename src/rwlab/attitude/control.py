@@ -29,10 +29,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import control
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.attitude.design import (
     DesignError,
     LTRResult,
@@ -43,6 +45,7 @@ from rwlab.attitude.design import (
     sigma,
 )
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
+from rwlab.attitude.metrics import metrics  # re-exported: it lived here
 from rwlab.attitude.scenario import Scenario
 from rwlab.attitude.sim import (
     LinearController,
@@ -90,7 +93,29 @@ def _f(s, tau, h_body, J, J_inv, n, gg):
 
 
 def linearize(q, w_bo, h_body, J, n: float = GEO_RATE, gravity_gradient: bool = True):
-    """A (6×6), B (6×3) of ṡ = f(s, τ) about s = [2 q_v, ω_bo] (central differences)."""
+    """A (6×6), B (6×3) of ṡ = f(s, τ) about s = [2 q_v, ω_bo] (central differences).
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (4,)
+        Attitude quaternion (orbital → body, scalar last).
+    w_bo : numpy.ndarray, shape (3,)
+        Body rate relative to the orbital frame, rad/s.
+    h_body : numpy.ndarray, shape (3,)
+        Wheel momentum in body axes, N·m·s.
+    J : numpy.ndarray, shape (3, 3)
+        Inertia, kg·m².
+    n : float
+        Orbital rate, rad/s.
+    gravity_gradient : bool
+        Include the gravity-gradient torque.
+
+    Returns
+    -------
+    A : numpy.ndarray, shape (6, 6)
+    B : numpy.ndarray, shape (6, 3)
+        Per N·m of body torque.
+    """
     J = np.asarray(J, float)
     J_inv = np.linalg.inv(J)
     gg = 3 * n * n if gravity_gradient else 0.0
@@ -109,13 +134,37 @@ def linearize(q, w_bo, h_body, J, n: float = GEO_RATE, gravity_gradient: bool = 
 
 
 def torque_capacity(scenario: Scenario) -> float:
-    """Largest body torque (N·m) in any direction that no wheel's limit clips (G⁺ allocation)."""
+    """Largest body torque (N·m) in any direction that no wheel's limit clips (G⁺ allocation).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its wheels (axes and torque limit).
+
+    Returns
+    -------
+    float
+        The torque, N·m.
+    """
     rows = np.linalg.norm(np.linalg.pinv(scenario.wheel_matrix), axis=1)
     return scenario.wheel_max_torque / float(rows.max())
 
 
 def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous Bryson weights Q (6×6), R (3×3) from the scenario's design fields."""
+    """Continuous Bryson weights Q (6×6), R (3×3) from the scenario's design fields.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``lqr_*`` fields set the Bryson scales.
+
+    Returns
+    -------
+    Q : numpy.ndarray, shape (6, 6)
+        State weight on [2 q_v, ω_bo].
+    R : numpy.ndarray, shape (3, 3)
+        Torque weight, 1/(N·m)².
+    """
     theta0 = math.radians(scenario.lqr_attitude_deg)
     rate0 = math.radians(scenario.lqr_rate_deg_s)
     tau0 = scenario.lqr_torque_fraction * torque_capacity(scenario)
@@ -140,7 +189,7 @@ def slew_rate_limit(scenario: Scenario, K: np.ndarray) -> float:
     """Rate limit of the saturation-aware law, rad/s: what K_ω can hold with the torque
     reserve, and what the momentum reserve allows on the largest inertia."""
     by_torque = scenario.slew_torque_fraction * torque_capacity(scenario)
-    by_torque /= np.linalg.norm(K[:, 3:], 2)
+    by_torque /= float(np.linalg.norm(K[:, 3:], 2))
     h_cap = scenario.wheel_max_momentum * torque_capacity(scenario) / scenario.wheel_max_torque
     by_momentum = (
         scenario.slew_momentum_fraction * h_cap / np.linalg.eigvalsh(scenario.inertia_matrix).max()
@@ -182,7 +231,20 @@ def _omega_grid(dt: float) -> np.ndarray:
 
 
 def crossover(loop_sigma: np.ndarray, omega: np.ndarray) -> float:
-    """Highest frequency (rad/s) where the largest singular value falls through 1."""
+    """Highest frequency (rad/s) where the largest singular value falls through 1.
+
+    Parameters
+    ----------
+    loop_sigma : numpy.ndarray, shape (nw, k)
+        Singular values of the loop, largest first.
+    omega : numpy.ndarray, shape (nw,)
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    float
+        The crossover frequency, rad/s.
+    """
     s = loop_sigma[:, 0]
     above = np.flatnonzero(s >= 1)
     if above.size == 0:
@@ -200,6 +262,20 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
     q² = (κ ω_c)⁴ J_slow² r_c puts a double integrator's Kalman bandwidth
     (q²/(J² r_c))^¼ at κ = ``ltr_bandwidth_factor`` times the LQR crossover ω_c
     on the slowest axis, J_slow = 1/σ_min(B) from the SVD of B.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+    ctl : LQRController, optional
+        The regulator whose crossover sets the bandwidth (designed here if None).
+
+    Returns
+    -------
+    q2 : float
+        Fictitious torque PSD, N²·m²·s.
+    r_c : float
+        Attitude measurement noise PSD, rad²·s.
     """
     ctl = LQRController(scenario) if ctl is None else ctl
     w = _omega_grid(scenario.dt)
@@ -213,7 +289,22 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
 
 
 def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
-    """Paper B Fig. 8 on the discrete loop: σ of K(z)G(z) at the plant input for each ρ."""
+    """Paper B Fig. 8 on the discrete loop: σ of K(z)G(z) at the plant input for each ρ.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+    rhos : sequence of float
+        The recovery parameters ρ.
+    omega : array_like, optional
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    LTRResult
+        Target and recovered loops' singular values.
+    """
     ctl = LQRController(scenario)
     q2, r_c = ltr_noise(scenario, ctl)
     dt = scenario.dt
@@ -292,90 +383,8 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
     return out
 
 
-def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
-    """Pointing, torque and momentum metrics of one run.
-
-    Maxima and RMS come from every step; the steady window starts at
-    ``r.steady_from_s`` (half the run, at most its first hour), and every
-    ``steady_*``, ``*_desaturation*`` and ``torque_saturated_fraction`` /
-    ``torque_rms_Nm`` figure is over that window ("excluding desaturation" also
-    leaves out unloading windows and ``unload_recovery_s`` after each).
-    ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
-    slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
-    and settling come from the logged trace.
-    """
-    st = r.stats
-    steady_n = max(st["steady_steps"], 1)
-    outside = np.flatnonzero(r.error_deg > band_deg)
-    settled = outside.size == 0 or outside[-1] < len(r.t) - 1
-    theta = np.degrees(2 * r.q[:, :3])
-    sign0 = np.sign(theta[0])
-    overshoot = float(max(0.0, np.max(-sign0 * theta))) if np.any(sign0) else 0.0
-    dt = float(np.median(np.diff(r.t))) if len(r.t) > 1 else 0.0
-    est = r.est_error_deg[r.t >= r.steady_from_s]
-    steady_log = r.error_deg[r.t >= r.steady_from_s]
-    return {
-        "steps": int(st["steps"]),
-        "max_error_deg": st["max_error_deg"],
-        "steady_max_error_deg": st["steady_max_error_deg"],
-        "steady_rms_error_deg": math.sqrt(st["steady_error_sq_sum"] / steady_n),
-        "steady_p99_73_error_deg": float(np.percentile(steady_log, 99.73))
-        if steady_log.size
-        else 0.0,
-        "max_error_deg_excluding_desaturation": st["steady_max_error_excl_desat_deg"],
-        "max_error_during_desaturation_deg": st["max_error_in_desat_deg"],
-        "settling_time_s": (float(r.t[outside[-1] + 1]) if outside.size else 0.0)
-        if settled
-        else None,
-        "overshoot_deg": overshoot,
-        "control_effort_Nms": float(np.sum(np.abs(r.torque)) * dt),
-        "torque_saturated_fraction": st["steady_torque_saturated_steps"] / steady_n,
-        "torque_peak_Nm": st["torque_peak_Nm"],
-        "torque_rms_Nm": math.sqrt(st["steady_torque_sq_sum"] / steady_n),
-        "peak_wheel_speed_rpm": float(np.max(np.abs(r.wheel_speed_rpm))),
-        "wheel_momentum_peak_fraction": st["momentum_peak_fraction"],
-        "wheel_saturated": bool(r.wheel_saturated),
-        "desaturation_count": int(st["desaturation_count"]),
-        "thruster_impulse_Nms": st["thruster_impulse_Nms"],
-        "steady_rms_estimation_error_deg": float(np.sqrt(np.mean(est**2))) if est.size else 0.0,
-        "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
-        **_sky_metrics(st),
-    }
-
-
-def _sky_metrics(st: dict) -> dict:
-    """Eclipse time (the Earth's umbra + penumbra), pointing inside and outside it (steady
-    window; None when the window has no step there), and the sensors' outages,
-    blindings and gated measurements (sensor ticks)."""
-    n_ecl = st["steady_eclipse_steps"]
-    n_out = st["steady_steps"] - n_ecl
-    period = st.get("sensor_period_s", 0.0)
-    return {
-        "eclipse_s": st["eclipse_steps"] * st.get("dt_s", 0.0),
-        "moon_shadow_s": st["moon_shadow_steps"] * st.get("dt_s", 0.0),
-        # null, not 0, for a window with no step in it (no shadow in the steady state)
-        "steady_max_error_in_eclipse_deg": st["steady_eclipse_max_error_deg"] if n_ecl else None,
-        "steady_rms_error_in_eclipse_deg": (
-            math.sqrt(st["steady_eclipse_error_sq_sum"] / n_ecl) if n_ecl else None
-        ),
-        "steady_max_error_outside_eclipse_deg": (
-            st["steady_outside_eclipse_max_error_deg"] if n_out else None
-        ),
-        "steady_rms_error_outside_eclipse_deg": (
-            math.sqrt(st["steady_outside_eclipse_error_sq_sum"] / n_out) if n_out else None
-        ),
-        "sun_sensor_outage_count": int(st["sun_sensor_outages"]),
-        "sun_sensor_outage_s": st["sun_sensor_outages"] * period,
-        "earth_sensor_blinded_count": int(st["earth_sensor_blinded"]),
-        "earth_sensor_blinded_s": st["earth_sensor_blinded"] * period,
-        "no_sensor_s": st["no_update_ticks"] * period,
-        "sun_sensor_gated_count": int(st["sun_sensor_gated"]),
-        "earth_sensor_gated_count": int(st["earth_sensor_gated"]),
-    }
-
-
-@dataclass
-class Comparison:
+@dataclass(repr=False)
+class Comparison(ShortRepr):
     """Runs and metrics of the three controllers (and the identified-wheel run)."""
 
     scenario: Scenario
@@ -383,6 +392,21 @@ class Comparison:
     metrics: dict
     rho: float
     config: dict
+
+    def to_pandas(self):
+        """The metrics as a table: one row per controller flown, one column per metric.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``controller``; the columns of ``metrics`` (SI units, degrees where named).
+        """
+        from rwlab._display import pandas
+
+        pd = pandas()
+        frame = pd.DataFrame.from_dict(self.metrics, orient="index")
+        frame.index.name = "controller"
+        return frame
 
 
 def compare(
@@ -402,10 +426,32 @@ def compare(
     disturbances. With ``wheel_model_file`` the LQG loop is also run with the
     identified wheel model as the actuator (``lqg_identified_wheel``).
     ``progress(name)`` is called before each run.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The spacecraft, sky and sensors.
+    duration : float, optional
+        Length of each run, s (the scenario's by default).
+    seed : int, optional
+        Noise seed (the scenario's by default).
+    rho : float
+        LTR's recovery parameter ρ for the LQG/LTR run.
+    wheel_model_file : str, optional
+        A ``model.json`` to fly as the actuator of an extra LQG run.
+    update_period : float, optional
+        Re-linearisation period of the LQR gains, s (None: fixed gains).
+    progress : callable, optional
+        ``progress(name)`` before each run.
+
+    Returns
+    -------
+    Comparison
+        The runs, their metrics, ρ and the configuration.
     """
     seed = scenario.seed if seed is None else seed
     q2, _ = ltr_noise(scenario)
-    plans = {
+    plans: dict[str, tuple[Scenario, dict[str, Any]]] = {
         "lqr": (scenario, dict(estimator="truth")),
         "lqg": (scenario, dict(estimator="ekf")),
         "lqg_ltr": (
@@ -448,7 +494,20 @@ CONTROLLERS = ("pd", "lqr", "lqg", "lqg_ltr")
 def pd_gains(scenario: Scenario) -> tuple[float, float]:
     """(kp N·m/rad, kd N·m·s/rad) of a PD law with the LQR design's proportional gain
     (Bryson: ``lqr_torque_fraction`` of the torque at ``lqr_attitude_deg``) and ζ = 0.707
-    on the largest inertia."""
+    on the largest inertia.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The design scenario.
+
+    Returns
+    -------
+    kp : float
+        Proportional gain, N·m/rad.
+    kd : float
+        Derivative gain, N·m·s/rad.
+    """
     kp = scenario.lqr_torque_fraction * torque_capacity(scenario)
     kp /= math.radians(scenario.lqr_attitude_deg)
     j_max = float(np.linalg.eigvalsh(scenario.inertia_matrix).max())
@@ -467,26 +526,63 @@ def fly(
     log_every: int = 10,
     progress=None,
     design: Scenario | None = None,
+    steady_after: float | None = None,
 ) -> tuple[SimResult, dict]:
     """One controller on one scenario: the run and its :func:`metrics` (``rwlab attitude
     simulate``). ``estimator`` defaults to 'truth' for LQR and PD, 'ekf' otherwise.
     ``design``: the scenario the gains (and LTR's filter noise) are designed on, by
     default the flown one; a Monte Carlo run flies a dispersed truth with the nominal
-    design (the filter still uses the flown scenario's inertia and sensor noise)."""
+    design (the filter still uses the flown scenario's inertia and sensor noise).
+    ``steady_after``: seconds where the steady-state window starts (``sim.simulate``).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario flown (the truth).
+    controller : {'pd', 'lqr', 'lqg', 'lqg_ltr'}
+        The control law.
+    estimator : {'truth', 'ekf'}, optional
+        What the law sees.
+    duration : float, optional
+        Run length, s.
+    seed : int, optional
+        Noise seed.
+    rho : float
+        LTR's ρ (``lqg_ltr`` only).
+    update_period : float, optional
+        Re-linearisation period of the LQR gains, s.
+    log_every : int
+        Steps between logged rows.
+    progress : callable, optional
+        Passed to :func:`rwlab.attitude.sim.simulate`.
+    design : Scenario, optional
+        The scenario the gains are designed on.
+    steady_after : float, optional
+        Where the steady-state window starts, s (default: half the run, at most an hour).
+
+    Returns
+    -------
+    run : SimResult
+        The time histories.
+    metrics : dict
+        :func:`metrics` of the run.
+    """
     if controller not in CONTROLLERS:
         raise DesignError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     estimator = estimator or ("truth" if controller in ("pd", "lqr") else "ekf")
     design = scenario if design is None else design
-    kw = {}
+    kw: dict[str, Any] = {}
+    ctl: PDController | LQRController
     if controller == "pd":
         ctl = PDController(*pd_gains(design))
         ctl.rate_limit = slew_rate_limit(design, ctl.K)
     else:
-        ctl = LQRController(design, update_period=update_period)
-    if controller == "lqg_ltr":
-        if not (math.isfinite(rho) and rho > 0):
-            raise DesignError(f"ρ must be a positive number, got {rho}")
-        kw = dict(filter_torque_psd=ltr_noise(design, ctl)[0], filter_noise_scale=math.sqrt(rho))
+        ctl = lqr = LQRController(design, update_period=update_period)
+        if controller == "lqg_ltr":
+            if not (math.isfinite(rho) and rho > 0):
+                raise DesignError(f"ρ must be a positive number, got {rho}")
+            psd = ltr_noise(design, lqr)[0]
+            kw = dict(filter_torque_psd=psd, filter_noise_scale=math.sqrt(rho))
     run = simulate(
         scenario,
         ctl,
@@ -495,6 +591,7 @@ def fly(
         seed=seed,
         log_every=log_every,
         progress=progress,
+        steady_after=steady_after,
         **kw,
     )
     return run, metrics(run, scenario.pointing_requirement_deg)

@@ -27,7 +27,8 @@ import control
 import numpy as np
 import scipy.linalg
 
-from rwlab.errors import RwlabError
+from rwlab._display import ShortRepr
+from rwlab.errors import DesignError  # DesignError re-exported here, where it was
 
 __all__ = [
     "DesignError",
@@ -41,10 +42,6 @@ __all__ = [
     "ltr",
     "sigma",
 ]
-
-
-class DesignError(RwlabError, ValueError):
-    """Weights or a plant for which the requested design does not exist."""
 
 
 def _check_weight(name: str, M, n: int, definite: bool) -> np.ndarray:
@@ -133,6 +130,20 @@ def lqr(sys, Q, R) -> np.ndarray:
 
     Raises ``DesignError`` for weights that are not (semi)definite, an (A, B)
     pair that is not stabilisable, or a Riccati equation without a stabilising solution.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        The plant.
+    Q : array_like, shape (n, n)
+        State weight (positive semidefinite).
+    R : array_like, shape (m, m)
+        Input weight (positive definite).
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, n)
+        The gain K.
     """
     ss = _ss(sys)
     A, B = np.asarray(ss.A), np.asarray(ss.B)
@@ -195,6 +206,22 @@ def kalman(sys, Qn, Rn, G=None) -> np.ndarray:
     Continuous: x̂̇ = A x̂ + B u + L (y − C x̂). Discrete: the predictor gain of
     x̂[k+1] = A x̂[k] + B u[k] + L (y[k] − C x̂[k]); the current-estimate gain is
     M = A⁻¹L (see :func:`kalman_current`).
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        The plant (continuous, or discrete with dt > 0).
+    Qn : array_like, shape (g, g)
+        Process noise intensity (covariance for a discrete plant).
+    Rn : array_like, shape (p, p)
+        Measurement noise intensity.
+    G : array_like, shape (n, g), optional
+        Process noise input matrix.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, p)
+        The gain L.
     """
     ss = _ss(sys)
     A, C = np.asarray(ss.A), np.asarray(ss.C)
@@ -212,6 +239,18 @@ def kalman_current(sys, Qn, Rn, G=None) -> np.ndarray:
 
     M = P̄ Cᵀ (C P̄ Cᵀ + Rn)⁻¹ with P̄ the steady predicted covariance; it is what
     a sampled Kalman filter that measures, then controls, uses each period.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Discrete plant.
+    Qn, Rn, G
+        As for :func:`kalman`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, p)
+        The gain M.
     """
     ss = _ss(sys)
     if not ss.isdtime(strict=True):
@@ -221,7 +260,22 @@ def kalman_current(sys, Qn, Rn, G=None) -> np.ndarray:
 
 
 def lqg(sys, K, L) -> control.StateSpace:
-    """The LQG compensator K(s) = K (sI − A + BK + LC)⁻¹ L (from y to −u), predictor form."""
+    """The LQG compensator K(s) = K (sI − A + BK + LC)⁻¹ L (from y to −u), predictor form.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        The plant.
+    K : array_like, shape (m, n)
+        Regulator gain.
+    L : array_like, shape (n, p)
+        Estimator gain.
+
+    Returns
+    -------
+    control.StateSpace
+        The compensator, p inputs, m outputs.
+    """
     ss = _ss(sys)
     A, B, C = np.asarray(ss.A), np.asarray(ss.B), np.asarray(ss.C)
     K, L = np.atleast_2d(K), np.atleast_2d(L)
@@ -233,6 +287,20 @@ def lqg_current(sys, K, M) -> control.StateSpace:
 
     Each period: x̂ = x̄ + M (y − C x̄), u = −K x̂, x̄⁺ = A x̂ + B u, so
     K(z) = K(I − MC) (zI − (A − BK)(I − MC))⁻¹ (A − BK) M + K M.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Discrete plant.
+    K : array_like, shape (m, n)
+        Regulator gain.
+    M : array_like, shape (n, p)
+        Current-estimate filter gain.
+
+    Returns
+    -------
+    control.StateSpace
+        The compensator, discrete at the plant's dt.
     """
     ss = _ss(sys)
     if not ss.isdtime(strict=True):
@@ -245,7 +313,20 @@ def lqg_current(sys, K, M) -> control.StateSpace:
 
 
 def sigma(sys, omega) -> np.ndarray:
-    """Singular values of sys(jω) (or of e^{jωdt}), largest first; shape (len(ω), min(p, m))."""
+    """Singular values of sys(jω) (or of e^{jωdt}), largest first; shape (len(ω), min(p, m)).
+
+    Parameters
+    ----------
+    sys : control.StateSpace or control.TransferFunction
+        The system.
+    omega : array_like, shape (nw,)
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (nw, min(p, m))
+        The singular values.
+    """
     sys = _ss(sys)
     w = np.atleast_1d(np.asarray(omega, dtype=float))
     resp = sys.frequency_response(w)
@@ -255,8 +336,8 @@ def sigma(sys, omega) -> np.ndarray:
     return np.array([np.linalg.svd(H[:, :, i], compute_uv=False) for i in range(w.size)])
 
 
-@dataclass
-class LTRResult:
+@dataclass(repr=False)
+class LTRResult(ShortRepr):
     """Loop transfer recovery over a list of ρ.
 
     Attributes
@@ -337,6 +418,11 @@ def ltr(
     K : array_like, optional
         Input LTR: the regulator gain of the target loop, when designed elsewhere
         (e.g. :func:`lqrd`); Q and R are then not used.
+
+    Returns
+    -------
+    LTRResult
+        ``omega``, the target loop's and each recovered loop's singular values.
     """
     ss = _ss(sys)
     A, B, C = np.asarray(ss.A), np.asarray(ss.B), np.asarray(ss.C)

@@ -350,3 +350,201 @@ def _backward3(L, z0, z1, z2):
     y2 = z2 / L[2, 2]
     y1 = (z1 - L[2, 1] * y2) / L[1, 1]
     return (z0 - L[1, 0] * y1 - L[2, 0] * y2) / L[0, 0], y1, y2
+
+
+# -- the gyro-driven filter (Lefferts–Markley–Shuster) ----------------------------------
+# With gyros the attitude is propagated with the measured rate, ω̂ = ω_m − β̂, and the error
+# state is δx = [δθ, δβ] (n = 6; Markley & Crassidis 2014, §6.2.3):
+#
+#     δθ̇ = −[ω̂×] δθ − δβ − v,    δβ̇ = u,
+#
+# v the gyro's angle random walk (PSD σ_v²) and u its bias walk (σ_u²). The vector
+# updates are the ones above (H = [[b×], 0]); a star tracker's quaternion is an update
+# with H = [I, 0] (:func:`attitude_update_into`).
+
+
+@njit(cache=True)
+def gyro_jacobian_into(w, F):
+    """F (n, n) of the gyro-driven error dynamics at the rate estimate ω̂ = ``w`` (3,):
+    [[−[ω̂×], −I], [0, 0]] (n = 6; further rows and columns zero)."""
+    F[:, :] = 0.0
+    F[0, 1], F[0, 2], F[1, 0], F[1, 2], F[2, 0], F[2, 1] = w[2], -w[1], -w[2], w[0], w[1], -w[0]
+    for i in range(3):
+        F[i, 3 + i] = -1.0
+
+
+def gyro_process_noise(psd_v: float, psd_u: float, n: int = 6) -> np.ndarray:
+    """Qc (n, n) of the gyro-driven filter: σ_v² on δθ, σ_u² on δβ (rad²/s, rad²/s³); the
+    rest (sensor alignment states) zero for the caller to fill."""
+    Qc = np.zeros((n, n))
+    Qc[:3, :3] = psd_v * np.eye(3)
+    Qc[3:6, 3:6] = psd_u * np.eye(3)
+    return Qc
+
+
+@njit(cache=True, inline="always")
+def propagate_attitude_into(q, b0, b1, b2, dt):
+    """q ← δq(φ) ⊗ q in place, φ = ω_bo·dt the body rate relative to the orbital frame held
+    over the step (the exact rotation, then renormalised)."""
+    p0, p1, p2 = b0 * dt, b1 * dt, b2 * dt
+    ang = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    c = math.cos(0.5 * ang)
+    s = 0.5 - ang * ang / 48.0 if ang < 1e-6 else math.sin(0.5 * ang) / ang
+    p0, p1, p2 = s * p0, s * p1, s * p2
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    n1 = c * q1 + q4 * p0 - (p1 * q3 - p2 * q2)
+    n2 = c * q2 + q4 * p1 - (p2 * q1 - p0 * q3)
+    n3 = c * q3 + q4 * p2 - (p0 * q2 - p1 * q1)
+    n4 = c * q4 - (p0 * q1 + p1 * q2 + p2 * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+
+
+@njit(cache=True, inline="always")
+def attitude_error(a, b):
+    """2 (a ⊗ b⁻¹)_v with the sign of the shorter rotation: the small angle (3-tuple, rad) that
+    turns attitude b into a (A(a) = (I − [δθ×]) A(b))."""
+    a1, a2, a3, a4 = a[0], a[1], a[2], a[3]
+    b1, b2, b3, b4 = b[0], b[1], b[2], b[3]
+    sign = 2.0 if a4 * b4 + a1 * b1 + a2 * b2 + a3 * b3 >= 0 else -2.0
+    return (
+        sign * (b4 * a1 - a4 * b1 + a2 * b3 - a3 * b2),
+        sign * (b4 * a2 - a4 * b2 + a3 * b1 - a1 * b3),
+        sign * (b4 * a3 - a4 * b3 + a1 * b2 - a2 * b1),
+    )
+
+
+@njit(cache=True)
+def attitude_update_into(q, w, P, q_meas, R, W):
+    """An attitude (star tracker) update in place on q (4,), w (n − 3,), P (n, n):
+    residual δθ = 2 (q_m ⊗ q̂⁻¹)_v, H = [I, 0], R (3, 3) in body axes, Joseph form.
+    ``W`` is a (4, n, n) scratch (n ≥ 6)."""
+    nx = P.shape[0]
+    nu0, nu1, nu2 = attitude_error(q_meas, q)
+    PHt, K, X, Y = W[0], W[1], W[2], W[3]
+    S, L = Y[:3, :3], Y[3:6, :3]  # n ≥ 6
+    for i in range(3):
+        for j in range(3):
+            S[i, j] = P[i, j] + R[i, j]
+    _cholesky3_into(S, L)
+    dx = X[:, 0]
+    for i in range(nx):  # K = P Hᵀ S⁻¹ = P[:, :3] S⁻¹
+        z0, z1, z2 = _forward3(L, P[i, 0], P[i, 1], P[i, 2])
+        K[i, 0], K[i, 1], K[i, 2] = _backward3(L, z0, z1, z2)
+        dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    d0, d1, d2 = dx[0], dx[1], dx[2]  # X is reused below
+    for i in range(nx - 3):
+        w[i] += dx[3 + i]
+    for i in range(nx):  # I − K H
+        for j in range(nx):
+            v = 1.0 if i == j else 0.0
+            if j < 3:
+                v -= K[i, j]
+            PHt[i, j] = v
+    _mm(PHt, P, X)
+    _mmt(X, PHt, Y)
+    for i in range(nx):
+        for j in range(i, nx):
+            kk = 0.0
+            for a in range(3):
+                for b in range(3):
+                    kk += K[i, a] * R[a, b] * K[j, b]
+            v = 0.5 * (Y[i, j] + Y[j, i]) + kk
+            P[i, j] = v
+            P[j, i] = v
+    p1, p2, p3 = 0.5 * d0, 0.5 * d1, 0.5 * d2
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
+    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
+    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
+    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+
+
+@njit(cache=True)
+def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
+    """A vector update whose sensor is turned by a small unknown rotation φ (body axes) held
+    in the state from w[at − 3] (3 values): the sensor reports (I + [φ×]) A(q) r, so
+    H = [[b×], 0, …, −[b×] at column ``at``, …]. In place on q, w, P like
+    :func:`gated_update_into` (which is this with no φ); returns whether it was applied.
+    ``W`` is a (4, n, n) scratch (n ≥ 6). φ about the measured vector's own direction is
+    unobservable at any instant and, with only this sensor fixing yaw, its component along
+    the axis that sensor alone observes stays at its prior: the filter then carries that
+    misalignment as the uncertainty it is (a consider state)."""
+    nx = P.shape[0]
+    A = np.empty((3, 3))
+    _dcm_rows_into(q, A)
+    b0 = A[0, 0] * ref[0] + A[0, 1] * ref[1] + A[0, 2] * ref[2]
+    b1 = A[1, 0] * ref[0] + A[1, 1] * ref[1] + A[1, 2] * ref[2]
+    b2 = A[2, 0] * ref[0] + A[2, 1] * ref[1] + A[2, 2] * ref[2]
+    f0, f1, f2 = w[at - 3], w[at - 2], w[at - 1]  # predicted report: b + φ × b
+    p0, p1, p2 = b0 + f1 * b2 - f2 * b1, b1 + f2 * b0 - f0 * b2, b2 + f0 * b1 - f1 * b0
+    H = np.zeros((3, nx))
+    H[0, 1], H[0, 2], H[1, 0], H[1, 2], H[2, 0], H[2, 1] = -b2, b1, b2, -b0, -b1, b0  # [b×]
+    for i in range(3):
+        for j in range(3):
+            H[i, at + j] = -H[i, j]
+    PHt, K, X, Y = W[0], W[1], W[2], W[3]
+    for i in range(nx):
+        for j in range(3):
+            acc = 0.0
+            for k in range(nx):
+                acc += P[i, k] * H[j, k]
+            PHt[i, j] = acc
+    r = sigma * sigma
+    S, L = Y[:3, :3], Y[3:6, :3]
+    for i in range(3):
+        for j in range(3):
+            acc = r if i == j else 0.0
+            for k in range(nx):
+                acc += H[i, k] * PHt[k, j]
+            S[i, j] = acc
+    _cholesky3_into(S, L)
+    nu0, nu1, nu2 = b_meas[0] - p0, b_meas[1] - p1, b_meas[2] - p2
+    if gate > 0:
+        z0, z1, z2 = _forward3(L, nu0, nu1, nu2)
+        if z0 * z0 + z1 * z1 + z2 * z2 > gate:
+            return False
+    dx = X[:, 0]
+    for i in range(nx):
+        z0, z1, z2 = _forward3(L, PHt[i, 0], PHt[i, 1], PHt[i, 2])
+        K[i, 0], K[i, 1], K[i, 2] = _backward3(L, z0, z1, z2)
+        dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    d0, d1, d2 = dx[0], dx[1], dx[2]
+    for i in range(nx - 3):
+        w[i] += dx[3 + i]
+    for i in range(nx):  # I − K H
+        for j in range(nx):
+            PHt[i, j] = (1.0 if i == j else 0.0) - (
+                K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j]
+            )
+    _mm(PHt, P, X)
+    _mmt(X, PHt, Y)
+    for i in range(nx):
+        for j in range(i, nx):
+            v = 0.5 * (Y[i, j] + Y[j, i]) + r * (
+                K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2]
+            )
+            P[i, j] = v
+            P[j, i] = v
+    p1_, p2_, p3_ = 0.5 * d0, 0.5 * d1, 0.5 * d2
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    n1 = q1 + q4 * p1_ - (p2_ * q3 - p3_ * q2)
+    n2 = q2 + q4 * p2_ - (p3_ * q1 - p1_ * q3)
+    n3 = q3 + q4 * p3_ - (p1_ * q2 - p2_ * q1)
+    n4 = q4 - (p1_ * q1 + p2_ * q2 + p3_ * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    return True
+
+
+@njit(cache=True, inline="always")
+def _dcm_rows_into(q, C):
+    """C = A(q) (frames.dcm) element by element."""
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    s = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
+    C[0, 0], C[1, 1], C[2, 2] = s + 2 * q1 * q1, s + 2 * q2 * q2, s + 2 * q3 * q3
+    C[0, 1], C[1, 0] = 2 * (q1 * q2 + q4 * q3), 2 * (q1 * q2 - q4 * q3)
+    C[0, 2], C[2, 0] = 2 * (q1 * q3 - q4 * q2), 2 * (q1 * q3 + q4 * q2)
+    C[1, 2], C[2, 1] = 2 * (q2 * q3 + q4 * q1), 2 * (q2 * q3 - q4 * q1)

@@ -61,12 +61,21 @@ SKY_COLUMNS = (
     "sunlit",
     "earth_lit",
     "moon_visible",
+    "srp_scale",
 )
 
 
 @dataclass(frozen=True)
 class Epoch:
-    """A UTC instant as a two-part TAI Julian date (``tai1 + tai2`` days)."""
+    """A UTC instant as a two-part TAI Julian date (``tai1 + tai2`` days).
+
+    Parameters
+    ----------
+    text : str
+        The epoch as given (ISO 8601).
+    tai1, tai2 : float
+        The two parts of the TAI Julian date, days.
+    """
 
     text: str
     tai1: float
@@ -85,6 +94,15 @@ def parse_epoch(text: str) -> Epoch:
 
     Raises :class:`~rwlab.errors.ConfigError` when the text is not an ISO 8601
     date-time, or lies outside 1900–2100 (the ephemerides' range of validity).
+
+    Parameters
+    ----------
+    text : str
+        ISO 8601 date-time.
+
+    Returns
+    -------
+    Epoch
     """
     try:
         when = datetime.fromisoformat(str(text).strip())
@@ -173,7 +191,22 @@ def sun_moon_orbital(epoch: Epoch, longitude_deg: float, t) -> tuple[np.ndarray,
 
 def occulted_fraction(a, b, c) -> np.ndarray:
     """Share of a disc of angular radius ``a`` covered by a disc of radius ``b`` at centre
-    separation ``c`` (rad; arrays broadcast), 0…1 (Montenbruck & Gill eq. 3.86)."""
+    separation ``c`` (rad; arrays broadcast), 0…1 (Montenbruck & Gill eq. 3.86).
+
+    Parameters
+    ----------
+    a : array_like
+        Angular radius of the occulted disc, rad.
+    b : array_like
+        Angular radius of the occulting disc, rad.
+    c : array_like
+        Separation of the centres, rad.
+
+    Returns
+    -------
+    numpy.ndarray
+        The covered share, broadcast shape.
+    """
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
     out = np.zeros(a.shape)
     full = c <= b - a  # the occulter covers the whole disc
@@ -205,7 +238,18 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
     ``sunlit`` = the share of the Sun's disc neither the Earth nor the Moon
     hides (the SRP scale); ``earth_lit`` = the same for the Earth alone (< 1: in
     the Earth's umbra or penumbra); ``moon_visible`` = 1 where the Moon is not
-    behind the Earth.
+    behind the Earth; ``srp_scale`` = sunlit × (1 AU / Sun distance)²: solar pressure
+    falls with the square of the distance (±3.4 % over the year).
+
+    Parameters
+    ----------
+    sun, moon : numpy.ndarray, shape (N, 3)
+        Satellite-relative positions in the orbital frame, m.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, len(SKY_COLUMNS))
+        Columns :data:`SKY_COLUMNS`.
     """
     earth = np.broadcast_to([0.0, 0.0, GEO_RADIUS], sun.shape)
     d_sun = np.linalg.norm(sun, axis=-1)
@@ -221,4 +265,5 @@ def sky_table(sun: np.ndarray, moon: np.ndarray) -> np.ndarray:
     table[:, 6] = (1 - by_earth) * (1 - by_moon * moon_visible)  # both at once: a bound
     table[:, 7] = 1 - by_earth
     table[:, 8] = moon_visible
+    table[:, 9] = table[:, 6] * (AU / d_sun) ** 2
     return table

@@ -77,18 +77,52 @@ def qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def from_axis_angle(axis, angle_rad: float) -> np.ndarray:
-    """Unit quaternion of a rotation by ``angle_rad`` about ``axis`` (scalar last)."""
+    """Unit quaternion of a rotation by ``angle_rad`` about ``axis`` (scalar last).
+
+    Parameters
+    ----------
+    axis : array_like, shape (3,)
+        Rotation axis (normalised here).
+    angle_rad : float
+        Rotation angle, rad.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4,)
+        The quaternion, scalar last.
+    """
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
     return np.concatenate([a * math.sin(angle_rad / 2), [math.cos(angle_rad / 2)]])
 
 
 def angle_deg(q: np.ndarray) -> np.ndarray:
-    """Rotation angle of q (or of each row of an (N, 4) array), degrees: the pointing error."""
+    """Rotation angle of q (or of each row of an (N, 4) array), degrees: the pointing error.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (4,) or (N, 4)
+        Quaternion(s), scalar last.
+
+    Returns
+    -------
+    float or numpy.ndarray, shape (N,)
+        The angle(s), degrees in [0, 180].
+    """
     q = np.asarray(q, dtype=float)
     return np.degrees(2 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3])))
 
 
 def omega_orbit(n: float = GEO_RATE) -> np.ndarray:
-    """The orbital frame's inertial rate, in orbital axes, rad/s."""
+    """The orbital frame's inertial rate, in orbital axes, rad/s.
+
+    Parameters
+    ----------
+    n : float
+        Orbital rate, rad/s (GEO by default).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3,)
+    """
     return np.array([0.0, -n, 0.0])

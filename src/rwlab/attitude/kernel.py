@@ -29,20 +29,41 @@ measurement (``ekf.predict_covariance_into``).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from rwlab.attitude.ekf import (
     _skew_into,
+    aligned_update_into,
+    attitude_error,
+    attitude_update_into,
     error_jacobian_into,
     gated_update_into,
+    gyro_jacobian_into,
     predict_covariance_into,
+    propagate_attitude_into,
 )
 from rwlab.attitude.plant import rk4_step
+from rwlab.attitude.sensors import gyro_sample_into, tracker_visible
 from rwlab.attitude.wheels import realise
 
-__all__ = ["STATS", "control_torque", "new_stats", "run_block"]
+__all__ = [
+    "STATS",
+    "Filter",
+    "Law",
+    "Log",
+    "Noise",
+    "Plant",
+    "Sensors",
+    "Sky",
+    "State",
+    "Wheels",
+    "control_torque",
+    "new_stats",
+    "run_block",
+]
 
 # Running statistics the kernel keeps over every step (not only the logged ones).
 STATS = (
@@ -74,20 +95,172 @@ STATS = (
     "sun_sensor_gated",
     "earth_sensor_gated",
     "no_update_ticks",
+    "star_tracker_blinded",
+    "steady_torque_jitter_sq_sum",
+    "steady_wheel_power_sum",
 )
-MAX_ERR, STEADY_MAX, STEADY_EXCL, DESAT_MAX = 0, 1, 2, 3
-SAT_STEPS, STEADY_STEPS, TAU_PEAK, TAU_SQ, ERR_SQ = 4, 5, 6, 7, 8
-H_PEAK, DESAT_COUNT, UNLOADING, UNLOAD_END, IMPULSE, DESAT_STEPS, EXCL_STEPS = (
-    9,
-    10,
-    11,
-    12,
-    13,
-    14,
-    15,
+_AT = {name: i for i, name in enumerate(STATS)}  # the indices, generated from the list
+MAX_ERR, STEADY_MAX = _AT["max_error_deg"], _AT["steady_max_error_deg"]
+STEADY_EXCL, DESAT_MAX = _AT["steady_max_error_excl_desat_deg"], _AT["max_error_in_desat_deg"]
+SAT_STEPS, STEADY_STEPS = _AT["steady_torque_saturated_steps"], _AT["steady_steps"]
+TAU_PEAK, TAU_SQ, ERR_SQ = (
+    _AT["torque_peak_Nm"],
+    _AT["steady_torque_sq_sum"],
+    _AT["steady_error_sq_sum"],
 )
-ECL_STEPS, MOON_STEPS, ECL_STEADY, ECL_MAX, ECL_SQ, OUT_MAX, OUT_SQ = 16, 17, 18, 19, 20, 21, 22
-SUN_OUT, EARTH_BLIND, SUN_GATED, EARTH_GATED, NO_UPDATE = 23, 24, 25, 26, 27
+H_PEAK, DESAT_COUNT = _AT["momentum_peak_fraction"], _AT["desaturation_count"]
+UNLOADING, UNLOAD_END, IMPULSE = _AT["unloading"], _AT["unload_end_s"], _AT["thruster_impulse_Nms"]
+DESAT_STEPS, EXCL_STEPS = _AT["desat_window_steps"], _AT["steady_excl_desat_steps"]
+ECL_STEPS, MOON_STEPS = _AT["eclipse_steps"], _AT["moon_shadow_steps"]
+ECL_STEADY, ECL_MAX = _AT["steady_eclipse_steps"], _AT["steady_eclipse_max_error_deg"]
+ECL_SQ = _AT["steady_eclipse_error_sq_sum"]
+OUT_MAX = _AT["steady_outside_eclipse_max_error_deg"]
+OUT_SQ = _AT["steady_outside_eclipse_error_sq_sum"]
+SUN_OUT, EARTH_BLIND = _AT["sun_sensor_outages"], _AT["earth_sensor_blinded"]
+SUN_GATED, EARTH_GATED = _AT["sun_sensor_gated"], _AT["earth_sensor_gated"]
+NO_UPDATE, TRACKER_BLIND = _AT["no_update_ticks"], _AT["star_tracker_blinded"]
+JITTER_SQ, POWER = _AT["steady_torque_jitter_sq_sum"], _AT["steady_wheel_power_sum"]
+
+# the filter's modes (``Filter.mode``)
+TRUTH, DYNAMICS, GYRO = 0, 1, 2
+
+
+class Plant(NamedTuple):
+    """The rigid body and its wheels: ``dt`` (s), orbit rate ``n`` (rad/s), J and J⁻¹ (3, 3),
+    the wheel axes G (3, N) and G⁺, momentum limits ``h_max`` (N,), N·m·s, torque limit
+    ``tau_max``, N·m, the disturbance vector ``dist`` (``DisturbanceModel.vector``), the
+    wheels' spin inertia, kg·m² (for their power), and the factor by which every wheel's
+    realised torque differs from its command (motor constant, drive electronics)."""
+
+    dt: float
+    n: float
+    J: np.ndarray
+    J_inv: np.ndarray
+    G: np.ndarray
+    G_pinv: np.ndarray
+    h_max: np.ndarray
+    tau_max: float
+    dist: np.ndarray
+    wheel_inertia: float
+    torque_scale: float
+
+
+class Law(NamedTuple):
+    """The control law's K_ω (3, 3), K_ω⁻¹ K_θ (3, 3), rate limit ``w_max`` (rad/s), and the
+    momentum unloading vector ``unload`` (see :func:`run_block`)."""
+
+    K_w: np.ndarray
+    M: np.ndarray
+    w_max: float
+    unload: np.ndarray
+
+
+class Sky(NamedTuple):
+    """The sky table of ``ephemeris.sky_table`` (rows, 9), row i at ``t0 + i·step`` s."""
+
+    table: np.ndarray
+    t0: float
+    step: float
+
+
+class Sensors(NamedTuple):
+    """The true sensors: sun and earth sensors every ``every`` steps (σ rad, alignment
+    rotations (3, 3), the sun sensor's field cosine and incidence-noise switch, the earth
+    sensor's Sun and Moon exclusion cosines ``blind_cos`` (2,)); gyros when ``gyro`` (par:
+    ``GyroModel.vector``, E (3, 3) scale factor and misalignment); a star tracker when
+    ``tracker``, every ``tracker_every`` steps (a multiple of ``every``), its frame (3, 3,
+    body → tracker), σ (3,) rad and exclusion cosines (3,) (``sensors``)."""
+
+    every: int
+    sun_fov_cos: float
+    sun_incidence: bool
+    sig_sun: float
+    sig_earth: float
+    sun_align: np.ndarray
+    earth_align: np.ndarray
+    blind_cos: np.ndarray
+    gyro: bool
+    gyro_par: np.ndarray
+    gyro_E: np.ndarray
+    tracker: bool
+    tracker_every: int
+    tracker_frame: np.ndarray
+    tracker_sigma: np.ndarray
+    tracker_cos: np.ndarray
+
+
+class Filter(NamedTuple):
+    """The estimator: ``mode`` TRUTH (the controller sees the true state), DYNAMICS (the MEKF
+    on the plant model, its disturbance state of kind ``bias_kind``, truth ``bias_true``
+    for NEES, disturbances it models ``dist_model``) or GYRO (the gyro-driven MEKF); its
+    continuous process noise Qc (n, n); the σ it assumes for the sun and earth sensors
+    (rad); the innovation ``gate`` (2,); the star tracker's covariance ``tracker_R`` (3, 3);
+    the inertia J and J⁻¹ (3, 3) of the DYNAMICS filter's model (not necessarily the truth's)."""
+
+    mode: int
+    bias_kind: int
+    bias_true: np.ndarray
+    dist_model: np.ndarray
+    Qc: np.ndarray
+    r_sun: float
+    r_earth: float
+    gate: np.ndarray
+    tracker_R: np.ndarray
+    J: np.ndarray
+    J_inv: np.ndarray
+
+
+class Noise(NamedTuple):
+    """A block's pre-drawn noise: process torque (steps, 3) N·m; the sun and earth sensors'
+    standard normals (sensor ticks, 6); the gyros' (steps, 9); the tracker's (its ticks, 3)."""
+
+    process: np.ndarray
+    sensor: np.ndarray
+    gyro: np.ndarray
+    tracker: np.ndarray
+
+
+class Log(NamedTuple):
+    """Logging every ``every`` steps into the row arrays; ``steady_from``: the first step of
+    the steady-state statistics."""
+
+    every: int
+    steady_from: int
+    t: np.ndarray
+    x: np.ndarray
+    est: np.ndarray
+    tau: np.ndarray
+    nees: np.ndarray
+    sky: np.ndarray
+    sigma: np.ndarray
+
+
+class State(NamedTuple):
+    """What a block changes in place: the plant x, the estimate q̂ (4,), ŵ (the rest of the
+    filter's state: ω̂ [, b̂] or the gyro bias β̂), P (n, n), the gyros' state (9,) =
+    [β walk, β Gauss–Markov, ω at the last sample] and ``stats`` (:data:`STATS`)."""
+
+    x: np.ndarray
+    q_hat: np.ndarray
+    w_hat: np.ndarray
+    P: np.ndarray
+    gyro: np.ndarray
+    stats: np.ndarray
+
+
+class Wheels(NamedTuple):
+    """The wheel model as the kernel reads it (``wheels.WheelArrays``'s fields)."""
+
+    kind: int
+    healthy: np.ndarray
+    faulty: np.ndarray
+    fault_s: np.ndarray
+    state: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    ident: np.ndarray
+    servo: np.ndarray
 
 
 def new_stats() -> np.ndarray:
@@ -100,7 +273,7 @@ def new_stats() -> np.ndarray:
 @njit(cache=True)
 def _sky_at(sky, u, sun, moon):
     """Sun and Moon unit vectors (into ``sun``, ``moon``) and (sunlit, earth_lit,
-    moon_visible) at row position ``u`` of the sky table (linear interpolation,
+    moon_visible, srp_scale) at row position ``u`` of the sky table (linear interpolation,
     see ``ephemeris.SKY_COLUMNS``)."""
     i = min(max(int(u), 0), sky.shape[0] - 2)
     f = u - i
@@ -120,6 +293,7 @@ def _sky_at(sky, u, sun, moon):
         a[6] + f * (b[6] - a[6]),
         a[7] + f * (b[7] - a[7]),
         a[8] + f * (b[8] - a[8]) > 0.5,
+        a[9] + f * (b[9] - a[9]),
     )
 
 
@@ -135,22 +309,15 @@ def _dcm_into(q, C):
 
 
 @njit(cache=True)
-def _nees(x, q_hat, w_hat, P, b_true, L):
-    """Normalised estimation error squared δxᵀ P⁻¹ δx, δx = [2 (q ⊗ q̂⁻¹)_v, ω − ω̂] (n = 6)
-    or [.., b − b̂] (n = 9, b = ``b_true``), by a Cholesky factor of P written into the
-    (n, n) scratch L."""
-    a1, a2, a3, a4 = x[0], x[1], x[2], x[3]
-    b1, b2, b3, b4 = q_hat[0], q_hat[1], q_hat[2], q_hat[3]
-    sign = 2.0 if a4 * b4 + a1 * b1 + a2 * b2 + a3 * b3 >= 0 else -2.0
+def _nees(q, q_hat, e, P, L):
+    """Normalised estimation error squared δxᵀ P⁻¹ δx, δx = [2 (q ⊗ q̂⁻¹)_v, e[3:]] (n,):
+    the caller fills ``e[3:]`` with the truth minus the estimate of the rest of the state
+    (ω − ω̂, b − b̂ or β − β̂); e[:3] is written here. By a Cholesky factor of P written
+    into the (n, n) scratch L."""
+    e[0], e[1], e[2] = attitude_error(q, q_hat)
     nx = P.shape[0]
-    e = np.empty(nx)  # only at logged steps
-    e[0] = sign * (b4 * a1 - a4 * b1 + a2 * b3 - a3 * b2)
-    e[1] = sign * (b4 * a2 - a4 * b2 + a3 * b1 - a1 * b3)
-    e[2] = sign * (b4 * a3 - a4 * b3 + a1 * b2 - a2 * b1)
-    for i in range(3, nx):
-        e[i] = x[1 + i] - w_hat[i - 3] if i < 6 else b_true[i - 6] - w_hat[i - 3]
     total = 0.0
-    z = np.empty(nx)
+    z = np.empty(nx)  # only at logged steps
     for i in range(nx):
         for j in range(i + 1):
             acc = P[i, j]
@@ -232,157 +399,215 @@ def _control_into(K_w, M, w_max, s, work, tau):
 
 
 @njit(cache=True)
-def run_block(
-    x,
-    q_hat,
-    w_hat,
-    P,
-    k0,
-    steps,
-    K_w,
-    M,
-    w_max,
-    use_ekf,
-    bias_kind,
-    bias_true,
-    dt,
-    sensor_every,
-    log_every,
-    steady_from,
-    J,
-    J_inv,
-    G,
-    G_pinv,
-    h_max,
-    tau_max,
-    n,
-    dist,
-    dist_model,
-    process_noise,
-    sensor_noise,
-    Qc,
-    sky,
-    sky_t0,
-    sky_step,
-    sun_fov_cos,
-    sun_incidence,
-    sig_sun,
-    sig_earth,
-    r_sun,
-    r_earth,
-    sun_align,
-    earth_align,
-    blind_cos,
-    gate,
-    unload,
-    wheel_kind,
-    wheel_healthy,
-    wheel_faulty,
-    wheel_fault_s,
-    wheel_state,
-    wheel_A,
-    wheel_B,
-    wheel_C,
-    wheel_ident,
-    wheel_servo,
-    stats,
-    log_t,
-    log_x,
-    log_est,
-    log_tau,
-    log_nees,
-    log_sky,
-    log_k,
-):
-    """Run ``steps`` steps from step index ``k0``.
+def _unload_step(stats, unload, x, G, h_max, err, t, k, dt, h_body, tau_thr):
+    """Momentum unloading: thruster pulses (into ``tau_thr``) against the wheels' body
+    momentum (into ``h_body``); returns the fullest wheel's momentum fraction."""
+    nw = h_max.shape[0]
+    for i in range(3):
+        h_body[i] = G[i, 0] * x[7]
+        for c in range(1, nw):
+            h_body[i] += G[i, c] * x[7 + c]
+        tau_thr[i] = 0.0
+    h_frac = 0.0
+    for i in range(nw):
+        h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
+    if unload[0] > 0:
+        pointing = err <= unload[6]
+        if stats[UNLOADING] == 0 and h_frac > unload[1] and pointing:
+            stats[UNLOADING] = 1
+            stats[DESAT_COUNT] += 1
+        if stats[UNLOADING] == 1:
+            if h_frac <= unload[2]:
+                stats[UNLOADING] = 0
+                stats[UNLOAD_END] = t
+            elif k % int(unload[4]) == 0 and pointing:  # no pulses during a slew
+                fired = False
+                for i in range(3):
+                    if abs(h_body[i]) > unload[2] * h_max.min():
+                        tau_thr[i] = -math.copysign(unload[3], h_body[i])
+                        stats[IMPULSE] += unload[3] * dt
+                        fired = True
+                if not fired:  # what is left lies in the wheels' null space
+                    stats[UNLOADING] = 0
+                    stats[UNLOAD_END] = t
+    return h_frac
 
-    ``process_noise`` (steps, 3) is the white torque of each step, N·m;
-    ``sensor_noise`` (≥ sensor steps in the block, 6) the standard normals of
-    the sun and earth sensors. ``sky`` (rows, 9) is the sky table of
-    ``ephemeris.sky_table``, row i at ``sky_t0 + i·sky_step`` s; ``sun_align``,
-    ``earth_align`` (3, 3) turn the true body vector into the one each sensor
-    reports (bias and misalignment); ``blind_cos`` (2,) the cosines of the earth
-    sensor's Sun and Moon exclusion angles; ``gate`` = [χ² innovation bound (0:
-    none), consecutive rejections after which a sensor's next measurement is taken
-    anyway: a filter that has drifted must not lock its sensors out]. ``log_sky``
-    rows: sunlit fraction, sun and earth sensor status (0 used, 1 unavailable, 2
-    gated). ``unload`` = [enabled, start fraction, stop fraction, pulse torque
-    N·m, pulse steps between pulses, recovery s, pointing error (°) above which
-    no window starts and no pulse fires]; ``wheel_*`` the wheel model
-    (:class:`rwlab.attitude.wheels.WheelArrays`; its state is updated in place);
-    ``stats`` (see :data:`STATS`) is updated in place. ``w_hat`` is [ω̂] (3,) with P
-    6×6, or [ω̂, b̂] with P n×n and the disturbance state of kind ``bias_kind`` (1: a
-    body torque b (3), acting as b; 2: an SRP lever arm β (3), acting as ν ŝ × β
-    with ŝ the Sun in the estimated body axes and ν the sunlit fraction; 3: both,
-    [b, β]; see ``ekf``); ``bias_true`` (n − 6,) is its true value for NEES;
-    ``log_est`` rows are [q̂, ω̂, b, β] (zeros for a state the filter lacks). Returns
-    the new x, q̂, ŵ, P, log position and whether a wheel touched its momentum limit.
+
+@njit(cache=True)
+def _steady_stats(stats, err, hw_cmd, hw_prev, x, wheel_inertia, at_limit, in_desat, earth_lit):
+    """The steady window's statistics of one step."""
+    nw = hw_cmd.shape[0]
+    stats[STEADY_MAX] = max(stats[STEADY_MAX], err)
+    stats[STEADY_STEPS] += 1
+    stats[ERR_SQ] += err * err
+    for i in range(nw):
+        stats[TAU_SQ] += hw_cmd[i] * hw_cmd[i] / nw
+        d = hw_cmd[i] - hw_prev[i]  # white jitter of σ gives E[d²] = 2σ²
+        stats[JITTER_SQ] += d * d / (2 * nw)
+        stats[POWER] += abs(hw_cmd[i] * x[7 + i] / wheel_inertia)
+    if at_limit:
+        stats[SAT_STEPS] += 1
+    if in_desat:
+        stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
+        stats[DESAT_STEPS] += 1
+    else:
+        stats[STEADY_EXCL] = max(stats[STEADY_EXCL], err)
+        stats[EXCL_STEPS] += 1
+    if earth_lit < 1.0:
+        stats[ECL_STEADY] += 1
+        stats[ECL_MAX] = max(stats[ECL_MAX], err)
+        stats[ECL_SQ] += err * err
+    else:
+        stats[OUT_MAX] = max(stats[OUT_MAX], err)
+        stats[OUT_SQ] += err * err
+
+
+@njit(cache=True)
+def _tracker_measurement(x, frame, sigma, e, out):
+    """The tracker's quaternion: the truth turned by its noise (σ·e about its own axes)."""
+    v0, v1, v2 = sigma[0] * e[0], sigma[1] * e[1], sigma[2] * e[2]
+    out[:] = x[:4]
+    b0 = frame[0, 0] * v0 + frame[1, 0] * v1 + frame[2, 0] * v2  # body = frameᵀ v
+    b1 = frame[0, 1] * v0 + frame[1, 1] * v1 + frame[2, 1] * v2
+    b2 = frame[0, 2] * v0 + frame[1, 2] * v1 + frame[2, 2] * v2
+    propagate_attitude_into(out, b0, b1, b2, 1.0)
+
+
+@njit(cache=True)
+def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wheels, log):
+    """Run ``steps`` steps from step index ``k0``; returns the next log row and whether a
+    wheel touched its momentum limit.
+
+    ``state`` (:class:`State`) is updated in place, as are the wheels' state and the log
+    rows from ``log_k`` (:class:`Log`). The records say what each input is; besides them:
+    ``law.unload`` = [enabled, start fraction, stop fraction, pulse torque N·m, steps
+    between pulses, recovery s, pointing error (°) above which no window starts and no
+    pulse fires]; ``filt.gate`` = [χ² innovation bound (0: none), consecutive rejections
+    after which a sensor's next measurement is taken anyway]. In the DYNAMICS mode
+    ``state.w_hat`` is [ω̂] with P 6×6, or [ω̂, b̂] with the disturbance state of kind
+    ``filt.bias_kind`` (1: a body torque b (3); 2: an SRP lever arm β (3), acting as
+    ν ŝ × β; 3: both, [b, β]; see ``ekf``); in the GYRO mode it is the gyro bias β̂ (3,)
+    with P 6×6, or [β̂, φ̂] with P 9×9 and φ̂ the sun sensor's misalignment (body axes;
+    ``filt.bias_true`` its truth). ``log.est`` rows are [q̂, ω̂, b, β, β̂_gyro, φ̂] (zeros
+    for a state the filter lacks), ``log.sigma`` rows √diag P[:6] and ``log.sky`` rows the
+    sunlit fraction and the sun sensor's, earth sensor's and star tracker's status (0 used,
+    1 unavailable, 2 gated).
     """
+    x, q_hat, w_hat, P, gs, stats = state
+    J, J_inv, G, h_max, n, dt = plant.J, plant.J_inv, plant.G, plant.h_max, plant.n, plant.dt
+    unload = law.unload
     nadir = np.array([0.0, 0.0, 1.0])
     saturated = False
     nw = h_max.shape[0]
     m = x.shape[0]
-    T_sensor = sensor_every * dt
-    i_sensor = 0
+    mode = filt.mode
+    every = sensors.every
+    T_sensor = every * dt
+    i_sensor = i_tracker = 0
     tau_thr = np.zeros(3)
     s = np.empty(6)
     tau = np.empty(3)
     work = np.empty(3)
-    hw_cmd = np.empty(nw)
-    hw_real = np.empty(nw)
+    hw_cmd, hw_prev, hw_real = np.empty(nw), np.zeros(nw), np.empty(nw)
     h_body = np.empty(3)
     rk4_work = np.empty((5, m))
-    d = dist.copy()
-    dm = dist_model.copy()
-    x = x.copy()
+    d = plant.dist.copy()
+    dm = filt.dist_model.copy()
     xm = np.empty(m)
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     nx = P.shape[0]  # 6, or 9 or 12 with the disturbance state b̂ = w_hat[3:]
-    biased = use_ekf and nx > 6
+    biased = mode == DYNAMICS and nx > 6
+    aligned = mode == GYRO and nx == 9  # [δθ, δβ, φ_sun]
     F, W3, Wn = np.empty((nx, nx)), np.empty((4, 3, 3)), np.empty((6, nx, nx))
     C, Bmap = np.empty((3, 3)), np.zeros((3, max(nx - 6, 3)))  # Bmap: torque per unit b̂
-    if bias_kind != 2:  # the constant torque's columns come first
+    if filt.bias_kind != 2:  # the constant torque's columns come first
         for i in range(3):
             Bmap[i, i] = 1.0
-    srp_map = Bmap[:, 3:] if bias_kind == 3 else Bmap[:, :3]
+    srp_map = Bmap[:, 3:] if filt.bias_kind == 3 else Bmap[:, :3]
     C_hat, sun_hat, tau_b = np.empty((3, 3)), np.empty(3), np.zeros(3)
-    q_hat, w_hat, P = q_hat.copy(), w_hat.copy(), P.copy()
     s_orb, m_orb, sun_b, moon_b = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     b_true, b_meas, nadir_b = np.empty(3), np.empty(3), np.empty(3)
-    sun_status = earth_status = 0.0
+    w_mean, w_meas, q_meas, e_nees = np.zeros(3), np.zeros(3), np.empty(4), np.zeros(nx)
+    sun_status = earth_status = tracker_status = 0.0
     sun_rejected = earth_rejected = 0  # consecutive gated measurements of each sensor
     for j in range(steps):
         k = k0 + j
         t = k * dt
-        sunlit, earth_lit, moon_visible = _sky_at(sky, (t - sky_t0) / sky_step, s_orb, m_orb)
+        u = (t - sky.t0) / sky.step
+        sunlit, earth_lit, moon_visible, srp_scale = _sky_at(sky.table, u, s_orb, m_orb)
         if earth_lit < 1.0:
             stats[ECL_STEPS] += 1
         if sunlit < earth_lit:
             stats[MOON_STEPS] += 1
-        if k % sensor_every == 0:
+        if sensors.gyro:  # the angle turned over the last step, as a rate
+            for c in range(3):
+                w_mean[c] = 0.5 * (gs[6 + c] + x[4 + c])
+                gs[6 + c] = x[4 + c]
+            gyro_sample_into(w_mean, sensors.gyro_E, sensors.gyro_par, gs, noise.gyro[j], w_meas)
+            if mode == GYRO and k > 0:  # q̂ over the last step with ω̂ = ω_m − β̂
+                for c in range(3):
+                    work[c] = w_meas[c] - w_hat[c]
+                _dcm_into(q_hat, C_hat)
+                propagate_attitude_into(
+                    q_hat,
+                    work[0] + n * C_hat[0, 1],
+                    work[1] + n * C_hat[1, 1],
+                    work[2] + n * C_hat[2, 1],
+                    dt,
+                )
+        tick = k % every == 0
+        if tick:
             _dcm_into(x, C)
             _matvec(C, s_orb, sun_b)
             _matvec(C, m_orb, moon_b)
+            for c in range(3):
+                nadir_b[c] = C[c, 2]
             # the sun sensor needs the whole disc inside its field; the earth sensor
             # (boresight +z) is blinded by a visible Sun or Moon inside its exclusion cone
-            sun_ok = sunlit >= 1.0 and -sun_b[0] >= sun_fov_cos
+            sun_ok = sunlit >= 1.0 and -sun_b[0] >= sensors.sun_fov_cos
             earth_ok = not (
-                (sunlit > 0.0 and sun_b[2] >= blind_cos[0])
-                or (moon_visible and moon_b[2] >= blind_cos[1])
+                (sunlit > 0.0 and sun_b[2] >= sensors.blind_cos[0])
+                or (moon_visible and moon_b[2] >= sensors.blind_cos[1])
             )
             sun_status = 0.0 if sun_ok else 1.0
             earth_status = 0.0 if earth_ok else 1.0
-        measured = use_ekf and k % sensor_every == 0
+            if sensors.tracker and k % sensors.tracker_every == 0:
+                seen = tracker_visible(
+                    sensors.tracker_frame,
+                    sun_b,
+                    moon_b,
+                    nadir_b,
+                    sunlit,
+                    moon_visible,
+                    sensors.tracker_cos,
+                )
+                tracker_status = 0.0 if seen else 1.0
+                if not seen:
+                    stats[TRACKER_BLIND] += 1
+                elif mode != TRUTH:
+                    _tracker_measurement(
+                        x,
+                        sensors.tracker_frame,
+                        sensors.tracker_sigma,
+                        noise.tracker[i_tracker],
+                        q_meas,
+                    )
+                    attitude_update_into(q_hat, w_hat, P, q_meas, filt.tracker_R, Wn)
+                i_tracker += 1
+        measured = mode != TRUTH and tick
         if measured:  # no update through an outage: the filter only propagates
-            e = sensor_noise[i_sensor]
+            e = noise.sensor[i_sensor]
             i_sensor += 1
             if sun_status == 0.0:
-                cos_i = -sun_b[0] if sun_incidence else 1.0  # noise ∝ 1/cos(incidence)
-                _matvec(sun_align, sun_b, b_true)
-                _noisy_into(b_true, sig_sun / cos_i, e[0], e[1], e[2], b_meas)
-                r = r_sun / max(-b_meas[0], 1e-3) if sun_incidence else r_sun
-                g = gate[0] if sun_rejected < gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, Wn)
+                cos_i = -sun_b[0] if sensors.sun_incidence else 1.0  # noise ∝ 1/cos(incidence)
+                _matvec(sensors.sun_align, sun_b, b_true)
+                _noisy_into(b_true, sensors.sig_sun / cos_i, e[0], e[1], e[2], b_meas)
+                r = filt.r_sun / max(-b_meas[0], 1e-3) if sensors.sun_incidence else filt.r_sun
+                g = filt.gate[0] if sun_rejected < filt.gate[1] else 0.0
+                if aligned:  # the sun sensor's misalignment is in the state
+                    ok = aligned_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, 6, Wn)
+                else:
+                    ok = gated_update_into(q_hat, w_hat, P, b_meas, s_orb, r, g, Wn)
                 sun_rejected = 0 if ok else sun_rejected + 1
                 if not ok:
                     stats[SUN_GATED] += 1
@@ -390,157 +615,149 @@ def run_block(
             else:
                 stats[SUN_OUT] += 1
             if earth_status == 0.0:
-                for c in range(3):
-                    nadir_b[c] = C[c, 2]
-                _matvec(earth_align, nadir_b, b_true)
-                _noisy_into(b_true, sig_earth, e[3], e[4], e[5], b_meas)
-                g = gate[0] if earth_rejected < gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, r_earth, g, Wn)
+                _matvec(sensors.earth_align, nadir_b, b_true)
+                _noisy_into(b_true, sensors.sig_earth, e[3], e[4], e[5], b_meas)
+                g = filt.gate[0] if earth_rejected < filt.gate[1] else 0.0
+                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, filt.r_earth, g, Wn)
                 earth_rejected = 0 if ok else earth_rejected + 1
                 if not ok:
                     stats[EARTH_GATED] += 1
                     earth_status = 2.0
             else:
                 stats[EARTH_BLIND] += 1
-            if sun_status != 0.0 and earth_status != 0.0:
+            no_tracker = not sensors.tracker or tracker_status != 0.0
+            if sun_status != 0.0 and earth_status != 0.0 and no_tracker:
                 stats[NO_UPDATE] += 1
         qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         err = math.degrees(2.0 * math.asin(min(1.0, qv)))  # the true error (target: orbital frame)
-        # momentum unloading: thruster pulses against the wheels' body momentum
-        for i in range(3):
-            h_body[i] = G[i, 0] * x[7]
-            for c in range(1, nw):
-                h_body[i] += G[i, c] * x[7 + c]
-            tau_thr[i] = 0.0
-        h_frac = 0.0
-        for i in range(nw):
-            h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
-        if unload[0] > 0:
-            pointing = err <= unload[6]
-            if stats[UNLOADING] == 0 and h_frac > unload[1] and pointing:
-                stats[UNLOADING] = 1
-                stats[DESAT_COUNT] += 1
-            if stats[UNLOADING] == 1:
-                if h_frac <= unload[2]:
-                    stats[UNLOADING] = 0
-                    stats[UNLOAD_END] = t
-                elif k % int(unload[4]) == 0 and pointing:  # no pulses during a slew
-                    fired = False
-                    for i in range(3):
-                        if abs(h_body[i]) > unload[2] * h_max.min():
-                            tau_thr[i] = -math.copysign(unload[3], h_body[i])
-                            stats[IMPULSE] += unload[3] * dt
-                            fired = True
-                    if not fired:  # what is left lies in the wheels' null space
-                        stats[UNLOADING] = 0
-                        stats[UNLOAD_END] = t
+        h_frac = _unload_step(stats, unload, x, G, h_max, err, t, k, dt, h_body, tau_thr)
 
-        for i in range(7):
-            est[i] = (q_hat[i] if i < 4 else w_hat[i - 4]) if use_ekf else x[i]
+        for i in range(4):
+            est[i] = x[i] if mode == TRUTH else q_hat[i]
+        for i in range(3):
+            if mode == TRUTH:
+                est[4 + i] = x[4 + i]
+            elif mode == GYRO:
+                est[4 + i] = w_meas[i] - w_hat[i]
+            else:
+                est[4 + i] = w_hat[i]
         _state_into(est, n, s)
-        _control_into(K_w, M, w_max, s, work, tau)
+        _control_into(law.K_w, law.M, law.w_max, s, work, tau)
         if biased:  # disturbance accommodation: cancel the estimated torque
-            if bias_kind >= 2:
-                _srp_map_into(q_hat, s_orb, sunlit, C_hat, sun_hat, srp_map)
+            if filt.bias_kind >= 2:
+                _srp_map_into(q_hat, s_orb, srp_scale, C_hat, sun_hat, srp_map)
             _matvec(Bmap, w_hat[3:], tau_b)
             for i in range(3):
                 tau[i] -= tau_b[i]
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
-        _matvec(G_pinv, work, hw_cmd)
+        _matvec(plant.G_pinv, work, hw_cmd)
         at_limit = False
         for i in range(nw):
-            if abs(hw_cmd[i]) >= tau_max:
+            if abs(hw_cmd[i]) >= plant.tau_max:
                 at_limit = True
-            hw_cmd[i] = min(max(hw_cmd[i], -tau_max), tau_max)
+            hw_cmd[i] = min(max(hw_cmd[i], -plant.tau_max), plant.tau_max)
             stats[TAU_PEAK] = max(stats[TAU_PEAK], abs(hw_cmd[i]))
         stats[H_PEAK] = max(stats[H_PEAK], h_frac)
         if h_frac >= 0.999:
             saturated = True
         realise(
-            wheel_kind,
+            wheels.kind,
             t,
             dt,
             hw_cmd,
             x,
-            wheel_healthy,
-            wheel_faulty,
-            wheel_fault_s,
-            wheel_state,
-            wheel_A,
-            wheel_B,
-            wheel_C,
-            wheel_ident,
-            wheel_servo,
+            wheels.healthy,
+            wheels.faulty,
+            wheels.fault_s,
+            wheels.state,
+            wheels.A,
+            wheels.B,
+            wheels.C,
+            wheels.ident,
+            wheels.servo,
             hw_real,
         )
+        if plant.torque_scale != 1.0:  # the tachometers see what the wheels really did
+            for i in range(nw):
+                hw_real[i] *= plant.torque_scale
 
         in_desat = stats[UNLOADING] == 1 or t - stats[UNLOAD_END] <= unload[5]
         stats[MAX_ERR] = max(stats[MAX_ERR], err)
-        if k >= steady_from:
-            stats[STEADY_MAX] = max(stats[STEADY_MAX], err)
-            stats[STEADY_STEPS] += 1
-            stats[ERR_SQ] += err * err
-            for i in range(nw):
-                stats[TAU_SQ] += hw_cmd[i] * hw_cmd[i] / nw
-            if at_limit:
-                stats[SAT_STEPS] += 1
-            if in_desat:
-                stats[DESAT_MAX] = max(stats[DESAT_MAX], err)
-                stats[DESAT_STEPS] += 1
-            else:
-                stats[STEADY_EXCL] = max(stats[STEADY_EXCL], err)
-                stats[EXCL_STEPS] += 1
-            if earth_lit < 1.0:
-                stats[ECL_STEADY] += 1
-                stats[ECL_MAX] = max(stats[ECL_MAX], err)
-                stats[ECL_SQ] += err * err
-            else:
-                stats[OUT_MAX] = max(stats[OUT_MAX], err)
-                stats[OUT_SQ] += err * err
+        if k >= log.steady_from:
+            if k == log.steady_from or j == 0:  # no previous command in this window
+                hw_prev[:] = hw_cmd
+            _steady_stats(
+                stats, err, hw_cmd, hw_prev, x, plant.wheel_inertia, at_limit, in_desat, earth_lit
+            )
+        hw_prev[:] = hw_cmd
 
-        if k % log_every == 0:
-            log_t[log_k] = t
+        if k % log.every == 0:
+            log.t[log_k] = t
             for i in range(m):
-                log_x[log_k, i] = x[i]
+                log.x[log_k, i] = x[i]
             for i in range(7):
-                log_est[log_k, i] = est[i]
-            for i in range(6):
-                log_est[log_k, 7 + i] = 0.0
+                log.est[log_k, i] = est[i]
+            for i in range(7, log.est.shape[1]):
+                log.est[log_k, i] = 0.0
             if biased:
-                at = 10 if bias_kind == 2 else 7  # log columns: b, then β
+                at = 10 if filt.bias_kind == 2 else 7  # log columns: b, then β
                 for i in range(nx - 6):
-                    log_est[log_k, at + i] = w_hat[3 + i]
+                    log.est[log_k, at + i] = w_hat[3 + i]
+            if mode == GYRO:
+                for i in range(nx - 3):  # β̂, then φ̂ of the sun sensor
+                    log.est[log_k, 13 + i] = w_hat[i]
             for i in range(3):
-                log_tau[log_k, i] = 0.0
+                log.tau[log_k, i] = 0.0
                 for c in range(nw):
-                    log_tau[log_k, i] -= G[i, c] * hw_real[c]
-            if use_ekf:
-                nees = _nees(x, q_hat, w_hat, P, bias_true, Wn[0]) if measured else np.nan
-                log_nees[log_k] = nees
-            log_sky[log_k, 0] = sunlit
-            log_sky[log_k, 1] = sun_status
-            log_sky[log_k, 2] = earth_status
+                    log.tau[log_k, i] -= G[i, c] * hw_real[c]
+            if mode != TRUTH:
+                if measured:
+                    for i in range(3, nx):
+                        if mode == GYRO and i >= 6:  # the sun sensor's misalignment
+                            e_nees[i] = filt.bias_true[i - 6] - w_hat[i - 3]
+                        elif mode == GYRO:  # what β̂ stands for: the bias plus E ω
+                            e_nees[i] = gs[i - 3] + gs[i] - w_hat[i - 3]
+                            for c in range(3):
+                                e_nees[i] += sensors.gyro_E[i - 3, c] * w_mean[c]
+                        elif i < 6:
+                            e_nees[i] = x[1 + i] - w_hat[i - 3]
+                        else:
+                            e_nees[i] = filt.bias_true[i - 6] - w_hat[i - 3]
+                    log.nees[log_k] = _nees(x, q_hat, e_nees, P, Wn[0])
+                else:
+                    log.nees[log_k] = np.nan
+                for i in range(min(nx, 6)):
+                    log.sigma[log_k, i] = math.sqrt(P[i, i])
+            log.sky[log_k, 0] = sunlit
+            log.sky[log_k, 1] = sun_status
+            log.sky[log_k, 2] = earth_status
+            log.sky[log_k, 3] = tracker_status if sensors.tracker else 1.0
             log_k += 1
 
         for i in range(3):
-            d[7 + i] = dist[7 + i] + process_noise[j, i] + tau_thr[i]
-        d[1] = dist[1] * sunlit  # SRP in the shadow
-        dm[1] = dist_model[1] * sunlit
-        if use_ekf:
-            if measured:  # covariance to the next measurement, F at this estimate
-                error_jacobian_into(q_hat, w_hat, h_body, J, J_inv, n, dist_model[0], Bmap, F, W3)
-                predict_covariance_into(P, F, Qc, T_sensor, Wn)
+            d[7 + i] = plant.dist[7 + i] + noise.process[j, i] + tau_thr[i]
+        d[1] = plant.dist[1] * srp_scale  # SRP: none in the shadow, ∝ 1/r² of the Sun
+        dm[1] = filt.dist_model[1] * srp_scale
+        if measured:  # covariance to the next measurement, F at this estimate
+            if mode == GYRO:
+                gyro_jacobian_into(est[4:7], F)
+            else:
+                error_jacobian_into(
+                    q_hat, w_hat, h_body, filt.J, filt.J_inv, n, filt.dist_model[0], Bmap, F, W3
+                )
+            predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
+        if mode == DYNAMICS:
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
             xm[7:] = x[7:]
             for i in range(3):  # the thruster command (and b̂'s torque) is known to the filter
-                dm[7 + i] = dist_model[7 + i] + tau_thr[i] + tau_b[i]
+                dm[7 + i] = filt.dist_model[7 + i] + tau_thr[i] + tau_b[i]
             # the filter knows the wheels' torques and momenta (their tachometers)
-            rk4_step(xm, hw_real, dt, J, J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
+            rk4_step(xm, hw_real, dt, filt.J, filt.J_inv, G, h_max, n, dm, s_orb, m_orb, rk4_work)
             for i in range(4):
                 q_hat[i] = xm[i]
             for i in range(3):
                 w_hat[i] = xm[4 + i]
         rk4_step(x, hw_real, dt, J, J_inv, G, h_max, n, d, s_orb, m_orb, rk4_work)
-    return x, q_hat, w_hat, P, log_k, saturated
+    return log_k, saturated

@@ -17,6 +17,16 @@ Disturbances (each switchable, all in body axes):
 - Sun and Moon third-body gravity gradient 3 μ/R³ ŝ × (J ŝ);
 - a constant torque (a stand-in used by the Basilisk comparison).
 
+Wheel-spin-inertia convention. ``h_w`` is each wheel's *absolute* spin momentum,
+h_w = J_s (Ω + gᵀω) (Ω its speed relative to the body, g its axis), so ḣ_w is the
+motor torque, and J is the spacecraft's inertia *without* the wheels' spin-axis
+inertia: J = I_sc − Σ J_s g gᵀ. Basilisk's ``reactionWheelStateEffector`` keeps Ω
+as the state and I_sc with the wheels' full inertia; the two give the same
+motion (tests/test_wheel_convention.py holds rwlab's trajectory to Basilisk's
+equation of motion, I_sc ω̇ + Σ g J_s Ω̇ = −ω × (I_sc ω + Σ g J_s Ω) + τ), so a
+Basilisk scenario's hub inertia maps to J = I_sc − Σ J_s g gᵀ. The reported
+wheel speed h_w / J_s is Ω + gᵀω: at GEO gᵀω ≤ 7.3e-5 rad/s (7e-4 rpm).
+
 The inner loop is numba-compiled: the whole RK4 step runs without Python.
 """
 

@@ -11,8 +11,12 @@ Three built-ins:
   6000 rpm) and 30 m² of arrays.
 
 Sensors: sun sensor 0.02°, earth sensor 0.05° (1σ, typical units); the filter
-assumes 30 % more (paper B). A scenario file is TOML with the same keys; unknown
-keys and bad values are errors.
+assumes 30 % more (paper B). Two more built-ins fly the sensors real GEO comsats
+carry through the eclipses (``rwlab.attitude.sensors``): ``geo-comsat-gyro``
+(gyros drive the filter: the Lefferts–Markley–Shuster MEKF) and
+``geo-comsat-star`` (gyros and a star tracker); ``[gyro]`` and
+``[star_tracker]`` tables in a scenario file do the same. A scenario file is
+TOML with the same keys; unknown keys and bad values are errors.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.attitude.plant import DisturbanceModel
+from rwlab.attitude.sensors import GyroModel, StarTrackerModel
 from rwlab.errors import ConfigError
 
 __all__ = ["SCENARIOS", "Scenario", "load_scenario"]
@@ -112,6 +117,18 @@ class Scenario:
         limit) that starts and ends an unloading window.
     unload_pulse_period_s : s between pulses.  unload_recovery_s : s after a
         window still counted as "during desaturation".
+
+    Sensors GEO satellites fly besides sun and earth sensors (``rwlab.attitude.sensors``):
+    gyro : GyroModel or None — gyros; with them the filter is the gyro-driven MEKF
+        (Lefferts–Markley–Shuster: attitude + gyro bias), the dynamics model unused.
+    star_tracker : StarTrackerModel or None — a star tracker's attitude updates.
+    filter_sun_sensor_alignment : with gyros, the filter also estimates the sun sensor's
+        misalignment relative to the earth sensor (the pointing reference) — in-flight
+        calibration; about z it cannot be told from yaw and stays at its prior (carried
+        as uncertainty).
+    filter_inertia : the inertia the filter's dynamics model uses (3 or 9 values;
+        empty: the truth's) — the model error of a flight filter.
+    wheel_torque_scale : realised wheel torque over the command (1: exact).
     """
 
     name: str = "custom"
@@ -172,12 +189,21 @@ class Scenario:
     unload_stop_fraction: float = 0.1
     unload_pulse_period_s: float = 2.0
     unload_recovery_s: float = 300.0
+    gyro: GyroModel | None = None
+    star_tracker: StarTrackerModel | None = None
+    filter_inertia: tuple = ()
+    wheel_torque_scale: float = 1.0
+    filter_sun_sensor_alignment: bool = True
 
     def __post_init__(self) -> None:
         _check_types(self)
+        _check_attitude_sensors(self)
         J = self.inertia_matrix
         if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(J) <= 0):
             raise ConfigError(f"{self.name}: inertia must be symmetric positive definite")
+        Jf = self.filter_inertia_matrix
+        if not np.allclose(Jf, Jf.T) or np.any(np.linalg.eigvalsh(Jf) <= 0):
+            raise ConfigError(f"{self.name}: filter_inertia must be symmetric positive definite")
         ev = np.linalg.eigvalsh(J)
         if ev[2] > ev[0] + ev[1] + 1e-9:
             raise ConfigError(f"{self.name}: inertia violates the triangle inequality")
@@ -248,6 +274,14 @@ class Scenario:
             raise ConfigError(f"{self.name}: sun_noise_incidence needs sun_fov_deg < 90")
 
     @property
+    def filter_inertia_matrix(self) -> np.ndarray:
+        """The inertia the filter's model uses, kg·m²: ``filter_inertia``, else the truth's."""
+        if not self.filter_inertia:
+            return self.inertia_matrix
+        v = np.asarray(self.filter_inertia, dtype=float)
+        return np.diag(v) if v.size == 3 else v.reshape(3, 3)
+
+    @property
     def inertia_matrix(self) -> np.ndarray:
         v = np.asarray(self.inertia, dtype=float)
         if v.size == 3:
@@ -273,6 +307,7 @@ class Scenario:
 
 
 _POSITIVE = (
+    "wheel_torque_scale",
     "filter_torque_drift_s",
     "filter_srp_drift_s",
     "wheel_inertia",
@@ -305,6 +340,7 @@ _FRACTIONS = (
 )
 _VECTORS = {
     "inertia": (3, 9),
+    "filter_inertia": (0, 3, 9),
     "initial_axis": (3,),
     "initial_rate": (3,),
     "sun_sensor_bias_deg": (2,),
@@ -349,10 +385,29 @@ def _check_wheel_faults(sc: Scenario) -> None:
                 raise ConfigError(f"{sc.name}: wheel fault {key} must be {what}, got {v!r}")
 
 
+def _check_attitude_sensors(sc: Scenario) -> None:
+    """Gyros and a star tracker: of their model types, the tracker on the sensors' clock."""
+    if sc.gyro is not None and not isinstance(sc.gyro, GyroModel):
+        raise ConfigError(f"{sc.name}: gyro must be a GyroModel (a [gyro] table) or absent")
+    st = sc.star_tracker
+    if st is None:
+        return
+    if not isinstance(st, StarTrackerModel):
+        raise ConfigError(f"{sc.name}: star_tracker must be a StarTrackerModel or absent")
+    ratio = st.period_s / sc.sensor_period
+    if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise ConfigError(
+            f"{sc.name}: star_tracker.period_s must be a whole multiple of sensor_period "
+            f"({sc.sensor_period:g} s), got {st.period_s:g}"
+        )
+
+
 def _check_types(sc: Scenario) -> None:
     """Every field of the type its default has (numbers finite), vectors of the right length."""
     for f in fields(sc):
         value, default = getattr(sc, f.name), f.default
+        if f.name in ("gyro", "star_tracker"):
+            continue  # _check_attitude_sensors
         if f.name in _VECTORS:
             ok = isinstance(value, (tuple, list)) and len(value) in _VECTORS[f.name]
             ok = ok and all(_is_number(v) for v in value)
@@ -395,6 +450,12 @@ SCENARIOS = {
         unload_pulse_period_s=2.0,
     ),
     "geo-comsat": Scenario(name="geo-comsat"),
+    # geo-comsat with the sensors GEO comsats fly for the eclipses: gyros driving the filter
+    # (sun and earth sensors as before); and with a star tracker besides
+    "geo-comsat-gyro": Scenario(name="geo-comsat-gyro", gyro=GyroModel()),
+    "geo-comsat-star": Scenario(
+        name="geo-comsat-star", gyro=GyroModel(), star_tracker=StarTrackerModel()
+    ),
 }
 # the smallsat with four RW90 in a pyramid: any three still span the body (a wheel may fail)
 SCENARIOS["geo-smallsat-pyramid"] = replace(
@@ -402,8 +463,49 @@ SCENARIOS["geo-smallsat-pyramid"] = replace(
 )
 
 
+def _sensor_tables(raw: dict, base: Scenario, path: Path) -> dict:
+    """[gyro] and [star_tracker] tables: the sensor flies, its keys over the defaults (or over
+    the base scenario's unit); ``fly = false`` removes the base's."""
+    out: dict = {}
+    for key, cls in (("gyro", GyroModel), ("star_tracker", StarTrackerModel)):
+        if key not in raw:
+            continue
+        table = raw[key]
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: [{key}] must be a table")
+        table = dict(table)
+        if table.pop("fly", True) is False:
+            out[key] = None
+            continue
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(f"{path}: unknown key(s) {[f'{key}.{k}' for k in unknown]}")
+        for k, v in table.items():
+            if isinstance(v, list):
+                table[k] = tuple(v)
+        current = getattr(base, key) or cls()
+        try:
+            out[key] = replace(current, **table)
+        except TypeError as exc:
+            raise ConfigError(f"{path}: [{key}]: {exc}") from None
+    return out
+
+
 def load_scenario(name_or_path: str, **overrides) -> Scenario:
-    """A built-in scenario by name, or a TOML file (``[scenario]`` and ``[disturbances]``)."""
+    """A built-in scenario by name, or a TOML file (``[scenario]`` and ``[disturbances]``).
+
+    Parameters
+    ----------
+    name_or_path : str
+        ``"geo-smallsat"``, ``"geo-comsat"`` or a TOML file.
+    **overrides
+        Fields to change after loading.
+
+    Returns
+    -------
+    Scenario
+    """
     if name_or_path in SCENARIOS:
         base = SCENARIOS[name_or_path]
         return replace(base, **overrides) if overrides else base
@@ -416,6 +518,11 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    if not raw or not any(raw.values()):
+        raise ConfigError(
+            f"{path}: the scenario file is empty; give a [scenario] table (base = "
+            f"{' or '.join(map(repr, sorted(SCENARIOS)))} and the values that differ)"
+        )
     if not isinstance(raw.get("scenario", {}), dict) or not isinstance(
         raw.get("disturbances", {}), dict
     ):
@@ -430,7 +537,7 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     dist = raw.get("disturbances", {})
     dist_known = {f.name for f in fields(DisturbanceModel)}
     unknown += sorted(f"disturbances.{k}" for k in set(dist) - dist_known)
-    extra = sorted(set(raw) - {"scenario", "disturbances"})
+    extra = sorted(set(raw) - {"scenario", "disturbances", "gyro", "star_tracker"})
     if unknown or extra:
         raise ConfigError(f"{path}: unknown key(s) {unknown + extra}")
     if isinstance(table.get("wheel_faults"), list):
@@ -455,8 +562,10 @@ def load_scenario(name_or_path: str, **overrides) -> Scenario:
     model_file = table.get("wheel_model_file")
     if isinstance(model_file, str) and not Path(model_file).is_absolute():
         table["wheel_model_file"] = str(path.parent / model_file)  # relative to the file
+    sensors = _sensor_tables(raw, base, path)
     return replace(
         base,
+        **sensors,
         name=str(table.pop("name", path.stem)),
         disturbances=replace(base.disturbances, **dist),
         **table,

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.attitude import kernel
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
 from rwlab.attitude.kernel import control_torque
@@ -43,7 +44,19 @@ MOON_DIRECTION = np.array([0.6, -0.1, 0.79])  # orbital frame, slowly varying; f
 
 
 def sun_direction(scenario: Scenario, t: float) -> np.ndarray:
-    """Unit vector to the Sun in the orbital frame at time t (s)."""
+    """Unit vector to the Sun in the orbital frame at time t (s).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``sun`` model.
+    t : float
+        Time since the start, s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3,)
+    """
     d = math.radians(scenario.sun_declination_deg)
     theta = math.radians(scenario.sun_phase_deg)
     if scenario.sun == "moving":
@@ -78,7 +91,17 @@ def _rate_map(K: np.ndarray) -> np.ndarray:
 
 
 class PDController(LinearController):
-    """Quaternion PD law τ = −Kp·2q_v·sign(q4) − Kd·ω_bo (like Basilisk's MRP feedback)."""
+    """Quaternion PD law τ = −Kp·2q_v·sign(q4) − Kd·ω_bo (like Basilisk's MRP feedback).
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain, N·m/rad.
+    kd : float
+        Derivative gain, N·m·s/rad.
+    rate_limit : float
+        Largest commanded rate in a large slew, rad/s.
+    """
 
     def __init__(self, kp: float, kd: float, rate_limit: float = math.inf) -> None:
         self.K = np.hstack([kp * np.eye(3), kd * np.eye(3)])
@@ -88,8 +111,8 @@ class PDController(LinearController):
         return self.K
 
 
-@dataclass
-class SimResult:
+@dataclass(repr=False)
+class SimResult(ShortRepr):
     """Time histories of one run (rows are logged steps) and statistics over every step.
 
     Attributes
@@ -107,6 +130,13 @@ class SimResult:
     torque_est, srp_lever_est : (K, 3) the filter's disturbance states, N·m: a body
     torque and the SRP lever arm P·A·C_r·ρ (zeros for a state it lacks, see
     ``Scenario.filter_disturbance_state``).
+    gyro_bias_est : (K, 3) the gyro-driven filter's bias estimate β̂, rad/s (zeros without).
+    sun_sensor_alignment_est : (K, 3) its estimate of the sun sensor's misalignment (body
+    axes), rad (zeros without).
+    sigma : (K, 6) the filter's 1σ: attitude (rad, body axes), then rate (rad/s) or gyro
+    bias (rad/s) (zeros without a filter): the ±3σ envelopes of the estimation error.
+    est_error_axes : (K, 3) the estimation error per body axis, rad, 2 (q ⊗ q̂⁻¹)_v.
+    tracker_status : (K,) the star tracker's status (0 used, 1 unavailable or absent).
     """
 
     t: np.ndarray
@@ -125,6 +155,11 @@ class SimResult:
     sky: np.ndarray | None = None
     torque_est: np.ndarray | None = None
     srp_lever_est: np.ndarray | None = None
+    gyro_bias_est: np.ndarray | None = None
+    sun_sensor_alignment_est: np.ndarray | None = None
+    sigma: np.ndarray | None = None
+    est_error_axes: np.ndarray | None = None
+    tracker_status: np.ndarray | None = None
 
 
 def _w_bo(q, w, n=GEO_RATE):
@@ -136,7 +171,18 @@ def _w_bo(q, w, n=GEO_RATE):
 
 
 def steady_start(duration: float) -> float:
-    """Start of the steady-state window, s: half the run, at most its first hour."""
+    """Start of the steady-state window, s: half the run, at most its first hour.
+
+    Parameters
+    ----------
+    duration : float
+        Run length, s.
+
+    Returns
+    -------
+    float
+        The window's start, s.
+    """
     return min(duration / 2, 3600.0)
 
 
@@ -165,6 +211,16 @@ def default_filter_psd(sc: Scenario) -> float:
     ``filter_disturbance_budget_deg`` (τ_u: ``filter_torque_bound``, or
     :func:`unknown_torque_bound` when that is 0): a Kalman filter on J θ̈ = τ measuring θ
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    float
+        The PSD, N²·m²·s.
     """
     q = sc.process_noise_torque**2
     if not sc.disturbances_known_to_filter and disturbance_state(sc) == "none":
@@ -177,7 +233,17 @@ def default_filter_psd(sc: Scenario) -> float:
 def disturbance_state(sc: Scenario) -> str:
     """The filter's disturbance state as flown: ``filter_disturbance_state``, or "none"
     when there is nothing left to estimate (every disturbance known to the filter, or a
-    torque bound of 0)."""
+    torque bound of 0).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    {'none', 'torque', 'srp', 'torque+srp'}
+    """
     if filter_torque_scale(sc) == 0.0:
         return "none"
     return sc.filter_disturbance_state
@@ -199,6 +265,16 @@ def disturbance_psd(sc: Scenario) -> np.ndarray:
     filter from locking onto a wrong value), the SRP lever arm over
     ``filter_srp_drift_s`` (a day: the arrays turn once a day and the centre of
     pressure moves with them and with the seasons).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n − 6,)
+        The PSDs, N²·m²/s.
     """
     tau = filter_torque_scale(sc)
     kind = disturbance_state(sc)
@@ -222,7 +298,18 @@ def _bias_truth(sc: Scenario, dist, dist_model) -> np.ndarray:
 
 def attitude_noise_psd(sc: Scenario) -> float:
     """Attitude measurement noise as a continuous PSD, rad²·s: the sensors' mean σ (with the
-    filter's margin) squared, times the sensor period."""
+    filter's margin) squared, times the sensor period.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+
+    Returns
+    -------
+    float
+        The PSD, rad²·s.
+    """
     sigma = math.radians((sc.sun_noise_deg + sc.earth_noise_deg) / 2) * sc.noise_margin
     return sigma**2 * sc.sensor_period
 
@@ -231,18 +318,23 @@ class _Streams:
     """One independent random stream per noise source, all from one seed."""
 
     def __init__(self, seed: int) -> None:
-        init, process, sensor = np.random.SeedSequence(seed).spawn(3)
+        # spawn keys are positional: the first three streams are those of earlier versions
+        init, process, sensor, gyro, tracker = np.random.SeedSequence(seed).spawn(5)
         self.init = np.random.default_rng(init)
         self.process = np.random.default_rng(process)
         self.sensor = np.random.default_rng(sensor)
+        self.gyro = np.random.default_rng(gyro)
+        self.tracker = np.random.default_rng(tracker)
 
-    def block(self, k: int, n_steps: int, sensor_every: int, noise_sd: float):
-        """Process torques (n_steps, 3) and sensor normals (sensor steps, 6) of steps k…"""
-        first = -(-k // sensor_every) * sensor_every
-        n_sensor = len(range(first, k + n_steps, sensor_every))
-        return (
-            self.process.standard_normal((n_steps, 3)) * noise_sd,
-            self.sensor.standard_normal((n_sensor, 6)),
+    def block(self, k: int, n_steps: int, every: tuple[int, int], noise_sd: float, sensors):
+        """The noise of steps k… (:class:`kernel.Noise`): process torques, sensor normals
+        (sun/earth and tracker ticks: ``every`` steps), gyro normals when gyros fly."""
+        ticks = [len(range(-(-k // e) * e, k + n_steps, e)) for e in every]
+        return kernel.Noise(
+            process=self.process.standard_normal((n_steps, 3)) * noise_sd,
+            sensor=self.sensor.standard_normal((ticks[0], 6)),
+            gyro=self.gyro.standard_normal((n_steps if sensors.gyro else 0, 9)),
+            tracker=self.tracker.standard_normal((ticks[1] if sensors.tracker else 0, 3)),
         )
 
 
@@ -257,6 +349,7 @@ def simulate(
     wheel_momentum0: np.ndarray | None = None,
     filter_torque_psd: float | None = None,
     filter_noise_scale: float = 1.0,
+    steady_after: float | None = None,
     progress=None,
 ) -> SimResult:
     """Run the closed loop. ``estimator``: 'ekf' (LQG-style) or 'truth' (ideal LQR).
@@ -279,11 +372,19 @@ def simulate(
         LTR passes its fictitious noise here.
     filter_noise_scale : float
         Scales the sensor σ the filter assumes (√ρ for LTR).
+    steady_after : float, optional
+        Seconds after which the steady-state statistics start (default
+        :func:`steady_start`: half the run, at most its first hour).
     progress : callable, optional
         Called with the number of steps done after each block.
 
     Every wheel model runs in the compiled kernel (``kernel.run_block``), in blocks
     of at most an hour of steps (shorter when the controller re-linearises).
+
+    Returns
+    -------
+    SimResult
+        The logged time histories and the statistics over every step.
     """
     if estimator not in ("ekf", "truth"):
         raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
@@ -296,6 +397,12 @@ def simulate(
     if steps < 1:
         raise ConfigError(f"duration {duration:g} s is shorter than one step ({scenario.dt:g} s)")
     sensor_every = round(scenario.sensor_period / scenario.dt)
+    if steady_after is None:
+        steady_after = steady_start(steps * scenario.dt)
+    elif not (_is_real(steady_after) and 0 <= steady_after < steps * scenario.dt):
+        raise ConfigError(
+            f"steady_after must be a number of seconds in [0, duration), got {steady_after!r}"
+        )
     kw = dict(
         steps=steps,
         streams=_Streams(scenario.seed if seed is None else seed),
@@ -306,7 +413,7 @@ def simulate(
         if filter_torque_psd is None
         else scenario.process_noise_torque**2 + filter_torque_psd,
         noise_scale=scenario.noise_margin * filter_noise_scale,
-        steady_from=round(steady_start(steps * scenario.dt) / scenario.dt),
+        steady_from=round(steady_after / scenario.dt),
         progress=progress,
     )
     result = _simulate_compiled(scenario, controller, **kw)
@@ -314,6 +421,19 @@ def simulate(
     result.stats["dt_s"] = scenario.dt
     result.stats["sensor_period_s"] = scenario.sensor_period
     return result
+
+
+SUN_ALIGNMENT_PRIOR_DEG = 0.03  # 1σ of the sun sensor's misalignment the filter starts from
+SUN_ALIGNMENT_DRIFT_DEG_DAY = 0.005  # its random walk a day (thermal distortion)
+
+
+def _aligned(sc: Scenario) -> bool:
+    """Whether the gyro filter estimates the sun sensor's misalignment."""
+    return sc.gyro is not None and sc.filter_sun_sensor_alignment
+
+
+def _is_real(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def _initial(sc: Scenario, rng, wheel_momentum0):
@@ -326,6 +446,11 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     s0 = math.radians(max(sc.estimator_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
+    if sc.gyro is not None:  # the gyro-driven filter: [δθ, δβ (, φ)], β̂ = 0 at the turn-on σ
+        sb = math.radians(max(sc.gyro.initial_bias_deg_h, 1e-3)) / 3600.0
+        sphi = [math.radians(SUN_ALIGNMENT_PRIOR_DEG) ** 2] * 3 if _aligned(sc) else []
+        P0 = np.diag([s0**2] * 3 + [sb**2] * 3 + sphi)
+        return q0, w0, hw0, qmul(dq, q0), np.zeros(3 + len(sphi)), P0
     nb = BIAS_SIZES[disturbance_state(sc)]
     if nb:
         sb = filter_torque_scale(sc)
@@ -402,6 +527,115 @@ def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) ->
     return dcm(from_axis_angle(rot, angle)).T if angle > 0 else np.eye(3)
 
 
+def _plant_record(sc: Scenario) -> kernel.Plant:
+    G = sc.wheel_matrix
+    return kernel.Plant(
+        dt=sc.dt,
+        n=GEO_RATE,
+        J=sc.inertia_matrix,
+        J_inv=np.linalg.inv(sc.inertia_matrix),
+        G=G,
+        G_pinv=np.linalg.pinv(G),
+        h_max=np.full(sc.n_wheels, sc.wheel_max_momentum),
+        tau_max=sc.wheel_max_torque,
+        dist=sc.disturbances.vector(),
+        wheel_inertia=sc.wheel_inertia,
+        torque_scale=sc.wheel_torque_scale,
+    )
+
+
+def _sensor_record(sc: Scenario, gyro_E: np.ndarray) -> kernel.Sensors:
+    """The true sensors; ``gyro_E`` (3, 3): the gyro unit's scale factors and misalignment."""
+    from rwlab.attitude.sensors import star_tracker_frame
+
+    exclusion = np.array([sc.earth_sensor_sun_exclusion_deg, sc.earth_sensor_moon_exclusion_deg])
+    every = round(sc.sensor_period / sc.dt)
+    gyro, st = sc.gyro, sc.star_tracker
+    return kernel.Sensors(
+        every=every,
+        sun_fov_cos=math.cos(math.radians(min(sc.sun_fov_deg, 180.0))),
+        sun_incidence=sc.sun_noise_incidence,
+        sig_sun=math.radians(sc.sun_noise_deg),
+        sig_earth=math.radians(sc.earth_noise_deg),
+        sun_align=sensor_alignment(sc.sun_sensor_bias_deg, sc.sun_sensor_misalignment_deg, (1, 2)),
+        earth_align=sensor_alignment(
+            sc.earth_sensor_bias_deg, sc.earth_sensor_misalignment_deg, (0, 1)
+        ),
+        blind_cos=np.where(exclusion > 0, np.cos(np.radians(exclusion)), 2.0),  # 2: never
+        gyro=gyro is not None,
+        gyro_par=gyro.vector(sc.dt) if gyro is not None else np.zeros(4),
+        gyro_E=gyro_E,
+        tracker=st is not None,
+        tracker_every=round(st.period_s / sc.dt) if st is not None else every,
+        tracker_frame=star_tracker_frame(st.boresight) if st is not None else np.eye(3),
+        tracker_sigma=st.sigma_rad() if st is not None else np.zeros(3),
+        tracker_cos=st.exclusion_cos() if st is not None else np.full(3, 2.0),
+    )
+
+
+def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, scale: float):
+    """The estimator (:class:`kernel.Filter`) for an ``nx``-state filter."""
+    from rwlab.attitude.ekf import gyro_process_noise
+
+    dist = sc.disturbances.vector()
+    dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
+    mode = kernel.TRUTH if estimator == "truth" else kernel.DYNAMICS
+    bias_true = _bias_truth(sc, dist, dist_model)
+    if sc.gyro is not None and estimator != "truth":
+        mode = kernel.GYRO
+        Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd(), nx)
+        if nx > 6:
+            Qc[6:, 6:] = np.eye(nx - 6) * math.radians(SUN_ALIGNMENT_DRIFT_DEG_DAY) ** 2 / 86400
+        # the truth of φ: the sun sensor's rotation (bias on y, z, and misalignment)
+        rot = np.radians(np.asarray(sc.sun_sensor_misalignment_deg, float))
+        rot[1:] += np.radians(np.asarray(sc.sun_sensor_bias_deg, float))
+        bias_true = rot[: nx - 6]
+    else:
+        J_inv = np.linalg.inv(sc.filter_inertia_matrix)
+        Qc = np.zeros((nx, nx))
+        Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
+        if nx > 6:
+            Qc[6:, 6:] = np.diag(disturbance_psd(sc))
+    st = sc.star_tracker
+    return kernel.Filter(
+        mode=mode,
+        bias_kind=BIAS_KINDS[disturbance_state(sc)] if mode == kernel.DYNAMICS else 0,
+        bias_true=bias_true,
+        dist_model=dist_model,
+        Qc=Qc,
+        r_sun=math.radians(sc.sun_noise_deg) * scale,
+        r_earth=math.radians(sc.earth_noise_deg) * scale,
+        gate=np.array([sc.innovation_gate, sc.innovation_gate_max_rejections], dtype=float),
+        tracker_R=st.body_covariance() * scale**2 if st is not None else np.eye(3),
+        J=sc.filter_inertia_matrix,
+        J_inv=np.linalg.inv(sc.filter_inertia_matrix),
+    )
+
+
+def _log_record(steps: int, log_every: int, steady_from: int, m: int) -> kernel.Log:
+    n_log = steps // log_every + 2
+    return kernel.Log(
+        every=log_every,
+        steady_from=steady_from,
+        t=np.zeros(n_log),
+        x=np.zeros((n_log, m)),
+        est=np.zeros((n_log, 19)),
+        tau=np.zeros((n_log, 3)),
+        nees=np.zeros(n_log),
+        sky=np.zeros((n_log, 4)),
+        sigma=np.zeros((n_log, 6)),
+    )
+
+
+def _law_record(sc: Scenario, controller, K: np.ndarray) -> kernel.Law:
+    return kernel.Law(
+        K_w=np.ascontiguousarray(K[:, 3:]),
+        M=_rate_map(K),
+        w_max=float(controller.rate_limit),
+        unload=_unload_vector(sc),
+    )
+
+
 def _simulate_compiled(
     sc,
     controller,
@@ -416,137 +650,99 @@ def _simulate_compiled(
     steady_from,
     progress,
 ):
-    J = sc.inertia_matrix
-    J_inv = np.linalg.inv(J)
-    G = sc.wheel_matrix
     q0, w0, hw0, q_hat, w_hat, P = _initial(sc, streams.init, wheel_momentum0)
     x = np.concatenate([q0, w0, hw0])
-    use_ekf = estimator == "ekf"
-    if not use_ekf:
+    if estimator != "ekf":
         q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
-    n_log = steps // log_every + 2
-    log_t, log_x, log_sky = np.zeros(n_log), np.zeros((n_log, x.size)), np.zeros((n_log, 3))
-    log_est, log_tau, log_nees = np.zeros((n_log, 13)), np.zeros((n_log, 3)), np.zeros(n_log)
-    dist = sc.disturbances.vector()
-    dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
-    Qc = np.zeros(P.shape)
-    Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
-    if P.shape[0] > 6:
-        Qc[6:, 6:] = np.diag(disturbance_psd(sc))
-    m = noise_scale
-    fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
-    sensor_every = round(sc.sensor_period / sc.dt)
+    gyro_state, gyro_E = np.zeros(9), np.zeros((3, 3))
+    if sc.gyro is not None:  # the unit's fixed errors and turn-on bias
+        from rwlab.attitude.sensors import draw_gyro_errors
+
+        gyro_E, gyro_state[:3] = draw_gyro_errors(sc.gyro, streams.gyro)
+        gyro_state[6:] = w0
+    plant = _plant_record(sc)
+    sensors = _sensor_record(sc, gyro_E)
+    filt = _filter_record(sc, estimator, P.shape[0], filter_psd, noise_scale)
+    log = _log_record(steps, log_every, steady_from, x.size)
+    state = kernel.State(
+        x=x, q_hat=q_hat, w_hat=w_hat, P=P, gyro=gyro_state, stats=kernel.new_stats()
+    )
+    wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
     period = controller.update_period
     block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.dt)))
     noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
-    stats = kernel.new_stats()
-    unload = _unload_vector(sc)
-    wheels = wheel_setup(sc, hw0)
-    G_pinv = np.linalg.pinv(G)
-    h_max = np.full(sc.n_wheels, sc.wheel_max_momentum)
-    sun_align = sensor_alignment(sc.sun_sensor_bias_deg, sc.sun_sensor_misalignment_deg, (1, 2))
-    earth_align = sensor_alignment(
-        sc.earth_sensor_bias_deg, sc.earth_sensor_misalignment_deg, (0, 1)
-    )
-    exclusion = np.array([sc.earth_sensor_sun_exclusion_deg, sc.earth_sensor_moon_exclusion_deg])
-    blind_cos = np.where(exclusion > 0, np.cos(np.radians(exclusion)), 2.0)  # 2: never blinded
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
-        s_q, s_w = (q_hat, w_hat[:3]) if use_ekf else (x[:4], x[4:7])
+        # the gain's operating point: what the controller knows (with gyros, q̂ and the
+        # nominal rate, ω_bo = 0)
+        s_q = x[:4] if filt.mode == kernel.TRUTH else state.q_hat
+        s_w = {
+            kernel.TRUTH: x[4:7],
+            kernel.DYNAMICS: state.w_hat[:3],
+            kernel.GYRO: dcm(s_q) @ np.array([0.0, -GEO_RATE, 0.0]),
+        }[filt.mode]
         K = np.ascontiguousarray(
-            controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), G @ x[7:]), dtype=float
+            controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), plant.G @ x[7:]), dtype=float
         )
-        process, sensor = streams.block(k, n_steps, sensor_every, noise_sd)
+        noise = streams.block(k, n_steps, (sensors.every, sensors.tracker_every), noise_sd, sensors)
         sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
         rows = math.ceil(((k + n_steps) * sc.dt - sky_t0) / SKY_STEP) + 2
-        sky = sky_table(sc, sky_t0 + SKY_STEP * np.arange(rows))
-        x, q_hat, w_hat, P, log_k, sat = kernel.run_block(
-            x,
-            q_hat,
-            w_hat,
-            P,
-            k,
-            n_steps,
-            np.ascontiguousarray(K[:, 3:]),
-            _rate_map(K),
-            float(controller.rate_limit),
-            use_ekf,
-            BIAS_KINDS[disturbance_state(sc)],
-            _bias_truth(sc, dist, dist_model),
-            sc.dt,
-            sensor_every,
-            log_every,
-            steady_from,
-            J,
-            J_inv,
-            G,
-            G_pinv,
-            h_max,
-            sc.wheel_max_torque,
-            GEO_RATE,
-            dist,
-            dist_model,
-            process,
-            sensor,
-            Qc,
-            sky,
-            sky_t0,
-            SKY_STEP,
-            fov_cos,
-            sc.sun_noise_incidence,
-            math.radians(sc.sun_noise_deg),
-            math.radians(sc.earth_noise_deg),
-            math.radians(sc.sun_noise_deg) * m,
-            math.radians(sc.earth_noise_deg) * m,
-            sun_align,
-            earth_align,
-            blind_cos,
-            np.array([sc.innovation_gate, sc.innovation_gate_max_rejections]),
-            unload,
-            wheels.kind,
-            wheels.healthy,
-            wheels.faulty,
-            wheels.fault_s,
-            wheels.state,
-            wheels.A,
-            wheels.B,
-            wheels.C,
-            wheels.ident,
-            wheels.servo,
-            stats,
-            log_t,
-            log_x,
-            log_est,
-            log_tau,
-            log_nees,
-            log_sky,
-            log_k,
+        sky = kernel.Sky(sky_table(sc, sky_t0 + SKY_STEP * np.arange(rows)), sky_t0, SKY_STEP)
+        law = _law_record(sc, controller, K)
+        log_k, sat = kernel.run_block(
+            state, k, n_steps, log_k, plant, law, sky, sensors, filt, noise, wheels, log
         )
         saturated |= sat
         k += n_steps
         if progress is not None:
             progress(min(k, steps))
-    log_x, log_est = log_x[:log_k], log_est[:log_k]
+    result = _assemble(sc, log, log_k, saturated, state.stats, steady_from, filt.mode)
+    result.stats["filter_states"] = P.shape[0] if filt.mode != kernel.TRUTH else 0
+    return result
+
+
+def astuple_shallow(obj) -> tuple:
+    """A dataclass's field values in order, not copied (``dataclasses.astuple`` deep-copies)."""
+    from dataclasses import fields
+
+    return tuple(getattr(obj, f.name) for f in fields(obj))
+
+
+def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:
+    log_x, log_est = log.x[:log_k], log.est[:log_k]
     w_bo = _w_bo(log_x[:, :4], log_x[:, 4:7])
     w_est = _w_bo(log_est[:, :4], log_est[:, 4:7])
     wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheel_inertia)
     result = _result(
-        log_t[:log_k],
+        log.t[:log_k],
         log_x[:, :4],
         w_bo,
         log_est[:, :4],
         w_est,
-        log_tau[:log_k],
+        log.tau[:log_k],
         wheel,
-        log_nees[:log_k] if use_ekf else np.zeros(log_k),
+        log.nees[:log_k] if mode != kernel.TRUTH else np.zeros(log_k),
         saturated,
         stats,
         steady_from * sc.dt,
     )
-    result.sky = log_sky[:log_k]
+    result.sky = log.sky[:log_k, :3]
+    result.tracker_status = log.sky[:log_k, 3]
     result.torque_est, result.srp_lever_est = log_est[:, 7:10], log_est[:, 10:13]
+    result.gyro_bias_est = log_est[:, 13:16]
+    result.sun_sensor_alignment_est = log_est[:, 16:19]
+    result.sigma = log.sigma[:log_k]
+    result.est_error_axes = _axis_errors(result.q, result.q_est)
     return result
+
+
+def _axis_errors(q: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    """2 (q ⊗ q̂⁻¹)_v row by row (the filter's δθ, body axes), rad (K, 3)."""
+    av, a4, bv, b4 = q[:, :3], q[:, 3:], q_est[:, :3], q_est[:, 3:]
+    v = b4 * av - a4 * bv + np.cross(av, bv)
+    sign = np.where(a4[:, 0] * b4[:, 0] + np.sum(av * bv, axis=1) >= 0, 2.0, -2.0)
+    return v * sign[:, None]
 
 
 BLOCK_STEPS = 36_000  # steps per kernel call without re-linearisation (an hour at 0.1 s)

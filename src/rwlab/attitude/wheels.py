@@ -24,12 +24,13 @@ hold each model equal to the Python class it compiles.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
 
 from rwlab.ident.nonlinear import servo_advance
+from rwlab.wheel.physics import IDEAL as IDEAL_PARAMS
 from rwlab.wheel.physics import RW90, WheelParams, rad_s_to_rpm
 
 __all__ = ["IDEAL", "IDENTIFIED", "PHYSICS", "WheelArrays", "realise", "wheel_setup"]
@@ -84,8 +85,13 @@ class WheelArrays:
 
 
 def physics_params(sc) -> WheelParams:
-    """The RW physics scaled to the scenario's wheel (RW90's friction and electrical model)."""
-    return WheelParams(
+    """The RW physics scaled to the scenario's wheel (RW90's friction and electrical model).
+
+    The ideal twin's law (:data:`rwlab.wheel.physics.IDEAL`): the compiled kernel
+    here is that law, exactly; the realistic twin's imperfections are not flown.
+    """
+    return replace(
+        IDEAL_PARAMS,
         inertia=sc.wheel_inertia,
         max_speed_rpm=sc.wheel_max_speed_rpm,
         overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
@@ -109,7 +115,20 @@ def _physics_row(p: WheelParams) -> np.ndarray:
 
 
 def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
-    """Pack the scenario's wheel model, starting from wheel momenta ``hw0`` (N·m·s)."""
+    """Pack the scenario's wheel model, starting from wheel momenta ``hw0`` (N·m·s).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its wheel fields.
+    hw0 : numpy.ndarray, shape (N,)
+        Initial wheel momenta, N·m·s.
+
+    Returns
+    -------
+    WheelArrays
+        The arrays the compiled kernel steps.
+    """
     nw = sc.n_wheels
     kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheel_model]
     row = _physics_row(physics_params(sc))

@@ -24,6 +24,7 @@ import math
 import zlib
 from dataclasses import dataclass, replace
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -49,8 +50,15 @@ _SCALARS = (
     "initial_error_deg",
     "estimator_error_deg",
     "thruster_torque",
+    "wheel_torque_scale",
 )
-_VECTORS = ("initial_axis", "initial_rate")
+_VECTORS = (
+    "initial_axis",
+    "initial_rate",
+    "sun_sensor_misalignment_deg",
+    "earth_sensor_misalignment_deg",
+)
+_VECTORS2 = ("sun_sensor_bias_deg", "earth_sensor_bias_deg")  # two transverse axes
 _DIST_SCALARS = ("srp_area", "srp_reflectivity")
 _DIST_VECTORS = ("srp_offset", "constant_torque")
 
@@ -59,6 +67,7 @@ FIELDS = (
     tuple(f"inertia.{k}" for k in _INERTIA)
     + _SCALARS
     + tuple(f"{v}.{a}" for v in _VECTORS for a in _AXES)
+    + tuple(f"{v}.{a}" for v in _VECTORS2 for a in _AXES[:2])
     + tuple(f"disturbances.{s}" for s in _DIST_SCALARS)
     + tuple(f"disturbances.{v}.{a}" for v in _DIST_VECTORS for a in _AXES)
 )
@@ -92,7 +101,8 @@ class Dispersion:
     def sample(self, rng: np.random.Generator) -> float:
         """One δ."""
         if self.distribution == "uniform":
-            return float(rng.uniform(*self.bounds))
+            low, high = self.bounds  # type: ignore[misc]  # a uniform one always has them
+            return float(rng.uniform(low, high))
         if self.bounds is None:
             return float(rng.normal(self.mean, self.sigma))
         lo, hi = ((b - self.mean) / self.sigma for b in self.bounds)
@@ -130,7 +140,8 @@ def _parse(name: str, spec: dict, where: str) -> Dispersion:
         if bounds is None:
             raise ConfigError(f"{where}: {name}: a uniform dispersion needs bounds = [low, high]")
         return Dispersion(name, kind, bounds=bounds, relative=relative)
-    sigma, mean = spec.get("sigma"), spec.get("mean", 0.0)
+    sigma: Any = spec.get("sigma")
+    mean: Any = spec.get("mean", 0.0)
     if not (_is_number(sigma) and sigma > 0):
         raise ConfigError(f"{where}: {name}: a normal dispersion needs sigma > 0, got {sigma!r}")
     if not _is_number(mean):
@@ -156,7 +167,17 @@ def _leaves(table: dict, prefix: str, where: str):
 
 
 def load_dispersions(path=None) -> tuple[Dispersion, ...]:
-    """The dispersions of a TOML file (the default set when ``path`` is None)."""
+    """The dispersions of a TOML file (the default set when ``path`` is None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike, optional
+        A dispersions TOML file.
+
+    Returns
+    -------
+    tuple of Dispersion
+    """
     if path is None:
         path = resources.files("rwlab.campaign") / "default_dispersions.toml"
     table = read_table(path, "dispersions", "dispersions")
@@ -167,6 +188,11 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
                 f"{path}: unknown field {name!r}; dispersible fields: {', '.join(FIELDS)}"
             )
         out.append(_parse(name, spec, str(path)))
+    if not out:
+        raise ConfigError(
+            f"{path}: no dispersion in the file; a campaign disperses at least one field "
+            "(leave out the file for rwlab's GEO set)"
+        )
     return tuple(out)
 
 
@@ -186,7 +212,22 @@ def _nominal(sc: Scenario, name: str) -> tuple[float, float]:
 
 
 def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
-    """Every dispersed field's value for one run (field units), from the run's seed alone."""
+    """Every dispersed field's value for one run (field units), from the run's seed alone.
+
+    Parameters
+    ----------
+    dispersions : sequence of Dispersion
+        What is dispersed, and how.
+    nominal : Scenario
+        The nominal values (relative dispersions scale them).
+    run_seed : int
+        The run's seed.
+
+    Returns
+    -------
+    dict of str to float
+        Field name → value.
+    """
     values = {}
     for d in dispersions:
         rng = np.random.default_rng([run_seed, zlib.crc32(d.field.encode())])
@@ -197,9 +238,22 @@ def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
 
 
 def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
-    """The scenario with the dispersed values (validated like any scenario: ConfigError)."""
+    """The scenario with the dispersed values (validated like any scenario: ConfigError).
+
+    Parameters
+    ----------
+    nominal : Scenario
+        The scenario dispersed.
+    values : dict of str to float
+        Field name (``inertia.xx``, ``disturbances.srp_torque.x``, ...) → value, field units.
+
+    Returns
+    -------
+    Scenario
+        A new scenario (``nominal`` is unchanged).
+    """
     J = nominal.inertia_matrix.copy()
-    top = {f: list(getattr(nominal, f)) for f in _VECTORS}
+    top = {f: list(getattr(nominal, f)) for f in _VECTORS + _VECTORS2}
     dist = {f: list(getattr(nominal.disturbances, f)) for f in _DIST_VECTORS}
     scalars, dist_scalars = {}, {}
     for name, value in values.items():
@@ -217,13 +271,11 @@ def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
             scalars[name] = value
     off_diagonal = np.any(J != np.diag(np.diag(J)))
     inertia = J.ravel() if off_diagonal or np.size(nominal.inertia) == 9 else np.diag(J)
-    disturbances = replace(
-        nominal.disturbances, **{k: tuple(v) for k, v in dist.items()}, **dist_scalars
-    )
+    dist_fields: dict[str, Any] = {k: tuple(v) for k, v in dist.items()} | dist_scalars
+    fields: dict[str, Any] = {k: tuple(v) for k, v in top.items()} | scalars
     return replace(
         nominal,
         inertia=tuple(float(v) for v in inertia),
-        disturbances=disturbances,
-        **{k: tuple(v) for k, v in top.items()},
-        **scalars,
+        disturbances=replace(nominal.disturbances, **dist_fields),
+        **fields,
     )

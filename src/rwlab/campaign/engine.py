@@ -3,10 +3,12 @@
 The default is a :class:`distributed.LocalCluster` of worker processes on this
 machine (one thread each, loopback only, no dashboard); a scheduler address
 sends the same work to an existing cluster (whose workers must have rwlab
-installed). Dask reschedules the tasks of a worker that dies on the others, and
-the local cluster's nannies start a replacement, so a campaign finishes with
-every run; each task is a pure function of its inputs, so a retried batch gives
-the same rows.
+installed). When a worker dies, the local cluster's nannies start a
+replacement, and :func:`map_batches` submits the batches it was computing
+again (up to ``MAX_RETRIES`` times each) and reports every retry, so a campaign
+finishes with every run; each task is a pure function of its inputs, so a
+retried batch gives the same rows. The local scheduler is told not to retry on
+its own (``allowed-failures`` 0), so that no retry goes unreported.
 """
 
 from __future__ import annotations
@@ -16,19 +18,37 @@ import itertools
 import logging
 import os
 
-from rwlab.errors import ConfigError
+from rwlab._optional import require
+from rwlab.errors import ConfigError, LostWorkerError
 
-__all__ = ["batches", "dask_client", "map_batches", "worker_count"]
+__all__ = ["MAX_RETRIES", "batches", "dask_client", "map_batches", "worker_count"]
+
+MAX_RETRIES = 3  # times one batch is submitted again after its worker died
 
 
 @contextlib.contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://host:8786), or on
-    a new local cluster of ``workers`` processes (default: the machine's cores)."""
+    a new local cluster of ``workers`` processes (default: the machine's cores).
+
+    Parameters
+    ----------
+    workers : int, optional
+        Processes of a new local cluster.
+    scheduler : str, optional
+        Address of a running scheduler (not with ``workers``).
+
+    Yields
+    ------
+    distributed.Client
+        Closed, with its local cluster, when the block ends.
+    """
+    require("distributed", "running on Dask")
+    import dask
     from distributed import Client, LocalCluster
 
     if workers is not None and scheduler is not None:
-        raise ConfigError("give --workers or --scheduler, not both")
+        raise ConfigError("give workers or scheduler, not both")
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")
@@ -39,8 +59,9 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         return
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
-        raise ConfigError(f"--workers must be ≥ 1, got {n}")
+        raise ConfigError(f"workers must be ≥ 1, got {n}")
     with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
         LocalCluster(
             n_workers=n,
             threads_per_worker=1,
@@ -55,13 +76,38 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
 
 
 def worker_count(client) -> int:
-    """Workers the scheduler knows now (at least 1)."""
+    """Workers the scheduler knows now (at least 1).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster.
+
+    Returns
+    -------
+    int
+    """
     return max(1, len(client.scheduler_info().get("workers", {})))
 
 
 def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     """Split ``items`` in order into ``per_worker`` tasks per worker (fewer when there are
-    fewer items), of sizes that differ by at most one."""
+    fewer items), of sizes that differ by at most one.
+
+    Parameters
+    ----------
+    items : list
+        The work, in order.
+    n_workers : int
+        Number of workers.
+    per_worker : int
+        Tasks per worker (more balance the load, fewer cost less overhead).
+
+    Returns
+    -------
+    list of list
+        The batches; concatenated, they are ``items``.
+    """
     n = max(1, min(len(items), per_worker * max(1, n_workers)))
     edges = [len(items) * i // n for i in range(n + 1)]
     return [items[a:b] for a, b in itertools.pairwise(edges)]
@@ -75,22 +121,82 @@ def _pinned(fn, batch, *args):
         return fn(batch, *args)
 
 
-def map_batches(client, fn, work: list[list], *args, progress=None) -> list:
+def map_batches(
+    client,
+    fn,
+    work: list[list],
+    *args,
+    progress=None,
+    on_batch=None,
+    on_retry=None,
+    max_retries: int = MAX_RETRIES,
+) -> list:
     """``fn(batch, *args)`` for every batch on the cluster; the results of all, in order.
 
-    ``fn`` returns one result per item of its batch; ``progress(done)`` is called with
-    the number of items finished after each batch.
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster.
+    fn : callable
+        ``fn(batch, *args)`` returns one result per item of its batch (runs on a worker).
+    work : list of list
+        The batches (see :func:`batches`).
+    *args
+        Passed to every call (scattered once).
+    progress : callable, optional
+        ``progress(done)``: items finished so far, after each batch.
+    on_batch : callable, optional
+        ``on_batch(i, results)`` as soon as batch ``i`` is back (to keep it on disk).
+    on_retry : callable, optional
+        ``on_retry(i, attempt, reason)`` when batch ``i`` is submitted again because
+        the worker computing it died (``attempt`` 1, 2, …).
+    max_retries : int
+        Retries of one batch before the campaign stops.
+
+    Returns
+    -------
+    list
+        Every item's result, in the order of ``work``.
+
+    Raises
+    ------
+    LostWorkerError
+        A batch lost its worker more than ``max_retries`` times.
     """
     from distributed import as_completed
+    from distributed.scheduler import KilledWorker
 
-    futures = [client.submit(_pinned, fn, b, *args, pure=False) for b in work]
-    where = {f.key: i for i, f in enumerate(futures)}
+    def submit(i: int):
+        future = client.submit(_pinned, fn, work[i], *args, pure=False)
+        where[future.key] = i
+        return future
+
+    where: dict = {}
+    futures = [submit(i) for i in range(len(work))]
+    attempts = [0] * len(work)
     results: list = [None] * len(work)
     done = 0
+    pending = as_completed(futures)
     try:
-        for future in as_completed(futures):
+        for future in pending:
             i = where[future.key]
-            results[i] = future.result()
+            try:
+                batch = future.result()
+            except KilledWorker as exc:
+                attempts[i] += 1
+                if attempts[i] > max_retries:
+                    raise LostWorkerError(
+                        f"batch {i} (items {len(work[i])}) lost its worker "
+                        f"{attempts[i]} times; the cluster is unhealthy ({exc})"
+                    ) from None
+                if on_retry is not None:
+                    on_retry(i, attempts[i], f"worker lost ({type(exc).__name__})")
+                futures.append(submit(i))
+                pending.add(futures[-1])
+                continue
+            results[i] = batch
+            if on_batch is not None:
+                on_batch(i, batch)
             done += len(work[i])
             if progress is not None:
                 progress(done)

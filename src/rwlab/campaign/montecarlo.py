@@ -6,12 +6,21 @@ scenario (:func:`rwlab.campaign.dispersions.draw`) and its noise (the
 simulator's streams). The controller is designed on the nominal scenario and
 flown on the dispersed one. A run is therefore the same whichever worker, batch
 or worker count computes it, and any row can be re-flown with :func:`fly_run`.
+
+A :class:`RunStore` keeps the rows on disk as batches finish, so an interrupted
+campaign keeps what it finished and a resumed one computes only the rest: the
+rows (and so the budget) are those of an uninterrupted campaign.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import math
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -20,11 +29,15 @@ from rwlab.attitude.scenario import Scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.campaign.dispersions import Dispersion, apply, draw
 from rwlab.campaign.engine import batches, map_batches, worker_count
-from rwlab.errors import ConfigError
+from rwlab.campaign.quantiles import clopper_pearson_lower, quantile_table
+from rwlab.errors import ConfigError, FileFormatError
 
 __all__ = [
     "AXES",
+    "MAX_RUNS",
     "Campaign",
+    "Execution",
+    "RunStore",
     "axis_errors_deg",
     "budget",
     "check_runs",
@@ -35,6 +48,10 @@ __all__ = [
 
 AXES = ("x", "y", "z")
 WORST = 5  # seeds listed in the budget
+RPE_WINDOW_S = 60.0  # the relative pointing error's window (ECSS-E-ST-60-10C RPE)
+STATISTIC = "steady_max_error_deg"  # the results.parquet column the budget's quantiles summarise
+MAX_RUNS = 1_000_000  # beyond this a campaign is a mistake (1e6 runs: days on a cluster)
+ROW_BYTES = 16_000  # a row's memory in this process, generous (~60 keys of a dict, measured ~6 kB)
 
 
 @dataclass(frozen=True)
@@ -53,6 +70,11 @@ class Campaign:
     seed : int
         The campaign's seed.
     runs : int
+    epoch : str, optional
+        UTC start (ISO 8601) of the real sky; None: the scenario's.
+    epoch_spread_days : float
+        Each run starts at ``epoch`` plus a uniform draw in [0, this) days from its seed
+        (a season or a year of starts); 0: every run at ``epoch``.
     """
 
     scenario: Scenario
@@ -61,8 +83,16 @@ class Campaign:
     controller: str = "lqg"
     seed: int = 0
     runs: int = 1
+    epoch: str | None = None
+    epoch_spread_days: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.epoch_spread_days) and 0 <= self.epoch_spread_days <= 3660):
+            raise ConfigError(
+                f"epoch_spread_days must be in [0, 3660], got {self.epoch_spread_days!r}"
+            )
+        if self.epoch_spread_days > 0 and (self.epoch or self.scenario.epoch) is None:
+            raise ConfigError("epoch_spread_days needs an epoch (the real sky)")
         if self.controller not in CONTROLLERS:
             raise ConfigError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
         if not (math.isfinite(self.duration) and self.duration >= self.scenario.dt):
@@ -72,20 +102,64 @@ class Campaign:
 
 
 def run_seeds(seed: int, runs: int) -> list[int]:
-    """The runs' seeds: a 63-bit word from each of ``SeedSequence(seed).spawn(runs)``."""
+    """The runs' seeds: a 63-bit word from each of ``SeedSequence(seed).spawn(runs)``.
+
+    Parameters
+    ----------
+    seed : int
+        The campaign's seed.
+    runs : int
+        Number of runs.
+
+    Returns
+    -------
+    list of int
+    """
     children = np.random.SeedSequence(seed).spawn(runs)
     return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children]
 
 
-def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict[str, float]]:
-    """The run's scenario and its dispersed values."""
-    values = draw(campaign.dispersions, campaign.scenario, run_seed)
-    return apply(campaign.scenario, values), values
+def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
+    """The run's scenario and its dispersed values (with its epoch, when dispersed).
+
+    The filter keeps the nominal inertia (``filter_inertia``) while the truth's is
+    dispersed: the filter's model error a flight filter has."""
+    values: dict = draw(campaign.dispersions, campaign.scenario, run_seed)
+    sc = apply(campaign.scenario, values)
+    if not campaign.scenario.filter_inertia:
+        sc = sc.with_(filter_inertia=tuple(campaign.scenario.inertia))
+    epoch = campaign.epoch or campaign.scenario.epoch
+    if epoch is not None:
+        if campaign.epoch_spread_days > 0:
+            from datetime import UTC, datetime, timedelta
+
+            from rwlab.attitude.ephemeris import parse_epoch
+
+            parse_epoch(epoch)  # a clear error for a bad one
+            start = datetime.fromisoformat(epoch.strip())
+            start = start.astimezone(UTC) if start.tzinfo else start.replace(tzinfo=UTC)
+            rng = np.random.default_rng([run_seed, 0x45504F43])  # its own stream ("EPOC")
+            days = rng.uniform(0, campaign.epoch_spread_days)
+            epoch = (start + timedelta(seconds=round(days * 86400))).isoformat()
+        sc = sc.with_(epoch=epoch)
+        values["epoch"] = epoch
+    return sc, values
 
 
 def axis_errors_deg(q: np.ndarray) -> np.ndarray:
     """(K, 3) pointing error about body x, y, z, degrees: the rotation vector of q (K, 4)
-    (orbital → body, scalar last); its norm is the total error."""
+    (orbital → body, scalar last); its norm is the total error.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (K, 4)
+        Attitude quaternions, orbital → body, scalar last.
+
+    Returns
+    -------
+    numpy.ndarray, shape (K, 3)
+        Error about x, y, z, degrees.
+    """
     qv, q4 = q[:, :3], q[:, 3:4]
     s = np.linalg.norm(qv, axis=1, keepdims=True)
     angle = 2 * np.arctan2(s, np.abs(q4))
@@ -96,19 +170,57 @@ def axis_errors_deg(q: np.ndarray) -> np.ndarray:
 
 
 def _axis_metrics(run: SimResult) -> dict[str, float]:
-    """Per axis over the steady window of the logged trace: max |error|, RMS and mean."""
-    err = axis_errors_deg(run.q[run.t >= run.steady_from_s])
+    """Per axis over the steady window of the logged trace: max |error| (the absolute
+    performance error, ECSS APE), RMS and mean; the relative performance error over
+    :data:`RPE_WINDOW_S` (max |e − its centred moving mean|, ECSS RPE); the knowledge
+    error (max |estimate − truth|, from the filter's δθ)."""
+    steady = run.t >= run.steady_from_s
+    err = axis_errors_deg(run.q[steady])
+    know = np.degrees(run.est_error_axes[steady]) if run.est_error_axes is not None else None
+    dt = float(np.median(np.diff(run.t))) if run.t.size > 1 else 1.0
+    width = max(1, round(RPE_WINDOW_S / dt))
     out = {}
     for i, a in enumerate(AXES):
         e = err[:, i]
         out[f"steady_max_error_{a}_deg"] = float(np.max(np.abs(e))) if e.size else 0.0
         out[f"steady_rms_error_{a}_deg"] = float(np.sqrt(np.mean(e**2))) if e.size else 0.0
         out[f"steady_mean_error_{a}_deg"] = float(np.mean(e)) if e.size else 0.0
+        out[f"rpe_{a}_deg"] = _rpe(e, width)
+        k = know[:, i] if know is not None else np.zeros(0)
+        out[f"knowledge_error_{a}_deg"] = float(np.max(np.abs(k))) if k.size else 0.0
     return out
 
 
+def _rpe(e: np.ndarray, width: int) -> float:
+    """max |e(t) − mean of e over the window of ``width`` samples centred on t| (0 when the
+    trace is shorter than one window)."""
+    if e.size < width:
+        return 0.0
+    c = np.concatenate([[0.0], np.cumsum(e)])
+    mean = (c[width:] - c[:-width]) / width
+    centre = e[width // 2 : width // 2 + mean.size]
+    return float(np.max(np.abs(centre - mean)))
+
+
 def fly_run(campaign: Campaign, run_seed: int, log_every: int = 1) -> tuple[SimResult, dict]:
-    """Fly one run: its trace and its row (seed, dispersed values, metrics)."""
+    """Fly one run: its trace and its row (seed, dispersed values, metrics).
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The campaign.
+    run_seed : int
+        The run's seed.
+    log_every : int
+        Steps between logged rows of the trace.
+
+    Returns
+    -------
+    run : SimResult
+        The trace.
+    row : dict
+        Seed, dispersed values and metrics.
+    """
     sc, values = dispersed(campaign, run_seed)
     steps = round(campaign.duration / sc.dt)
     run, metrics = fly(
@@ -127,12 +239,40 @@ def _run_batch(items: list[tuple[int, int]], campaign: Campaign) -> list[dict]:
     return [{"run": i, **fly_run(campaign, s)[1]} for i, s in items]
 
 
+def check_size(runs: int) -> None:
+    """Refuse a number of runs that cannot end or whose rows would not fit in memory."""
+    if runs > MAX_RUNS:
+        raise ConfigError(f"runs={runs} is more than {MAX_RUNS:,} runs; split the campaign")
+    try:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # not on this system: no check
+        return
+    need = runs * ROW_BYTES
+    if need > free / 2:
+        raise ConfigError(
+            f"runs={runs} needs about {need / 2**30:.1f} GiB for its rows and this machine has "
+            f"{free / 2**30:.1f} GiB free; run fewer runs (several campaigns with other seeds)"
+        )
+
+
 def check_runs(campaign: Campaign) -> list[int]:
     """The runs' seeds, once every run's dispersed scenario is known to be valid.
 
     A dispersion that makes a scenario invalid (a negative inertia, the triangle
-    inequality) fails here, naming the run, not minutes later on a worker.
+    inequality) fails here, naming the run, not minutes later on a worker. A
+    campaign too large to end or to hold in memory fails first (:func:`check_size`).
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The campaign.
+
+    Returns
+    -------
+    list of int
+        The runs' seeds.
     """
+    check_size(campaign.runs)
     seeds = run_seeds(campaign.seed, campaign.runs)
     for i, s in enumerate(seeds):
         try:
@@ -145,12 +285,208 @@ def check_runs(campaign: Campaign) -> list[int]:
     return seeds
 
 
-def run_campaign(campaign: Campaign, client, *, progress=None) -> list[dict]:
-    """Every run's row, in run order, computed in batches on ``client``'s workers
-    (``progress(runs done)`` after each batch)."""
+def run_campaign(
+    campaign: Campaign,
+    client,
+    *,
+    progress=None,
+    store: RunStore | None = None,
+    execution: Execution | None = None,
+) -> list[dict]:
+    """Every run's row, in run order, computed in batches on ``client``'s workers.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    campaign : Campaign
+        The campaign.
+    client : distributed.Client
+        The cluster.
+    progress : callable, optional
+        ``progress(runs done)`` after each batch (runs kept from before included).
+    store : RunStore, optional
+        Where finished batches are kept as they finish; runs it already holds
+        are not computed again (a resumed campaign).
+    execution : Execution, optional
+        Filled with what happened: runs kept from before, batches retried.
+
+    Returns
+    -------
+    list of dict
+        One row per run, in run order.
+    """
     seeds = check_runs(campaign)
-    work = batches(list(enumerate(seeds)), worker_count(client))
-    return map_batches(client, _run_batch, work, campaign, progress=progress)
+    execution = execution if execution is not None else Execution()
+    kept = store.rows() if store is not None else {}
+    kept = {i: r for i, r in kept.items() if i < campaign.runs}
+    execution.resumed_runs = len(kept)
+    execution.retries.extend(store.retries() if store is not None else [])
+    todo = [(i, s) for i, s in enumerate(seeds) if i not in kept]
+    work = batches(todo, worker_count(client)) if todo else []
+
+    def keep(i: int, rows: list[dict]) -> None:
+        if store is not None:
+            store.add(rows)
+
+    def retried(i: int, attempt: int, reason: str) -> None:
+        execution.retries.append(
+            {"runs": [run for run, _ in work[i]], "attempt": attempt, "reason": reason}
+        )
+        if store is not None:
+            store.save_retries(execution.retries)
+
+    if progress is not None and kept:
+        progress(len(kept))
+    new = map_batches(
+        client,
+        _run_batch,
+        work,
+        campaign,
+        progress=None if progress is None else (lambda k: progress(len(kept) + k)),
+        on_batch=keep,
+        on_retry=retried,
+    )
+    rows = {**kept, **{r["run"]: r for r in new}}
+    return [rows[i] for i in range(campaign.runs)]
+
+
+@dataclass
+class Execution:
+    """How a campaign ran: runs kept from an interrupted run, batches retried.
+
+    Attributes
+    ----------
+    resumed_runs : int
+        Runs read back from a :class:`RunStore` rather than computed.
+    retries : list of dict
+        One entry per retry: ``runs`` (the run indices of the batch), ``attempt``
+        (1 for the first retry of that batch) and ``reason``.
+    """
+
+    resumed_runs: int = 0
+    retries: list[dict] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """Plain JSON: the retries and the runs they concern (for budget.json)."""
+        runs = sorted({r for entry in self.retries for r in entry["runs"]})
+        return {
+            "resumed_runs": self.resumed_runs,
+            "retries": len(self.retries),
+            "retried_runs": runs,
+            "retry_log": list(self.retries),
+        }
+
+
+def campaign_key(campaign: Campaign) -> str:
+    """A digest of what defines every run except their number (a resume must match it)."""
+    described = {
+        "scenario": dataclasses.asdict(campaign.scenario),
+        "dispersions": [dataclasses.asdict(d) for d in campaign.dispersions],
+        "duration": campaign.duration,
+        "controller": campaign.controller,
+        "seed": campaign.seed,
+    }
+    text = json.dumps(described, sort_keys=True, default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _plain(obj):
+    return obj.tolist() if hasattr(obj, "tolist") else repr(obj)
+
+
+class RunStore:
+    """A campaign's finished runs on disk, kept as they finish (a partial campaign).
+
+    The folder holds ``campaign.json`` (the campaign's key and description) and
+    one ``batch-<first run>.json`` per finished batch, each written atomically;
+    ``retries.json`` lists retried batches. JSON keeps every float exactly, so
+    rows read back are the rows computed.
+
+    Parameters
+    ----------
+    folder : path-like
+        The store (``OUT/runs`` for ``rwlab attitude montecarlo``).
+    campaign : Campaign
+    """
+
+    FORMAT = "rwlab.CampaignRuns/1"
+
+    def __init__(self, folder: str | os.PathLike, campaign: Campaign) -> None:
+        self.folder = Path(folder)
+        self.campaign = campaign
+        self.key = campaign_key(campaign)
+
+    def exists(self) -> bool:
+        """Whether the folder holds a store."""
+        return (self.folder / "campaign.json").is_file()
+
+    def create(self) -> None:
+        """Start an empty store (the folder is created)."""
+        from rwlab._io import write_json
+
+        c = self.campaign
+        write_json(
+            self.folder / "campaign.json",
+            {
+                "format": self.FORMAT,
+                "key": self.key,
+                "scenario": c.scenario.name,
+                "controller": c.controller,
+                "duration_s": c.duration,
+                "campaign_seed": c.seed,
+                "runs": c.runs,
+            },
+        )
+
+    def check(self) -> None:
+        """Refuse a store written by another campaign (other options than this one's)."""
+        path = self.folder / "campaign.json"
+        head = self._read(path)
+        if head.get("format") != self.FORMAT:
+            raise FileFormatError(f"{path}: not a campaign's runs ({head.get('format')!r})")
+        if head.get("key") != self.key:
+            raise ConfigError(
+                f"{path}: the kept runs belong to another campaign (scenario "
+                f"{head.get('scenario')!r}, controller {head.get('controller')!r}, "
+                f"duration {head.get('duration_s')} s, seed {head.get('campaign_seed')}); "
+                "resume with the options it was started with"
+            )
+
+    def rows(self) -> dict[int, dict]:
+        """The kept rows by run index."""
+        rows: dict[int, dict] = {}
+        for path in sorted(self.folder.glob("batch-*.json")):
+            for row in self._read(path).get("rows", []):
+                rows[int(row["run"])] = row
+        return rows
+
+    def add(self, rows: list[dict]) -> None:
+        """Keep a finished batch's rows."""
+        from rwlab._io import write_json
+
+        if rows:
+            write_json(self.folder / f"batch-{rows[0]['run']:09d}.json", {"rows": rows})
+
+    def retries(self) -> list[dict]:
+        """Retries recorded so far."""
+        path = self.folder / "retries.json"
+        return list(self._read(path).get("retries", [])) if path.is_file() else []
+
+    def save_retries(self, retries: list[dict]) -> None:
+        """Record the retries so far."""
+        from rwlab._io import write_json
+
+        write_json(self.folder / "retries.json", {"retries": retries})
+
+    @staticmethod
+    def _read(path: Path) -> dict:
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise FileFormatError(f"{path}: not readable JSON ({exc})") from None
+        if not isinstance(data, dict):
+            raise FileFormatError(f"{path}: not a campaign's runs file")
+        return data
 
 
 def _spread(x: np.ndarray) -> dict[str, float]:
@@ -170,13 +506,33 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
     steady-state maximum |error| (total: from every step; axes: from the logged
     trace). The 99.73rd percentile is numpy's linear interpolation: with fewer
     than ~370 runs it lies between the largest values, so ``mean_plus_3std`` (the
-    Gaussian 3σ) is given next to it.
+    Gaussian 3σ) is given next to it. The reviewer's figures are distribution-free:
+    ``quantiles`` bounds each p-quantile of :data:`STATISTIC` by an order statistic at
+    95 % confidence (null when the runs cannot, with the runs that would: see
+    ``quantiles``), ``meets_requirement`` gives the fraction of runs within the
+    requirement and its Clopper–Pearson lower bound, and ``APE``, ``RPE`` and
+    ``knowledge_error`` (ECSS-E-ST-60-10C, per axis, each run's steady-state maximum) the
+    same per axis.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per run (:func:`fly_run`'s rows).
+    campaign : Campaign
+        The campaign flown.
+
+    Returns
+    -------
+    dict
+        ``budget.json``'s content (schema ``budget``).
     """
     if not rows:
         raise ConfigError("a budget needs at least one run")
     req = campaign.scenario.pointing_requirement_deg
     col = {
-        k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "settling_time_s"
+        k: np.array([r[k] for r in rows], dtype=float)
+        for k in rows[0]
+        if k != "settling_time_s" and not isinstance(rows[0][k], str)
     }
     pointing = {a: _spread(col[f"steady_max_error_{a}_deg"]) for a in AXES}
     pointing["total"] = _spread(col["steady_max_error_deg"])
@@ -186,9 +542,36 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
         i = int(np.argmax(col[key]))
         return {"max": float(col[key][i]), "seed": rows[i]["seed"]}
 
+    n = len(rows)
+    met = int(np.sum(col[STATISTIC] <= req))
+
+    def ecss(key: str) -> dict:
+        return {
+            a: {
+                "max": float(np.max(col[key.format(a)])),
+                "quantiles": quantile_table(col[key.format(a)]),
+            }
+            for a in AXES
+        }
+
     return {
-        "runs": len(rows),
+        "runs": n,
         "scenario": campaign.scenario.name,
+        "epoch": campaign.epoch or campaign.scenario.epoch,
+        "epoch_spread_days": campaign.epoch_spread_days,
+        "statistic_column": STATISTIC,
+        "quantiles": quantile_table(col[STATISTIC]),
+        "meets_requirement": {
+            "fraction": met / n,
+            "lower_bound_95": clopper_pearson_lower(met, n, 0.95),
+        },
+        "APE": ecss("steady_max_error_{}_deg"),
+        "RPE": {"window_s": RPE_WINDOW_S, **ecss("rpe_{}_deg")},
+        "knowledge_error": ecss("knowledge_error_{}_deg"),
+        "shadow_s": {
+            "min": float(np.min(col["eclipse_s"])),
+            "max": float(np.max(col["eclipse_s"])),
+        },
         "controller": campaign.controller,
         "duration_s": campaign.duration,
         "campaign_seed": campaign.seed,

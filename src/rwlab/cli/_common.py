@@ -47,7 +47,8 @@ class _Cli(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
-            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            with _stop_signals():
+                return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
             where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
             hint = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
@@ -56,8 +57,10 @@ class _Cli(click.Group):
             _fail(RwlabError(exc.format_message()))
         except (RwlabError, OSError) as exc:
             _fail(exc)
-        except click.Abort:
-            click.echo("interrupted", err=True)
+        except click.Abort as exc:
+            cause = exc.__cause__ or exc.__context__
+            why = cause.args[0] if isinstance(cause, KeyboardInterrupt) and cause.args else ""
+            click.echo(f"interrupted{f' ({why})' if why else ''}", err=True)
             sys.exit(130)
 
 
@@ -89,6 +92,51 @@ def _stop_signals():
             signal.signal(s, handler)
 
 
+class Number(click.ParamType):
+    """A finite number within bounds: NaN, ±inf and absurd magnitudes are refused here.
+
+    ``click.FloatRange`` lets NaN through (every comparison with NaN is false)
+    and has no notion of "too large to mean anything"; this type says which
+    values an option takes in its error, e.g. ``--rho: nan is not a number in
+    (0, 1e+06]``. ``allow_inf`` admits +inf ("no limit").
+    """
+
+    name = "number"
+
+    def __init__(self, low=None, high=None, *, low_open=False, high_open=False, allow_inf=False):
+        self.low, self.high = low, high
+        self.low_open, self.high_open, self.allow_inf = low_open, high_open, allow_inf
+
+    def _range(self) -> str:
+        lo = "(" if self.low_open else "["
+        hi = ")" if self.high_open else "]"
+        low = "-inf" if self.low is None else f"{self.low:g}"
+        high = "inf" if self.high is None or self.allow_inf else f"{self.high:g}"
+        return f"{lo}{low}, {high}{hi}"
+
+    def convert(self, value, param, ctx):
+        import math
+
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        ok = not math.isnan(x) and (math.isfinite(x) or (self.allow_inf and x == math.inf))
+        if ok and self.low is not None:
+            ok = x > self.low if self.low_open else x >= self.low
+        if ok and self.high is not None and not (self.allow_inf and x == math.inf):
+            ok = x < self.high if self.high_open else x <= self.high
+        if not ok:
+            bounded = self.low is not None or self.high is not None
+            where = f" in {self._range()}" if bounded else ""
+            self.fail(f"{value} is not a finite number{where}", param, ctx)
+        return x
+
+
+SECONDS = Number(0, 1e9, low_open=True)  # > 0 and below 30 years
+POSITIVE = Number(0, 1e6, low_open=True)
+
+
 def _check_folder(folder) -> None:
     """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
     import errno
@@ -107,6 +155,29 @@ def _check_folder(folder) -> None:
         while target != path:
             target.rmdir()
             target = target.parent
+
+
+@contextlib.contextmanager
+def _output(out, names, force: bool, what: str = "rwlab run", *, replace_previous=False):
+    """The command's output folder, locked now and written whole or not at all.
+
+    ``with _output(out, FILES, force, "simulation") as stage:`` around the whole
+    command: a second run on ``out`` is refused at once, the files are written
+    into ``stage`` and appear in ``out`` only when the block succeeds (see
+    :func:`rwlab._io.output_folder`).
+    """
+    from rwlab._io import output_folder
+
+    _check_folder(Path(out).absolute().parent)
+    with output_folder(
+        out, names, force=force, replace_previous=replace_previous, what=what
+    ) as stage:
+        yield stage
+
+
+def _wrote(out, paths) -> str:
+    """The "wrote …" line naming the files in ``out`` (not the staging folder)."""
+    return "wrote " + ", ".join(str(Path(out) / Path(p).name) for p in paths)
 
 
 def _columns_option(func):
@@ -167,6 +238,7 @@ def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
     """A bundled data set by name, or any file rwlab reads (.mcap records included)."""
     from rwlab import datasets
     from rwlab.data import load
+    from rwlab.datafiles import check_magnitude
 
     if not Path(file).exists() and file in datasets.NAMES:
         if input_col or output_col:
@@ -174,6 +246,7 @@ def _load(file, Ts, input_col, output_col, detrend="none", normalize=False):
         data = datasets.get(file)
     else:
         data = load(file, Ts, input_columns=input_col, output_columns=output_col)
+    check_magnitude(data, file)
     if detrend != "none":
         data = data.detrend(detrend)
     if normalize:

@@ -4,12 +4,24 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
+import shutil
 import sys
+from pathlib import Path
 
 import click
 
-from rwlab.cli._common import _check_folder, _engine_options, _friendly_errors, main
-from rwlab.errors import ConfigError
+from rwlab.cli._common import (
+    POSITIVE,
+    SECONDS,
+    Number,
+    _engine_options,
+    _friendly_errors,
+    _output,
+    _wrote,
+    main,
+)
+from rwlab.errors import ConfigError, RwlabError
 
 # -- attitude control -----------------------------------------------------------------
 
@@ -43,17 +55,17 @@ _EPOCH = click.option(
     help="geo-smallsat, geo-comsat, or a scenario TOML file.",
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--duration", type=float, default=1800.0, show_default=True, help="Seconds.")
+@click.option("--duration", type=SECONDS, default=1800.0, show_default=True, help="Seconds.")
 @click.option(
     "--wheel-model",
     type=click.Path(exists=True, dir_okay=False),
     help="model.json from `rwlab identify`: also fly it as the actuator.",
 )
-@click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ.")
+@click.option("--rho", type=POSITIVE, default=0.7692, show_default=True, help="LTR ρ.")
 @click.option("--seed", type=click.IntRange(min=0), default=None)
 @click.option(
     "--relinearize",
-    type=float,
+    type=SECONDS,
     default=None,
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
@@ -65,36 +77,36 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.design import DesignError
     from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import check_outputs, write_comparison
+    from rwlab.report.attitude import write_comparison
 
     if not (math.isfinite(rho) and rho > 0):
         raise DesignError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
     sc = load_scenario(scenario, **({"epoch": epoch} if epoch else {}))
+    _check_steps(duration, sc)
     if wheel_model and sc.epoch:
         raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
     if wheel_model:
         from rwlab.wheel.identified import IdentifiedWheel
 
         IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
-    _check_folder(out)
-    check_outputs(out, ["report.html", "metrics.json", "sigma.json"], force)
-    click.echo(
-        f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
-        f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
-        "~30 s)...",
-        err=True,
-    )
-    comp = compare(
-        sc,
-        duration=duration,
-        seed=seed,
-        rho=rho,
-        wheel_model_file=wheel_model,
-        update_period=relinearize,
-        progress=lambda name: click.echo(f"  flying {name}", err=True),
-    )
-    paths = write_comparison(comp, out, force=force, ltr_result=ltr_study(sc))
+    with _output(out, ["report.html", "metrics.json", "sigma.json"], force, "comparison") as stage:
+        click.echo(
+            f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
+            f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
+            "~30 s)...",
+            err=True,
+        )
+        comp = compare(
+            sc,
+            duration=duration,
+            seed=seed,
+            rho=rho,
+            wheel_model_file=wheel_model,
+            update_period=relinearize,
+            progress=lambda name: click.echo(f"  flying {name}", err=True),
+        )
+        paths = write_comparison(comp, stage, force=force, ltr_result=ltr_study(sc))
     click.echo(
         f"{'controller':<22} {'max err [°]':>11} {'rms [°]':>9} {'settle [s]':>10} "
         f"{'τ-saturated':>11} {'crossover [rad/s]':>17}"
@@ -105,14 +117,14 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
             f"{name:<22} {m['steady_max_error_deg']:11.3g} {m['steady_rms_error_deg']:9.3g} "
             f"{settle:>10} {m['torque_saturated_fraction']:11.3g} {m['crossover_rad_s']:17.3g}"
         )
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 @attitude.command("ltr")
 @click.option("--scenario", default="geo-smallsat", show_default=True)
 @click.option(
     "--rho",
-    type=float,
+    type=POSITIVE,
     multiple=True,
     default=(76.92, 7.692, 0.7692, 0.007692),
     show_default=True,
@@ -127,14 +139,44 @@ def attitude_ltr(scenario, rho, out, force):
     from rwlab.attitude.scenario import load_scenario
     from rwlab.report.attitude import ltr_rows, write_ltr
 
-    _check_folder(out)
     sc = load_scenario(scenario)
-    res = ltr_study(sc, rhos=rho)
-    paths = write_ltr(res, sc.name, out, force=force)
+    with _output(out, ["sigma.json", "report.html"], force, "LTR study") as stage:
+        res = ltr_study(sc, rhos=rho)
+        paths = write_ltr(res, sc.name, stage, force=force)
     click.echo("rho        gap 1e-3..1e-1 [dB]  gap to crossover [dB]  crossover / LQR [rad/s]")
     for rho, gap, gap_c, w, w_c in ltr_rows(res):
         click.echo(f"{rho:<10} {gap:19.2f} {gap_c:22.2f}  {w:.3g} / {w_c:.3g}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
+
+
+def _run_store(out, campaign, *, force: bool, resume: bool):
+    """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
+    from rwlab.campaign.montecarlo import RunStore
+
+    base = Path(os.path.abspath(out))
+    store = RunStore(base.with_name(base.name + ".partial"), campaign)
+    if store.exists() and resume:
+        store.check()
+        click.echo(f"resuming: {len(store.rows())} runs kept in {store.folder}", err=True)
+        return store
+    if resume:
+        raise ConfigError(f"nothing to resume: {store.folder} holds no interrupted campaign")
+    if store.exists() and not force:
+        raise FileExistsError(
+            f"{store.folder} holds an interrupted campaign ({len(store.rows())} runs kept); "
+            "continue it with --resume, or start over with --force"
+        )
+    shutil.rmtree(store.folder, ignore_errors=True)
+    store.create()
+    return store
+
+
+def _check_steps(duration: float, sc) -> int:
+    """The run's number of steps; more than 1e9 (years at 0.1 s) is a typo, refused now."""
+    steps = round(duration / sc.dt)
+    if steps > 1e9:
+        raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
+    return steps
 
 
 def _check_run(duration: float, relinearize: float | None) -> None:
@@ -184,47 +226,59 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
     type=click.Choice(["ekf", "truth"]),
     help="Default: truth for pd and lqr, ekf for lqg and lqg_ltr.",
 )
-@click.option("--dt", type=float, help="Control and physics step, s (the scenario's by default).")
-@click.option("--duration", type=float, required=True, help="Seconds.")
-@click.option("--seed", type=click.IntRange(min=0), default=None)
-@click.option("--rho", type=float, default=0.7692, show_default=True, help="LTR ρ (lqg_ltr).")
 @click.option(
-    "--relinearize", type=float, default=None, help="Re-design the LQR every this many seconds."
+    "--dt",
+    type=Number(0, 3600, low_open=True),
+    help="Control and physics step, s (the scenario's by default).",
+)
+@click.option("--duration", type=SECONDS, required=True, help="Seconds.")
+@click.option("--seed", type=click.IntRange(min=0), default=None)
+@click.option("--rho", type=POSITIVE, default=0.7692, show_default=True, help="LTR ρ (lqg_ltr).")
+@click.option(
+    "--relinearize", type=SECONDS, default=None, help="Re-design the LQR every this many seconds."
 )
 @_EPOCH
+@click.option(
+    "--steady-after",
+    type=float,
+    default=None,
+    help="Seconds after which the steady-state metrics start [default: half the run, at "
+    "most its first hour].",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
 def attitude_simulate(
-    scenario, controller, estimator, dt, duration, seed, rho, relinearize, epoch, out, force
+    scenario,
+    controller,
+    estimator,
+    dt,
+    duration,
+    seed,
+    rho,
+    relinearize,
+    epoch,
+    steady_after,
+    out,
+    force,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     from rwlab.attitude.control import fly
     from rwlab.attitude.scenario import load_scenario
     from rwlab.attitude.sim import disturbance_state
-    from rwlab.report.attitude import check_outputs, write_simulation
+    from rwlab.report.attitude import write_simulation
 
     _check_run(duration, relinearize)
+    if steady_after is not None and not (
+        math.isfinite(steady_after) and 0 <= steady_after < duration
+    ):
+        raise ConfigError(
+            f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
+        )
     overrides = {"dt": dt} if dt is not None else {}
     sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
-    _check_folder(out)
-    check_outputs(out, ["metrics.json", "trace.parquet", "report.html"], force)
-    steps = round(duration / sc.dt)
-    if steps > 1e9:
-        raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
+    steps = _check_steps(duration, sc)
     log_every = max(10, -(-steps // 100_000))
-    with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
-        run, metrics = fly(
-            sc,
-            controller,
-            estimator=estimator,
-            duration=duration,
-            seed=seed,
-            rho=rho,
-            update_period=relinearize,
-            log_every=log_every,
-            progress=progress,
-        )
     config = {
         "scenario": sc.name,
         "controller": controller,
@@ -241,8 +295,29 @@ def attitude_simulate(
         "wheel_faults": list(sc.wheel_faults),
         "epoch": sc.epoch,
         "station_longitude_deg": sc.station_longitude_deg,
+        "steady_from_s": None,  # the run's own, filled in below
+        "gyro": sc.gyro is not None,
+        "star_tracker": sc.star_tracker is not None,
     }
-    paths = write_simulation(run, metrics, config, sc, out, force=force)
+    files = ["metrics.json", "trace.parquet", "report.html"]
+    with (
+        _output(out, files, force, "simulation") as stage,
+        _steps_progress(steps, f"{controller} on {sc.name}") as progress,
+    ):
+        run, metrics = fly(
+            sc,
+            controller,
+            estimator=estimator,
+            duration=duration,
+            seed=seed,
+            rho=rho,
+            update_period=relinearize,
+            log_every=log_every,
+            progress=progress,
+            steady_after=steady_after,
+        )
+        config["steady_from_s"] = run.steady_from_s
+        paths = write_simulation(run, metrics, config, sc, stage, force=force)
     for key in (
         "max_error_deg",
         "steady_max_error_deg",
@@ -254,13 +329,13 @@ def attitude_simulate(
         "earth_sensor_blinded_s",
     ):
         click.echo(f"{key:<40} {metrics[key]:.6g}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
 
 
 @attitude.command("montecarlo")
 @click.option("--scenario", default="geo-comsat", show_default=True)
 @click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
-@click.option("--duration", type=float, required=True, help="Seconds per run.")
+@click.option("--duration", type=SECONDS, required=True, help="Seconds per run.")
 @click.option(
     "--controller",
     type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
@@ -274,47 +349,125 @@ def attitude_simulate(
 )
 @_engine_options
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@_EPOCH
+@click.option(
+    "--epoch-spread-days",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Each run starts at --epoch plus a uniform draw of up to this many days "
+    "(e.g. 30 for an eclipse season, 365 for a year).",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out (and start over).")
+@click.option(
+    "--resume",
+    is_flag=True,
+    help="Continue the interrupted campaign kept in OUT.partial (same options).",
+)
 @_friendly_errors
 def attitude_montecarlo(
-    scenario, runs, duration, controller, dispersions, workers, scheduler, seed, out, force
+    scenario,
+    runs,
+    duration,
+    controller,
+    dispersions,
+    workers,
+    scheduler,
+    seed,
+    epoch,
+    epoch_spread_days,
+    out,
+    force,
+    resume,
 ):
     """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
 
     Every run flies the controller (designed on the nominal scenario) on a
     scenario dispersed from its own seed, a child of --seed: a run is the same
     whatever the number of workers.
+
+    Finished runs are kept in OUT.partial as they finish: an interrupted
+    campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
+    computing only the runs it lacks, with the results of an uninterrupted one.
     """
     from rwlab.attitude.scenario import load_scenario
     from rwlab.campaign.dispersions import load_dispersions
     from rwlab.campaign.engine import dask_client
-    from rwlab.campaign.montecarlo import Campaign, budget, check_runs, fly_run, run_campaign
-    from rwlab.report.attitude import check_outputs
+    from rwlab.campaign.montecarlo import (
+        Campaign,
+        Execution,
+        budget,
+        check_runs,
+        check_size,
+        fly_run,
+        run_campaign,
+    )
     from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
 
+    check_size(runs)
     _check_run(duration, None)
     sc = load_scenario(scenario)
-    campaign = Campaign(sc, load_dispersions(dispersions), duration, controller, seed, runs)
-    check_runs(campaign)  # before the cluster starts
-    _check_folder(out)
-    check_outputs(out, CAMPAIGN_FILES, force)
-    where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
-    click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
-    with (
-        dask_client(workers, scheduler) as client,
-        _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
-    ):
-        rows = run_campaign(campaign, client, progress=progress)
-    stats = budget(rows, campaign)
-    worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
-    paths = write_campaign(rows, stats, campaign, worst, out, force=force)
+    _check_steps(duration, sc)
+    campaign = Campaign(
+        sc,
+        load_dispersions(dispersions),
+        duration,
+        controller,
+        seed,
+        runs,
+        epoch=epoch,
+        epoch_spread_days=epoch_spread_days,
+    )
+    with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
+        store = _run_store(out, campaign, force=force, resume=resume)
+        check_runs(campaign)  # before the cluster starts
+        where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
+        click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
+        execution = Execution()
+        try:
+            with (
+                dask_client(workers, scheduler) as client,
+                _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
+            ):
+                rows = run_campaign(
+                    campaign, client, progress=progress, store=store, execution=execution
+                )
+        except (KeyboardInterrupt, RwlabError, OSError):
+            kept = len(store.rows())
+            click.echo(
+                f"\ncampaign stopped: {kept} of {runs} runs kept in {store.folder}; "
+                "continue it with the same options and --resume",
+                err=True,
+            )
+            raise
+        stats = {**budget(rows, campaign), "execution": execution.to_dict()}
+        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
+        paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
+    shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
+    if execution.retries:
+        ex = stats["execution"]
+        click.echo(
+            f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}",
+            err=True,
+        )
     click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
     for axis, s in stats["pointing_error_deg"].items():
         click.echo(
             f"{axis:<6} {s['mean']:10.4g} {s['std']:10.4g} {s['p99_73']:11.4g} {s['max']:10.4g}"
         )
+    met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.pointing_requirement_deg:g}°: {stats['meets_requirement_fraction']:.1%}"
+        f"meeting ±{sc.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    for q in stats["quantiles"]:
+        bound = (
+            f"≤ {q['upper_bound']:.4g}° ({q['confidence']:.0%})"
+            if q["upper_bound"] is not None
+            else f"no {q['confidence']:.0%} bound: needs {q['runs_needed']} runs"
+        )
+        click.echo(
+            f"  {q['p']:.2%} quantile of {stats['statistic_column']}: {q['estimate']:.4g}°, {bound}"
+        )
+    click.echo(_wrote(out, paths.values()))

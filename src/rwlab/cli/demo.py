@@ -41,7 +41,11 @@ def demo(out, realtime, monitor, quick, force):
             )
     except KeyboardInterrupt as exc:
         why = exc.args[0] if exc.args else "Ctrl-C"
-        click.echo(f"\ninterrupted ({why}): the wheel is idle and every record is closed", err=True)
+        click.echo(
+            f"\ninterrupted ({why}): the wheel is idle, every record closed, and nothing "
+            f"written to {out}",
+            err=True,
+        )
         sys.exit(130)
     cm = summary["chosen_model"]
     click.echo(f"wheel model: {cm['structure']} (validation fit {cm['fit_percent']:.2f} %)")

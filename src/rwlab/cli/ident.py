@@ -318,10 +318,15 @@ def _ss_options(func):
             click.argument("nx", type=click.IntRange(min=1)),
             click.option(
                 "--weighting",
-                type=click.Choice(["auto", "CVA", "MOESP", "N4SID"]),
+                type=click.Choice(["auto", "CVA", "MOESP", "N4SID", "SSARX"]),
                 default="auto",
                 show_default=True,
-                help="n4sid's SVD weighting (auto: CVA).",
+                help="n4sid's SVD weighting (auto: CVA; SSARX for closed-loop data).",
+            ),
+            click.option(
+                "--enforce-stability",
+                is_flag=True,
+                help="Reflect unstable n4sid poles inside (MATLAB EnforceStability).",
             ),
             click.option("--feedthrough", is_flag=True, help="Estimate D (default D = 0)."),
             click.option(
@@ -343,8 +348,8 @@ def _ss_options(func):
 def _state_space_command(name: str, doc: str):
     @_ss_options
     @_friendly_errors
-    def command(file, Ts, input_col, output_col, detrend, normalize, nx, weighting, feedthrough,
-                split, as_json, save, force):  # fmt: skip
+    def command(file, Ts, input_col, output_col, detrend, normalize, nx, weighting,
+                enforce_stability, feedthrough, split, as_json, save, force):  # fmt: skip
         import numpy as np
 
         from rwlab import ident as idm
@@ -353,12 +358,19 @@ def _state_space_command(name: str, doc: str):
             _check_folder(Path(save).parent)
         data = _load(file, Ts, input_col, output_col, detrend, normalize)
         est, val = (data, None) if split >= 1 else data.split(split)
-        options = {"weighting": weighting, "feedthrough": feedthrough}
+        options = {
+            "weighting": weighting,
+            "feedthrough": feedthrough,
+            "enforce_stability": enforce_stability,
+        }
         if name == "n4sid":
             model = idm.n4sid(est, nx, **options)
         else:
             model = idm.ssest(
-                est, nx, feedthrough=feedthrough, n4sid_options={"weighting": weighting}
+                est,
+                nx,
+                feedthrough=feedthrough,
+                n4sid_options={"weighting": weighting, "enforce_stability": enforce_stability},
             )
         v, line = None, None
         if val is not None:
@@ -384,7 +396,7 @@ _state_space_command(
 
 
 def _write_json(path, payload: dict, force: bool) -> None:
-    from rwlab.data import atomic_write_bytes
+    from rwlab._io import atomic_write_bytes
 
     if Path(path).exists() and not force:
         raise FileExistsError(f"{path} exists; use --force to overwrite")
@@ -421,6 +433,8 @@ def _response_table(fr, rows: int = 16) -> None:
 @_friendly_errors
 def ident_spa(file, Ts, input_col, output_col, detrend, normalize, window, as_json, save, force):
     """Frequency response by spectral analysis (MATLAB spa): Blackman–Tukey, Hann window."""
+    import numpy as np
+
     from rwlab.ident import spa
 
     if save:
@@ -433,6 +447,13 @@ def ident_spa(file, Ts, input_col, output_col, detrend, normalize, window, as_js
         _echo_json(fr.to_dict())
         return
     click.echo(f"data: {data!r}; spa at {len(fr.omega)} frequencies")
+    bias = fr.report.get("bias")
+    if bias:
+        click.echo(
+            f"the ±σ band is the variance only: the Hann window (M = {bias['window_size']}) "
+            f"smooths G over ~{bias['resolution_rad_s']:.3g} rad/s, a bias it leaves out "
+            f"(estimated up to {float(np.max(bias['estimate'])):.3g} here)"
+        )
     _response_table(fr)
     if save:
         click.echo(f"estimate written to {save}")

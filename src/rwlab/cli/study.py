@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import sys
 from pathlib import Path
 
 import click
 
 from rwlab.cli._common import (
+    POSITIVE,
+    Number,
     _check_folder,
     _columns_option,
     _engine_options,
     _friendly_errors,
     _message,
+    _output,
+    _wrote,
     main,
 )
 from rwlab.cli.attitude import _steps_progress
@@ -22,25 +28,26 @@ from rwlab.errors import ConfigError, RwlabError
 @main.command("identify")
 @click.argument("file")
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
-@click.option("--Ts", "Ts", type=float, help="Sample time, s (a record's own by default).")
+@click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (a record's own by default).")
 @_columns_option
 @click.option(
     "--preprocess",
-    type=click.Choice(["normalize", "detrend", "none"]),
-    default="normalize",
+    type=click.Choice(["detrend", "scale", "normalize", "none"]),
+    default="detrend",
     show_default=True,
-    help="normalize to [0, 1] (paper A) or remove means (MATLAB habit).",
+    help="Statistics from the estimation part: remove means (default), scale without "
+    "shifting, or normalize to [0, 1] as paper A (biases a model without intercept).",
 )
 @click.option(
     "--split",
-    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    type=Number(0, 1, low_open=True, high_open=True),
     default=0.7,
     show_default=True,
     help="Estimation share.",
 )
 @click.option(
     "--tolerance",
-    type=click.FloatRange(min=0),
+    type=Number(0, 100),
     default=3.0,
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
@@ -61,7 +68,6 @@ def identify(
     studied in parallel on a Dask cluster (--workers, --scheduler), into
     OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
     """
-    _check_folder(out)
     options = dict(
         Ts=Ts,
         input_col=input_col,
@@ -76,15 +82,21 @@ def identify(
         return
     if workers is not None or scheduler is not None:
         raise ConfigError("--workers and --scheduler apply to a folder of records")
-    with click.progressbar(length=1, label="identification study", file=sys.stderr) as bar:
+    with (
+        _output(out, STUDY_FILES, force, "identification study") as stage,
+        contextlib.ExitStack() as stack,
+    ):
+        bars: list = []
 
         def progress(done: int, total: int, label: str) -> None:
-            bar.length = total
-            bar.label = f"identification study: {label}"
-            bar.update(1)
+            if not bars:  # from the first stage on: a refused record prints only its error
+                bar = click.progressbar(length=total, label="identification study", file=sys.stderr)
+                bars.append(stack.enter_context(bar))
+            bars[0].label = f"identification study: {label}"
+            bars[0].update(1)
 
         study, paths = _identify_one(
-            file, out, progress=progress, echo=lambda t: click.echo(t, err=True), **options
+            file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
         )
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
@@ -97,67 +109,109 @@ def identify(
     if nl and "error" not in nl:
         click.echo(
             f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
-            f"{nl['accel_limit_rpm_s']:.4g} (output unit)/s"
+            f"{nl['accel_limit_rpm_s']:.4g} {_rate_unit(study)}"
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
+
+
+STUDY_FILES = ("report.html", "study.json", "model.json")
+
+
+def _rate_unit(study: dict) -> str:
+    """The rate limit's unit: the output's unit per second (rpm/s for a wheel record)."""
+    unit = (study.get("data") or {}).get("output_unit") or ""
+    return f"{unit}/s" if unit else "(output unit)/s"
 
 
 @main.command("diagnose")
-@click.argument("record", type=click.Path(dir_okay=False))
+@click.argument("record", type=click.Path(exists=True))
 @click.option(
     "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True, help="Output folder.")
 @click.option(
-    "--calibration",
-    "calibration_s",
-    type=float,
-    default=300.0,
-    show_default=True,
-    help="Healthy start of the record that calibrates the residuals, s.",
-)
-@click.option(
     "--false-alarms",
     "false_alarms_per_hour",
-    type=click.FloatRange(0, min_open=True),
+    type=POSITIVE,
     default=1e-3,
     show_default=True,
     help="Wanted false alarms per hour per detector (sets the thresholds).",
 )
-@click.option("--speed-test", is_flag=True, help="Also test the speed residual (see docs).")
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
-def diagnose_cmd(record, model_file, out, calibration_s, false_alarms_per_hour, speed_test, force):
-    """Detect and isolate wheel faults in a record with an identified model.
+def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
+    """Detect, name and size wheel faults in a record with an identified model.
 
-    Writes OUT/diagnosis.json (alarms, thresholds, residual statistics) and
-    OUT/report.html (residuals and test statistics with the alarms marked).
+    The detectors compare the record, from its first sample, with the healthy
+    reference that rwlab identify stored in model.json. Writes
+    OUT/diagnosis.json (alarms with fault sizes and 95 % intervals, thresholds,
+    residual statistics) and OUT/report.html.
+
+    RECORD may be a folder of records of one wheel: each is diagnosed into
+    OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
+    fault's size over the records (in the order of their start times).
     """
+    from rwlab.diagnose import HealthyReference
+    from rwlab.wheel import IdentifiedWheel
+
+    _check_folder(out)
+    wheel = IdentifiedWheel.from_json(model_file)
+    reference = HealthyReference.from_model_file(model_file)
+    if Path(record).is_dir():
+        _diagnose_folder(Path(record), Path(out), wheel, reference, false_alarms_per_hour, force)
+        return
+    result, paths = _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force)
+    for a in result.alarms:
+        click.echo(f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)")
+    if not result.alarms:
+        click.echo("no alarm")
+    click.echo(_wrote(out, paths.values()))
+
+
+def _finding_text(a) -> str:
+    if a.magnitude is None:
+        return a.kind
+    ci = "" if a.ci is None else f" [{a.ci[0]:.4g}, {a.ci[1]:.4g}]"
+    return f"{a.kind} {a.magnitude:.4g}{ci} {a.unit}"
+
+
+def _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force):
     import numpy as np
 
     from rwlab.diagnose import diagnose
     from rwlab.report.diagnosis import write_diagnosis
     from rwlab.testbed import load_record
-    from rwlab.wheel import IdentifiedWheel
 
-    _check_folder(out)
-    wheel = IdentifiedWheel.from_json(model_file)
-    data = load_record(record, wheel.Ts, outputs=("speed", "current", "age"), max_gap=np.inf)
-    result = diagnose(
-        data,
-        wheel,
-        calibration_s=calibration_s,
-        false_alarms_per_hour=false_alarms_per_hour,
-        speed_test=speed_test,
+    with _output(out, ("diagnosis.json", "report.html"), force, "diagnosis") as stage:
+        data = load_record(
+            record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
+        result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
+        paths = write_diagnosis(result, stage, title=Path(record).name, force=force)
+    return result, paths
+
+
+def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> None:
+    """Every record of ``folder`` diagnosed, and the trend of each fault's size."""
+    from rwlab.report.diagnosis import trend_point, write_trend
+    from rwlab.testbed import read_record
+
+    records = sorted(
+        p for p in folder.iterdir() if p.suffix == ".mcap" and not p.name.endswith(".partial.mcap")
     )
-    paths = write_diagnosis(result, out, title=Path(record).name, force=force)
-    for a in result.alarms:
-        click.echo(f"alarm at {a.t_s:.1f} s: {a.kind} ({a.detector} test, {a.statistic:.3g})")
-    if not result.alarms:
-        click.echo("no alarm")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    if not records:
+        raise ConfigError(f"{folder}: no records (.mcap) in the folder")
+    points = []
+    for path in records:
+        result, _ = _diagnose_one(path, out / path.stem, wheel, reference, rate, force)
+        start = read_record(path).metadata.get("start_utc", "")
+        points.append(trend_point(path.name, start, result))
+        named = ", ".join(_finding_text(a) for a in result.alarms) or "no alarm"
+        click.echo(f"{path.name:<32} {named}")
+    paths = write_trend(points, out, force=force)
+    click.echo(_wrote(out, paths.values()))
 
 
 def _identify_one(
@@ -175,7 +229,12 @@ def _identify_one(
     echo=None,
 ):
     """`rwlab identify` on one record: the study written into ``out``; (study dict, paths)."""
-    from rwlab.ident.study import identification_study, load_study_data, physical_model
+    from rwlab.ident.study import (
+        identification_study,
+        load_current,
+        load_study_data,
+        physical_model,
+    )
     from rwlab.report.identification import write_study
 
     data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
@@ -188,6 +247,12 @@ def _identify_one(
         tolerance=tolerance,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
+        datasheet={
+            "current_limit": saturation.get("current_limit_a", 0.7),
+            "max_speed_rpm": saturation["speed_limit_rpm"],
+            "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
+        },
+        current=load_current(file, Ts),
     )
     model = physical_model(
         result,
@@ -195,7 +260,35 @@ def _identify_one(
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
         saturation_source=saturation["saturation_source"],
     )
-    return result.to_dict(), write_study(result, model, out, force=force)
+    reference = _healthy_reference(file, model)
+    if isinstance(reference, dict):
+        model = dataclasses.replace(model, healthy_reference=reference)
+    elif echo is not None:
+        echo(f"no healthy reference for fault diagnosis: {reference}")
+    paths = write_study(result, model, out, force=force)
+    study = result.to_dict()
+    study["data"]["output_unit"] = data.output_units[0]  # for the messages only
+    return study, paths
+
+
+def _healthy_reference(file, model) -> dict | str:
+    """The healthy reference measured on a testbed record, or why there is none."""
+    import numpy as np
+
+    from rwlab.diagnose import healthy_reference
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
+
+    if Path(file).suffix.lower() != ".mcap":
+        return "not a testbed record (.mcap with motor current)"
+    try:
+        wheel = IdentifiedWheel.from_file(model)
+        data = load_record(
+            file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
+        return healthy_reference(data, wheel, source=Path(file).name).to_dict()
+    except RwlabError as exc:
+        return _message(exc)
 
 
 _RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")
@@ -225,7 +318,6 @@ def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
 def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
     """`rwlab identify FOLDER`: every record's study on the Dask engine, and a fleet summary."""
     from rwlab.campaign.engine import dask_client, map_batches
-    from rwlab.report.attitude import check_outputs
     from rwlab.report.campaign import FLEET_FILES, write_fleet
 
     records = sorted(
@@ -241,21 +333,19 @@ def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force)
     twins = sorted({s for s in stems if stems.count(s) > 1})
     if twins:
         raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
-    check_outputs(out, FLEET_FILES, force)
-    for stem in stems:
-        check_outputs(out / stem, ["report.html", "study.json", "model.json"], force)
-    jobs = [[(str(p), str(out / p.stem))] for p in records]
-    click.echo(f"identifying {len(records)} records on Dask...", err=True)
-    with (
-        dask_client(workers, scheduler) as client,
-        _steps_progress(len(records), "fleet identification", unit="records") as progress,
-    ):
-        lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
-    paths = write_fleet(lines, out, force=force)
+    with _output(out, [*FLEET_FILES, *stems], force, "fleet identification") as stage:
+        jobs = [[(str(p), str(stage / p.stem))] for p in records]
+        click.echo(f"identifying {len(records)} records on Dask...", err=True)
+        with (
+            dask_client(workers, scheduler) as client,
+            _steps_progress(len(records), "fleet identification", unit="records") as progress,
+        ):
+            lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
+        paths = write_fleet(lines, stage, force=force)
     for line in lines:
         fit = "" if line["fit_percent"] is None else f"{line['fit_percent']:8.2f}"
         click.echo(f"{line['record']:<32} {line['structure'] or 'failed':<12} {fit:>8}")
-    click.echo(f"wrote {', '.join(str(p) for p in paths.values())}")
+    click.echo(_wrote(out, paths.values()))
     failed = [line for line in lines if line["error"]]
     if failed:
         raise RwlabError(

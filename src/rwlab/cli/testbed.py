@@ -8,13 +8,41 @@ from pathlib import Path
 
 import click
 
-from rwlab.cli._common import _check_folder, _friendly_errors, _stop_signals, main
+from rwlab.cli._common import (
+    POSITIVE,
+    Number,
+    _check_folder,
+    _friendly_errors,
+    _stop_signals,
+    main,
+)
 from rwlab.errors import ConfigError
 
 # -- the testbed ----------------------------------------------------------------------
 
 
-@main.command("experiment")
+class _ExperimentCommand(click.Command):
+    """``experiment --help`` shows ExperimentConfig's defaults (the options default to None so
+    that a --config file's values are not overridden)."""
+
+    def format_options(self, ctx, formatter):
+        from dataclasses import fields
+
+        from rwlab.testbed import ExperimentConfig
+
+        defaults = {f.name: f.default for f in fields(ExperimentConfig)}
+        for p in self.params:
+            name = {"setpoint_file": "file", "model_file": "model"}.get(p.name or "", p.name)
+            value = defaults.get(name)
+            unset = p.get_default(ctx) in (None, getattr(click.core, "UNSET", None))
+            if isinstance(p, click.Option) and unset and value not in (None, ()):
+                shown = ("on" if value else "off") if isinstance(value, bool) else value
+                if "[default:" not in (p.help or ""):
+                    p.help = f"{p.help or ''}  [default: {shown}]".strip()
+        super().format_options(ctx, formatter)
+
+
+@main.command("experiment", cls=_ExperimentCommand)
 @click.option(
     "--config",
     "config_file",
@@ -31,15 +59,41 @@ from rwlab.errors import ConfigError
 @click.option("--telemetry-rate", type=float, help="Simulated wheel's telemetry rate, Hz.")
 @click.option("--seed", type=int)
 @click.option(
+    "--unit",
+    type=click.IntRange(0),
+    help="Simulated wheel unit: another RW90 with parameters drawn within its tolerances.",
+)
+@click.option(
+    "--wheel",
+    "wheel_preset",
+    type=click.Choice(["rw90", "ideal"]),
+    help="Simulated wheel preset: rw90 (realistic, default) or ideal (no imperfections).",
+)
+@click.option(
     "--file",
     "setpoint_file",
     type=click.Path(dir_okay=False),
     help="CSV of setpoints for --signal file.",
 )
-@click.option("--interface", type=click.Choice(["virtual", "socketcan", "udp_multicast", "serial"]))
+@click.option(
+    "--interface",
+    help="virtual (a simulated wheel), socketcan, udp_multicast, serial, or one added by an "
+    "entry point.",
+)
 @click.option("--channel")
 @click.option("--node-id", type=click.IntRange(0, 15))
+@click.option(
+    "--protocol",
+    help="Wheel protocol: rwlab (default), canopen, nsp, or a registered one "
+    "(`rwlab wheel protocols`).",
+)
 @click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option(
+    "--rate-limit/--no-rate-limit",
+    default=None,
+    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (default on: "
+    "ramps, not steps); --no-rate-limit plays true steps and lets the wheel saturate.",
+)
 @click.option(
     "--fault",
     "faults",
@@ -72,11 +126,15 @@ def experiment(
     realtime,
     telemetry_rate,
     seed,
+    unit,
+    wheel_preset,
     setpoint_file,
     interface,
     channel,
     node_id,
+    protocol,
     raw_frames,
+    rate_limit,
     faults,
     model_file,
     monitor,
@@ -100,11 +158,15 @@ def experiment(
         realtime=realtime,
         telemetry_rate=telemetry_rate,
         seed=seed,
+        unit=unit,
+        wheel=wheel_preset,
         file=setpoint_file,
         interface=interface,
         channel=channel,
         node_id=node_id,
+        protocol=protocol,
         raw_frames=raw_frames,
+        rate_limit=rate_limit,
         faults=tuple(faults) or None,
         model=model_file,
     )
@@ -112,9 +174,9 @@ def experiment(
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:
         cfg = ExperimentConfig(**{k: v for k, v in overrides.items() if v is not None})
-    from rwlab.wheel import RW90
-
-    cfg.check_limits(RW90)
+    cfg.check_limits(cfg.wheel_params())
+    if Path(out).suffix.lower() != ".mcap":
+        raise ConfigError(f"--out {out}: a record is an .mcap file; name it NAME.mcap")
     if Path(out).exists() and not force:
         raise FileExistsError(f"{out} exists; pass --force to replace it")
     _check_folder(Path(out).parent)
@@ -152,18 +214,35 @@ def experiment(
             stop_process(server)
     click.echo(
         f"{summary.path}: {summary.commands} commands, {summary.telemetry} telemetry "
-        f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status})"
+        f"frames, {summary.lost_frames} lost, {summary.duration:.1f} s ({summary.status}); "
+        f"timing: {_timing_line(summary.timing)}"
+        + (f"; {summary.bad_frames} damaged frames dropped" if summary.bad_frames else "")
     )
+
+
+def _timing_line(t: dict) -> str:
+    """The run's real-time quality in one line (see rwlab.testbed.runner.Timing)."""
+    if not t.get("commands"):
+        return "no command sent"
+    lat, per, ms = t["lateness_s"], t["period_s"], 1e3
+    text = (
+        f"lateness p50/p99/max {lat['p50'] * ms:.3g}/{lat['p99'] * ms:.3g}/{lat['max'] * ms:.3g}"
+        f" ms, {t['late']} of {t['commands']} commands late by > {t['tolerance_s'] * ms:.3g} ms"
+    )
+    if per["p50"] is not None:
+        text += f"; period p50/p99/max {per['p50'] * ms:.4g}/{per['p99'] * ms:.4g}/"
+        text += f"{per['max'] * ms:.4g} ms"
+    return text
 
 
 @main.command("export")
 @click.argument("record", type=click.Path(dir_okay=False))
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "mat"]), required=True)
 @click.option("--out", type=click.Path(dir_okay=False), required=True)
-@click.option("--Ts", "Ts", type=float, help="Sample time, s (default: the record's).")
+@click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (default: the record's).")
 @click.option(
     "--max-gap",
-    type=float,
+    type=Number(0, allow_inf=True),
     default=None,
     help="Accept telemetry gaps up to this many seconds (default Ts).",
 )
@@ -179,13 +258,24 @@ def export(record, fmt, out, Ts, max_gap, node, force):
     """
     from rwlab.testbed import load_record
 
-    _check_folder(Path(out).parent)
+    path = Path(out)
+    if path.suffix and path.suffix.lower() != f".{fmt}":
+        raise ConfigError(
+            f"--format {fmt} contradicts --out {out} (a {path.suffix} name); "
+            f"name the file .{fmt} or choose the format its name says"
+        )
+    path = path.with_suffix(f".{fmt}") if not path.suffix else path
+    if path.exists() and not force:
+        raise FileExistsError(f"{path} exists; pass --force to replace it")
+    _check_folder(path.parent)
     data = load_record(
         record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap, node=node
     )
-    path = Path(out)
-    if path.suffix.lower() != f".{fmt}":
-        path = path.with_suffix(f".{fmt}") if not path.suffix else path
+    if data.N < 2:
+        raise ConfigError(
+            f"--Ts {data.Ts:g} s leaves {data.N} sample of the record; choose a Ts shorter "
+            "than the record"
+        )
     data.write(path, overwrite=force, plain=True)
     click.echo(f"{path}: {data.N} samples at Ts = {data.Ts:g} s")
 
@@ -202,7 +292,7 @@ def export(record, fmt, out, Ts, max_gap, node, force):
 @click.option("--replay", is_flag=True, help="Play a finished record back instead of following it.")
 @click.option(
     "--speed",
-    type=click.FloatRange(0, min_open=True),
+    type=POSITIVE,
     default=1.0,
     show_default=True,
     help="Replay speed factor.",
@@ -215,6 +305,13 @@ def monitor_cmd(record, host, port, replay, speed):
     if not host.strip():
         raise ConfigError("--host must name an address, e.g. 127.0.0.1")
     check_port(host, port)
+    from rwlab.testbed.record import partial_path
+
+    if not Path(record).is_file() and not partial_path(record).is_file():
+        raise FileNotFoundError(
+            f"no such record: {record} (nor {partial_path(record).name} being written); "
+            "start the experiment first, or give the path of an existing record"
+        )
     if replay:
         from rwlab.testbed import read_record
 

@@ -4,29 +4,36 @@ from __future__ import annotations
 
 import click
 
-from rwlab.cli._common import _friendly_errors, _stop_signals, main
+from rwlab.cli._common import SECONDS, Number, _friendly_errors, _stop_signals, main
 
 # -- the wheel ------------------------------------------------------------------------
 
 
 def _bus_options(func):
-    from rwlab.wheel.bus import INTERFACES
-
     for option in reversed(
         [
             click.option(
                 "--interface",
-                type=click.Choice(INTERFACES),
                 default="virtual",
                 show_default=True,
-                help="python-can interface (serial = RS-232 with SLIP).",
+                help="virtual, socketcan, udp_multicast, serial (RS-232), or one added by "
+                "an entry point (`rwlab wheel protocols` lists them).",
             ),
             click.option(
                 "--channel",
                 default=None,
-                help="Bus channel (vcan0, a multicast group, /dev/ttyUSB0, ...).",
+                help="Bus channel (vcan0; a multicast group, GROUP@ADDRESS to leave the "
+                "loopback interface; /dev/ttyUSB0, ...; for `serve`, pty makes a "
+                "pseudo-terminal pair and prints the path clients open).",
             ),
             click.option("--node-id", type=click.IntRange(0, 15), default=0, show_default=True),
+            click.option(
+                "--protocol",
+                default="rwlab",
+                show_default=True,
+                help="Wheel protocol (rwlab, canopen, nsp, or a registered one; "
+                "see `rwlab wheel protocols`).",
+            ),
         ]
     ):
         func = option(func)
@@ -40,17 +47,23 @@ def wheel() -> None:
 
 @wheel.command("serve")
 @_bus_options
-@click.option("--telemetry-rate", type=float, default=100.0, show_default=True, help="Hz.")
+@click.option(
+    "--telemetry-rate",
+    type=Number(0, 10_000, low_open=True),
+    default=100.0,
+    show_default=True,
+    help="Hz.",
+)
 @click.option(
     "--latency-ms",
-    type=float,
+    type=Number(0, 10_000),
     default=20.0,
     show_default=True,
     help="Command-to-effect latency (paper A measured ~20 ms).",
 )
 @click.option(
     "--watchdog",
-    type=float,
+    type=Number(0, 3600),
     default=1.0,
     show_default=True,
     help="Idle the wheel after this many seconds without a command (0: off).",
@@ -60,74 +73,166 @@ def wheel() -> None:
     type=click.Path(exists=True, dir_okay=False),
     help="Wheel parameters as TOML (default RW90).",
 )
-@click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
+@click.option(
+    "--unit",
+    type=click.IntRange(0),
+    default=None,
+    help="Wheel unit: parameters drawn within their tolerances around --params.",
+)
+@click.option("--duration", type=SECONDS, default=None, help="Stop after this many seconds.")
 @_friendly_errors
 def wheel_serve(
-    interface, channel, node_id, telemetry_rate, latency_ms, watchdog, params, duration
+    interface,
+    channel,
+    node_id,
+    protocol,
+    telemetry_rate,
+    latency_ms,
+    watchdog,
+    params,
+    unit,
+    duration,
 ):
-    """Run a simulated wheel on a bus, on the wall clock, until Ctrl-C."""
+    """Run a simulated wheel on a bus, on the wall clock, until Ctrl-C.
+
+    It first listens for LISTEN_S seconds and refuses to start if another wheel
+    already answers under its node id there; later it reports one in its status.
+    """
     import time
 
+    from rwlab.errors import ConfigError
     from rwlab.wheel import RW90, WheelNode, WheelParams
-    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_bus
+    from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport, transport_names
+    from rwlab.wheel.link import get_protocol
 
     wheel_params = WheelParams.from_toml(params) if params else RW90
-    channel = channel or DEFAULT_CHANNELS[interface]
-    bus = open_bus(interface, channel)
-    node = WheelNode(
-        bus,
-        node_id,
-        wheel_params,
-        telemetry_rate=telemetry_rate,
-        latency=latency_ms / 1000,
-        watchdog=watchdog,
-    ).start()
-    click.echo(f"simulated wheel {node_id} on {interface}:{channel}; Ctrl-C to stop", err=True)
-    start = time.monotonic()
+    if unit is not None:
+        wheel_params = wheel_params.for_unit(unit)
+    get_protocol(protocol)  # an unknown name fails before the bus opens
+    if interface not in transport_names():
+        raise ConfigError(
+            f"unknown interface {interface!r}; choose from {', '.join(transport_names())}"
+        )
+    channel = channel or DEFAULT_CHANNELS.get(interface)
+    keep_open = None
+    if interface == "serial" and channel == "pty":  # the twin makes its own pty pair
+        from rwlab.wheel.serial import open_pty
+
+        bus, keep_open = open_pty()  # the other end stays open: no hang-up between clients
+        channel = keep_open.port
+    else:
+        bus = open_transport(protocol, interface, channel)
+    node = None
     try:
+        if "can" in get_protocol(protocol).transports:  # a shared bus; a serial line is not
+            _refuse_if_answered(bus, node_id, protocol)
+        node = WheelNode(
+            bus,
+            node_id,
+            wheel_params,
+            telemetry_rate=telemetry_rate,
+            latency=latency_ms / 1000,
+            watchdog=watchdog,
+            protocol=protocol,
+        ).start()
+        click.echo(
+            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop",
+            err=True,
+        )
+        start = time.monotonic()
         with _stop_signals():
             while duration is None or time.monotonic() - start < duration:
                 time.sleep(min(1.0, duration or 1.0))
-                w = node.wheel
-                click.echo(
-                    f"t={time.monotonic() - start:7.1f} s mode={w.mode.name:<12} "
-                    f"speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s}",
-                    err=True,
-                )
+                click.echo(f"t={time.monotonic() - start:7.1f} s {_status(node)}", err=True)
     except KeyboardInterrupt:
         pass
     finally:
-        node.stop()
-        bus.shutdown()
+        if node is not None:
+            node.stop()
+        _close(bus)
+        if keep_open is not None:
+            keep_open.close()
+
+
+def _close(transport) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
+
+
+LISTEN_S = 1.5  # longer than the 1 Hz heartbeat every protocol's twin sends
+
+
+def _refuse_if_answered(bus, node_id: int, protocol: str) -> None:
+    """ConfigError if a wheel already answers under ``node_id`` on ``bus``."""
+    import time
+
+    from rwlab.errors import ConfigError
+    from rwlab.wheel.clock import WallClock
+    from rwlab.wheel.link import get_protocol
+
+    link = get_protocol(protocol).host_link(bus, node_id, clock=WallClock())
+    end = time.monotonic() + LISTEN_S
+    while time.monotonic() < end:
+        heard = link.receive(WallClock().now())
+        if heard:
+            where = heard[0].source or "this bus"
+            raise ConfigError(
+                f"a wheel already answers as node {node_id} from {where}; serve this one "
+                "with another --node-id or --channel"
+            )
+        time.sleep(0.02)
+
+
+def _status(node) -> str:
+    """One status line: the wheel, and what the bus brought that was not for it."""
+    w = node.wheel
+    text = (
+        f"mode={w.mode.name:<12} speed={w.measured_speed_rpm():8.1f} rpm faults={w.faults!s} "
+        f"commands={node.commands_seen} rejected={node.rejected_commands} "
+        f"bad={node.bad_frames} foreign={node.foreign_frames}"
+    )
+    if node.errors:
+        text += f" errors={node.errors} (last: {node.last_error})"
+    if node.twin_source:
+        text += f" WARNING: another wheel answers as node {node.node_id} from {node.twin_source}"
+    return text
 
 
 @wheel.command("cmd")
 @_bus_options
 @click.argument("action", type=click.Choice(["speed", "accel", "idle", "clear"]))
-@click.argument("value", type=float, required=False, default=0.0)
+@click.argument("value", type=Number(), required=False, default=0.0)
 @click.option(
     "--watch",
-    type=float,
+    type=Number(0, 86_400),
     default=2.0,
     show_default=True,
     help="Seconds to print telemetry after the command.",
 )
-@click.option("--timeout", type=float, default=0.5, show_default=True)
+@click.option("--timeout", type=Number(0, 3600, low_open=True), default=0.5, show_default=True)
 @_friendly_errors
-def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
+def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeout):
     """Send one command (speed rpm, accel rpm/s, idle, clear) and print telemetry.
 
     On the virtual interface an in-process simulated wheel answers. The wheel is
     idled when the command ends unless the action was idle or clear.
     """
     from rwlab.wheel import WheelClient, WheelNode
-    from rwlab.wheel.bus import open_bus
+    from rwlab.wheel.bus import open_transport
+    from rwlab.wheel.link import get_protocol
+    from rwlab.wheel.serial import open_pty
 
-    bus = open_bus(interface, channel)
     node = None
-    if interface == "virtual":
-        node = WheelNode(open_bus(interface, channel), node_id, latency=0.02).start()
-    client = WheelClient(bus, node_id, timeout=timeout)
+    if interface == "virtual" and "can" not in get_protocol(protocol).transports:
+        node_bus, bus = open_pty()  # a serial protocol's twin answers over a pty pair
+    else:
+        bus = open_transport(protocol, interface, channel)
+        node_bus = open_transport(protocol, interface, channel) if interface == "virtual" else None
+    if node_bus is not None:
+        node = WheelNode(node_bus, node_id, latency=0.02, protocol=protocol).start()
+    client = WheelClient(bus, node_id, timeout=timeout, protocol=protocol)
     with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles
         try:
             send = {
@@ -162,5 +267,25 @@ def wheel_cmd(interface, channel, node_id, action, value, watch, timeout):
                 client.close()
             if node is not None:
                 node.stop()
-                node.bus.shutdown()
-            bus.shutdown()
+                _close(node.bus)
+            _close(bus)
+
+
+@wheel.command("protocols")
+@_friendly_errors
+def wheel_protocols():
+    """List the wheel protocols and transports (built in, and added by entry points)."""
+    from rwlab.wheel.bus import transport_names
+    from rwlab.wheel.link import get_protocol, protocol_names
+
+    click.echo("protocols:")
+    for name, target in protocol_names().items():
+        try:
+            protocol = get_protocol(name)
+            about = f"{protocol.description} [transports: {', '.join(protocol.transports)}]"
+        except Exception as exc:  # a broken plugin is listed with why, not fatal
+            about = f"cannot be loaded: {exc}"
+        click.echo(f"  {name:<10} {target}\n             {about}")
+    click.echo("interfaces:")
+    for name, target in transport_names().items():
+        click.echo(f"  {name:<14} {target}")

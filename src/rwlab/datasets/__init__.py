@@ -6,6 +6,7 @@ Origins are listed in ``ORIGIN.md`` beside this file.
 from __future__ import annotations
 
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy.io import loadmat
@@ -33,6 +34,11 @@ def dryer() -> IOData:
     """Feedback PT326 hair dryer (DaISy 96-006, MATLAB ``dryer2``): 1000 samples, Ts = 0.08 s.
 
     Input: heater voltage (V); output: thermocouple voltage (V). Not detrended.
+
+    Returns
+    -------
+    IOData
+        1000 samples, Ts = 0.08 s.
     """
     with resources.as_file(_path("daisy_dryer.dat")) as p:
         d = load(p, Ts=0.08)
@@ -52,6 +58,11 @@ def gas_furnace() -> IOData:
     """Box & Jenkins Series J gas furnace: 296 samples, Ts = 9 s.
 
     Input: gas feed rate (scaled ft³/min); output: CO2 in outlet gas (%).
+
+    Returns
+    -------
+    IOData
+        296 samples, Ts = 9 s.
     """
     with resources.as_file(_path("bj_gas_furnace.csv")) as p:
         d = load(p, Ts=9.0)
@@ -67,11 +78,19 @@ def gas_furnace() -> IOData:
 
 
 def cascaded_tanks() -> tuple[IOData, IOData]:
-    """Cascaded tanks benchmark (Schoukens et al. 2016): estimation and validation, Ts = 4 s."""
+    """Cascaded tanks benchmark (Schoukens et al. 2016): estimation and validation, Ts = 4 s.
+
+    Returns
+    -------
+    est, val : IOData
+        The estimation and validation records (pump voltage → level, V), 1024 samples each.
+    """
     with resources.as_file(_path("cascaded_tanks_dataBenchmark.csv")) as p:
         est = load(p, Ts=4.0, input_columns="uEst", output_columns="yEst")
         val = load(p, Ts=4.0, input_columns="uVal", output_columns="yVal")
-    kw = dict(input_names=["pump"], output_names=["level"], input_units=["V"], output_units=["V"])
+    kw: dict[str, Any] = dict(
+        input_names=["pump"], output_names=["level"], input_units=["V"], output_units=["V"]
+    )
     return (
         IOData(est.u, est.y, 4.0, name="cascaded_tanks_est", **kw),
         IOData(val.u, val.y, 4.0, name="cascaded_tanks_val", **kw),
@@ -82,6 +101,16 @@ def drive(experiment: int = 1) -> IOData:
     """Coupled electric drives, PRBS experiment 1, 2 or 3 (Wigren & Schoukens 2017), Ts = 0.02 s.
 
     The speed sensor is insensitive to sign: the system is nonlinear in sign.
+
+    Parameters
+    ----------
+    experiment : {1, 2, 3}
+        Which PRBS experiment (input amplitude ±1, ±1.5 or ±0.5).
+
+    Returns
+    -------
+    IOData
+        Input voltage → measured (unsigned) pulley speed, 500 samples.
     """
     if experiment not in (1, 2, 3):
         raise DataError(f"drive experiment must be 1, 2 or 3, got {experiment}")
@@ -98,12 +127,24 @@ def drive(experiment: int = 1) -> IOData:
 
 
 def cascaded_tanks_est() -> IOData:
-    """Cascaded tanks benchmark, estimation record: 1024 samples, Ts = 4 s."""
+    """Cascaded tanks benchmark, estimation record: 1024 samples, Ts = 4 s.
+
+    Returns
+    -------
+    IOData
+        Pump voltage (V) → upper tank level (V).
+    """
     return cascaded_tanks()[0]
 
 
 def cascaded_tanks_val() -> IOData:
-    """Cascaded tanks benchmark, validation record: 1024 samples, Ts = 4 s."""
+    """Cascaded tanks benchmark, validation record: 1024 samples, Ts = 4 s.
+
+    Returns
+    -------
+    IOData
+        Pump voltage (V) → upper tank level (V).
+    """
     return cascaded_tanks()[1]
 
 
@@ -117,7 +158,18 @@ NAMES = {
 
 
 def get(name: str) -> IOData:
-    """A bundled record by name (see ``NAMES``; ``drive`` is experiment 1)."""
+    """A bundled record by name (see ``NAMES``; ``drive`` is experiment 1).
+
+    Parameters
+    ----------
+    name : str
+        One of ``NAMES`` (``"dryer"``, ``"gas_furnace"``, ``"drive"``, ...).
+
+    Returns
+    -------
+    IOData
+        The record.
+    """
     if name not in NAMES:
         raise DataError(f"no bundled dataset {name!r}; choose from {sorted(NAMES)}")
     return NAMES[name]()

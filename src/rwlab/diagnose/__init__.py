@@ -1,13 +1,15 @@
 """Model-based fault diagnosis of a reaction wheel.
 
-The identified model runs beside the telemetry (:mod:`~rwlab.diagnose.residuals`),
-sequential tests watch the residuals with thresholds set from a stated
-false-alarm rate (:mod:`~rwlab.diagnose.detect`), and the residual signature
-names the likely fault (:mod:`~rwlab.diagnose.isolate`). :class:`Diagnoser`
-does it one sample at a time, live in the experiment runner or offline over a
-record (:func:`diagnose`).
+The identified model runs beside the telemetry (:mod:`~rwlab.diagnose.residuals`);
+block tests and sample tests compare it with the healthy reference measured on
+the identification record (:mod:`~rwlab.diagnose.reference`), with thresholds
+set from a stated false-alarm rate (:mod:`~rwlab.diagnose.detect`); the
+signature names and sizes the fault (:mod:`~rwlab.diagnose.isolate`).
+:class:`Diagnoser` does it one sample at a time, live in the experiment runner
+or offline over a record (:func:`diagnose`).
 """
 
-from rwlab.diagnose.diagnoser import Alarm, Diagnoser, Diagnosis, diagnose
+from rwlab.diagnose.diagnoser import Alarm, Diagnoser, Diagnosis, diagnose, healthy_reference
+from rwlab.diagnose.reference import HealthyReference
 
-__all__ = ["Alarm", "Diagnoser", "Diagnosis", "diagnose"]
+__all__ = ["Alarm", "Diagnoser", "Diagnosis", "HealthyReference", "diagnose", "healthy_reference"]

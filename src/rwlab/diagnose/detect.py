@@ -36,7 +36,20 @@ __all__ = ["Cusum", "RunTest", "arl_to_samples", "cusum_threshold", "run_length"
 
 
 def arl_to_samples(false_alarms_per_hour: float, Ts: float) -> float:
-    """The wanted ARL₀ in samples for a false-alarm rate (per hour) at sample time Ts (s)."""
+    """The wanted ARL₀ in samples for a false-alarm rate (per hour) at sample time Ts (s).
+
+    Parameters
+    ----------
+    false_alarms_per_hour : float
+        Accepted false-alarm rate, per hour (> 0).
+    Ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    float
+        The in-control average run length, samples.
+    """
     if not (math.isfinite(false_alarms_per_hour) and false_alarms_per_hour > 0):
         raise ConfigError(f"the false-alarm rate must be > 0 per hour, got {false_alarms_per_hour}")
     return 3600.0 / (Ts * false_alarms_per_hour)
@@ -48,7 +61,20 @@ def _siegmund_arl(h: float, k: float) -> float:
 
 
 def cusum_threshold(arl0: float, k: float = 0.5) -> float:
-    """Threshold h of a two-sided CUSUM with reference ``k`` (σ units) for ARL₀ ``arl0`` samples."""
+    """Threshold h of a two-sided CUSUM with reference ``k`` (σ units) for ARL₀ ``arl0`` samples.
+
+    Parameters
+    ----------
+    arl0 : float
+        Wanted in-control average run length, samples.
+    k : float
+        Reference value, in σ of the whitened residual.
+
+    Returns
+    -------
+    float
+        The threshold h, σ units.
+    """
     if not (k > 0 and arl0 > 1):
         raise ConfigError(f"need k > 0 and ARL₀ > 1 sample, got k={k}, ARL₀={arl0}")
     h_max = 700 / (2 * k) - 1.166  # exp(700) is near the largest double
@@ -56,7 +82,20 @@ def cusum_threshold(arl0: float, k: float = 0.5) -> float:
 
 
 def run_length(arl0: float, p: float) -> int:
-    """Smallest n whose first run of n events (probability ``p`` each) has ARL₀ ≥ ``arl0``."""
+    """Smallest n whose first run of n events (probability ``p`` each) has ARL₀ ≥ ``arl0``.
+
+    Parameters
+    ----------
+    arl0 : float
+        Wanted in-control average run length, samples.
+    p : float
+        Probability of one event, in (0, 1).
+
+    Returns
+    -------
+    int
+        The run length n.
+    """
     if not 0 <= p < 1:
         raise ConfigError(f"the event probability must be in [0, 1), got {p}")
     n = 1
@@ -96,7 +135,13 @@ class Cusum:
 
 
 class RunTest:
-    """Alarm after ``n`` events in a row."""
+    """Alarm after ``n`` events in a row.
+
+    Parameters
+    ----------
+    n : int
+        Events in a row that raise the alarm.
+    """
 
     def __init__(self, n: int) -> None:
         self.n = n
@@ -109,3 +154,7 @@ class RunTest:
     def update(self, event: bool) -> bool:
         self.run = self.run + 1 if event else 0
         return self.run >= self.n
+
+    def restart(self) -> None:
+        """Forget the current run (after an alarm, when counting false alarms)."""
+        self.run = 0

@@ -1,66 +1,102 @@
-"""The fault detector: calibrate on a healthy start, then test every sample.
+"""The fault detector: every sample against the healthy reference of the identification.
 
 One :class:`Diagnoser` serves both uses: ``rwlab diagnose`` feeds it a
 record's samples in a loop (:func:`diagnose`), and the experiment runner feeds
-it each sample as it arrives, so offline and live alarms are the same.
+it each sample as it arrives, so offline and live alarms are the same. It is
+calibrated by the :class:`~rwlab.diagnose.reference.HealthyReference` that
+``rwlab identify`` stored with the model (:func:`healthy_reference` measures
+one), never by the record under test: a fault present at power-up is a fault.
 
-1. **Calibration** (the first ``calibration_s`` seconds, assumed fault-free):
-   the current balance is fitted (:func:`~rwlab.diagnose.residuals.fit_current_model`);
-   the speed and current residuals get their mean and an AR(2) whitening filter
-   (:func:`rwlab.ident.ar`, forward-backward least squares), whose innovation σ
-   normalises them; the probability that a steady reading repeats exactly
-   (quantised Hall speed) is counted.
-2. **Detection**, with thresholds from ``false_alarms_per_hour`` (per detector,
-   derivations in :mod:`rwlab.diagnose.detect`):
+Each sample (Ts) gives, where it qualifies, a value to each block test:
 
-   - ``speed`` and ``current``: two-sided CUSUMs (reference k = 0.5 σ, i.e. tuned
-     to a 1 σ shift) on the whitened residuals; the current residual is taken
-     in the direction of rotation (sign ω · r_i), so friction and a weak motor
-     both push it up;
-   - ``stuck``: a run of identical non-zero speed readings, with the run length
-     from the calibrated repeat probability;
-   - ``dropout``: a sample whose newest telemetry frame is older than Ts
-     (deterministic: a whole sample period without a frame).
+=========  ==============================================  =====================  ==========
+test       qualifies                                       value                  alarms on
+=========  ==============================================  =====================  ==========
+friction   constant speed (|α| < 10 rpm/s), |ω| ≥ 500 rpm  relative excess of     increase
+                                                           current over the
+                                                           friction current
+motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess of     increase
+                                                           current over the
+                                                           inertial current
+speed      command held ≥ 30 s                             speed − model, rpm     either way
+lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
+=========  ==============================================  =====================  ==========
 
-   Each detector alarms once and then stays latched, as the faults it looks
-   for do not heal. Stale samples (no new frame) and the one after them do not
-   enter the tests.
-3. **Isolation** (:mod:`rwlab.diagnose.isolate`) names the likely fault from
-   the last minute's residual signature when a detector alarms.
+Friction raises the current at constant speed and not under acceleration; a
+weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
+lowered current limit slows large speed changes with a healthy current
+balance (``lag`` without ``motor``); a biased sensor shifts the held speed.
+
+A block test averages ``block`` qualifying values, standardises the mean by
+the reference's mean and σ, and runs a one-sided CUSUM (two for ``speed``)
+whose reference value is 0.5 σ plus the tolerance between healthy units; its
+threshold gives ARL₀ = the requested false alarms per hour, counted in the
+reference's block durations (Siegmund's approximation, :mod:`detect`). Two
+sample tests complete the set: ``stuck`` (a run of identical non-zero speed
+readings, length from the reference's repeat probability) and ``dropout``
+(telemetry frames lost in a 10 s block beyond what the reference's loss rate
+allows, Poisson). Samples without a new frame, and the one after them, enter
+no test. A detector alarms once and stays latched (``latch=False`` restarts it,
+for measuring false-alarm rates).
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import poisson
 
 from rwlab.data import IOData
-from rwlab.diagnose.detect import Cusum, RunTest, arl_to_samples, cusum_threshold, run_length
-from rwlab.diagnose.isolate import isolate
+from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
+from rwlab.diagnose.isolate import Finding, isolate
+from rwlab.diagnose.reference import DEFAULT_TOLERANCE, HealthyReference, block_stats
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError
 
-__all__ = ["Alarm", "Diagnoser", "Diagnosis", "diagnose"]
+__all__ = ["Alarm", "Diagnoser", "Diagnosis", "diagnose", "healthy_reference"]
 
-AR_ORDER = 2
 CUSUM_K = 0.5
-WINDOW_S = 60.0  # the signature window for isolation, s
-QUIET_RPM_S = 10.0  # |measured acceleration| below ≈ 7 σ of its noise at Ts = 0.5 s
-SETTLE_S = 30.0  # steady: the command has not changed for this long, s (wheel and model settled)
+QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
+FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
+MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
+LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
+SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
+BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
+DROPOUT_BLOCK_S = 10.0
+HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
 
 @dataclass(frozen=True)
 class Alarm:
-    """One alarm: when (s, sample time), which fault is likely, which detector fired."""
+    """One alarm: when, which fault, how large, which detector fired.
+
+    Parameters
+    ----------
+    t_s : float
+        Sample time of the alarm, s.
+    kind : str
+        The fault named (:data:`rwlab.wheel.faults.FAULTS`).
+    statistic, threshold : float
+        The detector's statistic and threshold when it fired.
+    detector : str
+    magnitude : float or None
+        The fault's estimated size in ``unit`` (factor, A, rpm, frames).
+    ci : tuple of 2 float or None
+        Its 95 % confidence interval.
+    unit : str
+    """
 
     t_s: float
     kind: str
     statistic: float
     detector: str
     threshold: float
+    magnitude: float | None = None
+    ci: tuple[float, float] | None = None
+    unit: str = ""
 
     def to_dict(self) -> dict:
         return {
@@ -69,44 +105,109 @@ class Alarm:
             "statistic": self.statistic,
             "detector": self.detector,
             "threshold": self.threshold,
+            "magnitude": self.magnitude,
+            "ci95": None if self.ci is None else list(self.ci),
+            "unit": self.unit,
         }
 
 
-def _segments(x: np.ndarray, keep: np.ndarray) -> list[np.ndarray]:
-    """The runs of ``x`` where ``keep`` holds, longer than the AR order."""
-    edges = np.flatnonzero(np.diff(np.r_[0, keep.astype(int), 0]))
-    return [x[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > AR_ORDER]
+class _BlockCusum:
+    """Block means of one test's values, standardised, into a one- or two-sided CUSUM."""
 
+    def __init__(
+        self, stats, tolerance: float, h: float, sides: str, baseline_blocks: int = 0
+    ) -> None:
+        self.stats, self.h, self.sides = stats, h, sides
+        self.k = CUSUM_K + tolerance / stats.sigma
+        self.baseline_blocks = baseline_blocks  # > 0: the mean of the record's first blocks
+        self._baseline: list[float] = []
+        self.mean = stats.mean
+        self._values: list[float] = []
+        self.up = self.down = 0.0
+        self.means: deque = deque()  # (t_s, block mean, up, down)
+        self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
 
-class _Whitener:
-    """(r − μ) filtered by A(q) of an AR model, divided by the innovation σ.
+    @property
+    def statistic(self) -> float:
+        return max(self.up, self.down)
 
-    Fitted on one or several segments of healthy residuals; ``restart`` forgets
-    the past (a gap), and the next ``AR_ORDER`` samples give no innovation.
-    """
-
-    def __init__(self, segments: list[np.ndarray], Ts: float) -> None:
-        from rwlab.ident import ar
-
-        if not segments:
-            raise DataError("no calibration segment is long enough to fit the whitening filter")
-        self.mean = float(np.mean(np.concatenate(segments)))
-        model = ar([IOData(None, x - self.mean, Ts) for x in segments], AR_ORDER)
-        self.A = np.asarray(model.A, dtype=float)
-        self.sigma = math.sqrt(model.noise_variance)
-        if not self.sigma > 0:
-            raise DataError("a residual is constant on the calibration data; nothing to normalise")
-        self._past: deque = deque(maxlen=AR_ORDER)
+    def add(self, t_s: float, value: float) -> bool:
+        self._values.append(value)
+        self.raw.append((t_s, value))
+        while self.raw[0][0] < t_s - HISTORY_S:
+            self.raw.popleft()
+        if len(self._values) < self.stats.block:
+            return False
+        mean = float(np.mean(self._values))
+        self._values.clear()
+        if len(self._baseline) < self.baseline_blocks:
+            self._baseline.append(mean)
+            self.mean = float(np.mean(self._baseline))
+            return False
+        z = (mean - self.mean) / self.stats.sigma
+        if self.sides in ("up", "both"):
+            self.up = max(0.0, self.up + z - self.k)
+        if self.sides in ("down", "both"):
+            self.down = max(0.0, self.down - z - self.k)
+        self.means.append((t_s, mean, self.up, self.down))
+        while self.means and self.means[0][0] < t_s - HISTORY_S:
+            self.means.popleft()
+        return self.statistic > self.h
 
     def restart(self) -> None:
-        self._past.clear()
+        self.up = self.down = 0.0
 
-    def __call__(self, r: float) -> float | None:
-        x = r - self.mean
-        full = len(self._past) == AR_ORDER
-        e = x + sum(a * p for a, p in zip(self.A[1:], self._past, strict=False))
-        self._past.appendleft(x)
-        return e / self.sigma if full else None
+    def change_time(self) -> float:
+        """Time of the last block at which the statistic was zero (−inf: none kept)."""
+        side = 2 if self.up >= self.down else 3
+        zeros = [row[0] for row in self.means if row[side] == 0.0]
+        return zeros[-1] if zeros else -math.inf
+
+    def since_change(self) -> np.ndarray:
+        """The single values since the change: the last zero of the statistic, then the
+        split that best explains a shift from the healthy mean (the maximum-likelihood
+        change point of a Gaussian mean), so a block straddling the onset does not dilute
+        the size."""
+        t0 = self.change_time()
+        v = np.array([x for t, x in self.raw if t > t0] or [x for _, x in self.raw][-1:])
+        d = v - self.mean
+        tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
+        n = np.arange(len(v), 0, -1)
+        j = int(np.argmax(tail**2 / n))
+        return v[j:]
+
+
+class _Dropout:
+    """Lost telemetry frames per block, against the reference's Poisson loss rate."""
+
+    def __init__(self, block: int, n: int) -> None:
+        self.block, self.n = block, n
+        self.count = self.samples = 0
+        self.last_count = 0
+
+    @property
+    def statistic(self) -> float:
+        return float(self.count)
+
+    def add(self, lost: int) -> bool:
+        self.count += lost
+        self.samples += 1
+        fired = self.count >= self.n
+        if self.samples >= self.block or fired:
+            self.last_count = self.count
+            self.count = self.samples = 0
+        return fired
+
+    def restart(self) -> None:
+        self.count = self.samples = 0
+
+
+@dataclass
+class _Sample:
+    """What one sample gives the tests."""
+
+    values: dict[str, float] = field(default_factory=dict)
+    usable: bool = False
 
 
 class Diagnoser:
@@ -116,200 +217,329 @@ class Diagnoser:
     ----------
     wheel : IdentifiedWheel
         The identified model; the samples come at its Ts.
-    calibration_s : float
-        Length of the healthy start used to calibrate, s.
+    reference : HealthyReference or None
+        The healthy reference (``model.json``'s); None only to measure one
+        (:func:`healthy_reference`): then nothing is tested.
     false_alarms_per_hour : float
-        Wanted false-alarm rate of each detector on healthy data (sets the thresholds).
-    speed_test : bool
-        Also run the speed-residual CUSUM (in steady holds). Off by default: with
-        paper A's linear model (ARX221 in its rate-limit wrapper) the speed
-        residual drifts in a hold by up to ~1 rpm per sample, more than the
-        sensor noise the test is normalised by, so it false-alarms on healthy
-        records. With the nonlinear servo model (issue 14, ``model.json``'s
-        preferred model since then) the healthy speed residual is ≈ the sensor
-        noise (σ ≈ 0.5 rpm over 2 h) and the test can be turned on.
+        Wanted false-alarm rate of each detector on healthy records (sets the thresholds).
+    latch : bool
+        A detector alarms once (True), or restarts after each alarm (False: for
+        counting false alarms).
     """
 
     def __init__(
         self,
         wheel,
+        reference: HealthyReference | None,
         *,
-        calibration_s: float = 300.0,
         false_alarms_per_hour: float = 1e-3,
-        speed_test: bool = False,
+        latch: bool = True,
     ) -> None:
         self.Ts = float(wheel.Ts)
-        if not (math.isfinite(calibration_s) and calibration_s >= 60 * self.Ts):
-            raise ConfigError(f"calibration_s must be ≥ 60 samples, got {calibration_s} s")
-        self.calibration_s = float(calibration_s)
-        self.speed_test = bool(speed_test)
+        self.accel_limit = float(wheel.accel_limit_rpm_s)
+        self.reference = reference
+        self.latch = latch
         self.false_alarms_per_hour = float(false_alarms_per_hour)
         self.arl0 = arl_to_samples(false_alarms_per_hour, self.Ts)
         self.residuals = ResidualGenerator(wheel)
+        self.alarms: list[Alarm] = []
+        self.thresholds: dict[str, float] = {}
+        self.collected: dict[str, list[float]] = {name: [] for name in BLOCKS}
+        self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
             name: []
-            for name in ("t_s", "speed", "acceleration", "current", "stat_speed", "stat_current")
+            for name in ("t_s", "speed", "acceleration", "current", *(f"stat_{b}" for b in BLOCKS))
         }
-        self.alarms: list[Alarm] = []
-        self.calibration: dict = {}
-        self._calib: list[tuple] = []
         self._detectors: dict = {}
-        self._recent: deque = deque(maxlen=max(2, round(WINDOW_S / self.Ts)))
+        self._lag_currents: deque = deque(maxlen=200)
+        self._recent_speed: deque = deque(maxlen=8)
+        self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
+        self._moving = False
         self._was_stale = True
-        self._t0: float | None = None
-        self._command: tuple[float, float] = (math.nan, -math.inf)  # (value, since when)
+        self._lost: float | None = None
+        self._command: tuple[float, float] = (math.nan, -math.inf)
+        if reference is not None:
+            if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
+                raise ConfigError(
+                    f"the healthy reference is at Ts = {reference.Ts} s, the model at {self.Ts} s"
+                )
+            self.residuals.current_model = np.asarray(reference.current_model, dtype=float)
+            self._arm(reference)
+
+    # -- thresholds ----------------------------------------------------------------------
+    def _arm(self, ref: HealthyReference) -> None:
+        for name, stats in ref.tests.items():
+            sides = {"friction": "up", "motor": "up", "lag": "down"}.get(name, "both")
+            arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
+            h = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
+            tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
+            self._detectors[name] = _BlockCusum(stats, tol, h, sides)
+            self.thresholds[name] = h
+            if name == "friction":  # onsets smaller than the spread between units
+                tol = ref.tolerance.get("friction_change", DEFAULT_TOLERANCE["friction_change"])
+                self._detectors["friction_change"] = _BlockCusum(stats, tol, h, sides, 6)
+                self.thresholds["friction_change"] = h
+        p = ref.repeat_probability
+        self._detectors["stuck"] = RunTest(run_length(self.arl0, p))
+        self.thresholds["stuck"] = self._detectors["stuck"].n
+        block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
+        mean = ref.lost_per_sample * block
+        p_block = block / self.arl0  # a block's share of the false-alarm budget
+        n = 1
+        while poisson.sf(n - 1, mean) > p_block:
+            n += 1
+        self._detectors["dropout"] = _Dropout(block, n)
+        self.thresholds["dropout"] = n
 
     # -- one sample ----------------------------------------------------------------------
     def update(
-        self, t_s: float, command_rpm: float, speed_rpm: float, current_a: float, age_s: float
+        self,
+        t_s: float,
+        command_rpm: float,
+        speed_rpm: float,
+        current_a: float,
+        age_s: float,
+        lost_frames: float = 0.0,
     ) -> list[Alarm]:
-        """Take the sample at ``t_s`` (command held since the last sample); new alarms."""
-        if self._t0 is None:
-            self._t0 = t_s
+        """Take the sample at ``t_s``; the new alarms.
+
+        Parameters
+        ----------
+        t_s : float
+            Sample time, s.
+        command_rpm : float
+            The speed command held over the interval that ends here, rpm.
+        speed_rpm, current_a : float
+            The newest telemetry: measured speed (rpm), motor current (A; NaN if none).
+        age_s : float
+            Age of that telemetry frame, s.
+        lost_frames : float
+            Telemetry frames lost so far (the frame counter's gaps), cumulative.
+        """
         r = self.residuals.update(command_rpm, speed_rpm, current_a)
         if command_rpm != self._command[0]:
             self._command = (command_rpm, t_s)
-        r["steady"] = t_s - self._command[1] >= SETTLE_S
         stale = age_s >= self.Ts
         usable = not (stale or self._was_stale)
         self._was_stale = stale
+        lost = 0.0 if self._lost is None else max(0.0, lost_frames - self._lost)
+        self._lost = lost_frames
         repeat = speed_rpm != 0 and speed_rpm == self._last_speed
+        # a repeated reading is evidence only while the model says the wheel moves (in a
+        # hold a well-regulated wheel's Hall reading repeats; the speed and lag tests and
+        # the frozen check catch a sensor stuck there once the command changes)
+        self._moving = abs(r["acceleration"] - r["accel_rpm_s"]) >= QUIET_RPM_S
+        if usable and self._moving and speed_rpm != 0 and self._last_speed not in (None, 0.0):
+            self.repeats[0] += repeat
+            self.repeats[1] += 1
         self._last_speed = speed_rpm
+        self._recent_speed.append(speed_rpm)
+        values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
         new: list[Alarm] = []
-        if stale and "dropout" in self._detectors:
-            new += self._fire(t_s, "dropout", age_s, self.Ts)
-        if not self._detectors:
-            if usable:
-                self._calib.append(
-                    (r["accel_rpm_s"], speed_rpm, current_a, r["speed"], repeat, r["steady"])
-                )
-            if t_s - self._t0 >= self.calibration_s:
-                self._calibrate()
-        elif usable:
-            new += self._test(t_s, r, speed_rpm, current_a, repeat)
-        self._record(t_s, r)
+        if self._detectors:
+            if self._detectors["dropout"].add(round(lost)):
+                new += self._fire(t_s, "dropout")
+            if "friction" in values:
+                values["friction_change"] = values["friction"]
+            for name, value in values.items():
+                if self._detectors[name].add(t_s, value):
+                    new += self._fire(t_s, name)
+            if usable and self._detectors["stuck"].update(repeat and self._moving):
+                new += self._fire(t_s, "stuck")
+        else:
+            for name, value in values.items():
+                self.collected[name].append(value)
+        self._record(t_s, r, values)
         return new
 
-    def _record(self, t_s: float, r: dict) -> None:
+    def _values(self, t_s: float, r: dict, speed_rpm: float, current_a: float) -> dict:
+        """The qualifying test values of a usable sample."""
+        out: dict[str, float] = {}
+        accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
+        prev = self._prev
+        self._prev = {"accel": accel, "model_accel": model_accel}
+        if t_s - self._command[1] >= SETTLE_S:
+            out["speed"] = r["speed"]
+        lagging = abs(model_accel) >= LAG_SHARE * self.accel_limit
+        if lagging and abs(prev.get("model_accel", 0.0)) >= LAG_SHARE * self.accel_limit:
+            out["lag"] = (accel - model_accel) * math.copysign(1.0, model_accel) / self.accel_limit
+            self._lag_currents.append(abs(current_a))
+        c = self.residuals.current_model
+        if c is None or not math.isfinite(r["current"]):
+            return out
+        sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
+        friction = c[1] * speed_rpm + c[2] * sign
+        inertial = c[0] * accel
+        if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
+            out["friction"] = sign * r["current"] / abs(friction)
+        sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
+        if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
+            out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
+        return out
+
+    def _record(self, t_s: float, r: dict, values: dict) -> None:
         h = self.history
         h["t_s"].append(t_s)
         for name in ("speed", "acceleration", "current"):
             h[name].append(r[name])
-        for name in ("speed", "current"):
+        for name in BLOCKS:
             det = self._detectors.get(name)
             h[f"stat_{name}"].append(det.statistic if det is not None else math.nan)
 
-    # -- calibration ---------------------------------------------------------------------
-    def _calibrate(self) -> None:
-        rows = self._calib
-        if len(rows) < 60:
-            raise DataError(
-                f"only {len(rows)} usable samples in the {self.calibration_s:g} s calibration "
-                "window; the detector needs ≥ 60"
-            )
-        accel, speed, current, r_speed, repeat, steady = (
-            np.array(c) for c in zip(*rows, strict=True)
-        )
-        if self.speed_test and steady.sum() < 30:
-            raise DataError(
-                f"only {steady.sum()} steady samples in the {self.calibration_s:g} s calibration "
-                "window; the speed test needs ≥ 30 (hold the command longer, or calibrate longer)"
-            )
-        thresholds = {"dropout": self.Ts}
-        h = cusum_threshold(self.arl0, CUSUM_K)
-        self._detectors, self._white = {"dropout": None}, {}
-        if self.speed_test:
-            self._white["speed"] = _Whitener(_segments(r_speed, steady), self.Ts)
-            self._detectors["speed"] = Cusum(h, CUSUM_K)
-            thresholds["speed"] = h
-        if np.isfinite(current).all():
-            coef = fit_current_model(accel, speed, current)
-            self.residuals.current_model = coef
-            fitted = np.column_stack([accel, speed, np.sign(speed), np.ones_like(speed)]) @ coef
-            self._white["current"] = _Whitener([np.sign(speed) * (current - fitted)], self.Ts)
-            self._detectors["current"] = Cusum(h, CUSUM_K)
-            thresholds["current"] = h
-            self.calibration["current_model"] = dict(
-                zip(
-                    ("a_per_rpm_s", "a_per_rpm", "a_coulomb", "a_offset"),
-                    coef.tolist(),
-                    strict=True,
-                )
-            )
-            self.calibration["current_peak_a"] = float(np.max(np.abs(current)))
-        if steady.sum() < 30:  # few settled holds: samples whose speed barely changes
-            steady = np.abs(accel) < QUIET_RPM_S
-        p = (repeat[steady].sum() + 1) / (steady.sum() + 2)  # Laplace's rule: never 0 or 1
-        n = run_length(self.arl0, p)
-        self._detectors["stuck"] = RunTest(n)
-        thresholds["stuck"] = n
-        self.thresholds = thresholds
-        self.calibration.update(
-            samples=len(rows),
-            repeat_probability=float(p),
-            repeat_samples=int(steady.sum()),  # the settled samples p was counted on
-            whitening={
-                name: {"mean": w.mean, "A": w.A.tolist(), "sigma": w.sigma}
-                for name, w in self._white.items()
-            },
-        )
-
-    # -- detection -------------------------------------------------------------------------
-    def _test(self, t_s: float, r: dict, speed_rpm: float, current_a: float, repeat: bool):
-        sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
-        self._recent.append((r["speed"], r["accel_rpm_s"], speed_rpm, r["current"], current_a))
-        new = []
-        if "speed" not in self._detectors:
-            pass
-        elif not r["steady"]:
-            self._white["speed"].restart()
-        elif (z := self._white["speed"](r["speed"])) is not None:
-            if self._detectors["speed"].update(z):
-                new += self._fire(t_s, "speed")
-        if "current" in self._detectors and math.isfinite(r["current"]):
-            z = self._white["current"](sign * r["current"])
-            if z is not None and self._detectors["current"].update(z):
-                new += self._fire(t_s, "current")
-        if self._detectors["stuck"].update(repeat):
-            new += self._fire(t_s, "stuck")
-        return new
-
-    def _fire(self, t_s: float, detector: str, statistic=None, threshold=None) -> list[Alarm]:
-        if any(a.detector == detector for a in self.alarms):
-            return []  # latched
+    def _fire(self, t_s: float, detector: str) -> list[Alarm]:
         det = self._detectors[detector]
-        alarm = Alarm(
-            t_s,
-            isolate(detector, np.array(self._recent), self.calibration),
-            float(det.statistic if statistic is None else statistic),
-            detector,
-            float(self.thresholds[detector] if threshold is None else threshold),
-        )
-        self.alarms.append(alarm)
-        return [alarm]
+        statistic = det.statistic if detector != "dropout" else float(det.last_count)
+        if not self.latch:
+            det.restart()
+        elif any(a.detector == detector for a in self.alarms):
+            return []
+        else:
+            det.restart() if detector == "dropout" else None
+        findings: list[Finding] = isolate(detector, self._evidence(detector))
+        alarms = [
+            Alarm(
+                t_s,
+                f.kind,
+                float(statistic),
+                detector,
+                float(self.thresholds[detector]),
+                f.magnitude,
+                f.ci,
+                f.unit,
+            )
+            for f in findings
+        ]
+        self.alarms += alarms
+        return alarms
+
+    def _evidence(self, detector: str) -> dict:
+        """What isolation reads: each block test's recent block means, and more."""
+        ev: dict = {
+            name: self._detectors[name].since_change()
+            for name in BLOCKS
+            if name in self._detectors and self._detectors[name].raw
+        }
+        change = self._detectors.get("friction_change")
+        if detector == "friction_change" and change is not None and change.raw:
+            # the size relative to the record's start, not to the reference's unit
+            ev["friction"] = (1 + change.since_change()) / (1 + change.mean) - 1
+            detector = "friction"
+        ref = self.reference
+        assert ref is not None  # alarms come only from an armed detector
+        # σ of one value, the block-mean σ scaled back (correlation included)
+        ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
+        ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
+        motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
+        if motor is not None and lag is not None:  # the motor test before and after the lag
+            t_change = lag.change_time()
+            ev["motor_before"] = np.array([x for t, x in motor.raw if t < t_change])
+            ev["motor_after"] = np.array([x for t, x in motor.raw if t >= t_change])
+        ev["tolerance"] = dict(ref.tolerance)
+        ev["recent_speed"] = np.array(self._recent_speed)
+        ev["moving_repeats"] = self._detectors["stuck"].run
+        n_lag = len(ev.get("lag", ())) * (lag.stats.block if lag is not None else 0)
+        ev["lag_currents"] = np.array(list(self._lag_currents)[-max(n_lag, 1) :])
+        ev["lost"] = self._detectors["dropout"].last_count
+        if detector in ("motor", "friction"):
+            for name in ("friction", "motor"):  # the other test's latest blocks too
+                det = self._detectors.get(name)
+                if det is not None and det.raw and name != detector:
+                    ev[name] = np.array([x for _, x in list(det.raw)[-60:]])
+        return ev
 
     @property
     def calibrated(self) -> bool:
         return bool(self._detectors)
 
 
+def healthy_reference(
+    data: IOData, wheel, *, tolerance: dict | None = None, source: str = ""
+) -> HealthyReference:
+    """Measure the healthy reference on a fault-free record (the identification record).
+
+    Parameters
+    ----------
+    data : IOData
+        As :func:`diagnose` takes it (speed, current, age and lost frames), speed mode.
+    wheel : IdentifiedWheel
+        The model identified on it.
+    tolerance : dict, optional
+        Tolerance between healthy units per test (default
+        :data:`~rwlab.diagnose.reference.DEFAULT_TOLERANCE`).
+    source : str
+        Where the record came from.
+
+    Raises
+    ------
+    DataError
+        No motor current, too few samples for a test, or not a speed-mode record.
+    """
+    t, u, speed, current, age, lost = _columns(data, wheel)
+    if not np.isfinite(current).all():
+        raise DataError("the healthy reference needs the motor current on every sample")
+    accel = np.concatenate([[0.0], np.diff(speed) / data.Ts])
+    fresh = age < data.Ts
+    keep = fresh & np.concatenate([[False], fresh[:-1]])  # as the tests take samples
+    coef = fit_current_model(accel[keep], speed[keep], current[keep])
+    second = Diagnoser(wheel, None)
+    second.residuals.current_model = coef
+    for k in range(data.N):
+        second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
+    tests = {
+        name: block_stats(np.array(values), BLOCKS[name], data.N)
+        for name, values in second.collected.items()
+    }
+    reps, readings = second.repeats
+    return HealthyReference(
+        Ts=float(data.Ts),
+        current_model=tuple(float(x) for x in coef),  # type: ignore[arg-type]
+        tests=tests,
+        repeat_probability=(reps + 1) / (readings + 2),  # Laplace's rule: never 0 or 1
+        repeat_samples=int(readings),
+        lost_per_sample=(float(lost[-1] - lost[0]) + 0.5) / data.N,  # Jeffreys: never 0
+        samples=int(data.N),
+        tolerance=dict(DEFAULT_TOLERANCE if tolerance is None else tolerance),
+        source=source,
+    )
+
+
 @dataclass
 class Diagnosis:
-    """What :func:`diagnose` found in a record."""
+    """What :func:`diagnose` found in a record.
+
+    Parameters
+    ----------
+    alarms : list of Alarm
+        In time order.
+    thresholds : dict
+        Each detector's threshold.
+    calibration : dict
+        What the healthy start of the record calibrated (whitening, current model).
+    history : dict of str to numpy.ndarray
+        The residuals and statistics at every sample (``t_s``, ``speed``, ...).
+    false_alarms_per_hour : float
+        The false-alarm rate the thresholds were set for, per detector.
+    calibration_s : float
+        Length of the calibration window, s.
+    """
 
     alarms: list[Alarm]
     thresholds: dict
-    calibration: dict
+    reference: HealthyReference
     history: dict[str, np.ndarray]
     false_alarms_per_hour: float
-    calibration_s: float
+    duration_s: float = 0.0
+
+    def faults(self) -> list[str]:
+        """The faults named, in the order of their first alarm."""
+        return list(dict.fromkeys(a.kind for a in self.alarms))
 
     def residual_statistics(self) -> dict:
         """Mean, σ and largest |value| of each residual, before and after the first alarm."""
-        t = self.history["t_s"] - self.history["t_s"][0]
+        t = self.history["t_s"]
         first = min((a.t_s for a in self.alarms), default=math.inf)
-        out = {}
+        out: dict[str, dict] = {}
         for name, unit in (("speed", "rpm"), ("acceleration", "rpm/s"), ("current", "A")):
             x = self.history[name]
             for part, mask in (("before_alarm", t < first), ("after_alarm", t >= first)):
@@ -327,40 +557,28 @@ class Diagnosis:
 
     def to_dict(self) -> dict:
         return {
-            "format": "rwlab.Diagnosis/1",
+            "format": "rwlab.Diagnosis/2",
             "alarms": [a.to_dict() for a in self.alarms],
+            "faults": self.faults(),
             "thresholds": self.thresholds,
             "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
-            "calibration_s": self.calibration_s,
-            "calibration": self.calibration,
+            "duration_s": self.duration_s,
+            "reference": self.reference.to_dict(),
             "residual_statistics": self.residual_statistics(),
         }
 
 
-def diagnose(
-    data: IOData,
-    wheel,
-    *,
-    calibration_s: float = 300.0,
-    false_alarms_per_hour: float = 1e-3,
-    speed_test: bool = False,
-) -> Diagnosis:
-    """Run the detector over a record's samples.
-
-    Parameters
-    ----------
-    data : IOData
-        u = speed command (rpm); outputs ``speed_rpm`` and optionally
-        ``current_a`` and ``telemetry_age_s`` (as ``load_record(..., outputs=
-        ('speed', 'current', 'age'))`` gives), sampled at the model's Ts.
-    wheel : IdentifiedWheel
-    calibration_s, false_alarms_per_hour, speed_test :
-        See :class:`Diagnoser`.
-    """
+def _columns(data: IOData, wheel):
+    """Time, held command, speed, current, age and lost frames of a record, checked."""
     if not math.isclose(data.Ts, wheel.Ts, rel_tol=1e-6):
         raise DataError(f"the data are sampled at {data.Ts} s, the model at {wheel.Ts} s")
     if data.nu != 1:
         raise DataError(f"diagnosis needs one input (the speed command), got {data.nu}")
+    if data.input_units and data.input_units[0] == "rpm/s":
+        raise DataError(
+            "an acceleration-mode record cannot be diagnosed: the identified model maps a "
+            "speed command to speed; record the test in speed mode"
+        )
     names = list(data.output_names)
     if "speed_rpm" not in names:
         raise DataError(f"diagnosis needs a speed_rpm output, got {names}")
@@ -368,31 +586,56 @@ def diagnose(
     def column(name, default):
         return data.y[:, names.index(name)] if name in names else np.full(data.N, default)
 
-    speed, current, age = (
-        column("speed_rpm", 0),
+    u = data.u[:, 0]
+    held = np.concatenate([u[:1], u[:-1]])  # the command in force over the last interval
+    t = data.tstart + data.Ts * np.arange(data.N)
+    return (
+        t,
+        held,
+        column("speed_rpm", 0.0),
         column("current_a", math.nan),
         column("telemetry_age_s", 0.0),
+        column("lost_frames", 0.0),
     )
-    u = data.u[:, 0]
-    d = Diagnoser(
-        wheel,
-        calibration_s=calibration_s,
-        false_alarms_per_hour=false_alarms_per_hour,
-        speed_test=speed_test,
-    )
-    t = data.tstart + data.Ts * np.arange(data.N)
+
+
+def diagnose(
+    data: IOData,
+    wheel,
+    reference: HealthyReference,
+    *,
+    false_alarms_per_hour: float = 1e-3,
+    latch: bool = True,
+) -> Diagnosis:
+    """Run the detector over a record's samples.
+
+    Parameters
+    ----------
+    data : IOData
+        u = speed command (rpm) issued at each sample; outputs ``speed_rpm`` and
+        optionally ``current_a``, ``telemetry_age_s`` and ``lost_frames`` (as
+        ``load_record(..., outputs=('speed', 'current', 'age', 'lost'))`` gives),
+        sampled at the model's Ts.
+    wheel : IdentifiedWheel
+    reference : HealthyReference
+        From the model file (:meth:`HealthyReference.from_model_file`).
+    false_alarms_per_hour, latch :
+        See :class:`Diagnoser`.
+
+    Raises
+    ------
+    DataError
+        Another Ts, no speed, an acceleration-mode record.
+    """
+    t, held, speed, current, age, lost = _columns(data, wheel)
+    d = Diagnoser(wheel, reference, false_alarms_per_hour=false_alarms_per_hour, latch=latch)
     for k in range(data.N):
-        d.update(float(t[k]), float(u[k - 1] if k else u[0]), speed[k], current[k], age[k])
-    if not d.calibrated:
-        raise DataError(
-            f"the record ({data.N * data.Ts:g} s) is shorter than the calibration window "
-            f"({calibration_s:g} s)"
-        )
+        d.update(float(t[k]), float(held[k]), speed[k], current[k], age[k], lost[k])
     return Diagnosis(
         d.alarms,
         d.thresholds,
-        d.calibration,
+        reference,
         {k: np.asarray(v, dtype=float) for k, v in d.history.items()},
         false_alarms_per_hour,
-        calibration_s,
+        data.N * data.Ts,
     )

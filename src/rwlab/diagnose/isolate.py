@@ -1,70 +1,139 @@
-"""Isolation: which fault most likely explains an alarm, from the residual signature.
+"""Isolation and sizing: which fault explains an alarm, and how large it is.
 
-The signature is read over the last minute of usable samples before the
-alarm (columns: speed residual rpm, measured acceleration rpm/s, measured
-speed rpm, current residual A, measured current A):
+Evidence (:meth:`rwlab.diagnose.Diagnoser._evidence`): each block test's block
+means since its statistic last left zero (the change's estimated start), the
+reference's σ of a block mean and the tolerance between healthy units, the
+recent speed readings, the currents while the wheel lagged its model, the lost
+frames of the last dropout block.
 
-==========  ======================================================  ======================
-detector    signature                                               likely fault
-==========  ======================================================  ======================
-dropout     no telemetry frame for a whole sample period             ``telemetry_dropout``
-stuck       identical speed readings, longer than noise allows       ``speed_sensor_stuck``
-current     the last ≥ 3 speed readings identical (a frozen sensor   ``speed_sensor_stuck``
-            makes the measured acceleration 0 while current flows)
-current     extra current ∝ acceleration (regression slope ≥ 10 %)  ``torque_constant``
-current     extra current in the direction of rotation, not ∝ α     ``friction``
-speed       current clamped below its healthy peak while the         ``current_limit``
-            speed lags the model
-speed       speed offset with a healthy current                     ``speed_sensor_bias``
-==========  ======================================================  ======================
+==========  ================================================  ======================
+detector    signature                                         fault, size (unit)
+==========  ================================================  ======================
+dropout     telemetry frames lost beyond the healthy rate     ``telemetry_dropout``,
+                                                              frames in 10 s
+stuck       identical speed readings, longer than noise       ``speed_sensor_stuck``,
+            allows (also: 2 repeats while the model moves     the frozen reading (rpm)
+            when another test fires)
+friction,   current in excess under acceleration (motor       ``torque_constant``,
+motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 + e_α)
+            1/F the current for everything
+friction    excess only at constant speed                     ``friction``, factor
+                                                              (1 + e_ω)/(1 + e_α)
+speed       held speed offset from the model                  ``speed_sensor_bias``, rpm
+lag         slower than the model at its acceleration limit   ``current_limit``: the
+            with a healthy motor test                         current it flattens at (A);
+                                                              with the motor test in
+                                                              excess: ``torque_constant``
+==========  ================================================  ======================
 
-Why these: a weak motor (k_t × F) needs 1/F times the current for the same
-acceleration, so the current residual grows with α; worn bearings add a torque
-against the rotation, whatever α; a lowered current limit leaves the current
-balance intact (the residual stays white) but slows every large speed change;
-a biased sensor shifts the speed and nothing else.
+Why: the torque balance k_t·i = I·α + friction(ω) holds whatever the wheel's
+controller does, so with the nominal balance î = î_α + î_ω the relative
+excesses are e_α = 1/F_k − 1 (under acceleration) and e_ω = F_f/F_k − 1 (at
+constant speed). Two faults at once are both named when both are significant
+(a weak motor and worn bearings), or by their own detectors (a sensor fault and
+a rotor fault). Confidence intervals are 95 %, from the block means' σ on the
+healthy reference (sizes are relative to the unit the reference was measured on).
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["isolate"]
+__all__ = ["Finding", "isolate"]
 
-FROZEN = 3  # identical readings that point to a frozen sensor (healthy: p³ ≈ 1 %)
-_DIRECT = {"dropout": "telemetry_dropout", "stuck": "speed_sensor_stuck"}
+FROZEN = 3  # identical readings that point to a frozen sensor
+Z95 = 1.959964
+LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
-def isolate(detector: str, window: np.ndarray, calibration: dict) -> str:
-    """The likely fault for an alarm of ``detector`` given the recent samples.
+@dataclass(frozen=True)
+class Finding:
+    """A named fault with its estimated size and 95 % confidence interval."""
+
+    kind: str
+    magnitude: float | None
+    ci: tuple[float, float] | None
+    unit: str
+
+
+def _mean_ci(x: np.ndarray, sigma: float) -> tuple[float, float]:
+    """Mean of block means and its half-width at 95 %."""
+    return float(np.mean(x)), Z95 * sigma / math.sqrt(len(x))
+
+
+def _motor(ev: dict) -> tuple[float, float] | None:
+    if len(ev.get("motor", ())) == 0:
+        return None
+    return _mean_ci(ev["motor"], ev["sigma"]["motor"])
+
+
+def _torque_constant(e: float, half: float) -> Finding:
+    lo, hi = 1 / (1 + e + half), 1 / max(1 + e - half, 1e-9)
+    return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
+
+
+def _rotor(ev: dict) -> list[Finding]:
+    """Friction, weak motor, or both, from the friction and motor tests' excesses."""
+    motor = _motor(ev)
+    weak = motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0)
+    findings = []
+    if weak:
+        findings.append(_torque_constant(*motor))  # type: ignore[misc]
+    if len(ev.get("friction", ())):
+        e_f, half_f = _mean_ci(ev["friction"], ev["sigma"]["friction"])
+        e_a, half_a = motor if weak else (0.0, 0.0)  # type: ignore[misc]
+        factor = (1 + e_f) / (1 + e_a)
+        rel = math.hypot(half_f / (1 + e_f), half_a / (1 + e_a))
+        if not weak or factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0):
+            findings.append(
+                Finding("friction", factor, (factor * (1 - rel), factor * (1 + rel)), "factor")
+            )
+    return findings or [Finding("friction", None, None, "factor")]
+
+
+def isolate(detector: str, ev: dict) -> list[Finding]:
+    """The faults that explain an alarm of ``detector``, sized.
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'current', 'speed'}
-    window : ndarray, shape (n, 5)
-        Recent samples: speed residual, acceleration, speed, current residual, current.
-    calibration : dict
-        The diagnoser's calibration (``current_model``, ``current_peak_a``).
+    detector : {'dropout', 'stuck', 'friction', 'motor', 'speed', 'lag'}
+    ev : dict
+        The evidence (see the module docstring).
+
+    Returns
+    -------
+    list of Finding
+        One, or two when two faults act.
     """
-    if detector in _DIRECT:
-        return _DIRECT[detector]
-    window = np.asarray(window, dtype=float).reshape(-1, 5)
-    accel, speed, r_current, current = window[:, 1], window[:, 2], window[:, 3], window[:, 4]
-    ok = np.isfinite(r_current)
-    if detector == "current":
-        if len(speed) >= FROZEN and speed[-1] != 0 and np.all(speed[-FROZEN:] == speed[-1]):
-            return "speed_sensor_stuck"
-        if ok.sum() < 4:
-            return "friction"
-        # r_i ≈ a·sign ω + b·(c_α α): b is the relative excess current per acceleration
-        c_accel = calibration["current_model"]["a_per_rpm_s"]
-        X = np.column_stack([np.sign(speed[ok]), c_accel * accel[ok]])
-        (_, b), *_ = np.linalg.lstsq(X, r_current[ok], rcond=None)
-        return "torque_constant" if abs(b) >= 0.1 else "friction"
-    peak = calibration.get("current_peak_a")
-    if peak is not None and np.isfinite(current).any():
-        top = np.nanmax(np.abs(current))
-        clamped = np.sum(np.abs(current) >= 0.99 * top) >= 3
-        if top < 0.9 * peak and clamped:
-            return "current_limit"
-    return "speed_sensor_bias"
+    speed = np.asarray(ev.get("recent_speed", ()), dtype=float)
+    if detector == "dropout":
+        return [Finding("telemetry_dropout", float(ev.get("lost", 0)), None, "frames")]
+    # identical readings while the model says the wheel moves (in a hold a regulated
+    # wheel's reading repeats by itself)
+    frozen = ev.get("moving_repeats", 0) >= FROZEN - 1
+    if detector == "stuck" or frozen:
+        return [
+            Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")
+        ]
+    if detector in ("friction", "friction_change", "motor"):
+        return _rotor(ev)
+    if detector == "speed":
+        bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
+        bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the model's own held error
+        return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
+    after = np.asarray(ev.get("motor_after", ()), dtype=float)
+    before = np.asarray(ev.get("motor_before", ()), dtype=float)
+    if after.size:  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
+        base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
+        e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
+        if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one
+            return [_torque_constant((1 + e) / (1 + base) - 1, half)]
+    currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
+    currents = currents[np.isfinite(currents)]
+    if currents.size == 0:
+        return [Finding("current_limit", None, None, "A")]
+    lo, mid, hi = np.percentile(currents, [2.5, 50, 97.5])
+    return [Finding("current_limit", float(mid), (float(lo), float(hi)), "A")]

@@ -25,7 +25,19 @@ __all__ = ["current_regressors", "fit_current_model"]
 
 
 def current_regressors(accel_rpm_s: float, speed_rpm: float) -> np.ndarray:
-    """[α, ω, sign ω, 1] for the current balance (rpm/s, rpm), shape (4,)."""
+    """[α, ω, sign ω, 1] for the current balance (rpm/s, rpm), shape (4,).
+
+    Parameters
+    ----------
+    accel_rpm_s : float
+        Acceleration, rpm/s.
+    speed_rpm : float
+        Speed, rpm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4,)
+    """
     sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
     return np.array([accel_rpm_s, speed_rpm, sign, 1.0])
 
@@ -36,6 +48,16 @@ def fit_current_model(accel_rpm_s, speed_rpm, current_a) -> np.ndarray:
     In SI terms c = [I/k_t, b/k_t, τ_c/k_t, offset] with α and ω converted from
     rpm/s and rpm (×2π/60), so the fit can be checked against the wheel's inertia,
     torque constant and friction.
+
+    Parameters
+    ----------
+    accel_rpm_s, speed_rpm, current_a : array_like, shape (N,)
+        Acceleration (rpm/s), speed (rpm) and motor current (A) of healthy samples.
+
+    Returns
+    -------
+    numpy.ndarray, shape (4,)
+        The coefficients c, A per regressor unit.
 
     Raises
     ------

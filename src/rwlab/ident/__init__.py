@@ -10,15 +10,19 @@ State space: :func:`n4sid`, :func:`ssest`, :class:`SSModel` (``idss``).
 Models: :class:`PolyModel` (``idpoly``) and :func:`c2d`.
 """
 
-from rwlab.ident import pem  # the module; calling it calls pem.pem (see rwlab.ident.pem)
 from rwlab.ident.ar import ar
 from rwlab.ident.arx import arx
 from rwlab.ident.models import PolyModel, c2d
 from rwlab.ident.nonparametric import FIRModel, FrequencyResponse, etfe, impulseest, spa
-from rwlab.ident.pem import armax, bj, oe
+
+# ``pem`` here is the estimator, a plain function (its module is still importable as
+# ``from rwlab.ident.pem import ...``)
+from rwlab.ident.pem import armax, bj, oe, pem
 from rwlab.ident.recursive import RecursiveARMAX, RecursiveARX, rarx
-from rwlab.ident.statespace import SSModel, n4sid, ssest
+from rwlab.ident.ssmodel import SSModel
+from rwlab.ident.sspem import ssest
 from rwlab.ident.structure import arxstruc, delay_scan, delayest, selstruc, struc
+from rwlab.ident.subspace import n4sid
 from rwlab.ident.validation import compare, fit_percent, fpe, mse, resid
 
 __all__ = [

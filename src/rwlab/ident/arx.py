@@ -25,7 +25,22 @@ __all__ = ["arx", "arx_loss", "check_order"]
 
 
 def check_order(name: str, value, minimum: int = 0) -> int:
-    """Validate one model order: an integer ≥ ``minimum``."""
+    """Validate one model order: an integer ≥ ``minimum``.
+
+    Parameters
+    ----------
+    name : str
+        The order's name for the message (``"na"``...).
+    value : int
+        The order given.
+    minimum : int
+        Smallest allowed value.
+
+    Returns
+    -------
+    int
+        ``value`` as an int.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise DataError(f"order {name} must be an integer, got {value!r}")
     if value < minimum:
@@ -74,9 +89,9 @@ def _triangular_factor(M: np.ndarray, block: int = 65536) -> np.ndarray:
     cache: about 3× faster than a single LAPACK call on 10⁶ × 5 regressors.
     """
     if M.shape[0] <= 2 * block:
-        return np.linalg.qr(M, mode="r")
+        return np.asarray(np.linalg.qr(M, mode="r"))
     parts = [np.linalg.qr(M[i : i + block], mode="r") for i in range(0, M.shape[0], block)]
-    return np.linalg.qr(np.vstack(parts), mode="r")
+    return np.asarray(np.linalg.qr(np.vstack(parts), mode="r"))
 
 
 def _check_excitation(experiments: list[IOData], nb: list[int]) -> None:
@@ -190,6 +205,22 @@ def arx_loss(est: IOData, val: IOData | None, na: int, nb: int, nk: int, n0: int
 
     Rows start at the common index ``n0`` so losses over a scan of orders or
     delays are computed on exactly the same samples.
+
+    Parameters
+    ----------
+    est : IOData
+        Estimation record.
+    val : IOData or None
+        Record the loss is measured on (None: ``est`` itself).
+    na, nb, nk : int
+        ARX orders and delay, samples.
+    n0 : int
+        First row (sample index) of the regression, common to the whole scan.
+
+    Returns
+    -------
+    float
+        Mean squared one-step prediction error, in the output's unit squared.
     """
     theta, _, sse, rows = _solve([est], na, [nb], [nk], n0)
     if val is None:

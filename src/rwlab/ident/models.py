@@ -15,18 +15,14 @@ The sample time ``Ts`` (seconds) is required. Continuous-time conversion
 
 from __future__ import annotations
 
-import json
-import os
-import warnings
-from pathlib import Path
-
 import control
 import numpy as np
-from scipy import linalg
 from scipy import signal as sps
 
-from rwlab.data import IOData, atomic_write_bytes, check_Ts
+from rwlab.data import IOData, check_Ts
 from rwlab.errors import DataError, FileFormatError, ModelError
+from rwlab.ident.base import IdentifiedModel
+from rwlab.ident.conversions import c2d_coefficients, d2c_tf
 from rwlab.ident.polynomials import check_initial, filt, fit_initial, is_stable, roots_z, to_z
 
 __all__ = ["PolyModel", "c2d"]
@@ -63,7 +59,7 @@ def _leading_zeros(row: np.ndarray) -> int:
     return int(nz[0]) if nz.size else len(row)
 
 
-class PolyModel:
+class PolyModel(IdentifiedModel):
     """Discrete-time polynomial input/output model (MATLAB ``idpoly``).
 
     Parameters
@@ -96,6 +92,8 @@ class PolyModel:
         Channel labels for printouts.
     """
 
+    FORMAT = _FORMAT
+
     def __init__(
         self,
         A=None,
@@ -123,7 +121,6 @@ class PolyModel:
         if B2.ndim != 2 or not np.all(np.isfinite(B2)):
             raise ModelError("B must be a finite 1-D array, or 2-D with one row per input")
         self._B = B2
-        self.nu = B2.shape[0]
         self._F = _denominators(F, self.nu)
         width_f = self._F.shape[1]
         nf = [width_f - 1] * self.nu if nf is None else [int(n) for n in np.atleast_1d(nf)]
@@ -164,6 +161,11 @@ class PolyModel:
             arr.setflags(write=False)
 
     # -- structure ---------------------------------------------------------------
+    @property
+    def nu(self) -> int:
+        """Number of inputs (0: a time series)."""
+        return self._B.shape[0]
+
     @property
     def B(self) -> np.ndarray:
         """B in MATLAB layout: 1-D for one input, (nu, L) for several."""
@@ -246,10 +248,6 @@ class PolyModel:
             names += [f"f{tag}{i}" for i in range(1, n + 1)]
         return names
 
-    @property
-    def n_params(self) -> int:
-        return self.na + sum(self.nb) + self.nc + self.nd + sum(self._nf)
-
     def with_parameters(self, theta) -> PolyModel:
         """The same structure with :attr:`parameters` replaced by ``theta`` (no covariance)."""
         theta = np.asarray(theta, dtype=float)
@@ -280,18 +278,6 @@ class PolyModel:
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     # -- time responses ------------------------------------------------------------
-    def _inputs(self, u) -> np.ndarray:
-        if isinstance(u, IOData):
-            u = u.u
-        arr = np.asarray(u, dtype=float)
-        if arr.ndim == 1:
-            arr = arr[:, None]
-        if arr.ndim != 2 or arr.shape[1] != self.nu:
-            raise DataError(f"u must have shape (N,) or (N, {self.nu}); got {np.shape(u)}")
-        if not np.all(np.isfinite(arr)):
-            raise DataError("u contains NaN or Inf")
-        return arr
-
     def simulate(self, u, initial: str = "zero") -> np.ndarray:
         """Noise-free output ``y = Σⱼ Bⱼ/(A Fⱼ) uⱼ`` (zero for a time series, as MATLAB's ``sim``).
 
@@ -459,22 +445,7 @@ class PolyModel:
         if self.nu != 1:
             raise ModelError("d2c supports single-input models; convert each input separately")
         den = np.convolve(self.A, self.F)
-        if method == "tustin":
-            num_s, den_s = _inverse_bilinear(*to_z(self.B, den), self.Ts)
-            return control.tf(num_s, den_s)
-        if method != "zoh":
-            raise ModelError(f"d2c method must be 'zoh' or 'tustin', got {method!r}")
-        delay = max(self.nk[0] - 1, 0)
-        tf = _inverse_zoh(*to_z(self.B[delay:], den), self.Ts)
-        if delay:
-            if pade_order is None:
-                raise ModelError(
-                    f"the model has an input delay of {delay} samples ({delay * self.Ts:g} s) "
-                    "that a rational G(s) cannot hold; pass pade_order=N to approximate it, "
-                    "or use method='tustin'"
-                )
-            tf = tf * control.tf(*control.pade(delay * self.Ts, int(pade_order)))
-        return tf
+        return d2c_tf(self.B, den, self.Ts, nk=self.nk[0], method=method, pade_order=pade_order)
 
     # -- files ---------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -523,15 +494,6 @@ class PolyModel:
             )
         except KeyError as exc:
             raise FileFormatError(f"PolyModel JSON lacks field {exc}") from None
-
-    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write JSON atomically; refuses to replace a file unless ``overwrite``."""
-        return save_model_json(path, self.to_dict(), overwrite=overwrite)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> PolyModel:
-        """Read a model written by :meth:`save`."""
-        return cls.from_dict(load_model_json(path))
 
     # -- printing ------------------------------------------------------------------
     def __repr__(self) -> str:
@@ -584,84 +546,6 @@ class PolyModel:
         return "\n".join(lines)
 
 
-def save_model_json(path: str | os.PathLike, d: dict, *, overwrite: bool) -> Path:
-    """Write a model's dict as JSON atomically; refuses to replace a file unless ``overwrite``."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-    text = json.dumps(d, indent=2, default=_json_default)
-    return atomic_write_bytes(path, lambda tmp: tmp.write_text(text))
-
-
-def load_model_json(path: str | os.PathLike) -> dict:
-    """The dict of a model file written by :func:`save_model_json`."""
-    try:
-        return json.loads(Path(path).read_text())
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"{path}: not JSON ({exc})") from None
-
-
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"cannot store {type(obj).__name__} in JSON")
-
-
-def _inverse_bilinear(num_z, den_z, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """Substitute z = (1 + sTs/2)/(1 − sTs/2) into num(z)/den(z) (descending powers)."""
-    n = len(den_z) - 1
-    plus, minus = np.array([Ts / 2, 1.0]), np.array([-Ts / 2, 1.0])
-
-    def substitute(p):
-        out = np.zeros(n + 1)
-        for k, c in enumerate(p):  # c multiplies z^(n-k)
-            term = c * np.polymul(_polypow(plus, n - k), _polypow(minus, k))
-            out[-len(term) :] += term
-        return out
-
-    num_s, den_s = substitute(num_z), substitute(den_z)
-    if abs(den_s[0]) < 1e-300:
-        raise ModelError("the model has a pole at z = −1; it has no Tustin equivalent")
-    return num_s / den_s[0], den_s / den_s[0]
-
-
-def _polypow(p: np.ndarray, k: int) -> np.ndarray:
-    out = np.array([1.0])
-    for _ in range(k):
-        out = np.polymul(out, p)
-    return out
-
-
-def _inverse_zoh(num_z, den_z, Ts: float) -> control.TransferFunction:
-    """Continuous G(s) whose ZOH sampling at Ts is num(z)/den(z) (matrix logarithm)."""
-    num_z = np.trim_zeros(np.asarray(num_z, float), "f")
-    if num_z.size == 0:
-        return control.tf([0.0], [1.0])
-    if len(num_z) > len(den_z):
-        raise ModelError("improper discrete model: more zeros than poles")
-    Ad, Bd, Cd, Dd = sps.tf2ss(num_z, den_z)
-    n = Ad.shape[0]
-    if n == 0:
-        return control.tf(Dd.ravel(), [1.0])
-    eig = np.linalg.eigvals(Ad)
-    if np.any(np.abs(eig) < 1e-12) or np.any((np.abs(eig.imag) < 1e-12) & (eig.real < 0)):
-        raise ModelError(
-            "the model has a pole at z = 0 or on the negative real axis, which no "
-            "continuous system sampled with a ZOH produces; use method='tustin'"
-        )
-    M = np.zeros((n + 1, n + 1))
-    M[:n, :n], M[:n, n:] = Ad, Bd
-    M[n, n] = 1.0
-    L = linalg.logm(M) / Ts
-    if np.max(np.abs(np.imag(L))) > 1e-8 * max(1.0, np.max(np.abs(L))):
-        raise ModelError("the matrix logarithm is complex: no real ZOH equivalent exists")
-    L = np.real(L)
-    num_s, den_s = sps.ss2tf(L[:n, :n], L[:n, n:], Cd, Dd)
-    return control.tf(np.atleast_2d(num_s)[0], den_s)
-
-
 def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyModel:
     """Discretise a continuous SISO transfer function into a ``PolyModel`` (B/A form).
 
@@ -673,28 +557,11 @@ def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyMo
         Sample time in seconds.
     method : {'zoh', 'tustin'}
         Zero-order hold or bilinear transform.
+
+    Returns
+    -------
+    PolyModel
+        ``B/A`` with ``A`` monic, at sample time ``Ts``.
     """
-    Ts = check_Ts(Ts)
-    if method not in ("zoh", "tustin"):
-        raise ModelError(f"c2d method must be 'zoh' or 'tustin', got {method!r}")
-    tf = control.tf(sys)
-    if not control.isctime(tf, strict=True):
-        raise ModelError("c2d needs a continuous-time system (dt = 0)")
-    if tf.ninputs != 1 or tf.noutputs != 1:
-        raise ModelError("c2d supports SISO systems")
-    num, den = np.asarray(tf.num[0][0], float), np.asarray(tf.den[0][0], float)
-    tiny = 1e-14 * max(np.max(np.abs(num)), 1e-300)
-    num = num[np.argmax(np.abs(num) > tiny) :] if np.any(np.abs(num) > tiny) else np.zeros(1)
-    with (
-        warnings.catch_warnings()
-    ):  # scipy flags |coefficient| < 1e-14 absolute, even when meaningful
-        warnings.simplefilter("ignore", sps.BadCoefficients)
-        numd, dend, _ = sps.cont2discrete(
-            (num, den), Ts, method="zoh" if method == "zoh" else "bilinear"
-        )
-    numd = np.atleast_2d(numd)[0]
-    numd = np.concatenate([np.zeros(len(dend) - len(numd)), numd])  # align powers of z
-    scale = dend[0]
-    B = numd / scale
-    B[np.abs(B) < 1e-14 * max(1.0, np.max(np.abs(B)))] = 0.0
-    return PolyModel(dend / scale, B, Ts=Ts)
+    A, B = c2d_coefficients(sys, Ts, method)
+    return PolyModel(A, B, Ts=Ts)

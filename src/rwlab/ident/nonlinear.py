@@ -8,7 +8,7 @@ saturation: the measured output carries it into the predictor).
 
 Structure ``"servo"`` — a Lur'e (feedback block) model, equations per sample
 ``k`` (Ts), integrated with ``M`` sub-steps of ``h = Ts/M``; ``sat`` clips to the
-input limits, ``clip_α`` to ±α, the output clip to the output limits:
+input limits, ``clip_α`` to ±α, the output clip to the output limits::
 
     r_old = g·sat(u[k−1]) + c,   r_new = g·sat(u[k]) + c
     for j = 0..M−1:

@@ -18,6 +18,16 @@ def to_z(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Both are padded to a common length ``L`` and read as coefficients of
     ``z^(L-1) ... z^0``: multiplying top and bottom by ``z^(L-1)``.
+
+    Parameters
+    ----------
+    num, den : numpy.ndarray
+        Numerator and denominator in q⁻¹.
+
+    Returns
+    -------
+    num_z, den_z : numpy.ndarray
+        The same ratio in descending powers of z, equal lengths.
     """
     length = max(len(num), len(den))
     pad = lambda p: np.concatenate([p, np.zeros(length - len(p))])  # noqa: E731
@@ -31,7 +41,19 @@ def roots_z(p: np.ndarray) -> np.ndarray:
 
 
 def is_stable(p: np.ndarray, margin: float = 0.0) -> bool:
-    """True when every root in z of ``p`` lies strictly inside the circle of radius 1 − margin."""
+    """True when every root in z of ``p`` lies strictly inside the circle of radius 1 − margin.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Polynomial in q⁻¹ (``p[0] = 1``).
+    margin : float
+        Required distance inside the unit circle.
+
+    Returns
+    -------
+    bool
+    """
     r = roots_z(p)
     return bool(np.all(np.abs(r) < 1.0 - margin)) if r.size else True
 
@@ -41,6 +63,16 @@ def stabilize(p: np.ndarray) -> np.ndarray:
 
     Used after each prediction-error step to keep C, D and F stable, as
     MATLAB's estimators do. Returns a new array; a stable ``p`` comes back equal.
+
+    Parameters
+    ----------
+    p : numpy.ndarray
+        Monic polynomial in q⁻¹.
+
+    Returns
+    -------
+    numpy.ndarray
+        The stabilised polynomial, same length.
     """
     p = np.asarray(p, float)
     r = roots_z(p)
@@ -73,6 +105,20 @@ def free_responses(den: np.ndarray, n: int, N: int) -> np.ndarray:
     Column i is ``(1/den) δ(t − i)``: these n sequences are independent and span the
     solutions of ``den(q) s(t) = 0`` for t ≥ n, i.e. all free responses of any
     realisation of order n (n ≥ len(den) − 1) with this denominator.
+
+    Parameters
+    ----------
+    den : numpy.ndarray
+        Denominator in q⁻¹.
+    n : int
+        Number of states (≥ len(den) − 1).
+    N : int
+        Number of samples.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, n)
+        One free response per column.
     """
     impulses = np.zeros((N, n))
     idx = np.arange(min(n, N))
@@ -85,6 +131,22 @@ def fit_initial(y: np.ndarray, yhat: np.ndarray, den: np.ndarray, n: int) -> np.
 
     This is MATLAB's ``InitialCondition = 'e'``: the initial state is chosen to
     minimise ‖y − ŷ‖, given the zero-initial-state response ``yhat``.
+
+    Parameters
+    ----------
+    y : numpy.ndarray, shape (N,)
+        Measured output.
+    yhat : numpy.ndarray, shape (N,)
+        Response from a zero initial state.
+    den : numpy.ndarray
+        Denominator of the free response, in q⁻¹.
+    n : int
+        Number of initial states.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+        ``yhat`` plus the fitted free response.
     """
     basis = free_responses(den, n, len(y))
     x0, *_ = np.linalg.lstsq(basis, y - yhat, rcond=None)
@@ -92,7 +154,22 @@ def fit_initial(y: np.ndarray, yhat: np.ndarray, den: np.ndarray, n: int) -> np.
 
 
 def shift(x: np.ndarray, k: int, steady: bool = False) -> np.ndarray:
-    """``q⁻ᵏ x``: delay by ``k`` samples; zeros (or ``x[0]`` if ``steady``) before the start."""
+    """``q⁻ᵏ x``: delay by ``k`` samples; zeros (or ``x[0]`` if ``steady``) before the start.
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (N,)
+        The signal.
+    k : int
+        Delay, samples (≥ 0).
+    steady : bool
+        Fill with ``x[0]`` instead of zeros.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+        The delayed signal.
+    """
     if k == 0:
         return x
     out = np.full_like(x, x[0] if steady and len(x) else 0.0)
@@ -107,6 +184,20 @@ def filt(b, a, x: np.ndarray, steady: bool = False) -> np.ndarray:
     ``steady=False``: zero initial conditions (the signals were 0 before t = 0).
     ``steady=True``: the input held ``x[0]`` forever before t = 0, so the filter
     starts in that equilibrium (``lfilter_zi``) — a record that starts at rest.
+
+    Parameters
+    ----------
+    b, a : array_like
+        Numerator and denominator in q⁻¹ (``a[0] ≠ 0``).
+    x : numpy.ndarray, shape (N,)
+        The signal.
+    steady : bool
+        Start in the equilibrium of ``x[0]`` instead of at rest.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+        The filtered signal.
     """
     b = np.atleast_1d(np.asarray(b, float))
     a = np.atleast_1d(np.asarray(a, float))

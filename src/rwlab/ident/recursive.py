@@ -136,6 +136,16 @@ class RecursiveARMAX(RecursiveARX):
     """Online estimator of ``A y = B u(t−nk) + C e`` by recursive pseudo-linear regression.
 
     Parameters as :class:`RecursiveARX`, with ``nc`` the order of C.
+
+    Parameters
+    ----------
+    na, nb, nc : int
+        Orders of A, B and C.
+    nk : int
+        Input delay, samples.
+    **options
+        ``method``, ``forgetting``, ``drift``, ``initial_parameters``,
+        ``initial_covariance``: as for :class:`RecursiveARX`.
     """
 
     def __init__(self, na: int, nb: int, nc: int, nk: int = 1, **options) -> None:
@@ -147,6 +157,17 @@ class RecursiveARMAX(RecursiveARX):
 
 def rarx(data: IOData, na: int, nb: int, nk: int = 1, **options) -> tuple[np.ndarray, np.ndarray]:
     """Run :class:`RecursiveARX` over a record (MATLAB ``rarx``).
+
+    Parameters
+    ----------
+    data : IOData
+        Single-input single-output record.
+    na, nb : int
+        Orders of A and B.
+    nk : int
+        Input delay, samples.
+    **options
+        As for :class:`RecursiveARX`.
 
     Returns
     -------

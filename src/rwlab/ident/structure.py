@@ -72,19 +72,54 @@ def delayest(
     """Input delay in samples that minimises the ARX(na, nb, nk) loss (MATLAB ``delayest``).
 
     Scans nk_min..nk_max (default ``nk_min + 20``, MATLAB's); see :func:`delay_scan`.
+
+    Parameters
+    ----------
+    data : IOData
+        Single-input record.
+    na, nb : int
+        Orders of the ARX model scanned.
+    nk_min, nk_max : int
+        Delays scanned, samples.
+
+    Returns
+    -------
+    int
+        The delay, samples.
     """
     losses = delay_scan(data, na, nb, nk_min, nk_max)
-    return min(losses, key=losses.get)
+    return min(losses, key=lambda k: losses[k])
 
 
 def struc(na: Iterable[int], nb: Iterable[int], nk: Iterable[int]) -> list[tuple[int, int, int]]:
-    """All (na, nb, nk) combinations, as MATLAB's ``struc``."""
+    """All (na, nb, nk) combinations, as MATLAB's ``struc``.
+
+    Parameters
+    ----------
+    na, nb, nk : iterable of int
+        The values of each order to combine.
+
+    Returns
+    -------
+    list of (na, nb, nk)
+        Every combination, na slowest.
+    """
     return [(a, b, k) for a in na for b in nb for k in nk]
 
 
 @dataclass(frozen=True)
 class StructureLoss:
-    """One row of ``arxstruc``: orders, parameter count and validation loss."""
+    """One row of ``arxstruc``: orders, parameter count and validation loss.
+
+    Parameters
+    ----------
+    na, nb, nk : int
+        ARX orders and delay.
+    loss : float
+        Validation loss (mean squared prediction error).
+    n_samples : int
+        Number of samples the loss is measured on.
+    """
 
     na: int
     nb: int
@@ -100,7 +135,20 @@ class StructureLoss:
 def arxstruc(
     est: IOData, val: IOData, orders: Iterable[tuple[int, int, int]]
 ) -> list[StructureLoss]:
-    """Validation loss of ARX(na, nb, nk) models fitted on ``est`` (MATLAB ``arxstruc``)."""
+    """Validation loss of ARX(na, nb, nk) models fitted on ``est`` (MATLAB ``arxstruc``).
+
+    Parameters
+    ----------
+    est, val : IOData
+        Estimation and validation records.
+    orders : iterable of (na, nb, nk)
+        The structures to try (see :func:`struc`).
+
+    Returns
+    -------
+    list of StructureLoss
+        One per structure, in the given order.
+    """
     _siso(est, "arxstruc")
     _siso(val, "arxstruc")
     orders = [
@@ -122,6 +170,11 @@ def selstruc(losses: list[StructureLoss], criterion: str | float = 0) -> tuple[i
     criterion : {0, 'aic', 'mdl'} or float
         0: the smallest validation loss V. 'aic': minimise log(V) + 2d/N.
         'mdl': minimise V·(1 + d·log(N)/N). A number c: minimise V·(1 + c·d/N).
+
+    Returns
+    -------
+    (na, nb, nk) : tuple of int
+        The chosen structure.
     """
     if not losses:
         raise DataError("selstruc needs the output of arxstruc")

@@ -2,7 +2,9 @@
 
 The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
 
-1. preprocess (normalise to [0, 1] as the paper, or detrend), split 70/30;
+1. split 70/30, then preprocess with statistics of the estimation part only
+   (the validation part must not inform the model): remove the means
+   (default), scale without shifting, or normalise to [0, 1] as the paper;
 2. delay scan with ARX(2,2,nk) (Fig. 16);
 3. ARX orders na = nb = 2…5 at that delay: fit %, MSE, polynomials ± std (Table 2,
    Fig. 17) and their step responses (Fig. 18);
@@ -14,9 +16,14 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
    against the discrete model on a new input (Fig. 23), and the acceleration
    check (Fig. 24);
 7. the chosen model in physical units with the wheel's saturations;
-8. beyond the paper (its future work): a nonlinear servo model with an estimated
-   rate limit (``rwlab.ident.nonlinear``), fitted in physical units by simulation
-   error from the chosen model, scored on the same validation data.
+8. beyond the paper (its future work): nonlinear models in physical units, fitted
+   by simulation error on the estimation part and scored on the validation part:
+   the servo model (``rwlab.ident.nonlinear``: the inner loop's structure alone),
+   a physical grey-box wheel (``rwlab.ident.greybox``: inertia, torque constant,
+   current limit, Stribeck friction, rate limit, PI loop, each estimated
+   parameter with its standard deviation) and a nonlinear ARX
+   (``rwlab.ident.nlarx``); the better of the grey box and the NLARX on the
+   validation part is the study's nonlinear model (``nonlinear['chosen']``).
 
 Fit % and MSE are computed on the validation data by simulation, in the
 preprocessed units the paper reports. Every number (estimation, fit %, MSE,
@@ -37,18 +44,22 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
+from rwlab._display import ShortRepr
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
+from rwlab.ident.greybox import WheelGreyBox, greybox_fit
+from rwlab.ident.model_file import Channel, WheelModelFile
 from rwlab.ident.models import PolyModel
+from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
 
-__all__ = ["StudyResult", "identification_study", "physical_model"]
+__all__ = ["StudyResult", "identification_study", "physical_model", "wheel_model"]
 
-PREPROCESSING = ("normalize", "detrend", "none")
+PREPROCESSING = ("detrend", "scale", "normalize", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
 
 
@@ -56,8 +67,8 @@ def _kind(structure: str) -> str:
     return structure.rstrip("0123456789[], ")
 
 
-@dataclass
-class StudyResult:
+@dataclass(repr=False)
+class StudyResult(ShortRepr):
     """Everything the study computed; ``to_dict()`` is ``study.json``.
 
     Attributes
@@ -96,7 +107,23 @@ class StudyResult:
     new_input: dict = field(repr=False)
     servo: ServoModel | None = None
     nonlinear: dict | None = None
+    greybox: WheelGreyBox | None = None
+    nlarx: NLARXModel | None = None
     physical_val: IOData | None = field(default=None, repr=False)
+
+    def to_pandas(self):
+        """The structures tried (orders and other structures), one row each.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``structure``; fit %, MSE, FPE, parameter count, stability.
+        """
+        from rwlab._display import pandas
+
+        keep = ("structure", "n_params", "fit_percent", "prediction_fit_percent", "mse", "fpe")
+        rows = [{k: r.get(k) for k in (*keep, "stable")} for r in self.orders + self.others]
+        return pandas().DataFrame(rows).set_index("structure")
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""
@@ -165,7 +192,7 @@ def _try(estimate, *args):
 def identification_study(
     data: IOData,
     *,
-    preprocess: str = "normalize",
+    preprocess: str = "detrend",
     split: float = 0.7,
     orders=(2, 3, 4, 5),
     nk_max: int = 10,
@@ -174,6 +201,8 @@ def identification_study(
     nonlinear: bool = True,
     limits_rpm: tuple[float, float] = (math.inf, math.inf),
     progress: Callable[[int, int, str], None] | None = None,
+    datasheet: dict | None = None,
+    current=None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -181,8 +210,16 @@ def identification_study(
     ----------
     data : IOData
         The raw record (physical units), single input and output.
-    preprocess : {'normalize', 'detrend', 'none'}
-        'normalize' scales to [0, 1] as the paper; 'detrend' removes means.
+    preprocess : {'detrend', 'scale', 'normalize', 'none'}
+        Statistics always from the estimation part. 'detrend' (default) removes
+        the means, so a model without intercept (ARX, OE, BJ) is left no offset
+        to explain; 'scale' divides by the largest magnitude without shifting
+        (physical zero stays zero); 'normalize' maps to [0, 1] as paper A and
+        MATLAB's ``normalize`` do. That last one biases a model without
+        intercept: physical zero becomes ``−min/range`` in each channel, and the
+        static map is forced through both minima, so the DC gain absorbs the
+        offset (measured on the twin: DC gain 1.016–1.023 against 0.995–0.999
+        detrended, validation fit 2–5 points lower).
     split : float
         Estimation share (paper: 0.7).
     orders : sequence of int
@@ -202,6 +239,19 @@ def identification_study(
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (delay scan, each
         estimate, validation), for a progress bar.
+    datasheet : dict, optional
+        The wheel's datasheet values for the grey-box model (keys of
+        :data:`DATASHEET`; default the RW90's, paper A Table 1). Only J, the
+        current limit and the firmware's feed-forward stay fixed; the rest start
+        the fit.
+    current : array_like, shape (N,), optional
+        The record's motor current (A) at the speed's instants: the grey box's
+        second output (it makes kt and the friction observable).
+
+    Returns
+    -------
+    StudyResult
+        Every number of the report; ``to_dict()`` is ``study.json``.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -218,9 +268,7 @@ def identification_study(
             f"{max(orders)} with delays up to {nk_max} needs at least {needed} (ten samples "
             "per parameter and lag in each part); record longer or lower the orders"
         )
-    prepared = {"normalize": data.normalize, "detrend": data.detrend, "none": lambda: data}[
-        preprocess
-    ]()
+    prepared = _preprocessed(data, preprocess, split)
     est, val = prepared.split(split)
     total, done = len(orders) + 5 + int(nonlinear), 0
 
@@ -232,7 +280,7 @@ def identification_study(
 
     losses = delay_scan(est, 2, 2, 0, nk_max)
     step("delay scan")
-    nk = min(losses, key=losses.get)
+    nk = min(losses, key=lambda k: losses[k])
     if nk == 0:
         nk = 1 if losses.get(1, math.inf) <= losses[0] * 1.001 else 0
 
@@ -279,9 +327,11 @@ def identification_study(
     new_u = _new_input(rng, est, val.N)
     continuous = _continuous(chosen, new_u)
     step("validation")
-    servo, nl = None, None
+    servo, nl, grey, black = None, None, None, None
     if nonlinear:
         servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
+        sheet = {**DATASHEET, **(datasheet or {})}
+        grey, black = _wheel_models(data, split, servo, nl, sheet, current)
         step("nonlinear")
     return StudyResult(
         data=prepared,
@@ -300,8 +350,79 @@ def identification_study(
         new_input={"u": new_u},
         servo=servo,
         nonlinear=nl,
+        greybox=grey,
+        nlarx=black,
         physical_val=data.split(split)[1],
     )
+
+
+DATASHEET = {
+    "inertia": 4.2e-4,
+    "torque_constant": 0.0245,
+    "current_limit": 0.7,
+    "coulomb": 2.0e-4,
+    "viscous": 1.0e-6,
+    "accel_limit_rpm_s": 314.0,
+    "max_speed_rpm": 7800.0,
+}
+"""RW90 datasheet values (paper A, Table 1; SPEC.md): the grey box's fixed and start values."""
+
+
+def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
+    """The grey-box wheel and the NLARX on the physical estimation part, scored on the
+    validation part (simulation from its first measured speed); the better one is
+    ``nl['chosen']``. Adds ``nl['greybox']`` and ``nl['nlarx']``."""
+    est, val = data.split(split)
+    out: dict = {}
+    grey = black = None
+    kp, ki = 0.5, 0.1
+    if servo is not None:
+        kp, ki = servo.kp, servo.ki
+    try:
+        i_est = None if current is None else np.asarray(current, dtype=float)[: est.N]
+        grey = greybox_fit(est, kp=kp, ki=ki, current=i_est, **datasheet)
+        out["greybox"] = _nonlinear_row(grey, val)
+    except (EstimationError, ModelError, DataError) as exc:
+        out["greybox"] = {"error": str(exc)}
+    try:
+        black = nlarx(est)
+        out["nlarx"] = _nonlinear_row(black, val)
+    except (EstimationError, ModelError, DataError) as exc:
+        out["nlarx"] = {"error": str(exc)}
+    scored = {k: v["fit_percent"] for k, v in out.items() if v.get("fit_percent") is not None}
+    if scored:
+        best = max(scored, key=scored.get)
+        out["chosen"] = best
+        out["choice"] = f"{best}: the better simulation fit on the validation part " + ", ".join(
+            f"{k} {v:.2f} %" for k, v in scored.items()
+        )
+    nl.update(out)
+    return grey, black
+
+
+def _nonlinear_row(model, val: IOData) -> dict:
+    yhat = model.predict(val, np.inf, initial="steady")
+    y = val.y[:, 0]
+    ok = bool(np.all(np.isfinite(yhat)))
+    return {
+        "structure": model.structure,
+        "fit_percent": fit_percent(y, yhat) if ok else None,
+        "n_params": model.n_params,
+        "parameters": model.to_dict(),
+        "initial_conditions": "the validation part's first measured speed, loop integral 0",
+    }
+
+
+def _preprocessed(data: IOData, preprocess: str, split: float) -> IOData:
+    """``data`` preprocessed with the statistics of its estimation part only."""
+    if preprocess == "none":
+        return data
+    reference = data.split(split)[0]
+    if preprocess == "detrend":
+        return data.detrend(reference=reference)
+    if preprocess == "scale":
+        return data.scale(reference=reference)
+    return data.normalize(reference=reference)
 
 
 def _nonlinear_stage(data, split, chosen, trend, limits) -> tuple[ServoModel | None, dict]:
@@ -408,49 +529,89 @@ def physical_model(
     accel_limit_rpm_s: float = 314.0,
     saturation_source: str = "RW90 defaults",
 ) -> dict:
+    """The JSON form of :func:`wheel_model` (``model.json``), same arguments.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    dict
+        ``model.json``'s content (schema ``model``).
+    """
+    return wheel_model(
+        result,
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+    ).to_dict()
+
+
+def wheel_model(
+    result: StudyResult,
+    *,
+    speed_limit_rpm: float = 7800.0,
+    accel_limit_rpm_s: float = 314.0,
+    saturation_source: str = "RW90 defaults",
+) -> WheelModelFile:
     """The chosen model in physical units, with the saturations any control use needs.
 
     The study's model maps preprocessed input to preprocessed output. With
     ``u_p = (u − u_off)/u_scale`` and ``y = y_off + y_scale·y_p``, the physical
     model is ``y − y_off = G(q)·(u − u_off)`` with G's numerator scaled by
     ``y_scale/u_scale``; ``model.json`` stores G and both offsets.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    speed_limit_rpm, accel_limit_rpm_s : float
+        The wheel's saturations, rpm and rpm/s.
+    saturation_source : str
+        Where they come from.
+
+    Returns
+    -------
+    WheelModelFile
+        The content of ``model.json`` (``.save(path)`` writes it).
     """
     m = result.chosen
     trend = result.data.trend
     if np.any(trend.input_slope) or np.any(trend.output_slope):
         raise ModelError("a linear trend cannot be folded into model.json; use 'normalize'")
-    physical = _to_physical(m, trend, result.data.input_names[0], result.data.output_names[0])
-    info = {
-        "format": "rwlab.WheelModel/1",
-        "structure": m.structure,
-        "Ts": m.Ts,
-        "input": {
-            "name": result.data.input_names[0],
-            "unit": result.data.input_units[0] or "rpm",
-            "offset": float(trend.input_offset[0]),
-        },
-        "output": {
-            "name": result.data.output_names[0],
-            "unit": result.data.output_units[0] or "rpm",
-            "offset": float(trend.output_offset[0]),
-        },
-        "model": physical.to_dict(),
-        "saturation": {
-            "speed_rpm": speed_limit_rpm,
-            "accel_rpm_s": accel_limit_rpm_s,
-            "source": saturation_source,
-        },
-        "validation_fit_percent": next(
-            r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
-        ),
-        "note": "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
-        "saturation before the model and the acceleration limit to its output.",
+    d = result.data
+    fit = next(
+        r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
+    )
+    nl = result.nonlinear or {}
+    servo_fit = None if result.servo is None or not nl else nl["fit_percent"]
+    others = {
+        name: {**model.to_dict(), "validation_fit_percent": nl[name]["fit_percent"]}
+        for name, model in (("greybox", result.greybox), ("nlarx", result.nlarx))
+        if model is not None and nl.get(name, {}).get("fit_percent") is not None
     }
-    if result.servo is not None:
-        fit = result.nonlinear["fit_percent"]
-        info["nonlinear"] = {**result.servo.to_dict(), "validation_fit_percent": fit}
-        info["preferred"] = "nonlinear" if fit > info["validation_fit_percent"] else "linear"
-    return info
+    return WheelModelFile(
+        _to_physical(m, trend, d.input_names[0], d.output_names[0]),
+        Channel(d.input_names[0], d.input_units[0] or "rpm", float(trend.input_offset[0])),
+        Channel(d.output_names[0], d.output_units[0] or "rpm", float(trend.output_offset[0])),
+        speed_limit_rpm=speed_limit_rpm,
+        accel_limit_rpm_s=accel_limit_rpm_s,
+        saturation_source=saturation_source,
+        validation_fit_percent=fit,
+        servo=result.servo,
+        servo_fit_percent=servo_fit,
+        preferred="nonlinear" if servo_fit is not None and servo_fit > fit else "linear",
+        current_limit_a=result.greybox.current_limit if result.greybox is not None else None,
+        nonlinear_models=others,
+        nonlinear_chosen=nl.get("chosen"),
+        nonlinear_choice=nl.get("choice"),
+    )
 
 
 def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:
@@ -472,6 +633,29 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
     )
 
 
+def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
+    """The motor current (A) of a testbed record at the speed's instants, or None
+    for a file without one (the grey box then fits the speed alone).
+
+    Parameters
+    ----------
+    path : str
+        A record (``.mcap``); other files give None.
+    Ts : float, optional
+        Sample time, s (the record's own by default).
+    """
+    from pathlib import Path
+
+    from rwlab.data import load
+
+    if Path(path).suffix.lower() != ".mcap":
+        return None
+    try:
+        return load(path, Ts, input_columns="command", output_columns="current_a").y[:, 0]
+    except DataError:
+        return None
+
+
 def load_study_data(
     path: str,
     Ts: float | None = None,
@@ -486,8 +670,11 @@ def load_study_data(
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
     the model: from the record's wheel parameters when present, else the RW90
-    defaults. A record whose telemetry has a gap longer than the largest
-    model's memory (``max_orders + nk_max`` samples) is refused.
+    defaults; ``current_limit_a`` is the driver's current limit (A). A record whose
+    telemetry has a gap longer than one sample time, or a ``Ts`` shorter than its
+    telemetry period, is refused (``DataError``): its samples there would repeat a
+    stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
+    a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
     """
     from pathlib import Path
 
@@ -498,25 +685,34 @@ def load_study_data(
         "speed_limit_rpm": 7800.0,
         "accel_limit_rpm_s": 314.0,
         "saturation_source": "RW90 defaults (paper A)",
+        "current_limit_a": 0.7,
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
-        from rwlab.testbed import read_record
+        from rwlab.errors import RecordGapError
 
-        meta = read_record(path).metadata
-        Ts_rec = Ts if Ts is not None else meta.get("Ts")
-        memory = (max_orders + nk_max) * (Ts_rec or 0.0)
-        data = load(path, Ts, **columns, max_gap=memory or None)
-        wheel = meta.get("wheel", {})
+        try:
+            data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
+        except RecordGapError as exc:
+            raise RecordGapError(
+                f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
+                "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
+                "or export the gap-free parts and identify each."
+            ) from None
+        wheel = data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
                 "speed_limit_rpm": float(wheel["max_speed_rpm"]),
                 "accel_limit_rpm_s": float(wheel["max_accel_rpm_s"]),
                 "saturation_source": "the record's wheel parameters",
             }
+        if "current_limit" in wheel:  # the driver's configured limit: a known setting
+            saturation["current_limit_a"] = float(wheel["current_limit"])
         return data, saturation
     if not Path(path).exists() and path in datasets.NAMES:
         if input_col or output_col:
             raise DataError(f"{path} is a bundled data set: it has one input and one output")
         return datasets.get(path), saturation
-    return load(path, Ts, **columns), saturation
+    from rwlab.datafiles import check_magnitude
+
+    return check_magnitude(load(path, Ts, **columns), path), saturation

@@ -118,13 +118,43 @@ def _propagate(model, f: Callable, method: str, n_samples: int, seed) -> np.ndar
 
 
 def step_band(model, n: int, *, method: str = "linear", n_samples: int = 500, seed=None) -> Band:
-    """Unit-step response over ``n`` samples with its standard deviation (MATLAB ``step``'s ysd)."""
+    """Unit-step response over ``n`` samples with its standard deviation (MATLAB ``step``'s ysd).
+
+    Parameters
+    ----------
+    model : PolyModel or SSModel
+        A model with a parameter covariance.
+    n : int
+        Number of samples.
+    method, n_samples, seed
+        As for :func:`bode_band`.
+
+    Returns
+    -------
+    Band
+        The step response and its standard deviation, shape (n, ny, nu).
+    """
     f = lambda m: _step(m, n)  # noqa: E731
     return Band(np.arange(n) * model.Ts, f(model), _propagate(model, f, method, n_samples, seed))
 
 
 def impulse_band(model, n: int, *, method: str = "linear", n_samples: int = 500, seed=None) -> Band:
-    """Unit-pulse response over ``n`` samples with its standard deviation."""
+    """Unit-pulse response over ``n`` samples with its standard deviation.
+
+    Parameters
+    ----------
+    model : PolyModel or SSModel
+        A model with a parameter covariance.
+    n : int
+        Number of samples.
+    method, n_samples, seed
+        As for :func:`bode_band`.
+
+    Returns
+    -------
+    Band
+        The pulse response and its standard deviation, shape (n, ny, nu).
+    """
     f = lambda m: _impulse(m, n)  # noqa: E731
     return Band(np.arange(n) * model.Ts, f(model), _propagate(model, f, method, n_samples, seed))
 
@@ -136,6 +166,24 @@ def bode_band(
 
     The phase of a perturbed model is measured relative to the nominal one, so
     phase wrapping never inflates its spread.
+
+    Parameters
+    ----------
+    model : PolyModel or SSModel
+        A model with a parameter covariance.
+    omega : array_like, shape (nw,)
+        Frequencies, rad/s.
+    method : {'linear', 'montecarlo'}
+        First-order propagation, or sampling the parameters.
+    n_samples : int
+        Samples for 'montecarlo'.
+    seed : int or numpy.random.Generator, optional
+        Random source for 'montecarlo'.
+
+    Returns
+    -------
+    magnitude, phase : Band
+        |G| and its phase in degrees, each with one standard deviation.
     """
     w = np.atleast_1d(np.asarray(omega, dtype=float))
     G0 = _freq(model, w)

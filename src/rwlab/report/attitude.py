@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rwlab._io import atomic_write_bytes
 from rwlab.attitude.control import Comparison
 from rwlab.attitude.design import LTRResult
-from rwlab.data import atomic_write_bytes
 from rwlab.report.html import Page, figure
 
 __all__ = ["write_comparison", "write_ltr"]
@@ -82,7 +82,24 @@ def write_comparison(
     force: bool = False,
     ltr_result: LTRResult | None = None,
 ) -> dict[str, Path]:
-    """Write ``report.html`` and ``metrics.json`` (and ``sigma.json`` with an LTR result)."""
+    """Write ``report.html`` and ``metrics.json`` (and ``sigma.json`` with an LTR result).
+
+    Parameters
+    ----------
+    comp : Comparison
+        The runs and metrics.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+    ltr_result : LTRResult, optional
+        Adds ``sigma.json`` and the σ plot.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     names = ["report.html", "metrics.json"] + (["sigma.json"] if ltr_result else [])
     targets = _check_out(Path(out_dir), names, force)
     payload = {
@@ -276,7 +293,24 @@ def _sigma_figure(page: Page, res: LTRResult) -> None:
 def write_ltr(
     res: LTRResult, scenario_name: str, out_dir: str | os.PathLike, *, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``sigma.json`` and ``report.html`` for the ρ sweep (paper Fig. 8)."""
+    """Write ``sigma.json`` and ``report.html`` for the ρ sweep (paper Fig. 8).
+
+    Parameters
+    ----------
+    res : LTRResult
+        The ρ sweep.
+    scenario_name : str
+        For the title.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     targets = _check_out(Path(out_dir), ["sigma.json", "report.html"], force)
     _write_json(targets["sigma.json"], res.to_dict())
     page = Page(f"Loop transfer recovery — {scenario_name}")
@@ -338,7 +372,54 @@ def _trace_table(r):
     for name, est in _disturbance_estimates(r):
         for i, axis in enumerate("xyz"):
             cols[f"{name}_{axis}_Nm"] = est[:, i]
+    if r.sigma is not None and np.any(r.sigma):  # a filter flew: its errors and its 1σ
+        cols["nees"] = r.nees
+        for i, axis in enumerate("xyz"):
+            cols[f"est_error_{axis}_deg"] = np.degrees(r.est_error_axes[:, i])
+            cols[f"est_sigma_{axis}_deg"] = np.degrees(r.sigma[:, i])
+    if r.gyro_bias_est is not None and np.any(r.gyro_bias_est):
+        for i, axis in enumerate("xyz"):
+            cols[f"gyro_bias_est_{axis}_deg_h"] = np.degrees(r.gyro_bias_est[:, i]) * 3600
     return pa.table({k: np.ascontiguousarray(v, dtype=float) for k, v in cols.items()})
+
+
+def _estimation_figure(page, run) -> None:
+    """Each axis's estimation error inside the filter's ±3σ, and the NEES."""
+    if run.sigma is None or not np.any(run.sigma):
+        return
+    fig, axes = figure(10, 8.0, 4, 1, sharex=True)
+    t_h = run.t / 3600
+    for i, axis in enumerate("xyz"):
+        ax = axes[i]
+        three = 3 * np.degrees(run.sigma[:, i])
+        ax.fill_between(*_envelope(t_h, three), 0, color="#1f77b4", alpha=0.15, lw=0)
+        ax.plot(*_envelope(t_h, three), color="#1f77b4", lw=0.6, label="±3σ")
+        ax.plot(*_envelope(t_h, -three), color="#1f77b4", lw=0.6)
+        ax.plot(
+            *_envelope(t_h, np.degrees(run.est_error_axes[:, i])),
+            color="k",
+            lw=0.5,
+            label=f"δθ{axis}",
+        )
+        ax.set_ylabel(f"{axis} [°]")
+        ax.legend(fontsize=8, loc="upper right")
+        ax.grid(alpha=0.3)
+    nees = np.where(np.isfinite(run.nees), run.nees, np.nan)
+    n = 6 if run.sigma.shape[1] >= 6 else run.sigma.shape[1]
+    axes[3].semilogy(t_h, np.maximum(nees, 1e-3), ".", ms=1, color="#555555")
+    axes[3].set_ylabel("NEES")
+    axes[3].set_xlabel("t [h]")
+    axes[3].grid(alpha=0.3)
+    inside = np.mean(np.abs(run.est_error_axes) <= 3 * run.sigma[:, :3])
+    mean = float(np.nanmean(nees)) if np.any(np.isfinite(nees)) else float("nan")
+    page.figure(
+        fig,
+        "fig-estimation",
+        f"Estimation error per body axis (the filter's δθ) inside its ±3σ ({inside:.1%} of "
+        f"the logged samples inside on every axis's average), and the normalised estimation "
+        f"error squared against the whole error state (mean {mean:.3g}; a consistent filter's "
+        f"mean equals its state count, ≥ {n}).",
+    )
 
 
 def _disturbance_estimates(r) -> list[tuple[str, np.ndarray]]:
@@ -432,10 +513,11 @@ def write_simulation(
             else ""
         ),
     )
+    _estimation_figure(page, run)
     estimates = _disturbance_estimates(run)
     if estimates:
-        rows = len(estimates)
-        fig, axes = figure(10, 2.2 * rows, rows, 1, sharex=True, squeeze=False)
+        n_rows = len(estimates)
+        fig, axes = figure(10, 2.2 * n_rows, n_rows, 1, sharex=True, squeeze=False)
         axes = axes[:, 0]
         for ax, (name, est) in zip(axes, estimates, strict=True):
             for i, axis in enumerate("xyz"):

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rwlab._io import atomic_write_bytes
 from rwlab.campaign.montecarlo import AXES, Campaign, axis_errors_deg
-from rwlab.data import atomic_write_bytes
 from rwlab.report.attitude import check_outputs
 from rwlab.report.html import Page, figure
 
@@ -58,6 +58,26 @@ def write_campaign(
     """Write ``results.parquet``, ``budget.json`` and ``report.html``.
 
     ``worst`` is the worst run's ``SimResult`` (flown again from its seed).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per run.
+    budget : dict
+        :func:`rwlab.campaign.montecarlo.budget` of the rows.
+    campaign : Campaign
+        The campaign flown.
+    worst : SimResult
+        The worst run, flown again.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
     """
     import pyarrow.parquet as pq
 
@@ -70,6 +90,79 @@ def write_campaign(
     return targets
 
 
+def _confidence_section(page: Page, budget: dict, req: float) -> None:
+    """What the runs support, in words and a table: quantile bounds, the requirement's
+    lower bound, the ECSS indices per axis."""
+    page.heading("What these runs support", "confidence")
+    met = budget["meets_requirement"]
+    n = budget["runs"]
+    words = [
+        f"{met['fraction']:.1%} of the {n} runs meet ±{req:g}°; with 95 % confidence the "
+        f"true share is at least {met['lower_bound_95']:.1%} (Clopper–Pearson)."
+    ]
+    for q in budget["quantiles"]:
+        if q["upper_bound"] is None:
+            words.append(
+                f"The {q['p']:.2%} quantile of {budget['statistic_column']} is estimated at "
+                f"{q['estimate']:.4g}° but {n} runs cannot bound it at "
+                f"{q['confidence']:.0%} confidence: that needs {q['runs_needed']} runs."
+            )
+        else:
+            words.append(
+                f"The {q['p']:.2%} quantile is ≤ {q['upper_bound']:.4g}° with "
+                f"{q['confidence']:.0%} confidence (order statistic "
+                f"{q['upper_bound_rank']} of {n}; estimate {q['estimate']:.4g}°)."
+            )
+    if budget.get("epoch"):
+        spread = budget.get("epoch_spread_days") or 0
+        words.append(
+            f"Real sky from {budget['epoch']}"
+            + (f", starts spread over {spread:g} days" if spread else "")
+            + f"; time in shadow per run {budget['shadow_s']['min']:.0f}–"
+            f"{budget['shadow_s']['max']:.0f} s."
+        )
+    page.text(" ".join(words))
+    rows = []
+    for name, key in (("APE", "APE"), ("RPE", "RPE"), ("knowledge", "knowledge_error")):
+        for a in AXES:
+            q = {row["p"]: row for row in budget[key][a]["quantiles"]}
+            bound = q[0.9]["upper_bound"]
+            rows.append(
+                [name, a, q[0.5]["estimate"], q[0.9]["estimate"], bound, budget[key][a]["max"]]
+            )
+    page.table(
+        ["ECSS index", "axis", "median [°]", "90 % [°]", "90 % bound (95 %) [°]", "max [°]"],
+        rows,
+        table_id="table-ecss",
+    )
+    page.text(
+        "ECSS-E-ST-60-10C indices over runs of each run's steady-state maximum: APE the "
+        f"absolute error, RPE the error minus its {budget['RPE']['window_s']:g} s centred mean, "
+        "knowledge the estimate's error; an empty bound: too few runs.",
+        note=True,
+    )
+
+
+def _execution_note(page: Page, execution: dict | None) -> None:
+    """How the campaign ran: runs resumed from an interrupted one, batches retried."""
+    if not execution:
+        return
+    parts = []
+    if execution.get("resumed_runs"):
+        parts.append(
+            f"{execution['resumed_runs']} runs were kept from an interrupted campaign and "
+            "resumed (each run depends only on its seed, so the rows are those of an "
+            "uninterrupted campaign)"
+        )
+    if execution.get("retries"):
+        parts.append(
+            f"{execution['retries']} batch(es) were computed again after their worker was "
+            f"lost: runs {execution['retried_runs']}"
+        )
+    if parts:
+        page.html(f'<p class="note" id="execution">{"; ".join(parts)}.</p>')
+
+
 def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
     sc = campaign.scenario
     req = budget["requirement_deg"]
@@ -78,10 +171,12 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
         f"{budget['runs']} runs of {campaign.duration:g} s, campaign seed {campaign.seed}; each "
         "run's seed is a child of numpy's SeedSequence(campaign seed), and from it alone come "
         "the run's dispersions and noise. The controller is designed on the nominal scenario "
-        "and flown on the dispersed one; the filter uses the dispersed inertia and sensor "
-        f"noise. Requirement ±{req:g}°. {budget['meets_requirement_fraction']:.1%} of the runs "
-        "meet it in steady state."
+        "and flown on the dispersed one; the filter keeps the nominal inertia (its model "
+        f"error) and uses the dispersed sensor noise. Requirement ±{req:g}°. "
+        f"{budget['meets_requirement_fraction']:.1%} of the runs meet it in steady state."
     )
+    _confidence_section(page, budget, req)
+    _execution_note(page, budget.get("execution"))
     page.heading("Pointing budget", "budget")
     stats = ["mean", "std", "p99_73", "mean_plus_3std", "max"]
     rows_b = [
@@ -189,7 +284,22 @@ def _worst_figure(page: Page, run, req: float) -> None:
 def write_fleet(
     records: list[dict], out_dir: str | os.PathLike, *, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``fleet.json`` and ``fleet.html``: one line per record (its study or its error)."""
+    """Write ``fleet.json`` and ``fleet.html``: one line per record (its study or its error).
+
+    Parameters
+    ----------
+    records : list of dict
+        One per record: its name, study summary or error.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     targets = check_outputs(out_dir, FLEET_FILES, force)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     ok = [r for r in records if r["error"] is None]

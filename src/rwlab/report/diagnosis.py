@@ -1,7 +1,7 @@
 """The diagnosis report: residuals and test statistics of one record, with alarm marks.
 
 Figure ids: ``fig-residuals`` (speed, acceleration and current residuals),
-``fig-statistics`` (each CUSUM's statistic and threshold); table ``alarms``.
+``fig-statistics`` (each block test's CUSUM statistic and threshold); table ``alarms``.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 from rwlab.diagnose import Diagnosis
 from rwlab.report.html import Page, figure
 
@@ -22,7 +22,24 @@ __all__ = ["write_diagnosis"]
 def write_diagnosis(
     diagnosis: Diagnosis, out_dir: str | os.PathLike, *, title: str, force: bool = False
 ) -> dict[str, Path]:
-    """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``."""
+    """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        The alarms and statistics.
+    out_dir : str or os.PathLike
+        The folder.
+    title : str
+        The page's title.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     out = Path(out_dir)
     targets = {name: out / name for name in ("diagnosis.json", "report.html")}
     existing = [str(p) for p in targets.values() if p.exists()]
@@ -47,16 +64,39 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
     page = Page(f"Fault diagnosis — {title}")
     page.text(
         f"The identified model ran beside the telemetry at Ts = {np.median(np.diff(t)):g} s. "
-        f"The first {diagnosis.calibration_s:g} s calibrated the residuals (assumed healthy); "
+        f"The detectors compare it with the healthy reference measured on the identification "
+        f"record ({diagnosis.reference.source or 'see model.json'}), from the first sample on; "
         f"the thresholds hold each detector to {diagnosis.false_alarms_per_hour:g} false alarms "
-        "per hour on healthy data (CUSUM: Siegmund's approximation of ARL₀ on the whitened "
-        "residual; frozen speed: the exact run-length ARL₀ of the calibrated repeat probability)."
+        "per hour on healthy records (block CUSUMs: Siegmund's approximation of ARL₀ in the "
+        "reference's block durations; frozen speed: the exact run-length ARL₀ of the reference's "
+        "repeat probability; dropouts: Poisson counts of lost frames)."
     )
     page.heading("Alarms", "alarms-heading")
     if diagnosis.alarms:
         page.table(
-            ["t [s]", "likely fault", "detector", "statistic", "threshold"],
-            [[a.t_s, a.kind, a.detector, a.statistic, a.threshold] for a in diagnosis.alarms],
+            [
+                "t [s]",
+                "likely fault",
+                "size",
+                "95 % CI",
+                "unit",
+                "detector",
+                "statistic",
+                "threshold",
+            ],
+            [
+                [
+                    a.t_s,
+                    a.kind,
+                    "—" if a.magnitude is None else f"{a.magnitude:.4g}",
+                    "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
+                    a.unit,
+                    a.detector,
+                    a.statistic,
+                    a.threshold,
+                ]
+                for a in diagnosis.alarms
+            ],
             table_id="alarms",
         )
     else:
@@ -74,9 +114,9 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         fig,
         "fig-residuals",
         "Measured minus modelled speed and acceleration (identified model), and measured "
-        "minus calibrated current balance; red dashes: alarms.",
+        "minus the reference's current balance; red dashes: alarms.",
     )
-    stats = [n for n in ("speed", "current") if n in diagnosis.thresholds]
+    stats = [n for n in ("friction", "motor", "speed", "lag") if n in diagnosis.thresholds]
     fig, axes = figure(9, 2.4 * len(stats), len(stats), 1, sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], stats, strict=True):
         ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
@@ -87,7 +127,7 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         ax.legend(loc="upper left", fontsize=8)
         _mark_alarms(ax, diagnosis)
     axes[-1, 0].set_xlabel("time [s]")
-    page.figure(fig, "fig-statistics", "CUSUM statistics against their thresholds.")
+    page.figure(fig, "fig-statistics", "Block tests' CUSUM statistics against their thresholds.")
     page.heading("Residual statistics")
     rows = []
     for name, stats_ in payload["residual_statistics"].items():
@@ -97,3 +137,62 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
                 rows.append([name, stats_["unit"], part.replace("_", " "), *s.values()])
     page.table(["residual", "unit", "part", "mean", "σ", "max |·|"], rows)
     return page
+
+
+TREND_FORMAT = "rwlab.DiagnosisTrend/1"
+
+
+def trend_point(record: str, start_utc: str, diagnosis: Diagnosis) -> dict:
+    """One record's line of the trend: the first size of each fault named in it."""
+    faults: dict[str, dict] = {}
+    for a in diagnosis.alarms:
+        if a.kind not in faults and a.magnitude is not None:
+            faults[a.kind] = {"magnitude": a.magnitude, "ci95": a.ci, "unit": a.unit, "t_s": a.t_s}
+    return {"record": record, "start_utc": start_utc, "faults": faults}
+
+
+def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool = False):
+    """Write ``trend.json`` and ``trend.html``: each fault's size over a wheel's records."""
+    out = Path(out_dir)
+    targets = {name: out / name for name in ("trend.json", "trend.html")}
+    existing = [str(p) for p in targets.values() if p.exists()]
+    if existing and not force:
+        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    points = sorted(points, key=lambda p: (p["start_utc"], p["record"]))
+    text = json.dumps({"format": TREND_FORMAT, "records": points}, indent=2)
+    atomic_write_bytes(targets["trend.json"], lambda tmp: tmp.write_text(text))
+    page = Page("Fault trend")
+    page.text(
+        "Each record of the wheel diagnosed against the same healthy reference; the size of "
+        "each fault named (first alarm) with its 95 % interval, in record order."
+    )
+    kinds = sorted({k for p in points for k in p["faults"]})
+    if kinds:
+        fig, axes = figure(9, 2.4 * len(kinds), len(kinds), 1, sharex=True, squeeze=False)
+        x = np.arange(len(points))
+        for ax, kind in zip(axes[:, 0], kinds, strict=True):
+            rows = [(i, p["faults"][kind]) for i, p in enumerate(points) if kind in p["faults"]]
+            mags = np.array([f["magnitude"] for _, f in rows])
+            lo = np.array([(f["ci95"] or [f["magnitude"]] * 2)[0] for _, f in rows])
+            hi = np.array([(f["ci95"] or [f["magnitude"]] * 2)[1] for _, f in rows])
+            idx = np.array([i for i, _ in rows])
+            ax.errorbar(idx, mags, yerr=[mags - lo, hi - mags], fmt="o-", capsize=3)
+            ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
+        axes[-1, 0].set_xticks(x, [p["record"] for p in points], rotation=30, fontsize=7)
+        page.figure(fig, "fig-trend", "Estimated fault size per record (95 % intervals).")
+    page.table(
+        ["record", "start (UTC)", "faults"],
+        [
+            [
+                p["record"],
+                p["start_utc"],
+                ", ".join(f"{k} {f['magnitude']:.4g} {f['unit']}" for k, f in p["faults"].items())
+                or "none",
+            ]
+            for p in points
+        ],
+        table_id="trend",
+    )
+    page.save(targets["trend.html"])
+    return targets

@@ -17,7 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
 
 __all__ = ["Page", "figure", "png_uri"]
 
@@ -35,11 +35,38 @@ code{background:#f4f4f4;padding:0 .2em}
 
 
 def figure(width: float = 8.0, height: float = 3.2, nrows: int = 1, ncols: int = 1, **kw):
-    """A new matplotlib figure and axes with the report's size."""
+    """A new matplotlib figure and axes with the report's size.
+
+    Parameters
+    ----------
+    width, height : float
+        Size, inches.
+    nrows, ncols : int
+        Grid of axes.
+    **kw
+        Passed to ``matplotlib.pyplot.subplots``.
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    ax : matplotlib.axes.Axes or numpy.ndarray of them
+    """
     return plt.subplots(nrows, ncols, figsize=(width, height), constrained_layout=True, **kw)
 
 
 def png_uri(fig) -> str:
+    """A figure as an inline PNG (``data:`` URI), and the figure closed.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+
+    Returns
+    -------
+    str
+        ``data:image/png;base64,...``.
+    """
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
@@ -47,7 +74,13 @@ def png_uri(fig) -> str:
 
 
 class Page:
-    """Collects sections, then writes one self-contained HTML file."""
+    """Collects sections, then writes one self-contained HTML file.
+
+    Parameters
+    ----------
+    title : str
+        The page's title.
+    """
 
     def __init__(self, title: str) -> None:
         self.title = title

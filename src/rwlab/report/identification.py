@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from rwlab.data import atomic_write_bytes
+from rwlab._io import atomic_write_bytes
+from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import Page, figure
 
@@ -99,9 +100,11 @@ def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
     """An axis label that says what the plotted numbers are."""
     unit = f" [{unit}]" if unit else ""
     if preprocess == "normalize":
-        return f"{name}, normalised to [0, 1]"
+        return f"{name}, normalised to [0, 1] over the estimation part"
     if preprocess == "detrend":
-        return f"{name} − its mean{unit}"
+        return f"{name} − its estimation-part mean{unit}"
+    if preprocess == "scale":
+        return f"{name} / its estimation-part peak"
     return f"{name}{unit}"
 
 
@@ -113,9 +116,32 @@ def _minus(name: str, offset: float) -> str:
 
 
 def write_study(
-    result: StudyResult, model_info: dict, out_dir: str | os.PathLike, *, force: bool = False
+    result: StudyResult,
+    model_info: dict | WheelModelFile,
+    out_dir: str | os.PathLike,
+    *,
+    force: bool = False,
 ) -> dict[str, Path]:
-    """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``."""
+    """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    model_info : WheelModelFile or dict
+        ``model.json``'s content.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
+    if isinstance(model_info, WheelModelFile):
+        model_info = model_info.to_dict()
     out = Path(out_dir)
     targets = {name: out / name for name in ("report.html", "study.json", "model.json")}
     existing = [str(p) for p in targets.values() if p.exists()]
@@ -317,7 +343,9 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
 
 def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
     """Beyond the paper: the servo model next to the chosen linear one, in physical units."""
-    servo, chosen = result.servo, result.chosen
+    servo, chosen, val = result.servo, result.chosen, result.physical_val
+    if servo is None or val is None:  # the caller checked: a study with a servo model has both
+        raise ValueError("the nonlinear section needs the study's servo model and data")
     trend = result.data.trend
     ch = chosen.structure
     page.heading("8. Nonlinear model: rate-limited servo (beyond the paper)", "nonlinear")
@@ -330,7 +358,6 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         f"{nl['fit_percent']:.2f} % against {ch}'s {_study_fit(result):.2f} %. The speed limit "
         f"is {nl['speed_limit_note']}."
     )
-    val = result.physical_val
     t = val.time - val.time[0]
     y_lin = trend.output_to_physical(chosen.simulate(result.val, initial=INITIAL), result.val.time)
     fig, ax = figure(9, 3.2)

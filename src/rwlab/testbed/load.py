@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import IOData, check_Ts
+from rwlab.data import IOData, check_Ts, register_reader
+from rwlab.datafiles import from_table
 from rwlab.errors import DataError, RecordGapError
 from rwlab.testbed.record import read_record
 
@@ -17,6 +19,7 @@ OUTPUTS = {
     "acceleration": ("acceleration_rpm_s", "rpm/s"),
     "current": ("current_a", "A"),
     "age": ("telemetry_age_s", "s"),
+    "lost": ("lost_frames", "frames"),
 }
 
 
@@ -26,6 +29,18 @@ def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float
     Frame times jitter around the telemetry period, so an interval counts as a
     gap only when it exceeds ``max_gap`` by more than half the typical (median)
     interval: at 10 Hz, a 0.1000001 s step is not a gap, a lost frame's 0.2 s is.
+
+    Parameters
+    ----------
+    times : numpy.ndarray, shape (n,)
+        Frame times, s, increasing.
+    max_gap : float
+        Longest accepted interval, s.
+
+    Returns
+    -------
+    list of (float, float)
+        Start time and length of each gap, s.
     """
     if times.size < 2:
         return []
@@ -40,6 +55,7 @@ def load_record(
     *,
     outputs: tuple[str, ...] = ("speed",),
     max_gap: float | None = None,
+    max_gap_samples: int | None = None,
     node: int | None = None,
 ) -> IOData:
     """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
@@ -50,16 +66,21 @@ def load_record(
         An ``.mcap`` record written by ``rwlab experiment``.
     Ts : float, optional
         Sample time in seconds (default: the record's command period).
-    outputs : tuple of {'speed', 'acceleration', 'current', 'age'}
+    outputs : tuple of {'speed', 'acceleration', 'current', 'age', 'lost'}
         Output channels: measured speed (rpm), acceleration derived from it by a
         backward difference over Ts (rpm/s), motor current (A), age of the
-        telemetry frame each sample repeats (s: large where frames were lost).
+        telemetry frame each sample repeats (s: large where frames were lost),
+        telemetry frames lost so far by the frames' 8-bit counter (as
+        :attr:`rwlab.wheel.WheelClient.lost_frames` counts them live).
     max_gap : float, optional
         Longest accepted interval between telemetry frames, s (default Ts),
         beyond the timestamps' jitter (half the median frame interval). Longer
         gaps raise ``RecordGapError`` listing them; pass ``numpy.inf`` to accept
         them. Without ``max_gap``, a ``Ts`` shorter than the telemetry period is
         refused (``DataError``).
+    max_gap_samples : int, optional
+        The same limit as a number of samples (``max_gap = max_gap_samples·Ts``),
+        for callers that know a model's memory but not the record's Ts.
     node : int, optional
         The wheel to read from a record of several (``rwlab hil``: topics
         ``/wheelN/command`` and ``/wheelN/telemetry``).
@@ -67,14 +88,18 @@ def load_record(
     Returns
     -------
     IOData
-        u = the command (rpm or rpm/s), y = the chosen outputs; sample k is the
-        last value received at or before t₀ + k·Ts, t₀ the first command.
+        u = the command (rpm or rpm/s) issued at sample k (sent within Ts/2 after
+        t₀ + k·Ts: on the wall clock a command leaves a little after its
+        instant), y = the chosen outputs; sample k is the last value received
+        at or before t₀ + k·Ts, t₀ the first command.
     """
     record = read_record(path)
     meta = record.metadata
     if Ts is None:
         Ts = meta.get("Ts")
     Ts = check_Ts(Ts)
+    if max_gap_samples is not None:
+        max_gap = max_gap_samples * Ts
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs:
         raise DataError(f"outputs must be chosen from {sorted(OUTPUTS)}, got {list(outputs)}")
@@ -114,7 +139,7 @@ def load_record(
     n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1
     grid = t0 + Ts * np.arange(n)
     eps = 1e-9 * max(1.0, abs(grid[-1]))
-    u = uc[np.searchsorted(tc, grid + eps, side="right") - 1]
+    u = uc[np.maximum(np.searchsorted(tc, grid + 0.5 * Ts, side="right") - 1, 0)]
     last = np.searchsorted(tt, grid + eps, side="right") - 1
     if last[0] < 0:  # no telemetry yet at the first command: start the grid at the first frame
         keep = last >= 0
@@ -125,6 +150,7 @@ def load_record(
         "acceleration": np.concatenate([[0.0], np.diff(speed) / Ts]),
         "current": np.array([m["current_a"] for m in telemetry])[last],
         "age": grid - tt[last],
+        "lost": _lost_frames(telemetry)[last],
     }
     mode = meta.get("mode", "speed")
     return IOData(
@@ -137,4 +163,61 @@ def load_record(
         output_units=[OUTPUTS[o][1] for o in outputs],
         tstart=float(grid[0] - t0),
         name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
+        source=meta,
     )
+
+
+def _lost_frames(telemetry: list[dict]) -> np.ndarray:
+    """Frames lost up to each telemetry frame, from the gaps of its 8-bit counter."""
+    counter = np.array([m.get("counter", 0) for m in telemetry], dtype=np.int64)
+    gaps = (np.diff(counter) - 1) % 256
+    return np.concatenate([[0], np.cumsum(gaps)]).astype(float)
+
+
+def read_mcap(
+    path: Path,
+    Ts: float | None,
+    input_columns=None,
+    output_columns=None,
+    max_gap: float | None = None,
+    max_gap_samples: int | None = None,
+) -> IOData:
+    """A testbed record as :func:`rwlab.data.load` reads it (registered for ``.mcap``).
+
+    Parameters
+    ----------
+    path : Path
+        The ``.mcap`` record.
+    Ts : float, optional
+        Sample time, s (default: the record's).
+    input_columns, output_columns : str or list, optional
+        Channels (default ``command`` → ``speed_rpm``; every output of
+        :data:`OUTPUTS` can be chosen).
+    max_gap, max_gap_samples : optional
+        See :func:`load_record`.
+
+    Returns
+    -------
+    IOData
+        With the record's metadata in ``source``.
+    """
+    rec = load_record(
+        path, Ts, outputs=tuple(OUTPUTS), max_gap=max_gap, max_gap_samples=max_gap_samples
+    )
+    names = ["time_s", *rec.input_names, *rec.output_names]
+    units = dict(zip(names[1:], [*rec.input_units, *rec.output_units], strict=True))
+    table = np.column_stack([rec.time, rec.u, rec.y])
+    data = from_table(
+        names,
+        table,
+        rec.Ts,
+        None,
+        path,
+        "command" if input_columns is None else input_columns,
+        "speed_rpm" if output_columns is None else output_columns,
+        units=units,
+    )
+    return data._with(data.u, data.y, name=rec.name, source=rec.source)
+
+
+register_reader(".mcap", read_mcap)

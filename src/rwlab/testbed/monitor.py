@@ -11,7 +11,7 @@ motor current, and the wheel's mode, faults and the experiment's events. A
 record of ``rwlab hil`` (a ``/satellite`` channel) adds the satellite view on
 top: true and estimated pointing error against the requirement, every wheel's
 momentum, the wheels still in the loop, and the alarms among the events. Given
-a finished record with ``replay=True`` it plays the record back at ``speed``×.
+a finished record with ``replay=True`` it plays the record back at ``speed`` times real time.
 Bokeh serves its own JavaScript from the server: no CDN, works offline.
 """
 
@@ -25,7 +25,9 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import Any
 
+from rwlab._optional import require
 from rwlab.errors import ConfigError
 from rwlab.testbed.record import RecordFollower, read_record
 
@@ -80,9 +82,25 @@ class _Feed:
 def make_document(
     doc, path: str | Path, *, replay: bool = False, speed: float = 1.0, max_points: int = 20_000
 ) -> None:
-    """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler)."""
+    """Build the monitor page into a Bokeh ``Document`` (a Bokeh application handler).
+
+    Parameters
+    ----------
+    doc : bokeh.document.Document
+        The page to fill.
+    path : str or Path
+        The record (being written, or finished with ``replay``).
+    replay : bool
+        Play a finished record back.
+    speed : float
+        Replay speed, times real time.
+    max_points : int
+        Samples kept per plot.
+    """
+    require("bokeh", "the live monitor")
     from bokeh.layouts import column, row
-    from bokeh.models import ColumnDataSource, Div
+    from bokeh.models import ColumnDataSource
+    from bokeh.models.widgets import Div
     from bokeh.plotting import figure
 
     path = Path(path)
@@ -91,7 +109,9 @@ def make_document(
     tel = ColumnDataSource(
         {"t": [], "speed": [], "acceleration": [], "current": []}, name="telemetry"
     )
-    opts = dict(height=260, sizing_mode="stretch_width", tools="pan,wheel_zoom,box_zoom,reset")
+    opts: dict[str, Any] = dict(
+        height=260, sizing_mode="stretch_width", tools="pan,wheel_zoom,box_zoom,reset"
+    )
     f_speed = figure(title="command and measured speed [rpm]", x_axis_label="t [s]", **opts)
     f_speed.step("t", "command", source=cmd, mode="after", color="#d62728", legend_label="command")
     f_speed.line("t", "speed", source=tel, color="#1f77b4", legend_label="speed")
@@ -118,7 +138,7 @@ def make_document(
     )
     doc.title = f"rwlab monitor: {path.name}"
     recent: deque[tuple[float, float]] = deque()
-    state = {"frames": 0, "lost": 0, "counter": None, "events": []}
+    state: dict[str, Any] = {"frames": 0, "lost": 0, "counter": None, "events": [], "alarms": []}
 
     def refresh() -> None:
         new = feed.poll()
@@ -146,8 +166,20 @@ def make_document(
                 },
                 rollover=max_points,
             )
+        for e in new.get("/event", []):
+            line = html.escape(f"{e['t']:.2f} s {e['kind']} {e['message']}")
+            if e["kind"] == "alarm":  # the live fault detector's verdicts: every one stays shown
+                state["alarms"].append(f'<b style="color:#c00">{line}</b>')
+            elif e["kind"] == "fault_injected":
+                state["events"].append(f'<b style="color:#c00">{line}</b>')
+            else:
+                state["events"].append(line)
+        events.text = "<br>".join(state["alarms"] + state["events"][-4:])
+        if frames:
             last = frames[-1]
             fault = "<b style='color:#c00'>FAULT</b>" if last["fault_active"] else "ok"
+            if state["alarms"]:  # an alarm is a verdict on the wheel: red until the run ends
+                fault = f"<b style='color:#c00'>ALARM ({len(state['alarms'])})</b>"
             status.text = (
                 f"t = {last['t']:.2f} s &nbsp; mode <b>{last['mode']}</b> &nbsp; "
                 f"speed {last['speed_rpm']:.1f} rpm &nbsp; {fault} &nbsp; "
@@ -166,12 +198,6 @@ def make_document(
         beats = new.get("/heartbeat", [])
         if beats and beats[-1]["faults"]:
             status.text += f" &nbsp; fault bits {beats[-1]['faults']}"
-        for e in new.get("/event", []):
-            line = html.escape(f"{e['t']:.2f} s {e['kind']} {e['message']}")
-            if e["kind"] in ("alarm", "fault_injected"):  # the live fault detector's verdicts
-                line = f'<b style="color:#c00">{line}</b>'
-            state["events"].append(line)
-            events.text = "<br>".join(state["events"][-4:])
 
     doc.add_periodic_callback(refresh, REFRESH_MS)
 
@@ -227,6 +253,20 @@ def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:
     ``recent`` holds the (t, speed) pairs seen so far and is trimmed in place. The
     oldest frame kept is the newest one at least ``ACCEL_WINDOW`` old, so the
     difference always spans a frame interval, whatever the telemetry rate.
+
+    Parameters
+    ----------
+    recent : collections.deque of (float, float)
+        (t s, speed rpm) pairs, oldest first; trimmed in place.
+    t : float
+        The newest frame's time, s.
+    speed : float
+        Its speed, rpm.
+
+    Returns
+    -------
+    float
+        Acceleration, rpm/s (0 until a window has passed).
     """
     recent.append((t, speed))
     while len(recent) > 2 and t - recent[1][0] >= ACCEL_WINDOW:
@@ -236,6 +276,7 @@ def acceleration_from_speed(recent: deque, t: float, speed: float) -> float:
 
 
 def _application(path, replay, speed):
+    require("bokeh", "the live monitor")
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
 
@@ -245,14 +286,32 @@ def _application(path, replay, speed):
 
 
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that is free on ``host`` right now."""
+    """A TCP port that is free on ``host`` right now.
+
+    Parameters
+    ----------
+    host : str
+        The address.
+
+    Returns
+    -------
+    int
+    """
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
 
 
 def check_port(host: str, port: int) -> None:
-    """Raise ``ConfigError`` now if the monitor could not listen on ``host:port``."""
+    """Raise ``ConfigError`` now if the monitor could not listen on ``host:port``.
+
+    Parameters
+    ----------
+    host : str
+        The address to listen on.
+    port : int
+        The TCP port.
+    """
     with socket.socket() as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as tornado binds
         try:
@@ -266,7 +325,13 @@ def check_port(host: str, port: int) -> None:
 
 
 def stop_process(child: subprocess.Popen) -> None:
-    """Stop a monitor started by :func:`start_process` and wait for it to release its port."""
+    """Stop a monitor started by :func:`start_process` and wait for it to release its port.
+
+    Parameters
+    ----------
+    child : subprocess.Popen
+        As :func:`start_process` returned it.
+    """
     child.terminate()
     try:
         child.wait(timeout=5)
@@ -278,7 +343,21 @@ def stop_process(child: subprocess.Popen) -> None:
 def serve(
     path, *, host: str = "127.0.0.1", port: int = 5006, replay: bool = False, speed: float = 1.0
 ) -> None:
-    """Serve the monitor until interrupted (blocking)."""
+    """Serve the monitor until interrupted (blocking).
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int
+        TCP port.
+    replay : bool
+        Play a finished record back.
+    speed : float
+        Replay speed, times real time.
+    """
     from bokeh.server.server import Server
 
     check_port(host, port)
@@ -296,8 +375,9 @@ def serve(
 
 
 class _ThreadedServer:
-    def __init__(self, server, loop, thread) -> None:
+    def __init__(self, server, loop, thread, url: str = "") -> None:
         self._server, self._loop, self._thread = server, loop, thread
+        self.url = url
 
     def stop(self) -> None:
         self._loop.add_callback(self._server.stop)
@@ -314,7 +394,26 @@ def serve_in_thread(
     speed: float = 1.0,
     wait_for_file: bool = False,
 ):
-    """Serve the monitor from a background thread; returns a handle with ``stop()`` and ``url``."""
+    """Serve the monitor from a background thread; returns a handle with ``stop()`` and ``url``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int, optional
+        TCP port (a free one by default).
+    replay, speed
+        As for :func:`serve`.
+    wait_for_file : bool
+        Let the page wait until the record appears.
+
+    Returns
+    -------
+    handle
+        With ``url`` and ``stop()``.
+    """
     import asyncio
 
     from bokeh.server.server import Server
@@ -322,7 +421,7 @@ def serve_in_thread(
 
     port = port or free_port(host)
     ready = threading.Event()
-    holder = {}
+    holder: dict[str, Any] = {}
 
     def run() -> None:
         asyncio.set_event_loop(asyncio.new_event_loop())
@@ -343,15 +442,27 @@ def serve_in_thread(
     thread.start()
     if not ready.wait(15):
         raise RuntimeError("the monitor server did not start")
-    handle = _ThreadedServer(holder["server"], holder["loop"], thread)
-    handle.url = f"http://{host}:{port}/"
-    return handle
+    return _ThreadedServer(holder["server"], holder["loop"], thread, f"http://{host}:{port}/")
 
 
 def start_process(path, *, host: str = "127.0.0.1", port: int = 5006) -> subprocess.Popen:
     """Run the monitor in its own process (what ``rwlab experiment --monitor`` does).
 
     Raises ``ConfigError`` at once if the port is taken; stop it with :func:`stop_process`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The record.
+    host : str
+        Address to listen on.
+    port : int
+        TCP port.
+
+    Returns
+    -------
+    subprocess.Popen
+        The monitor's process.
     """
     check_port(host, port)
     return subprocess.Popen(

@@ -13,7 +13,7 @@ Channels (JSON messages, JSON-schema described):
 - ``/command``   — t (s), sequence, mode, setpoint (rpm or rpm/s)
 - ``/telemetry`` — t, speed_rpm, current_a, mode, fault_active, speed_limited,
   sequence_echo, counter
-- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s
+- ``/heartbeat`` — t, mode, faults, temperature_c, uptime_s, bus_voltage_v
 - ``/event``     — t, kind, message (start, stop, fault, interrupt, error)
 - ``/can``       — t, id, data (hex), direction (only if raw frames are recorded)
 
@@ -64,6 +64,7 @@ CHANNELS: dict[str, dict] = {
         "faults": _INT,
         "temperature_c": _NUM,
         "uptime_s": _INT,
+        "bus_voltage_v": _NUM,
     },
     "/event": {"t": _NUM, "kind": {"type": "string"}, "message": {"type": "string"}},
     "/can": {"t": _NUM, "id": _INT, "data": {"type": "string"}, "direction": {"type": "string"}},
@@ -83,7 +84,17 @@ def _schema(topic: str, props: dict | None = None) -> bytes:
 
 
 def partial_path(path: str | os.PathLike) -> Path:
-    """Where a record is written until it closes: ``name.partial.mcap`` beside ``path``."""
+    """Where a record is written until it closes: ``name.partial.mcap`` beside ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final record's path.
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     return path.with_name(f"{path.stem}.partial{path.suffix or '.mcap'}")
 
@@ -272,9 +283,25 @@ def read_record(path: str | os.PathLike) -> Record:
     """Read a record, tolerating a truncated end (a crashed recorder).
 
     Raises ``FileFormatError`` for a file that is not an MCAP record at all.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.mcap`` file.
+
+    Returns
+    -------
+    Record
+        Its metadata and topics.
     """
     path = Path(path)
     if not path.is_file():
+        partial = partial_path(path)
+        if partial.is_file() and partial != path:
+            raise FileNotFoundError(
+                f"no such record: {path}; the run that wrote it did not finish and left "
+                f"{partial} (readable up to where it stopped): use that file"
+            )
         raise FileNotFoundError(f"no such record: {path}")
     data = path.read_bytes()
     if not data.startswith(MAGIC):

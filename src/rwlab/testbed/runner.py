@@ -13,23 +13,29 @@ default (a 20-minute PRBS finishes in seconds, through real CAN frames);
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rwlab import __version__, signals
+from rwlab._display import ShortRepr
 from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter
 from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, WheelParams
-from rwlab.wheel.bus import INTERFACES, open_bus
+from rwlab.wheel.bus import open_bus, open_transport, transport_names
+from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
+from rwlab.wheel.link import get_protocol
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
+from rwlab.wheel.serial import open_pty
 
 __all__ = ["SIGNALS", "ExperimentConfig", "RunSummary", "make_signal", "run_experiment"]
 
@@ -66,8 +72,12 @@ class ExperimentConfig:
     min_hold, max_hold : float
         PRBS hold times, s (paper A: ≥ 5 s).
     rate_limit : bool
-        Limit a speed-mode PRBS's slope to the wheel's maximum acceleration, so the
-        identification signal is one the wheel can follow (steps stay steps).
+        Limit a speed-mode PRBS's slope to the wheel's maximum acceleration
+        (default True; RW90: 314 rpm/s), so the identification signal is one
+        the wheel can follow: the command then ramps instead of stepping, and a
+        linear model identified from it never sees the acceleration limit bind.
+        ``false`` (TOML) or ``--no-rate-limit`` (CLI) plays true steps, which
+        the wheel follows at its limit: the record then shows the nonlinearity.
     f0, f1 : float
         Chirp / multisine band, Hz (f1 default: 0.4/Ts).
     step_levels : tuple of float
@@ -76,13 +86,26 @@ class ExperimentConfig:
         CSV of setpoints for ``signal = 'file'`` (one column, or ``time_s`` + a column).
     raw_frames : bool
         Also record every CAN frame.
+    protocol : str
+        The wheel protocol (``rwlab``, ``canopen``, ``nsp`` or a registered one); on
+        the virtual interface a byte-stream protocol's twin answers over a pty pair.
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
+    wheel : {'rw90', 'ideal'}
+        The simulated wheel's parameter preset: the realistic RW90 twin (default)
+        or the one without imperfections (:data:`rwlab.wheel.physics.IDEAL`).
+    unit : int, optional
+        Unit seed of the simulated wheel: another RW90 drawn within its tolerances
+        (:meth:`rwlab.wheel.WheelParams.for_unit`); None is the nominal wheel.
     model : str
         ``model.json`` of an identified wheel: run the fault detector live
         (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
         each alarm as an ``alarm`` event.
+    late_tolerance : float, optional
+        Seconds a command may go out late before the run counts a timing fault
+        (default: 10 % of Ts, at least 1 ms, at most Ts). The lateness
+        statistics are recorded as a ``timing`` event before ``stop``.
     """
 
     signal: str = "prbs"
@@ -107,20 +130,26 @@ class ExperimentConfig:
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
     model: str | None = None
+    wheel: str = "rw90"
+    unit: int | None = None
+    protocol: str = "rwlab"
+    late_tolerance: float | None = None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:
             raise ConfigError(f"unknown signal {self.signal!r}; choose from {', '.join(SIGNALS)}")
         if self.mode not in MODES:
             raise ConfigError(f"unknown mode {self.mode!r}; choose 'speed' or 'acceleration'")
-        if self.interface not in INTERFACES:
-            raise ConfigError(f"unknown interface {self.interface!r}")
+        if not isinstance(self.interface, str) or self.interface not in transport_names():
+            raise ConfigError(
+                f"unknown interface {self.interface!r}; choose from {', '.join(transport_names())}"
+            )
         for name in ("amplitude", "duration", "Ts", "telemetry_rate", "min_hold", "max_hold"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
         number = (int, float)
-        expected = {
+        expected: dict[str, tuple[Any, str]] = {
             "seed": (int, "an integer"),
             "node_id": (int, "an integer 0..15"),
             "realtime": (bool, "true or false"),
@@ -131,13 +160,26 @@ class ExperimentConfig:
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
             "model": ((str, type(None)), "a path to model.json"),
+            "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
+            "wheel": (str, "a wheel preset name"),
+            "unit": ((int, type(None)), "an integer ≥ 0"),
         }
         for name, (kind, text) in expected.items():
             value = getattr(self, name)
             bad_bool = isinstance(value, bool) and kind is not bool
             if not isinstance(value, kind) or bad_bool:
                 raise ConfigError(f"{name} must be {text}, got {value!r}")
+        if self.seed < 0:
+            raise ConfigError(f"seed must be an integer ≥ 0, got {self.seed}")
+        tol = self.late_tolerance
+        if tol is not None and (
+            isinstance(tol, bool)
+            or not isinstance(tol, number)
+            or not (math.isfinite(tol) and tol > 0)
+        ):
+            raise ConfigError(f"late_tolerance must be a positive number of seconds, got {tol!r}")
+        self.wheel_params()  # a bad preset or unit fails here, before any work
         if not 0 <= self.node_id <= 15:
             raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
         if not (math.isfinite(self.latency) and self.latency >= 0):
@@ -150,6 +192,9 @@ class ExperimentConfig:
             isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in levels
         ):
             raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
+        from rwlab.wheel.link import get_protocol
+
+        get_protocol(self.protocol)  # ConfigError naming the known ones
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
         if self.duration < self.Ts:
@@ -166,6 +211,27 @@ class ExperimentConfig:
                 f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
                 f"{MAX_COMMANDS:.0e} in one experiment"
             )
+
+    def wheel_params(self, base: WheelParams | None = None) -> WheelParams:
+        """The simulated wheel: ``base`` (default: the ``wheel`` preset), as unit ``unit``.
+
+        Parameters
+        ----------
+        base : WheelParams, optional
+
+        Returns
+        -------
+        WheelParams
+        """
+        params = WheelParams.preset(self.wheel) if base is None else base
+        return params if self.unit is None else params.for_unit(self.unit)
+
+    def tolerance(self) -> float:
+        """How late a command may go out, s: ``late_tolerance``, else 10 % of Ts (≥ 1 ms,
+        ≤ Ts): a later command shifts the signal the model is identified from."""
+        if self.late_tolerance is not None:
+            return float(self.late_tolerance)
+        return min(self.Ts, max(0.1 * self.Ts, 1e-3))
 
     def scheduled_faults(self) -> list[ScheduledFault]:
         """The faults, parsed (``ConfigError`` for a bad one)."""
@@ -190,6 +256,11 @@ class ExperimentConfig:
         from rwlab._toml import read_table
 
         table = read_table(path, "experiment", "experiment")
+        if not table:
+            raise ConfigError(
+                f"{path}: the experiment file is empty; give an [experiment] table with at "
+                "least the signal and its duration"
+            )
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
@@ -207,7 +278,20 @@ class ExperimentConfig:
 
 
 def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray:
-    """The command samples, one per Ts, in rpm or rpm/s."""
+    """The command samples, one per Ts, in rpm or rpm/s.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    params : WheelParams
+        The wheel's limits.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(duration / Ts),)
+        The commands.
+    """
     if cfg.signal == "prbs":
         x = signals.prbs(
             cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
@@ -237,7 +321,8 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
 
 
 def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
-    data = load_data(cfg.file, Ts=cfg.Ts) if Path(cfg.file).suffix == ".csv" else None
+    file = str(cfg.file)
+    data = load_data(file, Ts=cfg.Ts) if Path(file).suffix == ".csv" else None
     if data is None:
         raise ConfigError(f"setpoint file {cfg.file} must be a .csv")
     x = data.y[:, 0]  # a one-column file is read as the output channel
@@ -246,9 +331,23 @@ def _signal_from_file(cfg: ExperimentConfig) -> np.ndarray:
     return x[: round(cfg.duration / cfg.Ts)]
 
 
-@dataclass
-class RunSummary:
-    """What an experiment produced."""
+@dataclass(repr=False)
+class RunSummary(ShortRepr):
+    """What an experiment produced.
+
+    Parameters
+    ----------
+    path : Path
+        The record written.
+    commands, telemetry : int
+        Frames sent and received.
+    lost_frames, bad_frames : int
+        Telemetry frames missing, and refused (bad checksum or length).
+    duration : float
+        Length of the experiment, s.
+    status : {'completed', 'interrupted', 'fault', 'error'}
+        How it ended.
+    """
 
     path: Path
     commands: int
@@ -256,31 +355,104 @@ class RunSummary:
     lost_frames: int
     bad_frames: int
     duration: float
-    status: str  # "completed", "interrupted", "fault", "error"
+    status: str  # "completed", "completed with timing faults", "interrupted", "fault", "error"
+    timing: dict = dataclasses.field(default_factory=dict)
+    """Command timing (:class:`Timing`): period and lateness p50/p99/max, commands late."""
+
+
+class Timing:
+    """When each command went out against when it was due (real-time quality).
+
+    Lateness is the send time minus the due time t₀ + k·Ts; the period is the
+    interval between consecutive sends. A command later than ``tolerance`` is
+    *late*; a run with a late command did not hold its sample time, and its
+    record says so ("completed with timing faults").
+
+    Parameters
+    ----------
+    Ts : float
+        The command period, s.
+    tolerance : float
+        Lateness beyond which a command counts as late, s.
+    """
+
+    def __init__(self, Ts: float, tolerance: float) -> None:
+        self.Ts, self.tolerance = Ts, tolerance
+        self.due: list[float] = []
+        self.sent: list[float] = []
+
+    def add(self, due: float, sent: float) -> None:
+        """One command: due and sent clock times, s."""
+        self.due.append(due)
+        self.sent.append(sent)
+
+    def summary(self) -> dict:
+        """Plain JSON: ``lateness_s`` and ``period_s`` as p50/p99/max, ``late`` (count)."""
+        late = np.asarray(self.sent) - np.asarray(self.due)
+        period = np.diff(self.sent)
+
+        def stats(x: np.ndarray) -> dict:
+            if not x.size:
+                return {"p50": None, "p99": None, "max": None}
+            return {k: float(np.percentile(x, q)) for k, q in (("p50", 50), ("p99", 99))} | {
+                "max": float(np.max(x))
+            }
+
+        return {
+            "Ts_s": self.Ts,
+            "tolerance_s": self.tolerance,
+            "commands": int(late.size),
+            "late": int(np.sum(late > self.tolerance)),
+            "lateness_s": stats(late),
+            "period_s": stats(period),
+        }
 
 
 def run_experiment(
     cfg: ExperimentConfig,
     out: str | os.PathLike,
     *,
-    params: WheelParams = RW90,
+    params: WheelParams | None = None,
     force: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> RunSummary:
     """Run ``cfg`` and write the record to ``out`` (an ``.mcap`` file).
 
+    ``params`` replaces the preset named by ``cfg.wheel`` (``cfg.unit`` still applies).
+
     ``progress(k, n)`` is called after each command. KeyboardInterrupt and
     errors idle the wheel, close the record (with an event saying why) and
     are re-raised.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+        The experiment.
+    out : str or os.PathLike
+        The ``.mcap`` file.
+    params : WheelParams
+        The simulated wheel's parameters.
+    force : bool
+        Replace an existing record.
+    progress : callable, optional
+        ``progress(k, n)`` after each command.
+
+    Returns
+    -------
+    RunSummary
     """
+    params = cfg.wheel_params(params)
     cfg.check_limits(params)
     command = make_signal(cfg, params)
+    detector = _live_detector(cfg)  # before the clock starts: loading delays no command
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
     metadata = {
         "rwlab_version": __version__,
         "dbc_sha256": dbc_sha256(),
+        "protocol": cfg.protocol,
+        "protocol_identity": get_protocol(cfg.protocol).identity(),
         "Ts": cfg.Ts,
         "mode": cfg.mode,
         "experiment": cfg.to_dict(),
@@ -290,44 +462,67 @@ def run_experiment(
         "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
         "time_origin": "s since the first command",
     }
+    detector = _live_detector(cfg)  # every check before the record opens: no empty record
+    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
-        host_bus = open_bus(cfg.interface, channel, simulated_clock=not realtime)
+        if stream_twin:  # a serial protocol's twin answers over a pseudo-terminal pair
+            node_bus, host_bus = open_pty()
+        else:
+            host_bus = open_transport(
+                cfg.protocol, cfg.interface, channel, simulated_clock=not realtime
+            )
     except BaseException:
         writer.discard()  # nothing was recorded: keep the old record, if any
         raise
     node = None
-    if simulated:
-        node_bus = open_bus("virtual", host_bus.channel_id, simulated_clock=not realtime)
-        node = WheelNode(
-            node_bus,
+    if not stream_twin:
+        node_bus = None
+    try:
+        if simulated:
+            if not stream_twin:
+                channel = host_bus.channel_id  # type: ignore[attr-defined]  # a VirtualBus has one
+                node_bus = open_bus("virtual", channel, simulated_clock=not realtime)
+            node = WheelNode(
+                node_bus,
+                cfg.node_id,
+                params,
+                clock=clock,
+                telemetry_rate=cfg.telemetry_rate,
+                latency=cfg.latency,
+                seed=cfg.seed,
+                protocol=cfg.protocol,
+            )
+            if realtime:
+                node.start()
+        client = WheelClient(
+            host_bus,
             cfg.node_id,
             params,
             clock=clock,
-            telemetry_rate=cfg.telemetry_rate,
-            latency=cfg.latency,
-            seed=cfg.seed,
+            timeout=max(0.5, 2 * cfg.Ts),
+            protocol=cfg.protocol,
         )
-        if realtime:
-            node.start()
-    client = WheelClient(host_bus, cfg.node_id, params, clock=clock, timeout=max(0.5, 2 * cfg.Ts))
+        client.link.set_telemetry_rate(cfg.telemetry_rate)
+    except BaseException:  # refused before the first command: no record, no bus left open
+        writer.discard()
+        if node is not None:
+            node.stop()
+        for bus in (node_bus, host_bus):
+            if bus is not None:
+                bus.shutdown()
+        raise
     if cfg.raw_frames:
-        client.frame_listener = lambda msg, direction: writer.write(
-            "/can",
-            {
-                "t": msg.timestamp if not realtime else clock.now(),
-                "id": msg.arbitration_id,
-                "data": bytes(msg.data).hex(),
-                "direction": direction,
-            },
+        client.frame_listener = lambda t, frame_id, data, direction: writer.write(
+            "/can", {"t": t, "id": frame_id, "data": data.hex(), "direction": direction}
         )
     send = client.set_speed if cfg.mode == "speed" else client.set_acceleration
     status, k = "error", 0
+    timing = Timing(cfg.Ts, cfg.tolerance())
     t0 = clock.now() + 0.01
     writer.time_origin = t0
-    faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
-    detector = _live_detector(cfg)
     if node is not None:
         node.schedule_faults(faults, origin=t0)
     try:
@@ -345,12 +540,15 @@ def run_experiment(
                     client.latest.speed_rpm,
                     client.latest.current,
                     clock.now() - client.latest_time,
+                    client.lost_frames,
                 ):
                     writer.event(clock.now(), "alarm", _alarm_text(alarm))
             seq = send(float(value))
+            sent = clock.now()
+            timing.add(t0 + k * cfg.Ts, sent)
             writer.write(
                 "/command",
-                {"t": clock.now(), "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
+                {"t": sent, "sequence": seq, "mode": cfg.mode, "setpoint": float(value)},
             )
             if k == 0:
                 client.wait_ack(seq)  # no wheel on the bus: WheelTimeout now, not an empty record
@@ -359,7 +557,7 @@ def run_experiment(
         _record_until(client, writer, clock, t0 + len(command) * cfg.Ts, realtime)
         for fault in faults:  # those that started after the last command
             writer.event(t0 + fault.t_s, "fault_injected", str(fault))
-        status = "completed"
+        status = "completed" if not timing.summary()["late"] else "completed with timing faults"
     except KeyboardInterrupt:
         status = "interrupted"
         raise
@@ -374,6 +572,10 @@ def run_experiment(
         try:
             client.close()  # the wheel idles first, whatever else fails
             _drain(client, writer, clock)
+            dropped = _dropped_text(client)
+            if dropped:
+                writer.event(clock.now(), "dropped_frames", dropped)
+            writer.event(clock.now(), "timing", json.dumps(timing.summary()))
             writer.event(clock.now(), "stop", status)
         finally:
             try:
@@ -381,8 +583,8 @@ def run_experiment(
             finally:
                 if node is not None:
                     node.stop()
-                    node.bus.shutdown()
-                host_bus.shutdown()
+                    _close(node.bus)
+                _close(host_bus)
     return RunSummary(
         Path(out),
         writer.counts["/command"],
@@ -391,14 +593,33 @@ def run_experiment(
         client.bad_frames,
         clock.now() - t0,
         status,
+        timing.summary(),
     )
+
+
+def _close(transport: object) -> None:
+    """Shut a bus down, or close a serial port."""
+    closer = getattr(transport, "shutdown", None) or getattr(transport, "close", None)
+    if closer is not None:
+        closer()
+
+
+def _dropped_text(client: WheelClient) -> str:
+    """What the host dropped from the bus, or '' when nothing was."""
+    counts = {
+        "damaged": client.bad_frames,
+        "of other protocols": client.foreign_frames,
+        "implausible": client.implausible_frames,
+        "commands not acknowledged": client.lost_commands,
+    }
+    return ", ".join(f"{n} {what}" for what, n in counts.items() if n)
 
 
 def _live_detector(cfg: ExperimentConfig):
     """The fault detector for ``cfg.model``, or None."""
     if cfg.model is None:
         return None
-    from rwlab.diagnose import Diagnoser
+    from rwlab.diagnose import Diagnoser, HealthyReference
     from rwlab.wheel.identified import IdentifiedWheel
 
     wheel = IdentifiedWheel.from_json(cfg.model)
@@ -407,13 +628,17 @@ def _live_detector(cfg: ExperimentConfig):
             f"live diagnosis needs speed mode at the model's Ts = {wheel.Ts:g} s "
             f"(the experiment: {cfg.mode} mode, Ts = {cfg.Ts:g} s)"
         )
-    return Diagnoser(wheel)
+    return Diagnoser(wheel, HealthyReference.from_model_file(cfg.model))
 
 
 def _alarm_text(alarm) -> str:
+    size = ""
+    if alarm.magnitude is not None:
+        ci = "" if alarm.ci is None else f" [{alarm.ci[0]:.4g}, {alarm.ci[1]:.4g}]"
+        size = f" {alarm.magnitude:.4g}{ci} {alarm.unit}"
     return (
         f"{alarm.kind} at {alarm.t_s:.1f} s ({alarm.detector} test, statistic "
-        f"{alarm.statistic:.3g} > {alarm.threshold:.3g})"
+        f"{alarm.statistic:.3g} > {alarm.threshold:.3g}){size}"
     )
 
 
@@ -433,7 +658,9 @@ def _record_until(
 
 def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
     for t, frame in client.drain():
-        if isinstance(frame, Telemetry):
+        if isinstance(frame, Implausible):  # flagged, never recorded as the wheel's state
+            writer.event(t, "implausible_telemetry", frame.reason)
+        elif isinstance(frame, Telemetry):
             writer.write(
                 "/telemetry",
                 {
@@ -455,6 +682,7 @@ def _drain(client: WheelClient, writer: RecordWriter, clock) -> None:
                     "mode": frame.mode.name,
                     "faults": int(frame.faults),
                     "temperature_c": frame.temperature,
+                    "bus_voltage_v": frame.bus_voltage,
                     "uptime_s": frame.uptime,
                 },
             )

@@ -1,9 +1,11 @@
 """The reaction wheel: physics (RW90 default), CAN protocol, simulated node and host driver.
 
 - :class:`WheelParams`, :data:`RW90`, :class:`WheelPhysics` — the wheel itself.
-- ``rw.dbc`` / :mod:`rwlab.wheel.protocol` — the frames, shared by node and driver.
-- :class:`WheelNode` — a simulated wheel on any python-can bus, with fault injection.
-- :class:`WheelClient` — the host driver.
+- :mod:`rwlab.wheel.protocol` — the protocol-free messages, and ``rw.dbc``'s frames.
+- :mod:`rwlab.wheel.link` — wheel protocols by name (``rwlab``, ``canopen``, ``nsp``,
+  and any added by the entry-point group ``rwlab.wheel_protocols``).
+- :class:`WheelNode` — a simulated wheel speaking any of them, with fault injection.
+- :class:`WheelClient` — the host driver, the same for every protocol.
 - :class:`SimClock`, :class:`WallClock` — time sources.
 - :class:`SlipSerialBus` — the same frames over RS-232 (SLIP + CRC-16).
 - :class:`IdentifiedWheel` — the model chosen by ``rwlab identify`` (``model.json``).
@@ -15,6 +17,10 @@ _SOURCES = {
     "WheelCommandError": "rwlab.errors",
     "WheelFault": "rwlab.errors",
     "WheelTimeout": "rwlab.errors",
+    "WheelConflict": "rwlab.errors",
+    "Implausible": "rwlab.wheel.client",
+    "WheelProtocol": "rwlab.wheel.link",
+    "get_protocol": "rwlab.wheel.link",
     "WheelClient": "rwlab.wheel.client",
     "SimClock": "rwlab.wheel.clock",
     "WallClock": "rwlab.wheel.clock",
@@ -44,15 +50,19 @@ __all__ = [
     "Fault",
     "FaultInjection",
     "IdentifiedWheel",
+    "Implausible",
     "Mode",
     "SimClock",
     "SlipSerialBus",
     "WallClock",
     "WheelClient",
     "WheelCommandError",
+    "WheelConflict",
     "WheelFault",
     "WheelNode",
     "WheelParams",
     "WheelPhysics",
+    "WheelProtocol",
     "WheelTimeout",
+    "get_protocol",
 ]

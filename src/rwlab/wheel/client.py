@@ -1,26 +1,58 @@
 """The host driver: ``WheelClient`` commands one wheel over any python-can bus.
 
 Like python-can itself, one client works with every transport: a virtual bus
-in tests, SocketCAN on a bench, the SLIP serial bus over RS-232. The client
-refuses commands outside the wheel's limits before sending, raises
-``WheelTimeout`` when the wheel is silent and ``WheelFault`` when it reports
-a fault, and — used as a context manager — always leaves the wheel idle.
+in tests, SocketCAN on a bench, the SLIP serial bus over RS-232; and with every
+wheel protocol of :mod:`rwlab.wheel.link` (``rwlab``, ``canopen``, ``nsp``, or
+a registered one). The client refuses commands outside the wheel's limits
+before sending, raises ``WheelTimeout`` when the wheel is silent, ``WheelFault``
+when it reports a fault and ``WheelConflict`` when two sources answer under its
+node id, and — used as a context manager — always leaves the wheel idle.
+
+Whatever else arrives is never fatal: damaged frames are dropped and counted
+(:attr:`WheelClient.bad_frames`), frames of other protocols too
+(:attr:`WheelClient.foreign_frames`), and telemetry beyond what the wheel can
+physically do (speed past its overspeed trip, current past twice its
+overcurrent trip, non-finite values) is not taken as the wheel's state: it is
+counted (:attr:`WheelClient.implausible_frames`) and handed to :meth:`drain`
+as an :class:`Implausible` event.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
 
-import can
-
-from rwlab.errors import WheelCommandError, WheelFault, WheelTimeout
+from rwlab.errors import WheelCommandError, WheelConflict, WheelFault, WheelTimeout
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.link import RawListener, get_protocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams
 
-__all__ = ["WheelClient"]
+__all__ = ["Implausible", "WheelClient"]
+
+IMPLAUSIBLE_SPEED_MARGIN = 1.1  # × the overspeed trip: beyond it no real wheel is spinning
+IMPLAUSIBLE_CURRENT_MARGIN = 2.0  # × the overcurrent trip
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """Telemetry the wheel cannot have sent truthfully, kept as an event, not as its state.
+
+    Attributes
+    ----------
+    node_id : int
+    reason : str
+        What is beyond the physical limit, with the numbers.
+    telemetry : Telemetry
+        The frame as received.
+    """
+
+    node_id: int
+    reason: str
+    telemetry: proto.Telemetry
 
 
 class WheelClient:
@@ -40,17 +72,21 @@ class WheelClient:
         Seconds to wait for an answer before ``WheelTimeout``.
     history : int
         How many received telemetry frames to keep in :attr:`received`.
+    protocol : str
+        The wheel protocol by name: ``rwlab`` (default), ``canopen``, ``nsp`` or a
+        registered one (:func:`rwlab.wheel.link.get_protocol`).
     """
 
     def __init__(
         self,
-        bus: can.BusABC,
+        bus: Any,
         node_id: int = 0,
         params: WheelParams = RW90,
         *,
         clock: WallClock | SimClock | None = None,
         timeout: float = 0.5,
         history: int = 100_000,
+        protocol: str = "rwlab",
     ) -> None:
         self.bus = bus
         self.node_id = proto._check_node(node_id)
@@ -61,13 +97,41 @@ class WheelClient:
         self.latest_time: float | None = None
         self.heartbeat: proto.Heartbeat | None = None
         self.received: deque[tuple[float, proto.Telemetry]] = deque(maxlen=history)
-        self.bad_frames = 0
         self.lost_frames = 0
+        self.implausible_frames = 0
+        self.sources: set[str] = set()
         self._sequence = 0
         self._sent_at: dict[int, float] = {}
-        self._inbox: list[tuple[float, proto.Telemetry | proto.Heartbeat]] = []
-        self.frame_listener: Callable[[can.Message, str], None] | None = None
-        """Called with every raw frame and 'rx' or 'tx' (for recording the bus)."""
+        self._inbox: list[tuple[float, proto.Telemetry | proto.Heartbeat | Implausible]] = []
+        self.protocol = get_protocol(protocol)
+        self.link = self.protocol.host_link(bus, self.node_id, clock=self.clock)
+        self.link.configure(params)
+
+    @property
+    def frame_listener(self) -> RawListener | None:
+        """Called with (t, id, bytes, 'rx' or 'tx') for every raw frame (to record the bus)."""
+        return self.link.raw_listener
+
+    @frame_listener.setter
+    def frame_listener(self, listener: RawListener | None) -> None:
+        self.link.raw_listener = listener
+
+    @property
+    def bad_frames(self) -> int:
+        """Damaged frames and datagrams received (dropped)."""
+        bus = self.bus
+        extra = int(getattr(bus, "bad_datagrams", 0)) + int(getattr(bus, "bad_frames", 0))
+        return self.link.bad_frames + extra
+
+    @property
+    def lost_commands(self) -> int:
+        """Commands the protocol knows the wheel did not receive (no ACK, for nsp)."""
+        return self.link.lost_commands
+
+    @property
+    def foreign_frames(self) -> int:
+        """Valid frames of other protocols received (ignored)."""
+        return self.link.foreign_frames
 
     # -- commands --------------------------------------------------------------------
     def set_speed(self, rpm: float) -> int:
@@ -99,35 +163,31 @@ class WheelClient:
             )
 
     def _send(self, mode: Mode, setpoint: float, allow_faulted: bool = False) -> int:
-        self.poll()
-        if not allow_faulted:
+        if allow_faulted:  # idle and clear go out whatever the bus says meanwhile
+            try:
+                self.poll()
+            except WheelConflict:
+                pass
+        else:
+            self.poll()
             self.raise_if_faulted()
         self._sequence = self._sequence % 255 + 1
-        msg = proto.encode_command(
-            proto.Command(self.node_id, mode, float(setpoint), self._sequence)
-        )
-        msg.timestamp = self.clock.now()
-        self.bus.send(msg)
-        if self.frame_listener:
-            self.frame_listener(msg, "tx")
-        self._sent_at[self._sequence] = msg.timestamp
+        now = self.clock.now()
+        self.link.send(proto.Command(self.node_id, mode, float(setpoint), self._sequence), now)
+        self._sent_at[self._sequence] = now
         return self._sequence
 
     # -- receiving --------------------------------------------------------------------
     def poll(self) -> list[tuple[float, proto.Telemetry]]:
         """Read every frame waiting on the bus; returns the new telemetry with times (s)."""
         new = []
-        while (msg := self.bus.recv(timeout=0)) is not None:
-            if self.frame_listener:
-                self.frame_listener(msg, "rx")
-            try:
-                frame = proto.decode(msg)
-            except proto.ProtocolError:
-                self.bad_frames += 1
+        for incoming in self.link.receive(self.clock.now()):
+            t, frame = incoming.t, incoming.frame
+            self._check_source(incoming.source)
+            if isinstance(frame, proto.Telemetry) and (why := self._implausible(frame)):
+                self.implausible_frames += 1
+                self._inbox.append((t, Implausible(self.node_id, why, frame)))
                 continue
-            if frame is None or frame.node_id != self.node_id or isinstance(frame, proto.Command):
-                continue  # other protocols, other wheels, and commands (ours, echoed by UDP)
-            t = msg.timestamp if isinstance(self.clock, SimClock) else self.clock.now()
             if isinstance(frame, proto.Telemetry):
                 if self.latest is not None:
                     self.lost_frames += (frame.counter - self.latest.counter - 1) % 256
@@ -139,8 +199,29 @@ class WheelClient:
             self._inbox.append((t, frame))
         return new
 
-    def drain(self) -> list[tuple[float, proto.Telemetry | proto.Heartbeat]]:
-        """Every telemetry and heartbeat frame received since the last drain, in order.
+    def _check_source(self, source: str | None) -> None:
+        if source is None or source in self.sources:
+            return
+        self.sources.add(source)
+        if len(self.sources) > 1:
+            raise WheelConflict(
+                f"wheel {self.node_id} answers from {len(self.sources)} sources "
+                f"({', '.join(sorted(self.sources))}): two wheels share node id {self.node_id} "
+                "on this channel; give each its own node id or channel"
+            )
+
+    def _implausible(self, t: proto.Telemetry) -> str | None:
+        p = self.params
+        speed_max = IMPLAUSIBLE_SPEED_MARGIN * p.overspeed_fault_rpm
+        current_max = IMPLAUSIBLE_CURRENT_MARGIN * p.overcurrent_fault
+        if not (math.isfinite(t.speed_rpm) and abs(t.speed_rpm) <= speed_max):
+            return f"speed {t.speed_rpm:g} rpm beyond the wheel's physical ±{speed_max:g} rpm"
+        if not (math.isfinite(t.current) and abs(t.current) <= current_max):
+            return f"current {t.current:g} A beyond the wheel's physical ±{current_max:g} A"
+        return None
+
+    def drain(self) -> list[tuple[float, proto.Telemetry | proto.Heartbeat | Implausible]]:
+        """Every telemetry, heartbeat and implausible frame received since the last drain.
 
         Unlike :meth:`poll`, this includes frames read inside commands and waits,
         so a recorder that drains loses nothing.
@@ -194,7 +275,11 @@ class WheelClient:
         """The newest telemetry; ``WheelTimeout`` if none arrived within ``max_age`` s."""
         self.poll()
         age = self.timeout if max_age is None else max_age
-        if self.latest is None or self.clock.now() - self.latest_time > age:
+        if (
+            self.latest is None
+            or self.latest_time is None
+            or self.clock.now() - self.latest_time > age
+        ):
             raise WheelTimeout(f"no telemetry from wheel {self.node_id} in the last {age:g} s")
         return self.latest
 
@@ -227,9 +312,11 @@ class WheelClient:
             self.wait_ack(self.idle())
         except Exception:
             pass
+        finally:
+            self.link.close()
 
     def __enter__(self) -> WheelClient:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

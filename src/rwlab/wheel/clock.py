@@ -42,6 +42,11 @@ class WallClock:
 class SimClock:
     """Simulated time that advances only when someone sleeps.
 
+    Attached tickers (a node's ``poll``, a polling driver's link) are called as
+    time advances; a ticker may return the next time it wants to be called
+    (a float), and the clock then stops there on its way, so a driver that polls
+    its wheel at 10 Hz is called at 10 Hz however long the sleep.
+
     Parameters
     ----------
     start : float
@@ -52,15 +57,18 @@ class SimClock:
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)
-        self._tickers: list[Callable[[float], None]] = []
+        self._tickers: list[Callable[[float], object]] = []
+        self._wakeups: dict[Callable[[float], object], float] = {}
+        self._running: list[Callable[[float], object]] = []
 
-    def attach(self, ticker: Callable[[float], None]) -> None:
+    def attach(self, ticker: Callable[[float], object]) -> None:
         """Call ``ticker(t)`` whenever time advances to ``t`` (a node's ``poll``)."""
         self._tickers.append(ticker)
 
-    def detach(self, ticker: Callable[[float], None]) -> None:
+    def detach(self, ticker: Callable[[float], object]) -> None:
         if ticker in self._tickers:
             self._tickers.remove(ticker)
+        self._wakeups.pop(ticker, None)
 
     def now(self) -> float:
         return self._t
@@ -68,9 +76,35 @@ class SimClock:
     def sleep_until(self, t: float) -> None:
         if t <= self._t:
             return
-        self._t = float(t)
+        while True:
+            due = [w for w in self._wakeups.values() if self._t < w < t]
+            step = min(due, default=t)
+            self._t = float(step)
+            self._tick()
+            if step >= t:
+                return
+
+    def kick(self) -> None:
+        """Let every other attached ticker run now, without advancing time.
+
+        A request/response driver calls this after writing a request so the
+        simulated wheel answers at the same simulated instant.
+        """
+        self._tick()
+
+    def _tick(self) -> None:
         for tick in list(self._tickers):
-            tick(self._t)
+            if tick in self._running:
+                continue  # a ticker that kicks is not re-entered
+            self._running.append(tick)
+            try:
+                wake = tick(self._t)
+            finally:
+                self._running.remove(tick)
+            if isinstance(wake, (int, float)) and not isinstance(wake, bool):
+                self._wakeups[tick] = float(wake)
+            else:
+                self._wakeups.pop(tick, None)
 
     def sleep(self, dt: float) -> None:
         self.sleep_until(self._t + dt)

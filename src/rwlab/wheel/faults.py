@@ -88,6 +88,15 @@ class ScheduledFault:
 def parse_fault(text: str) -> ScheduledFault:
     """Read ``NAME[=VALUE]@SECONDS`` (e.g. ``friction=3@900``, ``speed_sensor_stuck@600``).
 
+    Parameters
+    ----------
+    text : str
+        The fault, ``NAME[=VALUE]@SECONDS``.
+
+    Returns
+    -------
+    ScheduledFault
+
     Raises
     ------
     ConfigError

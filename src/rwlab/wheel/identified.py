@@ -14,13 +14,12 @@ Two models, one per sample step each (``IdentifiedWheel.step``):
 
 from __future__ import annotations
 
-import json
 import os
-from pathlib import Path
 
 import numpy as np
 
 from rwlab.errors import FileFormatError, ModelError
+from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_advance
 
@@ -78,33 +77,87 @@ class IdentifiedWheel:
         ``model``: 'linear', 'nonlinear', or None for the file's ``preferred``
         one (the better validation fit; 'linear' in files without a nonlinear model).
         """
-        try:
-            info = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
-        if info.get("format") != "rwlab.WheelModel/1":
-            raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
-        sat = info["saturation"]
-        kind = model or info.get("preferred", "linear")
+        info = WheelModelFile.load(path)
+        return cls.from_file(info, model, source=str(path))
+
+    @classmethod
+    def from_info(
+        cls, info: dict, model: str | None = None, *, source: str = "model"
+    ) -> IdentifiedWheel:
+        """The wheel of a ``model.json`` already read (its dict); see :meth:`from_json`.
+
+        Parameters
+        ----------
+        info : dict
+            ``model.json``'s content.
+        model : {'linear', 'nonlinear'}, optional
+            Which model to fly (default: the file's ``preferred``).
+        source : str
+            The file's name for the messages.
+
+        Returns
+        -------
+        IdentifiedWheel
+        """
+        return cls.from_file(WheelModelFile.from_dict(info, source=source), model, source=source)
+
+    @classmethod
+    def from_file(
+        cls, info: WheelModelFile, model: str | None = None, *, source: str = "model"
+    ) -> IdentifiedWheel:
+        """The wheel a :class:`~rwlab.ident.model_file.WheelModelFile` describes.
+
+        Parameters
+        ----------
+        info : WheelModelFile
+            The model file's content.
+        model : {'linear', 'nonlinear'}, optional
+            Fly the linear or the servo model (default: the file's ``preferred``).
+        source : str
+            The file's name for the messages.
+
+        Returns
+        -------
+        IdentifiedWheel
+
+        Raises
+        ------
+        FileFormatError
+            No such model in the file, or a model no wheel can have (unstable,
+            non-finite, limits that are not positive).
+        """
+        kind = model or info.preferred
         if kind not in ("linear", "nonlinear"):
             raise FileFormatError(f"model must be 'linear' or 'nonlinear', got {kind!r}")
-        if kind == "nonlinear" and "nonlinear" not in info:
-            raise FileFormatError(f"{path}: holds no nonlinear model; run rwlab identify again")
-        servo = None
-        if kind == "nonlinear":
-            fields = {k: v for k, v in info["nonlinear"].items() if k != "validation_fit_percent"}
-            try:
-                servo = ServoModel.from_dict(fields)
-            except ModelError as exc:
-                raise FileFormatError(f"{path}: bad nonlinear model ({exc})") from None
-        return cls(
-            PolyModel.from_dict(info["model"]),
-            input_offset=info["input"]["offset"],
-            output_offset=info["output"]["offset"],
-            speed_limit_rpm=sat["speed_rpm"],
-            accel_limit_rpm_s=sat["accel_rpm_s"],
-            servo=servo,
+        if kind == "nonlinear" and info.servo is None:
+            raise FileFormatError(f"{source}: holds no nonlinear model; run rwlab identify again")
+        wheel = cls(
+            info.model,
+            input_offset=info.input.offset,
+            output_offset=info.output.offset,
+            speed_limit_rpm=info.speed_limit_rpm,
+            accel_limit_rpm_s=info.accel_limit_rpm_s,
+            servo=info.servo if kind == "nonlinear" else None,
         )
+        try:
+            wheel._check(source)
+        except ModelError as exc:
+            raise FileFormatError(str(exc)) from None
+        return wheel
+
+    def _check(self, path) -> None:
+        """Refuse a model no wheel can have: unstable, or coefficients out of any range."""
+        coeffs = [np.ravel(m) for m in (self._A, self._B, self._C, self._D)]
+        if not all(np.all(np.isfinite(m)) for m in coeffs):
+            raise ModelError(f"{path}: the model holds non-finite coefficients")
+        if max(float(np.max(np.abs(m), initial=0.0)) for m in coeffs) > 1e12:
+            raise ModelError(f"{path}: the model's coefficients exceed 1e12: not a wheel's model")
+        poles = np.linalg.eigvals(self._A) if self._A.size else np.zeros(0)
+        if poles.size and np.max(np.abs(poles)) >= 1:
+            raise ModelError(
+                f"{path}: the model is unstable (largest pole |z| = {np.max(np.abs(poles)):.4g}); "
+                "a wheel's speed loop is stable, so the file is wrong: identify the wheel again"
+            )
 
     def reset(self, speed_rpm: float = 0.0) -> None:
         """Start at rest at ``speed_rpm`` (the model's equilibrium for that speed)."""

@@ -1,9 +1,16 @@
 """A simulated reaction wheel that answers on any python-can bus.
 
-``WheelNode`` runs :class:`WheelPhysics` and speaks the protocol of
-``rw.dbc``: it applies commands (after the configured latency), sends
-telemetry at a fixed rate and a heartbeat at 1 Hz and whenever a fault
-latches, and idles the wheel with a WATCHDOG fault when valid commands stop.
+``WheelNode`` runs :class:`WheelPhysics` and speaks a wheel protocol
+(``rw.dbc`` by default; any of :mod:`rwlab.wheel.link`'s registry): it applies
+commands (after the configured latency), sends telemetry at a fixed rate and a
+heartbeat at 1 Hz and whenever a fault latches, and idles the wheel with a
+WATCHDOG fault when valid commands stop.
+
+It survives any traffic: what is not a valid command for it is dropped and
+counted (:attr:`WheelNode.bad_frames`, :attr:`WheelNode.foreign_frames`); a
+setpoint beyond the wheel's limits is refused, counted and reported by the
+heartbeat's COMMAND_REJECTED bit; an error while polling is counted
+(:attr:`WheelNode.errors`) and the wheel runs on.
 ``FaultInjection`` makes it misbehave on purpose, and
 :meth:`WheelNode.schedule_faults` does so by name at given times
 (:mod:`rwlab.wheel.faults`).
@@ -16,15 +23,17 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
-import can
 import numpy as np
 
 from rwlab.errors import ConfigError
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault
+from rwlab.wheel.link import get_protocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
 
 __all__ = ["FaultInjection", "WheelNode"]
@@ -71,10 +80,11 @@ class WheelNode:
 
     Parameters
     ----------
-    bus : can.BusABC
-        Any python-can bus (virtual, socketcan, udp_multicast, or the SLIP serial bus).
+    bus : can.BusABC or serial port
+        The transport: any python-can bus (virtual, socketcan, udp_multicast, the SLIP
+        serial bus) for CAN protocols, a pyserial port for ``nsp``.
     node_id : int
-        0..15; selects the frame ids.
+        0..15; selects the frame ids (the address, for nsp).
     params : WheelParams
         Physics parameters (default RW90).
     clock : WallClock or SimClock
@@ -91,11 +101,14 @@ class WheelNode:
     faults : FaultInjection, optional
     seed : int
         For measurement noise and fault injection.
+    protocol : str
+        The wheel protocol by name (:func:`rwlab.wheel.link.get_protocol`): ``rwlab``
+        (default), ``canopen``, ``nsp`` or a registered one.
     """
 
     def __init__(
         self,
-        bus: can.BusABC,
+        bus: Any,
         node_id: int = 0,
         params: WheelParams = RW90,
         *,
@@ -106,6 +119,7 @@ class WheelNode:
         physics_dt: float = 1e-3,
         faults: FaultInjection | None = None,
         seed: int = 0,
+        protocol: str = "rwlab",
     ) -> None:
         if not 2.0 <= telemetry_rate <= 1000.0:
             raise ConfigError(f"telemetry_rate must be 2..1000 Hz, got {telemetry_rate}")
@@ -124,32 +138,42 @@ class WheelNode:
         self.physics_dt = physics_dt
         self.inject = faults or FaultInjection()
         self.rng = np.random.default_rng(seed + 1)
+        # the wheel's own timing jitter and frame loss (WheelParams), a stream of their own
+        self._timing_rng = np.random.default_rng([seed, 0x4A4954])
+        self.protocol = get_protocol(protocol)
+        self.link = self.protocol.node_link(bus, self.node_id, clock=self.clock)
+        self.link.configure(params)
         self.t = self.clock.now()
         self.t0 = self.t
         self._next_telemetry = self.t
         self._next_heartbeat = self.t
         self._pending: list[tuple[float, proto.Command]] = []
         self._scheduled: list[tuple[float, ScheduledFault]] = []
-        self._outbox: list[tuple[float, can.Message]] = []
+        self._outbox: list[tuple[float, proto.Telemetry | proto.Heartbeat]] = []
         self._last_command = self.t
         self._applied_seq = 0
         self._counter = 0
         self.commands_seen = 0
-        self.bad_frames = 0
+        self.rejected_commands = 0
+        self.command_rejected = False  # latched until CLEAR_FAULT, reported by the heartbeat
+        self.send_failures = 0
+        self.errors = 0
+        self.last_error: str | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
         if isinstance(self.clock, SimClock):
             self.clock.attach(self.poll)
 
-    def schedule_faults(self, faults, origin: float) -> None:
+    def schedule_faults(self, faults: Iterable[ScheduledFault], origin: float) -> None:
         """Apply each :class:`ScheduledFault` at clock time ``origin + fault.t_s``, s."""
         with self._lock:
             due = self._scheduled + [(origin + f.t_s, f) for f in faults]
             self._scheduled = sorted(due, key=lambda item: item[0])
 
     def _apply(self, fault: ScheduledFault) -> None:
-        wheel, inject, value = self.wheel, self.inject, fault.value
+        wheel, inject = self.wheel, self.inject
+        value = 0.0 if fault.value is None else fault.value  # None only for speed_sensor_stuck
         if fault.name == "friction":
             wheel.friction_factor = value
         elif fault.name == "torque_constant":
@@ -179,19 +203,40 @@ class WheelNode:
                 if self.t >= now:
                     break
 
+    @property
+    def bad_frames(self) -> int:
+        """Damaged frames and datagrams received, plus frames the transport refused to send."""
+        return (
+            self.link.bad_frames
+            + int(getattr(self.bus, "bad_datagrams", 0))
+            + int(getattr(self.bus, "bad_frames", 0))
+            + self.send_failures
+        )
+
+    @property
+    def foreign_frames(self) -> int:
+        """Valid frames of other protocols received (and ignored)."""
+        return self.link.foreign_frames
+
+    @property
+    def twin_source(self) -> str | None:
+        """Where another wheel answering under this node id was heard from, if one was."""
+        return self.link.heard_twin()
+
     def _receive(self, now: float) -> None:
-        simulated = isinstance(self.clock, SimClock)
-        while (msg := self.bus.recv(timeout=0)) is not None:
-            try:
-                frame = proto.decode(msg)
-            except proto.ProtocolError:
-                self.bad_frames += 1
+        for arrival, cmd in self.link.receive(now):
+            if not self._within_limits(cmd):
+                self.rejected_commands += 1
+                self.command_rejected = True
                 continue
-            if not isinstance(frame, proto.Command) or frame.node_id != self.node_id:
-                continue
-            arrival = msg.timestamp if simulated else now
-            self._pending.append((max(arrival, self.t) + self.latency, frame))
-            self._pending.sort(key=lambda p: p[0])
+            self._pending.append((max(arrival, self.t) + self.latency, cmd))
+        self._pending.sort(key=lambda p: p[0])
+
+    def _within_limits(self, cmd: proto.Command) -> bool:
+        """A setpoint the wheel may obey (a node refuses what its host should never send)."""
+        p = self.wheel.params
+        limit = {Mode.SPEED: p.max_speed_rpm, Mode.ACCELERATION: p.max_accel_rpm_s}.get(cmd.mode)
+        return math.isfinite(cmd.setpoint) and (limit is None or abs(cmd.setpoint) <= limit)
 
     def _advance(self, t_next: float) -> None:
         span = t_next - self.t
@@ -203,7 +248,7 @@ class WheelNode:
         self.t = t_next
 
     def _handle_events(self) -> None:
-        faults_before = self.wheel.faults
+        faults_before = (self.wheel.faults, self.command_rejected)
         while self._scheduled and self._scheduled[0][0] <= self.t:
             self._apply(self._scheduled.pop(0)[1])
         while self._pending and self._pending[0][0] <= self.t:
@@ -211,6 +256,8 @@ class WheelNode:
             self.commands_seen += 1
             self._last_command = self.t
             self._applied_seq = cmd.sequence
+            if cmd.mode == Mode.CLEAR_FAULT:
+                self.command_rejected = False
             self.wheel.command(cmd.mode, cmd.setpoint)
         if self.inject.overcurrent:
             self.wheel.forced_current = 2 * self.wheel.params.overcurrent_fault
@@ -218,23 +265,30 @@ class WheelNode:
         if wd and self.wheel.mode != Mode.IDLE and self.t - self._last_command > wd:
             self.wheel.latch(Fault.WATCHDOG)
         if self.t >= self._next_telemetry:
-            frame = proto.encode_telemetry(self._telemetry())
+            frame = self._telemetry()
             if self.t >= self.inject.dropout_until:
                 self._queue(frame)
             self._next_telemetry += self.period
             if self._next_telemetry <= self.t:  # fell behind (wall clock): do not burst
                 self._next_telemetry = self.t + self.period
-        if self.t >= self._next_heartbeat or self.wheel.faults != faults_before:
+        if (
+            self.t >= self._next_heartbeat
+            or (
+                self.wheel.faults,
+                self.command_rejected,
+            )
+            != faults_before
+        ):
             self._queue(
-                proto.encode_heartbeat(
-                    proto.Heartbeat(
-                        self.node_id,
-                        self.wheel.mode,
-                        self.wheel.faults,
-                        self.wheel.temperature,
-                        int(self.t - self.t0),
-                        self.commands_seen,
-                    )
+                proto.Heartbeat(
+                    self.node_id,
+                    self.wheel.mode,
+                    self.wheel.faults,
+                    self.wheel.temperature,
+                    int(self.t - self.t0),
+                    self.commands_seen,
+                    bus_voltage=self.wheel.measured_bus_voltage(),
+                    command_rejected=self.command_rejected,
                 )
             )
             if self.t >= self._next_heartbeat:
@@ -251,7 +305,7 @@ class WheelNode:
         return proto.Telemetry(
             self.node_id,
             speed,
-            self.wheel.current,
+            self.wheel.measured_current(),
             self.wheel.mode,
             bool(self.wheel.faults),
             self.wheel.speed_limited,
@@ -259,25 +313,27 @@ class WheelNode:
             self._counter,
         )
 
-    def _queue(self, msg: can.Message) -> None:
-        self._outbox.append((self.t + self.inject.extra_delay, msg))
+    def _queue(self, frame: proto.Telemetry | proto.Heartbeat) -> None:
+        p = self.wheel.params
+        if p.frame_loss_rate and self._timing_rng.random() < p.frame_loss_rate:
+            return  # lost on the way (the telemetry counter shows it)
+        jitter = p.telemetry_jitter_s * self._timing_rng.random() if p.telemetry_jitter_s else 0.0
+        self._outbox.append((self.t + self.inject.extra_delay + jitter, frame))
+        if jitter:
+            self._outbox.sort(key=lambda item: item[0])
 
     def _flush(self) -> None:
         while self._outbox and self._outbox[0][0] <= self.t:
-            release, msg = self._outbox.pop(0)
+            release, frame = self._outbox.pop(0)
             if self.inject.silent or self.rng.random() < self.inject.drop_rate:
                 continue
+            corrupt = None
             if self.rng.random() < self.inject.corrupt_rate:
-                data = bytearray(msg.data)
-                data[int(self.rng.integers(0, 7))] ^= 0xA5
-                msg = can.Message(
-                    arbitration_id=msg.arbitration_id, data=data, is_extended_id=False
-                )
-            msg.timestamp = release
+                corrupt = int(self.rng.integers(0, 7))
             try:
-                self.bus.send(msg)
-            except can.CanError:
-                self.bad_frames += 1  # a full or broken bus must not kill the wheel
+                self.link.send(frame, release, corrupt)
+            except Exception:  # a full or broken transport must not kill the wheel
+                self.send_failures += 1
 
     # -- wall-clock thread -------------------------------------------------------------
     def start(self, poll_period: float = 2e-4) -> WheelNode:
@@ -297,7 +353,11 @@ class WheelNode:
 
     def _run(self, poll_period: float) -> None:
         while not self._stop.is_set():
-            self.poll(self.clock.now())
+            try:
+                self.poll(self.clock.now())
+            except Exception as exc:  # stray traffic or a transport hiccup: count, run on
+                self.errors += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
             self._stop.wait(poll_period)
 
     def stop(self) -> None:
@@ -308,9 +368,10 @@ class WheelNode:
             self._thread = None
         if isinstance(self.clock, SimClock):
             self.clock.detach(self.poll)
+        self.link.close()
 
     def __enter__(self) -> WheelNode:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()

@@ -28,19 +28,52 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.errors import ConfigError
+from rwlab.wheel.imperfections import stribeck_friction
 
-__all__ = ["RW90", "Fault", "Mode", "WheelParams", "WheelPhysics", "rad_s_to_rpm", "rpm_to_rad_s"]
+__all__ = [
+    "IDEAL",
+    "PRESETS",
+    "RW90",
+    "Fault",
+    "Mode",
+    "WheelParams",
+    "WheelPhysics",
+    "rad_s_to_rpm",
+    "rpm_to_rad_s",
+]
 
 RPM = 2 * math.pi / 60  # rad/s per rpm
 
 
 def rpm_to_rad_s(rpm):
-    """Convert rpm to rad/s."""
+    """Convert rpm to rad/s.
+
+    Parameters
+    ----------
+    rpm : float or array_like
+        Angular rate, rpm.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The same rate, rad/s.
+    """
     return rpm * RPM
 
 
 def rad_s_to_rpm(rad_s):
-    """Convert rad/s to rpm."""
+    """Convert rad/s to rpm.
+
+    Parameters
+    ----------
+    rad_s : float or array_like
+        Angular rate, rad/s.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The same rate, rpm.
+    """
     return rad_s / RPM
 
 
@@ -88,7 +121,9 @@ class WheelParams:
     speed_kp, speed_ki : float
         Inner PI speed loop: acceleration request per speed error (1/s, 1/s²).
     speed_resolution_rpm, speed_noise_rpm, min_measurable_rpm : float
-        Hall-sensor speed measurement: quantum, noise σ and dead zone, rpm.
+        Reported speed: quantum (default 0.1), added white noise σ (default 0: the
+        Hall model makes the noise) and the slowest speed read as non-zero (default 5),
+        rpm.
     overspeed_fault_rpm : float
         Hard overspeed fault threshold, rpm.
     overcurrent_fault : float
@@ -96,7 +131,83 @@ class WheelParams:
     thermal_resistance, thermal_time_constant, overtemp_fault_c, ambient_c : float
         First-order motor thermal model (K/W, s) and its fault threshold (°C).
     winding_resistance : float
-        Ω, for copper losses in the thermal model.
+        Ω at ``ambient_c``, for copper losses, the back-EMF limit and the thermal model.
+
+    The imperfections (issue 22). Each is on by default, at a typical value with
+    its source; :data:`IDEAL` turns them off (the twin before issue 22: only the
+    white speed noise and quantum). A unit seed (:meth:`for_unit`, ``unit`` in the
+    TOML) draws the manufacturing-dependent ones within
+    :data:`rwlab.wheel.imperfections.TOLERANCES`.
+
+    stiction : bool
+        Friction law: breakaway + Stribeck + Coulomb + viscous, stuck at zero speed
+        until the motor torque exceeds the breakaway torque (Armstrong & Canudas de
+        Wit 1995; Basilisk's reaction-wheel friction model). False: the plain
+        Coulomb + viscous law, no stuck state.
+    breakaway_friction : float
+        τ_brk, N·m (default 3e-4: 1.5× Coulomb; ball bearings 1.2–2×).
+    stribeck_speed_rpm : float
+        Speed over which friction falls from breakaway to Coulomb, rpm (default 10).
+    viscous_temp_coeff : float
+        Fall of viscous friction per K above ``ambient_c``, 1/K (default 0.02: a
+        bearing oil's viscosity halves over ~35 K).
+    friction_drift : float
+        σ of the friction factor's random walk per √hour (default 0.05: lubricant
+        redistribution and run-in drift friction by a few % within a record).
+    cogging_torque : float
+        Amplitude of the detent torque, N·m, sinusoidal in rotor angle (default 1e-4:
+        under 1 % of the rated torque, a slotted small BLDC).
+    cogging_periods : int
+        Cogging periods per revolution (default 24 = lcm(12 slots, 8 poles)).
+    torque_ripple : float
+        Commutation ripple, a fraction of the motor torque at 6 per electrical
+        revolution (default 0.05; trapezoidal drives 5–15 %).
+    pole_pairs : int
+        Motor pole pairs p (default 4): 6p Hall edges and ripple periods per revolution.
+    torque_constant_temp_coeff : float
+        Fall of k_t per K above ambient, 1/K (default 0.0012: NdFeB magnets −0.12 %/K).
+    resistance_temp_coeff : float
+        Rise of the winding resistance per K, 1/K (default 0.0039: copper).
+    back_emf : bool
+        Limit the current by the voltage left after the back-EMF k_t·ω:
+        |R·i + k_t·ω| ≤ duty·V_bus. False: an unlimited supply.
+    bus_voltage : float
+        Supply voltage, V (default 24; small-satellite buses 12–28 V, not given in
+        paper A). Sags by ``bus_source_resistance`` × the supply current.
+    bus_source_resistance : float
+        Ω (default 0.3: harness and supply).
+    driver_max_duty : float
+        Largest PWM duty cycle (default 0.95: bootstrap and dead time).
+    bus_voltage_noise_v : float
+        σ of the bus-voltage measurement, V (default 0.05).
+    current_noise_a : float
+        σ of the motor-current measurement, A (default 0.004: shunt amplifier noise
+        and aliased PWM ripple).
+    current_lsb_a : float
+        ADC quantum of the current measurement, A (default 0.002: 11 bits over ±2 A);
+        0 for none.
+    current_offset_a : float
+        Offset of the current measurement, A (default 0; drawn ±5 mA per unit).
+    hall_speed : bool
+        Speed from Hall-edge timing (:class:`rwlab.wheel.imperfections.HallSpeedSensor`).
+        False: true speed plus ``speed_noise_rpm``, quantised, 0 below ``min_measurable_rpm``.
+    hall_misalignment_deg : float
+        σ of each Hall edge's misplacement, electrical degrees (default 3: sensor
+        placement ±0.2 mm and magnet pole-pitch errors); a fixed pattern per unit.
+    hall_jitter_s : float
+        σ of the edge-capture time, s (default 5e-7: input capture on an 8 MHz ARM).
+    hall_timer_hz : float
+        Capture timer clock, Hz (default 1e6).
+    hall_window_s : float
+        Averaging window of the firmware's speed estimate, s (default 0.1).
+    hall_pattern_seed : int
+        Seed of the Hall misplacement pattern and capture jitter (drawn per unit).
+    telemetry_jitter_s : float
+        Telemetry frames leave up to this late, uniformly, s (default 5e-4: the
+        firmware's main loop and CAN arbitration); on the simulated clock too.
+    frame_loss_rate : float
+        Fraction of the wheel's frames lost (default 1e-4: adapter overruns and
+        error frames beyond retransmission).
     """
 
     inertia: float = 4.2e-4
@@ -110,9 +221,9 @@ class WheelParams:
     coulomb_friction: float = 2.0e-4
     speed_kp: float = 0.485
     speed_ki: float = 0.123
-    speed_resolution_rpm: float = 0.5
-    speed_noise_rpm: float = 0.5
-    min_measurable_rpm: float = 2.0
+    speed_resolution_rpm: float = 0.1
+    speed_noise_rpm: float = 0.0
+    min_measurable_rpm: float = 5.0
     overspeed_fault_rpm: float = 8500.0
     overcurrent_fault: float = 1.5
     thermal_resistance: float = 8.0
@@ -120,20 +231,55 @@ class WheelParams:
     overtemp_fault_c: float = 85.0
     ambient_c: float = 20.0
     winding_resistance: float = 4.0
+    # -- imperfections (issue 22): the defaults misbehave like a real wheel; IDEAL turns
+    # each one off. Source and typical value of each in the class docstring.
+    stiction: bool = True
+    breakaway_friction: float = 3.0e-4
+    stribeck_speed_rpm: float = 10.0
+    viscous_temp_coeff: float = 0.02
+    friction_drift: float = 0.05
+    cogging_torque: float = 1.0e-4
+    cogging_periods: int = 24
+    torque_ripple: float = 0.05
+    pole_pairs: int = 4
+    torque_constant_temp_coeff: float = 0.0012
+    resistance_temp_coeff: float = 0.0039
+    back_emf: bool = True
+    bus_voltage: float = 24.0
+    bus_source_resistance: float = 0.3
+    driver_max_duty: float = 0.95
+    bus_voltage_noise_v: float = 0.05
+    current_noise_a: float = 0.004
+    current_lsb_a: float = 0.002
+    current_offset_a: float = 0.0
+    hall_speed: bool = True
+    hall_misalignment_deg: float = 3.0
+    hall_jitter_s: float = 5.0e-7
+    hall_timer_hz: float = 1.0e6
+    hall_window_s: float = 0.1
+    hall_pattern_seed: int = 0
+    telemetry_jitter_s: float = 5.0e-4
+    frame_loss_rate: float = 1.0e-4
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ConfigError(
-                    f"wheel parameter {f.name} must be a finite number, got {value!r}"
-                )
-            if value < 0 or (value == 0 and f.name in _STRICTLY_POSITIVE):
-                raise ConfigError(f"wheel parameter {f.name} must be > 0, got {value}")
+            _check_field(f.name, f.type, getattr(self, f.name))
         if self.max_speed_rpm >= self.overspeed_fault_rpm:
             raise ConfigError("overspeed_fault_rpm must be above max_speed_rpm")
         if self.current_limit >= self.overcurrent_fault:
             raise ConfigError("overcurrent_fault must be above current_limit")
+        if self.stiction and self.breakaway_friction < self.coulomb_friction:
+            raise ConfigError(
+                f"breakaway_friction ({self.breakaway_friction}) must be ≥ coulomb_friction "
+                f"({self.coulomb_friction}): a wheel needs more torque to start than to keep going"
+            )
+        for name, most in (("pole_pairs", 64), ("cogging_periods", 10_000)):
+            if getattr(self, name) > most:
+                raise ConfigError(f"{name} must be at most {most}, got {getattr(self, name)}")
+        if not self.driver_max_duty <= 1:
+            raise ConfigError(f"driver_max_duty must be in (0, 1], got {self.driver_max_duty}")
+        if not self.frame_loss_rate < 1:
+            raise ConfigError(f"frame_loss_rate must be in [0, 1), got {self.frame_loss_rate}")
 
     @property
     def max_speed(self) -> float:
@@ -155,28 +301,74 @@ class WheelParams:
         """Angular momentum at maximum speed, N·m·s."""
         return self.inertia * self.max_speed
 
+    def for_unit(self, unit: int) -> WheelParams:
+        """Another wheel of the same model: parameters drawn within their tolerances.
+
+        Parameters
+        ----------
+        unit : int
+            Unit seed ≥ 0 (the same seed, the same wheel).
+
+        Returns
+        -------
+        WheelParams
+            See :func:`rwlab.wheel.imperfections.draw_unit`.
+        """
+        from rwlab.wheel.imperfections import draw_unit
+
+        return draw_unit(self, unit)
+
+    @classmethod
+    def preset(cls, name: str) -> WheelParams:
+        """A named parameter set: ``'rw90'`` (the realistic default) or ``'ideal'``.
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        WheelParams
+        """
+        if not isinstance(name, str) or name not in PRESETS:
+            raise ConfigError(f"unknown wheel preset {name!r}; choose from {sorted(PRESETS)}")
+        return PRESETS[name]
+
     @classmethod
     def from_toml(cls, path: str | Path) -> WheelParams:
         """Load parameters from a TOML file (a ``[wheel]`` table or top-level keys).
 
-        Unknown keys are an error; missing keys keep the RW90 defaults.
+        Unknown keys are an error; missing keys keep the defaults of ``preset``
+        (``'rw90'``, the realistic twin, or ``'ideal'``). ``unit = N`` then draws
+        unit N around them (:meth:`for_unit`).
         """
         from rwlab._toml import read_table
 
         table = read_table(path, "wheel", "wheel parameter")
+        preset = table.pop("preset", "rw90")
+        unit = table.pop("unit", None)
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(
-                f"{path}: unknown wheel parameter(s) {unknown}; known: {sorted(known)}"
+                f"{path}: unknown wheel parameter(s) {unknown}; known: "
+                f"{sorted(known | {'preset', 'unit'})}"
             )
-        return replace(cls(), **table)
+        params = replace(cls.preset(preset), **table)
+        return params if unit is None else params.for_unit(unit)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 _STRICTLY_POSITIVE = {
+    "stribeck_speed_rpm",
+    "pole_pairs",
+    "cogging_periods",
+    "bus_voltage",
+    "driver_max_duty",
+    "hall_timer_hz",
+    "hall_window_s",
     "inertia",
     "max_speed_rpm",
     "max_accel_rpm_s",
@@ -188,8 +380,51 @@ _STRICTLY_POSITIVE = {
     "thermal_time_constant",
 }
 
+
+def _check_field(name: str, kind, value) -> None:
+    if kind in ("bool", bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"wheel parameter {name} must be true or false, got {value!r}")
+        return
+    if kind in ("int", int) and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ConfigError(f"wheel parameter {name} must be an integer, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"wheel parameter {name} must be a finite number, got {value!r}")
+    if name == "current_offset_a":
+        return  # a sensor offset has either sign
+    if value < 0 or (value == 0 and name in _STRICTLY_POSITIVE):
+        raise ConfigError(f"wheel parameter {name} must be > 0, got {value}")
+
+
 RW90 = WheelParams()
-"""The RW90 wheel of paper A (Table 1)."""
+"""The RW90 wheel of paper A (Table 1), with a real wheel's imperfections."""
+
+IDEAL = replace(
+    RW90,
+    speed_resolution_rpm=0.5,
+    speed_noise_rpm=0.5,
+    min_measurable_rpm=2.0,
+    stiction=False,
+    breakaway_friction=RW90.coulomb_friction,
+    viscous_temp_coeff=0.0,
+    friction_drift=0.0,
+    cogging_torque=0.0,
+    torque_ripple=0.0,
+    torque_constant_temp_coeff=0.0,
+    resistance_temp_coeff=0.0,
+    back_emf=False,
+    bus_voltage_noise_v=0.0,
+    current_noise_a=0.0,
+    current_lsb_a=0.0,
+    hall_speed=False,
+    telemetry_jitter_s=0.0,
+    frame_loss_rate=0.0,
+)
+"""The RW90 without imperfections (the twin before issue 22), for tests that need exact
+truth: dynamics exactly ``I ω̇ = k_t i − b ω − τ_c sign ω``, current reported exactly,
+speed with 0.5 rpm white noise and a 0.5 rpm quantum, no timing jitter or frame loss."""
+
+PRESETS = {"rw90": RW90, "ideal": IDEAL}
 
 
 def _clip(x: float, limit: float) -> float:
@@ -203,12 +438,22 @@ class WheelPhysics:
     ----------
     params : WheelParams
     seed : int or numpy.random.Generator
-        For the speed-measurement noise.
+        For the measurement noise and the friction drift.
     """
 
     def __init__(self, params: WheelParams = RW90, seed=0) -> None:
+        from rwlab.wheel.imperfections import HallSpeedSensor
+
         self.params = params
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        # a stream of its own, so that the ideal twin's speed noise is what it was
+        self._imp_rng = self.rng.spawn(1)[0]
+        self.time = 0.0  # s since start
+        self.angle = 0.0  # rotor angle, rad (unwrapped)
+        self.bus_voltage = params.bus_voltage  # at the driver, after the source's drop, V
+        self._drift = 0.0  # log of the friction factor's random walk
+        self._drift_clock = 0.0
+        self.hall = HallSpeedSensor(params) if params.hall_speed else None
         self.speed = 0.0  # rad/s
         self.current = 0.0  # A
         self.temperature = params.ambient_c  # °C
@@ -246,11 +491,19 @@ class WheelPhysics:
         self.mode, self.setpoint, self._integral = Mode.IDLE, 0.0, 0.0
 
     # -- dynamics ----------------------------------------------------------------
-    def _accel_request(self, dt: float) -> float:
+    def feedback_speed(self) -> float:
+        """The speed the wheel's own controller sees, rad/s.
+
+        With ``hall_speed`` the firmware's Hall estimate (it has no other speed
+        sensor: coarse and late at low speed, 0 near standstill); else the true speed.
+        """
+        return self.hall.read() if self.hall is not None else self.speed
+
+    def _accel_request(self, dt: float, speed: float) -> float:
         p = self.params
         if self.mode == Mode.SPEED:
             target = _clip(self.setpoint, p.max_speed)
-            error = target - self.speed
+            error = target - speed
             request = p.speed_kp * error + self._integral
             if abs(request) < p.max_accel:  # anti-windup: integrate only when unsaturated
                 self._integral += p.speed_ki * error * dt
@@ -266,14 +519,72 @@ class WheelPhysics:
             abs(speed) > 1e-9
         )
 
+    def bearing_friction(self, speed: float) -> float:
+        """The true friction torque while sliding at ``speed`` (rad/s), N·m.
+
+        Stribeck law (:func:`rwlab.wheel.imperfections.stribeck_friction`) with
+        stiction on, else Coulomb + viscous; the viscous part falls with
+        temperature; both scaled by the drift and any injected wear.
+        """
+        p = self.params
+        viscous = p.viscous_friction * math.exp(
+            -p.viscous_temp_coeff * (self.temperature - p.ambient_c)
+        )
+        if p.stiction:
+            law = stribeck_friction(
+                speed,
+                p.coulomb_friction,
+                p.breakaway_friction,
+                rpm_to_rad_s(p.stribeck_speed_rpm),
+                viscous,
+            )
+        else:
+            law = viscous * speed + p.coulomb_friction * math.copysign(1.0, speed) * (
+                abs(speed) > 1e-9
+            )
+        return self.friction_factor * math.exp(self._drift) * law
+
+    def _torque_constant(self) -> float:
+        """The true k_t now (injected weakening, magnet temperature), N·m/A."""
+        p = self.params
+        warm = 1 - p.torque_constant_temp_coeff * (self.temperature - p.ambient_c)
+        return self.torque_constant_factor * p.torque_constant * warm
+
+    def _resistance(self) -> float:
+        p = self.params
+        rise = self.temperature - p.ambient_c
+        return p.winding_resistance * (1 + p.resistance_temp_coeff * rise)
+
+    def _supply_limit(self, current: float) -> float:
+        """Clip the current to what the bus voltage drives against the back-EMF."""
+        p = self.params
+        if not p.back_emf:
+            return current
+        volts = p.driver_max_duty * self.bus_voltage
+        emf = self._torque_constant() * self.speed
+        r = self._resistance()
+        return min(max(current, (-volts - emf) / r), (volts - emf) / r)
+
+    def _ripple_mean(self, periods: float, dt: float) -> tuple[float, float]:
+        """Means of sin(nθ) and cos(nθ) over the step (exact for a constant speed)."""
+        a0 = periods * self.angle
+        span = periods * self.speed * dt
+        if abs(span) < 1e-6:
+            return math.sin(a0), math.cos(a0)
+        return (
+            (math.cos(a0) - math.cos(a0 + span)) / span,
+            (math.sin(a0 + span) - math.sin(a0)) / span,
+        )
+
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (use ≤ 1 ms for the inner loop's accuracy)."""
         p = self.params
-        alpha = self._accel_request(dt)
+        sensed = self.feedback_speed()
+        alpha = self._accel_request(dt, sensed)
         if self.mode == Mode.IDLE:
             current = 0.0
         else:
-            torque = p.inertia * alpha + self.friction_torque(self.speed)
+            torque = p.inertia * alpha + self.friction_torque(sensed)
             current = _clip(torque / p.torque_constant, self.current_limit)
         # speed limit: never drive further beyond the maximum speed
         self.speed_limited = abs(self.speed) >= p.max_speed and current * self.speed > 0
@@ -281,22 +592,59 @@ class WheelPhysics:
             current = _clip(
                 self.friction_torque(self.speed) / p.torque_constant, self.current_limit
             )
+        current = self._supply_limit(current)
         if self.forced_current is not None:
             current = self.forced_current
         self.current = current
-        k_t = self.torque_constant_factor * p.torque_constant  # the true motor, not the model
-        net = k_t * current - self.friction_factor * self.friction_torque(self.speed)
-        new_speed = self.speed + net / p.inertia * dt
-        if self.mode == Mode.IDLE and self.speed != 0 and new_speed * self.speed < 0:
-            new_speed = 0.0  # friction stops the wheel; it does not reverse it
+        motor = self._torque_constant() * current  # the true motor, not the model
+        if p.torque_ripple:
+            motor *= 1 + p.torque_ripple * self._ripple_mean(6 * p.pole_pairs, dt)[1]
+        if p.cogging_torque:
+            motor += p.cogging_torque * self._ripple_mean(p.cogging_periods, dt)[0]
+        if p.stiction:
+            new_speed = self._stick_slip(motor, dt)
+        else:
+            net = motor - self.bearing_friction(self.speed)
+            new_speed = self.speed + net / p.inertia * dt
+            if self.mode == Mode.IDLE and self.speed != 0 and new_speed * self.speed < 0:
+                new_speed = 0.0  # friction stops the wheel; it does not reverse it
+        self.angle += 0.5 * (self.speed + new_speed) * dt
         self.speed = new_speed
-        heat = p.winding_resistance * current**2
+        self.time += dt
+        if self.hall is not None:
+            self.hall.record(self.time, self.angle)
+        self._update_supply_and_heat(current, dt)
+        self._check_faults()
+
+    def _stick_slip(self, motor: float, dt: float) -> float:
+        """New speed under breakaway friction: stuck at 0 until |motor| > τ_brk."""
+        p = self.params
+        if self.speed == 0.0:
+            breakaway = self.friction_factor * math.exp(self._drift) * p.breakaway_friction
+            if abs(motor) <= breakaway:
+                return 0.0
+            return (motor - math.copysign(breakaway, motor)) / p.inertia * dt
+        new_speed = self.speed + (motor - self.bearing_friction(self.speed)) / p.inertia * dt
+        return 0.0 if new_speed * self.speed < 0 else new_speed  # stops; breakaway decides
+
+    def _update_supply_and_heat(self, current: float, dt: float) -> None:
+        p = self.params
+        r = self._resistance()
+        heat = r * current**2
         self.temperature += (
             dt
             / p.thermal_time_constant
             * (p.ambient_c + p.thermal_resistance * heat - self.temperature)
         )
-        self._check_faults()
+        if p.back_emf:  # the supply current sags the bus through its source resistance
+            power = (r * current + self._torque_constant() * self.speed) * current
+            drop = p.bus_source_resistance * max(power, 0.0) / p.bus_voltage
+            self.bus_voltage = p.bus_voltage - drop
+        if p.friction_drift:
+            self._drift_clock += dt
+            while self._drift_clock >= 1.0:  # a random walk in 1 s steps
+                self._drift_clock -= 1.0
+                self._drift += p.friction_drift / 60 * self._imp_rng.standard_normal()
 
     def _check_faults(self) -> None:
         p = self.params
@@ -310,13 +658,34 @@ class WheelPhysics:
 
     # -- measurement -----------------------------------------------------------------
     def measured_speed_rpm(self) -> float:
-        """Speed as the Hall sensors report it: noisy, quantised, 0 near standstill."""
+        """Speed as the wheel reports it, rpm.
+
+        From Hall-edge timing when ``hall_speed`` (coarse at low speed, 0 below
+        ``min_measurable_rpm``), else the true speed; then ``speed_noise_rpm`` white
+        noise and the ``speed_resolution_rpm`` quantum.
+        """
         p = self.params
-        rpm = rad_s_to_rpm(self.speed)
+        rpm = rad_s_to_rpm(self.hall.read() if self.hall is not None else self.speed)
         if abs(rpm) < p.min_measurable_rpm:
             return 0.0
-        noisy = rpm + p.speed_noise_rpm * self.rng.standard_normal()
-        return round(noisy / p.speed_resolution_rpm) * p.speed_resolution_rpm
+        if p.speed_noise_rpm:
+            rpm += p.speed_noise_rpm * self.rng.standard_normal()
+        return round(rpm / p.speed_resolution_rpm) * p.speed_resolution_rpm
+
+    def measured_current(self) -> float:
+        """Motor current as the wheel reports it (offset, noise, ADC quantum), A."""
+        p = self.params
+        value = self.current + p.current_offset_a
+        if p.current_noise_a:
+            value += p.current_noise_a * self._imp_rng.standard_normal()
+        return round(value / p.current_lsb_a) * p.current_lsb_a if p.current_lsb_a else value
+
+    def measured_bus_voltage(self) -> float:
+        """Bus voltage at the driver as the wheel reports it, V."""
+        p = self.params
+        if not p.bus_voltage_noise_v:
+            return self.bus_voltage
+        return self.bus_voltage + p.bus_voltage_noise_v * self._imp_rng.standard_normal()
 
     @property
     def momentum(self) -> float:
@@ -325,8 +694,8 @@ class WheelPhysics:
 
     @property
     def motor_torque(self) -> float:
-        """Motor torque on the rotor, N·m (the satellite feels its negative)."""
-        return self.torque_constant_factor * self.params.torque_constant * self.current
+        """Motor torque on the rotor, N·m (the satellite feels its negative; ripple left out)."""
+        return self._torque_constant() * self.current
 
 
 def simulate_speed_command(

@@ -2,24 +2,28 @@
 
 Frame ids carry the node id in their low 4 bits (``0x100 + node`` commands,
 ``0x180 + node`` telemetry, ``0x700 + node`` heartbeat), so up to 16 wheels
-share a bus. Byte 7 of every frame is a checksum (sum of bytes 0..6 mod 256),
-so a corrupted payload is detected and dropped, never acted on.
-Encoding and decoding are cantools'; only the checksum and the node-id
-masking are written here.
+share a bus. Byte 7 of every frame is a CRC-8 (SAE J1850: polynomial 0x1D,
+initial value and final XOR 0xFF, the AUTOSAR E2E choice) over the frame id and
+bytes 0..6, so a corrupted payload, an all-zero frame or a frame sent under
+another id is detected and dropped, never acted on.
+Encoding and decoding are cantools'; the CRC (ten lines, no package needed)
+and the node-id masking are written here.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
+from typing import cast
 
 import can
 import cantools
 
-from rwlab.errors import RwlabError
+from rwlab.errors import ProtocolError  # ProtocolError re-exported here, where it was
 from rwlab.wheel.physics import Fault, Mode
 
 __all__ = [
@@ -40,21 +44,24 @@ __all__ = [
 COMMAND_ID, TELEMETRY_ID, HEARTBEAT_ID = 0x100, 0x180, 0x700
 BITRATE = 1_000_000
 MAX_NODE_ID = 15
-
-
-class ProtocolError(RwlabError):
-    """A frame that is not a valid wheel message (bad length, checksum or value)."""
+REJECTED_BIT = 0x10  # heartbeat Faults: a setpoint beyond the wheel's limits was refused
 
 
 @cache
 def database() -> cantools.database.Database:
     """The parsed ``rw.dbc``."""
     text = resources.files(__package__).joinpath("rw.dbc").read_text()
-    return cantools.database.load_string(text, database_format="dbc")
+    return cast(cantools.database.Database, cantools.database.load_string(text, "dbc"))
 
 
 def dbc_sha256() -> str:
-    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol."""
+    """SHA-256 of ``rw.dbc``, recorded in testbed files so a record names its protocol.
+
+    Returns
+    -------
+    str
+        Hexadecimal digest.
+    """
     return hashlib.sha256(resources.files(__package__).joinpath("rw.dbc").read_bytes()).hexdigest()
 
 
@@ -84,7 +91,11 @@ class Telemetry:
 
 @dataclass(frozen=True)
 class Heartbeat:
-    """A wheel's status frame: latched faults, temperature (°C), uptime (s)."""
+    """A wheel's status frame: latched faults, temperature (°C), uptime (s), bus voltage (V).
+
+    ``command_rejected`` says the wheel refused a setpoint beyond its limits
+    since the last CLEAR_FAULT (the motor kept its previous command).
+    """
 
     node_id: int
     mode: Mode
@@ -92,6 +103,8 @@ class Heartbeat:
     temperature: float
     uptime: int
     commands_seen: int
+    bus_voltage: float = 10.0  # V; the field's floor (10 V) when the sender has none
+    command_rejected: bool = False
 
 
 def _check_node(node_id: int) -> int:
@@ -100,14 +113,65 @@ def _check_node(node_id: int) -> int:
     return node_id
 
 
-def _frame(base: int, node_id: int, name: str, signals: dict) -> can.Message:
+def crc8_sae_j1850(data: bytes, crc: int = 0xFF) -> int:
+    """CRC-8/SAE-J1850 of ``data`` (poly 0x1D, init 0xFF, final XOR 0xFF).
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes to protect.
+    crc : int
+        Initial register value (0xFF for the standard CRC).
+
+    Returns
+    -------
+    int
+        The CRC, 0..255.
+    """
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+
+
+def frame_crc(arbitration_id: int, data: bytes | bytearray) -> int:
+    """The wheel protocol's byte-7 check: CRC-8/SAE-J1850 over the 11-bit id and bytes 0..6.
+
+    Parameters
+    ----------
+    arbitration_id : int
+        The frame's 11-bit id (its two bytes, little-endian, open the CRC).
+    data : bytes
+        At least 7 bytes; bytes 0..6 are covered.
+
+    Returns
+    -------
+    int
+        The check byte, 0..255.
+    """
+    return crc8_sae_j1850(arbitration_id.to_bytes(2, "little") + bytes(data[:7]))
+
+
+def _frame(base: int, node_id: int, name: str, signals: dict[str, float]) -> can.Message:
+    """One frame of ``rw.dbc`` with its check byte."""
     data = bytearray(database().get_message_by_name(name).encode({**signals, "Checksum": 0}))
-    data[7] = sum(data[:7]) & 0xFF
+    data[7] = frame_crc(base + _check_node(node_id), bytes(data))
     return can.Message(arbitration_id=base + _check_node(node_id), data=data, is_extended_id=False)
 
 
 def encode_command(cmd: Command) -> can.Message:
-    """CAN frame for a command; raises ProtocolError for values the frame cannot carry."""
+    """CAN frame for a command; raises ProtocolError for values the frame cannot carry.
+
+    Parameters
+    ----------
+    cmd : Command
+        The command.
+
+    Returns
+    -------
+    can.Message
+    """
     if not math.isfinite(cmd.setpoint) or abs(cmd.setpoint) > 1e6:
         raise ProtocolError(f"setpoint must be finite and within ±1e6, got {cmd.setpoint}")
     return _frame(
@@ -123,7 +187,17 @@ def encode_command(cmd: Command) -> can.Message:
 
 
 def encode_telemetry(t: Telemetry) -> can.Message:
-    """CAN frame for telemetry (speed clipped to the field's range)."""
+    """CAN frame for telemetry (speed clipped to the field's range).
+
+    Parameters
+    ----------
+    t : Telemetry
+        The telemetry.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         TELEMETRY_ID,
         t.node_id,
@@ -141,14 +215,25 @@ def encode_telemetry(t: Telemetry) -> can.Message:
 
 
 def encode_heartbeat(h: Heartbeat) -> can.Message:
-    """CAN frame for a heartbeat."""
+    """CAN frame for a heartbeat.
+
+    Parameters
+    ----------
+    h : Heartbeat
+        The status.
+
+    Returns
+    -------
+    can.Message
+    """
     return _frame(
         HEARTBEAT_ID,
         h.node_id,
         "RW_Heartbeat",
         {
             "Mode": int(h.mode) & 0x3,
-            "Faults": int(h.faults) & 0xFF,
+            "BusVoltage": max(10.0, min(41.5, round(h.bus_voltage * 2) / 2)),
+            "Faults": (int(h.faults) & 0xF) | (REJECTED_BIT if h.command_rejected else 0),
             "Temperature": max(-40.0, min(87.5, round(h.temperature * 2) / 2)),
             "Uptime": min(int(h.uptime), 0xFFFF),
             "CommandsSeen": int(h.commands_seen) & 0xFFFF,
@@ -157,7 +242,17 @@ def encode_heartbeat(h: Heartbeat) -> can.Message:
 
 
 def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
-    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones."""
+    """Decode a frame; None for frames of other protocols; ProtocolError for damaged ones.
+
+    Parameters
+    ----------
+    msg : can.Message
+        A received frame.
+
+    Returns
+    -------
+    Command, Telemetry, Heartbeat or None
+    """
     if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return None
     base, node = msg.arbitration_id & ~0xF, msg.arbitration_id & 0xF
@@ -167,20 +262,21 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
     data = bytes(msg.data)
     if len(data) != 8:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} has {len(data)} bytes, expected 8")
-    if sum(data[:7]) & 0xFF != data[7]:
+    if frame_crc(msg.arbitration_id, data) != data[7]:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} fails its checksum")
-    s = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    decoded = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    s = cast(Mapping[str, float], decoded)  # numbers only: choices are not decoded
     try:
         if base == COMMAND_ID:
             if not math.isfinite(s["Setpoint"]):
                 raise ProtocolError("command setpoint is not a finite number")
-            return Command(node, Mode(s["Mode"]), float(s["Setpoint"]), int(s["Sequence"]))
+            return Command(node, Mode(int(s["Mode"])), float(s["Setpoint"]), int(s["Sequence"]))
         if base == TELEMETRY_ID:
             return Telemetry(
                 node,
                 float(s["Speed"]),
                 float(s["Current"]),
-                Mode(s["Mode"]),
+                Mode(int(s["Mode"])),
                 bool(s["FaultActive"]),
                 bool(s["SpeedLimited"]),
                 int(s["SequenceEcho"]),
@@ -188,11 +284,13 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
             )
         return Heartbeat(
             node,
-            Mode(s["Mode"]),
+            Mode(int(s["Mode"])),
             Fault(int(s["Faults"]) & 0xF),
             float(s["Temperature"]),
             int(s["Uptime"]),
             int(s["CommandsSeen"]),
+            float(s["BusVoltage"]),
+            bool(int(s["Faults"]) & REJECTED_BIT),
         )
     except ValueError as exc:  # an out-of-range enum value
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X}: {exc}") from None

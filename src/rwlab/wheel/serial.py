@@ -22,7 +22,20 @@ END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
 
 
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE of ``data``."""
+    """CRC-16/CCITT-FALSE of ``data``.
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes.
+    crc : int
+        Initial value (chain calls over pieces).
+
+    Returns
+    -------
+    int
+        The CRC, 0..65535.
+    """
     for byte in data:
         crc ^= byte << 8
         for _ in range(8):
@@ -32,7 +45,18 @@ def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
 
 
 def slip_encode(payload: bytes) -> bytes:
-    """Frame ``payload`` with SLIP: END, escaped bytes, END."""
+    """Frame ``payload`` with SLIP: END, escaped bytes, END.
+
+    Parameters
+    ----------
+    payload : bytes
+        The bytes to send.
+
+    Returns
+    -------
+    bytes
+        The framed bytes.
+    """
     body = payload.replace(bytes([ESC]), bytes([ESC, ESC_ESC])).replace(
         bytes([END]), bytes([ESC, ESC_END])
     )
@@ -40,7 +64,18 @@ def slip_encode(payload: bytes) -> bytes:
 
 
 def slip_decode(body: bytes) -> bytes:
-    """Undo SLIP escaping of one frame body (without its END bytes); ValueError if malformed."""
+    """Undo SLIP escaping of one frame body (without its END bytes); ValueError if malformed.
+
+    Parameters
+    ----------
+    body : bytes
+        One frame's escaped bytes.
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
     out = bytearray()
     it = iter(body)
     for byte in it:
@@ -140,3 +175,90 @@ class SlipSerialBus(can.BusABC):
     def shutdown(self) -> None:
         super().shutdown()
         self.port.close()
+
+
+class FdPort:
+    """A pyserial-like port on a file descriptor (a pseudo-terminal's master side).
+
+    Writes never block: bytes the other side does not read in time are dropped
+    and counted in :attr:`dropped_writes`, as a UART would overrun.
+
+    Parameters
+    ----------
+    fd : int
+        An open descriptor; the port owns it and closes it.
+    name : str
+        What to call it in messages.
+    """
+
+    def __init__(self, fd: int, name: str = "pty") -> None:
+        import os
+
+        os.set_blocking(fd, False)
+        self.fd, self.name = fd, name
+        self.dropped_writes = 0
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes ready to read."""
+        import fcntl
+        import termios
+
+        buf = fcntl.ioctl(self.fd, termios.FIONREAD, b"\0\0\0\0")
+        return int.from_bytes(buf, "little")
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, b'' when none are waiting."""
+        import os
+
+        try:
+            return os.read(self.fd, size)
+        except (BlockingIOError, OSError):
+            return b""
+
+    def write(self, data: bytes) -> int:
+        """Write ``data``; what does not fit is dropped (counted)."""
+        import os
+
+        try:
+            return os.write(self.fd, data)
+        except (BlockingIOError, OSError):
+            self.dropped_writes += 1
+            return 0
+
+    def close(self) -> None:
+        """Close the descriptor."""
+        import os
+
+        try:
+            os.close(self.fd)
+        except OSError:
+            pass
+
+
+def open_pty(baudrate: int = 115200):
+    """A pseudo-terminal pair in raw mode: (the twin's end, a pyserial port on the other).
+
+    Parameters
+    ----------
+    baudrate : int
+        Nominal line speed for the pyserial end (a pty does not throttle).
+
+    Returns
+    -------
+    tuple
+        (:class:`FdPort` on the master side, ``serial.Serial`` on the slave path).
+        The slave path is ``port.port`` of the second.
+    """
+    import os
+    import tty
+
+    import serial
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    host = serial.serial_for_url(path, baudrate=baudrate, timeout=0)
+    os.close(slave)
+    return FdPort(master, path), host

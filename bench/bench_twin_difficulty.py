@@ -1,0 +1,104 @@
+"""How hard is paper A's identification study on the wheel twin? (issue 22)
+
+For each wheel unit and experiment seed: a 20-minute PRBS at Ts = 0.5 s on the
+simulated wheel (simulated clock), then `rwlab identify`'s study with its
+defaults. Printed per record:
+
+- ``paper``: paper A's published ARX221 (SPEC.md, Table 2) simulated from rest
+  on the record's command, fit % on the validation part (last 30 %), in rpm;
+- ``chosen``: the study's chosen model and its validation fit (the study's
+  own preprocessing);
+- ``dc``: the chosen model's DC gain in rpm/rpm, and its error against the
+  measured steady-state gain (settled speed over command on every PRBS hold of
+  at least 30 s: the mean of its last 5 s).
+
+Paper A reached 76.5 % on the real wheel. Usage::
+
+    python bench/bench_twin_difficulty.py                   # units 0-3, seeds 0 and 7
+    python bench/bench_twin_difficulty.py --units 0 --seeds 0 --no-rate-limit --wheel ideal
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from rwlab.ident.models import PolyModel
+from rwlab.ident.study import _to_physical, identification_study, load_study_data
+from rwlab.ident.validation import fit_percent
+from rwlab.testbed import ExperimentConfig, run_experiment
+
+PAPER_ARX221 = ([1.0, -1.758, 0.7852], [0.0, 0.0275, -0.0012])  # SPEC.md, paper A Table 2
+
+
+def measured_steady_gain(u: np.ndarray, y: np.ndarray, Ts: float) -> float:
+    """Settled speed over command on holds ≥ 30 s (mean of the last 5 s), least squares."""
+    edges = np.flatnonzero(np.diff(u) != 0) + 1
+    bounds = np.concatenate([[0], edges, [len(u)]])
+    c, s = [], []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        if (b - a) * Ts >= 30 and u[a] != 0:
+            tail = slice(b - round(5 / Ts), b)
+            c.append(u[a])
+            s.append(y[tail].mean())
+    c, s = np.array(c), np.array(s)
+    return float(c @ s / (c @ c))
+
+
+def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path) -> dict:
+    cfg = ExperimentConfig(seed=seed, unit=unit, rate_limit=rate_limit, wheel=wheel)
+    path = folder / f"u{unit}_s{seed}.mcap"
+    run_experiment(cfg, path, force=True)
+    data, _ = load_study_data(str(path))
+    res = identification_study(data, nonlinear=False)
+    u, y = data.u[:, 0], data.y[:, 0]
+    n_est = res.est.N
+    paper = PolyModel(*map(np.array, PAPER_ARX221), Ts=data.Ts, nk=1)
+    y_paper = np.ravel(paper.simulate(u[:, None]))
+    phys = _to_physical(res.chosen, res.data.trend)
+    dc = float(np.sum(phys.B) / (np.sum(phys.A) * np.sum(phys.F)))  # deterministic part
+    gain = measured_steady_gain(u, y, data.Ts)
+    row = next(r for r in res.orders + res.others if r["structure"] == res.chosen.structure)
+    return {
+        "unit": unit,
+        "seed": seed,
+        "paper": fit_percent(y[n_est:], y_paper[n_est:]),
+        "chosen": res.chosen.structure,
+        "fit": row["fit_percent"],
+        "dc": dc,
+        "gain": gain,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--units", type=int, nargs="+", default=[0, 1, 2, 3])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 7])
+    ap.add_argument("--no-rate-limit", action="store_true", help="PRBS steps (paper A's)")
+    ap.add_argument("--wheel", default="rw90", choices=["rw90", "ideal"])
+    args = ap.parse_args()
+    print(
+        f"wheel {args.wheel}, PRBS {'steps' if args.no_rate_limit else 'rate-limited'}, "
+        "20 min at Ts = 0.5 s"
+    )
+    print(
+        f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>10} {'fit %':>7} "
+        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8}"
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        for unit in args.units:
+            for seed in args.seeds:
+                r = one(unit, seed, not args.no_rate_limit, args.wheel, Path(tmp))
+                err = 100 * (r["dc"] / r["gain"] - 1)
+                print(
+                    f"{unit:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
+                    f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f}",
+                    flush=True,
+                )
+
+
+if __name__ == "__main__":
+    main()

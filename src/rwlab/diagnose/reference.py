@@ -1,0 +1,239 @@
+"""The healthy reference: what the detectors know of a healthy wheel, from its identification.
+
+``rwlab identify`` on a testbed record measures, on that record, everything the
+detectors compare a later record with, and stores it in ``model.json`` under
+``"healthy_reference"`` (format ``rwlab.HealthyReference/1``):
+
+- ``current_model``: the motor's current balance i = c·[α, ω, sign ω, 1]
+  (A per rpm/s, A per rpm, A, A), least squares on the record's usable samples;
+- ``tests``: per block test (``friction``, ``motor``, ``speed``, ``lag``) the
+  mean and the σ of its block means on the healthy record, the block length
+  (qualifying samples), the share of samples that qualify and how many samples
+  the figures rest on;
+- ``repeat_probability``: how often a non-zero speed reading repeats exactly
+  (Hall quantisation), counted over the whole record;
+- ``lost_per_sample``: telemetry frames lost per sample (the 8-bit frame
+  counter's gaps);
+- ``tolerance``: how far another healthy unit of the same wheel model may sit
+  from this one, relative (friction, motor) or absolute (speed, rpm; lag,
+  fraction of the acceleration limit). A stated assumption of the
+  datasheet-like spread between units, not a measurement: one record of one
+  unit cannot measure it.
+
+Because the reference comes from the identification record, a record under
+test is tested from its first sample on: a fault present at power-up is a fault.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rwlab.errors import DataError, FileFormatError
+
+__all__ = ["FORMAT", "BlockStats", "HealthyReference", "block_stats"]
+
+FORMAT = "rwlab.HealthyReference/1"
+# Between two healthy units (the reference's and another) of a wheel model whose friction
+# is within ±30 %, k_t ±5 % and inertia ±2 % (rwlab.wheel.imperfections.TOLERANCES):
+# friction ratio up to 1.3/0.7 = 1.86, inertial current I/k_t up to 1.15; held speed:
+# the model's steady error on the back-EMF-limited top speeds, a few rpm.
+DEFAULT_TOLERANCE = {
+    "friction": 0.86,
+    "motor": 0.15,
+    "speed": 4.0,
+    "lag": 0.03,
+    "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing's warm-up
+}
+
+
+@dataclass(frozen=True)
+class BlockStats:
+    """The healthy statistics of one block test.
+
+    Attributes
+    ----------
+    mean : float
+        Mean of the qualifying values (the test's unit).
+    sigma : float
+        σ of a block mean of ``block`` qualifying values.
+    block : int
+        Qualifying samples per block.
+    fraction : float
+        Share of samples that qualified on the reference record.
+    samples : int
+        Qualifying samples the figures rest on.
+    method : str
+        ``batch means`` (σ of the record's block means, ≥ 20 blocks) or
+        ``AR(1)`` (sample σ with the lag-1 correlation's variance inflation).
+    """
+
+    mean: float
+    sigma: float
+    block: int
+    fraction: float
+    samples: int
+    method: str
+
+    @property
+    def block_s(self) -> float:
+        """Mean duration of one block at the reference's qualifying share, in samples."""
+        return self.block / self.fraction
+
+
+def block_stats(values: np.ndarray, block: int, total_samples: int) -> BlockStats:
+    """Block statistics of a test's qualifying values on a healthy record.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n,)
+        The qualifying values in time order.
+    block : int
+        Values per block.
+    total_samples : int
+        All samples of the record (for the qualifying share).
+
+    Raises
+    ------
+    DataError
+        Fewer than 4 blocks' worth of values.
+    """
+    x = np.asarray(values, dtype=float)
+    if x.size < 4 * block:
+        raise DataError(
+            f"only {x.size} qualifying samples; the test needs ≥ {4 * block} on the "
+            "identification record (a longer or richer record)"
+        )
+    n_blocks = x.size // block
+    means = x[: n_blocks * block].reshape(n_blocks, block).mean(axis=1)
+    if n_blocks >= 20:
+        sigma, method = float(np.std(means, ddof=1)), "batch means"
+    else:
+        d = x - x.mean()
+        rho = float(np.clip(np.dot(d[1:], d[:-1]) / np.dot(d, d), 0.0, 0.95))
+        sigma = float(np.std(x, ddof=1) * math.sqrt((1 + rho) / (1 - rho) / block))
+        method = "AR(1)"
+    if not sigma > 0:
+        raise DataError("a test's healthy values are constant; nothing to normalise by")
+    return BlockStats(float(x.mean()), sigma, block, x.size / total_samples, int(x.size), method)
+
+
+@dataclass(frozen=True)
+class HealthyReference:
+    """What the detectors compare with (see the module docstring).
+
+    Attributes
+    ----------
+    Ts : float
+        Sample time, s.
+    current_model : tuple of 4 float
+        c of i = c·[α (rpm/s), ω (rpm), sign ω, 1], A.
+    tests : dict of str to BlockStats
+    repeat_probability : float
+    repeat_samples : int
+    lost_per_sample : float
+    samples : int
+        Samples of the identification record.
+    tolerance : dict of str to float
+    source : str
+        Which record it was measured on.
+    """
+
+    Ts: float
+    current_model: tuple[float, float, float, float]
+    tests: dict[str, BlockStats]
+    repeat_probability: float
+    repeat_samples: int
+    lost_per_sample: float
+    samples: int
+    tolerance: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCE))
+    source: str = ""
+
+    def to_dict(self) -> dict:
+        """The JSON form stored under ``model.json``'s ``"healthy_reference"``."""
+        return {
+            "format": FORMAT,
+            "Ts": self.Ts,
+            "current_model": {
+                "a_per_rpm_s": self.current_model[0],
+                "a_per_rpm": self.current_model[1],
+                "a_coulomb": self.current_model[2],
+                "a_offset": self.current_model[3],
+            },
+            "tests": {
+                name: {
+                    "mean": s.mean,
+                    "sigma": s.sigma,
+                    "block": s.block,
+                    "fraction": s.fraction,
+                    "samples": s.samples,
+                    "method": s.method,
+                }
+                for name, s in self.tests.items()
+            },
+            "repeat_probability": self.repeat_probability,
+            "repeat_samples": self.repeat_samples,
+            "lost_per_sample": self.lost_per_sample,
+            "samples": self.samples,
+            "tolerance": dict(self.tolerance),
+            "source": self.source,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> HealthyReference:
+        """Read the JSON form (``FileFormatError`` when it is not one)."""
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise FileFormatError(
+                f"not a healthy reference ({FORMAT}); run rwlab identify on a testbed record"
+            )
+        try:
+            c = d["current_model"]
+            return cls(
+                Ts=float(d["Ts"]),
+                current_model=(
+                    float(c["a_per_rpm_s"]),
+                    float(c["a_per_rpm"]),
+                    float(c["a_coulomb"]),
+                    float(c["a_offset"]),
+                ),
+                tests={
+                    name: BlockStats(
+                        float(s["mean"]),
+                        float(s["sigma"]),
+                        int(s["block"]),
+                        float(s["fraction"]),
+                        int(s["samples"]),
+                        str(s["method"]),
+                    )
+                    for name, s in d["tests"].items()
+                },
+                repeat_probability=float(d["repeat_probability"]),
+                repeat_samples=int(d["repeat_samples"]),
+                lost_per_sample=float(d["lost_per_sample"]),
+                samples=int(d["samples"]),
+                tolerance={k: float(v) for k, v in d["tolerance"].items()},
+                source=str(d.get("source", "")),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FileFormatError(
+                f"bad healthy reference ({exc!r}); run rwlab identify again"
+            ) from None
+
+    @classmethod
+    def from_model_file(cls, path) -> HealthyReference:
+        """The reference stored in ``model.json`` (``FileFormatError`` when it holds none)."""
+        import json
+        from pathlib import Path
+
+        try:
+            info = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
+        if "healthy_reference" not in info:
+            raise FileFormatError(
+                f"{path} holds no healthy reference: run rwlab identify on a testbed record "
+                "(.mcap with motor current) to write one"
+            )
+        return cls.from_dict(info["healthy_reference"])

@@ -1,0 +1,305 @@
+"""``model.json``: the wheel model that joins the two papers, and its one owner.
+
+:class:`WheelModelFile` is written by the identification study
+(:func:`rwlab.ident.study.wheel_model`) and read by the simulated wheel
+(:meth:`rwlab.wheel.IdentifiedWheel.from_json`), the attitude simulation and
+the testbed. Its JSON Schema is ``rwlab/schemas/model.schema.json``; the
+reading rule for older versions is :func:`rwlab.schemas.read_versioned`.
+
+Version history: 1 — linear model with offsets and saturations, optionally the
+servo model (``nonlinear``) and which one to fly (``preferred``); added within
+version 1 as optional keys (older files simply lack them): the physical grey box
+(``greybox``), the nonlinear ARX (``nlarx``), which of the nonlinear models the
+study chose and why (``nonlinear_chosen``, ``nonlinear_choice``), the driver's
+current limit (``saturation.current_limit_a``) and the diagnosis's healthy
+reference (``healthy_reference``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rwlab.errors import FileFormatError, ModelError
+from rwlab.ident.base import save_model_json
+from rwlab.ident.models import PolyModel
+from rwlab.ident.nonlinear import ServoModel
+from rwlab.schemas import format_tag, read_versioned
+
+__all__ = ["KIND", "VERSION", "Channel", "WheelModelFile"]
+
+KIND = "WheelModel"
+VERSION = 1
+NONLINEAR_MODELS = ("greybox", "nlarx")  # beside the servo model (``nonlinear``)
+NOTE = (
+    "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
+    "saturation before the model and the acceleration limit to its output."
+)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One side of the model: a signal's name, unit and operating point.
+
+    Parameters
+    ----------
+    name : str
+        The signal's name in the record (e.g. ``"command"``).
+    unit : str
+        Its unit (``"rpm"`` for a wheel).
+    offset : float
+        The operating point subtracted before the linear model, in ``unit``.
+    """
+
+    name: str
+    unit: str
+    offset: float
+
+    def to_dict(self) -> dict:
+        """Plain JSON.
+
+        Returns
+        -------
+        dict
+            ``{"name", "unit", "offset"}``.
+        """
+        return {"name": self.name, "unit": self.unit, "offset": float(self.offset)}
+
+
+@dataclass(frozen=True, eq=False)
+class WheelModelFile:
+    """The content of ``model.json``: a wheel's identified model in physical units.
+
+    Parameters
+    ----------
+    model : PolyModel
+        Speed command → speed around the offsets: ``y − output.offset = G(q)·(u − input.offset)``.
+    input, output : Channel
+        The command and speed signals with their operating points (rpm).
+    speed_limit_rpm : float
+        Speed-command saturation applied before the model, rpm (paper A: 7800).
+    accel_limit_rpm_s : float
+        Acceleration limit applied to the model's output, rpm/s (paper A: 314).
+    saturation_source : str
+        Where the saturations come from (the record's wheel parameters, defaults).
+    validation_fit_percent : float
+        The linear model's fit on validation data, %.
+    servo : ServoModel, optional
+        The nonlinear servo model, when the study estimated one.
+    servo_fit_percent : float, optional
+        Its validation fit, %.
+    preferred : {"linear", "nonlinear"}
+        The model to fly by default (the better validation fit).
+    current_limit_a : float, optional
+        The driver's current limit, A (the grey box's, when estimated).
+    nonlinear_models : dict of str to dict
+        The other nonlinear models' JSON forms (``"greybox"``, ``"nlarx"``), each
+        with its ``validation_fit_percent``.
+    nonlinear_chosen, nonlinear_choice : str, optional
+        Which nonlinear model the study chose on held-out data, and why.
+    healthy_reference : dict, optional
+        What the fault detectors need of the healthy identification record
+        (:class:`rwlab.diagnose.HealthyReference`'s JSON form).
+    """
+
+    model: PolyModel
+    input: Channel
+    output: Channel
+    speed_limit_rpm: float = 7800.0
+    accel_limit_rpm_s: float = 314.0
+    saturation_source: str = "RW90 defaults"
+    validation_fit_percent: float = math.nan
+    servo: ServoModel | None = None
+    servo_fit_percent: float | None = None
+    preferred: str = "linear"
+    current_limit_a: float | None = None
+    nonlinear_models: dict[str, dict] = field(default_factory=dict)
+    nonlinear_chosen: str | None = None
+    nonlinear_choice: str | None = None
+    healthy_reference: dict | None = None
+
+    def __post_init__(self) -> None:
+        if self.model.nu != 1:
+            raise ModelError("a wheel model must have one input (the speed command)")
+        if self.preferred not in ("linear", "nonlinear"):
+            raise ModelError(f"preferred must be 'linear' or 'nonlinear', got {self.preferred!r}")
+        if self.preferred == "nonlinear" and self.servo is None:
+            raise ModelError("preferred 'nonlinear' needs a servo model")
+        for name in ("speed_limit_rpm", "accel_limit_rpm_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ModelError(f"{name} must be a positive number, got {value}")
+        if self.servo is not None and self.servo.Ts != self.model.Ts:
+            raise ModelError(f"the servo model's Ts {self.servo.Ts} differs from {self.model.Ts}")
+
+    @property
+    def Ts(self) -> float:
+        """The sample time, s."""
+        return self.model.Ts
+
+    @property
+    def structure(self) -> str:
+        """The linear model's structure, e.g. ``"ARX(2,2,1)"``."""
+        return self.model.structure
+
+    def __repr__(self) -> str:
+        servo = f", servo fit {self.servo_fit_percent:.1f} %" if self.servo is not None else ""
+        return (
+            f"<WheelModelFile {self.structure} Ts={self.Ts:g} s, "
+            f"fit {self.validation_fit_percent:.1f} %{servo}, flies {self.preferred}>"
+        )
+
+    # -- JSON ----------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """The JSON form (schema ``model.schema.json``).
+
+        Returns
+        -------
+        dict
+            Plain JSON with ``format`` = ``"rwlab.WheelModel/1"``.
+        """
+        d: dict[str, Any] = {
+            "format": format_tag(KIND, VERSION),
+            "structure": self.structure,
+            "Ts": self.Ts,
+            "input": self.input.to_dict(),
+            "output": self.output.to_dict(),
+            "model": self.model.to_dict(),
+            "saturation": {
+                "speed_rpm": float(self.speed_limit_rpm),
+                "accel_rpm_s": float(self.accel_limit_rpm_s),
+                "source": self.saturation_source,
+            },
+            "validation_fit_percent": _json_float(self.validation_fit_percent),
+            "note": NOTE,
+        }
+        if self.servo is not None:
+            fit = _json_float(self.servo_fit_percent)
+            d["nonlinear"] = {**self.servo.to_dict(), "validation_fit_percent": fit}
+            d["preferred"] = self.preferred
+        for name, model in self.nonlinear_models.items():
+            d[name] = model
+        if self.nonlinear_chosen is not None:
+            d["nonlinear_chosen"] = self.nonlinear_chosen
+            d["nonlinear_choice"] = self.nonlinear_choice
+        d["saturation"]["current_limit_a"] = _json_float(self.current_limit_a)
+        if self.healthy_reference is not None:
+            d["healthy_reference"] = self.healthy_reference
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any, *, source: str = "model.json") -> WheelModelFile:
+        """Read the JSON form, upgrading older versions.
+
+        Parameters
+        ----------
+        d : dict
+            As :meth:`to_dict` returns, or any older version.
+        source : str
+            The file's name for the messages.
+
+        Returns
+        -------
+        WheelModelFile
+
+        Raises
+        ------
+        FileFormatError
+            Another kind of file, a newer version, a missing or invalid field.
+        """
+        if not isinstance(d, dict) or "format" not in d:  # model.json always carried it
+            raise FileFormatError(f"{source}: not an rwlab wheel model (no format field)")
+        d = read_versioned(d, KIND, VERSION, source=source)
+        try:
+            sat, nl = d["saturation"], d.get("nonlinear")
+            servo = None
+            if nl is not None:
+                servo = ServoModel.from_dict(
+                    {k: v for k, v in nl.items() if k != "validation_fit_percent"}
+                )
+            return cls(
+                PolyModel.from_dict(d["model"]),
+                Channel(**_channel(d["input"])),
+                Channel(**_channel(d["output"])),
+                speed_limit_rpm=float(sat["speed_rpm"]),
+                accel_limit_rpm_s=float(sat["accel_rpm_s"]),
+                saturation_source=str(sat.get("source", "")),
+                validation_fit_percent=_float(d.get("validation_fit_percent")),
+                servo=servo,
+                servo_fit_percent=None if nl is None else _float(nl.get("validation_fit_percent")),
+                preferred=d.get("preferred", "linear"),
+                current_limit_a=_optional_float(sat.get("current_limit_a")),
+                nonlinear_models={k: d[k] for k in NONLINEAR_MODELS if isinstance(d.get(k), dict)},
+                nonlinear_chosen=d.get("nonlinear_chosen"),
+                nonlinear_choice=d.get("nonlinear_choice"),
+                healthy_reference=d.get("healthy_reference"),
+            )
+        except (KeyError, TypeError) as exc:
+            raise FileFormatError(f"{source}: missing or malformed field {exc}") from None
+        except (ModelError, FileFormatError) as exc:
+            raise FileFormatError(f"{source}: {exc}") from None
+
+    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write ``model.json`` atomically.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file.
+        overwrite : bool
+            Replace an existing file; otherwise ``FileExistsError``.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
+        return save_model_json(path, self.to_dict(), overwrite=overwrite)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> WheelModelFile:
+        """Read ``model.json``.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file.
+
+        Returns
+        -------
+        WheelModelFile
+
+        Raises
+        ------
+        FileFormatError
+            Not readable, not JSON, not a wheel model, or a newer version.
+        """
+        try:
+            d = json.loads(Path(path).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
+        return cls.from_dict(d, source=str(path))
+
+
+def _channel(d: dict) -> dict:
+    return {
+        "name": str(d.get("name", "")),
+        "unit": str(d.get("unit") or ""),
+        "offset": float(d["offset"]),
+    }
+
+
+def _optional_float(v: Any) -> float | None:
+    return None if v is None else float(v)
+
+
+def _float(v: Any) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _json_float(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)

@@ -1,0 +1,224 @@
+"""What makes the twin misbehave like a real wheel: friction laws, Hall-sensor speed, unit spread.
+
+Each imperfection is a named field of :class:`rwlab.wheel.WheelParams` (and so of
+the wheel TOML); this module holds the pieces that are more than one line:
+
+- :func:`stribeck_friction` — Coulomb + viscous + Stribeck friction, the sliding
+  law of Armstrong & Canudas de Wit (*Friction Modeling and Compensation*, The
+  Control Handbook, 1995), the form Basilisk's reaction-wheel state effector and
+  Simscape's Rotational Friction use; the stuck state at zero speed (breakaway)
+  is handled by :class:`rwlab.wheel.WheelPhysics`;
+- :class:`HallSpeedSensor` — the speed a BLDC wheel's firmware computes from the
+  times of its Hall-sensor edges (hand-written: no library models a sensor's
+  edge timing);
+- :data:`TOLERANCES` and :func:`draw_unit` — unit-to-unit variation: a unit seed
+  draws every manufacturing-dependent parameter within datasheet-like tolerances.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from rwlab.errors import ConfigError
+
+if TYPE_CHECKING:
+    from rwlab.wheel.physics import WheelParams
+
+__all__ = ["TOLERANCES", "HallSpeedSensor", "Tolerance", "draw_unit", "stribeck_friction"]
+
+
+def stribeck_friction(
+    speed: float, coulomb: float, breakaway: float, stribeck_speed: float, viscous: float
+) -> float:
+    """Sliding friction torque opposing ``speed``, N·m.
+
+    ``sign(ω)·(τ_c + (τ_brk − τ_c)·exp(−(ω/ω_s)²)) + b·ω``: the breakaway torque
+    at the first motion, falling to Coulomb over a few ``ω_s`` (the Stribeck
+    effect), plus viscous drag.
+
+    Parameters
+    ----------
+    speed : float
+        Rotor speed ω, rad/s (0 gives 0: the stuck state is the caller's).
+    coulomb, breakaway : float
+        τ_c and τ_brk ≥ τ_c, N·m.
+    stribeck_speed : float
+        ω_s, rad/s (> 0).
+    viscous : float
+        b, N·m·s/rad.
+
+    Returns
+    -------
+    float
+        Friction torque, N·m, with the sign of ``speed``.
+    """
+    if speed == 0.0:
+        return 0.0
+    drop = (breakaway - coulomb) * math.exp(-((speed / stribeck_speed) ** 2))
+    return math.copysign(coulomb + drop, speed) + viscous * speed
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """How far one parameter of a wheel of the same model may differ from nominal.
+
+    Attributes
+    ----------
+    relative : float
+        Half-width of the uniform spread as a fraction of nominal (0.05: ±5 %);
+        0 when ``absolute`` is used.
+    absolute : float
+        Half-width of an additive uniform spread, in the parameter's unit.
+    source : str
+        Where the tolerance comes from.
+    """
+
+    relative: float
+    absolute: float
+    source: str
+
+
+TOLERANCES: dict[str, Tolerance] = {
+    "inertia": Tolerance(0.02, 0.0, "rotor machining and balancing, ±2 %"),
+    "torque_constant": Tolerance(0.05, 0.0, "BLDC motor datasheets: k_t ±5 %"),
+    "winding_resistance": Tolerance(0.07, 0.0, "BLDC motor datasheets: R ±7 % at 20 °C"),
+    "coulomb_friction": Tolerance(0.30, 0.0, "bearing preload and lubricant fill, ±30 %"),
+    "breakaway_friction": Tolerance(0.30, 0.0, "bearing preload and lubricant fill, ±30 %"),
+    "viscous_friction": Tolerance(0.30, 0.0, "lubricant quantity and viscosity, ±30 %"),
+    "cogging_torque": Tolerance(0.30, 0.0, "magnet and slot tolerances, ±30 %"),
+    "torque_ripple": Tolerance(0.30, 0.0, "winding and Hall placement, ±30 %"),
+    "current_limit": Tolerance(0.02, 0.0, "current-sense shunt 1 % + reference 1 %"),
+    "current_offset_a": Tolerance(0.0, 0.005, "current-sense amplifier offset, ±5 mA"),
+    "thermal_resistance": Tolerance(0.10, 0.0, "mounting and potting, ±10 %"),
+    "thermal_time_constant": Tolerance(0.10, 0.0, "mounting and potting, ±10 %"),
+}
+"""Unit-to-unit tolerances (uniform within ±). Parameters not listed are the same on
+every unit: the firmware's (loop gains, limits, fault thresholds), the supply's
+and the sensor electronics'. The Hall sensors' placement pattern is drawn per unit
+too (``hall_pattern_seed``)."""
+
+
+def draw_unit(params: WheelParams, unit: int) -> WheelParams:
+    """Another wheel of the same model: every toleranced parameter drawn around ``params``.
+
+    Parameters
+    ----------
+    params : WheelParams
+        The nominal wheel.
+    unit : int
+        Unit seed ≥ 0; the same seed always gives the same wheel.
+
+    Returns
+    -------
+    WheelParams
+        The unit's parameters (``params`` itself is not changed).
+    """
+    if isinstance(unit, bool) or not isinstance(unit, int) or unit < 0:
+        raise ConfigError(f"wheel unit must be an integer ≥ 0, got {unit!r}")
+    rng = np.random.default_rng([unit, 0x52573930])  # "RW90": a stream of its own
+    drawn: dict = {}  # field name → value; mixed types, checked by WheelParams
+    for name, tol in TOLERANCES.items():
+        nominal = getattr(params, name)
+        u = rng.uniform(-1.0, 1.0)
+        drawn[name] = nominal * (1 + tol.relative * u) + tol.absolute * u
+    drawn["breakaway_friction"] = max(drawn["breakaway_friction"], drawn["coulomb_friction"])
+    drawn["hall_pattern_seed"] = int(rng.integers(0, 2**31))
+    return replace(params, **drawn)
+
+
+class HallSpeedSensor:
+    """Speed from the times of Hall-sensor edges, as a BLDC wheel's firmware computes it.
+
+    Three Hall sensors give ``6·p`` edges per revolution (``p`` pole pairs), each
+    misplaced by a fixed angle of its own (``hall_misalignment_deg``, electrical,
+    drawn once per unit). The firmware captures each edge's time with a timer of
+    ``hall_timer_hz`` (plus a capture jitter ``hall_jitter_s``) and, at each edge,
+    computes ``n·Δθ / (t_last − t_first)`` over the last ``n`` edges: a whole
+    revolution when one fits in ``hall_window_s`` (the placement errors cancel:
+    fine at high speed), else the edges within the window, at least one interval
+    (the placement error of one interval shows: coarse at low speed). When the
+    next edge is overdue by half an interval the estimate becomes ``Δθ / (time
+    since the last edge)``, so a stopping wheel reads a falling speed; no edge for longer than one edge
+    interval at ``min_measurable_rpm`` reads 0. A reversal restarts the estimate.
+
+    Parameters
+    ----------
+    params : WheelParams
+        Sensor fields: ``pole_pairs``, ``hall_misalignment_deg``, ``hall_jitter_s``,
+        ``hall_timer_hz``, ``hall_window_s``, ``hall_pattern_seed``,
+        ``min_measurable_rpm``.
+    """
+
+    def __init__(self, params: WheelParams) -> None:
+        self.edges_per_rev = 6 * int(params.pole_pairs)
+        self.pitch = 2 * math.pi / self.edges_per_rev  # rad between nominal edges
+        rng = np.random.default_rng([int(params.hall_pattern_seed), 0x48414C4C])
+        misplace = math.radians(params.hall_misalignment_deg) / params.pole_pairs  # mechanical
+        offsets = misplace * rng.standard_normal(self.edges_per_rev)
+        self.offsets = (offsets - offsets.mean()).tolist()  # a pattern around nominal edges
+        self.jitter = (params.hall_jitter_s * rng.standard_normal(4096)).tolist()  # per edge
+        self.tick = 1.0 / params.hall_timer_hz
+        self.window = params.hall_window_s
+        min_speed = params.min_measurable_rpm * 2 * math.pi / 60
+        self.timeout = self.pitch / min_speed if min_speed > 0 else math.inf
+        self._edges: deque[float] = deque(maxlen=self.edges_per_rev + 1)  # captured times
+        self._direction = 0.0
+        self._k: int | None = None  # the last edge at or below the rotor angle
+        self._t = 0.0
+        self._theta = 0.0
+        self._estimate = 0.0  # rad/s, at the last edge
+        self._last_edge = -math.inf
+
+    def _edge_angle(self, k: int) -> float:
+        return k * self.pitch + self.offsets[k % self.edges_per_rev]
+
+    def record(self, t: float, theta: float) -> None:
+        """Log the rotor angle ``theta`` (rad, unwrapped) at time ``t`` (s), every step."""
+        k = self._k
+        if k is None:
+            k = math.floor(theta / self.pitch)
+            k = k if self._edge_angle(k) <= theta else k - 1
+        else:
+            while self._edge_angle(k + 1) <= theta:  # edges passed going forward
+                k += 1
+                self._edge(k, 1.0, t, theta)
+            while self._edge_angle(k) > theta:  # going backward
+                self._edge(k, -1.0, t, theta)
+                k -= 1
+        self._k, self._t, self._theta = k, t, theta
+
+    def _edge(self, k: int, direction: float, t: float, theta: float) -> None:
+        a = self._edge_angle(k)
+        frac = (a - self._theta) / (theta - self._theta)
+        exact = self._t + frac * (t - self._t)
+        captured = round((exact + self.jitter[k % 4096]) / self.tick) * self.tick
+        if direction != self._direction:
+            self._edges.clear()  # a reversal: intervals across it mean nothing
+            self._direction = direction
+        edges = self._edges
+        edges.append(captured)
+        self._last_edge = captured
+        if len(edges) < 2:
+            self._estimate = 0.0
+            return
+        n = len(edges) - 1
+        if n < self.edges_per_rev or captured - edges[0] > self.window:
+            n = 1  # fewer edges: those within the window, at least one interval
+            while n + 1 < len(edges) and captured - edges[-n - 2] <= self.window:
+                n += 1
+        span = max(captured - edges[-n - 1], self.tick)
+        self._estimate = direction * n * self.pitch / span
+
+    def read(self) -> float:
+        """The firmware's speed now, rad/s (0 when no edge came within the timeout)."""
+        since = self._t - self._last_edge
+        if since > self.timeout:
+            return 0.0
+        if abs(self._estimate) * since > 1.5 * self.pitch:  # an edge is well overdue:
+            return math.copysign(self.pitch / since, self._estimate)  # slower than it was
+        return self._estimate

@@ -1,0 +1,225 @@
+"""Wheel protocols: what a driver and a twin need from one, and the registry of them by name.
+
+A :class:`WheelProtocol` turns the protocol-free messages of
+:mod:`rwlab.wheel.protocol` (:class:`Command`, :class:`Telemetry`,
+:class:`Heartbeat`, all in the units of the twin: rpm, rpm/s, A, °C) into
+bytes on a transport and back. It makes two ends:
+
+- a :class:`HostLink` for :class:`rwlab.wheel.WheelClient` (send commands,
+  receive telemetry and heartbeats),
+- a :class:`NodeLink` for :class:`rwlab.wheel.WheelNode`, the twin (receive
+  commands, send telemetry and heartbeats),
+
+so one client and one twin serve every protocol. Anything on the transport
+that is not a valid message for this end is dropped and counted by the link
+(``bad_frames``: damaged; ``foreign_frames``: valid but not ours), never raised.
+
+Protocols are found by name, as python-can finds its interfaces: the three
+built in (``rwlab``, ``canopen``, ``nsp``) and any a package declares under
+the entry-point group ``rwlab.wheel_protocols`` (``name = "module:Class"``).
+Transports likewise under ``rwlab.wheel_transports``.
+"""
+
+from __future__ import annotations
+
+import abc
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+from typing import Any, ClassVar
+
+from rwlab.errors import ConfigError
+from rwlab.wheel.clock import SimClock, WallClock
+from rwlab.wheel.physics import WheelParams
+from rwlab.wheel.protocol import Command, Heartbeat, Telemetry
+
+Clock = WallClock | SimClock
+
+__all__ = [
+    "PROTOCOL_GROUP",
+    "TRANSPORT_GROUP",
+    "HostLink",
+    "Incoming",
+    "NodeLink",
+    "WheelProtocol",
+    "get_protocol",
+    "protocol_names",
+]
+
+PROTOCOL_GROUP = "rwlab.wheel_protocols"
+TRANSPORT_GROUP = "rwlab.wheel_transports"
+
+BUILTIN_PROTOCOLS = {
+    "rwlab": "rwlab.wheel.dbc_link:RwlabProtocol",
+    "canopen": "rwlab.wheel.canopen_wheel:CanopenProtocol",
+    "nsp": "rwlab.wheel.nsp:NspProtocol",
+}
+
+RawListener = Callable[[float, int, bytes, str], None]
+"""Called with (time s, id, bytes, 'rx' or 'tx') for every frame, for recording the bus."""
+
+
+@dataclass(frozen=True)
+class Incoming:
+    """A message a host link received.
+
+    Attributes
+    ----------
+    t : float
+        Arrival time on the caller's clock, s.
+    frame : Telemetry or Heartbeat
+    source : str or None
+        The sender, where the transport tells (``ip:port`` on udp_multicast).
+    """
+
+    t: float
+    frame: Telemetry | Heartbeat
+    source: str | None = None
+
+
+class HostLink(abc.ABC):
+    """The driver's end of a protocol on one transport, for one wheel."""
+
+    def __init__(self) -> None:
+        self.bad_frames = 0
+        self.foreign_frames = 0
+        self.lost_commands = 0  # commands the wheel is known not to have received
+        self.raw_listener: RawListener | None = None
+
+    def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
+        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
+
+    def set_telemetry_rate(self, rate: float) -> None:  # noqa: B027 - streaming links ignore it
+        """Telemetry wanted per second, Hz (a polling protocol polls at this rate)."""
+
+    @abc.abstractmethod
+    def send(self, cmd: Command, now: float) -> None:
+        """Send ``cmd`` at clock time ``now`` (s); ``ProtocolError`` if it cannot be encoded."""
+
+    @abc.abstractmethod
+    def receive(self, now: float) -> list[Incoming]:
+        """Every valid telemetry and heartbeat of this wheel waiting now, oldest first."""
+
+    def close(self) -> None:  # noqa: B027 - most links own nothing beyond the transport
+        """Release what the link opened (not the transport)."""
+
+
+class NodeLink(abc.ABC):
+    """The twin's end of a protocol on one transport."""
+
+    def __init__(self) -> None:
+        self.bad_frames = 0
+        self.foreign_frames = 0
+
+    def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
+        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
+
+    def close(self) -> None:  # noqa: B027 - most links own nothing beyond the transport
+        """Release what the link opened (not the transport)."""
+
+    @abc.abstractmethod
+    def receive(self, now: float) -> list[tuple[float, Command]]:
+        """Every valid command for this wheel waiting now, with its arrival time, s."""
+
+    @abc.abstractmethod
+    def send(self, frame: Telemetry | Heartbeat, t: float, corrupt: int | None = None) -> None:
+        """Send telemetry or a heartbeat at clock time ``t``.
+
+        ``corrupt`` (fault injection): damage the encoded message by flipping bits
+        of its byte at this index (modulo its length), as a noisy line would.
+        """
+
+    def heard_twin(self) -> str | None:
+        """The source of another wheel answering under this node id, if one was heard."""
+        return None
+
+
+class WheelProtocol(abc.ABC):
+    """A wheel protocol, registered by :attr:`name`.
+
+    Subclasses set :attr:`name`, :attr:`description`, :attr:`transports` (the
+    transports it runs on, ``"can"`` for any python-can bus, ``"stream"`` for a
+    byte stream such as a serial port) and build the two links.
+    """
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    transports: ClassVar[tuple[str, ...]] = ("can",)
+
+    @abc.abstractmethod
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
+        """The driver's link to wheel ``node_id`` on ``transport``.
+
+        Parameters
+        ----------
+        transport : can.BusABC or serial port
+            What :func:`rwlab.wheel.bus.open_transport` opened for this protocol.
+        node_id : int
+            The wheel's node id, 0..15.
+        clock : WallClock or SimClock
+            The driver's clock. On a :class:`rwlab.wheel.SimClock` a link uses the
+            senders' time stamps, and a polling link attaches itself to the clock.
+
+        Returns
+        -------
+        HostLink
+        """
+
+    @abc.abstractmethod
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
+        """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
+
+    def identity(self) -> str:
+        """A text naming the protocol's definition exactly (a file hash), for records."""
+        return self.name
+
+
+def _entry_points(group: str) -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=group)}
+
+
+def protocol_names() -> dict[str, str]:
+    """Every protocol by name, with where it comes from (built in or ``module:Class``).
+
+    Returns
+    -------
+    dict
+        name -> ``"module:Class"``, built-ins first, then entry points.
+    """
+    names = dict(BUILTIN_PROTOCOLS)
+    for name, ep in sorted(_entry_points(PROTOCOL_GROUP).items()):
+        names.setdefault(name, ep.value)
+    return names
+
+
+def get_protocol(name: str) -> WheelProtocol:
+    """The protocol registered as ``name``.
+
+    Parameters
+    ----------
+    name : str
+        ``rwlab``, ``canopen``, ``nsp`` or a name a package registered under the
+        entry-point group ``rwlab.wheel_protocols``.
+
+    Returns
+    -------
+    WheelProtocol
+        An instance.
+    """
+    names = protocol_names()
+    if name not in names:
+        raise ConfigError(
+            f"unknown wheel protocol {name!r}; choose from {', '.join(names)} "
+            f"(a package adds one under the entry-point group {PROTOCOL_GROUP!r})"
+        )
+    target = names[name]
+    module_name, _, attr = target.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"wheel protocol {name!r} ({target}) cannot be loaded: {exc}") from exc
+    protocol = cls()
+    if not isinstance(protocol, WheelProtocol):
+        raise ConfigError(f"wheel protocol {name!r} ({target}) is not a WheelProtocol")
+    return protocol

@@ -1,0 +1,427 @@
+"""NSP: the serial protocol of Sinclair Interplanetary / Rocket Lab wheels, on a byte stream.
+
+A packet travels in SLIP framing (FEND 0xC0, FESC 0xDB, TFEND 0xDC, TFESC 0xDD)
+as ``[dst][src][MCF][payload…][CRC lo][CRC hi]``; the CRC is CRC-16/CCITT
+(polynomial 0x1021, initial value 0xFFFF, MSB first) over dst..payload. MCF bit 7
+asks for a reply ("poll"), bit 5 marks a reply ACK (set) or NACK (clear), bits
+4..0 name the command (PING 0x00, INIT 0x01, PEEK 0x02, POKE 0x03, DIAGNOSTIC
+0x04, CRC 0x06, READ-FILE 0x07, WRITE-FILE 0x08, CLEAR-FAULT 0x09).
+
+What the public outline leaves open is fixed here, for the twin and its driver
+alike (a real wheel's memory map would replace it):
+
+- addresses: the host is 0x11; wheel ``node_id`` is ``0x20 + node_id``;
+- POKE ``[0x00][mode][float32 LE]`` sets the mode: IDLE 0x00, SPEED 0x03
+  (rad/s), MOMENTUM 0x11 (N·m·s), TORQUE 0x12 (N·m);
+- PEEK ``[address]`` reads: 0x10, the telemetry block ``<BffBBfIHB``: mode,
+  speed (rad/s), current (A), latched faults, flags (bit 0 speed limited, bit 1
+  a command refused), temperature (°C), uptime (s), commands seen, counter;
+  0x11, the speed alone (float32, rad/s);
+- PING answers ACK with the text ``rwlab NSP twin``.
+
+The driver polls the telemetry block at its telemetry rate and turns rad/s and
+N·m into the rpm and rpm/s of :mod:`rwlab.wheel.protocol` with the wheel's
+inertia. SLIP and this CRC are a few lines each (see :mod:`rwlab.wheel.serial`).
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from rwlab.wheel import protocol as proto
+from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
+from rwlab.wheel.serial import END, crc16_ccitt, slip_decode, slip_encode
+
+__all__ = [
+    "HOST_ADDRESS",
+    "NspHostLink",
+    "NspNodeLink",
+    "NspPacket",
+    "NspProtocol",
+    "SlipReader",
+    "decode_packet",
+    "encode_packet",
+    "wheel_address",
+]
+
+HOST_ADDRESS = 0x11
+PING, INIT, PEEK, POKE, DIAGNOSTIC, CRC, READ_FILE, WRITE_FILE, CLEAR_FAULT = (
+    0x00, 0x01, 0x02, 0x03, 0x04, 0x06, 0x07, 0x08, 0x09,
+)  # fmt: skip
+POLL, ACK = 0x80, 0x20
+NSP_IDLE, NSP_SPEED, NSP_MOMENTUM, NSP_TORQUE = 0x00, 0x03, 0x11, 0x12
+TELEMETRY_BLOCK, SPEED_REGISTER = 0x10, 0x11
+BLOCK = struct.Struct("<BffBBfIHB")
+PING_TEXT = b"rwlab NSP twin"
+_TO_NSP = {Mode.IDLE: NSP_IDLE, Mode.SPEED: NSP_SPEED, Mode.ACCELERATION: NSP_TORQUE}
+_FROM_NSP = {v: k for k, v in _TO_NSP.items()}
+MAX_BYTES_PER_READ = 1 << 16  # a flood is read in bounded bites
+
+
+def wheel_address(node_id: int) -> int:
+    """The NSP address of wheel ``node_id`` (0..15): ``0x20 + node_id``."""
+    return 0x20 + proto._check_node(node_id)
+
+
+@dataclass(frozen=True)
+class NspPacket:
+    """One NSP packet, CRC checked.
+
+    Attributes
+    ----------
+    dst, src : int
+        Addresses, 0..255.
+    mcf : int
+        Message control field: bit 7 poll, bit 5 ACK (replies), bits 4..0 the command.
+    payload : bytes
+    """
+
+    dst: int
+    src: int
+    mcf: int
+    payload: bytes = b""
+
+    @property
+    def command(self) -> int:
+        """Bits 4..0 of the MCF."""
+        return self.mcf & 0x1F
+
+
+def encode_packet(packet: NspPacket) -> bytes:
+    """The packet with its CRC, in SLIP framing, ready for the wire.
+
+    Parameters
+    ----------
+    packet : NspPacket
+
+    Returns
+    -------
+    bytes
+        ``FEND … FEND``.
+    """
+    for name in ("dst", "src", "mcf"):
+        if not 0 <= getattr(packet, name) <= 0xFF:
+            raise proto.ProtocolError(f"NSP {name} must be a byte, got {getattr(packet, name)}")
+    body = bytes([packet.dst, packet.src, packet.mcf]) + bytes(packet.payload)
+    return slip_encode(body + crc16_ccitt(body).to_bytes(2, "little"))
+
+
+def decode_packet(body: bytes) -> NspPacket:
+    """A packet from one SLIP frame's body (between FENDs).
+
+    Parameters
+    ----------
+    body : bytes
+        Escaped bytes between two FENDs.
+
+    Returns
+    -------
+    NspPacket
+
+    Raises
+    ------
+    ProtocolError
+        Bad escape, too short, or the CRC fails.
+    """
+    try:
+        raw = slip_decode(body)
+    except ValueError as exc:
+        raise proto.ProtocolError(f"NSP frame: {exc}") from None
+    if len(raw) < 5:
+        raise proto.ProtocolError(f"NSP frame of {len(raw)} bytes; at least 5 expected")
+    if crc16_ccitt(raw[:-2]) != int.from_bytes(raw[-2:], "little"):
+        raise proto.ProtocolError("NSP frame fails its CRC")
+    return NspPacket(raw[0], raw[1], raw[2], bytes(raw[3:-2]))
+
+
+class SlipReader:
+    """Cuts a byte stream into SLIP frame bodies; junk between frames is counted, not kept."""
+
+    def __init__(self) -> None:
+        self._buffer = bytearray()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        """Add bytes; return the bodies of the frames they completed (empty ones skipped)."""
+        self._buffer += data
+        bodies = []
+        while True:
+            start = self._buffer.find(END)
+            if start < 0:
+                self._buffer.clear()
+                break
+            end = self._buffer.find(END, start + 1)
+            if end < 0:
+                del self._buffer[:start]
+                break
+            body = bytes(self._buffer[start + 1 : end])
+            del self._buffer[:end]  # the closing END may open the next frame
+            if body:
+                bodies.append(body)
+        if len(self._buffer) > MAX_BYTES_PER_READ:  # a frame that never ends: drop it
+            self._buffer.clear()
+        return bodies
+
+
+def _read(port: Any) -> bytes:
+    waiting = port.in_waiting
+    return bytes(port.read(min(waiting, MAX_BYTES_PER_READ))) if waiting else b""
+
+
+class NspNodeLink(NodeLink):
+    """The twin's end: answers PING, PEEK, POKE and CLEAR-FAULT as wheel ``0x20 + node_id``."""
+
+    def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
+        super().__init__()
+        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.address = wheel_address(node_id)
+        self._reader = SlipReader()
+        self._sequence = 0
+        self._block = BLOCK.pack(NSP_IDLE, 0.0, 0.0, 0, 0, 20.0, 0, 0, 0)
+        self._inertia = RW90.inertia
+        self._corrupt_next: int | None = None
+
+    def configure(self, params: WheelParams) -> None:
+        """The wheel's inertia turns TORQUE (N·m) into the twin's rpm/s."""
+        self._inertia = params.inertia
+
+    def receive(self, now: float) -> list[tuple[float, proto.Command]]:
+        out = []
+        for body in self._reader.feed(_read(self.port)):
+            try:
+                packet = decode_packet(body)
+            except proto.ProtocolError:
+                self.bad_frames += 1
+                continue
+            if packet.dst != self.address or packet.mcf & ACK or packet.src == self.address:
+                self.foreign_frames += 1  # another device's, or a reply
+                continue
+            cmd = self._handle(packet)
+            if cmd is not None:
+                out.append((now, cmd))
+        return out
+
+    def _handle(self, packet: NspPacket) -> proto.Command | None:
+        cmd, ok, reply, command = packet.command, False, b"", None
+        if cmd == PING:
+            ok, reply = True, PING_TEXT
+        elif cmd == PEEK and packet.payload[:1] == bytes([TELEMETRY_BLOCK]):
+            ok, reply = True, bytes([TELEMETRY_BLOCK]) + self._block
+        elif cmd == PEEK and packet.payload[:1] == bytes([SPEED_REGISTER]):
+            ok, reply = True, bytes([SPEED_REGISTER]) + self._block[1:5]
+        elif cmd == POKE:
+            command = self._mode_write(packet.payload)
+            ok = command is not None
+        elif cmd == CLEAR_FAULT:
+            command = self._command(Mode.CLEAR_FAULT, 0.0)
+            ok = True
+        if packet.mcf & POLL:
+            mcf = (ACK if ok else 0) | cmd
+            self._reply(NspPacket(packet.src, self.address, mcf, reply))
+        return command
+
+    def _mode_write(self, payload: bytes) -> proto.Command | None:
+        if len(payload) != 6 or payload[0] != 0x00 or payload[1] not in _FROM_NSP:
+            return None
+        (value,) = struct.unpack("<f", payload[2:6])
+        mode = _FROM_NSP[payload[1]]
+        if mode == Mode.SPEED:
+            return self._command(mode, rad_s_to_rpm(value))
+        if mode == Mode.ACCELERATION:  # TORQUE, N·m → the twin's rpm/s
+            return self._command(mode, rad_s_to_rpm(value / self._inertia))
+        return self._command(mode, 0.0)
+
+    def _command(self, mode: Mode, setpoint: float) -> proto.Command:
+        self._sequence = self._sequence % 255 + 1
+        return proto.Command(self.node_id, mode, float(setpoint), self._sequence)
+
+    def _reply(self, packet: NspPacket) -> None:
+        data = bytearray(encode_packet(packet))
+        if self._corrupt_next is not None:
+            data[1 + self._corrupt_next % (len(data) - 2)] ^= 0x01
+            self._corrupt_next = None
+        self.port.write(bytes(data))
+
+    def send(
+        self, frame: proto.Telemetry | proto.Heartbeat, t: float, corrupt: int | None = None
+    ) -> None:
+        """Update the wheel's registers (NSP wheels answer polls; they do not stream)."""
+        mode, speed, current, faults, flags, temp, uptime, seen, counter = BLOCK.unpack(self._block)
+        if isinstance(frame, proto.Telemetry):
+            mode = _TO_NSP.get(frame.mode, NSP_IDLE)
+            speed, current = rpm_to_rad_s(frame.speed_rpm), frame.current
+            flags = (flags & ~1) | int(frame.speed_limited)
+            counter = frame.counter & 0xFF
+        else:
+            faults, temp, uptime = int(frame.faults) & 0xFF, frame.temperature, frame.uptime
+            seen = frame.commands_seen & 0xFFFF
+            flags = (flags & ~2) | (2 if frame.command_rejected else 0)
+        self._block = BLOCK.pack(mode, speed, current, faults, flags, temp, uptime, seen, counter)
+        self._corrupt_next = corrupt if corrupt is not None else self._corrupt_next
+
+
+class NspHostLink(HostLink):
+    """The driver's end: POKEs modes, PEEKs the telemetry block at ``poll_rate``."""
+
+    def __init__(
+        self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0, inertia: float = 0.0
+    ) -> None:
+        super().__init__()
+        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.address = wheel_address(node_id)
+        self.inertia = inertia or RW90.inertia
+        self.period = 1.0 / poll_rate
+        self.reply_timeout = 0.5  # s of wall time: a pty or a 115200-baud line answers in ms
+        self._reader = SlipReader()
+        self._queue: list[Incoming] = []
+        self._next_poll = clock.now()
+        self._acked = 0
+        self._polls = 0
+        self._last_heartbeat: tuple[int, int] | None = None
+        self._heartbeat_due = clock.now()
+        self._busy = False
+        if clock.simulated:
+            clock.attach(self._tick)  # type: ignore[union-attr]
+
+    # -- the wire ---------------------------------------------------------------------
+    def transact(self, command: int, payload: bytes = b"") -> NspPacket | None:
+        """Send a polled request; the wheel's reply (ACK or NACK), or None without one.
+
+        Parameters
+        ----------
+        command : int
+            The MCF command, 0..31.
+        payload : bytes
+
+        Returns
+        -------
+        NspPacket or None
+        """
+        self._busy = True
+        try:
+            return self._transact(command, payload)
+        finally:
+            self._busy = False
+
+    def _transact(self, command: int, payload: bytes) -> NspPacket | None:
+        self._reader.feed(_read(self.port))  # stale bytes are not this reply
+        request = NspPacket(self.address, HOST_ADDRESS, POLL | command, payload)
+        wire = encode_packet(request)
+        self.port.write(wire)
+        now = self.clock.now()
+        if self.raw_listener:
+            self.raw_listener(now, request.mcf, wire, "tx")
+        deadline = time.monotonic() + self.reply_timeout
+        while time.monotonic() < deadline:
+            if self.clock.simulated:
+                self.clock.kick()  # type: ignore[union-attr]
+            for body in self._reader.feed(_read(self.port)):
+                try:
+                    packet = decode_packet(body)
+                except proto.ProtocolError:
+                    self.bad_frames += 1
+                    continue
+                if packet.src != self.address or packet.dst != HOST_ADDRESS:
+                    self.foreign_frames += 1
+                    continue
+                if self.raw_listener:
+                    self.raw_listener(now, packet.mcf, slip_encode(body), "rx")
+                if packet.command == command:
+                    return packet
+            time.sleep(5e-5)
+        return None
+
+    def send(self, cmd: proto.Command, now: float) -> None:
+        if cmd.mode == Mode.CLEAR_FAULT:
+            command, payload = CLEAR_FAULT, b""
+        else:
+            value = 0.0
+            if cmd.mode == Mode.SPEED:
+                value = rpm_to_rad_s(cmd.setpoint)
+            elif cmd.mode == Mode.ACCELERATION:
+                value = self.inertia * rpm_to_rad_s(cmd.setpoint)  # N·m
+            command = POKE
+            payload = bytes([0x00, _TO_NSP[cmd.mode]]) + struct.pack("<f", value)
+        reply = self.transact(command, payload)
+        if reply is None or not reply.mcf & ACK:
+            self.lost_commands += 1
+        else:
+            self._acked = cmd.sequence
+
+    # -- telemetry ----------------------------------------------------------------------
+    def configure(self, params: WheelParams) -> None:
+        """The wheel's inertia turns rpm/s into the TORQUE (N·m) NSP speaks."""
+        self.inertia = params.inertia
+
+    def set_telemetry_rate(self, rate: float) -> None:
+        """Poll the telemetry block ``rate`` times per second, Hz."""
+        self.period = 1.0 / rate
+        self._next_poll = self.clock.now()
+
+    def _tick(self, now: float) -> float:
+        if not self._busy and now >= self._next_poll - 1e-12:
+            self._poll(now)
+            self._next_poll += self.period
+            if self._next_poll <= now:
+                self._next_poll = now + self.period
+        return self._next_poll
+
+    def _poll(self, now: float) -> None:
+        self._polls += 1
+        reply = self.transact(PEEK, bytes([TELEMETRY_BLOCK]))
+        if reply is None or not reply.mcf & ACK or len(reply.payload) != 1 + BLOCK.size:
+            return  # the counter skips: the driver counts a lost frame
+        mode, speed, current, faults, flags, temp, uptime, seen, _ = BLOCK.unpack(reply.payload[1:])
+        telemetry = proto.Telemetry(
+            self.node_id,
+            rad_s_to_rpm(speed),
+            current,
+            _FROM_NSP.get(mode, Mode.IDLE),
+            bool(faults),
+            bool(flags & 1),
+            self._acked,
+            self._polls & 0xFF,
+        )
+        self._queue.append(Incoming(now, telemetry))
+        state = (faults, flags & 2)
+        if now >= self._heartbeat_due or state != self._last_heartbeat:
+            heartbeat = proto.Heartbeat(
+                self.node_id,
+                telemetry.mode,
+                Fault(faults & 0xF),
+                temp,
+                uptime,
+                seen,
+                bool(flags & 2),
+            )
+            self._queue.append(Incoming(now, heartbeat))
+            self._last_heartbeat = state
+            self._heartbeat_due = now + 1.0
+
+    def receive(self, now: float) -> list[Incoming]:
+        if not self.clock.simulated:
+            self._tick(now)
+        out, self._queue = self._queue, []
+        return out
+
+    def close(self) -> None:
+        if self.clock.simulated:
+            self.clock.detach(self._tick)  # type: ignore[union-attr]
+
+
+class NspProtocol(WheelProtocol):
+    """NSP over a serial port (pyserial): SLIP framing, CRC-16/CCITT, polled telemetry."""
+
+    name = "nsp"
+    description = "NSP (Sinclair / Rocket Lab wheels): SLIP + CRC-16/CCITT on a serial port"
+    transports = ("stream",)
+    poll_rate = 10.0
+
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> NspHostLink:
+        return NspHostLink(transport, node_id, clock, self.poll_rate)
+
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NspNodeLink:
+        return NspNodeLink(transport, node_id, clock)

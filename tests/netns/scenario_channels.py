@@ -1,0 +1,164 @@
+"""Issue 28: udp_multicast channels isolate, and two wheels under one node id are refused.
+
+Run inside a private network namespace (tests/netns/run.py); argv[1] names the
+case. Prints one JSON line.
+"""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+from rwlab.testbed import read_record
+from rwlab.wheel import WallClock, WheelClient
+from rwlab.wheel import protocol as proto
+from rwlab.wheel.udp import LoopbackMulticastBus
+
+A, B = "239.74.163.2", "239.74.163.3"
+py = sys.executable
+
+
+def serve(group: str, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [
+            py,
+            "-m",
+            "rwlab.cli",
+            "wheel",
+            "serve",
+            "--interface",
+            "udp_multicast",
+            "--channel",
+            group,
+            "--telemetry-rate",
+            "50",
+            "--duration",
+            "60",
+            *extra,
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def wait_for_wheel(bus: LoopbackMulticastBus, timeout: float = 30) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        msg = bus.recv(timeout=0.1)
+        if msg is not None and msg.arbitration_id == proto.TELEMETRY_ID:
+            return
+    raise SystemExit("no wheel answered")
+
+
+def stop(proc: subprocess.Popen) -> str:
+    proc.terminate()
+    return proc.communicate(timeout=20)[1]
+
+
+def channels() -> dict:
+    result: dict = {}
+    # the bus: a frame sent to B never reaches a bus on A (same port, same host)
+    on_a, on_b = LoopbackMulticastBus(A), LoopbackMulticastBus(B)
+    raw = on_a._tx
+    result["multicast_if"] = socket.inet_ntoa(
+        raw.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)
+    )
+    result["ttl"] = raw.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+    result["rx_bound_to"] = on_a._rx.getsockname()[0]
+    sender = LoopbackMulticastBus(B)
+    for k in range(20):
+        sender.send(proto.encode_command(proto.Command(0, proto.Mode.SPEED, 100.0, k)))
+    time.sleep(0.2)
+    result["a_got"] = sum(1 for _ in iter(lambda: on_a.recv(timeout=0.05), None))
+    result["b_got"] = sum(1 for _ in iter(lambda: on_b.recv(timeout=0.05), None))
+    for bus in (on_a, on_b, sender):
+        bus.shutdown()
+    # the wheel: served on A, commanded on B for 3 s, it stays idle
+    wheel = serve(A)
+    listen = LoopbackMulticastBus(A)
+    try:
+        wait_for_wheel(listen)
+        other = LoopbackMulticastBus(B)
+        client = WheelClient(other, 0, clock=WallClock())
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            client.set_speed(3000.0)
+            time.sleep(0.1)
+        other.shutdown()
+        speeds = []
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            msg = listen.recv(timeout=0.05)
+            if msg is not None and msg.arbitration_id == proto.TELEMETRY_ID:
+                speeds.append(proto.decode(msg).speed_rpm)
+        result["speed_on_a"] = max(abs(s) for s in speeds)
+        # and a command on A is obeyed (the test can fail)
+        client = WheelClient(listen, 0, clock=WallClock())
+        client.wait_ack(client.set_speed(300.0), timeout=2.0)
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            client.set_speed(300.0)
+            time.sleep(0.1)
+        result["speed_when_commanded_on_a"] = client.telemetry().speed_rpm
+        client.close()
+    finally:
+        listen.shutdown()
+        err = stop(wheel)
+    result["serve_status"] = [line for line in err.splitlines() if "commands=" in line][-1:]
+    return result
+
+
+def twins() -> dict:
+    result: dict = {}
+    first, second = serve(A), serve(A)  # started together: neither hears the other first
+    listen = LoopbackMulticastBus(A)
+    tmp = tempfile.mkdtemp()
+    try:
+        wait_for_wheel(listen)
+        time.sleep(2.0)
+        late = serve(A)  # a wheel served later on the same id is refused at once
+        late_err = late.communicate(timeout=30)[1]
+        result["late_rc"], result["late_err"] = late.returncode, late_err.strip()[-400:]
+        out = os.path.join(tmp, "rec.mcap")
+        exp = subprocess.run(
+            [
+                py,
+                "-m",
+                "rwlab.cli",
+                "experiment",
+                "--interface",
+                "udp_multicast",
+                "--channel",
+                A,
+                "--signal",
+                "step",
+                "--amplitude",
+                "300",
+                "--duration",
+                "4",
+                "--Ts",
+                "0.5",
+                "--out",
+                out,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=90,
+        )
+        result["exp_rc"], result["exp_err"] = exp.returncode, exp.stderr.strip()[-600:]
+        record = read_record(out)
+        result["stop"] = [e["message"] for e in record.topic("/event") if e["kind"] == "stop"]
+        result["error_events"] = [
+            e["message"] for e in record.topic("/event") if e["kind"] == "error"
+        ]
+    finally:
+        listen.shutdown()
+        errs = [stop(first), stop(second)]
+    result["serve_warned"] = ["WARNING: another wheel" in e for e in errs]
+    return result
+
+
+print(json.dumps({"channels": channels, "twins": twins}[sys.argv[1]]()))

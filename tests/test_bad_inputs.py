@@ -1,0 +1,491 @@
+"""Every bad input refused: one ``error:`` line, exit status 2 (issue 28, item 6).
+
+Each case is a command line a new user could type: a number that is NaN, inf,
+1e300, negative or zero where it cannot be; a file that is missing, empty,
+binary, of the wrong type or content; a format that contradicts the output's
+name. None may end in a traceback, hang, or be accepted. The table in
+docs/bad-inputs.md is generated from this list::
+
+    PYTHONPATH=src python -m tests.test_bad_inputs > docs/bad-inputs.md
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rwlab.cli import main
+
+BUDGET_S = 30.0  # a refusal comes at once; this only catches a hang
+NUMBERS = {"nan": "nan", "inf": "inf", "-inf": "-inf", "1e300": "1e300", "neg": "-1", "zero": "0"}
+
+# -- the files a user might pass ------------------------------------------------------------
+
+MODEL = {
+    "format": "rwlab.WheelModel/1",
+    "structure": "ARX221",
+    "Ts": 0.5,
+    "input": {"name": "command", "unit": "rpm", "offset": 0.0},
+    "output": {"name": "speed_rpm", "unit": "rpm", "offset": 0.0},
+    "model": {
+        "format": "rwlab.PolyModel/1",
+        "structure": "ARX221",
+        "Ts": 0.5,
+        "A": [1.0, -0.9, 0.0],
+        "B": [0.0, 0.1, 0.0],
+        "C": [1.0],
+        "D": [1.0],
+        "F": [1.0],
+        "nk": [1],
+        "nb": [2],
+        "nf": [0],
+        "noise_variance": 1.0,
+        "covariance": None,
+    },
+    "saturation": {"speed_rpm": 7800.0, "accel_rpm_s": 314.0, "source": "test"},
+    "validation_fit_percent": 90.0,
+}
+
+
+def _model(**changes) -> str:
+    m = json.loads(json.dumps(MODEL))
+    for key, value in changes.items():
+        where = m
+        *path, last = key.split(".")
+        for p in path:
+            where = where[p]
+        where[last] = value
+    return json.dumps(m)
+
+
+FILES = {
+    # models
+    "binary.json": bytes(range(256)) * 4,
+    "list.json": "[1, 2, 3]",
+    "abc.json": _model(**{"model.A": "abc"}),
+    "unstable.json": _model(**{"model.A": [1.0, -1.5, 0.0]}),
+    "nanmodel.json": _model(**{"model.A": [1.0, float("nan"), 0.0]}).replace("NaN", "NaN"),
+    "hugemodel.json": _model(**{"model.B": [0.0, 1e300, 0.0]}),
+    "nots.json": _model(Ts=-0.5),
+    "empty.json": "",
+    "other.json": '{"format": "something else"}',
+    # scenarios and dispersions
+    "empty.toml": "",
+    "binary.toml": bytes(range(256)),
+    "unknown.toml": '[scenario]\nbase = "geo-smallsat"\nno_such_key = 1\n',
+    "nan.toml": '[scenario]\nbase = "geo-smallsat"\ndt = nan\n',
+    "inf.toml": '[scenario]\nbase = "geo-smallsat"\ndt = inf\n',
+    "huge.toml": '[scenario]\nbase = "geo-smallsat"\ndt = 1e300\n',
+    "negdt.toml": '[scenario]\nbase = "geo-smallsat"\ndt = -0.1\n',
+    "nan-inertia.toml": '[scenario]\nbase = "geo-smallsat"\ninertia = [nan, 1, 1]\n',
+    "disp-nan.toml": 'sun_noise_deg = { distribution = "normal", sigma = nan }\n',
+    "disp-inf.toml": 'sun_noise_deg = { distribution = "uniform", bounds = [0, inf] }\n',
+    "disp-huge.toml": 'sun_noise_deg = { distribution = "normal", sigma = 1e300 }\n',
+    "disp-unknown.toml": 'no_field = { distribution = "normal", sigma = 0.1 }\n',
+    "exp-seed.toml": "[experiment]\nseed = -1\n",
+    "exp-nan.toml": "[experiment]\nduration = nan\n",
+    "exp-huge.toml": "[experiment]\nTs = 1e300\n",
+    "exp-unknown.toml": "[experiment]\ncolour = 1\n",
+    "params-nan.toml": "inertia = nan\n",
+    # data
+    "binary.csv": bytes(range(256)) * 4,
+    "empty.csv": "",
+    "header.csv": "u,y\n",
+    "nan.csv": "u,y\n1,2\n2,nan\n3,4\n4,5\n",
+    "inf.csv": "u,y\n1,2\n2,inf\n3,4\n4,5\n",
+    "huge.csv": "u,y\n" + "".join(f"{k},{1e300 * (k % 2)}\n" for k in range(1000)),
+    "text.csv": "u,y\n1,2\nabc,3\n",
+    "binary.mcap": bytes(range(256)) * 4,
+    "empty.mcap": "",
+    "binary.mat": bytes(range(256)) * 4,
+    "setpoints.txt": "1\n2\n",
+}
+
+
+@pytest.fixture(scope="module")
+def where(tmp_path_factory):
+    """A folder with every file above, a small valid record, and an output folder name."""
+    from rwlab.testbed import ExperimentConfig, run_experiment
+
+    root = tmp_path_factory.mktemp("bad")
+    for name, content in FILES.items():
+        path = root / name
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+    run_experiment(ExperimentConfig(duration=30, Ts=0.5, seed=1), root / "rec.mcap")
+    (root / "model.json").write_text(_model())
+    (root / "afile").write_text("x")
+    (root / "kept.partial.mcap").write_bytes((root / "rec.mcap").read_bytes())
+    return root
+
+
+# -- the cases --------------------------------------------------------------------------------
+
+
+def _numbers(prefix: list[str], option: str, kinds, suffix=()) -> list[tuple[str, list[str]]]:
+    words = []
+    for a in prefix:
+        if a.startswith(("-", "{")):
+            break
+        words.append(a)
+    return [
+        (f"{' '.join(words)} {option} {NUMBERS[k]}", [*prefix, option, NUMBERS[k], *suffix])
+        for k in kinds
+    ]
+
+
+ALL = ("nan", "inf", "-inf", "1e300", "neg", "zero")
+NONFINITE = ("nan", "inf", "-inf", "1e300")
+
+
+def cases() -> list[tuple[str, list[str]]]:
+    """(description, argv) with {D} for the files' folder and {O} for a fresh output."""
+    out = ["--out", "{O}"]
+    c: list[tuple[str, list[str]]] = []
+    # experiment
+    exp = ["experiment", *("--out", "{O}.mcap")]
+    for opt in ("--duration", "--Ts", "--amplitude", "--telemetry-rate"):
+        c += _numbers(exp, opt, ALL)
+    c += [
+        ("experiment --seed -1", [*exp, "--seed", "-1"]),
+        ("experiment --seed 1e300", [*exp, "--seed", "1e300"]),
+        ("experiment --node-id 16", [*exp, "--node-id", "16"]),
+        ("experiment --port 0 --monitor", [*exp, "--monitor", "--port", "0"]),
+        ("experiment --signal file without --file", [*exp, "--signal", "file"]),
+        ("experiment --file missing.csv", [*exp, "--signal", "file", "--file", "{D}/no.csv"]),
+        ("experiment --file binary.csv", [*exp, "--signal", "file", "--file", "{D}/binary.csv"]),
+        ("experiment --file empty.csv", [*exp, "--signal", "file", "--file", "{D}/empty.csv"]),
+        (
+            "experiment --file setpoints.txt",
+            [*exp, "--signal", "file", "--file", "{D}/setpoints.txt"],
+        ),
+        ("experiment --config empty file", [*exp, "--config", "{D}/empty.toml"]),
+        ("experiment --config binary", [*exp, "--config", "{D}/binary.toml"]),
+        ("experiment --config unknown key", [*exp, "--config", "{D}/exp-unknown.toml"]),
+        ("experiment --config seed = -1", [*exp, "--config", "{D}/exp-seed.toml"]),
+        ("experiment --config duration = nan", [*exp, "--config", "{D}/exp-nan.toml"]),
+        ("experiment --config Ts = 1e300", [*exp, "--config", "{D}/exp-huge.toml"]),
+        ("experiment --fault bogus", [*exp, "--fault", "bogus@1"]),
+        ("experiment --fault friction=nan@1", [*exp, "--fault", "friction=nan@1"]),
+        ("experiment --fault friction=3@inf", [*exp, "--fault", "friction=3@inf"]),
+        ("experiment --model binary", [*exp, "--model", "{D}/binary.json"]),
+        ("experiment --model list", [*exp, "--model", "{D}/list.json"]),
+        ("experiment --model A = abc", [*exp, "--model", "{D}/abc.json"]),
+        ("experiment --model unstable", [*exp, "--model", "{D}/unstable.json"]),
+        ("experiment --out a folder", ["experiment", "--out", "{D}"]),
+        ("experiment --out under a file", ["experiment", "--out", "{D}/afile/x.mcap"]),
+        ("experiment --out x.csv", ["experiment", "--out", "{O}.csv"]),
+        ("experiment --amplitude beyond the wheel", [*exp, "--amplitude", "9000"]),
+    ]
+    # export
+    exp_ = ["export", "{D}/rec.mcap"]
+    c += [
+        ("export --format mat --out a.csv", [*exp_, "--format", "mat", "--out", "{O}.csv"]),
+        ("export --format csv --out a.mat", [*exp_, "--format", "csv", "--out", "{O}.mat"]),
+        ("export --format parquet --out a.csv", [*exp_, "--format", "parquet", "--out", "{O}.csv"]),
+        ("export --format csv --out a.parquet", [*exp_, "--format", "csv", "--out", "{O}.parquet"]),
+        (
+            "export a missing record",
+            ["export", "{D}/no.mcap", "--format", "csv", "--out", "{O}.csv"],
+        ),
+        (
+            "export a killed run's NAME.mcap",
+            ["export", "{D}/kept.mcap", "--format", "csv", "--out", "{O}.csv"],
+        ),
+        (
+            "export a binary record",
+            ["export", "{D}/binary.mcap", "--format", "csv", "--out", "{O}.csv"],
+        ),
+        (
+            "export an empty record",
+            ["export", "{D}/empty.mcap", "--format", "csv", "--out", "{O}.csv"],
+        ),
+        (
+            "export a CSV as a record",
+            ["export", "{D}/nan.csv", "--format", "csv", "--out", "{O}.csv"],
+        ),
+    ]
+    for opt in ("--Ts", "--max-gap"):
+        kinds = ("nan", "-inf", "1e300", "neg", "zero") if opt == "--Ts" else ("nan", "-inf", "neg")
+        c += _numbers([*exp_, "--format", "csv", "--out", "{O}.csv"], opt, kinds)
+    # identify
+    idf = ["identify", "{D}/rec.mcap", *out]
+    c += _numbers(idf, "--Ts", ALL)
+    c += _numbers(idf, "--split", ("nan", "inf", "neg", "zero", "1e300"))
+    c += _numbers(idf, "--tolerance", ("nan", "inf", "neg", "1e300"))
+    c += [
+        ("identify --split 1", [*idf, "--split", "1"]),
+        ("identify --Ts finer than the telemetry", [*idf, "--Ts", "0.05"]),
+        ("identify --workers 0", [*idf, "--workers", "0"]),
+        ("identify --input no_such_column", [*idf, "--input", "nope"]),
+    ]
+    for f in (
+        "binary.csv",
+        "empty.csv",
+        "header.csv",
+        "nan.csv",
+        "inf.csv",
+        "text.csv",
+        "binary.mcap",
+        "empty.mcap",
+        "binary.mat",
+        "no_such.csv",
+        "binary.json",
+    ):
+        c.append((f"identify {f}", ["identify", f"{{D}}/{f}", *out]))
+    c.append(
+        ("identify huge.csv (values of 1e300)", ["identify", "{D}/huge.csv", "--Ts", "1", *out])
+    )
+    c.append(("identify an unknown data set name", ["identify", "dryerr", *out]))
+    c.append(("identify --out a file", ["identify", "dryer", "--out", "{D}/afile"]))
+    # ident
+    for sub, orders in (
+        ("arx", ["2", "2", "1"]),
+        ("armax", ["2", "2", "1", "1"]),
+        ("oe", ["2", "2", "1"]),
+    ):
+        base = ["ident", sub, "dryer", *orders]
+        c += _numbers(base, "--split", ("nan", "neg", "zero", "1e300"))
+    c += [
+        ("ident arx negative order", ["ident", "arx", "dryer", "-1", "2", "1"]),
+        ("ident arx order 1e300", ["ident", "arx", "dryer", "1e300", "2", "1"]),
+        ("ident arx --Ts nan on a CSV", ["ident", "arx", "{D}/nan.csv", "2", "2", "1"]),
+        ("ident arx a huge CSV", ["ident", "arx", "{D}/huge.csv", "2", "2", "1", "--Ts", "1"]),
+        (
+            "ident arx --save over a folder",
+            ["ident", "arx", "dryer", "2", "2", "1", "--save", "{D}"],
+        ),
+        ("ident ar binary file", ["ident", "ar", "{D}/binary.mat", "2"]),
+    ]
+    # diagnose
+    dia = ["diagnose", "{D}/rec.mcap", "--model", "{D}/model.json", "--calibration", "10", *out]
+    c += _numbers(dia[:5] + out, "--calibration", ALL)
+    c += _numbers(dia, "--false-alarms", ("nan", "inf", "neg", "zero", "1e300"))
+    for f in (
+        "binary.json",
+        "list.json",
+        "abc.json",
+        "unstable.json",
+        "nanmodel.json",
+        "hugemodel.json",
+        "nots.json",
+        "empty.json",
+        "other.json",
+        "no_such.json",
+    ):
+        c.append((f"diagnose --model {f}", [*dia[:3], f"{{D}}/{f}", *dia[4:]]))
+    c.append(
+        (
+            "diagnose a binary record",
+            ["diagnose", "{D}/binary.mcap", "--model", "{D}/model.json", *out],
+        )
+    )
+    # attitude
+    cmp_ = ["attitude", "compare", *out]
+    c += _numbers(cmp_, "--duration", ALL)
+    c += _numbers(cmp_, "--rho", ALL)
+    c += _numbers(cmp_, "--relinearize", ("nan", "inf", "neg", "zero"))
+    c.append(("attitude compare --seed -1", [*cmp_, "--seed", "-1"]))
+    c.append(("attitude compare --epoch garbage", [*cmp_, "--epoch", "noon"]))
+    for f in (
+        "binary.json",
+        "list.json",
+        "abc.json",
+        "unstable.json",
+        "nanmodel.json",
+        "empty.json",
+    ):
+        c.append((f"attitude compare --wheel-model {f}", [*cmp_, "--wheel-model", f"{{D}}/{f}"]))
+    for f in (
+        "empty.toml",
+        "binary.toml",
+        "unknown.toml",
+        "nan.toml",
+        "inf.toml",
+        "huge.toml",
+        "negdt.toml",
+        "nan-inertia.toml",
+        "no_such.toml",
+    ):
+        c.append((f"attitude compare --scenario {f}", [*cmp_, "--scenario", f"{{D}}/{f}"]))
+    c.append(("attitude compare --scenario unknown name", [*cmp_, "--scenario", "geo-moon"]))
+    ltr = ["attitude", "ltr", *out]
+    c += _numbers(ltr, "--rho", ALL)
+    sim = ["attitude", "simulate", "--duration", "60", *out]
+    c += _numbers(["attitude", "simulate", *out], "--duration", ALL)
+    c += _numbers(sim, "--dt", ALL)
+    c += _numbers(sim, "--rho", ("nan", "inf", "neg", "zero"), ("--controller", "lqg_ltr"))
+    c.append(("attitude simulate --seed -1", [*sim, "--seed", "-1"]))
+    c.append(("attitude simulate --scenario empty.toml", [*sim, "--scenario", "{D}/empty.toml"]))
+    mc = ["attitude", "montecarlo", "--duration", "60", *out]
+    c += [
+        ("attitude montecarlo --runs 1e9", [*mc, "--runs", "1e9"]),
+        ("attitude montecarlo --runs 1000000000", [*mc, "--runs", "1000000000"]),
+        ("attitude montecarlo --runs 0", [*mc, "--runs", "0"]),
+        ("attitude montecarlo --runs -1", [*mc, "--runs", "-1"]),
+        ("attitude montecarlo --runs nan", [*mc, "--runs", "nan"]),
+        ("attitude montecarlo --seed -1", [*mc, "--runs", "2", "--seed", "-1"]),
+        ("attitude montecarlo --workers 0", [*mc, "--runs", "2", "--workers", "0"]),
+        ("attitude montecarlo --resume with nothing kept", [*mc, "--runs", "2", "--resume"]),
+    ]
+    c += _numbers(["attitude", "montecarlo", "--runs", "2", *out], "--duration", ALL)
+    for f in (
+        "empty.toml",
+        "binary.toml",
+        "disp-nan.toml",
+        "disp-inf.toml",
+        "disp-huge.toml",
+        "disp-unknown.toml",
+        "no_such.toml",
+    ):
+        c.append(
+            (
+                f"attitude montecarlo --dispersions {f}",
+                [*mc, "--runs", "2", "--dispersions", f"{{D}}/{f}"],
+            )
+        )
+    # demo, monitor, wheel, datasets
+    c += [
+        ("demo --out a file", ["demo", "--quick", "--out", "{D}/afile"]),
+        ("demo --out a folder of other files", ["demo", "--quick", "--out", "{D}"]),
+        ("monitor a missing file", ["monitor", "{D}/no.mcap"]),
+        ("monitor a binary file --replay", ["monitor", "{D}/binary.mcap", "--replay"]),
+        ("monitor --port 0", ["monitor", "{D}/rec.mcap", "--port", "0"]),
+        ("monitor --port 70000", ["monitor", "{D}/rec.mcap", "--port", "70000"]),
+        ("monitor --speed nan", ["monitor", "{D}/rec.mcap", "--replay", "--speed", "nan"]),
+        ("monitor --speed inf", ["monitor", "{D}/rec.mcap", "--replay", "--speed", "inf"]),
+        ("wheel cmd speed nan", ["wheel", "cmd", "speed", "nan"]),
+        ("wheel cmd speed inf", ["wheel", "cmd", "speed", "inf"]),
+        ("wheel cmd speed 1e300", ["wheel", "cmd", "speed", "1e300"]),
+        ("wheel cmd speed 9000", ["wheel", "cmd", "speed", "9000"]),
+        ("wheel cmd accel nan", ["wheel", "cmd", "accel", "nan"]),
+        ("wheel cmd --watch nan", ["wheel", "cmd", "idle", "--watch", "nan"]),
+        ("wheel cmd --watch -1", ["wheel", "cmd", "idle", "--watch", "-1"]),
+        ("wheel cmd --timeout nan", ["wheel", "cmd", "idle", "--timeout", "nan"]),
+        ("wheel cmd --timeout 0", ["wheel", "cmd", "idle", "--timeout", "0"]),
+        ("wheel serve --telemetry-rate nan", ["wheel", "serve", "--telemetry-rate", "nan"]),
+        ("wheel serve --telemetry-rate 0", ["wheel", "serve", "--telemetry-rate", "0"]),
+        ("wheel serve --latency-ms -1", ["wheel", "serve", "--latency-ms", "-1"]),
+        ("wheel serve --latency-ms inf", ["wheel", "serve", "--latency-ms", "inf"]),
+        ("wheel serve --watchdog nan", ["wheel", "serve", "--watchdog", "nan"]),
+        ("wheel serve --duration nan", ["wheel", "serve", "--duration", "nan"]),
+        ("wheel serve --duration -1", ["wheel", "serve", "--duration", "-1"]),
+        ("wheel serve --params nan", ["wheel", "serve", "--params", "{D}/params-nan.toml"]),
+        ("wheel serve --params binary", ["wheel", "serve", "--params", "{D}/binary.toml"]),
+        ("datasets with an argument", ["datasets", "dryer"]),
+        ("an unknown command", ["identifyy", "dryer"]),
+    ]
+    return c
+
+
+CASES = cases()
+
+
+def _argv(args: list[str], root: Path, k: int) -> list[str]:
+    return [a.replace("{D}", str(root)).replace("{O}", str(root / "out" / f"o{k}")) for a in args]
+
+
+class _Budget:
+    def __enter__(self):
+        def hang(signum, frame):
+            raise TimeoutError("still running: a hang, not a refusal")
+
+        self.previous = signal.signal(signal.SIGALRM, hang)
+        signal.setitimer(signal.ITIMER_REAL, BUDGET_S)
+
+    def __exit__(self, *exc):
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, self.previous)
+
+
+def refuse(args: list[str], root: Path, k: int):
+    """Run one case in-process: (exit code, output, exception)."""
+    with _Budget():
+        r = CliRunner().invoke(main, _argv(args, root, k), prog_name="rwlab")
+    return r.exit_code, r.output, r.exception
+
+
+def test_there_are_at_least_150_cases_across_every_command():
+    from tests.test_cli_fuzz import COMMANDS
+
+    assert len(CASES) >= 150
+    assert len({d for d, _ in CASES}) == len(CASES)  # each described once
+    for path, _ in COMMANDS:
+        if path[0] == "ident" and path[1] not in ("arx", "armax", "oe", "ar"):
+            continue  # the ident group: arx, armax, oe and ar stand for its estimators
+        assert any(args[: len(path)] == list(path) for _, args in CASES), path
+
+
+def test_the_documented_table_lists_every_case():
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "bad-inputs.md").read_text()
+    listed = [
+        line.split("|")[2].strip()
+        for line in doc.splitlines()
+        if line[:3] == "| " + line[2:3] and line[2:3].isdigit()
+    ]
+    assert listed == [what.replace("|", "\\|") for what, _ in CASES], (
+        "regenerate docs/bad-inputs.md"
+    )
+
+
+@pytest.mark.parametrize(("what", "args"), CASES, ids=[d for d, _ in CASES])
+def test_a_bad_input_is_refused_with_one_error_line(where, what, args):
+    k = CASES.index((what, args))
+    code, output, exc = refuse(args, where, k)
+    assert exc is None or isinstance(exc, SystemExit), (what, output, exc)
+    assert code == 2, (what, output)
+    lines = output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), (what, output)
+    assert "Traceback" not in output
+    assert not (where / "out" / f"o{k}").exists()  # no output folder left
+
+
+def _table() -> str:
+    """docs/bad-inputs.md: every case and the line rwlab answers with."""
+    import tempfile
+
+    from rwlab.testbed import ExperimentConfig, run_experiment
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for name, content in FILES.items():
+            p = root / name
+            p.write_bytes(content) if isinstance(content, bytes) else p.write_text(content)
+        run_experiment(ExperimentConfig(duration=30, Ts=0.5, seed=1), root / "rec.mcap")
+        (root / "model.json").write_text(_model())
+        (root / "afile").write_text("x")
+        (root / "kept.partial.mcap").write_bytes((root / "rec.mcap").read_bytes())
+        for k, (what, args) in enumerate(CASES):
+            code, output, _ = refuse(args, root, k)
+            line = output.strip().splitlines()[-1] if output.strip() else ""
+            line = line.replace(str(root), "D").replace("|", "\\|")
+            shown = " ".join(_argv(args, Path("D"), k)).replace("D/out/", "").replace("|", "\\|")
+            rows.append(f"| {k + 1} | {what} | `rwlab {shown}` | {code} | {line} |")
+    head = [
+        "# Bad inputs and how rwlab refuses them",
+        "",
+        "Generated by `PYTHONPATH=src python -m tests.test_bad_inputs > docs/bad-inputs.md`",
+        "from the cases in `tests/test_bad_inputs.py`, which checks that each is refused",
+        "with one `error:` line and exit status 2, leaves no output, and does not hang.",
+        "`D` is the folder of test files (binary, empty, NaN, unstable, …).",
+        "",
+        f"{len(rows)} cases.",
+        "",
+        "| # | what | command line | exit | answer |",
+        "|---|---|---|---|---|",
+    ]
+    return "\n".join([*head, *rows]) + "\n"
+
+
+if __name__ == "__main__":
+    np.seterr(all="ignore")
+    sys.stdout.write(_table())

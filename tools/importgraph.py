@@ -1,0 +1,148 @@
+"""rwlab's import graph, its layering violations and cycles — read from the source with ast.
+
+Run ``python tools/importgraph.py`` (exit 1 on a violation or a cycle); the test
+``tests/test_layering.py`` runs the same check. Hand-written on ``ast`` rather than
+import-linter/grimp: those are not in rwlab's dependencies, and the rule here (an
+ordered list of layers plus "no cycle between modules") is fifty lines.
+
+Every ``import`` counts, also those inside functions: a lazy import is still a
+dependency. A module's layer is that of its top-level name under ``rwlab``.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parent.parent / "src"
+
+# Lowest first. A module may import its own layer and those below, never above.
+# testbed sits above diagnose (the runner diagnoses live), both above wheel.
+LAYERS: list[set[str]] = [
+    {"__init__", "errors", "_toml", "_io", "_display", "_optional", "schemas"},  # __init__: root
+    {"data", "signals", "datafiles", "datasets"},
+    {"ident"},
+    {"wheel"},
+    {"diagnose"},
+    {"testbed"},
+    {"attitude"},
+    {"hil"},
+    {"campaign"},
+    {"report"},
+    {"cli", "demo"},
+]
+
+
+def modules(src: Path = SRC) -> dict[str, Path]:
+    """Every module of the ``rwlab`` package: dotted name → file."""
+    out = {}
+    for path in sorted((src / "rwlab").rglob("*.py")):
+        parts = path.relative_to(src).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        out[name] = path
+    return out
+
+
+def imports(src: Path = SRC) -> dict[str, set[str]]:
+    """The graph: module → the rwlab modules it imports (anywhere in its body)."""
+    mods = modules(src)
+    graph: dict[str, set[str]] = defaultdict(set)
+    for name, path in mods.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join([*up, base] if base else up)
+                # "from rwlab import datasets" imports the module rwlab.datasets
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in mods else base
+                           for a in node.names]  # fmt: skip
+            else:
+                continue
+            for t in targets:
+                while t and t not in mods:
+                    t = t.rpartition(".")[0]
+                if t.startswith("rwlab") and t != name:
+                    graph[name].add(t)
+    return dict(graph)
+
+
+def layer(module: str) -> int:
+    """The layer index of a module (0 lowest)."""
+    top = module.split(".")[1] if "." in module else "__init__"
+    for i, names in enumerate(LAYERS):
+        if top in names:
+            return i
+    raise KeyError(f"{module}: its top-level name {top!r} is in no layer of LAYERS")
+
+
+def violations(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Imports from a lower layer up to a higher one."""
+    return sorted((a, b) for a, bs in graph.items() for b in bs if layer(b) > layer(a))
+
+
+def cycles(graph: dict[str, set[str]], *, packages: bool = True) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan).
+
+    With ``packages``, modules are merged into their top-level name under rwlab
+    (``rwlab.ident.pem`` → ``ident``), so a package's ``__init__`` re-exporting
+    its own modules is not a cycle, but two packages needing each other is.
+    """
+
+    def node(m: str) -> str:
+        return m.split(".")[1] if packages and "." in m else m
+
+    g: dict[str, set[str]] = defaultdict(set)
+    for a, bs in graph.items():
+        for b in bs:
+            if node(a) != node(b):
+                g[node(a)].add(node(b))
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(g.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in sorted(set(g) | {w for ws in g.values() for w in ws}):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def main() -> int:
+    graph = imports()
+    bad, loops = violations(graph), cycles(graph)
+    for a, b in bad:
+        print(f"layering: {a} (layer {layer(a)}) imports {b} (layer {layer(b)})")
+    for c in loops:
+        print(f"cycle: {' <-> '.join(c)}")
+    n_edges = sum(map(len, graph.values()))
+    print(f"{len(graph)} modules, {n_edges} imports: {len(bad)} violations, {len(loops)} cycles")
+    return 1 if bad or loops else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
