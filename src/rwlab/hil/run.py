@@ -265,15 +265,16 @@ def _channels(nodes) -> dict[str, dict]:
 
 
 def _frame_writer(record, node: int, clock):
-    """A ``WheelClient.frame_listener`` writing each decoded frame to the node's topics."""
-    simulated = isinstance(clock, SimClock)
+    """A ``WheelClient.frame_listener`` writing each decoded frame to the node's topics
+    (called with the clock time, the frame id, its bytes and 'rx' or 'tx')."""
+    import can
 
-    def listen(msg, direction: str) -> None:
+    def listen(t: float, frame_id: int, data: bytes, direction: str) -> None:
+        msg = can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False)
         try:
             frame = proto.decode(msg)
         except proto.ProtocolError:
             return  # the client counts bad frames
-        t = msg.timestamp if simulated else clock.now()
         if isinstance(frame, proto.Command):
             record.write(
                 f"/wheel{node}/command",
