@@ -67,6 +67,17 @@ def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def _check_flyable(sc: Scenario) -> None:
+    """Refuse what the host loop does not fly: gyros, a star tracker (the compiled loop's
+    GYRO filter mode and tracker updates are not mirrored here)."""
+    flown = [name for name in ("gyro", "star_tracker") if getattr(sc, name) is not None]
+    if flown:
+        raise ConfigError(
+            f"{sc.name}: hardware in the loop flies paper B's sun and earth sensors with the "
+            f"dynamics MEKF; this scenario flies {' and '.join(flown)}, which the host loop "
+            "does not mirror yet — pick a sun/earth-sensor scenario (geo-smallsat, "
+            "geo-smallsat-pyramid, geo-comsat) or remove the [gyro]/[star_tracker] tables"
+        )
 
 
 class Satellite:
@@ -107,11 +118,7 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.dt:g} s)")
-        if getattr(scenario, "gyro", None) is not None or getattr(scenario, "star_tracker", None):
-            raise ConfigError(
-                f"{scenario.name}: hardware in the loop flies the sun/earth-sensor MEKF; "
-                "remove the gyros and the star tracker from the scenario"
-            )
+        _check_flyable(scenario)
         sc = self.scenario = scenario
         self._sensors = _sensor_record(sc, np.zeros((3, 3)))
         self.controller = controller
@@ -129,6 +136,9 @@ class Satellite:
         self.q_hat, self.w_hat, self.P = q_hat, w_hat, P
         self.J = sc.inertia_matrix
         self.J_inv = np.linalg.inv(self.J)
+        # the filter's model of the body (a flight filter's inertia is not the truth's)
+        self.Jf = sc.filter_inertia_matrix
+        self.Jf_inv = np.linalg.inv(self.Jf)
         self.G = sc.wheel_matrix
         self.nw = self.G.shape[1]
         self.h_max = np.full(self.nw, sc.wheel_max_momentum)
@@ -143,7 +153,7 @@ class Satellite:
         )
         nx = P.shape[0]
         self.Qc = np.zeros((nx, nx))
-        self.Qc[3:6, 3:6] = psd * self.J_inv @ self.J_inv.T
+        self.Qc[3:6, 3:6] = psd * self.Jf_inv @ self.Jf_inv.T
         if nx > 6:
             self.Qc[6:, 6:] = np.diag(disturbance_psd(sc))
         self.biased = self.use_ekf and nx > 6
@@ -239,7 +249,7 @@ class Satellite:
         f = u - i
         row = self.sky[i] + f * (self.sky[i + 1] - self.sky[i])
         sun, moon = row[:3] / np.linalg.norm(row[:3]), row[3:6] / np.linalg.norm(row[3:6])
-        return sun, moon, row[6], row[7], row[8] > 0.5
+        return sun, moon, row[6], row[7], row[8] > 0.5, row[9]
 
     def _sense(self, k: int, s_orb, m_orb, sunlit, moon_visible) -> bool:
         """Sensor statuses at sensor ticks and the filter's updates; whether it measured."""
@@ -334,7 +344,7 @@ class Satellite:
         k, t, sc, st, x = self.k, self.t, self.scenario, self.stats, self.x
         if k == 0 or k - self.block_k0 >= self.block:
             self._new_block()
-        s_orb, m_orb, sunlit, earth_lit, moon_visible = self._sky_at(t)
+        s_orb, m_orb, sunlit, earth_lit, moon_visible, srp_scale = self._sky_at(t)
         if earth_lit < 1.0:
             st[_S["eclipse_steps"]] += 1
         if sunlit < earth_lit:
@@ -352,7 +362,7 @@ class Satellite:
             if self.bias_kind >= 2:
                 sun_hat = dcm(self.q_hat) @ s_orb
                 cols = slice(3, 6) if self.bias_kind == 3 else slice(0, 3)
-                self.Bmap[:, cols] = skew(sunlit * sun_hat)
+                self.Bmap[:, cols] = skew(srp_scale * sun_hat)
             tau_b = self.Bmap @ self.w_hat[3:]
             tau = tau - tau_b
         # the idled wheels' measured torque is known: the others make up for it
@@ -377,6 +387,7 @@ class Satellite:
             sun=s_orb,
             moon=m_orb,
             sunlit=sunlit,
+            srp_scale=srp_scale,
             err=err,
             demand=-tau,
         )
@@ -468,12 +479,12 @@ class Satellite:
         j = self.k - self.block_k0
         d, dm = self.dist.copy(), self.dist_model.copy()
         d[7:10] = self.dist[7:10] + self.process[j] + s["tau_thr"]
-        d[1] = self.dist[1] * s["sunlit"]
-        dm[1] = self.dist_model[1] * s["sunlit"]
+        d[1] = self.dist[1] * s["srp_scale"]  # SRP: none in the shadow, ∝ 1/r² of the Sun
+        dm[1] = self.dist_model[1] * s["srp_scale"]
         if self.use_ekf:
             if s["measured"]:
                 error_jacobian_into(
-                    self.q_hat, self.w_hat, s["h_body"], self.J, self.J_inv, GEO_RATE,
+                    self.q_hat, self.w_hat, s["h_body"], self.Jf, self.Jf_inv, GEO_RATE,
                     self.dist_model[0], self.Bmap, self._F, self._W3,
                 )  # fmt: skip
                 T = self.sensor_every * self.dt
@@ -481,7 +492,7 @@ class Satellite:
             xm = np.concatenate([self.q_hat, self.w_hat[:3], x[7:]])
             dm[7:10] = self.dist_model[7:10] + s["tau_thr"] + s["tau_b"]
             rk4_step(
-                xm, hw_real, self.dt, self.J, self.J_inv, self.G, self.h_max, GEO_RATE, dm,
+                xm, hw_real, self.dt, self.Jf, self.Jf_inv, self.G, self.h_max, GEO_RATE, dm,
                 s["sun"], s["moon"], self._work,
             )  # fmt: skip
             self.q_hat = xm[:4].copy()
