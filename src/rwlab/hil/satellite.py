@@ -97,6 +97,9 @@ class Satellite:
     wheel_momentum0 : (N,) array, optional
         Initial wheel momenta, N·m·s (their speeds must then be the wheels' own).
     filter_torque_psd, filter_noise_scale : see :func:`rwlab.attitude.sim.simulate`.
+    steady_after : float, optional
+        Seconds after which the steady-state statistics start (as ``simulate``'s;
+        default half the run, at most its first hour).
     log_every : int
         Control periods between logged rows (rounded up to whole sensor periods).
     """
@@ -113,6 +116,7 @@ class Satellite:
         filter_torque_psd: float | None = None,
         filter_noise_scale: float = 1.0,
         log_every: int = 10,
+        steady_after: float | None = None,
     ) -> None:
         if estimator not in ("ekf", "truth"):
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
@@ -127,7 +131,13 @@ class Satellite:
         self.steps = round(duration / sc.dt)
         self.sensor_every = round(sc.sensor_period / sc.dt)
         self.log_every = -(-max(1, int(log_every)) // self.sensor_every) * self.sensor_every
-        self.steady_from = round(steady_start(self.steps * sc.dt) / sc.dt)
+        if steady_after is None:
+            steady_after = steady_start(self.steps * sc.dt)
+        elif not (math.isfinite(steady_after) and 0 <= steady_after < self.steps * sc.dt):
+            raise ConfigError(
+                f"steady_after must be a number of seconds in [0, duration), got {steady_after!r}"
+            )
+        self.steady_from = round(steady_after / sc.dt)
         self.streams = _Streams(seed)
         x_q, w0, hw0, q_hat, w_hat, P = _initial(sc, self.streams.init, wheel_momentum0)
         self.x = np.concatenate([x_q, w0, hw0])
