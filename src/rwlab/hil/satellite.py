@@ -21,7 +21,6 @@ them equal) and every difference on the bench is the wheels'.
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -36,11 +35,13 @@ from rwlab.attitude.sim import (
     SKY_STEP,
     LinearController,
     SimResult,
+    _axis_errors,
     _bias_truth,
     _initial,
     _known_only,
     _rate_map,
     _result,
+    _sensor_record,
     _Streams,
     _unload_vector,
     _w_bo,
@@ -66,9 +67,6 @@ def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-# the host flies the sun and earth sensors only (sim._Streams.block draws no gyro or
-# tracker noise for them)
-_SUN_EARTH_ONLY = SimpleNamespace(gyro=False, tracker=False)
 
 
 class Satellite:
@@ -109,7 +107,13 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.dt:g} s)")
+        if getattr(scenario, "gyro", None) is not None or getattr(scenario, "star_tracker", None):
+            raise ConfigError(
+                f"{scenario.name}: hardware in the loop flies the sun/earth-sensor MEKF; "
+                "remove the gyros and the star tracker from the scenario"
+            )
         sc = self.scenario = scenario
+        self._sensors = _sensor_record(sc, np.zeros((3, 3)))
         self.controller = controller
         self.use_ekf = estimator == "ekf"
         self.dt = sc.dt
@@ -177,9 +181,10 @@ class Satellite:
         self._sun_rejected = self._earth_rejected = 0
         self._status = (0.0, 0.0)
         self._log: dict[str, list] = {
-            name: [] for name in ("t", "x", "est", "tau", "nees", "sky", "cmd", "sensors")
+            name: [] for name in ("t", "x", "est", "tau", "nees", "sky", "cmd", "sensors", "sigma")
         }
         self._hw_dot_last = np.zeros(self.nw)
+        self._hw_prev = np.zeros(self.nw)
         self._step: dict = {}
         self.last_sensors: dict = {}
 
@@ -219,8 +224,9 @@ class Satellite:
             self.controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
         )
         self.K_w, self.M = np.ascontiguousarray(K[:, 3:]), _rate_map(K)
-        every = (self.sensor_every, self.sensor_every)  # no star tracker, no gyros on the host
-        noise = self.streams.block(k, n_steps, every, self.noise_sd, _SUN_EARTH_ONLY)
+        noise = self.streams.block(
+            k, n_steps, (self.sensor_every, self.sensor_every), self.noise_sd, self._sensors
+        )
         self.process, self.sensor = noise.process, noise.sensor
         self.block_k0, self.i_sensor = k, 0
         self.sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
@@ -359,7 +365,10 @@ class Satellite:
         in_desat = st[_S["unloading"]] == 1 or t - st[_S["unload_end_s"]] <= self.unload[5]
         st[_S["max_error_deg"]] = max(st[_S["max_error_deg"]], err)
         if k >= self.steady_from:
+            if k == self.steady_from or k == self.block_k0:  # no previous command here
+                self._hw_prev = hw_cmd
             self._steady_stats(err, hw_cmd, at_limit, in_desat, earth_lit)
+        self._hw_prev = hw_cmd
         self._step = dict(
             measured=measured,
             h_body=h_body,
@@ -381,6 +390,11 @@ class Satellite:
         st[_S["steady_steps"]] += 1
         st[_S["steady_error_sq_sum"]] += err * err
         st[_S["steady_torque_sq_sum"]] += float(np.sum(hw_cmd**2)) / self.nw
+        if "steady_torque_jitter_sq_sum" in _S:  # white jitter of σ gives E[d²] = 2σ²
+            d = hw_cmd - self._hw_prev
+            st[_S["steady_torque_jitter_sq_sum"]] += float(np.sum(d * d)) / (2 * self.nw)
+            power = np.abs(hw_cmd * self.x[7:] / self.scenario.wheel_inertia)
+            st[_S["steady_wheel_power_sum"]] += float(np.sum(power))
         if at_limit:
             st[_S["steady_torque_saturated_steps"]] += 1
         if in_desat:
@@ -417,6 +431,10 @@ class Satellite:
         nees = self._nees() if (self.use_ekf and measured) else (math.nan if self.use_ekf else 0.0)
         log["nees"].append(nees)
         log["sky"].append([sunlit, *self._status])
+        sigma = np.zeros(6)
+        if self.use_ekf:
+            sigma = np.sqrt(np.diag(self.P)[:6])
+        log["sigma"].append(sigma)
 
     def _nees(self) -> float:
         x, qh = self.x, self.q_hat
@@ -518,4 +536,7 @@ class Satellite:
         r.stats["steps"] = self.steps
         r.stats["dt_s"] = self.dt
         r.stats["sensor_period_s"] = self.scenario.sensor_period
+        r.stats["filter_states"] = self.P.shape[0] if self.use_ekf else 0
+        r.sigma = np.array(log["sigma"])
+        r.est_error_axes = _axis_errors(r.q, r.q_est)
         return r
