@@ -6,7 +6,9 @@ import-linter/grimp: those are not in rwlab's dependencies, and the rule here (a
 ordered list of layers plus "no cycle between modules") is fifty lines.
 
 Every ``import`` counts, also those inside functions: a lazy import is still a
-dependency. A module's layer is that of its top-level name under ``rwlab``.
+dependency. Imports under ``if TYPE_CHECKING:`` do not (they only name types for
+annotations and never run), as grimp's ``exclude_type_checking_imports``. A
+module's layer is that of its top-level name under ``rwlab``.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
     graph: dict[str, set[str]] = defaultdict(set)
     for name, path in mods.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -70,6 +72,21 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
                 if t.startswith("rwlab") and t != name:
                     graph[name].add(t)
     return dict(graph)
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node except those under ``if TYPE_CHECKING:`` (annotations only, never run)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            test = child.test if isinstance(child, ast.If) else None
+            name = getattr(test, "id", getattr(test, "attr", None))
+            if name == "TYPE_CHECKING":
+                stack.extend(child.orelse)
+            else:
+                stack.append(child)
 
 
 def layer(module: str) -> int:

@@ -41,7 +41,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
-from rwlab.errors import ConfigError, RwlabError, WheelFault
+from rwlab.errors import ConfigError, HilStopped, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
@@ -55,10 +55,6 @@ SIM_READ_DELAY = 1e-6  # s after each control instant the simulated host reads (
 SPIN_UP_RPM_S = 20.0  # the bias spin-up's ramp, rpm/s
 SPIN_UP_HOLD_S = 10.0  # and its hold before the run, s
 LATE_S = 0.005  # a wall-clock period that starts this late counts as a late step
-
-
-class HilStopped(RwlabError):
-    """The run stopped before its end (the wheels were idled, the record closed)."""
 
 
 _NODE_FAULT = re.compile(r"^\s*(\d+)\s*:(.+)$")
