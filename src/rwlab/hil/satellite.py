@@ -67,8 +67,6 @@ def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-
-
 class Satellite:
     """The attitude loop with the wheels outside it.
 
