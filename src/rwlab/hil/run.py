@@ -25,6 +25,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
-from rwlab.errors import ConfigError, HilStopped, WheelFault  # HilStopped: re-export
+from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
@@ -61,19 +62,7 @@ _NODE_FAULT = re.compile(r"^\s*(\d+)\s*:(.+)$")
 
 
 def parse_node_fault(text: str) -> tuple[int, ScheduledFault]:
-    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault).
-
-    Parameters
-    ----------
-    text : str
-        ``NODE:NAME[=VALUE]@SECONDS``.
-
-    Returns
-    -------
-    node : int
-        The wheel's node id.
-    fault : ScheduledFault
-    """
+    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault)."""
     match = _NODE_FAULT.match(text) if isinstance(text, str) else None
     if match is None:
         raise ConfigError(
@@ -212,25 +201,68 @@ def build_controller(sc: Scenario, name: str):
     return lqr, estimator, kw
 
 
-class _AccelerationModel:
-    """The diagnosers' wheel model in acceleration mode: the speed the commands lead to.
+class _CommandedSpeed:
+    """The diagnosers' wheel model in acceleration mode: the wheel follows the speed its
+    commands lead to (``step`` returns the speed command), within ``accel_limit_rpm_s``."""
 
-    The diagnosers were built for speed commands and an identified model; here the
-    command is an acceleration (rpm/s), and the model integrates it from the last
-    reading. Only the current balance, the frozen-reading and the dropout tests run
-    (the speed test needs steady holds, which an attitude loop never gives).
-    """
-
-    def __init__(self, Ts: float) -> None:
-        self.Ts = Ts
+    def __init__(self, Ts: float, accel_limit_rpm_s: float) -> None:
+        self.Ts, self.accel_limit_rpm_s = Ts, accel_limit_rpm_s
         self.speed_rpm = 0.0
 
     def reset(self, speed_rpm: float) -> None:
         self.speed_rpm = float(speed_rpm)
 
-    def step(self, accel_rpm_s: float) -> float:
-        self.speed_rpm += accel_rpm_s * self.Ts
+    def step(self, command_rpm: float) -> float:
+        self.speed_rpm = float(command_rpm)
         return self.speed_rpm
+
+
+class _WheelWatch:
+    """One wheel's live diagnosis in the loop (:mod:`rwlab.diagnose`).
+
+    The diagnosers take a speed command and a healthy reference; in acceleration mode
+    the command is the speed the commanded acceleration leads to from the last reading
+    (rpm), and the reference is measured (``healthy_reference``) on this wheel's first
+    ``calibration_s`` in the loop — the regime it will watch — then the
+    :class:`~rwlab.diagnose.Diagnoser` tests every sample against it.
+    """
+
+    def __init__(self, Ts: float, accel_limit: float, calibration_s: float, fa_per_hour: float):
+        self.model = _CommandedSpeed(Ts, accel_limit)
+        self.Ts, self.calibration_s, self.fa_per_hour = Ts, calibration_s, fa_per_hour
+        self.rows: list[tuple[float, ...]] = []
+        self.t_start: float | None = None
+        self.diagnoser: Any = None
+        self._last: float | None = None
+
+    def update(self, t: float, accel_rpm_s: float, speed: float, current: float, age: float):
+        from rwlab.data import IOData
+        from rwlab.diagnose import Diagnoser
+        from rwlab.diagnose.diagnoser import healthy_reference
+
+        command = (speed if self._last is None else self._last) + accel_rpm_s * self.Ts
+        self._last = speed
+        if self.diagnoser is not None:
+            return self.diagnoser.update(t, command, speed, current, age, 0.0)
+        if self.t_start is None:
+            self.t_start = t
+        self.rows.append((command, speed, current, age, 0.0))
+        if t - self.t_start >= self.calibration_s:
+            table = np.array(self.rows)
+            data = IOData(
+                table[:, :1],
+                table[:, 1:],
+                self.Ts,
+                input_names=["command"],
+                output_names=["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"],
+                input_units=["rpm"],
+                output_units=["rpm", "A", "s", ""],
+            )
+            reference = healthy_reference(data, self.model, source="rwlab hil calibration")
+            self.diagnoser = Diagnoser(
+                self.model, reference, false_alarms_per_hour=self.fa_per_hour
+            )
+        return []
 
 
 def _null_space_bias(sc: Scenario, bias_rpm: float) -> np.ndarray:
@@ -273,15 +305,16 @@ def _channels(nodes) -> dict[str, dict]:
 
 
 def _frame_writer(record, node: int, clock):
-    """A ``WheelClient.frame_listener`` writing each decoded frame to the node's topics."""
-    simulated = isinstance(clock, SimClock)
+    """A ``WheelClient.frame_listener`` writing each decoded frame to the node's topics
+    (called with the clock time, the frame id, its bytes and 'rx' or 'tx')."""
+    import can
 
-    def listen(msg, direction: str) -> None:
+    def listen(t: float, frame_id: int, data: bytes, direction: str) -> None:
+        msg = can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False)
         try:
             frame = proto.decode(msg)
         except proto.ProtocolError:
             return  # the client counts bad frames
-        t = msg.timestamp if simulated else clock.now()
         if isinstance(frame, proto.Command):
             record.write(
                 f"/wheel{node}/command",
@@ -479,6 +512,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "wheel_faults": loop.wheel_faults,
         "max_error_from_first_fault_deg": loop.max_error_from_fault if cfg.faults else None,
         "bench": {**loop.bench, "idle_problems": problems},
+        "diagnosis_off": loop.diagnosis_off,
         "measurement": measurement_effects(loop.wheel_log(), params, sc.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
         "config": config,
@@ -608,6 +642,7 @@ class _Loop:
         self.diagnosis = False
         self.diag: dict = {}
         self._recalibrate_when_still = False
+        self.diagnosis_off: dict[int, str] = {}
         self._first_fault_s = min((f.t_s for _, f in cfg.faults), default=math.inf)
         self.max_error_from_fault = 0.0
         for c in bank.clients:
@@ -740,14 +775,13 @@ class _Loop:
     def _diagnosers(self, nodes) -> dict:
         """A fresh diagnoser per node; each calibrates on its first ``calibration_s`` of
         the loop (the regime it will watch: a spin-up's speed-mode ramp is another)."""
-        from rwlab.diagnose import Diagnoser
-
         cfg = self.cfg
         return {
-            n: Diagnoser(
-                _AccelerationModel(cfg.diagnosis_period_s),
-                calibration_s=cfg.calibration_s,
-                false_alarms_per_hour=cfg.false_alarms_per_hour,
+            n: _WheelWatch(
+                cfg.diagnosis_period_s,
+                self.bank.params.max_accel_rpm_s,
+                cfg.calibration_s,
+                cfg.false_alarms_per_hour,
             )
             for n in nodes
         }
@@ -770,12 +804,17 @@ class _Loop:
                 now,
             )
         for r in readings:
-            if not self.bank.active[r.node]:
+            if not self.bank.active[r.node] or r.node not in diag:
                 continue
-            d = diag[r.node]
-            alarms = d.update(
-                now - self.t0, acc_sum[r.node] / every, r.speed_rpm, r.current_a, r.age_s
-            )
+            try:
+                alarms = diag[r.node].update(
+                    now - self.t0, acc_sum[r.node] / every, r.speed_rpm, r.current_a, r.age_s
+                )
+            except RwlabError as exc:  # the diagnosis cannot watch it: fly on, say so
+                del diag[r.node]
+                self.diagnosis_off[r.node] = str(exc)
+                self.event("diagnosis_off", f"node {r.node}: {exc}", now)
+                continue
             for a in alarms:
                 self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
 
