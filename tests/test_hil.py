@@ -404,3 +404,15 @@ def test_cli_refuses_a_wrong_number_of_nodes(tmp_path):
     )
     assert res.exit_code == 2
     assert "has 3 wheels" in res.output
+
+
+def test_twin_params_toml_round_trips(tmp_path):
+    """What bench_hil_realtime hands to `rwlab wheel serve --params` is the scenario's wheel."""
+    from rwlab.attitude.wheels import physics_params
+    from rwlab.hil.bench import twin_params_toml
+    from rwlab.wheel.physics import WheelParams
+
+    params = physics_params(load_scenario("geo-smallsat"))
+    path = tmp_path / "wheel.toml"
+    path.write_text(twin_params_toml(params))
+    assert WheelParams.from_toml(path) == params

@@ -86,3 +86,17 @@ def test_the_data_layer_imports_the_testbed_only_to_read_a_record(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent / "src")}
     done = subprocess.run([sys.executable, "-c", code, str(tmp_path)], env=env, capture_output=True)
     assert done.returncode == 0, done.stderr.decode()
+
+
+def test_imports_for_annotations_only_are_not_dependencies(tmp_path):
+    pkg = tmp_path / "rwlab"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from rwlab import b\n"
+        "else:\n    import rwlab.errors\n"
+    )
+    (pkg / "b.py").write_text("def f():\n    from rwlab import a\n")
+    (pkg / "errors.py").write_text("")
+    graph = importgraph.imports(tmp_path)
+    assert graph == {"rwlab.a": {"rwlab.errors"}, "rwlab.b": {"rwlab.a"}}

@@ -441,6 +441,8 @@ class Diagnoser:
         ev["tolerance"] = dict(ref.tolerance)
         ev["recent_speed"] = np.array(self._recent_speed)
         ev["moving_repeats"] = self._detectors["stuck"].run
+        if any(a.kind == "speed_sensor_stuck" for a in self.alarms):
+            ev["moving_repeats"] = math.inf  # a frozen reading misleads every later test
         n_lag = len(ev.get("lag", ())) * (lag.stats.block if lag is not None else 0)
         ev["lag_currents"] = np.array(list(self._lag_currents)[-max(n_lag, 1) :])
         ev["lost"] = self._detectors["dropout"].last_count

@@ -12,7 +12,7 @@ detector    signature                                         fault, size (unit)
 dropout     telemetry frames lost beyond the healthy rate     ``telemetry_dropout``,
                                                               frames in 10 s
 stuck       identical speed readings, longer than noise       ``speed_sensor_stuck``,
-            allows (also: 2 repeats while the model moves     the frozen reading (rpm)
+            allows (also: a repeat while the model moves      the frozen reading (rpm)
             when another test fires)
 friction,   current in excess under acceleration (motor       ``torque_constant``,
 motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 + e_α)
@@ -44,7 +44,6 @@ import numpy as np
 
 __all__ = ["Finding", "isolate"]
 
-FROZEN = 3  # identical readings that point to a frozen sensor
 Z95 = 1.959964
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
@@ -125,7 +124,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return [Finding("telemetry_dropout", float(ev.get("lost", 0)), None, "frames")]
     # identical readings while the model says the wheel moves (in a hold a regulated
     # wheel's reading repeats by itself)
-    frozen = ev.get("moving_repeats", 0) >= FROZEN - 1
+    frozen = ev.get("moving_repeats", 0) >= 1  # healthy: p ≈ 1e-3 per moving sample
     if detector == "stuck" or frozen:
         return [
             Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")

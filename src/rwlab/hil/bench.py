@@ -333,5 +333,16 @@ def twin_params_toml(params: WheelParams) -> str:
     str
         The TOML text.
     """
-    lines = ["[wheel]"] + [f"{k} = {float(v)!r}" for k, v in params.to_dict().items()]
+    import json
+
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)  # a TOML basic string is a JSON string
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(float(v)) if isinstance(v, float) else str(v)
+
+    lines = ["[wheel]"] + [f"{k} = {value(v)}" for k, v in params.to_dict().items()]
     return "\n".join(lines) + "\n"

@@ -42,7 +42,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
-from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault
+from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
@@ -62,19 +62,7 @@ _NODE_FAULT = re.compile(r"^\s*(\d+)\s*:(.+)$")
 
 
 def parse_node_fault(text: str) -> tuple[int, ScheduledFault]:
-    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault).
-
-    Parameters
-    ----------
-    text : str
-        ``NODE:NAME[=VALUE]@SECONDS``.
-
-    Returns
-    -------
-    node : int
-        The wheel's node id.
-    fault : ScheduledFault
-    """
+    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault)."""
     match = _NODE_FAULT.match(text) if isinstance(text, str) else None
     if match is None:
         raise ConfigError(

@@ -186,7 +186,8 @@ class WheelModelFile:
         if self.nonlinear_chosen is not None:
             d["nonlinear_chosen"] = self.nonlinear_chosen
             d["nonlinear_choice"] = self.nonlinear_choice
-        d["saturation"]["current_limit_a"] = _json_float(self.current_limit_a)
+        if self.current_limit_a is not None:  # optional: older files and records lack it
+            d["saturation"]["current_limit_a"] = _json_float(self.current_limit_a)
         if self.healthy_reference is not None:
             d["healthy_reference"] = self.healthy_reference
         return d
