@@ -25,20 +25,27 @@ import math
 import numpy as np
 
 from rwlab.attitude import kernel
-from rwlab.attitude.ekf import error_jacobian_into, gated_update_into, predict_covariance_into
+from rwlab.attitude.ekf import (
+    aligned_update_into,
+    attitude_update_into,
+    error_jacobian_into,
+    gated_update_into,
+    gyro_jacobian_into,
+    predict_covariance_into,
+    propagate_attitude_into,
+)
 from rwlab.attitude.frames import GEO_RATE, dcm, skew
 from rwlab.attitude.plant import rk4_step
 from rwlab.attitude.scenario import Scenario
+from rwlab.attitude.sensors import draw_gyro_errors, gyro_sample_into, tracker_visible
 from rwlab.attitude.sim import (
-    BIAS_KINDS,
     BLOCK_STEPS,
     SKY_STEP,
     LinearController,
     SimResult,
     _axis_errors,
-    _bias_truth,
+    _filter_record,
     _initial,
-    _known_only,
     _rate_map,
     _result,
     _sensor_record,
@@ -47,9 +54,6 @@ from rwlab.attitude.sim import (
     _w_bo,
     control_torque,
     default_filter_psd,
-    disturbance_psd,
-    disturbance_state,
-    sensor_alignment,
     sky_table,
     steady_start,
 )
@@ -65,19 +69,6 @@ def _noisy(b: np.ndarray, sigma: float, e: np.ndarray) -> np.ndarray:
     """Unit vector b turned by the small angle σ·e (e: three standard normals)."""
     v = b + sigma * np.cross(e, b)
     return v / np.linalg.norm(v)
-
-
-def _check_flyable(sc: Scenario) -> None:
-    """Refuse what the host loop does not fly: gyros, a star tracker (the compiled loop's
-    GYRO filter mode and tracker updates are not mirrored here)."""
-    flown = [name for name in ("gyro", "star_tracker") if getattr(sc, name) is not None]
-    if flown:
-        raise ConfigError(
-            f"{sc.name}: hardware in the loop flies paper B's sun and earth sensors with the "
-            f"dynamics MEKF; this scenario flies {' and '.join(flown)}, which the host loop "
-            "does not mirror yet — pick a sun/earth-sensor scenario (geo-smallsat, "
-            "geo-smallsat-pyramid, geo-comsat) or remove the [gyro]/[star_tracker] tables"
-        )
 
 
 class Satellite:
@@ -122,9 +113,7 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.dt:g} s)")
-        _check_flyable(scenario)
         sc = self.scenario = scenario
-        self._sensors = _sensor_record(sc, np.zeros((3, 3)))
         self.controller = controller
         self.use_ekf = estimator == "ekf"
         self.dt = sc.dt
@@ -146,45 +135,34 @@ class Satellite:
         self.q_hat, self.w_hat, self.P = q_hat, w_hat, P
         self.J = sc.inertia_matrix
         self.J_inv = np.linalg.inv(self.J)
-        # the filter's model of the body (a flight filter's inertia is not the truth's)
-        self.Jf = sc.filter_inertia_matrix
-        self.Jf_inv = np.linalg.inv(self.Jf)
         self.G = sc.wheel_matrix
         self.nw = self.G.shape[1]
         self.h_max = np.full(self.nw, sc.wheel_max_momentum)
         self.dist = sc.disturbances.vector()
-        self.dist_model = self.dist if sc.disturbances_known_to_filter else _known_only(sc)
-        self.bias_kind = BIAS_KINDS[disturbance_state(sc)]
-        self.bias_true = _bias_truth(sc, self.dist, self.dist_model)
+        # the gyros' state [β walk, β Gauss–Markov, ω at the last sample] and the unit's
+        # fixed errors, drawn as simulate draws them
+        self.gs, gyro_E = np.zeros(9), np.zeros((3, 3))
+        if sc.gyro is not None:
+            gyro_E, self.gs[:3] = draw_gyro_errors(sc.gyro, self.streams.gyro)
+            self.gs[6:] = w0
+        self.sensors = _sensor_record(sc, gyro_E)
         psd = (
             default_filter_psd(sc)
             if filter_torque_psd is None
             else sc.process_noise_torque**2 + filter_torque_psd
         )
         nx = P.shape[0]
-        self.Qc = np.zeros((nx, nx))
-        self.Qc[3:6, 3:6] = psd * self.Jf_inv @ self.Jf_inv.T
-        if nx > 6:
-            self.Qc[6:, 6:] = np.diag(disturbance_psd(sc))
-        self.biased = self.use_ekf and nx > 6
-        self.Bmap = np.zeros((3, max(nx - 6, 3)))
-        if self.bias_kind != 2:
-            self.Bmap[:, :3] = np.eye(3)
         m = sc.noise_margin * filter_noise_scale
-        self.sig_sun, self.sig_earth = (
-            math.radians(sc.sun_noise_deg),
-            math.radians(sc.earth_noise_deg),
-        )
-        self.r_sun, self.r_earth = self.sig_sun * m, self.sig_earth * m
-        self.fov_cos = math.cos(math.radians(min(sc.sun_fov_deg, 180.0)))
-        self.sun_align = sensor_alignment(
-            sc.sun_sensor_bias_deg, sc.sun_sensor_misalignment_deg, (1, 2)
-        )
-        self.earth_align = sensor_alignment(
-            sc.earth_sensor_bias_deg, sc.earth_sensor_misalignment_deg, (0, 1)
-        )
-        excl = np.array([sc.earth_sensor_sun_exclusion_deg, sc.earth_sensor_moon_exclusion_deg])
-        self.blind_cos = np.where(excl > 0, np.cos(np.radians(excl)), 2.0)
+        # the estimator as the compiled loop has it (its own inertia, noise, gates)
+        self.filt = _filter_record(sc, estimator, nx, psd, m)
+        self.mode = self.filt.mode
+        self.biased = self.mode == kernel.DYNAMICS and nx > 6
+        self.aligned = self.mode == kernel.GYRO and nx >= 9  # the sun sensor's turn
+        self.earth_aligned = self.mode == kernel.GYRO and nx == 12
+        self.Bmap = np.zeros((3, max(nx - 6, 3)))
+        if self.filt.bias_kind != 2:
+            self.Bmap[:, :3] = np.eye(3)
+        self.w_mean, self.w_meas = np.zeros(3), np.zeros(3)
         self.unload = _unload_vector(sc)
         self.noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
         period = controller.update_period
@@ -200,6 +178,7 @@ class Satellite:
         self._Wn = np.empty((6, nx, nx))
         self._sun_rejected = self._earth_rejected = 0
         self._status = (0.0, 0.0)
+        self._tracker_status = 0.0
         self._log: dict[str, list] = {
             name: [] for name in ("t", "x", "est", "tau", "nees", "sky", "cmd", "sensors", "sigma")
         }
@@ -237,18 +216,26 @@ class Satellite:
 
     # -- one control period -------------------------------------------------------------
     def _new_block(self) -> None:
-        sc, k = self.scenario, self.k
+        sc, k, sn = self.scenario, self.k, self.sensors
         n_steps = min(self.block, self.steps + 1 - k)
-        s_q, s_w = (self.q_hat, self.w_hat[:3]) if self.use_ekf else (self.x[:4], self.x[4:7])
+        # the gain's operating point: what the controller knows (with gyros, q̂ and the
+        # nominal rate, ω_bo = 0), as simulate takes it
+        if self.mode == kernel.TRUTH:
+            s_q, s_w = self.x[:4], self.x[4:7]
+        elif self.mode == kernel.GYRO:
+            s_q = self.q_hat
+            s_w = dcm(s_q) @ np.array([0.0, -GEO_RATE, 0.0])
+        else:
+            s_q, s_w = self.q_hat, self.w_hat[:3]
         K = np.asarray(
             self.controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
         )
         self.K_w, self.M = np.ascontiguousarray(K[:, 3:]), _rate_map(K)
-        noise = self.streams.block(
-            k, n_steps, (self.sensor_every, self.sensor_every), self.noise_sd, self._sensors
-        )
-        self.process, self.sensor = noise.process, noise.sensor
-        self.block_k0, self.i_sensor = k, 0
+        self.noise = self.streams.block(k, n_steps, (sn.every, sn.tracker_every), self.noise_sd, sn)
+        self.block_k0, self.i_sensor, self.i_tracker = k, 0, 0
+        # the compiled loop starts each block with these fresh (kernel.run_block)
+        self._status, self._tracker_status = (0.0, 0.0), 0.0
+        self._sun_rejected = self._earth_rejected = 0
         self.sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
         rows = math.ceil(((k + n_steps) * sc.dt - self.sky_t0) / SKY_STEP) + 2
         self.sky = sky_table(sc, self.sky_t0 + SKY_STEP * np.arange(rows))
@@ -261,35 +248,78 @@ class Satellite:
         sun, moon = row[:3] / np.linalg.norm(row[:3]), row[3:6] / np.linalg.norm(row[3:6])
         return sun, moon, row[6], row[7], row[8] > 0.5, row[9]
 
+    def _sample_gyros(self, k: int) -> None:
+        """The gyros' sample over the last step; the gyro filter propagates q̂ with it."""
+        x, gs = self.x, self.gs
+        self.w_mean[:] = 0.5 * (gs[6:9] + x[4:7])
+        gs[6:9] = x[4:7]
+        sn = self.sensors
+        j = k - self.block_k0
+        gyro_sample_into(self.w_mean, sn.gyro_E, sn.gyro_par, gs, self.noise.gyro[j], self.w_meas)
+        if self.mode == kernel.GYRO and k > 0:  # q̂ over the last step with ω̂ = ω_m − β̂
+            w = self.w_meas - self.w_hat[:3]
+            C = dcm(self.q_hat)
+            propagate_attitude_into(
+                self.q_hat, w[0] + GEO_RATE * C[0, 1], w[1] + GEO_RATE * C[1, 1],
+                w[2] + GEO_RATE * C[2, 1], self.dt,
+            )  # fmt: skip
+
+    def _track(self, k: int, sunlit, moon_visible, moon_b) -> None:
+        """The star tracker at its ticks: visibility, and the filter's attitude update."""
+        sn, x = self.sensors, self.x
+        seen = tracker_visible(
+            sn.tracker_frame, self._sun_b, moon_b, self._C[:, 2].copy(), sunlit,
+            moon_visible, sn.tracker_cos,
+        )  # fmt: skip
+        self._tracker_status = 0.0 if seen else 1.0
+        if not seen:
+            self.stats[_S["star_tracker_blinded"]] += 1
+        elif self.mode != kernel.TRUTH:
+            q_meas = np.empty(4)
+            e = self.noise.tracker[self.i_tracker]
+            kernel._tracker_measurement(x, sn.tracker_frame, sn.tracker_sigma, e, q_meas)
+            attitude_update_into(
+                self.q_hat, self.w_hat, self.P, q_meas, self.filt.tracker_R, self._Wn
+            )
+        self.i_tracker += 1
+
+    def _update(self, b, ref, r, g, at: int | None) -> bool:
+        """One vector sensor's gated update (with its misalignment states at ``at``)."""
+        if at is None:
+            return gated_update_into(self.q_hat, self.w_hat, self.P, b, ref, r, g, self._Wn)
+        return aligned_update_into(self.q_hat, self.w_hat, self.P, b, ref, r, g, at, self._Wn)
+
     def _sense(self, k: int, s_orb, m_orb, sunlit, moon_visible) -> bool:
         """Sensor statuses at sensor ticks and the filter's updates; whether it measured."""
-        st, x = self.stats, self.x
-        if k % self.sensor_every == 0:
+        st, x, sn, filt = self.stats, self.x, self.sensors, self.filt
+        tick = k % sn.every == 0
+        if tick:
             C = dcm(x[:4])
             sun_b, moon_b = C @ s_orb, C @ m_orb
-            sun_ok = sunlit >= 1.0 and -sun_b[0] >= self.fov_cos
+            sun_ok = sunlit >= 1.0 and -sun_b[0] >= sn.sun_fov_cos
             earth_ok = not (
-                (sunlit > 0.0 and sun_b[2] >= self.blind_cos[0])
-                or (moon_visible and moon_b[2] >= self.blind_cos[1])
+                (sunlit > 0.0 and sun_b[2] >= sn.blind_cos[0])
+                or (moon_visible and moon_b[2] >= sn.blind_cos[1])
             )
             self._status = (0.0 if sun_ok else 1.0, 0.0 if earth_ok else 1.0)
             self._sun_b, self._C = sun_b, C
-        measured = self.use_ekf and k % self.sensor_every == 0
+            if sn.tracker and k % sn.tracker_every == 0:
+                self._track(k, sunlit, moon_visible, moon_b)
+        measured = self.mode != kernel.TRUTH and tick
         if not measured:
             return False
-        sc = self.scenario
         sun_status, earth_status = self._status
-        gate = sc.innovation_gate
-        e = self.sensor[self.i_sensor]
+        gate, max_rejected = filt.gate
+        e = self.noise.sensor[self.i_sensor]
         self.i_sensor += 1
         sensors: dict = {"sun": None, "earth": None}
         if sun_status == 0.0:
             sun_b = self._sun_b
-            cos_i = -sun_b[0] if sc.sun_noise_incidence else 1.0
-            b = _noisy(self.sun_align @ sun_b, self.sig_sun / cos_i, e[:3])
-            r = self.r_sun / max(-b[0], 1e-3) if sc.sun_noise_incidence else self.r_sun
-            g = gate if self._sun_rejected < sc.innovation_gate_max_rejections else 0.0
-            ok = gated_update_into(self.q_hat, self.w_hat, self.P, b, s_orb, r, g, self._Wn)
+            cos_i = -sun_b[0] if sn.sun_incidence else 1.0  # noise ∝ 1/cos(incidence)
+            b = _noisy(sn.sun_align @ sun_b, sn.sig_sun / cos_i, e[:3])
+            r = filt.r_sun / max(-b[0], 1e-3) if sn.sun_incidence else filt.r_sun
+            g = gate if self._sun_rejected < max_rejected else 0.0
+            ok = self._update(b, s_orb, r, g, 6 if self.aligned else None)
             self._sun_rejected = 0 if ok else self._sun_rejected + 1
             sensors["sun"] = b
             if not ok:
@@ -298,12 +328,10 @@ class Satellite:
         else:
             st[_S["sun_sensor_outages"]] += 1
         if earth_status == 0.0:
-            b = _noisy(self.earth_align @ self._C[:, 2], self.sig_earth, e[3:])
-            g = gate if self._earth_rejected < sc.innovation_gate_max_rejections else 0.0
+            b = _noisy(sn.earth_align @ self._C[:, 2], sn.sig_earth, e[3:])
+            g = gate if self._earth_rejected < max_rejected else 0.0
             nadir = np.array([0.0, 0.0, 1.0])
-            ok = gated_update_into(
-                self.q_hat, self.w_hat, self.P, b, nadir, self.r_earth, g, self._Wn
-            )
+            ok = self._update(b, nadir, filt.r_earth, g, 9 if self.earth_aligned else None)
             self._earth_rejected = 0 if ok else self._earth_rejected + 1
             sensors["earth"] = b
             if not ok:
@@ -311,7 +339,8 @@ class Satellite:
                 earth_status = 2.0
         else:
             st[_S["earth_sensor_blinded"]] += 1
-        if sun_status != 0.0 and earth_status != 0.0:
+        no_tracker = not sn.tracker or self._tracker_status != 0.0
+        if sun_status != 0.0 and earth_status != 0.0 and no_tracker:
             st[_S["no_update_ticks"]] += 1
         self._status = (sun_status, earth_status)
         self.last_sensors = sensors
@@ -359,19 +388,26 @@ class Satellite:
             st[_S["eclipse_steps"]] += 1
         if sunlit < earth_lit:
             st[_S["moon_shadow_steps"]] += 1
+        if self.sensors.gyro:
+            self._sample_gyros(k)
         measured = self._sense(k, s_orb, m_orb, sunlit, moon_visible)
         err = math.degrees(2.0 * math.asin(min(1.0, float(np.linalg.norm(x[:3])))))
         h_body = self.G @ x[7:]
         tau_thr = self._unloading(t, k, err, h_body)
-        est = np.concatenate([self.q_hat, self.w_hat[:3]]) if self.use_ekf else x[:7].copy()
+        if self.mode == kernel.TRUTH:
+            est = x[:7].copy()
+        elif self.mode == kernel.GYRO:  # the rate the gyros measure, less the bias estimate
+            est = np.concatenate([self.q_hat, self.w_meas - self.w_hat[:3]])
+        else:
+            est = np.concatenate([self.q_hat, self.w_hat[:3]])
         q = est[:4]
         s = np.concatenate([2 * q[:3] * math.copysign(1.0, q[3]), _w_bo(q, est[4:7])])
         tau = np.asarray(control_torque(self.K_w, self.M, float(self.controller.rate_limit), s))
         tau_b = np.zeros(3)
         if self.biased:
-            if self.bias_kind >= 2:
+            if self.filt.bias_kind >= 2:
                 sun_hat = dcm(self.q_hat) @ s_orb
-                cols = slice(3, 6) if self.bias_kind == 3 else slice(0, 3)
+                cols = slice(3, 6) if self.filt.bias_kind == 3 else slice(0, 3)
                 self.Bmap[:, cols] = skew(srp_scale * sun_hat)
             tau_b = self.Bmap @ self.w_hat[3:]
             tau = tau - tau_b
@@ -398,6 +434,7 @@ class Satellite:
             moon=m_orb,
             sunlit=sunlit,
             srp_scale=srp_scale,
+            est=est,
             err=err,
             demand=-tau,
         )
@@ -442,18 +479,23 @@ class Satellite:
         log = self._log
         log["t"].append(t)
         log["x"].append(self.x.copy())
-        bias = np.zeros(6)
+        extra = np.zeros(12)  # [b, β, β̂_gyro, φ̂] as the compiled loop logs them
+        nx = self.P.shape[0]
         if self.biased:
-            at = 3 if self.bias_kind == 2 else 0
-            bias[at : at + self.w_hat.size - 3] = self.w_hat[3:]
-        log["est"].append(np.concatenate([est, bias]))
+            at = 3 if self.filt.bias_kind == 2 else 0
+            extra[at : at + nx - 6] = self.w_hat[3:]
+        if self.mode == kernel.GYRO:
+            extra[6 : 6 + min(nx, 9) - 3] = self.w_hat[: min(nx, 9) - 3]
+        log["est"].append(np.concatenate([est, extra]))
         log["cmd"].append(hw_cmd.copy())
         log["tau"].append(None)  # the realised torque is known after the period
-        nees = self._nees() if (self.use_ekf and measured) else (math.nan if self.use_ekf else 0.0)
+        ekf = self.mode != kernel.TRUTH
+        nees = self._nees() if (ekf and measured) else (math.nan if ekf else 0.0)
         log["nees"].append(nees)
-        log["sky"].append([sunlit, *self._status])
+        tracker = self._tracker_status if self.sensors.tracker else 1.0
+        log["sky"].append([sunlit, *self._status, tracker])
         sigma = np.zeros(6)
-        if self.use_ekf:
+        if ekf:
             sigma = np.sqrt(np.diag(self.P)[:6])
         log["sigma"].append(sigma)
 
@@ -465,8 +507,13 @@ class Satellite:
         e[0] = sign * (b[3] * a[0] - a[3] * b[0] + a[1] * b[2] - a[2] * b[1])
         e[1] = sign * (b[3] * a[1] - a[3] * b[1] + a[2] * b[0] - a[0] * b[2])
         e[2] = sign * (b[3] * a[2] - a[3] * b[2] + a[0] * b[1] - a[1] * b[0])
-        e[3:6] = x[4:7] - self.w_hat[:3]
-        e[6:] = self.bias_true - self.w_hat[3:]
+        w, truth = self.w_hat, self.filt.bias_true
+        if self.mode == kernel.GYRO:  # what β̂ stands for: the bias plus E ω
+            gs = self.gs
+            e[3:6] = gs[:3] + gs[3:6] + self.sensors.gyro_E @ self.w_mean - w[:3]
+        else:
+            e[3:6] = x[4:7] - w[:3]
+        e[6:] = truth - w[3:]
         return float(e @ np.linalg.solve(self.P, e))
 
     def advance(self, wheel_momentum: np.ndarray) -> None:
@@ -487,22 +534,26 @@ class Satellite:
         if self._log["tau"] and self._log["tau"][-1] is None:
             self._log["tau"][-1] = -(self.G @ hw_real)
         j = self.k - self.block_k0
-        d, dm = self.dist.copy(), self.dist_model.copy()
-        d[7:10] = self.dist[7:10] + self.process[j] + s["tau_thr"]
+        filt = self.filt
+        d, dm = self.dist.copy(), filt.dist_model.copy()
+        d[7:10] = self.dist[7:10] + self.noise.process[j] + s["tau_thr"]
         d[1] = self.dist[1] * s["srp_scale"]  # SRP: none in the shadow, ∝ 1/r² of the Sun
-        dm[1] = self.dist_model[1] * s["srp_scale"]
-        if self.use_ekf:
-            if s["measured"]:
+        dm[1] = filt.dist_model[1] * s["srp_scale"]
+        if s["measured"]:  # covariance to the next measurement, F at this estimate
+            if self.mode == kernel.GYRO:
+                gyro_jacobian_into(s["est"][4:7], self._F)
+            else:
                 error_jacobian_into(
-                    self.q_hat, self.w_hat, s["h_body"], self.Jf, self.Jf_inv, GEO_RATE,
-                    self.dist_model[0], self.Bmap, self._F, self._W3,
+                    self.q_hat, self.w_hat, s["h_body"], filt.J, filt.J_inv, GEO_RATE,
+                    filt.dist_model[0], self.Bmap, self._F, self._W3,
                 )  # fmt: skip
-                T = self.sensor_every * self.dt
-                predict_covariance_into(self.P, self._F, self.Qc, T, self._Wn)
+            T = self.sensors.every * self.dt
+            predict_covariance_into(self.P, self._F, filt.Qc, T, self._Wn)
+        if self.mode == kernel.DYNAMICS:  # the filter's model knows the wheels' torques
             xm = np.concatenate([self.q_hat, self.w_hat[:3], x[7:]])
-            dm[7:10] = self.dist_model[7:10] + s["tau_thr"] + s["tau_b"]
+            dm[7:10] = filt.dist_model[7:10] + s["tau_thr"] + s["tau_b"]
             rk4_step(
-                xm, hw_real, self.dt, self.Jf, self.Jf_inv, self.G, self.h_max, GEO_RATE, dm,
+                xm, hw_real, self.dt, filt.J, filt.J_inv, self.G, self.h_max, GEO_RATE, dm,
                 s["sun"], s["moon"], self._work,
             )  # fmt: skip
             self.q_hat = xm[:4].copy()
@@ -552,8 +603,10 @@ class Satellite:
             self.stats.copy(),
             self.steady_from * self.dt,
         )
-        r.sky = np.array(log["sky"])
+        sky = np.array(log["sky"])
+        r.sky, r.tracker_status = sky[:, :3], sky[:, 3]
         r.torque_est, r.srp_lever_est = est[:, 7:10], est[:, 10:13]
+        r.gyro_bias_est, r.sun_sensor_alignment_est = est[:, 13:16], est[:, 16:19]
         r.stats["steps"] = self.steps
         r.stats["dt_s"] = self.dt
         r.stats["sensor_period_s"] = self.scenario.sensor_period
