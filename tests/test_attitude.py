@@ -271,13 +271,17 @@ def test_scalar_derivative_equals_the_readable_reference():
 
 
 def test_noise_streams_do_not_depend_on_block_size_or_estimator():
+    from types import SimpleNamespace
+
     from rwlab.attitude.sim import _Streams
 
     a, b = _Streams(4), _Streams(4)
-    whole = a.block(0, 100, 5, 2.0)
-    first, second = b.block(0, 37, 5, 2.0), b.block(37, 63, 5, 2.0)
-    assert np.array_equal(whole[0], np.vstack([first[0], second[0]]))
-    assert np.array_equal(whole[1], np.vstack([first[1], second[1]]))
+    on = SimpleNamespace(gyro=True, tracker=True)
+    whole = a.block(0, 100, (5, 10), 2.0, on)
+    first, second = b.block(0, 37, (5, 10), 2.0, on), b.block(37, 63, (5, 10), 2.0, on)
+    for i in range(4):  # process, sun/earth, gyro, tracker
+        assert np.array_equal(whole[i], np.vstack([first[i], second[i]]))
+    assert [len(x) for x in whole] == [100, 20, 100, 10]
     # a run re-designed every 7 s (other blocks) sees the same disturbances as one designed once
     sc = SCENARIOS["geo-comsat"]
     once = simulate(sc, PDController(20.0, 400.0), duration=60, estimator="truth")
@@ -497,11 +501,12 @@ def test_kernel_nees_is_the_textbook_quadratic_form():
     dq = dq if dq[3] >= 0 else -dq
     e = np.concatenate([2 * dq[:3], x[4:7] - w_hat, b - b_hat])
     expected = e[:6] @ np.linalg.solve(P[:6, :6], e[:6])
-    assert _nees(x, q_hat, w_hat, P[:6, :6].copy(), b, np.empty((6, 6))) == pytest.approx(
-        expected, rel=1e-9
-    )
+    rest = np.concatenate([np.zeros(3), x[4:7] - w_hat])  # the caller fills e[3:]
+    got = _nees(x, q_hat, rest, P[:6, :6].copy(), np.empty((6, 6)))
+    assert got == pytest.approx(expected, rel=1e-9)
     # with the disturbance state the error gains b − b̂
-    got = _nees(x, q_hat, np.concatenate([w_hat, b_hat]), P, b, np.empty((9, 9)))
+    rest = np.concatenate([np.zeros(3), x[4:7] - w_hat, b - b_hat])
+    got = _nees(x, q_hat, rest, P, np.empty((9, 9)))
     assert got == pytest.approx(e @ np.linalg.solve(P, e), rel=1e-9)
 
 

@@ -352,6 +352,36 @@ def cases() -> list[tuple[str, list[str]]]:
                 [*mc, "--runs", "2", "--dispersions", f"{{D}}/{f}"],
             )
         )
+    # compare (every model of a model.json on a record)
+    for f in (
+        "binary.json",
+        "list.json",
+        "abc.json",
+        "unstable.json",
+        "empty.json",
+        "no_such.json",
+    ):
+        c.append((f"compare {f}", ["compare", f"{{D}}/{f}", "{D}/rec.mcap"]))
+    c += [
+        ("compare a binary record", ["compare", "{D}/model.json", "{D}/binary.mcap"]),
+        ("compare a missing record", ["compare", "{D}/model.json", "{D}/no.mcap"]),
+        ("compare a NaN CSV", ["compare", "{D}/model.json", "{D}/nan.csv"]),
+    ]
+    c += _numbers(
+        ["compare", "{D}/model.json", "{D}/rec.mcap"], "--Ts", ("nan", "inf", "neg", "zero")
+    )
+    # hil (simulated wheels on a virtual bus)
+    hil = ["hil", "--duration", "60", *out]
+    c += _numbers(["hil", *out], "--duration", ALL)
+    c += _numbers(hil, "--telemetry-rate", ("nan", "inf", "neg", "zero"))
+    c += _numbers(hil, "--wheel-bias-rpm", ("nan", "inf", "1e300"))
+    c += _numbers(hil, "--calibration", ("nan", "inf", "neg"))
+    c += [
+        ("hil --seed -1", [*hil, "--seed", "-1"]),
+        ("hil --nodes garbage", [*hil, "--nodes", "a,b"]),
+        ("hil --scenario empty.toml", [*hil, "--scenario", "{D}/empty.toml"]),
+        ("hil --fault bogus", [*hil, "--fault", "9:bogus@1"]),
+    ]
     # demo, monitor, wheel, datasets
     c += [
         ("demo --out a file", ["demo", "--quick", "--out", "{D}/afile"]),
@@ -381,6 +411,7 @@ def cases() -> list[tuple[str, list[str]]]:
         ("wheel serve --params nan", ["wheel", "serve", "--params", "{D}/params-nan.toml"]),
         ("wheel serve --params binary", ["wheel", "serve", "--params", "{D}/binary.toml"]),
         ("datasets with an argument", ["datasets", "dryer"]),
+        ("wheel protocols with an argument", ["wheel", "protocols", "canopen"]),
         ("an unknown command", ["identifyy", "dryer"]),
     ]
     return c
@@ -429,7 +460,7 @@ def test_the_documented_table_lists_every_case():
     listed = [
         line.split("|")[2].strip()
         for line in doc.splitlines()
-        if line[:3] == "| " + line[2:3] and line[2:3].isdigit()
+        if line.startswith("| ") and line[2:3].isdigit()
     ]
     assert listed == [what.replace("|", "\\|") for what, _ in CASES], (
         "regenerate docs/bad-inputs.md"
@@ -445,7 +476,8 @@ def test_a_bad_input_is_refused_with_one_error_line(where, what, args):
     lines = output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), (what, output)
     assert "Traceback" not in output
-    assert not (where / "out" / f"o{k}").exists()  # no output folder left
+    left = [*(where / "out").glob(f"o{k}"), *(where / "out").glob(f"o{k}.*")]
+    assert not left, left  # no output folder, record or partial record left
 
 
 def _table() -> str:

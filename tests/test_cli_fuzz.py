@@ -52,6 +52,80 @@ toml_scalar = st.one_of(
 toml_value = st.one_of(toml_scalar, st.lists(toml_scalar, max_size=4))
 
 
+json_value = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**6), 10**6)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=5),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=4), inner, max_size=3)
+    ),
+    max_leaves=8,
+)
+MODEL_KEYS = ["format", "structure", "Ts", "input", "output", "model", "saturation", "preferred"]
+POLY_KEYS = ["A", "B", "C", "D", "F", "nk", "nb", "nf", "Ts", "structure", "noise_variance"]
+
+
+@st.composite
+def model_json(draw):
+    """A wheel model file: a plausible one with some fields replaced by anything."""
+    model = {
+        "format": "rwlab.WheelModel/1",
+        "structure": "ARX221",
+        "Ts": 0.5,
+        "input": {"name": "command", "unit": "rpm", "offset": 0.0},
+        "output": {"name": "speed_rpm", "unit": "rpm", "offset": 0.0},
+        "model": {
+            "format": "rwlab.PolyModel/1",
+            "structure": "ARX221",
+            "Ts": 0.5,
+            **{"A": [1.0, -0.9, 0.0], "B": [0.0, 0.1, 0.0], "C": [1.0], "D": [1.0], "F": [1.0]},
+            **{"nk": [1], "nb": [2], "nf": [0], "noise_variance": 1.0, "covariance": None},
+        },
+        "saturation": {"speed_rpm": 7800.0, "accel_rpm_s": 314.0, "source": "fuzz"},
+    }
+    for key in draw(st.lists(st.sampled_from(MODEL_KEYS), max_size=2)):
+        model[key] = draw(json_value)
+    if isinstance(model.get("model"), dict):
+        for key in draw(st.lists(st.sampled_from(POLY_KEYS), max_size=2)):
+            model["model"][key] = draw(json_value)
+    return draw(st.sampled_from([model, [model], "model"])) if draw(st.booleans()) else model
+
+
+@st.composite
+def dispersion_toml(draw):
+    from rwlab.campaign.dispersions import FIELDS
+
+    lines = []
+    for name in draw(st.lists(st.sampled_from([*FIELDS, "inertia.xw", "dt"]), max_size=3)):
+        spec = {"distribution": draw(st.sampled_from(["normal", "uniform", "lognormal"]))}
+        if draw(st.booleans()):
+            spec["sigma"] = draw(toml_scalar)
+        if draw(st.booleans()):
+            spec["bounds"] = draw(st.lists(toml_scalar, max_size=3))
+        if draw(st.booleans()):
+            spec["relative"] = draw(toml_scalar)
+        body = ", ".join(
+            f"{k} = {_toml({k: v}).split(' = ', 1)[1].strip()}" for k, v in spec.items()
+        )
+        lines.append(f"{json.dumps(name)} = {{ {body} }}")
+    return "\n".join(lines) + "\n"
+
+
+@st.composite
+def scenario_toml(draw):
+    from rwlab.attitude.scenario import Scenario
+
+    keys = sorted({f.name for f in fields(Scenario)} - {"disturbances"} | {"base"})
+    table = draw(st.dictionaries(st.sampled_from(keys), toml_value, max_size=4))
+    if draw(st.booleans()):
+        table["base"] = draw(st.sampled_from(["geo-smallsat", "geo-comsat", "geo-moon"]))
+    text = ("[scenario]\n" if draw(st.booleans()) else "") + _toml(table)
+    tomllib.loads(text)
+    return text
+
+
 def _toml(table: dict) -> str:
     def value(v):
         if isinstance(v, bool):
@@ -127,6 +201,23 @@ def invocations(draw, path, cmd, files, root):
         toml.write_text(text)
         where = draw(st.sampled_from([k for k, a in enumerate(args) if a.startswith("/")] or [0]))
         args[where : where + 1] = [str(toml)]
+    if draw(st.integers(0, 2)) == 0:  # a random model, dispersion or scenario file
+        kind = draw(st.sampled_from(["model", "dispersions", "scenario"]))
+        made = root / "out" / f"{kind}{draw(st.integers(0, 10**6))}"
+        made.parent.mkdir(exist_ok=True)
+        if kind == "model":
+            made = made.with_suffix(".json")
+            made.write_text(json.dumps(draw(model_json()), allow_nan=True))
+            flags = ("--model", "--wheel-model")
+        else:
+            made = made.with_suffix(".toml")
+            made.write_text(draw(dispersion_toml() if kind == "dispersions" else scenario_toml()))
+            flags = ("--dispersions",) if kind == "dispersions" else ("--scenario", "--config")
+        own = [k + 1 for k, a in enumerate(args[:-1]) if a in flags]
+        if own:
+            args[own[0]] = str(made)
+        elif any(o.opts[0] in flags for o in options):
+            args += [next(o.opts[0] for o in options if o.opts[0] in flags), str(made)]
     if draw(st.integers(0, 4)) == 0:  # a random argument list
         args = draw(st.permutations(args))[: draw(st.integers(0, len(args)))]
     return [*path, *args]

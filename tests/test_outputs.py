@@ -182,6 +182,9 @@ def test_a_second_run_on_a_busy_output_is_refused_before_computing(tmp_path, mon
     def computing(*args, **kwargs):
         raise AssertionError("computed although the output folder is busy")
 
+    monkeypatch.setattr(  # the valid model below has no healthy reference: not the point here
+        diagnose.HealthyReference, "from_model_file", staticmethod(lambda path: None)
+    )
     for module, name in [
         (study, "identification_study"),
         (study, "load_study_data"),
@@ -196,7 +199,9 @@ def test_a_second_run_on_a_busy_output_is_refused_before_computing(tmp_path, mon
     fleet = tmp_path / "fleet"
     fleet.mkdir()
     (fleet / "a.csv").write_text("u,y\n1,2\n2,3\n")
-    (tmp_path / "model.json").write_text("{}")
+    from tests.test_bad_inputs import _model
+
+    (tmp_path / "model.json").write_text(_model())  # a valid model: the lock refuses the run
     (tmp_path / "rec.mcap").write_bytes(b"")
     paths = {"FLEET": fleet, "REC": tmp_path / "rec.mcap", "MODEL": tmp_path / "model.json"}
     args = [str(paths.get(a, a)) for a in BUSY[command]]
@@ -276,3 +281,22 @@ def test_a_killed_simulation_leaves_no_folder_and_keeps_the_previous_one(tmp_pat
     assert f"interrupted ({signal.Signals(sig).name})" in err and "Traceback" not in err
     assert {p.name: p.read_text() for p in out.iterdir()} == previous
     assert _leftovers(out) == []
+
+
+@pytest.mark.slow
+def test_a_fleet_killed_with_sigterm_leaves_no_folder(tmp_path):
+    """The issue's case: SIGTERM during a fleet `identify` once left model.json, no report."""
+    from rwlab import datasets
+
+    fleet = tmp_path / "fleet"
+    for k in range(3):
+        datasets.get("dryer").write(fleet / f"unit_{k}.csv")
+    out = tmp_path / "studies"
+    child = _start("identify", fleet, "--preprocess", "detrend", "--workers", "1", "--out", out)
+    _wait_for(lambda: any(".partial-" in n for n in _leftovers(out)))
+    time.sleep(3.0)  # the cluster starts, the studies begin
+    child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 130, err
+    assert "Traceback" not in err.split("interrupted")[-1]
+    assert not out.exists() and _leftovers(out) == []

@@ -49,7 +49,7 @@ __all__ = [
 SUN_RADIUS = 6.957e8  # m, IAU 2015 nominal
 MOON_RADIUS = 1.7374e6  # m
 AU = erfa.DAU  # m
-SUN_NODE_S = 60.0  # the Sun's ephemeris is evaluated on this grid and interpolated
+SUN_NODE_S = 60.0  # the Sun's and Moon's ephemerides are evaluated on this grid, interpolated
 ROTATION_NODE_S = 3600.0  # the same for the precession-nutation matrix
 SKY_COLUMNS = (
     "sun_x",
@@ -179,8 +179,9 @@ def sun_moon_orbital(epoch: Epoch, longitude_deg: float, t) -> tuple[np.ndarray,
     t = np.atleast_1d(np.asarray(t, dtype=float))
     M = _earth_rotation(epoch, t)
     sun = _interpolated(lambda s: _sun_gcrs(epoch, s), t, SUN_NODE_S)
-    tt1, tt2, _, _ = epoch.dates(t)
-    moon = erfa.moon98(tt1, tt2)["p"] * AU
+    # the Moon too (it moves 0.009° a minute: a linear chord is off by ~1 m at 3.8e8 m);
+    # moon98 at every second was a fifth of a real-sky run's time
+    moon = _interpolated(lambda s: erfa.moon98(*epoch.dates(s)[:2])["p"] * AU, t, SUN_NODE_S)
     r_sat, axes = _orbital_axes(longitude_deg)
     out = []
     for body in (sun, moon):

@@ -517,7 +517,8 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     est = np.empty(7)  # what the controller sees: [q̂, ω̂] or the true [q, ω]
     nx = P.shape[0]  # 6, or 9 or 12 with the disturbance state b̂ = w_hat[3:]
     biased = mode == DYNAMICS and nx > 6
-    aligned = mode == GYRO and nx == 9  # [δθ, δβ, φ_sun]
+    aligned = mode == GYRO and nx >= 9  # [δθ, δβ, φ_sun (, φ_earth)]
+    earth_aligned = mode == GYRO and nx == 12
     F, W3, Wn = np.empty((nx, nx)), np.empty((4, 3, 3)), np.empty((6, nx, nx))
     C, Bmap = np.empty((3, 3)), np.zeros((3, max(nx - 6, 3)))  # Bmap: torque per unit b̂
     if filt.bias_kind != 2:  # the constant torque's columns come first
@@ -618,7 +619,11 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 _matvec(sensors.earth_align, nadir_b, b_true)
                 _noisy_into(b_true, sensors.sig_earth, e[3], e[4], e[5], b_meas)
                 g = filt.gate[0] if earth_rejected < filt.gate[1] else 0.0
-                ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, filt.r_earth, g, Wn)
+                r = filt.r_earth
+                if earth_aligned:
+                    ok = aligned_update_into(q_hat, w_hat, P, b_meas, nadir, r, g, 9, Wn)
+                else:
+                    ok = gated_update_into(q_hat, w_hat, P, b_meas, nadir, r, g, Wn)
                 earth_rejected = 0 if ok else earth_rejected + 1
                 if not ok:
                     stats[EARTH_GATED] += 1
@@ -705,7 +710,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 for i in range(nx - 6):
                     log.est[log_k, at + i] = w_hat[3 + i]
             if mode == GYRO:
-                for i in range(nx - 3):  # β̂, then φ̂ of the sun sensor
+                for i in range(min(nx, 9) - 3):  # β̂, then φ̂ of the sun sensor
                     log.est[log_k, 13 + i] = w_hat[i]
             for i in range(3):
                 log.tau[log_k, i] = 0.0

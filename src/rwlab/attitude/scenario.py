@@ -126,6 +126,9 @@ class Scenario:
         misalignment relative to the earth sensor (the pointing reference) — in-flight
         calibration; about z it cannot be told from yaw and stays at its prior (carried
         as uncertainty).
+    filter_earth_sensor_alignment : with the above, the earth sensor's turn too, as
+        consider states at their prior (it is the pointing reference: unobservable, but
+        the filter's covariance then carries its bias instead of being overconfident).
     filter_inertia : the inertia the filter's dynamics model uses (3 or 9 values;
         empty: the truth's) — the model error of a flight filter.
     wheel_torque_scale : realised wheel torque over the command (1: exact).
@@ -194,6 +197,7 @@ class Scenario:
     filter_inertia: tuple = ()
     wheel_torque_scale: float = 1.0
     filter_sun_sensor_alignment: bool = True
+    filter_earth_sensor_alignment: bool = True
 
     def __post_init__(self) -> None:
         _check_types(self)

@@ -427,9 +427,12 @@ SUN_ALIGNMENT_PRIOR_DEG = 0.03  # 1σ of the sun sensor's misalignment the filte
 SUN_ALIGNMENT_DRIFT_DEG_DAY = 0.005  # its random walk a day (thermal distortion)
 
 
-def _aligned(sc: Scenario) -> bool:
-    """Whether the gyro filter estimates the sun sensor's misalignment."""
-    return sc.gyro is not None and sc.filter_sun_sensor_alignment
+def _aligned(sc: Scenario) -> int:
+    """How many sensors' misalignments the gyro filter carries: 0, 1 (the sun sensor's) or
+    2 (and the earth sensor's)."""
+    if sc.gyro is None or not sc.filter_sun_sensor_alignment:
+        return 0
+    return 2 if sc.filter_earth_sensor_alignment else 1
 
 
 def _is_real(v) -> bool:
@@ -448,7 +451,7 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
     if sc.gyro is not None:  # the gyro-driven filter: [δθ, δβ (, φ)], β̂ = 0 at the turn-on σ
         sb = math.radians(max(sc.gyro.initial_bias_deg_h, 1e-3)) / 3600.0
-        sphi = [math.radians(SUN_ALIGNMENT_PRIOR_DEG) ** 2] * 3 if _aligned(sc) else []
+        sphi = [math.radians(SUN_ALIGNMENT_PRIOR_DEG) ** 2] * 3 * _aligned(sc)
         P0 = np.diag([s0**2] * 3 + [sb**2] * 3 + sphi)
         return q0, w0, hw0, qmul(dq, q0), np.zeros(3 + len(sphi)), P0
     nb = BIAS_SIZES[disturbance_state(sc)]
@@ -586,10 +589,12 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
         Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd(), nx)
         if nx > 6:
             Qc[6:, 6:] = np.eye(nx - 6) * math.radians(SUN_ALIGNMENT_DRIFT_DEG_DAY) ** 2 / 86400
-        # the truth of φ: the sun sensor's rotation (bias on y, z, and misalignment)
-        rot = np.radians(np.asarray(sc.sun_sensor_misalignment_deg, float))
-        rot[1:] += np.radians(np.asarray(sc.sun_sensor_bias_deg, float))
-        bias_true = rot[: nx - 6]
+        # the truth of φ: each sensor's rotation (bias on its transverse axes, misalignment)
+        sun = np.radians(np.asarray(sc.sun_sensor_misalignment_deg, float))
+        sun[1:] += np.radians(np.asarray(sc.sun_sensor_bias_deg, float))
+        earth = np.radians(np.asarray(sc.earth_sensor_misalignment_deg, float))
+        earth[:2] += np.radians(np.asarray(sc.earth_sensor_bias_deg, float))
+        bias_true = np.concatenate([sun, earth])[: nx - 6]
     else:
         J_inv = np.linalg.inv(sc.filter_inertia_matrix)
         Qc = np.zeros((nx, nx))

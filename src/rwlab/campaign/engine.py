@@ -60,19 +60,42 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise ConfigError(f"workers must be ≥ 1, got {n}")
-    with (
-        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
-        LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        ) as cluster,
-        Client(cluster) as client,
-    ):
-        yield client
+    from distributed.deploy.spec import SpecCluster
+
+    before = set(SpecCluster._instances)
+    try:
+        with (
+            dask.config.set({"distributed.scheduler.allowed-failures": 0}),
+            LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            ) as cluster,
+            Client(cluster) as client,
+        ):
+            yield client
+    except BaseException:  # Ctrl-C or SIGTERM while it starts or runs: no noise at exit
+        _close_quietly(set(SpecCluster._instances) - before)
+        raise
+
+
+def _close_quietly(clusters) -> None:
+    """Close the local clusters left half-started by an interrupt, quietly.
+
+    distributed closes them again at exit and, for one interrupted while its
+    workers start, prints an AssertionError traceback; marking them closed here
+    (after trying to close them) keeps the interrupt's message the last line.
+    ``SpecCluster._instances`` is distributed's own registry (no public API).
+    """
+    from distributed.core import Status
+
+    for cluster in clusters:
+        with contextlib.suppress(Exception):
+            cluster.close(timeout=5)
+        cluster.status = Status.closed
 
 
 def worker_count(client) -> int:

@@ -217,7 +217,7 @@ def _data_options(func):
     options = [
         click.argument("file"),
         click.option(
-            "--Ts", "Ts", type=float, help="Sample time in seconds (when the file has none)."
+            "--Ts", "Ts", type=POSITIVE, help="Sample time in seconds (when the file has none)."
         ),
         _columns_option,
         click.option(

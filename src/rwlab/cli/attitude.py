@@ -420,8 +420,8 @@ def attitude_montecarlo(
         epoch_spread_days=epoch_spread_days,
     )
     with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
+        check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume)
-        check_runs(campaign)  # before the cluster starts
         where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
         click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
         execution = Execution()

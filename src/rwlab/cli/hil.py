@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import click
 
-from rwlab.cli._common import _check_folder, _friendly_errors, _stop_signals, main
+from rwlab.cli._common import (
+    SECONDS,
+    Number,
+    _check_folder,
+    _friendly_errors,
+    _stop_signals,
+    main,
+)
 from rwlab.errors import ConfigError
 
 
@@ -41,7 +48,7 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option("--channel", default=None, help="Bus channel (the interface's default).")
 @click.option("--nodes", default=None, help="Node id of each wheel, e.g. 1,2,3 [default: 1..N].")
-@click.option("--duration", type=float, required=True, help="Seconds of flight.")
+@click.option("--duration", type=SECONDS, required=True, help="Seconds of flight.")
 @click.option("--seed", type=click.IntRange(min=0), default=None)
 @click.option("--realtime", is_flag=True, help="Wall clock (10 Hz or faster) instead of simulated.")
 @click.option("--epoch", help="UTC start, ISO 8601: the real Sun, Moon and eclipses.")
@@ -58,13 +65,13 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option(
     "--telemetry-rate",
-    type=float,
+    type=Number(0, 10_000, low_open=True),
     default=None,
     help="Twins' telemetry, Hz [default: one per control period; 50 on the wall clock].",
 )
 @click.option(
     "--wheel-bias-rpm",
-    type=float,
+    type=Number(-1e5, 1e5),
     default=0.0,
     show_default=True,
     help="Spin the wheels up along the null space first (pyramid): no zero crossings.",
@@ -77,7 +84,7 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option(
     "--calibration",
-    type=float,
+    type=SECONDS,
     default=300.0,
     show_default=True,
     help="Seconds of healthy telemetry that calibrate the diagnosis.",

@@ -18,7 +18,7 @@ friction   constant speed (|α| < 10 rpm/s), |ω| ≥ 500 rpm  relative excess o
 motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess of     increase
                                                            current over the
                                                            inertial current
-speed      command held ≥ 30 s                             speed − model, rpm     either way
+speed      command held ≥ 30 s                             speed − command, rpm   either way
 lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
 =========  ==============================================  =====================  ==========
 
@@ -64,6 +64,7 @@ FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare rela
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
+HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
@@ -340,13 +341,13 @@ class Diagnoser:
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
                 new += self._fire(t_s, "dropout")
+            if usable and self._detectors["stuck"].update(repeat and self._moving):
+                new += self._fire(t_s, "stuck")
             if "friction" in values:
                 values["friction_change"] = values["friction"]
             for name, value in values.items():
                 if self._detectors[name].add(t_s, value):
                     new += self._fire(t_s, name)
-            if usable and self._detectors["stuck"].update(repeat and self._moving):
-                new += self._fire(t_s, "stuck")
         else:
             for name, value in values.items():
                 self.collected[name].append(value)
@@ -359,8 +360,10 @@ class Diagnoser:
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
         prev = self._prev
         self._prev = {"accel": accel, "model_accel": model_accel}
-        if t_s - self._command[1] >= SETTLE_S:
-            out["speed"] = r["speed"]
+        if t_s - self._command[1] >= SETTLE_S and abs(self._command[0]) <= HELD_MAX_RPM:
+            # the wheel's PI loop holds the true speed at the command: model-free, and the
+            # same for every unit (the identified model's own steady error is no part of it)
+            out["speed"] = speed_rpm - self._command[0]
         lagging = abs(model_accel) >= LAG_SHARE * self.accel_limit
         if lagging and abs(prev.get("model_accel", 0.0)) >= LAG_SHARE * self.accel_limit:
             out["lag"] = (accel - model_accel) * math.copysign(1.0, model_accel) / self.accel_limit

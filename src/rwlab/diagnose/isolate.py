@@ -19,7 +19,7 @@ motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 +
             1/F the current for everything
 friction    excess only at constant speed                     ``friction``, factor
                                                               (1 + e_ω)/(1 + e_α)
-speed       held speed offset from the model                  ``speed_sensor_bias``, rpm
+speed       held speed offset from the command                 ``speed_sensor_bias``, rpm
 lag         slower than the model at its acceleration limit   ``current_limit``: the
             with a healthy motor test                         current it flattens at (A);
                                                               with the motor test in
@@ -133,8 +133,11 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev)
     if detector == "speed":
+        held = np.asarray(ev["speed"], dtype=float)
+        if held.size >= 5 and np.ptp(held) == 0:  # one reading, over and over: not noise
+            return [Finding("speed_sensor_stuck", float(speed[-1]), None, "rpm")]
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
-        bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the model's own held error
+        bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)

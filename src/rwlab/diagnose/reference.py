@@ -39,11 +39,11 @@ FORMAT = "rwlab.HealthyReference/1"
 # Between two healthy units (the reference's and another) of a wheel model whose friction
 # is within ±30 %, k_t ±5 % and inertia ±2 % (rwlab.wheel.imperfections.TOLERANCES):
 # friction ratio up to 1.3/0.7 = 1.86, inertial current I/k_t up to 1.15; held speed:
-# the model's steady error on the back-EMF-limited top speeds, a few rpm.
+# the Hall reading's error at a held speed, ~1 rpm.
 DEFAULT_TOLERANCE = {
     "friction": 0.86,
     "motor": 0.15,
-    "speed": 4.0,
+    "speed": 2.0,
     "lag": 0.03,
     "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing's warm-up
 }

@@ -41,7 +41,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult
 from rwlab.attitude.wheels import physics_params
-from rwlab.errors import ConfigError, HilStopped, WheelFault  # HilStopped: re-export
+from rwlab.errors import ConfigError, HilStopped, WheelFault
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto

@@ -239,10 +239,10 @@ class WheelModelFile:
                 nonlinear_choice=d.get("nonlinear_choice"),
                 healthy_reference=d.get("healthy_reference"),
             )
-        except (KeyError, TypeError) as exc:
-            raise FileFormatError(f"{source}: missing or malformed field {exc}") from None
         except (ModelError, FileFormatError) as exc:
             raise FileFormatError(f"{source}: {exc}") from None
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise FileFormatError(f"{source}: missing or malformed field ({exc})") from None
 
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write ``model.json`` atomically.

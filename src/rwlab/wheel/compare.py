@@ -38,9 +38,9 @@ __all__ = ["compare_wheel_models"]
 def _read(path: str | os.PathLike) -> dict:
     try:
         info = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
-    if info.get("format") != "rwlab.WheelModel/1":
+    if not isinstance(info, dict) or info.get("format") != "rwlab.WheelModel/1":
         raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
     return info
 
