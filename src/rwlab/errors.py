@@ -63,11 +63,6 @@ class MissingDependencyError(RwlabError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
 
 
-class HilStopped(RwlabError):
-    """A hardware-in-the-loop run stopped before its end (the wheels were idled, the record
-    closed)."""
-
-
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
 
