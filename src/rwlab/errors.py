@@ -79,6 +79,10 @@ class WheelConflict(RwlabError):
     """Two sources answer under one wheel's node id: their telemetry cannot be told apart."""
 
 
+class HilStopped(RwlabError):
+    """A hardware-in-the-loop run stopped before its end (the wheels idled, the record closed)."""
+
+
 class OutputBusyError(RwlabError):
     """Another run is writing the same output folder."""
 
