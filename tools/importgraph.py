@@ -6,9 +6,7 @@ import-linter/grimp: those are not in rwlab's dependencies, and the rule here (a
 ordered list of layers plus "no cycle between modules") is fifty lines.
 
 Every ``import`` counts, also those inside functions: a lazy import is still a
-dependency. Imports under ``if TYPE_CHECKING:`` do not (they only name types for
-annotations and never run), as grimp's ``exclude_type_checking_imports``. A
-module's layer is that of its top-level name under ``rwlab``.
+dependency. A module's layer is that of its top-level name under ``rwlab``.
 """
 
 from __future__ import annotations
@@ -47,13 +45,27 @@ def modules(src: Path = SRC) -> dict[str, Path]:
     return out
 
 
+def _is_type_checking(node: ast.AST) -> bool:
+    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+
+
 def imports(src: Path = SRC) -> dict[str, set[str]]:
     """The graph: module → the rwlab modules it imports (anywhere in its body)."""
     mods = modules(src)
     graph: dict[str, set[str]] = defaultdict(set)
     for name, path in mods.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        typing_only = {  # imports under `if TYPE_CHECKING:` are for annotations, not run
+            id(n)  # (its else branch does run)
+            for block in ast.walk(tree)
+            if _is_type_checking(block)
+            for stmt in block.body  # type: ignore[attr-defined]
+            for n in ast.walk(stmt)
+        }
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -72,21 +84,6 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
                 if t.startswith("rwlab") and t != name:
                     graph[name].add(t)
     return dict(graph)
-
-
-def _runtime_nodes(tree: ast.AST):
-    """Every node except those under ``if TYPE_CHECKING:`` (annotations only, never run)."""
-    stack = [tree]
-    while stack:
-        node = stack.pop()
-        yield node
-        for child in ast.iter_child_nodes(node):
-            test = child.test if isinstance(child, ast.If) else None
-            name = getattr(test, "id", getattr(test, "attr", None))
-            if name == "TYPE_CHECKING":
-                stack.extend(child.orelse)
-            else:
-                stack.append(child)
 
 
 def layer(module: str) -> int:

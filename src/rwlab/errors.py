@@ -63,11 +63,6 @@ class MissingDependencyError(RwlabError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
 
 
-class HilStopped(RwlabError):
-    """A hardware-in-the-loop run stopped before its end (the wheels were idled, the record
-    closed)."""
-
-
 class RecordGapError(DataError):
     """A record has gaps in its telemetry longer than the caller accepts."""
 
@@ -82,6 +77,10 @@ class RecordBusyError(RwlabError):
 
 class WheelConflict(RwlabError):
     """Two sources answer under one wheel's node id: their telemetry cannot be told apart."""
+
+
+class HilStopped(RwlabError):
+    """A hardware-in-the-loop run stopped before its end (the wheels idled, the record closed)."""
 
 
 class OutputBusyError(RwlabError):
