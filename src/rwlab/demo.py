@@ -163,7 +163,7 @@ def run_demo(
     return summary
 
 
-DEMO_FILES = ("records", "identification", "attitude", "summary.json", "index.html")
+DEMO_FILES = ("records", "identification", "attitude", "hil", "summary.json", "index.html")
 
 
 def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
