@@ -219,6 +219,8 @@ def test_the_canopen_twin_answers_a_bare_canopen_client():
             time.sleep(0.2)
         assert remote.sdo["Control state"].raw == 2
         assert abs(remote.sdo["Velocity"].raw - target) < 0.2 * target
+        # the supply the twin's driver sees (RW90: a 24 V bus, measured in 0.5 V steps)
+        assert abs(remote.sdo["Bus voltage"].raw - 24.0) <= 1.0
         seen: dict[int, bytes] = {}
         end = time.monotonic() + 1.5
         while time.monotonic() < end:  # python-can alone sees the TPDOs and the heartbeat

@@ -204,7 +204,9 @@ def test_a_burst_of_junk_leaves_the_served_wheel_and_the_experiment_running():
     for phase in ("rate_before", "rate_during", "rate_after"):
         assert r[phase] >= 35, r  # served at 50 Hz (counted on arrival: a lower bound)
     assert r["exp_rc"] == 0 and "(completed)" in r["exp_stdout"], r
-    assert " 0 lost" in r["exp_stdout"], r  # the wheel's frame counter never skipped
+    lost = int(r["exp_stdout"].split(" lost")[0].rsplit(",", 1)[1])
+    # the burst costs no frame: the realistic twin loses ~1 in 1000 on purpose (frame_loss_rate)
+    assert lost <= 3, r
     assert r["complete"] and ("stop", "completed") in [tuple(e) for e in r["events"]]
     assert r["telemetry"] >= 0.95 * 50 * 10, r  # 50 Hz for the 10 s run, the burst included
     assert r["max_speed"] < 700  # the 1e30 rpm requests were refused

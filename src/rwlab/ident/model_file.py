@@ -215,6 +215,7 @@ class WheelModelFile:
         if not isinstance(d, dict) or "format" not in d:  # model.json always carried it
             raise FileFormatError(f"{source}: not an rwlab wheel model (no format field)")
         d = read_versioned(d, KIND, VERSION, source=source)
+        _check_top_level(d, source)
         try:
             sat, nl = d["saturation"], d.get("nonlinear")
             servo = None
@@ -292,6 +293,21 @@ def _channel(d: dict) -> dict:
         "unit": str(d.get("unit") or ""),
         "offset": float(d["offset"]),
     }
+
+
+def _check_top_level(d: dict, source: str) -> None:
+    """The copies at the top (``Ts``, the fit) must be finite numbers, and ``Ts`` the model's."""
+    for key in ("Ts", "validation_fit_percent"):
+        value = d.get(key)
+        if value is None and key == "validation_fit_percent":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise FileFormatError(f"{source}: {key} must be a number, got {value!r}")
+        if not math.isfinite(value) or (key == "Ts" and value <= 0):
+            raise FileFormatError(f"{source}: {key} must be a finite positive number, got {value}")
+    model_Ts = d.get("model", {}).get("Ts") if isinstance(d.get("model"), dict) else None
+    if isinstance(model_Ts, (int, float)) and abs(model_Ts - d["Ts"]) > 1e-9 * abs(d["Ts"]):
+        raise FileFormatError(f"{source}: Ts {d['Ts']} differs from the model's {model_Ts}")
 
 
 def _optional_float(v: Any) -> float | None:

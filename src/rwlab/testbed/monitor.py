@@ -11,7 +11,7 @@ motor current, and the wheel's mode, faults and the experiment's events. A
 record of ``rwlab hil`` (a ``/satellite`` channel) adds the satellite view on
 top: true and estimated pointing error against the requirement, every wheel's
 momentum, the wheels still in the loop, and the alarms among the events. Given
-a finished record with ``replay=True`` it plays the record back at ``speed``×.
+a finished record with ``replay=True`` it plays the record back at ``speed`` times real time.
 Bokeh serves its own JavaScript from the server: no CDN, works offline.
 """
 

@@ -21,6 +21,7 @@ index   name                   type    meaning
                                        8 overtemperature
 0x4009  Setpoint sequence      U8, rw  echoed in 0x400A once the setpoint is applied
 0x400C  Status flags           U8      bit 0 speed limited, bit 1 a setpoint was refused
+0x400F  Bus voltage            REAL32  V, the supply at the wheel's driver (1 Hz)
 ======  =====================  ======  =============================================
 
 PDOs: RPDO1 (0x200 + id) carries state, setpoint and sequence from the host;
@@ -271,6 +272,7 @@ class CanopenNodeLink(NodeLink):
         self._values.update(
             {
                 0x4007: frame.temperature,
+                0x400F: frame.bus_voltage,
                 0x400D: frame.commands_seen & 0xFFFF,
                 0x400E: min(frame.uptime, 0xFFFF),
                 0x4008: int(frame.faults) & 0xFF,

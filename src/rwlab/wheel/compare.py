@@ -28,6 +28,7 @@ import numpy as np
 from rwlab.data import IOData
 from rwlab.errors import DataError, FileFormatError, ModelError
 from rwlab.ident.greybox import RPM, WheelGreyBox
+from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.nlarx import NLARXModel
 from rwlab.ident.validation import fit_percent, mse
 from rwlab.wheel.identified import IdentifiedWheel
@@ -40,8 +41,7 @@ def _read(path: str | os.PathLike) -> dict:
         info = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
-    if not isinstance(info, dict) or info.get("format") != "rwlab.WheelModel/1":
-        raise FileFormatError(f"{path}: not an rwlab wheel model (format rwlab.WheelModel/1)")
+    WheelModelFile.from_dict(info, source=str(path))  # the whole file checked by its owner
     return info
 
 
