@@ -213,7 +213,8 @@ class WheelModelFile:
             Another kind of file, a newer version, a missing or invalid field.
         """
         if not isinstance(d, dict) or "format" not in d:  # model.json always carried it
-            raise FileFormatError(f"{source}: not an rwlab wheel model (no format field)")
+            expected = format_tag(KIND, VERSION)
+            raise FileFormatError(f"{source}: not an rwlab wheel model (no format {expected!r})")
         d = read_versioned(d, KIND, VERSION, source=source)
         _check_top_level(d, source)
         try:
@@ -299,15 +300,16 @@ def _check_top_level(d: dict, source: str) -> None:
     """The copies at the top (``Ts``, the fit) must be finite numbers, and ``Ts`` the model's."""
     for key in ("Ts", "validation_fit_percent"):
         value = d.get(key)
-        if value is None and key == "validation_fit_percent":
-            continue
+        if value is None and (key not in d or key == "validation_fit_percent"):
+            continue  # a copy the file may leave out (a hand-written model); null fit: unknown
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise FileFormatError(f"{source}: {key} must be a number, got {value!r}")
         if not math.isfinite(value) or (key == "Ts" and value <= 0):
             raise FileFormatError(f"{source}: {key} must be a finite positive number, got {value}")
     model_Ts = d.get("model", {}).get("Ts") if isinstance(d.get("model"), dict) else None
-    if isinstance(model_Ts, (int, float)) and abs(model_Ts - d["Ts"]) > 1e-9 * abs(d["Ts"]):
-        raise FileFormatError(f"{source}: Ts {d['Ts']} differs from the model's {model_Ts}")
+    Ts = d.get("Ts")
+    if isinstance(model_Ts, (int, float)) and Ts is not None and abs(model_Ts - Ts) > 1e-9 * Ts:
+        raise FileFormatError(f"{source}: Ts {Ts} differs from the model's {model_Ts}")
 
 
 def _optional_float(v: Any) -> float | None:
