@@ -246,6 +246,19 @@ def predict_covariance_into(P, F, Qc, T, W):
             P[i, j] = 0.5 * (Z[i, j] + Z[j, i] + Y[i, j] + Y[j, i])
 
 
+@njit(cache=True, inline="always")
+def _reset_attitude(q, d0, d1, d2):
+    """q ← [δθ/2, 1] ⊗ q, renormalised (the multiplicative reset after an update), in place."""
+    p1, p2, p3 = 0.5 * d0, 0.5 * d1, 0.5 * d2
+    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
+    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
+    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
+    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
+    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
+    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
+    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+
+
 @njit(cache=True)
 def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
     """One vector-measurement update in place on q (4,), w (n − 3,), P (n, n): the scalar
@@ -313,13 +326,7 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
             v = 0.5 * (Hx[i, j] + Hx[j, i]) + kk
             P[i, j] = v
             P[j, i] = v
-    p1, p2, p3 = 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]  # q ← [δθ/2, 1] ⊗ q, renormalised
-    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
-    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
-    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
-    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
-    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
-    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    _reset_attitude(q, dx[0], dx[1], dx[2])
     for i in range(nx - 3):
         w[i] += dx[3 + i]
     return True
@@ -452,14 +459,7 @@ def attitude_update_into(q, w, P, q_meas, R, W):
             v = 0.5 * (Y[i, j] + Y[j, i]) + kk
             P[i, j] = v
             P[j, i] = v
-    p1, p2, p3 = 0.5 * d0, 0.5 * d1, 0.5 * d2
-    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
-    n1 = q1 + q4 * p1 - (p2 * q3 - p3 * q2)
-    n2 = q2 + q4 * p2 - (p3 * q1 - p1 * q3)
-    n3 = q3 + q4 * p3 - (p1 * q2 - p2 * q1)
-    n4 = q4 - (p1 * q1 + p2 * q2 + p3 * q3)
-    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
-    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    _reset_attitude(q, d0, d1, d2)
 
 
 @njit(cache=True)
@@ -528,14 +528,7 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
             )
             P[i, j] = v
             P[j, i] = v
-    p1_, p2_, p3_ = 0.5 * d0, 0.5 * d1, 0.5 * d2
-    q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
-    n1 = q1 + q4 * p1_ - (p2_ * q3 - p3_ * q2)
-    n2 = q2 + q4 * p2_ - (p3_ * q1 - p1_ * q3)
-    n3 = q3 + q4 * p3_ - (p1_ * q2 - p2_ * q1)
-    n4 = q4 - (p1_ * q1 + p2_ * q2 + p3_ * q3)
-    norm = math.sqrt(n1 * n1 + n2 * n2 + n3 * n3 + n4 * n4)
-    q[0], q[1], q[2], q[3] = n1 / norm, n2 / norm, n3 / norm, n4 / norm
+    _reset_attitude(q, d0, d1, d2)
     return True
 
 
