@@ -91,8 +91,8 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--rate-limit/--no-rate-limit",
     default=None,
-    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (default on: "
-    "ramps, not steps); --no-rate-limit plays true steps and lets the wheel saturate.",
+    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (ramps, not "
+    "steps). Default off: paper A's PRBS steps, and the wheel follows at its limit.",
 )
 @click.option(
     "--fault",

@@ -73,11 +73,11 @@ class ExperimentConfig:
         PRBS hold times, s (paper A: ≥ 5 s).
     rate_limit : bool
         Limit a speed-mode PRBS's slope to the wheel's maximum acceleration
-        (default True; RW90: 314 rpm/s), so the identification signal is one
-        the wheel can follow: the command then ramps instead of stepping, and a
+        (RW90: 314 rpm/s): the command then ramps instead of stepping, and a
         linear model identified from it never sees the acceleration limit bind.
-        ``false`` (TOML) or ``--no-rate-limit`` (CLI) plays true steps, which
-        the wheel follows at its limit: the record then shows the nonlinearity.
+        Default False: paper A's PRBS steps between random levels, the wheel
+        follows each step at its acceleration limit, and the record shows that
+        nonlinearity (``true`` in TOML or ``--rate-limit`` on the CLI to ramp).
     f0, f1 : float
         Chirp / multisine band, Hz (f1 default: 0.4/Ts).
     step_levels : tuple of float
@@ -122,7 +122,7 @@ class ExperimentConfig:
     latency: float = 0.02
     min_hold: float = 5.0
     max_hold: float = 60.0
-    rate_limit: bool = True
+    rate_limit: bool = False
     f0: float = 0.0001
     f1: float | None = None
     step_levels: tuple[float, ...] = (0.0, 1.0, 0.0, -1.0, 0.0)
