@@ -42,11 +42,11 @@ def main() -> None:
         f"{'steady max [°]':>14} {'NEES/n':>10} {'in ±3σ':>7} {'shadow [h]':>10} {'wall [s]':>8}"
     )
     for name, changes, epoch, days, seed in CASES[:1] if args.quick else CASES:
-        sc = SCENARIOS[name].with_(epoch=epoch, **changes)
+        sc = SCENARIOS[name].with_(**changes, **{"sky.epoch": epoch})
         t0 = time.perf_counter()
         _, m = fly(sc, "lqg", duration=days * DAY, seed=seed, log_every=100, steady_after=3600)
         wall = time.perf_counter() - t0
-        kind = "gyro" if sc.gyro else sc.filter_disturbance_state
+        kind = "gyro" if sc.sensors.gyro else sc.filter.disturbance_state
         nees = f"{m['nees_mean']:.3g}/{m['nees_states']}" if m["nees_mean"] else "—"
         inside = m["inside_3sigma_fraction"]
         print(

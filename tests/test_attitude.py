@@ -1,4 +1,6 @@
+import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -129,14 +131,14 @@ def test_vector_measurement_jacobian_matches_finite_differences():
 
 def test_noise_free_ekf_converges_from_a_5_degree_error():
     sc = SCENARIOS["geo-comsat"].with_(
-        sun_noise_deg=1e-5,
-        earth_noise_deg=1e-5,
-        process_noise_torque=0.0,
-        estimator_error_deg=5.0,
-        disturbances_known_to_filter=True,  # a perfect model: only convergence is tested
-        # no innovation gate: with 1e-5° sensors the first updates' linearisation residual
-        # is many σ, and the gate would only let every 11th measurement through
-        innovation_gate=0.0,
+        **{
+            "sensors.sun_noise_deg": 1e-5,
+            "sensors.earth_noise_deg": 1e-5,
+            "spacecraft.process_noise_torque": 0.0,
+            "filter.initial_error_deg": 5.0,
+            "filter.disturbances_known": True,
+            "filter.innovation_gate": 0.0,
+        }
     )
     r = simulate(sc, PDController(20.0, 400.0), duration=600, estimator="ekf")
     assert r.est_error_deg[-1] < 1e-3  # from 5° (the first log is already after one update)
@@ -156,14 +158,16 @@ def test_ekf_is_consistent_over_long_noisy_runs(state, dim):
     it every torque is known."""
     unknown = state != "none"
     sc = SCENARIOS["geo-comsat"].with_(
-        noise_margin=1.0,
-        estimator_error_deg=0.05,
-        disturbances=DisturbanceModel(True, False, unknown, False),
-        disturbances_known_to_filter=not unknown,
-        filter_disturbance_state=state,
-        filter_torque_drift_s=1e12,
-        filter_srp_drift_s=1e12,
-        epoch="2027-02-01T00:00:00Z",
+        **{
+            "filter.noise_margin": 1.0,
+            "filter.initial_error_deg": 0.05,
+            "spacecraft.disturbances": DisturbanceModel(True, False, unknown, False),
+            "filter.disturbances_known": not unknown,
+            "filter.disturbance_state": state,
+            "filter.torque_drift_s": 1e12,
+            "filter.srp_drift_s": 1e12,
+            "sky.epoch": "2027-02-01T00:00:00Z",
+        }
     )
     nees = [
         simulate(sc, PDController(20.0, 400.0), duration=3 * 3600, log_every=600, seed=seed).nees[
@@ -178,12 +182,16 @@ def _constant_torque_day(state: str):
     """Noise-free sensors, no process noise, and a constant body torque of 1.9e-3 N·m (ten
     times the comsat's SRP) that the filter does not model; gravity gradient only besides."""
     sc = SCENARIOS["geo-comsat"].with_(
-        sun_noise_deg=1e-5,
-        earth_noise_deg=1e-5,
-        process_noise_torque=0.0,
-        innovation_gate=0.0,  # as in the convergence test above
-        disturbances=DisturbanceModel(True, False, False, False, constant_torque=TORQUE),
-        filter_disturbance_state=state,
+        **{
+            "sensors.sun_noise_deg": 1e-5,
+            "sensors.earth_noise_deg": 1e-5,
+            "spacecraft.process_noise_torque": 0.0,
+            "filter.innovation_gate": 0.0,
+            "spacecraft.disturbances": DisturbanceModel(
+                True, False, False, False, constant_torque=TORQUE
+            ),
+            "filter.disturbance_state": state,
+        }
     )
     from rwlab.attitude.control import LQRController
 
@@ -216,13 +224,13 @@ def test_quaternion_stays_unit_and_pointing_holds_with_noise():
 
 @pytest.mark.parametrize("model", ["physics"])
 def test_the_rw_physics_can_be_the_actuator(model):
-    sc = SCENARIOS["geo-smallsat"].with_(wheel_model=model)
+    sc = SCENARIOS["geo-smallsat"].with_(**{"wheels.model": model})
     r = simulate(sc, PDController(0.2, 4.0), duration=600, estimator="truth")
     assert r.error_deg[-1] < 0.1 * r.error_deg[0]
 
 
 def test_pyramid_wheels_share_the_load():
-    sc = SCENARIOS["geo-comsat"].with_(wheel_axes="pyramid")
+    sc = SCENARIOS["geo-comsat"].with_(**{"wheels.axes": "pyramid"})
     r = simulate(sc, PDController(20.0, 400.0), duration=600, estimator="truth")
     assert r.wheel_speed_rpm.shape[1] == 4 and r.error_deg[-1] < 0.01
 
@@ -230,12 +238,12 @@ def test_pyramid_wheels_share_the_load():
 def test_scenario_files_are_validated(tmp_path):
     good = tmp_path / "s.toml"
     good.write_text(
-        '[scenario]\nbase = "geo-comsat"\ndt = 0.2\nsensor_period = 1.0\n'
-        "[disturbances]\nsrp_area = 10.0\n"
+        '[scenario]\nbase = "geo-comsat"\n[run]\ndt = 0.2\n[sensors]\nperiod = 1.0\n'
+        "[spacecraft.disturbances]\nsrp_area = 10.0\n"
     )
     sc = load_scenario(str(good))
-    assert sc.dt == 0.2 and sc.disturbances.srp_area == 10.0
-    assert sc.inertia == (1200.0, 1000.0, 1500.0)
+    assert sc.run.dt == 0.2 and sc.spacecraft.disturbances.srp_area == 10.0
+    assert sc.spacecraft.inertia == (1200.0, 1000.0, 1500.0)
     bad = tmp_path / "b.toml"
     bad.write_text("[scenario]\ninertiaa = [1, 2, 3]\n")
     with pytest.raises(ConfigError, match="inertiaa"):
@@ -243,9 +251,9 @@ def test_scenario_files_are_validated(tmp_path):
     with pytest.raises(ConfigError, match="unknown scenario"):
         load_scenario("geo-nosuch")
     with pytest.raises(ConfigError, match="positive definite"):
-        SCENARIOS["geo-comsat"].with_(inertia=(1.0, -2.0, 3.0))
+        SCENARIOS["geo-comsat"].with_(**{"spacecraft.inertia": (1.0, -2.0, 3.0)})
     with pytest.raises(ConfigError, match="triangle"):
-        SCENARIOS["geo-comsat"].with_(inertia=(1.0, 1.0, 5.0))
+        SCENARIOS["geo-comsat"].with_(**{"spacecraft.inertia": (1.0, 1.0, 5.0)})
     assert angle_deg(np.array([0, 0, 0, 1.0])) == 0.0
 
 
@@ -253,14 +261,14 @@ def test_scalar_derivative_equals_the_readable_reference():
     from rwlab.attitude.plant import _derivative_into, derivative
 
     rng = np.random.default_rng(1)
-    sc = SCENARIOS["geo-comsat"].with_(wheel_axes="pyramid")
+    sc = SCENARIOS["geo-comsat"].with_(**{"wheels.axes": "pyramid"})
     J = sc.inertia_matrix + np.array([[0, 5, 3], [5, 0, -2], [3, -2, 0.0]])
     J_inv, G, h_max = np.linalg.inv(J), sc.wheel_matrix, np.full(4, 50.0)
     for _ in range(100):
         q = rng.standard_normal(4)
         x = np.concatenate([q / np.linalg.norm(q), rng.standard_normal(3) * 1e-2, [50, -3, 7, 1]])
         hw_dot = rng.standard_normal(4) * 0.1
-        d = sc.disturbances.vector()
+        d = sc.spacecraft.disturbances.vector()
         d[7:] = rng.standard_normal(3) * 1e-4
         s, m = rng.standard_normal(3), rng.standard_normal(3)
         args = (J, J_inv, G, h_max, GEO_RATE, d, s / np.linalg.norm(s), m / np.linalg.norm(m))
@@ -306,7 +314,9 @@ def test_saturation_aware_law_is_linear_inside_and_rate_limited_outside():
 def test_a_large_slew_never_asks_the_wheels_for_more_than_they_have():
     from rwlab.attitude.control import LQRController, metrics, torque_capacity
 
-    sc = SCENARIOS["geo-comsat"].with_(initial_error_deg=30.0, initial_rate=(0.0, 0.0, 0.0))
+    sc = SCENARIOS["geo-comsat"].with_(
+        **{"run.initial_error_deg": 30.0, "run.initial_rate": (0.0, 0.0, 0.0)}
+    )
     r = simulate(sc, LQRController(sc), duration=2400, estimator="truth")
     m = metrics(r)
     assert m["torque_peak_Nm"] <= 0.6 * torque_capacity(sc)  # the slew's reserve is kept
@@ -318,7 +328,9 @@ def test_torque_saturation_is_reported_when_the_wheels_cannot_hold():
     from rwlab.attitude.plant import DisturbanceModel
 
     sc = SCENARIOS["geo-comsat"]
-    strong = sc.with_(disturbances=DisturbanceModel(constant_torque=(0.0, 0.5, 0.0)))
+    strong = sc.with_(
+        **{"spacecraft.disturbances": DisturbanceModel(constant_torque=(0.0, 0.5, 0.0))}
+    )
     m_ok = metrics(simulate(sc, LQRController(sc), duration=300, estimator="truth"))
     m_bad = metrics(simulate(strong, LQRController(strong), duration=300, estimator="truth"))
     assert m_ok["torque_saturated_fraction"] == 0.0
@@ -329,19 +341,19 @@ def test_thrusters_unload_the_wheels_and_pointing_holds_outside_the_windows():
     from rwlab.attitude.control import LQRController, metrics
 
     sc = SCENARIOS["geo-smallsat"]
-    h0 = np.array([0.55, -0.3, 0.2]) * sc.wheel_max_momentum
+    h0 = np.array([0.55, -0.3, 0.2]) * sc.wheels.max_momentum
     r = simulate(sc, LQRController(sc), duration=3600, estimator="truth", wheel_momentum0=h0)
     m = metrics(r)
     assert m["desaturation_count"] == 1
-    h_end = np.abs(r.wheel_speed_rpm[-1]) * np.pi / 30 * sc.wheel_inertia
+    h_end = np.abs(r.wheel_speed_rpm[-1]) * np.pi / 30 * sc.wheels.inertia
     assert r.stats["unloading"] == 0 and m["wheel_momentum_peak_fraction"] < 0.7
-    assert np.all(h_end <= 2 * sc.unload_stop_fraction * sc.wheel_max_momentum)
+    assert np.all(h_end <= 2 * sc.momentum.unload_stop_fraction * sc.wheels.max_momentum)
     assert m["thruster_impulse_Nms"] == pytest.approx(
         np.abs(h0).sum() - np.abs(h_end).sum(), rel=0.2
     )
     assert m["max_error_deg_excluding_desaturation"] <= 0.1
     off = simulate(
-        sc.with_(momentum_unloading=False),
+        sc.with_(**{"momentum.unloading": False}),
         LQRController(sc),
         duration=3600,
         estimator="truth",
@@ -353,23 +365,65 @@ def test_thrusters_unload_the_wheels_and_pointing_holds_outside_the_windows():
 @pytest.mark.parametrize(
     ("line", "match"),
     [
-        ('base = "geo-smalsat"', "base"),
-        ('inertia = "abc"', "inertia"),
-        ("inertia = 5", "inertia"),
-        ('seed = "x"', "seed"),
-        ("initial_axis = [0, 0, 0]", "initial_axis"),
-        ("wheel_max_torque = 1e9", "wheel_max_torque"),
-        ("momentum_unloading = 1", "momentum_unloading"),
-        ("lqr_torque_fraction = 2.0", "lqr_torque_fraction"),
+        ('[scenario]\nbase = "geo-smalsat"', "base"),
+        ('[spacecraft]\ninertia = "abc"', "spacecraft.inertia"),
+        ("[spacecraft]\ninertia = 5", "spacecraft.inertia"),
+        ('[run]\nseed = "x"', "run.seed"),
+        ("[run]\ninitial_axis = [0, 0, 0]", "run.initial_axis"),
+        ("[wheels]\nmax_torque = 1e9", "wheels.max_torque"),
+        ("[momentum]\nunloading = 1", "momentum.unloading"),
+        ("[control]\nlqr_torque_fraction = 2.0", "control.lqr_torque_fraction"),
+        ("[wheels]\nmax_torqe = 0.1", "wheels.max_torqe"),
+        ("[wheel]\nmax_torque = 0.1", "wheel"),
+        ("[sensors.gyro]\narw = 1", "sensors.gyro.arw"),
+        ("[spacecraft.disturbances]\nsrp_offset = [1, 2]", "srp_offset"),
     ],
 )
 def test_bad_scenario_values_are_config_errors(tmp_path, line, match):
     path = tmp_path / "s.toml"
-    path.write_text(
-        f'[scenario]\nbase = "geo-comsat"\n{line}\n'.replace('base = "geo-comsat"\nbase', "base")
-    )
+    head = "" if line.startswith("[scenario]") else '[scenario]\nbase = "geo-comsat"\n'
+    path.write_text(f"{head}{line}\n")
     with pytest.raises(ConfigError, match=match):
         load_scenario(str(path))
+
+
+def test_a_flat_scenario_file_is_read_with_a_warning_and_converts_to_the_same(tmp_path):
+    from rwlab.attitude.scenario import convert_scenario_file
+    from rwlab.errors import FormatWarning
+
+    flat = tmp_path / "flat.toml"
+    flat.write_text(
+        '[scenario]\nbase = "geo-smallsat"\nwheel_max_torque = 0.01\nsensor_period = 1.0\n'
+        "estimator_error_deg = 0.5\ndisturbances_known_to_filter = true\n"
+        "[disturbances]\nconstant_torque = [1e-4, 0, 0]\n[gyro]\n"
+    )
+    with pytest.warns(FormatWarning, match=r"\[wheels\] max_torque.*\[sensors\.gyro\]"):
+        old = load_scenario(str(flat))
+    # the same values, by their new names: the conversion is a renaming, nothing else
+    assert old.wheels.max_torque == 0.01 and old.sensors.period == 1.0
+    assert old.filter.initial_error_deg == 0.5 and old.filter.disturbances_known
+    assert old.spacecraft.disturbances.constant_torque == (1e-4, 0, 0)
+    assert old.sensors.gyro is not None and old.run.initial_error_deg == 2.0
+    new = tmp_path / "flat.sections.toml"
+    new.write_text(convert_scenario_file(flat))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the converted file reads without a warning
+        converted = load_scenario(str(new))
+    assert converted == dataclasses.replace(old, name="flat.sections")
+    mixed = tmp_path / "mixed.toml"
+    mixed.write_text("[scenario]\ndt = 0.2\n[wheels]\nmax_torque = 0.1\n")
+    with pytest.raises(ConfigError, match="mixes"):
+        load_scenario(str(mixed))
+
+
+def test_with_changes_fields_by_dotted_name_and_refuses_unknown_ones():
+    sc = SCENARIOS["geo-comsat"]
+    changed = sc.with_(**{"wheels.max_torque": 0.1, "spacecraft.disturbances.srp_area": 3.0})
+    assert changed.wheels.max_torque == 0.1 and changed.spacecraft.disturbances.srp_area == 3.0
+    assert sc.wheels.max_torque == 0.2  # unchanged
+    for bad in ("wheel_max_torque", "wheels.max_torqe", "name.x", "run"):
+        with pytest.raises(ConfigError):
+            sc.with_(**{bad: 1.0})
 
 
 @pytest.mark.parametrize("n", [6, 9, 12])

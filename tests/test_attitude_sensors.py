@@ -162,7 +162,7 @@ def test_the_gyro_filter_is_consistent():
     below (the filter's bias walk includes the Gauss–Markov term's low-frequency
     equivalent, which overstates a bounded process, and its yaw-alignment state stays at its
     prior: conservative by design; measured 0.6 n), never far above."""
-    sc = SCENARIOS["geo-comsat-gyro"].with_(noise_margin=1.0)
+    sc = SCENARIOS["geo-comsat-gyro"].with_(**{"filter.noise_margin": 1.0})
     run = simulate(sc, PDController(20.0, 400.0), duration=4 * 3600, seed=5, log_every=50)
     nees = run.nees[run.t >= 3600]
     nees = nees[np.isfinite(nees)]
@@ -176,11 +176,15 @@ def test_the_gyro_filter_is_consistent():
 def test_gyros_hold_yaw_through_a_sun_outage_where_paper_bs_suite_cannot():
     """Sun sensor off for an hour (field of view pointed away): without gyros the yaw error
     of the dynamics-model filter grows with the unknown torque; with them it stays small."""
-    base = SCENARIOS["geo-comsat"].with_(sun_declination_deg=0.0, sun_phase_deg=180.0)
+    base = SCENARIOS["geo-comsat"].with_(
+        **{"sky.sun_declination_deg": 0.0, "sky.sun_phase_deg": 180.0}
+    )
     ctl = PDController(20.0, 400.0)
     blind = dict(duration=7200, seed=2, log_every=50)
-    no_gyro = simulate(base.with_(sun_fov_deg=1.0), ctl, **blind)
-    gyro = simulate(base.with_(sun_fov_deg=1.0, gyro=GyroModel()), ctl, **blind)
+    no_gyro = simulate(base.with_(**{"sensors.sun_fov_deg": 1.0}), ctl, **blind)
+    gyro = simulate(
+        base.with_(**{"sensors.sun_fov_deg": 1.0, "sensors.gyro": GyroModel()}), ctl, **blind
+    )
     late = no_gyro.t >= 3600
     assert np.max(gyro.est_error_deg[late]) < np.max(no_gyro.est_error_deg[late])
 
@@ -199,18 +203,18 @@ def test_star_tracker_beats_sun_and_earth_sensors():
 def test_scenario_tables_for_gyro_and_star_tracker(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(
-        '[scenario]\nbase = "geo-comsat"\n[gyro]\narw_deg_rt_h = 0.01\n'
-        "[star_tracker]\nnoise_arcsec = [1.0, 1.0, 8.0]\nperiod_s = 1.0\n"
+        '[scenario]\nbase = "geo-comsat"\n[sensors.gyro]\narw_deg_rt_h = 0.01\n'
+        "[sensors.star_tracker]\nnoise_arcsec = [1.0, 1.0, 8.0]\nperiod_s = 1.0\n"
     )
     sc = load_scenario(str(path))
-    assert sc.gyro == GyroModel(arw_deg_rt_h=0.01)
-    assert sc.star_tracker.noise_arcsec == (1.0, 1.0, 8.0)
-    path.write_text('[scenario]\nbase = "geo-comsat-gyro"\n[gyro]\nfly = false\n')
-    assert load_scenario(str(path)).gyro is None
-    path.write_text("[gyro]\narw = 0.01\n")
+    assert sc.sensors.gyro == GyroModel(arw_deg_rt_h=0.01)
+    assert sc.sensors.star_tracker.noise_arcsec == (1.0, 1.0, 8.0)
+    path.write_text('[scenario]\nbase = "geo-comsat-gyro"\n[sensors.gyro]\nfly = false\n')
+    assert load_scenario(str(path)).sensors.gyro is None
+    path.write_text("[sensors.gyro]\narw = 0.01\n")
     with pytest.raises(ConfigError, match=r"gyro\.arw"):
         load_scenario(str(path))
-    path.write_text("[star_tracker]\nperiod_s = 0.7\n")
+    path.write_text("[sensors.star_tracker]\nperiod_s = 0.7\n")
     with pytest.raises(ConfigError, match="whole multiple"):
         load_scenario(str(path))
     with pytest.raises(ConfigError, match="arw_deg_rt_h"):
@@ -221,7 +225,7 @@ def test_steady_after_sets_the_steady_window():
     sc = SCENARIOS["geo-comsat-gyro"]
     run = simulate(sc, PDController(20.0, 400.0), duration=600, steady_after=100.0)
     assert run.steady_from_s == pytest.approx(100.0)
-    assert run.stats["steady_steps"] == pytest.approx(round(500 / sc.dt) + 1)
+    assert run.stats["steady_steps"] == pytest.approx(round(500 / sc.run.dt) + 1)
     with pytest.raises(ConfigError, match="steady_after"):
         simulate(sc, PDController(20.0, 400.0), duration=600, steady_after=600.0)
 
@@ -257,18 +261,18 @@ def test_the_gyro_filter_calibrates_a_misaligned_sun_sensor():
     frame (a quarter day) the filter learns the turn against the earth sensor, and
     pointing is better than the same filter without the alignment states."""
     sc = SCENARIOS["geo-comsat-gyro"].with_(
-        sun="moving",
-        sun_sensor_misalignment_deg=(0.03, -0.03, 0.0),
-        # the earth sensor taken as the exact reference: with its turn as consider states too
-        # the filter learns only the relative turn and splits it by the priors
-        filter_earth_sensor_alignment=False,
+        **{
+            "sky.sun": "moving",
+            "sensors.sun_sensor_misalignment_deg": (0.03, -0.03, 0.0),
+            "filter.earth_sensor_alignment": False,
+        }
     )
     ctl = PDController(20.0, 400.0)
     kw = dict(duration=6 * 3600, seed=3, log_every=50, steady_after=3 * 3600)
     cal = simulate(sc, ctl, **kw)
     phi = np.degrees(cal.sun_sensor_alignment_est[-1])
     assert np.allclose(phi[:2], [0.03, -0.03], atol=0.008)
-    blind = simulate(sc.with_(filter_sun_sensor_alignment=False), ctl, **kw)
+    blind = simulate(sc.with_(**{"filter.sun_sensor_alignment": False}), ctl, **kw)
     assert cal.stats["steady_max_error_deg"] < blind.stats["steady_max_error_deg"]
 
 

@@ -36,19 +36,19 @@ def _realise(w, t, dt, cmd, momenta):
 
 
 def test_compiled_physics_is_the_wheel_physics_in_acceleration_mode():
-    sc = SMALL.with_(wheel_model="physics")
+    sc = SMALL.with_(**{"wheels.model": "physics"})
     w = wheel_setup(sc, np.zeros(3))
     assert w.kind == PHYSICS
     unit = WheelPhysics(physics_params(sc))
     rng = np.random.default_rng(1)
     dt = 0.1
     for _ in range(400):  # random commands, through standstill and up to the speed limit
-        cmd = float(rng.uniform(-1, 1) * sc.wheel_max_torque)  # the kernel clips to this
+        cmd = float(rng.uniform(-1, 1) * sc.wheels.max_torque)  # the kernel clips to this
         before = unit.speed
-        unit.command(Mode.ACCELERATION, rad_s_to_rpm(cmd / sc.wheel_inertia))
+        unit.command(Mode.ACCELERATION, rad_s_to_rpm(cmd / sc.wheels.inertia))
         unit.step(dt)
-        realised = sc.wheel_inertia * (unit.speed - before) / dt
-        got = _realise(w, 0.0, dt, [cmd, 0.0, 0.0], [before * sc.wheel_inertia, 0.0, 0.0])
+        realised = sc.wheels.inertia * (unit.speed - before) / dt
+        got = _realise(w, 0.0, dt, [cmd, 0.0, 0.0], [before * sc.wheels.inertia, 0.0, 0.0])
         assert got[0] == pytest.approx(realised, rel=1e-9, abs=1e-15)
         assert unit.faults == 0
 
@@ -63,26 +63,28 @@ def test_compiled_physics_is_the_wheel_physics_in_acceleration_mode():
 )
 def test_compiled_wheel_faults_are_the_wheel_physics_faults(fault, attribute, value):
     """The drive does not know its fault: it feeds forward the nominal motor and friction."""
-    sc = SMALL.with_(wheel_model="physics", wheel_faults=({"wheel": 1, "at_s": 0.0, **fault},))
+    sc = SMALL.with_(
+        **{"wheels.model": "physics", "wheels.faults": ({"wheel": 1, "at_s": 0.0, **fault},)}
+    )
     w = wheel_setup(sc, np.zeros(3))
     unit = WheelPhysics(physics_params(sc))
     setattr(unit, attribute, value)
     dt = 0.1
     for cmd, speed in ((0.0015, 300.0), (-0.01, -500.0), (0.012, 80.0), (0.0, 700.0)):
         unit.speed = speed
-        unit.command(Mode.ACCELERATION, rad_s_to_rpm(cmd / sc.wheel_inertia))
+        unit.command(Mode.ACCELERATION, rad_s_to_rpm(cmd / sc.wheels.inertia))
         unit.step(dt)
-        realised = sc.wheel_inertia * (unit.speed - speed) / dt
-        got = _realise(w, 0.0, dt, [cmd, 0.0, 0.0], [speed * sc.wheel_inertia, 0.0, 0.0])
+        realised = sc.wheels.inertia * (unit.speed - speed) / dt
+        got = _realise(w, 0.0, dt, [cmd, 0.0, 0.0], [speed * sc.wheels.inertia, 0.0, 0.0])
         assert got[0] == pytest.approx(realised, rel=1e-9, abs=1e-15)
 
 
 def test_physics_drive_compensates_friction_up_to_its_current_limit():
     worn = {"wheel": 2, "at_s": 0.0, "friction": 200.0}
-    sc = SMALL.with_(wheel_model="physics", wheel_faults=(worn,))
+    sc = SMALL.with_(**{"wheels.model": "physics", "wheels.faults": (worn,)})
     w = wheel_setup(sc, np.zeros(3))
-    h_top = sc.wheel_inertia * sc.wheel_max_speed_rpm * math.pi / 30
-    tau = sc.wheel_max_torque
+    h_top = sc.wheels.inertia * sc.wheels.max_speed_rpm * math.pi / 30
+    tau = sc.wheels.max_torque
     out = _realise(w, 0.0, 0.1, [0.0, 0.0, tau], [0.5 * h_top, 0.5 * h_top, h_top])
     assert out[0] == pytest.approx(0.0, abs=1e-12)  # the acceleration loop hides friction
     assert out[1] < 0  # until the current limit cannot cover a worn bearing's drag
@@ -93,8 +95,10 @@ def test_physics_drive_compensates_friction_up_to_its_current_limit():
 
 def test_wheel_faults_switch_on_at_their_time():
     sc = SMALL.with_(
-        wheel_model="physics",
-        wheel_faults=({"wheel": 2, "at_s": 10.0, "torque_constant": 0.0},),
+        **{
+            "wheels.model": "physics",
+            "wheels.faults": ({"wheel": 2, "at_s": 10.0, "torque_constant": 0.0},),
+        }
     )
     w = wheel_setup(sc, np.zeros(3))
     cmd = [0.01, 0.01, 0.01]
@@ -116,18 +120,18 @@ def test_wheel_faults_switch_on_at_their_time():
 )
 def test_bad_wheel_faults_are_config_errors(fault, match):
     with pytest.raises(ConfigError, match=match):
-        SMALL.with_(wheel_model="physics", wheel_faults=(fault,))
+        SMALL.with_(**{"wheels.model": "physics", "wheels.faults": (fault,)})
 
 
 def test_wheel_faults_need_the_physics_model_and_load_from_toml(tmp_path):
     with pytest.raises(ConfigError, match="physics"):
-        SMALL.with_(wheel_faults=({"wheel": 1, "at_s": 0.0, "friction": 2.0},))
+        SMALL.with_(**{"wheels.faults": ({"wheel": 1, "at_s": 0.0, "friction": 2.0},)})
     f = tmp_path / "s.toml"
     f.write_text(
-        '[scenario]\nbase = "geo-smallsat"\nwheel_model = "physics"\n'
-        "wheel_faults = [{wheel = 3, at_s = 60.0, friction = 5.0}]\n"
+        '[scenario]\nbase = "geo-smallsat"\n[wheels]\nmodel = "physics"\n'
+        "faults = [{wheel = 3, at_s = 60.0, friction = 5.0}]\n"
     )
-    assert load_scenario(str(f)).wheel_faults == ({"wheel": 3, "at_s": 60.0, "friction": 5.0},)
+    assert load_scenario(str(f)).wheels.faults == ({"wheel": 3, "at_s": 60.0, "friction": 5.0},)
 
 
 def _model_file(tmp_path, accel_limit=40.0, servo=False):
@@ -152,30 +156,34 @@ def _model_file(tmp_path, accel_limit=40.0, servo=False):
 @pytest.mark.parametrize("servo", [False, True])
 def test_compiled_identified_wheel_is_the_identified_wheel(tmp_path, servo):
     path = _model_file(tmp_path, servo=servo)
-    sc = SMALL.with_(wheel_model="identified", wheel_model_file=str(path), dt=0.05)
+    sc = SMALL.with_(
+        **{"wheels.model": "identified", "wheels.model_file": str(path), "run.dt": 0.05}
+    )
     h0 = 0.05
     w = wheel_setup(sc, np.full(3, h0))
     assert w.kind == IDENTIFIED
     unit = IdentifiedWheel.from_json(path)
     assert unit.kind == ("nonlinear" if servo else "linear")
-    unit.reset(rad_s_to_rpm(h0 / sc.wheel_inertia))
+    unit.reset(rad_s_to_rpm(h0 / sc.wheels.inertia))
     command = unit.speed_rpm
     rng = np.random.default_rng(2)
     for _ in range(50):  # one model sample = 5 loop steps of a constant acceleration
-        cmd = float(rng.uniform(-1, 1) * sc.wheel_max_torque)
+        cmd = float(rng.uniform(-1, 1) * sc.wheels.max_torque)
         for _ in range(5):
-            got = _realise(w, 0.0, sc.dt, [cmd] * 3, np.full(3, h0))
-        command += rad_s_to_rpm(cmd / sc.wheel_inertia) * 0.25
+            got = _realise(w, 0.0, sc.run.dt, [cmd] * 3, np.full(3, h0))
+        command += rad_s_to_rpm(cmd / sc.wheels.inertia) * 0.25
         before = unit.speed_rpm
         unit.step(command)
-        torque = sc.wheel_inertia * (unit.speed_rpm - before) * math.pi / 30 / 0.25
+        torque = sc.wheels.inertia * (unit.speed_rpm - before) * math.pi / 30 / 0.25
         assert w.state[0, S_SPEED] == pytest.approx(unit.speed_rpm, rel=1e-12, abs=1e-9)
         assert got[0] == pytest.approx(torque, rel=1e-9, abs=1e-15)
 
 
 @pytest.mark.parametrize("model", ["physics", "identified"])
 def test_every_wheel_model_closes_the_compiled_loop(model, tmp_path):
-    sc = SMALL.with_(wheel_model=model, wheel_model_file=str(_model_file(tmp_path, 300.0)))
+    sc = SMALL.with_(
+        **{"wheels.model": model, "wheels.model_file": str(_model_file(tmp_path, 300.0))}
+    )
     ctl = PDController(0.2, 4.0)
     r = simulate(sc, ctl, duration=600, estimator="truth")
     ideal = simulate(SMALL, ctl, duration=600, estimator="truth")
@@ -189,9 +197,11 @@ def test_every_wheel_model_closes_the_compiled_loop(model, tmp_path):
 
 def test_a_dead_wheel_of_four_keeps_only_its_friction(tmp_path):
     sc = SCENARIOS["geo-comsat"].with_(
-        wheel_axes="pyramid",
-        wheel_model="physics",
-        wheel_faults=({"wheel": 1, "at_s": 0.0, "torque_constant": 0.0},),
+        **{
+            "wheels.axes": "pyramid",
+            "wheels.model": "physics",
+            "wheels.faults": ({"wheel": 1, "at_s": 0.0, "torque_constant": 0.0},),
+        }
     )
     r = simulate(sc, PDController(20.0, 400.0), duration=600, estimator="truth")
     speeds = r.wheel_speed_rpm

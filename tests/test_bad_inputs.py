@@ -78,15 +78,17 @@ FILES = {
     # scenarios and dispersions
     "empty.toml": "",
     "binary.toml": bytes(range(256)),
-    "unknown.toml": '[scenario]\nbase = "geo-smallsat"\nno_such_key = 1\n',
-    "nan.toml": '[scenario]\nbase = "geo-smallsat"\ndt = nan\n',
-    "inf.toml": '[scenario]\nbase = "geo-smallsat"\ndt = inf\n',
-    "huge.toml": '[scenario]\nbase = "geo-smallsat"\ndt = 1e300\n',
-    "negdt.toml": '[scenario]\nbase = "geo-smallsat"\ndt = -0.1\n',
-    "nan-inertia.toml": '[scenario]\nbase = "geo-smallsat"\ninertia = [nan, 1, 1]\n',
-    "disp-nan.toml": 'sun_noise_deg = { distribution = "normal", sigma = nan }\n',
-    "disp-inf.toml": 'sun_noise_deg = { distribution = "uniform", bounds = [0, inf] }\n',
-    "disp-huge.toml": 'sun_noise_deg = { distribution = "normal", sigma = 1e300 }\n',
+    "unknown.toml": '[scenario]\nbase = "geo-smallsat"\n[wheels]\nno_such_key = 1\n',
+    "nan.toml": '[scenario]\nbase = "geo-smallsat"\n[run]\ndt = nan\n',
+    "inf.toml": '[scenario]\nbase = "geo-smallsat"\n[run]\ndt = inf\n',
+    "huge.toml": '[scenario]\nbase = "geo-smallsat"\n[run]\ndt = 1e300\n',
+    "negdt.toml": '[scenario]\nbase = "geo-smallsat"\n[run]\ndt = -0.1\n',
+    "ok.toml": '[scenario]\nbase = "geo-smallsat"\n',
+    "flat-nan.toml": '[scenario]\nbase = "geo-smallsat"\ndt = nan\n',
+    "nan-inertia.toml": '[scenario]\nbase = "geo-smallsat"\n[spacecraft]\ninertia = [nan, 1, 1]\n',
+    "disp-nan.toml": 'sensors.sun_noise_deg = { distribution = "normal", sigma = nan }\n',
+    "disp-inf.toml": 'sensors.sun_noise_deg = { distribution = "uniform", bounds = [0, inf] }\n',
+    "disp-huge.toml": 'sensors.sun_noise_deg = { distribution = "normal", sigma = 1e300 }\n',
     "disp-unknown.toml": 'no_field = { distribution = "normal", sigma = 0.1 }\n',
     "exp-seed.toml": "[experiment]\nseed = -1\n",
     "exp-nan.toml": "[experiment]\nduration = nan\n",
@@ -414,6 +416,19 @@ def cases() -> list[tuple[str, list[str]]]:
         ("wheel protocols with an argument", ["wheel", "protocols", "canopen"]),
         ("an unknown command", ["identifyy", "dryer"]),
     ]
+    # added later: appended, so that the numbers above stay those of docs/bad-inputs.md
+    conv = ["attitude", "convert-scenario"]
+    for f in ("empty.toml", "binary.toml", "unknown.toml", "flat-nan.toml", "no_such.toml"):
+        c.append((f"attitude convert-scenario {f}", [*conv, f"{{D}}/{f}"]))
+    c.append(
+        (
+            "attitude convert-scenario --out an existing file",
+            [*conv, "{D}/ok.toml", "--out", "{D}/afile"],
+        )
+    )
+    c.append(
+        ("attitude simulate --scenario flat-nan.toml", [*sim, "--scenario", "{D}/flat-nan.toml"])
+    )
     return c
 
 

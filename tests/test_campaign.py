@@ -52,26 +52,38 @@ def _file(tmp_path, text):
         ('inertia.xw = { distribution = "normal", sigma = 0.1 }', "unknown field 'inertia.xw'"),
         ('name = { distribution = "normal", sigma = 0.1 }', "unknown field 'name'"),
         ('dt = { distribution = "normal", sigma = 0.1 }', "unknown field 'dt'"),
-        ('sun_noise_deg = { distribution = "lognormal", sigma = 0.1 }', "normal' or 'uniform"),
-        ('sun_noise_deg = { distribution = "normal" }', "sigma > 0"),
-        ('sun_noise_deg = { distribution = "normal", sigma = -1 }', "sigma > 0"),
-        ('sun_noise_deg = { distribution = "uniform" }', "needs bounds"),
-        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1, -0.1] }', "low < high"),
-        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1, 0.1] }', "low < high"),
-        ('sun_noise_deg = { distribution = "uniform", bounds = [0.1] }', "two numbers"),
-        ('sun_noise_deg = { distribution = "uniform", bounds = ["a", 1] }', "two numbers"),
         (
-            'sun_noise_deg = { distribution = "normal", sigma = 0.1, bounds = [0.2, 0.3] }',
+            'sensors.sun_noise_deg = { distribution = "lognormal", sigma = 0.1 }',
+            "normal' or 'uniform",
+        ),
+        ('sensors.sun_noise_deg = { distribution = "normal" }', "sigma > 0"),
+        ('sensors.sun_noise_deg = { distribution = "normal", sigma = -1 }', "sigma > 0"),
+        ('sensors.sun_noise_deg = { distribution = "uniform" }', "needs bounds"),
+        (
+            'sensors.sun_noise_deg = { distribution = "uniform", bounds = [0.1, -0.1] }',
+            "low < high",
+        ),
+        ('sensors.sun_noise_deg = { distribution = "uniform", bounds = [0.1, 0.1] }', "low < high"),
+        ('sensors.sun_noise_deg = { distribution = "uniform", bounds = [0.1] }', "two numbers"),
+        ('sensors.sun_noise_deg = { distribution = "uniform", bounds = ["a", 1] }', "two numbers"),
+        (
+            'sensors.sun_noise_deg = { distribution = "normal", sigma = 0.1, bounds = [0.2, 0.3] }',
             "do not contain the mean",
         ),
         (
-            'sun_noise_deg = { distribution = "uniform", bounds = [0, 1], sigma = 1 }',
+            'sensors.sun_noise_deg = { distribution = "uniform", bounds = [0, 1], sigma = 1 }',
             "takes bounds",
         ),
-        ('sun_noise_deg = { distribution = "normal", sigma = 1, scale = 2 }', "unknown key"),
-        ('sun_noise_deg = { distribution = "normal", sigma = 1, relative = 1 }', "true or false"),
-        ("sun_noise_deg = 0.1", "must be a table"),
-        ("sun_noise_deg = {", "not a valid TOML"),
+        (
+            'sensors.sun_noise_deg = { distribution = "normal", sigma = 1, scale = 2 }',
+            "unknown key",
+        ),
+        (
+            'sensors.sun_noise_deg = { distribution = "normal", sigma = 1, relative = 1 }',
+            "true or false",
+        ),
+        ("sensors.sun_noise_deg = 0.1", "must be a table"),
+        ("sensors.sun_noise_deg = {", "not a valid TOML"),
     ],
 )
 def test_bad_dispersion_files_are_config_errors(tmp_path, text, message):
@@ -82,17 +94,31 @@ def test_bad_dispersion_files_are_config_errors(tmp_path, text, message):
 def test_the_default_set_covers_what_a_geo_reviewer_expects():
     fields = {d.field for d in load_dispersions()}
     for expected in (
-        "inertia.xx",
-        "inertia.xy",
-        "disturbances.srp_offset.z",
-        "sun_noise_deg",
-        "earth_noise_deg",
-        "wheel_max_torque",
-        "initial_error_deg",
-        "initial_rate.x",
-        "estimator_error_deg",
+        "spacecraft.inertia.xx",
+        "spacecraft.inertia.xy",
+        "spacecraft.disturbances.srp_offset.z",
+        "sensors.sun_noise_deg",
+        "sensors.earth_noise_deg",
+        "wheels.max_torque",
+        "run.initial_error_deg",
+        "run.initial_rate.x",
+        "filter.initial_error_deg",
     ):
         assert expected in fields
+
+
+def test_dispersions_named_the_old_flat_way_are_read_with_a_warning(tmp_path):
+    from rwlab.errors import FormatWarning
+
+    old = _file(
+        tmp_path,
+        '[dispersions]\ninertia.xx = { distribution = "uniform", bounds = [0, 0.1] }\n'
+        'wheel_max_torque = { distribution = "uniform", bounds = [0, 0.1] }\n'
+        'initial_rate.x = { distribution = "uniform", bounds = [0, 0.1] }',
+    )
+    with pytest.warns(FormatWarning, match="wheel_max_torque → wheels.max_torque"):
+        fields = [d.field for d in load_dispersions(old)]
+    assert fields == ["spacecraft.inertia.xx", "wheels.max_torque", "run.initial_rate.x"]
 
 
 def test_a_cli_dispersion_error_is_one_line_and_status_2(tmp_path):
@@ -126,17 +152,21 @@ def test_a_cli_dispersion_error_is_one_line_and_status_2(tmp_path):
 def test_draws_stay_within_their_bounds(seed, lo, width, relative):
     bounds = (lo, lo + width)
     for d in (
-        Dispersion("sun_noise_deg", "uniform", bounds=bounds, relative=relative),
-        Dispersion("sun_noise_deg", "normal", 0.3, lo + width / 3, bounds, relative),
+        Dispersion("sensors.sun_noise_deg", "uniform", bounds=bounds, relative=relative),
+        Dispersion("sensors.sun_noise_deg", "normal", 0.3, lo + width / 3, bounds, relative),
     ):
-        value = draw([d], SMALLSAT, seed)["sun_noise_deg"]
-        delta = value / SMALLSAT.sun_noise_deg - 1 if relative else value - SMALLSAT.sun_noise_deg
+        value = draw([d], SMALLSAT, seed)["sensors.sun_noise_deg"]
+        delta = (
+            value / SMALLSAT.sensors.sun_noise_deg - 1
+            if relative
+            else value - SMALLSAT.sensors.sun_noise_deg
+        )
         assert bounds[0] - 1e-12 <= delta <= bounds[1] + 1e-12
 
 
 def test_a_truncated_normal_has_the_textbook_moments():
-    d = Dispersion("initial_error_deg", "normal", sigma=0.5, mean=0.2, bounds=(-0.3, 1.5))
-    x = np.array([draw([d], SMALLSAT, s)["initial_error_deg"] for s in range(4000)]) - 2.0
+    d = Dispersion("run.initial_error_deg", "normal", sigma=0.5, mean=0.2, bounds=(-0.3, 1.5))
+    x = np.array([draw([d], SMALLSAT, s)["run.initial_error_deg"] for s in range(4000)]) - 2.0
     truth = stats.truncnorm((-0.3 - 0.2) / 0.5, (1.5 - 0.2) / 0.5, loc=0.2, scale=0.5)
     se = truth.std() / math.sqrt(x.size)
     assert abs(x.mean() - truth.mean()) < 4 * se
@@ -146,20 +176,22 @@ def test_a_truncated_normal_has_the_textbook_moments():
 
 def test_each_field_draws_from_its_own_stream():
     full = load_dispersions()
-    some = [d for d in full if d.field.startswith("inertia")]
+    some = [d for d in full if d.field.startswith("spacecraft.inertia")]
     a, b = draw(full, SMALLSAT, 77), draw(some, SMALLSAT, 77)
     assert all(a[k] == b[k] for k in b)
     assert draw(full, SMALLSAT, 77) == a and draw(full, SMALLSAT, 78) != a
 
 
 def test_relative_products_of_inertia_scale_with_the_principal_moments():
-    d = [Dispersion("inertia.xy", "uniform", bounds=(0.02, 0.02 + 1e-12), relative=True)]
+    d = [Dispersion("spacecraft.inertia.xy", "uniform", bounds=(0.02, 0.02 + 1e-12), relative=True)]
     sc = apply(SMALLSAT, draw(d, SMALLSAT, 1))
     J = sc.inertia_matrix
     assert J[0, 1] == J[1, 0] == pytest.approx(0.02 * math.sqrt(14.0 * 12.0))
     assert np.diag(J).tolist() == [14.0, 12.0, 10.0] and J[0, 2] == J[1, 2] == 0
     assert apply(SMALLSAT, {}) == SMALLSAT
-    assert apply(SMALLSAT, {"disturbances.srp_offset.y": 0.5}).disturbances.srp_offset == (
+    assert apply(
+        SMALLSAT, {"spacecraft.disturbances.srp_offset.y": 0.5}
+    ).spacecraft.disturbances.srp_offset == (
         0.05,
         0.5,
         0.08,
@@ -167,7 +199,7 @@ def test_relative_products_of_inertia_scale_with_the_principal_moments():
 
 
 def test_a_dispersion_that_breaks_a_scenario_fails_before_any_run():
-    bad = (Dispersion("inertia.zz", "uniform", bounds=(2.0, 3.0), relative=True),)
+    bad = (Dispersion("spacecraft.inertia.zz", "uniform", bounds=(2.0, 3.0), relative=True),)
     c = Campaign(SMALLSAT, bad, 10.0, "pd", seed=1, runs=3)
     with pytest.raises(ConfigError, match=r"run 0 \(seed \d+\).*triangle"):
         check_runs(c)
@@ -286,8 +318,10 @@ def test_montecarlo_is_the_same_on_one_and_two_workers(tmp_path):
             assert f'id="{fig}"' in html
     assert len(tables[1]) == 24 and len({row["seed"] for row in tables[1]}) == 24
     assert tables[1] == tables[2]
-    assert "inertia.xy" in tables[1][0] and "steady_max_error_z_deg" in tables[1][0]
-    assert len({row["inertia.xx"] for row in tables[1]}) == 24  # each run dispersed its own
+    assert "spacecraft.inertia.xy" in tables[1][0] and "steady_max_error_z_deg" in tables[1][0]
+    assert (
+        len({row["spacecraft.inertia.xx"] for row in tables[1]}) == 24
+    )  # each run dispersed its own
 
 
 @pytest.mark.slow
@@ -403,11 +437,12 @@ def test_runs_get_their_own_epoch_in_the_spread_and_the_filter_keeps_the_nominal
     epochs = set()
     for s in run_seeds(1, 20):
         run, values = dispersed(c, s)
-        offset = datetime.fromisoformat(run.epoch) - start
+        offset = datetime.fromisoformat(run.sky.epoch) - start
         assert timedelta(0) <= offset < timedelta(days=40)
-        assert values["epoch"] == run.epoch
-        assert run.filter_inertia == tuple(sc.inertia) and run.inertia != sc.inertia
-        epochs.add(run.epoch)
+        assert values["epoch"] == run.sky.epoch
+        assert run.filter.inertia == tuple(sc.spacecraft.inertia)
+        assert run.spacecraft.inertia != sc.spacecraft.inertia
+        epochs.add(run.sky.epoch)
         assert dispersed(c, s)[0] == run  # from the seed alone
     assert len(epochs) == 20
     with pytest.raises(ConfigError, match="epoch"):

@@ -115,13 +115,18 @@ def dispersion_toml(draw):
 
 @st.composite
 def scenario_toml(draw):
-    from rwlab.attitude.scenario import Scenario
+    """A scenario file in sections, or now and then in the old flat format."""
+    from rwlab.attitude.scenario import LEGACY_NAMES, SECTIONS
 
-    keys = sorted({f.name for f in fields(Scenario)} - {"disturbances"} | {"base"})
+    section = draw(st.sampled_from([*SECTIONS, "scenario"]))
+    keys = sorted(
+        {f.name for f in fields(SECTIONS[section])} if section in SECTIONS else LEGACY_NAMES
+    )
     table = draw(st.dictionaries(st.sampled_from(keys), toml_value, max_size=4))
+    text = f"[{section}]\n" + _toml(table) if table else ""
     if draw(st.booleans()):
-        table["base"] = draw(st.sampled_from(["geo-smallsat", "geo-comsat", "geo-moon"]))
-    text = ("[scenario]\n" if draw(st.booleans()) else "") + _toml(table)
+        base = draw(st.sampled_from(["geo-smallsat", "geo-comsat", "geo-moon"]))
+        text = f'[scenario]\nbase = "{base}"\n' + text.replace("[scenario]\n", "")
     tomllib.loads(text)
     return text
 

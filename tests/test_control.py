@@ -222,16 +222,18 @@ def test_weights_keep_the_wheels_out_of_saturation_inside_the_budget():
     for name in ("geo-smallsat", "geo-comsat"):
         sc = SCENARIOS[name]
         ctl = LQRController(sc)
-        tau = ctl.K[:, :3] @ np.full(3, math.radians(sc.pointing_requirement_deg) / math.sqrt(3))
-        assert np.linalg.norm(tau) < 1.05 * sc.lqr_torque_fraction * torque_capacity(sc)
+        tau = ctl.K[:, :3] @ np.full(
+            3, math.radians(sc.control.pointing_requirement_deg) / math.sqrt(3)
+        )
+        assert np.linalg.norm(tau) < 1.05 * sc.control.lqr_torque_fraction * torque_capacity(sc)
         assert ctl.rate_limit * np.linalg.norm(ctl.K[:, 3:], 2) <= torque_capacity(sc)
 
 
 def test_pyramid_torque_capacity_is_larger_than_one_wheel():
     sc = SCENARIOS["geo-comsat"]
-    assert torque_capacity(sc) == pytest.approx(sc.wheel_max_torque)
-    assert torque_capacity(sc.with_(wheel_axes="pyramid")) == pytest.approx(
-        sc.wheel_max_torque * 4 / 3
+    assert torque_capacity(sc) == pytest.approx(sc.wheels.max_torque)
+    assert torque_capacity(sc.with_(**{"wheels.axes": "pyramid"})) == pytest.approx(
+        sc.wheels.max_torque * 4 / 3
     )
 
 
@@ -245,7 +247,7 @@ def test_paper_comparison_all_within_requirement_without_torque_saturation(name)
         assert m[ctl]["steady_max_error_deg"] <= 0.1 and m[ctl]["meets_requirement"], ctl
         assert m[ctl]["torque_saturated_fraction"] == 0.0
         assert 0 < m[ctl]["crossover_rad_s"] <= 0.6
-        assert m[ctl]["torque_peak_Nm"] <= SCENARIOS[name].wheel_max_torque
+        assert m[ctl]["torque_peak_Nm"] <= SCENARIOS[name].wheels.max_torque
     for ctl in ("lqg", "lqg_ltr"):
         assert m["lqr"]["steady_rms_error_deg"] < m[ctl]["steady_rms_error_deg"]
     # LTR recovers the LQR loop's crossover that the slow LQG filter loses
@@ -335,7 +337,7 @@ def test_ltr_command_writes_sigma_json(tmp_path):
 
 def test_bad_configurations_exit_with_clear_errors(tmp_path):
     bad = tmp_path / "s.toml"
-    bad.write_text("[scenario]\nwheel_inertiaa = 1\n")
+    bad.write_text("[wheels]\ninertiaa = 1\n")
     for args in (
         ["attitude", "compare", "--scenario", str(bad), "--out", str(tmp_path / "a")],
         ["attitude", "compare", "--rho", "0", "--out", str(tmp_path / "b")],
@@ -356,7 +358,7 @@ def test_ltr_rides_an_unexpected_torque_that_lqg_cannot():
 
     path = Path(__file__).parents[1] / "docs" / "scenarios" / "unknown-torque.toml"
     sc = load_scenario(str(path))
-    m = compare(sc.with_(filter_disturbance_state="none"), duration=1200).metrics
+    m = compare(sc.with_(**{"filter.disturbance_state": "none"}), duration=1200).metrics
     assert m["lqg_ltr"]["steady_max_error_deg"] <= 0.1 < m["lqg"]["steady_max_error_deg"]
     # with the disturbance state LQG estimates the torque and cancels it
     m = compare(sc, duration=1200).metrics

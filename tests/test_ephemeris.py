@@ -176,20 +176,20 @@ def test_sensor_alignment_turns_vectors_by_bias_and_misalignment():
 
 def test_scenario_sky_fields_are_validated(tmp_path):
     with pytest.raises(ConfigError, match="epoch"):
-        SCENARIOS["geo-comsat"].with_(epoch="not a date")
+        SCENARIOS["geo-comsat"].with_(**{"sky.epoch": "not a date"})
     with pytest.raises(ConfigError, match="sun_fov_deg"):
-        SCENARIOS["geo-comsat"].with_(sun_noise_incidence=True)
+        SCENARIOS["geo-comsat"].with_(**{"sensors.sun_noise_incidence": True})
     with pytest.raises(ConfigError, match="earth_sensor_bias_deg"):
-        SCENARIOS["geo-comsat"].with_(earth_sensor_bias_deg=(0.1, 0.2, 0.3))
+        SCENARIOS["geo-comsat"].with_(**{"sensors.earth_sensor_bias_deg": (0.1, 0.2, 0.3)})
     path = tmp_path / "s.toml"
     path.write_text(
-        '[scenario]\nbase = "geo-comsat"\nepoch = 2027-03-20T12:00:00Z\n'
-        "sun_sensor_misalignment_deg = [0.0, 0.1, 0.0]\n",
+        '[scenario]\nbase = "geo-comsat"\n[sky]\nepoch = 2027-03-20T12:00:00Z\n'
+        "[sensors]\nsun_sensor_misalignment_deg = [0.0, 0.1, 0.0]\n",
         encoding="utf-8",
     )
     sc = load_scenario(str(path))
-    assert E.parse_epoch(sc.epoch).tai2 == E.parse_epoch("2027-03-20T12:00:00Z").tai2
-    assert sc.sun_sensor_misalignment_deg == (0.0, 0.1, 0.0)
+    assert E.parse_epoch(sc.sky.epoch).tai2 == E.parse_epoch("2027-03-20T12:00:00Z").tai2
+    assert sc.sensors.sun_sensor_misalignment_deg == (0.0, 0.1, 0.0)
 
 
 class _Hold(LinearController):
@@ -204,17 +204,21 @@ def test_srp_vanishes_in_the_umbra():
     from rwlab.attitude.plant import DisturbanceModel
 
     base = SCENARIOS["geo-comsat"].with_(
-        disturbances=DisturbanceModel(gravity_gradient=False, oblateness=False, third_body=False),
-        process_noise_torque=0.0,
-        initial_error_deg=0.0,
-        initial_rate=(0.0, 0.0, 0.0),
-        momentum_unloading=False,
+        **{
+            "spacecraft.disturbances": DisturbanceModel(
+                gravity_gradient=False, oblateness=False, third_body=False
+            ),
+            "spacecraft.process_noise_torque": 0.0,
+            "run.initial_error_deg": 0.0,
+            "run.initial_rate": (0.0, 0.0, 0.0),
+            "momentum.unloading": False,
+        }
     )
     gained = {}
     # 2027-03-20, station 0° E: the umbra runs from ~23:35 to ~00:42 UTC
     for name, epoch in (("umbra", "2027-03-20T23:45:00Z"), ("sunlit", "2027-03-20T21:00:00Z")):
-        r = simulate(base.with_(epoch=epoch), _Hold(), duration=1200, estimator="truth")
-        h = r.wheel_speed_rpm * math.pi / 30 * base.wheel_inertia
+        r = simulate(base.with_(**{"sky.epoch": epoch}), _Hold(), duration=1200, estimator="truth")
+        h = r.wheel_speed_rpm * math.pi / 30 * base.wheels.inertia
         gained[name] = np.linalg.norm(h[-1] - h[0])
     assert gained["sunlit"] > 0.05  # ~1e-4 N·m × 1200 s
     assert gained["umbra"] < 1e-3 * gained["sunlit"]
@@ -224,12 +228,12 @@ def test_ekf_rides_through_the_earth_sensor_blinding():
     """2027-04-15, station 0° E: the Sun passes 10° from nadir around midnight, inside the
     earth sensor's 12° exclusion but clear of the Earth's disc: no eclipse, the earth sensor
     is blinded for ~50 min and the filter lives on the sun sensor and its model."""
-    sc = load_scenario(SKY, epoch="2027-04-15T23:00:00Z")
+    sc = load_scenario(SKY, **{"sky.epoch": "2027-04-15T23:00:00Z"})
     r, m = fly(sc, "lqg", duration=7200, log_every=50)
     assert m["eclipse_s"] == 0
     assert 2400 < m["earth_sensor_blinded_s"] < 3600
     assert m["sun_sensor_outage_s"] == 0
-    assert m["steady_max_error_deg"] < sc.pointing_requirement_deg
+    assert m["steady_max_error_deg"] < sc.control.pointing_requirement_deg
     blinded = r.sky[:, 2] == 1
     assert blinded.any() and np.all(r.error_deg[blinded & (r.t > 3600)] < 0.1)
     assert m["earth_sensor_gated_count"] == 0 and m["sun_sensor_gated_count"] == 0
@@ -300,7 +304,7 @@ def test_the_equinox_day_holds_the_requirement_through_the_shadow(tmp_path):
 
     trace = pq.read_table(out / "trace.parquet").to_pydict()
     # by the end of the day the lever arm is learnt: P·A·C_r·ρ of the comsat's SRP
-    d = SCENARIOS["geo-comsat"].disturbances.vector()
+    d = SCENARIOS["geo-comsat"].spacecraft.disturbances.vector()
     beta = [trace[f"srp_lever_est_{a}_Nm"][-1] for a in "xyz"]
     assert np.allclose(beta, d[1] * d[2:5], atol=0.15 * d[1] * np.linalg.norm(d[2:5]))
     assert 'id="fig-disturbance"' in (out / "report.html").read_text()

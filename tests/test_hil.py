@@ -40,20 +40,22 @@ _MIRRORED = {
     "paper B": {},
     # the real sky (SRP ∝ 1/r² of the Sun: 3 % above paper B's 1 AU in January), a filter
     # whose inertia is not the truth's, biased and misaligned sensors, a gated filter
-    "real sky, model error": dict(
-        epoch="2027-01-03T06:00:00",
-        filter_inertia=(15.0, 11.0, 10.5),
-        sun_sensor_bias_deg=(0.02, -0.01),
-        earth_sensor_misalignment_deg=(0.01, 0.0, -0.02),
-        innovation_gate=16.0,
-    ),
+    "real sky, model error": {
+        "sky.epoch": "2027-01-03T06:00:00",
+        "filter.inertia": (15.0, 11.0, 10.5),
+        "sensors.sun_sensor_bias_deg": (0.02, -0.01),
+        "sensors.earth_sensor_misalignment_deg": (0.01, 0.0, -0.02),
+        "filter.innovation_gate": 16.0,
+    },
 }
 
 
 # the sensors GEO satellites fly (issue 24): gyros driving the filter, and a star tracker
-_GYRO_SMALLSAT = dict(gyro=GyroModel(), epoch="2027-09-20T22:00:00")
+_GYRO_SMALLSAT = {"sensors.gyro": GyroModel(), "sky.epoch": "2027-09-20T22:00:00"}
 _MIRRORED["gyros, real sky"] = _GYRO_SMALLSAT
-_MIRRORED["gyros and a star tracker"] = dict(_GYRO_SMALLSAT, star_tracker=StarTrackerModel())
+_MIRRORED["gyros and a star tracker"] = _GYRO_SMALLSAT | {
+    "sensors.star_tracker": StarTrackerModel()
+}
 
 
 @pytest.mark.parametrize("case", list(_MIRRORED))
@@ -67,7 +69,7 @@ def test_satellite_with_ideal_wheels_repeats_the_compiled_simulation(case):
     sat = Satellite(sc, ctl, **kw)
     while not sat.done:
         torques = sat.wheel_torques()
-        sat.advance(sat.x[7:] + torques * sc.dt)  # an ideal wheel delivers its command
+        sat.advance(sat.x[7:] + torques * sc.run.dt)  # an ideal wheel delivers its command
     run = sat.result()
     np.testing.assert_allclose(run.error_deg, ref.error_deg, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.est_error_deg, ref.est_error_deg, rtol=0, atol=1e-9)
@@ -84,7 +86,7 @@ def test_satellite_with_ideal_wheels_repeats_the_compiled_simulation(case):
 def test_the_plant_feels_the_reported_momentum_not_the_command():
     """A wheel that does nothing (reports zero momentum) leaves the body's angular momentum
     unchanged: ω moves only by the disturbances, whatever the controller asked."""
-    sc = load_scenario("geo-smallsat").with_(process_noise_torque=0.0)
+    sc = load_scenario("geo-smallsat").with_(**{"spacecraft.process_noise_torque": 0.0})
     sat = Satellite(sc, LQRController(sc), duration=20.0, seed=1, estimator="truth")
     H0 = sc.inertia_matrix @ sat.x[4:7]
     asked = []
@@ -97,7 +99,7 @@ def test_the_plant_feels_the_reported_momentum_not_the_command():
 
 
 def test_reallocation_needs_three_axes():
-    sc = load_scenario("geo-smallsat").with_(wheel_axes="pyramid")
+    sc = load_scenario("geo-smallsat").with_(**{"wheels.axes": "pyramid"})
     sat = Satellite(sc, LQRController(sc), duration=1.0, seed=0)
     sat.set_active(np.array([True, False, True, True]))  # any three of a pyramid span
     assert np.allclose(sc.wheel_matrix[:, sat.active] @ sat._pinv[sat.active], np.eye(3))
@@ -198,7 +200,7 @@ def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
             speed = tel[round(row["t"], 6)]
             h = row["wheel_momentum_Nms"][n - 1]
             assert h == pytest.approx(
-                load_scenario("geo-smallsat").wheel_inertia * rpm_to_rad_s(speed)
+                load_scenario("geo-smallsat").wheels.inertia * rpm_to_rad_s(speed)
             )
 
 

@@ -20,7 +20,7 @@ fig, ax = plt.subplots(figsize=(8, 3), constrained_layout=True)
 for name, (run, metrics) in runs.items():
     ax.semilogy(run.t, run.error_deg, lw=1, label=name)
     print(f"{name}: steady max error {metrics['steady_max_error_deg']:.4f} deg")
-ax.axhline(sc.pointing_requirement_deg, color="k", ls="--", lw=1, label="requirement")
+ax.axhline(sc.control.pointing_requirement_deg, color="k", ls="--", lw=1, label="requirement")
 ax.set_xlabel("time [s]")
 ax.set_ylabel("pointing error [deg]")
 ax.legend()

@@ -302,7 +302,7 @@ def _pointing_png(comparison) -> str:
         ax.semilogy(
             r.t, np.maximum(r.error_deg, 1e-6), lw=1, color=COLORS[name], label=LABELS[name]
         )
-    ax.axhline(comparison.scenario.pointing_requirement_deg, color="k", ls="--", lw=1)
+    ax.axhline(comparison.scenario.control.pointing_requirement_deg, color="k", ls="--", lw=1)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("pointing error [°]")
     ax.grid(alpha=0.3)

@@ -89,3 +89,7 @@ class OutputBusyError(RwlabError):
 
 class LostWorkerError(RwlabError):
     """A campaign's batch lost its worker more often than it is retried."""
+
+
+class FormatWarning(RwlabWarning):
+    """A file in an older format was read; the message says how to convert it."""

@@ -147,7 +147,7 @@ def torque_capacity(scenario: Scenario) -> float:
         The torque, N·m.
     """
     rows = np.linalg.norm(np.linalg.pinv(scenario.wheel_matrix), axis=1)
-    return scenario.wheel_max_torque / float(rows.max())
+    return scenario.wheels.max_torque / float(rows.max())
 
 
 def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
@@ -165,9 +165,9 @@ def default_weights(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     R : numpy.ndarray, shape (3, 3)
         Torque weight, 1/(N·m)².
     """
-    theta0 = math.radians(scenario.lqr_attitude_deg)
-    rate0 = math.radians(scenario.lqr_rate_deg_s)
-    tau0 = scenario.lqr_torque_fraction * torque_capacity(scenario)
+    theta0 = math.radians(scenario.control.lqr_attitude_deg)
+    rate0 = math.radians(scenario.control.lqr_rate_deg_s)
+    tau0 = scenario.control.lqr_torque_fraction * torque_capacity(scenario)
     Q = np.diag([1 / theta0**2] * 3 + [1 / rate0**2] * 3)
     return Q, np.eye(3) / tau0**2
 
@@ -180,7 +180,7 @@ def attitude_plant(scenario: Scenario, q=None, w_bo=None, h_body=None) -> contro
         np.zeros(3) if w_bo is None else w_bo,
         np.zeros(3) if h_body is None else h_body,
         scenario.inertia_matrix,
-        gravity_gradient=scenario.disturbances.gravity_gradient,
+        gravity_gradient=scenario.spacecraft.disturbances.gravity_gradient,
     )
     return control.ss(A, B, np.hstack([np.eye(3), np.zeros((3, 3))]), 0)
 
@@ -188,11 +188,13 @@ def attitude_plant(scenario: Scenario, q=None, w_bo=None, h_body=None) -> contro
 def slew_rate_limit(scenario: Scenario, K: np.ndarray) -> float:
     """Rate limit of the saturation-aware law, rad/s: what K_ω can hold with the torque
     reserve, and what the momentum reserve allows on the largest inertia."""
-    by_torque = scenario.slew_torque_fraction * torque_capacity(scenario)
+    by_torque = scenario.control.slew_torque_fraction * torque_capacity(scenario)
     by_torque /= float(np.linalg.norm(K[:, 3:], 2))
-    h_cap = scenario.wheel_max_momentum * torque_capacity(scenario) / scenario.wheel_max_torque
+    h_cap = scenario.wheels.max_momentum * torque_capacity(scenario) / scenario.wheels.max_torque
     by_momentum = (
-        scenario.slew_momentum_fraction * h_cap / np.linalg.eigvalsh(scenario.inertia_matrix).max()
+        scenario.control.slew_momentum_fraction
+        * h_cap
+        / np.linalg.eigvalsh(scenario.inertia_matrix).max()
     )
     return float(min(by_torque, by_momentum))
 
@@ -216,13 +218,13 @@ class LQRController(LinearController):
         self.R = Rd if R is None else np.asarray(R, float)
         self.scenario = scenario
         self.update_period = update_period
-        self.K, self.plant = lqrd(attitude_plant(scenario), self.Q, self.R, scenario.dt)
+        self.K, self.plant = lqrd(attitude_plant(scenario), self.Q, self.R, scenario.run.dt)
         self.rate_limit = slew_rate_limit(scenario, self.K)
 
     def gain(self, t, q, w_bo, h_body) -> np.ndarray:
         if self.update_period:
             plant = attitude_plant(self.scenario, q, w_bo, h_body)
-            self.K, _ = lqrd(plant, self.Q, self.R, self.scenario.dt)
+            self.K, _ = lqrd(plant, self.Q, self.R, self.scenario.run.dt)
         return self.K
 
 
@@ -278,14 +280,14 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
         Attitude measurement noise PSD, rad²·s.
     """
     ctl = LQRController(scenario) if ctl is None else ctl
-    w = _omega_grid(scenario.dt)
+    w = _omega_grid(scenario.run.dt)
     sysd = ctl.plant
     target = sigma(control.ss(sysd.A, sysd.B, ctl.K, 0 * ctl.K @ sysd.B, sysd.dt), w)
     w_c = crossover(target, w)
     B = np.asarray(attitude_plant(scenario).B)
     J_slow = 1 / np.linalg.svd(B, compute_uv=False).min()
     r_c = attitude_noise_psd(scenario)
-    return (scenario.ltr_bandwidth_factor * w_c) ** 4 * J_slow**2 * r_c, r_c
+    return (scenario.filter.ltr_bandwidth_factor * w_c) ** 4 * J_slow**2 * r_c, r_c
 
 
 def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
@@ -307,7 +309,7 @@ def ltr_study(scenario: Scenario, rhos=PAPER_RHOS, omega=None) -> LTRResult:
     """
     ctl = LQRController(scenario)
     q2, r_c = ltr_noise(scenario, ctl)
-    dt = scenario.dt
+    dt = scenario.run.dt
     return ltr(
         ctl.plant,
         None,
@@ -334,7 +336,7 @@ def _with_disturbance_state(scenario: Scenario, sysd, Qn, K):
     if disturbance_state(scenario) == "none":
         return sysd, Qn, K
     A, B, C = (np.asarray(m) for m in (sysd.A, sysd.B, sysd.C))
-    n, dt = A.shape[0], scenario.dt
+    n, dt = A.shape[0], scenario.run.dt
     walk = disturbance_psd(scenario).reshape(-1, 3).sum(axis=0)  # per axis, N²·m²/s
     # d is a torque like u (N·m); a walk of PSD q has increments of variance q·dt
     Aa = np.block([[A, B], [np.zeros((3, n)), np.eye(3)]])
@@ -360,7 +362,7 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
     """
     ctl = LQRController(scenario)
     sysd = ctl.plant  # G(z): θ measured
-    dt, w = scenario.dt, _omega_grid(scenario.dt)
+    dt, w = scenario.run.dt, _omega_grid(scenario.run.dt)
     B = np.asarray(sysd.B)
     r_c = attitude_noise_psd(scenario)
     q2, _ = ltr_noise(scenario, ctl)
@@ -449,7 +451,7 @@ def compare(
     Comparison
         The runs, their metrics, ρ and the configuration.
     """
-    seed = scenario.seed if seed is None else seed
+    seed = scenario.run.seed if seed is None else seed
     q2, _ = ltr_noise(scenario)
     plans: dict[str, tuple[Scenario, dict[str, Any]]] = {
         "lqr": (scenario, dict(estimator="truth")),
@@ -460,7 +462,9 @@ def compare(
         ),
     }
     if wheel_model_file:
-        wheel = scenario.with_(wheel_model="identified", wheel_model_file=str(wheel_model_file))
+        wheel = scenario.with_(
+            **{"wheels.model": "identified", "wheels.model_file": str(wheel_model_file)}
+        )
         plans["lqg_identified_wheel"] = (wheel, dict(estimator="ekf"))
     runs = {}
     for name, (sc, kw) in plans.items():
@@ -471,19 +475,19 @@ def compare(
     margins = loop_margins(scenario, rho)
     table = {}
     for name, run in runs.items():
-        table[name] = metrics(run, scenario.pointing_requirement_deg)
+        table[name] = metrics(run, scenario.control.pointing_requirement_deg)
         table[name].update(margins.get(name, margins["lqg"]))
     config = {
-        "disturbances_known_to_filter": scenario.disturbances_known_to_filter,
+        "disturbances_known_to_filter": scenario.filter.disturbances_known,
         "filter_disturbance_state": disturbance_state(scenario),
         "seed": seed,
-        "dt_s": scenario.dt,
-        "sensor_period_s": scenario.sensor_period,
+        "dt_s": scenario.run.dt,
+        "sensor_period_s": scenario.sensors.period,
         "relinearize_period_s": update_period,
         "rho": rho,
         "ltr_fictitious_torque_psd": q2,
         "filter_torque_psd": default_filter_psd(scenario),
-        "requirement_deg": scenario.pointing_requirement_deg,
+        "requirement_deg": scenario.control.pointing_requirement_deg,
     }
     return Comparison(scenario, runs, table, rho, config)
 
@@ -508,8 +512,8 @@ def pd_gains(scenario: Scenario) -> tuple[float, float]:
     kd : float
         Derivative gain, N·m·s/rad.
     """
-    kp = scenario.lqr_torque_fraction * torque_capacity(scenario)
-    kp /= math.radians(scenario.lqr_attitude_deg)
+    kp = scenario.control.lqr_torque_fraction * torque_capacity(scenario)
+    kp /= math.radians(scenario.control.lqr_attitude_deg)
     j_max = float(np.linalg.eigvalsh(scenario.inertia_matrix).max())
     return kp, 2 * 0.707 * math.sqrt(kp * j_max)
 
@@ -594,4 +598,4 @@ def fly(
         steady_after=steady_after,
         **kw,
     )
-    return run, metrics(run, scenario.pointing_requirement_deg)
+    return run, metrics(run, scenario.control.pointing_requirement_deg)

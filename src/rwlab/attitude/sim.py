@@ -57,9 +57,9 @@ def sun_direction(scenario: Scenario, t: float) -> np.ndarray:
     -------
     numpy.ndarray, shape (3,)
     """
-    d = math.radians(scenario.sun_declination_deg)
-    theta = math.radians(scenario.sun_phase_deg)
-    if scenario.sun == "moving":
+    d = math.radians(scenario.sky.sun_declination_deg)
+    theta = math.radians(scenario.sky.sun_phase_deg)
+    if scenario.sky.sun == "moving":
         theta += GEO_RATE * t  # the orbital frame turns once a day relative to the Sun
     return np.array([-math.sin(theta) * math.cos(d), -math.sin(d), -math.cos(theta) * math.cos(d)])
 
@@ -129,7 +129,7 @@ class SimResult(ShortRepr):
     1 unavailable: eclipse, field of view or blinding, 2 gated) at the logged steps.
     torque_est, srp_lever_est : (K, 3) the filter's disturbance states, N·m: a body
     torque and the SRP lever arm P·A·C_r·ρ (zeros for a state it lacks, see
-    ``Scenario.filter_disturbance_state``).
+    ``Scenario.filter.disturbance_state``).
     gyro_bias_est : (K, 3) the gyro-driven filter's bias estimate β̂, rad/s (zeros without).
     sun_sensor_alignment_est : (K, 3) its estimate of the sun sensor's misalignment (body
     axes), rad (zeros without).
@@ -193,7 +193,7 @@ def unknown_torque_bound(sc: Scenario) -> float:
     on the inertia spread and any constant torque; J2 is within the gravity
     gradient's 7e-5 margin.
     """
-    d = sc.disturbances.vector()
+    d = sc.spacecraft.disturbances.vector()
     J = sc.inertia_matrix
     spread = float(np.ptp(np.linalg.eigvalsh(J)))
     tides = (d[5] + d[6]) * spread / 2
@@ -222,11 +222,11 @@ def default_filter_psd(sc: Scenario) -> float:
     float
         The PSD, N²·m²·s.
     """
-    q = sc.process_noise_torque**2
-    if not sc.disturbances_known_to_filter and disturbance_state(sc) == "none":
+    q = sc.spacecraft.process_noise_torque**2
+    if not sc.filter.disturbances_known and disturbance_state(sc) == "none":
         r = attitude_noise_psd(sc)
-        bound = sc.filter_torque_bound or unknown_torque_bound(sc)
-        q += r * (bound / math.radians(sc.filter_disturbance_budget_deg)) ** 2
+        bound = sc.filter.torque_bound or unknown_torque_bound(sc)
+        q += r * (bound / math.radians(sc.filter.disturbance_budget_deg)) ** 2
     return q
 
 
@@ -246,15 +246,15 @@ def disturbance_state(sc: Scenario) -> str:
     """
     if filter_torque_scale(sc) == 0.0:
         return "none"
-    return sc.filter_disturbance_state
+    return sc.filter.disturbance_state
 
 
 def filter_torque_scale(sc: Scenario) -> float:
     """τ_u, N·m: the unmodelled torque the filter is designed for (``filter_torque_bound``,
     else :func:`unknown_torque_bound`; 0 with the disturbances known to the filter)."""
-    if sc.disturbances_known_to_filter:
+    if sc.filter.disturbances_known:
         return 0.0
-    return sc.filter_torque_bound or unknown_torque_bound(sc)
+    return sc.filter.torque_bound or unknown_torque_bound(sc)
 
 
 def disturbance_psd(sc: Scenario) -> np.ndarray:
@@ -278,8 +278,8 @@ def disturbance_psd(sc: Scenario) -> np.ndarray:
     """
     tau = filter_torque_scale(sc)
     kind = disturbance_state(sc)
-    psd = [tau**2 / sc.filter_torque_drift_s] * 3 if "torque" in kind else []
-    return np.array(psd + ([tau**2 / sc.filter_srp_drift_s] * 3 if "srp" in kind else []))
+    psd = [tau**2 / sc.filter.torque_drift_s] * 3 if "torque" in kind else []
+    return np.array(psd + ([tau**2 / sc.filter.srp_drift_s] * 3 if "srp" in kind else []))
 
 
 # the kernel's codes for the disturbance state, and its size
@@ -310,8 +310,11 @@ def attitude_noise_psd(sc: Scenario) -> float:
     float
         The PSD, rad²·s.
     """
-    sigma = math.radians((sc.sun_noise_deg + sc.earth_noise_deg) / 2) * sc.noise_margin
-    return sigma**2 * sc.sensor_period
+    sigma = (
+        math.radians((sc.sensors.sun_noise_deg + sc.sensors.earth_noise_deg) / 2)
+        * sc.filter.noise_margin
+    )
+    return sigma**2 * sc.sensors.period
 
 
 class _Streams:
@@ -390,36 +393,38 @@ def simulate(
         raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
     if not isinstance(controller, LinearController):
         raise ConfigError(f"controller must be a LinearController, got {type(controller).__name__}")
-    duration = scenario.duration if duration is None else duration
+    duration = scenario.run.duration if duration is None else duration
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise ConfigError(f"duration must be a positive number of seconds, got {duration!r}")
-    steps = round(duration / scenario.dt)
+    steps = round(duration / scenario.run.dt)
     if steps < 1:
-        raise ConfigError(f"duration {duration:g} s is shorter than one step ({scenario.dt:g} s)")
-    sensor_every = round(scenario.sensor_period / scenario.dt)
+        raise ConfigError(
+            f"duration {duration:g} s is shorter than one step ({scenario.run.dt:g} s)"
+        )
+    sensor_every = round(scenario.sensors.period / scenario.run.dt)
     if steady_after is None:
-        steady_after = steady_start(steps * scenario.dt)
-    elif not (_is_real(steady_after) and 0 <= steady_after < steps * scenario.dt):
+        steady_after = steady_start(steps * scenario.run.dt)
+    elif not (_is_real(steady_after) and 0 <= steady_after < steps * scenario.run.dt):
         raise ConfigError(
             f"steady_after must be a number of seconds in [0, duration), got {steady_after!r}"
         )
     kw = dict(
         steps=steps,
-        streams=_Streams(scenario.seed if seed is None else seed),
+        streams=_Streams(scenario.run.seed if seed is None else seed),
         estimator=estimator,
         log_every=-(-max(1, int(log_every)) // sensor_every) * sensor_every,
         wheel_momentum0=wheel_momentum0,
         filter_psd=default_filter_psd(scenario)
         if filter_torque_psd is None
-        else scenario.process_noise_torque**2 + filter_torque_psd,
-        noise_scale=scenario.noise_margin * filter_noise_scale,
-        steady_from=round(steady_after / scenario.dt),
+        else scenario.spacecraft.process_noise_torque**2 + filter_torque_psd,
+        noise_scale=scenario.filter.noise_margin * filter_noise_scale,
+        steady_from=round(steady_after / scenario.run.dt),
         progress=progress,
     )
     result = _simulate_compiled(scenario, controller, **kw)
     result.stats["steps"] = steps
-    result.stats["dt_s"] = scenario.dt
-    result.stats["sensor_period_s"] = scenario.sensor_period
+    result.stats["dt_s"] = scenario.run.dt
+    result.stats["sensor_period_s"] = scenario.sensors.period
     return result
 
 
@@ -430,9 +435,9 @@ SUN_ALIGNMENT_DRIFT_DEG_DAY = 0.005  # its random walk a day (thermal distortion
 def _aligned(sc: Scenario) -> int:
     """How many sensors' misalignments the gyro filter carries: 0, 1 (the sun sensor's) or
     2 (and the earth sensor's)."""
-    if sc.gyro is None or not sc.filter_sun_sensor_alignment:
+    if sc.sensors.gyro is None or not sc.filter.sun_sensor_alignment:
         return 0
-    return 2 if sc.filter_earth_sensor_alignment else 1
+    return 2 if sc.filter.earth_sensor_alignment else 1
 
 
 def _is_real(v) -> bool:
@@ -442,15 +447,17 @@ def _is_real(v) -> bool:
 def _initial(sc: Scenario, rng, wheel_momentum0):
     """True and estimated initial states. The estimate after q̂ is [ω̂], or [ω̂, b̂] with b̂
     at its prior mean 0 with σ the designer's torque bound (:func:`filter_torque_scale`)."""
-    q0 = from_axis_angle(sc.initial_axis, math.radians(sc.initial_error_deg))
-    w0 = dcm(q0) @ np.array([0.0, -GEO_RATE, 0.0]) + np.asarray(sc.initial_rate, float)
+    q0 = from_axis_angle(sc.run.initial_axis, math.radians(sc.run.initial_error_deg))
+    w0 = dcm(q0) @ np.array([0.0, -GEO_RATE, 0.0]) + np.asarray(sc.run.initial_rate, float)
     hw0 = np.zeros(sc.n_wheels) if wheel_momentum0 is None else np.asarray(wheel_momentum0, float)
-    dq = from_axis_angle(rng.standard_normal(3), math.radians(sc.estimator_error_deg))
-    s0 = math.radians(max(sc.estimator_error_deg, 0.1))
+    dq = from_axis_angle(rng.standard_normal(3), math.radians(sc.filter.initial_error_deg))
+    s0 = math.radians(max(sc.filter.initial_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
     w_hat = w0 + 1e-5 * rng.standard_normal(3)
-    if sc.gyro is not None:  # the gyro-driven filter: [δθ, δβ (, φ)], β̂ = 0 at the turn-on σ
-        sb = math.radians(max(sc.gyro.initial_bias_deg_h, 1e-3)) / 3600.0
+    if (
+        sc.sensors.gyro is not None
+    ):  # the gyro-driven filter: [δθ, δβ (, φ)], β̂ = 0 at the turn-on σ
+        sb = math.radians(max(sc.sensors.gyro.initial_bias_deg_h, 1e-3)) / 3600.0
         sphi = [math.radians(SUN_ALIGNMENT_PRIOR_DEG) ** 2] * 3 * _aligned(sc)
         P0 = np.diag([s0**2] * 3 + [sb**2] * 3 + sphi)
         return q0, w0, hw0, qmul(dq, q0), np.zeros(3 + len(sphi)), P0
@@ -492,13 +499,15 @@ def _unload_vector(sc: Scenario) -> np.ndarray:
     """The kernel's unloading parameters (see ``kernel.run_block``)."""
     return np.array(
         [
-            float(sc.momentum_unloading),
-            sc.unload_start_fraction,
-            sc.unload_stop_fraction,
-            sc.thruster_torque * sc.thruster_min_pulse_s / sc.dt,  # one pulse's impulse in a step
-            max(1, round(sc.unload_pulse_period_s / sc.dt)),
-            sc.unload_recovery_s,
-            sc.pointing_requirement_deg,
+            float(sc.momentum.unloading),
+            sc.momentum.unload_start_fraction,
+            sc.momentum.unload_stop_fraction,
+            sc.momentum.thruster_torque
+            * sc.momentum.thruster_min_pulse_s
+            / sc.run.dt,  # one pulse's impulse in a step
+            max(1, round(sc.momentum.unload_pulse_period_s / sc.run.dt)),
+            sc.momentum.unload_recovery_s,
+            sc.control.pointing_requirement_deg,
         ]
     )
 
@@ -511,9 +520,9 @@ def sky_table(sc: Scenario, t: np.ndarray) -> np.ndarray:
     else paper B's vectors (:func:`sun_direction`, a fixed Moon) with the same shadow model."""
     from rwlab.attitude import ephemeris
 
-    if sc.epoch is not None:
-        epoch = ephemeris.parse_epoch(sc.epoch)
-        sun, moon = ephemeris.sun_moon_orbital(epoch, sc.station_longitude_deg, t)
+    if sc.sky.epoch is not None:
+        epoch = ephemeris.parse_epoch(sc.sky.epoch)
+        sun, moon = ephemeris.sun_moon_orbital(epoch, sc.sky.station_longitude_deg, t)
     else:
         sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
         moon = np.broadcast_to(MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8, sun.shape)
@@ -533,17 +542,17 @@ def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) ->
 def _plant_record(sc: Scenario) -> kernel.Plant:
     G = sc.wheel_matrix
     return kernel.Plant(
-        dt=sc.dt,
+        dt=sc.run.dt,
         n=GEO_RATE,
         J=sc.inertia_matrix,
         J_inv=np.linalg.inv(sc.inertia_matrix),
         G=G,
         G_pinv=np.linalg.pinv(G),
-        h_max=np.full(sc.n_wheels, sc.wheel_max_momentum),
-        tau_max=sc.wheel_max_torque,
-        dist=sc.disturbances.vector(),
-        wheel_inertia=sc.wheel_inertia,
-        torque_scale=sc.wheel_torque_scale,
+        h_max=np.full(sc.n_wheels, sc.wheels.max_momentum),
+        tau_max=sc.wheels.max_torque,
+        dist=sc.spacecraft.disturbances.vector(),
+        wheel_inertia=sc.wheels.inertia,
+        torque_scale=sc.wheels.torque_scale,
     )
 
 
@@ -551,25 +560,29 @@ def _sensor_record(sc: Scenario, gyro_E: np.ndarray) -> kernel.Sensors:
     """The true sensors; ``gyro_E`` (3, 3): the gyro unit's scale factors and misalignment."""
     from rwlab.attitude.sensors import star_tracker_frame
 
-    exclusion = np.array([sc.earth_sensor_sun_exclusion_deg, sc.earth_sensor_moon_exclusion_deg])
-    every = round(sc.sensor_period / sc.dt)
-    gyro, st = sc.gyro, sc.star_tracker
+    exclusion = np.array(
+        [sc.sensors.earth_sensor_sun_exclusion_deg, sc.sensors.earth_sensor_moon_exclusion_deg]
+    )
+    every = round(sc.sensors.period / sc.run.dt)
+    gyro, st = sc.sensors.gyro, sc.sensors.star_tracker
     return kernel.Sensors(
         every=every,
-        sun_fov_cos=math.cos(math.radians(min(sc.sun_fov_deg, 180.0))),
-        sun_incidence=sc.sun_noise_incidence,
-        sig_sun=math.radians(sc.sun_noise_deg),
-        sig_earth=math.radians(sc.earth_noise_deg),
-        sun_align=sensor_alignment(sc.sun_sensor_bias_deg, sc.sun_sensor_misalignment_deg, (1, 2)),
+        sun_fov_cos=math.cos(math.radians(min(sc.sensors.sun_fov_deg, 180.0))),
+        sun_incidence=sc.sensors.sun_noise_incidence,
+        sig_sun=math.radians(sc.sensors.sun_noise_deg),
+        sig_earth=math.radians(sc.sensors.earth_noise_deg),
+        sun_align=sensor_alignment(
+            sc.sensors.sun_sensor_bias_deg, sc.sensors.sun_sensor_misalignment_deg, (1, 2)
+        ),
         earth_align=sensor_alignment(
-            sc.earth_sensor_bias_deg, sc.earth_sensor_misalignment_deg, (0, 1)
+            sc.sensors.earth_sensor_bias_deg, sc.sensors.earth_sensor_misalignment_deg, (0, 1)
         ),
         blind_cos=np.where(exclusion > 0, np.cos(np.radians(exclusion)), 2.0),  # 2: never
         gyro=gyro is not None,
-        gyro_par=gyro.vector(sc.dt) if gyro is not None else np.zeros(4),
+        gyro_par=gyro.vector(sc.run.dt) if gyro is not None else np.zeros(4),
         gyro_E=gyro_E,
         tracker=st is not None,
-        tracker_every=round(st.period_s / sc.dt) if st is not None else every,
+        tracker_every=round(st.period_s / sc.run.dt) if st is not None else every,
         tracker_frame=star_tracker_frame(st.boresight) if st is not None else np.eye(3),
         tracker_sigma=st.sigma_rad() if st is not None else np.zeros(3),
         tracker_cos=st.exclusion_cos() if st is not None else np.full(3, 2.0),
@@ -580,20 +593,20 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
     """The estimator (:class:`kernel.Filter`) for an ``nx``-state filter."""
     from rwlab.attitude.ekf import gyro_process_noise
 
-    dist = sc.disturbances.vector()
-    dist_model = dist if sc.disturbances_known_to_filter else _known_only(sc)
+    dist = sc.spacecraft.disturbances.vector()
+    dist_model = dist if sc.filter.disturbances_known else _known_only(sc)
     mode = kernel.TRUTH if estimator == "truth" else kernel.DYNAMICS
     bias_true = _bias_truth(sc, dist, dist_model)
-    if sc.gyro is not None and estimator != "truth":
+    if sc.sensors.gyro is not None and estimator != "truth":
         mode = kernel.GYRO
-        Qc = gyro_process_noise(sc.gyro.sigma_v**2, sc.gyro.filter_bias_psd(), nx)
+        Qc = gyro_process_noise(sc.sensors.gyro.sigma_v**2, sc.sensors.gyro.filter_bias_psd(), nx)
         if nx > 6:
             Qc[6:, 6:] = np.eye(nx - 6) * math.radians(SUN_ALIGNMENT_DRIFT_DEG_DAY) ** 2 / 86400
         # the truth of φ: each sensor's rotation (bias on its transverse axes, misalignment)
-        sun = np.radians(np.asarray(sc.sun_sensor_misalignment_deg, float))
-        sun[1:] += np.radians(np.asarray(sc.sun_sensor_bias_deg, float))
-        earth = np.radians(np.asarray(sc.earth_sensor_misalignment_deg, float))
-        earth[:2] += np.radians(np.asarray(sc.earth_sensor_bias_deg, float))
+        sun = np.radians(np.asarray(sc.sensors.sun_sensor_misalignment_deg, float))
+        sun[1:] += np.radians(np.asarray(sc.sensors.sun_sensor_bias_deg, float))
+        earth = np.radians(np.asarray(sc.sensors.earth_sensor_misalignment_deg, float))
+        earth[:2] += np.radians(np.asarray(sc.sensors.earth_sensor_bias_deg, float))
         bias_true = np.concatenate([sun, earth])[: nx - 6]
     else:
         J_inv = np.linalg.inv(sc.filter_inertia_matrix)
@@ -601,16 +614,18 @@ def _filter_record(sc: Scenario, estimator: str, nx: int, filter_psd: float, sca
         Qc[3:6, 3:6] = filter_psd * J_inv @ J_inv.T
         if nx > 6:
             Qc[6:, 6:] = np.diag(disturbance_psd(sc))
-    st = sc.star_tracker
+    st = sc.sensors.star_tracker
     return kernel.Filter(
         mode=mode,
         bias_kind=BIAS_KINDS[disturbance_state(sc)] if mode == kernel.DYNAMICS else 0,
         bias_true=bias_true,
         dist_model=dist_model,
         Qc=Qc,
-        r_sun=math.radians(sc.sun_noise_deg) * scale,
-        r_earth=math.radians(sc.earth_noise_deg) * scale,
-        gate=np.array([sc.innovation_gate, sc.innovation_gate_max_rejections], dtype=float),
+        r_sun=math.radians(sc.sensors.sun_noise_deg) * scale,
+        r_earth=math.radians(sc.sensors.earth_noise_deg) * scale,
+        gate=np.array(
+            [sc.filter.innovation_gate, sc.filter.innovation_gate_max_rejections], dtype=float
+        ),
         tracker_R=st.body_covariance() * scale**2 if st is not None else np.eye(3),
         J=sc.filter_inertia_matrix,
         J_inv=np.linalg.inv(sc.filter_inertia_matrix),
@@ -660,10 +675,10 @@ def _simulate_compiled(
     if estimator != "ekf":
         q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
     gyro_state, gyro_E = np.zeros(9), np.zeros((3, 3))
-    if sc.gyro is not None:  # the unit's fixed errors and turn-on bias
+    if sc.sensors.gyro is not None:  # the unit's fixed errors and turn-on bias
         from rwlab.attitude.sensors import draw_gyro_errors
 
-        gyro_E, gyro_state[:3] = draw_gyro_errors(sc.gyro, streams.gyro)
+        gyro_E, gyro_state[:3] = draw_gyro_errors(sc.sensors.gyro, streams.gyro)
         gyro_state[6:] = w0
     plant = _plant_record(sc)
     sensors = _sensor_record(sc, gyro_E)
@@ -674,8 +689,8 @@ def _simulate_compiled(
     )
     wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
     period = controller.update_period
-    block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.dt)))
-    noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
+    block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.run.dt)))
+    noise_sd = sc.spacecraft.process_noise_torque / math.sqrt(sc.run.dt)
     k, log_k, saturated = 0, 0, False
     while k <= steps:
         n_steps = min(block, steps + 1 - k)
@@ -688,11 +703,11 @@ def _simulate_compiled(
             kernel.GYRO: dcm(s_q) @ np.array([0.0, -GEO_RATE, 0.0]),
         }[filt.mode]
         K = np.ascontiguousarray(
-            controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), plant.G @ x[7:]), dtype=float
+            controller.gain(k * sc.run.dt, s_q, _w_bo(s_q, s_w), plant.G @ x[7:]), dtype=float
         )
         noise = streams.block(k, n_steps, (sensors.every, sensors.tracker_every), noise_sd, sensors)
-        sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
-        rows = math.ceil(((k + n_steps) * sc.dt - sky_t0) / SKY_STEP) + 2
+        sky_t0 = math.floor(k * sc.run.dt / SKY_STEP) * SKY_STEP
+        rows = math.ceil(((k + n_steps) * sc.run.dt - sky_t0) / SKY_STEP) + 2
         sky = kernel.Sky(sky_table(sc, sky_t0 + SKY_STEP * np.arange(rows)), sky_t0, SKY_STEP)
         law = _law_record(sc, controller, K)
         log_k, sat = kernel.run_block(
@@ -718,7 +733,7 @@ def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:
     log_x, log_est = log.x[:log_k], log.est[:log_k]
     w_bo = _w_bo(log_x[:, :4], log_x[:, 4:7])
     w_est = _w_bo(log_est[:, :4], log_est[:, 4:7])
-    wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheel_inertia)
+    wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheels.inertia)
     result = _result(
         log.t[:log_k],
         log_x[:, :4],
@@ -730,7 +745,7 @@ def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:
         log.nees[:log_k] if mode != kernel.TRUTH else np.zeros(log_k),
         saturated,
         stats,
-        steady_from * sc.dt,
+        steady_from * sc.run.dt,
     )
     result.sky = log.sky[:log_k, :3]
     result.tracker_status = log.sky[:log_k, 3]
@@ -755,8 +770,8 @@ BLOCK_STEPS = 36_000  # steps per kernel call without re-linearisation (an hour 
 
 def _known_only(sc: Scenario) -> np.ndarray:
     """The disturbance vector the filter models in paper B's setting: gravity gradient only."""
-    d = sc.disturbances.vector()
+    d = sc.spacecraft.disturbances.vector()
     known = np.zeros_like(d)
-    gg = 3 * GEO_RATE**2 * float(sc.disturbances.gravity_gradient)
+    gg = 3 * GEO_RATE**2 * float(sc.spacecraft.disturbances.gravity_gradient)
     known[0] = gg
     return known

@@ -1,7 +1,7 @@
 """Every wheel model of the attitude loop, compiled: commanded torques → realised torques.
 
 The closed loop asks each wheel for a torque (N·m, along its axis); what the
-wheel delivers depends on the model (``Scenario.wheel_model``):
+wheel delivers depends on the model (``Scenario.wheels.model``):
 
 - ``ideal``: the command, clipped to the rated torque.
 - ``physics``: the RW physics of :class:`rwlab.wheel.physics.WheelPhysics` in
@@ -92,12 +92,12 @@ def physics_params(sc) -> WheelParams:
     """
     return replace(
         IDEAL_PARAMS,
-        inertia=sc.wheel_inertia,
-        max_speed_rpm=sc.wheel_max_speed_rpm,
-        overspeed_fault_rpm=sc.wheel_max_speed_rpm * 1.1,
-        max_accel_rpm_s=rad_s_to_rpm(sc.wheel_max_torque / sc.wheel_inertia),
+        inertia=sc.wheels.inertia,
+        max_speed_rpm=sc.wheels.max_speed_rpm,
+        overspeed_fault_rpm=sc.wheels.max_speed_rpm * 1.1,
+        max_accel_rpm_s=rad_s_to_rpm(sc.wheels.max_torque / sc.wheels.inertia),
         # the current limit then allows 5 % more than the rated torque
-        torque_constant=sc.wheel_max_torque / RW90.current_limit * 1.05,
+        torque_constant=sc.wheels.max_torque / RW90.current_limit * 1.05,
     )
 
 
@@ -130,12 +130,12 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
         The arrays the compiled kernel steps.
     """
     nw = sc.n_wheels
-    kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheel_model]
+    kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheels.model]
     row = _physics_row(physics_params(sc))
     healthy = np.tile(row, (nw, 1))
     faulty = healthy.copy()
     fault_s = np.full(nw, math.inf)
-    for f in sc.wheel_faults:
+    for f in sc.wheels.faults:
         i = f["wheel"] - 1
         fault_s[i] = f["at_s"]
         faulty[i, P_VISC] *= f.get("friction", 1.0)
@@ -150,7 +150,7 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
     if kind == IDENTIFIED:
         from rwlab.wheel.identified import IdentifiedWheel
 
-        unit = IdentifiedWheel.from_json(sc.wheel_model_file)
+        unit = IdentifiedWheel.from_json(sc.wheels.model_file)
         A, B, C, D = unit.state_space()
         ident = np.array(
             [
@@ -160,7 +160,7 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
                 unit.Ts,
                 unit.speed_limit_rpm,
                 unit.accel_limit_rpm_s,
-                sc.wheel_inertia,
+                sc.wheels.inertia,
                 float(unit.servo is not None),
             ]
         )
@@ -168,7 +168,7 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
             servo = unit.servo.vector
         state = np.zeros((nw, S_X + max(2 * A.shape[0], 2)))
         for i, h in enumerate(hw0):
-            unit.reset(rad_s_to_rpm(h / sc.wheel_inertia))
+            unit.reset(rad_s_to_rpm(h / sc.wheels.inertia))
             state[i, S_CMD] = state[i, S_SPEED] = unit.speed_rpm
             x = unit.model_state()
             state[i, S_X : S_X + x.size] = x

@@ -4,15 +4,19 @@ A dispersion file is TOML (``[dispersions]`` or top-level keys), one table per
 field, e.g.::
 
     [dispersions]
-    inertia.xx = { distribution = "normal", sigma = 0.033, bounds = [-0.1, 0.1], relative = true }
-    disturbances.srp_offset.z = { distribution = "uniform", bounds = [-0.05, 0.05] }
+    spacecraft.inertia.xx = { distribution = "normal", sigma = 0.033, relative = true }
+    spacecraft.disturbances.srp_offset.z = { distribution = "uniform", bounds = [-0.05, 0.05] }
 
 A run's value is ``nominal + δ``, or ``nominal × (1 + δ)`` with ``relative = true``;
 δ is ``normal`` (``sigma``, optional ``mean`` = 0, optional ``bounds`` that
-truncate it) or ``uniform`` over ``bounds``. Products of inertia
-(``inertia.xy``, ``.xz``, ``.yz``) with ``relative = true`` are fractions of
-√(J_ii·J_jj) of the nominal inertia. The default set (``default_dispersions.toml``,
-package data) is what a reviewer of a GEO comsat's pointing budget expects.
+truncate it) or ``uniform`` over ``bounds``. Fields are named as in
+:meth:`rwlab.attitude.scenario.Scenario.with_` (``wheels.max_torque``), a vector's
+component with ``.x``, ``.y``, ``.z``; the flat names of the old scenario format
+(``wheel_max_torque``, ``inertia.xx``) are still read, with a ``FormatWarning``.
+Products of inertia (``spacecraft.inertia.xy``, ``.xz``, ``.yz``) with
+``relative = true`` are fractions of √(J_ii·J_jj) of the nominal inertia. The default
+set (``default_dispersions.toml``, package data) is what a reviewer of a GEO comsat's
+pointing budget expects.
 
 Each field draws from its own stream, seeded by the run's seed and the field's
 name: adding or removing a dispersion never changes the draws of the others.
@@ -21,8 +25,9 @@ name: adding or removing a dispersion never changes the draws of the others.
 from __future__ import annotations
 
 import math
+import warnings
 import zlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
@@ -30,46 +35,48 @@ import numpy as np
 from scipy import stats
 
 from rwlab._toml import read_table
-from rwlab.attitude.scenario import Scenario
-from rwlab.errors import ConfigError
+from rwlab.attitude.scenario import LEGACY_NAMES, SECTIONS, Scenario
+from rwlab.errors import ConfigError, FormatWarning
 
 __all__ = ["FIELDS", "Dispersion", "apply", "draw", "load_dispersions"]
 
 _AXES = ("x", "y", "z")
 _INERTIA = {"xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 _SCALARS = (
-    "wheel_inertia",
-    "wheel_max_torque",
-    "wheel_max_momentum",
-    "wheel_max_speed_rpm",
-    "sun_noise_deg",
-    "earth_noise_deg",
-    "process_noise_torque",
-    "sun_declination_deg",
-    "sun_phase_deg",
-    "initial_error_deg",
-    "estimator_error_deg",
-    "thruster_torque",
-    "wheel_torque_scale",
+    "wheels.inertia",
+    "wheels.max_torque",
+    "wheels.max_momentum",
+    "wheels.max_speed_rpm",
+    "wheels.torque_scale",
+    "sensors.sun_noise_deg",
+    "sensors.earth_noise_deg",
+    "spacecraft.process_noise_torque",
+    "spacecraft.disturbances.srp_area",
+    "spacecraft.disturbances.srp_reflectivity",
+    "sky.sun_declination_deg",
+    "sky.sun_phase_deg",
+    "run.initial_error_deg",
+    "filter.initial_error_deg",
+    "momentum.thruster_torque",
 )
-_VECTORS = (
-    "initial_axis",
-    "initial_rate",
-    "sun_sensor_misalignment_deg",
-    "earth_sensor_misalignment_deg",
-)
-_VECTORS2 = ("sun_sensor_bias_deg", "earth_sensor_bias_deg")  # two transverse axes
-_DIST_SCALARS = ("srp_area", "srp_reflectivity")
-_DIST_VECTORS = ("srp_offset", "constant_torque")
+_VECTORS = {  # vector fields and the axes a dispersion may name
+    "run.initial_axis": _AXES,
+    "run.initial_rate": _AXES,
+    "sensors.sun_sensor_misalignment_deg": _AXES,
+    "sensors.earth_sensor_misalignment_deg": _AXES,
+    "sensors.sun_sensor_bias_deg": _AXES[:2],  # two transverse axes
+    "sensors.earth_sensor_bias_deg": _AXES[:2],
+    "spacecraft.disturbances.srp_offset": _AXES,
+    "spacecraft.disturbances.constant_torque": _AXES,
+}
 
-#: Every field a dispersion may name: the physical truth the design does not choose.
+#: Every field a dispersion may name (scenario fields by their dotted names, a vector's
+#: component as .x / .y / .z, the inertia's as spacecraft.inertia.xx … .yz): the physical
+#: truth the design does not choose.
 FIELDS = (
-    tuple(f"inertia.{k}" for k in _INERTIA)
+    tuple(f"spacecraft.inertia.{k}" for k in _INERTIA)
     + _SCALARS
-    + tuple(f"{v}.{a}" for v in _VECTORS for a in _AXES)
-    + tuple(f"{v}.{a}" for v in _VECTORS2 for a in _AXES[:2])
-    + tuple(f"disturbances.{s}" for s in _DIST_SCALARS)
-    + tuple(f"disturbances.{v}.{a}" for v in _DIST_VECTORS for a in _AXES)
+    + tuple(f"{v}.{a}" for v, axes in _VECTORS.items() for a in axes)
 )
 _KEYS = {"distribution", "sigma", "mean", "bounds", "relative"}
 
@@ -181,13 +188,23 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
     if path is None:
         path = resources.files("rwlab.campaign") / "default_dispersions.toml"
     table = read_table(path, "dispersions", "dispersions")
-    out = []
-    for name, spec in _leaves(table, "", str(path)):
+    out, renamed = [], []
+    for old, spec in _leaves(table, "", str(path)):
+        name = _current_name(old)
+        if name != old:
+            renamed.append(f"{old} → {name}")
         if name not in FIELDS:
             raise ConfigError(
-                f"{path}: unknown field {name!r}; dispersible fields: {', '.join(FIELDS)}"
+                f"{path}: unknown field {old!r}; dispersible fields: {', '.join(FIELDS)}"
             )
         out.append(_parse(name, spec, str(path)))
+    if renamed:
+        warnings.warn(
+            f"{path}: dispersions named by the flat scenario fields of the old format; "
+            f"name them by section: {', '.join(renamed)}",
+            FormatWarning,
+            stacklevel=2,
+        )
     if not out:
         raise ConfigError(
             f"{path}: no dispersion in the file; a campaign disperses at least one field "
@@ -196,18 +213,32 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
     return tuple(out)
 
 
+def _current_name(name: str) -> str:
+    """A dispersion's field by its dotted scenario name (old flat names translated)."""
+    head, _, rest = name.partition(".")
+    if head in ("inertia", "disturbances"):
+        return f"spacecraft.{name}"
+    if head in LEGACY_NAMES and head not in SECTIONS:
+        return LEGACY_NAMES[head] + (f".{rest}" if rest else "")
+    return name
+
+
+def _split(name: str) -> tuple[str, int | None]:
+    """(the scenario field, the component's index or None) of a dispersion's field."""
+    path, _, axis = name.rpartition(".")
+    if path in _VECTORS:
+        return path, _AXES.index(axis)
+    return name, None
+
+
 def _nominal(sc: Scenario, name: str) -> tuple[float, float]:
     """(nominal value, scale of a relative δ) of a field."""
-    parts = name.split(".")
-    if parts[0] == "inertia":
+    if name.startswith("spacecraft.inertia."):
         J = sc.inertia_matrix
-        i, j = _INERTIA[parts[1]]
+        i, j = _INERTIA[name.rpartition(".")[2]]
         return float(J[i, j]), float(math.sqrt(J[i, i] * J[j, j]))
-    obj = sc.disturbances if parts[0] == "disturbances" else sc
-    parts = parts[1:] if parts[0] == "disturbances" else parts
-    value = getattr(obj, parts[0])
-    if len(parts) == 2:
-        value = value[_AXES.index(parts[1])]
+    path, index = _split(name)
+    value = sc.get(path) if index is None else sc.get(path)[index]
     return float(value), abs(float(value))
 
 
@@ -245,7 +276,7 @@ def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
     nominal : Scenario
         The scenario dispersed.
     values : dict of str to float
-        Field name (``inertia.xx``, ``disturbances.srp_torque.x``, ...) → value, field units.
+        Field name (``spacecraft.inertia.xx``, ``wheels.max_torque``, ...) → value, field units.
 
     Returns
     -------
@@ -253,29 +284,20 @@ def apply(nominal: Scenario, values: dict[str, float]) -> Scenario:
         A new scenario (``nominal`` is unchanged).
     """
     J = nominal.inertia_matrix.copy()
-    top = {f: list(getattr(nominal, f)) for f in _VECTORS + _VECTORS2}
-    dist = {f: list(getattr(nominal.disturbances, f)) for f in _DIST_VECTORS}
-    scalars, dist_scalars = {}, {}
+    changes: dict[str, Any] = {}
     for name, value in values.items():
-        parts = name.split(".")
-        if parts[0] == "inertia":
-            i, j = _INERTIA[parts[1]]
+        if name.startswith("spacecraft.inertia."):
+            i, j = _INERTIA[name.rpartition(".")[2]]
             J[i, j] = J[j, i] = value
-        elif parts[0] == "disturbances" and len(parts) == 3:
-            dist[parts[1]][_AXES.index(parts[2])] = value
-        elif parts[0] == "disturbances":
-            dist_scalars[parts[1]] = value
-        elif len(parts) == 2:
-            top[parts[0]][_AXES.index(parts[1])] = value
+            continue
+        path, index = _split(name)
+        if index is None:
+            changes[path] = value
         else:
-            scalars[name] = value
+            vector = list(changes.get(path, nominal.get(path)))
+            vector[index] = value
+            changes[path] = tuple(vector)
     off_diagonal = np.any(J != np.diag(np.diag(J)))
-    inertia = J.ravel() if off_diagonal or np.size(nominal.inertia) == 9 else np.diag(J)
-    dist_fields: dict[str, Any] = {k: tuple(v) for k, v in dist.items()} | dist_scalars
-    fields: dict[str, Any] = {k: tuple(v) for k, v in top.items()} | scalars
-    return replace(
-        nominal,
-        inertia=tuple(float(v) for v in inertia),
-        disturbances=replace(nominal.disturbances, **dist_fields),
-        **fields,
-    )
+    full = off_diagonal or np.size(nominal.spacecraft.inertia) == 9
+    changes["spacecraft.inertia"] = tuple(float(v) for v in (J.ravel() if full else np.diag(J)))
+    return nominal.with_(**changes)

@@ -91,11 +91,11 @@ class Campaign:
             raise ConfigError(
                 f"epoch_spread_days must be in [0, 3660], got {self.epoch_spread_days!r}"
             )
-        if self.epoch_spread_days > 0 and (self.epoch or self.scenario.epoch) is None:
+        if self.epoch_spread_days > 0 and (self.epoch or self.scenario.sky.epoch) is None:
             raise ConfigError("epoch_spread_days needs an epoch (the real sky)")
         if self.controller not in CONTROLLERS:
             raise ConfigError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
-        if not (math.isfinite(self.duration) and self.duration >= self.scenario.dt):
+        if not (math.isfinite(self.duration) and self.duration >= self.scenario.run.dt):
             raise ConfigError(f"duration must be at least one step, got {self.duration!r} s")
         if isinstance(self.runs, bool) or not isinstance(self.runs, int) or self.runs < 1:
             raise ConfigError(f"runs must be a whole number ≥ 1, got {self.runs!r}")
@@ -126,9 +126,9 @@ def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
     dispersed: the filter's model error a flight filter has."""
     values: dict = draw(campaign.dispersions, campaign.scenario, run_seed)
     sc = apply(campaign.scenario, values)
-    if not campaign.scenario.filter_inertia:
-        sc = sc.with_(filter_inertia=tuple(campaign.scenario.inertia))
-    epoch = campaign.epoch or campaign.scenario.epoch
+    if not campaign.scenario.filter.inertia:
+        sc = sc.with_(**{"filter.inertia": tuple(campaign.scenario.spacecraft.inertia)})
+    epoch = campaign.epoch or campaign.scenario.sky.epoch
     if epoch is not None:
         if campaign.epoch_spread_days > 0:
             from datetime import UTC, datetime, timedelta
@@ -141,7 +141,7 @@ def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
             rng = np.random.default_rng([run_seed, 0x45504F43])  # its own stream ("EPOC")
             days = rng.uniform(0, campaign.epoch_spread_days)
             epoch = (start + timedelta(seconds=round(days * 86400))).isoformat()
-        sc = sc.with_(epoch=epoch)
+        sc = sc.with_(**{"sky.epoch": epoch})
         values["epoch"] = epoch
     return sc, values
 
@@ -222,7 +222,7 @@ def fly_run(campaign: Campaign, run_seed: int, log_every: int = 1) -> tuple[SimR
         Seed, dispersed values and metrics.
     """
     sc, values = dispersed(campaign, run_seed)
-    steps = round(campaign.duration / sc.dt)
+    steps = round(campaign.duration / sc.run.dt)
     run, metrics = fly(
         sc,
         campaign.controller,
@@ -528,7 +528,7 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
     """
     if not rows:
         raise ConfigError("a budget needs at least one run")
-    req = campaign.scenario.pointing_requirement_deg
+    req = campaign.scenario.control.pointing_requirement_deg
     col = {
         k: np.array([r[k] for r in rows], dtype=float)
         for k in rows[0]
@@ -557,7 +557,7 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
     return {
         "runs": n,
         "scenario": campaign.scenario.name,
-        "epoch": campaign.epoch or campaign.scenario.epoch,
+        "epoch": campaign.epoch or campaign.scenario.sky.epoch,
         "epoch_spread_days": campaign.epoch_spread_days,
         "statistic_column": STATISTIC,
         "quantiles": quantile_table(col[STATISTIC]),

@@ -47,7 +47,7 @@ class _Cli(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
-            with _stop_signals():
+            with _stop_signals(), _one_line_warnings():
                 return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
             where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
@@ -62,6 +62,21 @@ class _Cli(click.Group):
             why = cause.args[0] if isinstance(cause, KeyboardInterrupt) and cause.args else ""
             click.echo(f"interrupted{f' ({why})' if why else ''}", err=True)
             sys.exit(130)
+
+
+def _one_line_warning(message, category, *_args, **_kwargs) -> None:
+    """Show a warning as ``warning: message`` on stderr (no file, line or source)."""
+    click.echo(f"warning: {' '.join(str(message).split())}", err=True)
+
+
+@contextlib.contextmanager
+def _one_line_warnings():
+    """While a command runs, every Python warning is one ``warning:`` line."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warning
+        yield
 
 
 @contextlib.contextmanager

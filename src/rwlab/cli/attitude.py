@@ -82,9 +82,9 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
     if not (math.isfinite(rho) and rho > 0):
         raise DesignError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
-    sc = load_scenario(scenario, **({"epoch": epoch} if epoch else {}))
+    sc = load_scenario(scenario, **({"sky.epoch": epoch} if epoch else {}))
     _check_steps(duration, sc)
-    if wheel_model and sc.epoch:
+    if wheel_model and sc.sky.epoch:
         raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
     if wheel_model:
         from rwlab.wheel.identified import IdentifiedWheel
@@ -118,6 +118,26 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
             f"{settle:>10} {m['torque_saturated_fraction']:11.3g} {m['crossover_rad_s']:17.3g}"
         )
     click.echo(_wrote(out, paths.values()))
+
+
+@attitude.command("convert-scenario")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--out", type=click.Path(dir_okay=False), help="Write it here [default: print it].")
+@click.option("--force", is_flag=True, help="Replace an existing --out file.")
+@_friendly_errors
+def attitude_convert_scenario(file, out, force):
+    """Rewrite a flat (old-format) scenario FILE in section tables (comments are dropped)."""
+    from rwlab._io import atomic_write_bytes
+    from rwlab.attitude.scenario import convert_scenario_file
+
+    text = convert_scenario_file(file)
+    if out is None:
+        click.echo(text, nl=False)
+        return
+    if Path(out).exists() and not force:
+        raise ConfigError(f"{out} exists; give --force to replace it")
+    atomic_write_bytes(out, lambda tmp: tmp.write_bytes(text.encode("utf-8")))
+    click.echo(f"wrote {out}")
 
 
 @attitude.command("ltr")
@@ -173,7 +193,7 @@ def _run_store(out, campaign, *, force: bool, resume: bool):
 
 def _check_steps(duration: float, sc) -> int:
     """The run's number of steps; more than 1e9 (years at 0.1 s) is a typo, refused now."""
-    steps = round(duration / sc.dt)
+    steps = round(duration / sc.run.dt)
     if steps > 1e9:
         raise ConfigError(f"--duration {duration:g} s is {steps:.3g} steps: more than 1e9")
     return steps
@@ -275,29 +295,29 @@ def attitude_simulate(
         raise ConfigError(
             f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
         )
-    overrides = {"dt": dt} if dt is not None else {}
-    sc = load_scenario(scenario, **overrides, **({"epoch": epoch} if epoch else {}))
+    overrides = {"run.dt": dt} if dt is not None else {}
+    sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
     steps = _check_steps(duration, sc)
     log_every = max(10, -(-steps // 100_000))
     config = {
         "scenario": sc.name,
         "controller": controller,
         "estimator": estimator or ("truth" if controller in ("pd", "lqr") else "ekf"),
-        "seed": sc.seed if seed is None else seed,
-        "dt_s": sc.dt,
+        "seed": sc.run.seed if seed is None else seed,
+        "dt_s": sc.run.dt,
         "duration_s": duration,
         "rho": rho if controller == "lqg_ltr" else None,
         "relinearize_period_s": relinearize,
-        "disturbances_known_to_filter": sc.disturbances_known_to_filter,
+        "disturbances_known_to_filter": sc.filter.disturbances_known,
         "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
-        "momentum_unloading": sc.momentum_unloading,
-        "wheel_model": sc.wheel_model,
-        "wheel_faults": list(sc.wheel_faults),
-        "epoch": sc.epoch,
-        "station_longitude_deg": sc.station_longitude_deg,
+        "momentum_unloading": sc.momentum.unloading,
+        "wheel_model": sc.wheels.model,
+        "wheel_faults": list(sc.wheels.faults),
+        "epoch": sc.sky.epoch,
+        "station_longitude_deg": sc.sky.station_longitude_deg,
         "steady_from_s": None,  # the run's own, filled in below
-        "gyro": sc.gyro is not None,
-        "star_tracker": sc.star_tracker is not None,
+        "gyro": sc.sensors.gyro is not None,
+        "star_tracker": sc.sensors.star_tracker is not None,
     }
     files = ["metrics.json", "trace.parquet", "report.html"]
     with (
@@ -458,7 +478,7 @@ def attitude_montecarlo(
         )
     met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"meeting ±{sc.control.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
         f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
     for q in stats["quantiles"]:

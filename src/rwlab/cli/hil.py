@@ -157,7 +157,7 @@ def hil(
     from rwlab.attitude.scenario import load_scenario
 
     _check_folder(out)
-    steps = round(duration / load_scenario(scenario).dt) + 1
+    steps = round(duration / load_scenario(scenario).run.dt) + 1
     with _stop_signals(), _steps_progress(steps, f"hil {controller}", unit="periods") as progress:
         result = run_hil(cfg, out, force=force, progress=progress)
     report = write_hil_report(result, out)

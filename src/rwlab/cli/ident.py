@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import click
@@ -26,12 +25,6 @@ def ident() -> None:
     FILE is a .csv, .dat, .parquet or .mat record, or the name of a bundled
     data set (see `rwlab datasets`).
     """
-    warnings.showwarning = _one_line_warning
-
-
-def _one_line_warning(message, category, *_args, **_kwargs) -> None:
-    """Show a warning as ``warning: message`` on stderr (no file, line or source)."""
-    click.echo(f"warning: {message}", err=True)
 
 
 def _estimate_command(name: str, order_names: list[str], estimator_name: str, doc: str):

@@ -360,18 +360,18 @@ def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
         raise ConfigError(
             f"{sc.name} has {sc.n_wheels} wheels; --nodes names {len(nodes)} ({nodes})"
         )
-    if not (math.isfinite(cfg.duration) and cfg.duration >= sc.dt):
-        raise ConfigError(f"--duration must be at least one control period ({sc.dt:g} s)")
-    if cfg.realtime and sc.dt > 0.1 + 1e-12:
+    if not (math.isfinite(cfg.duration) and cfg.duration >= sc.run.dt):
+        raise ConfigError(f"--duration must be at least one control period ({sc.run.dt:g} s)")
+    if cfg.realtime and sc.run.dt > 0.1 + 1e-12:
         raise ConfigError(
-            f"the wall-clock loop runs at 10 Hz or faster; {sc.name} has dt {sc.dt:g} s"
+            f"the wall-clock loop runs at 10 Hz or faster; {sc.name} has dt {sc.run.dt:g} s"
         )
     for node, fault in cfg.faults:
         if node not in nodes:
             raise ConfigError(f"--fault names node {node}, not one of the wheels {nodes}")
         if fault.t_s > cfg.duration:
             raise ConfigError(f"--fault {node}:{fault} starts after the run ends")
-    every = cfg.diagnosis_period_s / sc.dt
+    every = cfg.diagnosis_period_s / sc.run.dt
     if cfg.diagnosis is not False and (every < 1 or abs(every - round(every)) > 1e-9):
         raise ConfigError("the diagnosis period must be a whole number of control periods")
     return tuple(nodes)
@@ -405,10 +405,10 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     from rwlab.data import atomic_write_bytes
     from rwlab.testbed.record import RecordWriter
 
-    overrides = {"epoch": cfg.epoch} if cfg.epoch else {}
+    overrides = {"sky.epoch": cfg.epoch} if cfg.epoch else {}
     sc = load_scenario(cfg.scenario, **overrides)
     nodes = _check(cfg, sc)
-    seed = sc.seed if cfg.seed is None else cfg.seed
+    seed = sc.run.seed if cfg.seed is None else cfg.seed
     ctl, estimator, sim_kw = build_controller(sc, cfg.controller)
     twins = cfg.twins if cfg.twins is not None else cfg.interface in ("virtual", "udp_multicast")
     if cfg.faults and not twins:
@@ -422,13 +422,13 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     params = physics_params(sc)
     diagnosis = bool(cfg.wheel_bias_rpm) if cfg.diagnosis is None else cfg.diagnosis
     clock = WallClock() if cfg.realtime else SimClock()
-    rate = cfg.telemetry_rate or (50.0 if cfg.realtime else 1.0 / sc.dt)
+    rate = cfg.telemetry_rate or (50.0 if cfg.realtime else 1.0 / sc.run.dt)
     config = {
         "scenario": sc.name,
         "controller": cfg.controller,
         "estimator": estimator,
         "seed": seed,
-        "dt_s": sc.dt,
+        "dt_s": sc.run.dt,
         "duration_s": cfg.duration,
         "interface": cfg.interface,
         "channel": cfg.channel,
@@ -440,7 +440,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "wheel_bias_rpm": cfg.wheel_bias_rpm,
         "faults": [f"{n}:{f}" for n, f in cfg.faults],
         "wheel_params": params.to_dict(),
-        "epoch": sc.epoch,
+        "epoch": sc.sky.epoch,
         "diagnosis": diagnosis,
         "wheel_model": "bus",
     }
@@ -468,7 +468,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 "kind": "rwlab.hil/1",
                 "config": config,
                 "dbc_sha256": proto.dbc_sha256(),
-                "Ts": sc.dt,  # what `rwlab export --node N` samples a wheel at
+                "Ts": sc.run.dt,  # what `rwlab export --node N` samples a wheel at
                 "mode": "acceleration",
             },
             force=force,
@@ -502,7 +502,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
             restore()
     problems = bank.close()
     run = loop.sat.result()
-    m = metrics(run, sc.pointing_requirement_deg)
+    m = metrics(run, sc.control.pointing_requirement_deg)
     reference = ref_metrics = None
     if cfg.reference:
         reference, ref_metrics = reference_simulation(sc, cfg, seed, loop.h0, run.t.size)
@@ -513,7 +513,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "max_error_from_first_fault_deg": loop.max_error_from_fault if cfg.faults else None,
         "bench": {**loop.bench, "idle_problems": problems},
         "diagnosis_off": loop.diagnosis_off,
-        "measurement": measurement_effects(loop.wheel_log(), params, sc.dt, cfg.latency_s),
+        "measurement": measurement_effects(loop.wheel_log(), params, sc.run.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
         "config": config,
     }
@@ -530,7 +530,7 @@ def reference_simulation(sc: Scenario, cfg: HilConfig, seed: int, h0: np.ndarray
     physics wheel from the same momenta: (SimResult, its metrics)."""
     from rwlab.attitude.sim import simulate
 
-    ref = sc.with_(wheel_model="physics")
+    ref = sc.with_(**{"wheels.model": "physics"})
     ctl, estimator, kw = build_controller(ref, cfg.controller)
     run = simulate(
         ref,
@@ -542,7 +542,7 @@ def reference_simulation(sc: Scenario, cfg: HilConfig, seed: int, h0: np.ndarray
         wheel_momentum0=np.asarray(h0, float),
         **kw,
     )
-    m = metrics(run, sc.pointing_requirement_deg)
+    m = metrics(run, sc.control.pointing_requirement_deg)
     m["wheel_model"] = "physics (healthy: the injected faults are not flown here)"
     return run, m
 
@@ -606,9 +606,9 @@ def _real_time(priority: int | None):
 def _warm_up(sc: Scenario, ctl, estimator: str, sim_kw: dict) -> None:
     """Fly one sensor period on a throwaway satellite: the compiled helpers load (or
     compile) now, not in the first control periods of a wall-clock run."""
-    sat = Satellite(sc, ctl, estimator=estimator, duration=sc.sensor_period, **sim_kw)
+    sat = Satellite(sc, ctl, estimator=estimator, duration=sc.sensors.period, **sim_kw)
     while not sat.done:
-        sat.advance(sat.x[7:] + sat.wheel_torques() * sc.dt)
+        sat.advance(sat.x[7:] + sat.wheel_torques() * sc.run.dt)
 
 
 def _json_default(o):
@@ -656,7 +656,7 @@ class _Loop:
     def _spin_up(self, target: np.ndarray) -> None:
         """Ramp the wheels to their null-space bias in speed mode (``SPIN_UP_RPM_S``), hold
         ``SPIN_UP_HOLD_S``."""
-        bank, clock, dt = self.bank, self.clock, self.sc.dt
+        bank, clock, dt = self.bank, self.clock, self.sc.run.dt
         self.event("spin_up", f"wheels to {np.round(target, 1).tolist()} rpm (null space)")
         start = clock.now()
         k = 0
@@ -702,7 +702,7 @@ class _Loop:
             bank.twins[self.nodes.index(node)].schedule_faults([fault], origin=t0)
             self.event("fault_scheduled", f"node {node}: {fault}", t0)
         diag = self.diag = self._diagnosers(self.nodes) if self.diagnosis else {}
-        every = round(cfg.diagnosis_period_s / sc.dt)
+        every = round(cfg.diagnosis_period_s / sc.run.dt)
         acc_sum = {n: 0.0 for n in self.nodes}
         report_every = max(1, sat.steps // 100)
         while not sat.done:
@@ -719,14 +719,14 @@ class _Loop:
                 acc_sum[n] += (
                     rad_s_to_rpm(torques[i] / bank.params.inertia) if bank.active[n] else 0.0
                 )
-            target = t0 + (k + 1) * sc.dt + delay
+            target = t0 + (k + 1) * sc.run.dt + delay
             clock.sleep_until(target)
             wake = clock.now()
             readings = bank.read()
             sat.advance(bank.momenta(readings))
             if sat.t >= self._first_fault_s:
                 self.max_error_from_fault = max(self.max_error_from_fault, sat.error_deg)
-            self._t.append((k + 1) * sc.dt)
+            self._t.append((k + 1) * sc.run.dt)
             self._speed.append([r.speed_rpm for r in readings])
             self._cmd.append([rad_s_to_rpm(x / bank.params.inertia) for x in torques])
             if not simulated:
@@ -863,7 +863,7 @@ class _Loop:
     # -- figures -------------------------------------------------------------------------
     def timing(self) -> dict:
         """Loop-timing quality on the wall clock (None figures on the simulated clock)."""
-        out: dict = {"clock": "wall" if self._wake else "simulated", "period_s": self.sc.dt}
+        out: dict = {"clock": "wall" if self._wake else "simulated", "period_s": self.sc.run.dt}
         if not self._wake:
             return out
         late = np.array(self._lateness)

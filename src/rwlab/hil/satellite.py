@@ -111,22 +111,22 @@ class Satellite:
     ) -> None:
         if estimator not in ("ekf", "truth"):
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
-        if not (math.isfinite(duration) and duration >= scenario.dt):
-            raise ConfigError(f"duration must be at least one step ({scenario.dt:g} s)")
+        if not (math.isfinite(duration) and duration >= scenario.run.dt):
+            raise ConfigError(f"duration must be at least one step ({scenario.run.dt:g} s)")
         sc = self.scenario = scenario
         self.controller = controller
         self.use_ekf = estimator == "ekf"
-        self.dt = sc.dt
-        self.steps = round(duration / sc.dt)
-        self.sensor_every = round(sc.sensor_period / sc.dt)
+        self.dt = sc.run.dt
+        self.steps = round(duration / sc.run.dt)
+        self.sensor_every = round(sc.sensors.period / sc.run.dt)
         self.log_every = -(-max(1, int(log_every)) // self.sensor_every) * self.sensor_every
         if steady_after is None:
-            steady_after = steady_start(self.steps * sc.dt)
-        elif not (math.isfinite(steady_after) and 0 <= steady_after < self.steps * sc.dt):
+            steady_after = steady_start(self.steps * sc.run.dt)
+        elif not (math.isfinite(steady_after) and 0 <= steady_after < self.steps * sc.run.dt):
             raise ConfigError(
                 f"steady_after must be a number of seconds in [0, duration), got {steady_after!r}"
             )
-        self.steady_from = round(steady_after / sc.dt)
+        self.steady_from = round(steady_after / sc.run.dt)
         self.streams = _Streams(seed)
         x_q, w0, hw0, q_hat, w_hat, P = _initial(sc, self.streams.init, wheel_momentum0)
         self.x = np.concatenate([x_q, w0, hw0])
@@ -137,22 +137,22 @@ class Satellite:
         self.J_inv = np.linalg.inv(self.J)
         self.G = sc.wheel_matrix
         self.nw = self.G.shape[1]
-        self.h_max = np.full(self.nw, sc.wheel_max_momentum)
-        self.dist = sc.disturbances.vector()
+        self.h_max = np.full(self.nw, sc.wheels.max_momentum)
+        self.dist = sc.spacecraft.disturbances.vector()
         # the gyros' state [β walk, β Gauss–Markov, ω at the last sample] and the unit's
         # fixed errors, drawn as simulate draws them
         self.gs, gyro_E = np.zeros(9), np.zeros((3, 3))
-        if sc.gyro is not None:
-            gyro_E, self.gs[:3] = draw_gyro_errors(sc.gyro, self.streams.gyro)
+        if sc.sensors.gyro is not None:
+            gyro_E, self.gs[:3] = draw_gyro_errors(sc.sensors.gyro, self.streams.gyro)
             self.gs[6:] = w0
         self.sensors = _sensor_record(sc, gyro_E)
         psd = (
             default_filter_psd(sc)
             if filter_torque_psd is None
-            else sc.process_noise_torque**2 + filter_torque_psd
+            else sc.spacecraft.process_noise_torque**2 + filter_torque_psd
         )
         nx = P.shape[0]
-        m = sc.noise_margin * filter_noise_scale
+        m = sc.filter.noise_margin * filter_noise_scale
         # the estimator as the compiled loop has it (its own inertia, noise, gates)
         self.filt = _filter_record(sc, estimator, nx, psd, m)
         self.mode = self.filt.mode
@@ -164,9 +164,11 @@ class Satellite:
             self.Bmap[:, :3] = np.eye(3)
         self.w_mean, self.w_meas = np.zeros(3), np.zeros(3)
         self.unload = _unload_vector(sc)
-        self.noise_sd = sc.process_noise_torque / math.sqrt(sc.dt)
+        self.noise_sd = sc.spacecraft.process_noise_torque / math.sqrt(sc.run.dt)
         period = controller.update_period
-        self.block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.dt)))
+        self.block = (
+            BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.run.dt)))
+        )
         self.stats = kernel.new_stats()
         self.saturated = False
         self.k = 0
@@ -228,7 +230,7 @@ class Satellite:
         else:
             s_q, s_w = self.q_hat, self.w_hat[:3]
         K = np.asarray(
-            self.controller.gain(k * sc.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
+            self.controller.gain(k * sc.run.dt, s_q, _w_bo(s_q, s_w), self.G @ self.x[7:]), float
         )
         self.K_w, self.M = np.ascontiguousarray(K[:, 3:]), _rate_map(K)
         self.noise = self.streams.block(k, n_steps, (sn.every, sn.tracker_every), self.noise_sd, sn)
@@ -236,8 +238,8 @@ class Satellite:
         # the compiled loop starts each block with these fresh (kernel.run_block)
         self._status, self._tracker_status = (0.0, 0.0), 0.0
         self._sun_rejected = self._earth_rejected = 0
-        self.sky_t0 = math.floor(k * sc.dt / SKY_STEP) * SKY_STEP
-        rows = math.ceil(((k + n_steps) * sc.dt - self.sky_t0) / SKY_STEP) + 2
+        self.sky_t0 = math.floor(k * sc.run.dt / SKY_STEP) * SKY_STEP
+        rows = math.ceil(((k + n_steps) * sc.run.dt - self.sky_t0) / SKY_STEP) + 2
         self.sky = sky_table(sc, self.sky_t0 + SKY_STEP * np.arange(rows))
 
     def _sky_at(self, t: float):
@@ -414,7 +416,7 @@ class Satellite:
         # the idled wheels' measured torque is known: the others make up for it
         idle_torque = self.G[:, ~self.active] @ self._hw_dot_last[~self.active]
         hw_cmd = self._pinv @ (tau_thr - tau - idle_torque)
-        tau_max = sc.wheel_max_torque
+        tau_max = sc.wheels.max_torque
         at_limit = bool(np.any(np.abs(hw_cmd) >= tau_max))
         hw_cmd = np.clip(hw_cmd, -tau_max, tau_max)
         st[_S["torque_peak_Nm"]] = max(st[_S["torque_peak_Nm"]], float(np.max(np.abs(hw_cmd))))
@@ -451,7 +453,7 @@ class Satellite:
         if "steady_torque_jitter_sq_sum" in _S:  # white jitter of σ gives E[d²] = 2σ²
             d = hw_cmd - self._hw_prev
             st[_S["steady_torque_jitter_sq_sum"]] += float(np.sum(d * d)) / (2 * self.nw)
-            power = np.abs(hw_cmd * self.x[7:] / self.scenario.wheel_inertia)
+            power = np.abs(hw_cmd * self.x[7:] / self.scenario.wheels.inertia)
             st[_S["steady_wheel_power_sum"]] += float(np.sum(power))
         if at_limit:
             st[_S["steady_torque_saturated_steps"]] += 1
@@ -597,7 +599,7 @@ class Satellite:
             est[:, :4],
             w_est,
             np.array(taus),
-            rad_s_to_rpm(x[:, 7:] / self.scenario.wheel_inertia),
+            rad_s_to_rpm(x[:, 7:] / self.scenario.wheels.inertia),
             np.array(log["nees"]),
             self.saturated,
             self.stats.copy(),
@@ -609,7 +611,7 @@ class Satellite:
         r.gyro_bias_est, r.sun_sensor_alignment_est = est[:, 13:16], est[:, 16:19]
         r.stats["steps"] = self.steps
         r.stats["dt_s"] = self.dt
-        r.stats["sensor_period_s"] = self.scenario.sensor_period
+        r.stats["sensor_period_s"] = self.scenario.sensors.period
         r.stats["filter_states"] = self.P.shape[0] if self.use_ekf else 0
         r.sigma = np.array(log["sigma"])
         r.est_error_axes = _axis_errors(r.q, r.q_est)

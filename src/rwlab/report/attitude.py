@@ -106,7 +106,7 @@ def write_comparison(
         **comp.metrics,
         "scenario": comp.scenario.name,
         "rho": comp.rho,
-        "requirement_deg": comp.scenario.pointing_requirement_deg,
+        "requirement_deg": comp.scenario.control.pointing_requirement_deg,
         "config": comp.config,
     }
     if "lqg_identified_wheel" in comp.metrics:
@@ -122,17 +122,18 @@ def write_comparison(
 
 def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
     sc = comp.scenario
-    req = sc.pointing_requirement_deg
+    req = sc.control.pointing_requirement_deg
     page = Page(f"Attitude control — LQR vs LQG vs LQG/LTR ({sc.name})")
     page.text(
-        f"Scenario {sc.name}: inertia {sc.inertia} kg·m², {sc.n_wheels} wheels "
-        f"({sc.wheel_model}, ±{sc.wheel_max_torque:g} N·m, {sc.wheel_max_momentum:.3g} N·m·s), "
-        f"sun sensor {sc.sun_noise_deg:g}°, earth sensor {sc.earth_noise_deg:g}° (1σ; the "
-        f"filter assumes ×{sc.noise_margin:g}), initial error {sc.initial_error_deg:g}°, "
-        f"control period {sc.dt:g} s, sensors every {sc.sensor_period:g} s. Every controller "
+        f"Scenario {sc.name}: inertia {sc.spacecraft.inertia} kg·m², {sc.n_wheels} wheels "
+        f"({sc.wheels.model}, ±{sc.wheels.max_torque:g} N·m, {sc.wheels.max_momentum:.3g} N·m·s), "
+        f"sun sensor {sc.sensors.sun_noise_deg:g}°, earth sensor "
+        f"{sc.sensors.earth_noise_deg:g}° (1σ; the filter assumes ×{sc.filter.noise_margin:g}), "
+        f"initial error {sc.run.initial_error_deg:g}°, "
+        f"control period {sc.run.dt:g} s, sensors every {sc.sensors.period:g} s. Every controller "
         "sees the same process noise, sensor noise and initial estimate (one random stream "
         f"per source). SRP, tides and J2 are "
-        f"{'known' if sc.disturbances_known_to_filter else 'unknown'} to the filter. "
+        f"{'known' if sc.filter.disturbances_known else 'unknown'} to the filter. "
         f"Requirement: ±{req:g}°."
     )
     columns = {
@@ -424,7 +425,7 @@ def _estimation_figure(page, run) -> None:
 
 def _disturbance_estimates(r) -> list[tuple[str, np.ndarray]]:
     """The filter's disturbance states that it has (name, (K, 3) N·m): a body torque and
-    the SRP lever arm (see ``Scenario.filter_disturbance_state``)."""
+    the SRP lever arm (see ``Scenario.filter.disturbance_state``)."""
     pairs = (("torque_est", r.torque_est), ("srp_lever_est", r.srp_lever_est))
     return [(name, est) for name, est in pairs if est is not None and np.any(est)]
 
@@ -459,19 +460,19 @@ def write_simulation(
     table = _trace_table(run)
     atomic_write_bytes(targets["trace.parquet"], lambda tmp: pq.write_table(table, tmp))
     page = Page(f"Attitude simulation — {config['controller']} on {scenario.name}")
-    req = scenario.pointing_requirement_deg
+    req = scenario.control.pointing_requirement_deg
     sky = (
-        f"Sky: the ephemerides from {scenario.epoch} (UTC), station at "
-        f"{scenario.station_longitude_deg:g}° E; in the Earth's shadow for "
+        f"Sky: the ephemerides from {scenario.sky.epoch} (UTC), station at "
+        f"{scenario.sky.station_longitude_deg:g}° E; in the Earth's shadow for "
         f"{metrics['eclipse_s']:g} s, earth sensor blinded for "
         f"{metrics['earth_sensor_blinded_s']:g} s."
-        if scenario.epoch
+        if scenario.sky.epoch
         else "Sky: paper B's fixed vectors (no epoch)."
     )
     page.text(
         f"{config['controller']} with estimator {config['estimator']}, {run.t[-1]:g} s at dt "
-        f"{scenario.dt:g} s ({metrics['steps']} steps), seed {config['seed']}. Disturbances "
-        f"{'known' if scenario.disturbances_known_to_filter else 'unknown'} to the filter. "
+        f"{scenario.run.dt:g} s ({metrics['steps']} steps), seed {config['seed']}. Disturbances "
+        f"{'known' if scenario.filter.disturbances_known else 'unknown'} to the filter. "
         f"Steady state from t = {run.steady_from_s:g} s. Requirement ±{req:g}°. {sky}"
     )
     rows = [[k, v] for k, v in metrics.items()]
@@ -483,11 +484,11 @@ def write_simulation(
     axes[0].axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
     axes[0].set_ylabel("error [°]")
     axes[0].legend(fontsize=8, loc="upper right")
-    h = run.wheel_speed_rpm * (np.pi / 30) * scenario.wheel_inertia / scenario.wheel_max_momentum
+    h = run.wheel_speed_rpm * (np.pi / 30) * scenario.wheels.inertia / scenario.wheels.max_momentum
     for i in range(h.shape[1]):
         axes[1].plot(*_envelope(t_h, h[:, i]), lw=0.8, label=f"wheel {i + 1}")
-    axes[1].axhline(scenario.unload_start_fraction, color="k", ls=":", lw=1)
-    axes[1].axhline(-scenario.unload_start_fraction, color="k", ls=":", lw=1)
+    axes[1].axhline(scenario.momentum.unload_start_fraction, color="k", ls=":", lw=1)
+    axes[1].axhline(-scenario.momentum.unload_start_fraction, color="k", ls=":", lw=1)
     axes[1].set_ylabel("momentum / limit")
     axes[1].legend(fontsize=8, loc="upper right")
     for i, axis in enumerate("xyz"):

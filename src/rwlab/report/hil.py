@@ -53,12 +53,12 @@ def write_hil_report(result, out_dir: str | os.PathLike) -> Path:
 def _page(result) -> Page:
     m, sc, run, ref = result.metrics, result.scenario, result.run, result.reference
     cfg = m["config"]
-    req = sc.pointing_requirement_deg
+    req = sc.control.pointing_requirement_deg
     page = Page(f"Hardware in the loop — {cfg['controller']} on {sc.name}")
     clock = "the wall clock" if cfg["clock"] == "wall" else "the simulated clock"
     page.text(
         f"{cfg['controller']} ({cfg['estimator']}) flew {cfg['duration_s']:g} s on {clock}, "
-        f"control period {sc.dt:g} s, seed {cfg['seed']}. Each wheel was node "
+        f"control period {sc.run.dt:g} s, seed {cfg['seed']}. Each wheel was node "
         f"{', '.join(map(str, cfg['nodes']))} on the {cfg['interface']} bus"
         f"{' (twins started by the run)' if cfg['twins'] else ''}; every period the torques "
         "went out as acceleration commands and the plant took each wheel's momentum from "
@@ -210,8 +210,8 @@ def _measurement(page: Page, m: dict, result, sc) -> None:
     for node, log in result.wheel_log.items():
         if log["speed_rpm"].size < 3:
             continue
-        realised = np.diff(log["speed_rpm"]) / sc.dt
-        err = (realised - log["command_rpm_s"][1:]) * sc.wheel_inertia * np.pi / 30
+        realised = np.diff(log["speed_rpm"]) / sc.run.dt
+        err = (realised - log["command_rpm_s"][1:]) * sc.wheels.inertia * np.pi / 30
         ax.plot(*_envelope(log["t"][1:] / 3600, err), lw=0.5, label=f"node {node}")
     ax.set_xlabel("t [h]")
     ax.set_ylabel("realised − commanded [N·m]")
