@@ -72,15 +72,28 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 @click.option(
     "--wheel-bias-rpm",
     type=Number(-1e5, 1e5),
-    default=0.0,
-    show_default=True,
-    help="Spin the wheels up along the null space first (pyramid): no zero crossings.",
+    default=None,
+    help="Spin the wheels up along the null space first (pyramid): no zero crossings "
+    "[default: 1000 on a redundant set such as a pyramid, else 0].",
 )
 @click.option(
     "--diagnosis/--no-diagnosis",
     default=None,
     help="Live diagnosis of every wheel [default: on with --wheel-bias-rpm, whose wheels "
     "never hover at zero speed where the current test false-alarms].",
+)
+@click.option(
+    "--health-check/--no-health-check",
+    default=None,
+    help="Excite the wheels' null space (no body torque) and test that each wheel follows "
+    "its commanded acceleration [default: on with the diagnosis on a redundant set].",
+)
+@click.option(
+    "--steady-after",
+    type=SECONDS,
+    default=None,
+    help="Seconds after which steady-state statistics start [default: half the run, "
+    "at most its first hour].",
 )
 @click.option(
     "--calibration",
@@ -114,6 +127,8 @@ def hil(
     telemetry_rate,
     wheel_bias_rpm,
     diagnosis,
+    health_check,
+    steady_after,
     calibration,
     rt_priority,
     no_reference,
@@ -150,6 +165,8 @@ def hil(
         telemetry_rate=telemetry_rate,
         wheel_bias_rpm=wheel_bias_rpm,
         diagnosis=diagnosis,
+        health_check=health_check,
+        steady_after=steady_after,
         calibration_s=calibration,
         reference=not no_reference,
         rt_priority=rt_priority,
