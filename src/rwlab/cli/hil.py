@@ -90,7 +90,7 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option(
     "--steady-after",
-    type=SECONDS,
+    type=Number(0, 1e9),
     default=None,
     help="Seconds after which steady-state statistics start [default: half the run, "
     "at most its first hour].",

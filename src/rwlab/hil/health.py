@@ -262,4 +262,3 @@ class TrackingTest:
     def healthy_spread_rpm_s(self) -> float:
         """The calibrated σ of the window residual, rpm/s (NaN before calibration)."""
         return self.sigma
-

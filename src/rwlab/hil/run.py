@@ -753,9 +753,7 @@ class _Loop:
         if self.health:
             self.dither = NullSpaceDither(sc.wheel_matrix, bank.params.inertia)
             self.tracking = {
-                n: TrackingTest(
-                    sc.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour
-                )
+                n: TrackingTest(sc.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour)
                 for n in self.nodes
             }
             self.tracked = dict(self.tracking)
