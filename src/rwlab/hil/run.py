@@ -40,7 +40,7 @@ from rwlab.attitude.control import (
     slew_rate_limit,
 )
 from rwlab.attitude.scenario import Scenario, load_scenario
-from rwlab.attitude.sim import SimResult
+from rwlab.attitude.sim import SimResult, _w_bo
 from rwlab.attitude.wheels import physics_params
 from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
@@ -306,6 +306,8 @@ _SAT = {
     "wheel_momentum_Nms": {"type": "array"},
     "sun_sensor": {"type": ["array", "null"]},
     "earth_sensor": {"type": ["array", "null"]},
+    "gyro_rad_s": {"type": ["array", "null"]},
+    "star_tracker_q": {"type": ["array", "null"]},
     "active_wheels": {"type": "array"},
 }
 
@@ -817,6 +819,7 @@ class _Loop:
         sat = self.sat
         step = sat._step
         sensors = sat.last_sensors if step.get("measured") else {}
+        tracker = sat.last_tracker if step.get("measured") else None
         x = sat.x
         self.record.write(
             "/satellite",
@@ -826,12 +829,14 @@ class _Loop:
                 "estimation_error_deg": sat.estimation_error_deg,
                 "q": x[:4].tolist(),
                 "q_est": sat.q_hat.tolist(),
-                "w_bo": (x[4:7]).tolist(),
+                "w_bo": _w_bo(x[:4], x[4:7]).tolist(),  # relative to the orbit frame
                 "torque_demand_Nm": step["demand"].tolist(),
                 "wheel_torque_cmd_Nm": np.asarray(torques).tolist(),
                 "wheel_momentum_Nms": x[7:].tolist(),
                 "sun_sensor": None if sensors.get("sun") is None else sensors["sun"].tolist(),
                 "earth_sensor": None if sensors.get("earth") is None else sensors["earth"].tolist(),
+                "gyro_rad_s": sat.w_meas.tolist() if sat.sensors.gyro else None,
+                "star_tracker_q": None if tracker is None else tracker.tolist(),
                 "active_wheels": [n for n in self.nodes if self.bank.active[n]],
             },
         )
