@@ -453,8 +453,9 @@ def test_gyro_and_star_tracker_readings_are_recorded_and_exported(tmp_path):
         cos = abs(float(np.dot(r["star_tracker_q"], r["q"])))
         assert np.degrees(2 * np.arccos(min(1.0, cos))) * 3600 < 100
     csv = tmp_path / "sat.csv"
+    record = str(out / "record.mcap")
     res = CliRunner().invoke(
-        main, ["export", str(out / "record.mcap"), "--format", "csv", "--out", str(csv), "--satellite"]
+        main, ["export", record, "--format", "csv", "--out", str(csv), "--satellite"]
     )
     assert res.exit_code == 0, res.output
     import pandas as pd
