@@ -469,3 +469,43 @@ def test_gyro_and_star_tracker_readings_are_recorded_and_exported(tmp_path):
                str(tmp_path / "x.csv"), "--satellite", "--node", "1"],
     )  # fmt: skip
     assert wrong.exit_code == 2 and wrong.output.startswith("error:")
+
+
+# -- the output folder ---------------------------------------------------------------------------
+
+
+def test_a_second_hil_on_a_busy_output_folder_is_refused_at_once(tmp_path):
+    from rwlab._io import output_folder
+
+    out = tmp_path / "o"
+    args = ["hil", "--duration", "30", "--channel", _channel(), "--out", str(out)]
+    with output_folder(out, ["record.mcap"], what="hil run"):  # another run holds it
+        res = CliRunner().invoke(main, args)
+        assert not out.exists()  # nothing was flown nor written
+    assert res.exit_code == 2
+    assert res.output.startswith("error:") and "another rwlab run" in res.output
+
+
+def test_a_failed_hil_run_keeps_its_record_but_never_looks_complete(tmp_path, monkeypatch):
+    real = Satellite.advance
+
+    def advance(self, h):
+        if self.k == 50:
+            raise RuntimeError("boom")
+        real(self, h)
+
+    monkeypatch.setattr(Satellite, "advance", advance)
+    out = tmp_path / "o"
+    args = ["hil", "--duration", "30", "--channel", _channel(), "--no-reference"]
+    res = CliRunner().invoke(main, [*args, "--out", str(out)])
+    assert res.exit_code == 2 and res.output.splitlines()[-1].startswith("error:"), res.output
+    assert not out.exists()  # nothing at the name a complete run would have
+    [failed] = tmp_path.glob("o.failed-*")
+    assert str(failed) in res.output and "boom" in res.output
+    assert not (failed / "metrics.json").exists()
+    _assert_idled_and_closed(failed, "error")
+    assert not list(tmp_path.glob(".o.*"))  # no staging folder or lock left behind
+    monkeypatch.setattr(Satellite, "advance", real)
+    res = CliRunner().invoke(main, [*args, "--out", str(out)])  # the name is still free
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} == {"record.mcap", "metrics.json", "report.html"}

@@ -7,12 +7,15 @@ import click
 from rwlab.cli._common import (
     SECONDS,
     Number,
-    _check_folder,
     _friendly_errors,
+    _output,
     _stop_signals,
+    _wrote,
     main,
 )
 from rwlab.errors import ConfigError
+
+HIL_FILES = ("record.mcap", "metrics.json", "report.html")
 
 
 def _nodes(text: str | None) -> tuple[int, ...] | None:
@@ -173,11 +176,16 @@ def hil(
     )
     from rwlab.attitude.scenario import load_scenario
 
-    _check_folder(out)
     steps = round(duration / load_scenario(scenario).dt) + 1
-    with _stop_signals(), _steps_progress(steps, f"hil {controller}", unit="periods") as progress:
-        result = run_hil(cfg, out, force=force, progress=progress)
-    report = write_hil_report(result, out)
+    # locked before anything starts; published whole on success; a failed run's record is
+    # kept (with its stop event) in OUT.failed-<time>, never in OUT
+    with (
+        _output(out, HIL_FILES, force, "hil run", keep_failed=True) as stage,
+        _stop_signals(),
+        _steps_progress(steps, f"hil {controller}", unit="periods") as progress,
+    ):
+        result = run_hil(cfg, stage, progress=progress)
+        report = write_hil_report(result, stage)
     m = result.metrics
     for key in ("steady_max_error_deg", "steady_rms_error_deg", "max_error_deg"):
         ref = m["reference_simulation"]
@@ -196,4 +204,4 @@ def hil(
         )
     b = m["bench"]
     click.echo(f"lost commands {b['lost_commands']}, lost telemetry {b['lost_telemetry_frames']}")
-    click.echo(f"wrote {', '.join(str(p) for p in (*result.paths.values(), report))}")
+    click.echo(_wrote(out, [*result.paths.values(), report]))
