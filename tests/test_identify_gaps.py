@@ -54,3 +54,27 @@ def test_a_sample_time_finer_than_the_telemetry_is_refused(records, tmp_path):
     r = _identify(clean, "--Ts", period / 2, "--out", tmp_path / "fine")
     assert r.exit_code == 2 and "shorter than the telemetry period" in r.output
     assert not (tmp_path / "fine").exists()
+
+
+def test_split_at_the_gap_gives_the_clean_records_model(records, tmp_path):
+    """--gaps split: the two gap-free parts identified as one merged multi-experiment
+    data set choose the clean record's structure, every parameter within its σ."""
+    import json
+
+    clean, dropout = records
+    assert _identify(clean, "--out", tmp_path / "c").exit_code == 0
+    r = _identify(dropout, "--gaps", "split", "--out", tmp_path / "s")
+    assert r.exit_code == 0, r.output
+    assert "split at telemetry gaps into 2 experiments" in r.output
+    a = json.loads((tmp_path / "c" / "study.json").read_text())
+    b = json.loads((tmp_path / "s" / "study.json").read_text())
+    assert a["segments"] is None
+    [(s0, e0), (s1, e1)] = b["segments"]
+    assert s0 == 0 and 299.0 < e0 < 300.5 and 301.5 < s1 <= 303.0 and e1 > 590
+    assert b["chosen"]["structure"] == a["chosen"]["structure"]
+    assert b["delay"]["nk"] == a["delay"]["nk"]
+    for name, value in a["chosen"]["parameters"].items():
+        sigma = max(a["chosen"]["std"][name], b["chosen"]["std"][name])
+        assert abs(b["chosen"]["parameters"][name] - value) <= sigma, name
+    model = json.loads((tmp_path / "s" / "model.json").read_text())
+    assert model["data_segments"] == b["segments"]
