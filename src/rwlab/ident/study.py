@@ -380,10 +380,13 @@ def identification_study(
         greybox=grey,
         nlarx=black,
         physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
-        segments=None
-        if pieces is None
-        else [[data.tstart + a * data.Ts, data.tstart + (b - 1) * data.Ts] for a, b in segments],
+        segments=None if pieces is None else _segment_times(data, pieces["all"]),
     )
+
+
+def _segment_times(data: IOData, ranges) -> list[list[float]]:
+    """``[t_start, t_end]`` (s) of the first and last sample of each range."""
+    return [[data.tstart + a * data.Ts, data.tstart + (b - 1) * data.Ts] for a, b in ranges]
 
 
 def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | None:
@@ -413,6 +416,7 @@ def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | Non
         "est": est,
         "val": max(val, key=lambda r: r[1] - r[0]),
         "longest": max(ranges, key=lambda r: r[1] - r[0]),
+        "all": ranges,
     }
 
 
