@@ -78,3 +78,24 @@ def test_split_at_the_gap_gives_the_clean_records_model(records, tmp_path):
         assert abs(b["chosen"]["parameters"][name] - value) <= sigma, name
     model = json.loads((tmp_path / "s" / "model.json").read_text())
     assert model["data_segments"] == b["segments"]
+
+
+def test_gap_free_segments_cut_out_exactly_the_stale_samples(records):
+    """Truth: the frames removed. A clean record is one segment; the dropout's samples
+    that repeat the frame before it belong to no segment, and nothing else is cut."""
+    import numpy as np
+
+    from rwlab.testbed import load_record
+    from rwlab.testbed.load import gap_free_segments
+
+    clean, dropout = records
+    full = load_record(clean)
+    assert gap_free_segments(clean) == [(0, full.N)]
+    data = load_record(dropout, outputs=("speed", "age"), max_gap=np.inf)
+    [(a0, b0), (a1, b1)] = gap_free_segments(dropout)
+    assert a0 == 0 and b1 == data.N
+    t = data.tstart + data.Ts * np.arange(data.N)
+    assert np.all((t[b0:a1] > 300.0) & (t[b0:a1] < 302.1))  # only the dropout is cut
+    age, period = data.y[:, 1], 0.1  # the twin's telemetry: 10 Hz
+    assert np.all(age[b0:a1] > period)  # every cut sample holds a stale frame ...
+    assert np.all(age[a0:b0] < period) and np.all(age[a1:b1] < period)  # ... no kept one

@@ -174,8 +174,8 @@ def gap_free_segments(
 
     The gaps are those :func:`load_record` refuses without ``max_gap`` (an
     interval between frames longer than ``Ts``, by :func:`telemetry_gaps`'s
-    rule); a sample strictly inside one holds a stale frame and belongs to no
-    segment.
+    rule); a sample inside one that holds the frame before it for longer than one
+    telemetry period holds a stale frame and belongs to no segment.
 
     Parameters
     ----------
@@ -199,9 +199,11 @@ def gap_free_segments(
     tt = np.array([m["t"] for m in record.topic(f"{prefix}/telemetry")])
     grid = t0 + data.tstart + data.Ts * np.arange(data.N)
     eps = 1e-9 * max(1.0, abs(float(grid[-1])))
+    period = float(np.median(np.diff(tt)))
     stale = np.zeros(data.N, dtype=bool)
-    for start, length in telemetry_gaps(tt, data.Ts):
-        stale |= (grid > start + eps) & (grid < start + length - eps)
+    for start, length in telemetry_gaps(tt, data.Ts):  # the frame at `start` is held ...
+        held = grid - start  # ... this long: older than one telemetry period is stale
+        stale |= (held > period + eps) & (grid < start + length - eps)
     edges = np.flatnonzero(np.diff(np.concatenate([[1], stale.astype(int), [1]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
