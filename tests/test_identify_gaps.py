@@ -99,3 +99,24 @@ def test_gap_free_segments_cut_out_exactly_the_stale_samples(records):
     age, period = data.y[:, 1], 0.1  # the twin's telemetry: 10 Hz
     assert np.all(age[b0:a1] > period)  # every cut sample holds a stale frame ...
     assert np.all(age[a0:b0] < period) and np.all(age[a1:b1] < period)  # ... no kept one
+
+
+def test_segments_cut_at_the_split_never_cross_a_gap():
+    """The estimation pieces end at the split or at a gap, the validation is the longest
+    gap-free piece after the split, and a piece too short to estimate from is dropped."""
+    from rwlab.errors import DataError
+    from rwlab.ident.study import _pieces
+
+    # 1000 samples, split at 700; gaps at 300-310 (estimation) and 850-860 (validation)
+    p = _pieces(1000, 0.7, [(0, 300), (310, 850), (860, 1000)], needed_per_piece=30)
+    assert p["est"] == [(0, 300), (310, 700)]
+    assert p["val"] == (700, 850)  # 150 samples against 140 after the second gap
+    assert p["longest"] == (310, 850)
+    assert _pieces(1000, 0.7, [(0, 1000)], 30) is None  # no gap: the plain study
+    p = _pieces(1000, 0.7, [(0, 20), (25, 1000)], needed_per_piece=30)
+    assert p["est"] == [(25, 700)]  # 20 samples: too short for the regressors
+    for bad in ([(0, 500), (400, 1000)], [(0, 1200)], []):
+        with pytest.raises(DataError):
+            _pieces(1000, 0.7, bad, 30)
+    with pytest.raises(DataError, match="no estimation or validation piece"):
+        _pieces(1000, 0.7, [(0, 690), (720, 1000)], needed_per_piece=300)
