@@ -237,6 +237,38 @@ def test_dead_motor_in_a_pyramid_is_named_idled_and_survived(tmp_path):
     assert kinds.index("reallocate") < kinds.index("stop")
 
 
+@pytest.mark.slow
+def test_a_healthy_pyramid_raises_no_alarm_and_the_excitation_costs_no_pointing(tmp_path):
+    """Another seed than the fault's, no fault: the command-tracking tests (calibrated on
+    the first 200 s) stay quiet on all four wheels, and the null-space excitation leaves
+    the pointing as the simulation of the same seed without it (within the bench's 2×)."""
+    cfg = HilConfig(
+        scenario="geo-smallsat-pyramid",
+        duration=1400.0,
+        seed=8,
+        channel=_channel(),
+        calibration_s=200.0,
+    )
+    m = run_hil(cfg, tmp_path).metrics
+    assert m["wheel_faults"] == []
+    sigma = m["health_check"]["residual_sigma_rpm_s"]
+    assert len(sigma) == 4 and all(0.3 < v < 3.0 for v in sigma.values())  # ≈ 0.5·√2 rpm/s
+    ref = m["reference_simulation"]
+    assert m["steady_max_error_deg"] <= max(2 * ref["steady_max_error_deg"], 0.02)
+
+
+def test_steady_after_sets_the_window_of_bench_and_simulation(tmp_path):
+    cfg = HilConfig(duration=60.0, seed=1, channel=_channel(), steady_after=20.0)
+    result = run_hil(cfg, tmp_path / "a")
+    assert result.run.steady_from_s == result.reference.steady_from_s == 20.0
+    assert result.metrics["config"]["steady_after_s"] == 20.0
+    res = CliRunner().invoke(
+        main, ["hil", "--duration", "30", "--steady-after", "30", "--out", str(tmp_path / "b")]
+    )
+    assert res.exit_code == 2 and "--steady-after" in res.output
+    assert not (tmp_path / "b").exists()
+
+
 def test_the_gyro_filter_flies_on_the_bus(tmp_path):
     """geo-comsat-gyro (issue 24's sensors) through twins: the gyro-driven 12-state filter
     holds the requirement with the wheels' telemetry in the loop, as it does in simulation."""
