@@ -103,7 +103,7 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     type=SECONDS,
     default=300.0,
     show_default=True,
-    help="Seconds of healthy telemetry that calibrate the diagnosis.",
+    help="Seconds of healthy telemetry that calibrate the diagnosis and the health check.",
 )
 @click.option(
     "--rt-priority",
