@@ -52,11 +52,30 @@ from rwlab.errors import ConfigError, RwlabError
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
+@click.option(
+    "--gaps",
+    type=click.Choice(["refuse", "split"]),
+    default="refuse",
+    show_default=True,
+    help="A record with telemetry gaps: refuse it, or split it at the gaps into segments "
+    "identified as separate experiments merged (MATLAB merge(iddata); reported as segments).",
+)
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
 def identify(
-    file, out, Ts, input_col, output_col, preprocess, split, tolerance, workers, scheduler, force
+    file,
+    out,
+    Ts,
+    input_col,
+    output_col,
+    preprocess,
+    split,
+    tolerance,
+    gaps,
+    workers,
+    scheduler,
+    force,
 ):
     """Run paper A's whole identification study on a record or data file.
 
@@ -75,6 +94,7 @@ def identify(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gaps=gaps,
         force=force,
     )
     if Path(file).is_dir():
@@ -98,6 +118,9 @@ def identify(
         study, paths = _identify_one(
             file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
         )
+    if study.get("segments"):
+        parts = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in study["segments"])
+        click.echo(f"split at telemetry gaps into {len(study['segments'])} experiments: {parts}")
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
     for row in study["orders"] + study["others"]:
@@ -225,6 +248,7 @@ def _identify_one(
     split,
     tolerance,
     force,
+    gaps="refuse",
     progress=None,
     echo=None,
 ):
@@ -237,7 +261,14 @@ def _identify_one(
     )
     from rwlab.report.identification import write_study
 
-    data, saturation = load_study_data(file, Ts, input_col=input_col, output_col=output_col)
+    data, saturation = load_study_data(
+        file, Ts, input_col=input_col, output_col=output_col, gaps=gaps
+    )
+    segments = None
+    if gaps == "split" and Path(file).suffix.lower() == ".mcap":
+        from rwlab.testbed.load import gap_free_segments
+
+        segments = gap_free_segments(file, data.Ts)
     if echo is not None:
         echo(f"data: {data!r}")
     result = identification_study(
@@ -254,7 +285,8 @@ def _identify_one(
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
         },
-        current=load_current(file, Ts),
+        current=load_current(file, Ts, gaps=gaps),
+        segments=segments,
     )
     model = wheel_model(  # the owner class: the healthy reference is added below
         result,

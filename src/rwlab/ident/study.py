@@ -37,8 +37,9 @@ convention is recorded in ``study.json`` as ``initial_conditions``.
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import control
@@ -89,6 +90,9 @@ class StudyResult(ShortRepr):
         ZOH and Tustin transfer functions and the discrete-vs-continuous check.
     acceleration : dict
         The acceleration check (Fig. 24).
+    segments : list of [t_start, t_end] or None
+        The gap-free parts the record was split into (s from its start), each an
+        experiment of its own; None for one record without gaps.
     """
 
     data: IOData
@@ -110,6 +114,7 @@ class StudyResult(ShortRepr):
     greybox: WheelGreyBox | None = None
     nlarx: NLARXModel | None = None
     physical_val: IOData | None = field(default=None, repr=False)
+    segments: list[list[float]] | None = None
 
     def to_pandas(self):
         """The structures tried (orders and other structures), one row each.
@@ -154,6 +159,7 @@ class StudyResult(ShortRepr):
             "continuous": {k: v for k, v in self.continuous.items() if k != "tf"},
             "acceleration": self.acceleration,
             "nonlinear": self.nonlinear,
+            "segments": self.segments,
         }
 
 
@@ -203,6 +209,7 @@ def identification_study(
     progress: Callable[[int, int, str], None] | None = None,
     datasheet: dict | None = None,
     current=None,
+    segments: Sequence[tuple[int, int]] | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -247,6 +254,14 @@ def identification_study(
     current : array_like, shape (N,), optional
         The record's motor current (A) at the speed's instants: the grey box's
         second output (it makes kt and the friction observable).
+    segments : sequence of (int, int), optional
+        ``[i0, i1)`` sample ranges of the record's gap-free parts (e.g. from
+        :func:`rwlab.testbed.load.gap_free_segments`); the samples between them are
+        not used. Each part is an experiment of its own, as MATLAB's
+        ``merge(iddata)``: the estimation part of every segment enters one estimate
+        (the criteria summed, no regressor across a boundary); the delay scan, the
+        validation and the nonlinear stage use the longest piece of their part, and
+        the preprocessing takes its statistics from every estimation piece.
 
     Returns
     -------
@@ -268,8 +283,20 @@ def identification_study(
             f"{max(orders)} with delays up to {nk_max} needs at least {needed} (ten samples "
             "per parameter and lag in each part); record longer or lower the orders"
         )
-    prepared = _preprocessed(data, preprocess, split)
+    pieces = _pieces(data.N, split, segments, needed_per_piece=worst + 2 * max(orders) + 2)
+    prepared = _preprocessed(data, preprocess, split, pieces)
     est, val = prepared.split(split)
+    fit_data: IOData | list[IOData] = est
+    physical, scan, cur = data, est, current
+    if pieces is not None:
+        est_parts = [prepared[a:b] for a, b in pieces["est"]]
+        fit_data = est_parts if len(est_parts) > 1 else est_parts[0]
+        scan = max(est_parts, key=len)
+        a, b = pieces["val"]
+        val = prepared[a:b]
+        a, b = pieces["longest"]  # the nonlinear stage: one gap-free experiment
+        physical = data[a:b]
+        cur = None if current is None else np.asarray(current, dtype=float)[a:b]
     total, done = len(orders) + 5 + int(nonlinear), 0
 
     def step(label: str) -> None:
@@ -278,7 +305,7 @@ def identification_study(
         if progress is not None:
             progress(done, total, label)
 
-    losses = delay_scan(est, 2, 2, 0, nk_max)
+    losses = delay_scan(scan, 2, 2, 0, nk_max)
     step("delay scan")
     nk = min(losses, key=lambda k: losses[k])
     if nk == 0:
@@ -287,7 +314,7 @@ def identification_study(
     models: dict[str, PolyModel] = {}
     rows = []
     for n in orders:
-        m = arx(est, n, n, nk)
+        m = arx(fit_data, n, n, nk)
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
         step(m.structure)
@@ -298,7 +325,7 @@ def identification_study(
         ("OE", oe, (2, 2, nk_pem)),
         ("BJ", bj, (2, 1, 1, 2, nk_pem)),
     ):
-        m = _try(estimate, est, *args)
+        m = _try(estimate, fit_data, *args)
         if m is not None:
             models[m.structure] = m
             others.append(_row(m, val))
@@ -324,14 +351,14 @@ def identification_study(
         for name in (chosen.structure, *(r["structure"] for r in others[:1]))
     }
     rng = np.random.default_rng(seed)
-    new_u = _new_input(rng, est, val.N)
+    new_u = _new_input(rng, scan, val.N)
     continuous = _continuous(chosen, new_u)
     step("validation")
     servo, nl, grey, black = None, None, None, None
     if nonlinear:
-        servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
+        servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
         sheet = None if datasheet is None else {**DATASHEET, **datasheet}
-        grey, black = _wheel_models(data, split, servo, nl, sheet, current)
+        grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
         step("nonlinear")
     return StudyResult(
         data=prepared,
@@ -352,8 +379,45 @@ def identification_study(
         nonlinear=nl,
         greybox=grey,
         nlarx=black,
-        physical_val=data.split(split)[1],
+        physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
+        segments=None if pieces is None else _segment_times(data, pieces["all"]),
     )
+
+
+def _segment_times(data: IOData, ranges) -> list[list[float]]:
+    """``[t_start, t_end]`` (s) of the first and last sample of each range."""
+    return [[data.tstart + a * data.Ts, data.tstart + (b - 1) * data.Ts] for a, b in ranges]
+
+
+def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | None:
+    """The segments cut at the estimation/validation split: ``est`` (ranges of every
+    estimation piece long enough to estimate from), ``val`` (the longest validation
+    piece), ``longest`` (the longest segment); None without segments or with one whole."""
+    if segments is None:
+        return None
+    ranges = [(int(a), int(b)) for a, b in segments]
+    if (
+        not ranges
+        or any(not 0 <= a < b <= n for a, b in ranges)
+        or any(b0 > a1 for (_, b0), (a1, _) in itertools.pairwise(ranges))
+    ):
+        raise DataError(f"segments must be ordered, disjoint sample ranges within 0..{n}")
+    if ranges == [(0, n)]:
+        return None
+    k = round(split * n)
+    est = [(a, min(b, k)) for a, b in ranges if min(b, k) - a >= needed_per_piece]
+    val = [(max(a, k), b) for a, b in ranges if b - max(a, k) >= needed_per_piece]
+    if not est or not val:
+        raise DataError(
+            f"the record's gap-free segments {ranges} leave no estimation or validation piece "
+            f"of {needed_per_piece} samples at the split {split:g}; record again without gaps"
+        )
+    return {
+        "est": est,
+        "val": max(val, key=lambda r: r[1] - r[0]),
+        "longest": max(ranges, key=lambda r: r[1] - r[0]),
+        "all": ranges,
+    }
 
 
 DATASHEET = {
@@ -414,11 +478,15 @@ def _nonlinear_row(model, val: IOData) -> dict:
     }
 
 
-def _preprocessed(data: IOData, preprocess: str, split: float) -> IOData:
-    """``data`` preprocessed with the statistics of its estimation part only."""
+def _preprocessed(data: IOData, preprocess: str, split: float, pieces=None) -> IOData:
+    """``data`` preprocessed with the statistics of its estimation part only (of its
+    estimation pieces, with segments: never of the stale samples in a gap)."""
     if preprocess == "none":
         return data
     reference = data.split(split)[0]
+    if pieces is not None:
+        rows = np.concatenate([np.arange(a, b) for a, b in pieces["est"]])
+        reference = IOData(data.u[rows], data.y[rows], data.Ts)
     if preprocess == "detrend":
         return data.detrend(reference=reference)
     if preprocess == "scale":
@@ -611,6 +679,9 @@ def wheel_model(
         nonlinear_models=others,
         nonlinear_chosen=nl.get("chosen"),
         nonlinear_choice=nl.get("choice"),
+        data_segments=None
+        if result.segments is None
+        else tuple((float(a), float(b)) for a, b in result.segments),
     )
 
 
@@ -633,7 +704,7 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
     )
 
 
-def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
+def load_current(path: str, Ts: float | None = None, *, gaps: str = "refuse") -> np.ndarray | None:
     """The motor current (A) of a testbed record at the speed's instants, or None
     for a file without one (the grey box then fits the speed alone).
 
@@ -643,6 +714,8 @@ def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
         A record (``.mcap``); other files give None.
     Ts : float, optional
         Sample time, s (the record's own by default).
+    gaps : {'refuse', 'split'}
+        ``split``: read a record with telemetry gaps whole (see :func:`load_study_data`).
     """
     from pathlib import Path
 
@@ -650,8 +723,10 @@ def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
 
     if Path(path).suffix.lower() != ".mcap":
         return None
+    extra = {"max_gap": math.inf} if gaps == "split" else {}
     try:
-        return load(path, Ts, input_columns="command", output_columns="current_a").y[:, 0]
+        columns = {"input_columns": "command", "output_columns": "current_a"}
+        return load(path, Ts, **columns, **extra).y[:, 0]
     except DataError:
         return None
 
@@ -664,6 +739,7 @@ def load_study_data(
     output_col: str | None = None,
     max_orders: int = 5,
     nk_max: int = 10,
+    gaps: str = "refuse",
 ) -> tuple[IOData, dict]:
     """Read a testbed record (``.mcap``), an exported or other data file, or a bundled set.
 
@@ -675,7 +751,12 @@ def load_study_data(
     its telemetry period, is refused (``DataError``): its samples there would repeat a
     stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
     a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
+    With ``gaps="split"`` such a record is read whole, stale samples included: the caller
+    identifies its gap-free parts as separate experiments (``identification_study``'s
+    ``segments``, from :func:`rwlab.testbed.load.gap_free_segments`).
     """
+    if gaps not in ("refuse", "split"):
+        raise DataError(f"gaps must be 'refuse' or 'split', got {gaps!r}")
     from pathlib import Path
 
     from rwlab import datasets
@@ -691,12 +772,18 @@ def load_study_data(
         from rwlab.errors import RecordGapError
 
         try:
-            data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
+            try:  # no max_gap: every gap and a too-fine Ts refused
+                data = load(path, Ts, **columns)
+            except RecordGapError:
+                if gaps != "split":
+                    raise
+                # Ts was accepted before the gaps were found: read it whole
+                data = load(path, Ts, **columns, max_gap=math.inf)
         except RecordGapError as exc:
             raise RecordGapError(
                 f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
                 "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
-                "or export the gap-free parts and identify each."
+                "or identify its gap-free parts as separate experiments (--gaps split)."
             ) from None
         wheel = data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:

@@ -173,6 +173,16 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         "'steady' initial conditions (every signal held its first value), not compare's "
         "default of an initial state fitted to the validation output."
     )
+    if study.get("segments"):
+        parts = ", ".join(f"{a:.2f}–{b:.2f} s" for a, b in study["segments"])
+        page.text(
+            f"The record has telemetry gaps: it was split into {len(study['segments'])} "
+            f"gap-free segments ({parts}), identified as separate experiments merged "
+            "(MATLAB merge(iddata)): every segment's estimation part enters one estimate, "
+            "no regressor crosses a gap; the delay scan, the validation and the nonlinear "
+            "stage use the longest piece of their part. The samples in the gaps are not used.",
+            note=True,
+        )
     ch = study["chosen"]
     page.html(
         f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
