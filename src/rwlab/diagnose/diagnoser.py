@@ -64,6 +64,9 @@ FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare rela
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
+STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 12000 rpm at the
+# acceleration limit outlasts any fixed hold time, s
+STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 DROPOUT_BLOCK_S = 10.0
@@ -260,6 +263,7 @@ class Diagnoser:
         self._was_stale = True
         self._lost: float | None = None
         self._command: tuple[float, float] = (math.nan, -math.inf)
+        self._still_since = math.inf  # since when wheel and model are quiet, s
         if reference is not None:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
                 raise ConfigError(
@@ -331,7 +335,13 @@ class Diagnoser:
         # hold a well-regulated wheel's Hall reading repeats; the speed and lag tests and
         # the frozen check catch a sensor stuck there once the command changes)
         self._moving = abs(r["acceleration"] - r["accel_rpm_s"]) >= QUIET_RPM_S
-        if usable and self._moving and speed_rpm != 0 and self._last_speed not in (None, 0.0):
+        if self._moving or abs(r["accel_rpm_s"]) >= QUIET_RPM_S or not usable:
+            self._still_since = math.inf
+        elif self._still_since == math.inf:
+            self._still_since = t_s
+        # a reading near zero repeats while the wheel rests in stiction: no evidence
+        self._moving = self._moving and abs(speed_rpm) >= STILL_RPM
+        if usable and self._moving and self._last_speed not in (None, 0.0):
             self.repeats[0] += repeat
             self.repeats[1] += 1
         self._last_speed = speed_rpm
@@ -360,7 +370,8 @@ class Diagnoser:
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
         prev = self._prev
         self._prev = {"accel": accel, "model_accel": model_accel}
-        if t_s - self._command[1] >= SETTLE_S and abs(self._command[0]) <= HELD_MAX_RPM:
+        settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
+        if settled and abs(self._command[0]) <= HELD_MAX_RPM:
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
