@@ -138,9 +138,20 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
+    # the current balance holds at the limit too: a weak motor draws 1/F the current the
+    # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
+    excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
+    excess = excess[np.isfinite(excess)]
+    if excess.size >= 5:
+        e = float(np.median(excess)) - ev["ref_mean"]["motor"]
+        if e > LAG_SPLIT:
+            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
+            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
-    if after.size:  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
+    if (
+        after.size and excess.size < 5
+    ):  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
         base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
         if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one

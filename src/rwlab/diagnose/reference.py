@@ -45,7 +45,7 @@ DEFAULT_TOLERANCE = {
     "motor": 0.15,
     "speed": 2.0,
     "lag": 0.03,
-    "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing's warm-up
+    "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing warm-up
 }
 
 
