@@ -121,7 +121,9 @@ def _record(cache: Path, name: str, spec: tuple) -> Path:
     path = cache / f"{name}.mcap"
     if not path.exists():
         unit, seed, signal, duration, faults, _, _ = spec
-        cfg = ExperimentConfig(signal=signal, duration=duration, seed=seed, unit=unit, faults=faults)
+        cfg = ExperimentConfig(
+            signal=signal, duration=duration, seed=seed, unit=unit, faults=faults
+        )
         run_experiment(cfg, cache / "tmp.mcap", force=True)
         (cache / "tmp.mcap").rename(path)
     return path
@@ -172,7 +174,9 @@ def _healthy(args, run, cache: Path, specs: dict) -> None:
     for name, spec in specs.items():
         path = _record(cache, name, spec)
         hours += spec[3] / 3600
-        latched += [f"{name} ({spec[2]}, unit {spec[0]}): {a.kind} at {a.t_s}" for a in run(path).alarms]
+        latched += [
+            f"{name} ({spec[2]}, unit {spec[0]}): {a.kind} at {a.t_s}" for a in run(path).alarms
+        ]
         for rate in args.rates:
             counts[rate].update(
                 a.detector for a in run(path, false_alarms_per_hour=rate, latch=False).alarms
@@ -195,10 +199,24 @@ def _truth(text: str) -> set[str]:
     return {part.split("=")[0] for part in text.split("+")}
 
 
+SIZED = ("friction", "torque_constant", "speed_sensor_bias", "current_limit")
+
+
+def _sizes(text: str) -> dict[str, float]:
+    """The injected sizes of the faults that come with a 95 % interval."""
+    pairs = (part.split("=") for part in text.split("+") if "=" in part)
+    return {name: float(value) for name, value in pairs if name in SIZED}
+
+
 def _faults_part(run, cache: Path, specs: dict) -> None:
     confusion: dict[str, Counter] = defaultdict(Counter)
     detected = named = early = both = pairs = 0
-    print(f"{'record':<10} {'fault':<40} {'signal':<6} {'det':>6} {'named':>5} {'early':>5} sizes")
+    covered: Counter = Counter()
+    intervals: Counter = Counter()
+    print(
+        f"{'record':<10} {'unit':>4} {'fault':<40} {'signal':<6} {'det':>6} {'named':>5} "
+        f"{'early':>5} sizes"
+    )
     for name, (unit, _, signal, duration, _, text, onset) in specs.items():
         alarms = run(_record(cache, name, specs[name])).alarms
         truth = _truth(text)
@@ -215,21 +233,36 @@ def _faults_part(run, cache: Path, specs: dict) -> None:
         if len(truth) > 1:
             pairs += 1
             both += truth <= kinds
+        for a in after:
+            size = _sizes(text).get(a.kind)
+            if size is not None and a.ci is not None:
+                intervals[a.kind] += 1
+                covered[a.kind] += a.ci[0] <= size <= a.ci[1]
         label = f"{text}{' @0' if onset == 0 else ''}"
         confusion[label][after[0].kind if after else "none"] += 1
         delay = f"{after[0].t_s - onset:.0f}s" if after else "missed"
         sizes = " ".join(
-            f"{a.kind}:{a.magnitude:.3g}[{a.ci[0]:.3g},{a.ci[1]:.3g}]"
-            if a.magnitude is not None and a.ci is not None
-            else a.kind
-            for a in after
+            dict.fromkeys(
+                f"{a.kind}:{a.magnitude:.3g}[{a.ci[0]:.3g},{a.ci[1]:.3g}]"
+                if a.magnitude is not None and a.ci is not None
+                else a.kind
+                for a in after
+            )
         )
-        print(f"{name:<10} {label:<40} {signal:<6} {delay:>6} {ok!s:>5} {len(before):>5} {sizes}")
+        print(
+            f"{name:<10} {unit:>4} {label:<40} {signal:<6} {delay:>6} {ok!s:>5} "
+            f"{len(before):>5} {sizes}"
+        )
     n = len(specs)
     print(
         f"\ndetected {detected}/{n} ({100 * detected / n:.0f} %); named right {named}/{detected} "
         f"({100 * named / max(detected, 1):.0f} %); both named {both}/{pairs}; "
         f"records with an alarm before onset: {early}"
+    )
+    print(
+        "95 % intervals holding the injected size: "
+        + ", ".join(f"{k} {covered[k]}/{intervals[k]}" for k in SIZED if intervals[k])
+        + " (current limit: the unit's true clamp is within ±2 % of the injected value)"
     )
     print("\nconfusion (injected → first name within the window):")
     for fault, c in confusion.items():

@@ -18,9 +18,18 @@ friction   constant speed (|α| < 10 rpm/s), |ω| ≥ 500 rpm  relative excess o
 motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess of     increase
                                                            current over the
                                                            inertial current
-speed      command held ≥ 30 s                             speed − command, rpm   either way
+speed      command held ≥ 30 s, wheel and model quiet      speed − command, rpm   either way
+           (|α| < 10 rpm/s) ≥ 10 s
 lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
 =========  ==============================================  =====================  ==========
+
+``friction_change`` compares the friction test's samples at ≥ 1500 rpm with the
+unit's own friction law (viscous, Coulomb and current offset over the
+reference's; ridge least squares on the record's samples older than 300 s): a
+friction rise smaller than the spread between units, when it starts within the
+record. A lag alarm is named by the current balance on the lag samples: a weak
+motor draws 1/F the current the achieved acceleration needs, a lowered clamp
+exactly that current.
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
@@ -203,6 +212,8 @@ class _FrictionChange(_BlockCusum):
         self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the baseline
         self._signs = [0, 0]  # baseline samples at positive, negative speed
         self._law: np.ndarray | None = None
+        self._cov = np.zeros((3, 3))
+        self.law_sd: deque = deque()  # (t_s, σ of the law's prediction, value units)
 
     def _ridge(self) -> np.ndarray:
         """The law's least squares, shrunk towards the reference's by the spread between
@@ -214,7 +225,8 @@ class _FrictionChange(_BlockCusum):
         noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
         prior = np.array([0.3 * abs(self.c[1]) + 1e-9, 0.3 * abs(self.c[2]) + 1e-4, 5e-3])
         A = self._xtx / noise**2 + np.diag(1 / prior**2)
-        return np.linalg.solve(A, self._xtr / noise**2)
+        self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
+        return self._cov @ self._xtr / noise**2
 
     def add_sample(self, t_s: float, residual_a: float, speed_rpm: float, friction_a: float):
         """One constant-speed sample: current residual (A), speed (rpm), the reference's
@@ -240,7 +252,17 @@ class _FrictionChange(_BlockCusum):
         own = float(self._law @ x)
         friction_own = float(self._law[:2] @ x[:2])  # the offset is no friction
         unit_friction = max(abs(friction_a) + sign * friction_own, 0.3 * abs(friction_a))
+        # the baseline law's own uncertainty at this speed, in the value's unit: the same
+        # for every sample of a hold, so averaging does not shrink it (sizing's interval)
+        self.law_sd.append((t_s, math.sqrt(float(x @ self._cov @ x)) / unit_friction))
+        while self.law_sd[0][0] < t_s - HISTORY_S:
+            self.law_sd.popleft()
         return self.add(t_s, sign * (residual_a - own) / unit_friction)
+
+    def law_uncertainty(self, n: int) -> float:
+        """Mean σ of the baseline law's prediction over the last ``n`` values."""
+        sd = [v for _, v in list(self.law_sd)[-n:]]
+        return float(np.mean(sd)) if sd else 0.0
 
 
 class _Dropout:
@@ -521,6 +543,7 @@ class Diagnoser:
         if detector == "friction_change" and change is not None and change.raw:
             # the size relative to the record's start, not to the reference's unit
             ev["friction"] = change.since_change()
+            ev["friction_model_sd"] = change.law_uncertainty(len(ev["friction"]))
             detector = "friction"
         ref = self.reference
         assert ref is not None  # alarms come only from an armed detector
