@@ -34,8 +34,8 @@ constant speed). Two faults at once are both named when both are significant
 a rotor fault). Confidence intervals are 95 %: the block means' σ on the healthy
 reference (noise), and model uncertainty where the size rests on a model: a
 friction-change size on the posterior σ of the record's own friction law, an
-absolute friction size (against the reference's unit) on the spread of friction
-between healthy units (:data:`FRICTION_UNIT_SD`).
+absolute friction or a torque-constant size (against the reference's unit) on
+the spread between healthy units (:data:`FRICTION_UNIT_SD`, :data:`MOTOR_UNIT_SD`).
 """
 
 from __future__ import annotations
@@ -53,6 +53,8 @@ Z95 = 1.959964
 # size from the absolute friction test is against the reference's unit; its interval holds
 # this spread as model uncertainty (a friction-change size is against the unit itself).
 FRICTION_UNIT_SD = math.sqrt(2) * 0.3 / math.sqrt(3)
+# ... and of the inertial current I/k_t between two units: I ±2 %, k_t ±5 %, uniform
+MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
@@ -90,6 +92,7 @@ def _motor(ev: dict) -> tuple[float, float] | None:
 
 
 def _torque_constant(e: float, half: float) -> Finding:
+    half = math.hypot(half, Z95 * MOTOR_UNIT_SD * (1 + e))  # against the reference's unit
     lo, hi = 1 / (1 + e + half), 1 / max(1 + e - half, 1e-9)
     return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
 
