@@ -252,3 +252,32 @@ def test_live_alarms_are_the_offline_alarms(tmp_path, model_file):
     offline = _diagnose(path, model_file).alarms
     assert {a.kind for a in offline} == {"friction", "speed_sensor_stuck"}
     assert [m.split(" (")[0] for m in live] == [f"{a.kind} at {a.t_s:.1f} s" for a in offline]
+
+
+def test_friction_change_compares_a_unit_with_its_own_law():
+    """Another unit (viscous ×1.25, Coulomb ×0.75, a 4 mA current offset) in holds at
+    random speeds of both signs: against the reference's law its relative excess changes
+    with speed; against its own law fitted on older samples it does not, until its
+    friction steps ×1.5 at 1500 s (truth built here, not by the detector)."""
+    from rwlab.diagnose.diagnoser import _FrictionChange
+    from rwlab.diagnose.reference import BlockStats
+
+    c = np.array([1.8e-3, 3.6e-6, 7e-3, 0.0])  # the reference's current model (A per unit)
+    stats = BlockStats(0.0, 0.05, 20, 0.5, 0, "batch means")
+    det = _FrictionChange(stats, 0.15, cusum_threshold(1e6 / 40), 6, c)
+    rng = np.random.default_rng(5)
+    alarms, sizes, t = [], [], 0.0
+    while t < 1800:
+        speed = rng.choice([-1, 1]) * rng.uniform(1500, 6000)
+        for _ in range(rng.integers(20, 60)):  # one hold, 0.5 s samples
+            t += 0.5
+            ref = c[1] * speed + c[2] * math.copysign(1, speed)
+            unit = 1.25 * c[1] * speed + 0.75 * c[2] * math.copysign(1, speed)
+            unit *= 1.5 if t >= 1500 else 1.0
+            residual = unit - ref + 4e-3 + 5e-4 * rng.standard_normal()
+            if det.add_sample(t, residual, speed, ref):
+                alarms.append(t)
+                sizes.append(1 + float(np.mean(det.since_change())))  # as the alarm sizes it
+                det.restart()
+    assert alarms and 1500 <= alarms[0] <= 1600, alarms
+    assert sizes[0] == pytest.approx(1.5, abs=0.1)
