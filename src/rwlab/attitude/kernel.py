@@ -41,7 +41,7 @@ from rwlab.attitude.ekf import (
     attitude_update_into,
     error_jacobian_into,
     gated_update_into,
-    gyro_jacobian_into,
+    gyro_predict_covariance_into,
     predict_covariance_into,
     propagate_attitude_into,
 )
@@ -745,13 +745,13 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
         d[1] = plant.dist[1] * srp_scale  # SRP: none in the shadow, ∝ 1/r² of the Sun
         dm[1] = filt.dist_model[1] * srp_scale
         if measured:  # covariance to the next measurement, F at this estimate
-            if mode == GYRO:
-                gyro_jacobian_into(est[4:7], F)
+            if mode == GYRO:  # F's blocks written out: a tenth of the dense products
+                gyro_predict_covariance_into(P, est[4:7], filt.Qc, T_sensor, Wn)
             else:
                 error_jacobian_into(
                     q_hat, w_hat, h_body, filt.J, filt.J_inv, n, filt.dist_model[0], Bmap, F, W3
                 )
-            predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
+                predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
         if mode == DYNAMICS:
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
