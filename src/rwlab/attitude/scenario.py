@@ -132,6 +132,17 @@ class Scenario:
     filter_inertia : the inertia the filter's dynamics model uses (3 or 9 values;
         empty: the truth's) — the model error of a flight filter.
     wheel_torque_scale : realised wheel torque over the command (1: exact).
+
+    r4sky additions (wheels, momentum):
+    wheel_stiction : for the "physics" wheels, the twin's friction law at low speed
+        (breakaway + Stribeck + Coulomb + viscous, stuck at rest until the motor beats
+        the breakaway torque; ``rwlab.attitude.wheels``); False: Coulomb + viscous only.
+    wheel_friction_factor : the true friction over what the drive's feed-forward assumes
+        (a worn or cold bearing; "physics" wheels).
+    momentum_bias : N·m·s the wheels are held at, off zero speed (0: none): with four
+        wheels along the null vector of G (no body momentum, no torque; a slow null-space
+        loop holds it), with three orthogonal wheels on the pitch wheel (the target the
+        unloading steers to); see ``sim.bias_momenta``.
     """
 
     name: str = "custom"
@@ -198,9 +209,15 @@ class Scenario:
     wheel_torque_scale: float = 1.0
     filter_sun_sensor_alignment: bool = True
     filter_earth_sensor_alignment: bool = True
+    # r4sky additions (section: wheels)
+    wheel_stiction: bool = True
+    wheel_friction_factor: float = 1.0
+    # r4sky additions (section: momentum)
+    momentum_bias: float = 0.0
 
     def __post_init__(self) -> None:
         _check_types(self)
+        _check_r4sky(self)
         _check_attitude_sensors(self)
         J = self.inertia_matrix
         if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(J) <= 0):
@@ -359,6 +376,20 @@ _FAULT_KEYS = {
     "torque_constant": "a factor ≥ 0",
     "current_limit": "A ≥ 0",
 }
+
+
+def _check_r4sky(sc: Scenario) -> None:
+    """The wheel-friction and momentum-bias fields."""
+    f = sc.wheel_friction_factor
+    if not _is_number(f) or f <= 0:
+        raise ConfigError(f"{sc.name}: wheel_friction_factor must be a number > 0, got {f!r}")
+    b = sc.momentum_bias
+    if not _is_number(b) or not abs(b) < sc.unload_start_fraction * sc.wheel_max_momentum:
+        raise ConfigError(
+            f"{sc.name}: momentum_bias must be a number (N·m·s) below unload_start_fraction × "
+            f"wheel_max_momentum ({sc.unload_start_fraction * sc.wheel_max_momentum:g}), "
+            f"got {b!r}"
+        )
 
 
 def _check_wheel_faults(sc: Scenario) -> None:
