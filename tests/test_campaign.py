@@ -91,6 +91,10 @@ def test_the_default_set_covers_what_a_geo_reviewer_expects():
         "initial_error_deg",
         "initial_rate.x",
         "estimator_error_deg",
+        "sun_sensor_bias_deg.x",
+        "earth_sensor_misalignment_deg.z",
+        "wheel_torque_scale",
+        "wheel_friction_factor",
     ):
         assert expected in fields
 

@@ -384,11 +384,11 @@ def _check_r4sky(sc: Scenario) -> None:
     if not _is_number(f) or f <= 0:
         raise ConfigError(f"{sc.name}: wheel_friction_factor must be a number > 0, got {f!r}")
     b = sc.momentum_bias
-    if not _is_number(b) or not abs(b) < sc.unload_start_fraction * sc.wheel_max_momentum:
+    room = (1 - sc.unload_start_fraction) * sc.wheel_max_momentum  # bias + the window's swing
+    if not _is_number(b) or not abs(b) < room:
         raise ConfigError(
-            f"{sc.name}: momentum_bias must be a number (N·m·s) below unload_start_fraction × "
-            f"wheel_max_momentum ({sc.unload_start_fraction * sc.wheel_max_momentum:g}), "
-            f"got {b!r}"
+            f"{sc.name}: momentum_bias must be a number (N·m·s) below (1 − unload_start_fraction)"
+            f" × wheel_max_momentum ({room:g}), got {b!r}"
         )
 
 

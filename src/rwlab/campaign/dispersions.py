@@ -51,6 +51,7 @@ _SCALARS = (
     "estimator_error_deg",
     "thruster_torque",
     "wheel_torque_scale",
+    "wheel_friction_factor",
 )
 _VECTORS = (
     "initial_axis",
