@@ -113,6 +113,11 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.dt:g} s)")
+        if scenario.momentum_bias:
+            raise ConfigError(
+                "the HIL loop has no momentum bias yet (real wheels start where they are): "
+                "set momentum_bias = 0 in the scenario"
+            )
         sc = self.scenario = scenario
         self.controller = controller
         self.use_ekf = estimator == "ekf"
