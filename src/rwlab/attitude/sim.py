@@ -556,7 +556,10 @@ def sky_table(sc: Scenario, t: np.ndarray) -> np.ndarray:
         epoch = ephemeris.parse_epoch(sc.epoch)
         sun, moon = ephemeris.sun_moon_orbital(epoch, sc.station_longitude_deg, t)
     else:
-        sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
+        if sc.sun == "moving":
+            sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
+        else:  # paper B's fixed Sun: one row, not one Python call per row
+            sun = np.broadcast_to(sun_direction(sc, 0.0) * ephemeris.AU, (len(t), 3))
         moon = np.broadcast_to(MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8, sun.shape)
     return ephemeris.sky_table(sun, moon)
 
