@@ -423,26 +423,26 @@ def gyro_predict_covariance_into(P, w, Qc, T, W):
             P11[i, j] = d + A[i, j] * T + A2[i, j] * T2 / 2 + A3[i, j] * T3 / 6
             P12[i, j] = -(d * T + A[i, j] * T2 / 2 + A2[i, j] * T3 / 6)
     M, Z = W[0], W[1]
-    for i in range(3):  # M = Φ P: the attitude rows mix, the rest are P's
+    for i in range(3):  # M = Φ P: only the attitude rows mix; the rest are P's own rows
         for j in range(nx):
             acc = 0.0
             for k in range(3):
                 acc += P11[i, k] * P[k, j] + P12[i, k] * P[3 + k, j]
             M[i, j] = acc
-    for i in range(3, nx):
-        for j in range(nx):
-            M[i, j] = P[i, j]
-    for i in range(nx):  # Z = M Φᵀ
+    for i in range(nx):  # Z = M Φᵀ, its attitude columns (the others are M's)
+        R = M if i < 3 else P
         for j in range(3):
             acc = 0.0
             for k in range(3):
-                acc += M[i, k] * P11[j, k] + M[i, 3 + k] * P12[j, k]
+                acc += R[i, k] * P11[j, k] + R[i, 3 + k] * P12[j, k]
             Z[i, j] = acc
-        for j in range(3, nx):
-            Z[i, j] = M[i, j]
-    for i in range(nx):
-        for j in range(i, nx):
+    for i in range(3):  # symmetrised; rows and columns ≥ 3 keep P's (already symmetric)
+        for j in range(i, 3):
             v = 0.5 * (Z[i, j] + Z[j, i])
+            P[i, j] = v
+            P[j, i] = v
+        for j in range(3, nx):
+            v = 0.5 * (M[i, j] + Z[j, i])
             P[i, j] = v
             P[j, i] = v
     # Q_d, added symmetrised by blocks
@@ -521,7 +521,7 @@ def attitude_update_into(q, w, P, q_meas, R, W):
     ``W`` is a (4, n, n) scratch (n ≥ 6)."""
     nx = P.shape[0]
     nu0, nu1, nu2 = attitude_error(q_meas, q)
-    PHt, K, X, Y = W[0], W[1], W[2], W[3]
+    K, X, Y = W[1], W[2], W[3]
     S, L = Y[:3, :3], Y[3:6, :3]  # n ≥ 6
     for i in range(3):
         for j in range(3):
@@ -535,21 +535,21 @@ def attitude_update_into(q, w, P, q_meas, R, W):
     d0, d1, d2 = dx[0], dx[1], dx[2]  # X is reused below
     for i in range(nx - 3):
         w[i] += dx[3 + i]
-    for i in range(nx):  # I − K H
+    # Joseph form with H = [I, 0] never formed (as in ``aligned_update_into``):
+    # M = P − K P[:3, :], P⁺ = M − M[:, :3] Kᵀ + K R Kᵀ (equal to round-off, tested)
+    M = Y  # free once K is known
+    for i in range(nx):
         for j in range(nx):
-            v = 1.0 if i == j else 0.0
-            if j < 3:
-                v -= K[i, j]
-            PHt[i, j] = v
-    _mm(PHt, P, X)
-    _mmt(X, PHt, Y)
+            M[i, j] = P[i, j] - (K[i, 0] * P[0, j] + K[i, 1] * P[1, j] + K[i, 2] * P[2, j])
     for i in range(nx):
         for j in range(i, nx):
             kk = 0.0
             for a in range(3):
                 for b in range(3):
                     kk += K[i, a] * R[a, b] * K[j, b]
-            v = 0.5 * (Y[i, j] + Y[j, i]) + kk
+            v_ij = M[i, j] - (M[i, 0] * K[j, 0] + M[i, 1] * K[j, 1] + M[i, 2] * K[j, 2])
+            v_ji = M[j, i] - (M[j, 0] * K[i, 0] + M[j, 1] * K[i, 1] + M[j, 2] * K[i, 2])
+            v = 0.5 * (v_ij + v_ji) + kk
             P[i, j] = v
             P[j, i] = v
     _reset_attitude(q, d0, d1, d2)
@@ -609,18 +609,13 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
     for i in range(nx - 3):
         w[i] += dx[3 + i]
     # Joseph form (I − K H) P (I − K H)ᵀ + r K Kᵀ through H's six columns, never forming
-    # I − K H: U = H P (3, n), M = P − K U, V = M Hᵀ (n, 3), P⁺ = M − V Kᵀ + r K Kᵀ. The same
-    # terms as the dense products, summed in another order (equal to round-off, tested).
-    U, M, V = X[:3, :], PHt, K[:, 3:6]  # X, PHt and K's spare columns are free by now
-    for a in range(3):
-        for j in range(nx):
-            acc = 0.0
-            for c in cols:
-                acc += H[a, c] * P[c, j]
-            U[a, j] = acc
+    # I − K H: M = P − K (H P), V = M Hᵀ (n, 3), P⁺ = M − V Kᵀ + r K Kᵀ, with H P = (P Hᵀ)ᵀ
+    # (P is kept exactly symmetric). The same terms as the dense products, summed in
+    # another order (equal to round-off, tested).
+    M, V = X, K[:, 3:6]  # X and K's spare columns are free by now
     for i in range(nx):
         for j in range(nx):
-            M[i, j] = P[i, j] - (K[i, 0] * U[0, j] + K[i, 1] * U[1, j] + K[i, 2] * U[2, j])
+            M[i, j] = P[i, j] - (K[i, 0] * PHt[j, 0] + K[i, 1] * PHt[j, 1] + K[i, 2] * PHt[j, 2])
     for i in range(nx):
         for a in range(3):
             acc = 0.0

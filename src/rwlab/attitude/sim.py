@@ -556,11 +556,13 @@ def sky_table(sc: Scenario, t: np.ndarray) -> np.ndarray:
         epoch = ephemeris.parse_epoch(sc.epoch)
         sun, moon = ephemeris.sun_moon_orbital(epoch, sc.station_longitude_deg, t)
     else:
-        if sc.sun == "moving":
-            sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
-        else:  # paper B's fixed Sun: one row, not one Python call per row
-            sun = np.broadcast_to(sun_direction(sc, 0.0) * ephemeris.AU, (len(t), 3))
-        moon = np.broadcast_to(MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8, sun.shape)
+        moon = MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8
+        if sc.sun != "moving":  # paper B's fixed sky: every row the same, computed once
+            sun = sun_direction(sc, 0.0) * ephemeris.AU
+            row = ephemeris.sky_table(sun[None, :], moon[None, :])
+            return np.repeat(row, len(t), axis=0)
+        sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
+        moon = np.broadcast_to(moon, sun.shape)
     return ephemeris.sky_table(sun, moon)
 
 
