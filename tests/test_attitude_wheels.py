@@ -269,3 +269,18 @@ def test_three_wheels_bias_the_pitch_wheel_and_zero_crossings_are_counted():
         for s in np.sign(np.where(np.abs(r.wheel_speed_rpm) > 1e-4, r.wheel_speed_rpm, 0)).T
     )
     assert signs.size and r.stats["wheel_zero_crossings"] == logged > 0
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"wheel_friction_factor": 0.0}, "wheel_friction_factor"),
+        ({"wheel_friction_factor": -1.0}, "wheel_friction_factor"),
+        ({"momentum_bias": 30.0}, "momentum_bias"),  # > (1 − 0.5) × 50 N·m·s
+        ({"momentum_bias": float("nan")}, "momentum_bias"),
+        ({"wheel_stiction": 1}, "wheel_stiction"),
+    ],
+)
+def test_bad_friction_and_bias_fields_are_config_errors(change, match):
+    with pytest.raises(ConfigError, match=match):
+        SCENARIOS["geo-comsat"].with_(**change)
