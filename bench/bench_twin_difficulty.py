@@ -15,7 +15,8 @@ defaults. Printed per record:
 Paper A reached 76.5 % on the real wheel. Usage::
 
     python bench/bench_twin_difficulty.py                   # units 0-3, seeds 0 and 7
-    python bench/bench_twin_difficulty.py --units 0 --seeds 0 --no-rate-limit --wheel ideal
+    python bench/bench_twin_difficulty.py --pairs 1:7 2:3 5:11   # unit:seed pairs
+    python bench/bench_twin_difficulty.py --units 0 --seeds 0 --rate-limit --wheel ideal
 """
 
 from __future__ import annotations
@@ -78,27 +79,33 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, nargs="+", default=[0, 1, 2, 3])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 7])
-    ap.add_argument("--no-rate-limit", action="store_true", help="PRBS steps (paper A's)")
+    ap.add_argument("--pairs", nargs="+", help="unit:seed pairs (instead of --units × --seeds)")
+    ap.add_argument(
+        "--rate-limit", action="store_true", help="PRBS ramps at 314 rpm/s (default: steps)"
+    )
     ap.add_argument("--wheel", default="rw90", choices=["rw90", "ideal"])
     args = ap.parse_args()
     print(
-        f"wheel {args.wheel}, PRBS {'steps' if args.no_rate_limit else 'rate-limited'}, "
+        f"wheel {args.wheel}, PRBS {'rate-limited' if args.rate_limit else 'steps'}, "
         "20 min at Ts = 0.5 s"
     )
     print(
         f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>10} {'fit %':>7} "
         f"{'DC gain':>8} {'measured':>8} {'DC err %':>8}"
     )
+    if args.pairs:
+        pairs = [tuple(int(v) for v in p.split(":")) for p in args.pairs]
+    else:
+        pairs = list(itertools.product(args.units, args.seeds))
     with tempfile.TemporaryDirectory() as tmp:
-        for unit in args.units:
-            for seed in args.seeds:
-                r = one(unit, seed, not args.no_rate_limit, args.wheel, Path(tmp))
-                err = 100 * (r["dc"] / r["gain"] - 1)
-                print(
-                    f"{unit:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
-                    f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f}",
-                    flush=True,
-                )
+        for unit, seed in pairs:
+            r = one(unit, seed, args.rate_limit, args.wheel, Path(tmp))
+            err = 100 * (r["dc"] / r["gain"] - 1)
+            print(
+                f"{unit:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
+                f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":
