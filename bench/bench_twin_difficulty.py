@@ -9,8 +9,9 @@ defaults. Printed per record:
 - ``chosen``: the study's chosen model and its validation fit (the study's
   own preprocessing);
 - ``dc``: the chosen model's DC gain in rpm/rpm, and its error against the
-  measured steady-state gain (settled speed over command on every PRBS hold of
-  at least 30 s: the mean of its last 5 s).
+  measured steady-state gain (``rwlab.ident.study.steady_state_gain``: the
+  least-squares slope of settled speed against command over every PRBS hold of
+  at least 30 s, the speed averaged over the hold's last 5 s).
 
 Paper A reached 76.5 % on the real wheel. Usage::
 
@@ -29,25 +30,11 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.ident.models import PolyModel
-from rwlab.ident.study import _to_physical, identification_study, load_study_data
+from rwlab.ident.study import identification_study, load_study_data, steady_state_gain
 from rwlab.ident.validation import fit_percent
 from rwlab.testbed import ExperimentConfig, run_experiment
 
 PAPER_ARX221 = ([1.0, -1.758, 0.7852], [0.0, 0.0275, -0.0012])  # SPEC.md, paper A Table 2
-
-
-def measured_steady_gain(u: np.ndarray, y: np.ndarray, Ts: float) -> float:
-    """Settled speed over command on holds ≥ 30 s (mean of the last 5 s), least squares."""
-    edges = np.flatnonzero(np.diff(u) != 0) + 1
-    bounds = np.concatenate([[0], edges, [len(u)]])
-    c, s = [], []
-    for a, b in itertools.pairwise(bounds):
-        if (b - a) * Ts >= 30 and u[a] != 0:
-            tail = slice(b - round(5 / Ts), b)
-            c.append(u[a])
-            s.append(y[tail].mean())
-    c, s = np.array(c), np.array(s)
-    return float(c @ s / (c @ c))
 
 
 def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path) -> dict:
@@ -60,10 +47,9 @@ def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path)
     n_est = res.est.N
     paper = PolyModel(*map(np.array, PAPER_ARX221), Ts=data.Ts, nk=1)
     y_paper = np.ravel(paper.simulate(u[:, None]))
-    phys = _to_physical(res.chosen, res.data.trend)
-    dc = float(np.sum(phys.B) / (np.sum(phys.A) * np.sum(phys.F)))  # deterministic part
-    gain = measured_steady_gain(u, y, data.Ts)
+    gain = steady_state_gain(data)["gain"]
     row = next(r for r in res.orders + res.others if r["structure"] == res.chosen.structure)
+    dc = row["dc_gain"]  # the deterministic part's, physical units
     return {
         "unit": unit,
         "seed": seed,

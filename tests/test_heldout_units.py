@@ -44,7 +44,7 @@ def heldout(tmp_path_factory):
 
 @pytest.mark.slow
 def test_the_chosen_nonlinear_model_beats_the_linear_one_by_10_points_on_other_units(heldout):
-    root, model, scores = heldout
+    _, model, scores = heldout
     chosen = model["nonlinear_chosen"]
     assert chosen in ("greybox", "nlarx")  # chosen by validation fit on unit a's record
     for name, row in scores.items():

@@ -33,8 +33,8 @@ from rwlab.wheel import RW90, SimClock, WallClock, WheelClient, WheelNode, Wheel
 from rwlab.wheel.bus import open_bus, open_transport, transport_names
 from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
-from rwlab.wheel.physics import PRESETS
 from rwlab.wheel.link import get_protocol
+from rwlab.wheel.physics import PRESETS
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 from rwlab.wheel.serial import open_pty
 
