@@ -8,6 +8,7 @@ defaults. Printed per record:
   on the record's command, fit % on the validation part (last 30 %), in rpm;
 - ``chosen``: the study's chosen model and its validation fit (the study's
   own preprocessing);
+- ``ARX221``: the study's own ARX221 (paper A's choice), its fit and DC gain error;
 - ``dc``: the chosen model's DC gain in rpm/rpm, and its error against the
   measured steady-state gain (``rwlab.ident.study.steady_state_gain``: the
   least-squares slope of settled speed against command over every PRBS hold of
@@ -16,7 +17,7 @@ defaults. Printed per record:
 Paper A reached 76.5 % on the real wheel. Usage::
 
     python bench/bench_twin_difficulty.py                   # units 0-3, seeds 0 and 7
-    python bench/bench_twin_difficulty.py --pairs 1:7 2:3 5:11   # unit:seed pairs
+    python bench/bench_twin_difficulty.py --pairs n:0 1:7 2:3 5:11   # unit:seed, n nominal
     python bench/bench_twin_difficulty.py --units 0 --seeds 0 --rate-limit --wheel ideal
 """
 
@@ -50,7 +51,10 @@ def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path)
     gain = steady_state_gain(data)["gain"]
     row = next(r for r in res.orders + res.others if r["structure"] == res.chosen.structure)
     dc = row["dc_gain"]  # the deterministic part's, physical units
+    arx221 = res.orders[0]
     return {
+        "arx221": arx221["fit_percent"],
+        "arx221_dc": arx221["dc_gain_error_percent"],
         "unit": unit,
         "seed": seed,
         "paper": fit_percent(y[n_est:], y_paper[n_est:]),
@@ -65,7 +69,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, nargs="+", default=[0, 1, 2, 3])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 7])
-    ap.add_argument("--pairs", nargs="+", help="unit:seed pairs (instead of --units × --seeds)")
+    ap.add_argument("--pairs", nargs="+", help="unit:seed pairs (unit n: nominal)")
     ap.add_argument(
         "--rate-limit", action="store_true", help="PRBS ramps at 314 rpm/s (default: steps)"
     )
@@ -77,19 +81,23 @@ def main() -> None:
     )
     print(
         f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>10} {'fit %':>7} "
-        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8}"
+        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8} {'ARX221 %':>9} {'its DC err':>10}"
     )
     if args.pairs:
-        pairs = [tuple(int(v) for v in p.split(":")) for p in args.pairs]
+        pairs = [
+            (None if a == "n" else int(a), int(b)) for a, b in (p.split(":") for p in args.pairs)
+        ]
     else:
         pairs = list(itertools.product(args.units, args.seeds))
     with tempfile.TemporaryDirectory() as tmp:
         for unit, seed in pairs:
             r = one(unit, seed, args.rate_limit, args.wheel, Path(tmp))
             err = 100 * (r["dc"] / r["gain"] - 1)
+            name = "-" if unit is None else unit
             print(
-                f"{unit:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
-                f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f}",
+                f"{name:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
+                f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f} {r['arx221']:9.2f} "
+                f"{r['arx221_dc']:10.2f}",
                 flush=True,
             )
 

@@ -98,7 +98,8 @@ def test_report_has_every_figure_of_the_paper_and_no_external_links(study_dir):
 
 def test_model_json_is_physical_and_simulates_the_wheel(study_dir):
     info = json.loads((study_dir / "model.json").read_text())
-    assert info["structure"] in ("ARX221", "OE221") and info["Ts"] == 0.5
+    chosen = json.loads((study_dir / "study.json").read_text())["chosen"]["structure"]
+    assert info["structure"] == chosen and info["Ts"] == 0.5
     assert info["saturation"] == {
         "speed_rpm": 7800.0,
         "accel_rpm_s": 314.0,
