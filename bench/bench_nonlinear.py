@@ -93,6 +93,7 @@ def main() -> None:
         model.write_text(json.dumps(physical_model(study)))
         grey = study.greybox
         print(f"identified on twin unit {args.unit}, seed {args.seed} ({seconds:.0f} s, study)")
+        print(f"chosen linear model: {study.reason}")
         print(f"chosen nonlinear model: {study.nonlinear['choice']}")
         print("grey box (J fixed at the datasheet 4.2e-4 kg·m²), estimate ± std:")
         for k, v in grey.std.items():
