@@ -52,11 +52,30 @@ from rwlab.errors import ConfigError, RwlabError
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
+@click.option(
+    "--gain-tolerance",
+    type=Number(0, 100, low_open=True),
+    default=2.0,
+    show_default=True,
+    help="Percent within which the chosen model's DC gain must match the steady-state gain "
+    "measured on the record's settled holds (a record without them: fit alone).",
+)
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
 def identify(
-    file, out, Ts, input_col, output_col, preprocess, split, tolerance, workers, scheduler, force
+    file,
+    out,
+    Ts,
+    input_col,
+    output_col,
+    preprocess,
+    split,
+    tolerance,
+    gain_tolerance,
+    workers,
+    scheduler,
+    force,
 ):
     """Run paper A's whole identification study on a record or data file.
 
@@ -75,6 +94,7 @@ def identify(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gain_tolerance=gain_tolerance,
         force=force,
     )
     if Path(file).is_dir():
@@ -225,6 +245,7 @@ def _identify_one(
     split,
     tolerance,
     force,
+    gain_tolerance=2.0,
     progress=None,
     echo=None,
 ):
@@ -245,6 +266,7 @@ def _identify_one(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gain_tolerance=gain_tolerance / 100.0,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
         datasheet=None
