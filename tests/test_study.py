@@ -103,7 +103,7 @@ def test_model_json_is_physical_and_simulates_the_wheel(study_dir):
     assert info["saturation"] == {
         "speed_rpm": 7800.0,
         "accel_rpm_s": 314.0,
-        "source": "the record's wheel parameters",
+        "source": "the record's driver settings",
     }
     wheel = IdentifiedWheel.from_json(study_dir / "model.json", model="linear")  # copied limits
     # a new stepped PRBS, in rpm: the physical model (offsets, saturations) reproduces the

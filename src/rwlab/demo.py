@@ -214,7 +214,7 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
 
     echo("[identify] paper A's study on the PRBS record")
     study = identification_study(load_record(out / "records" / "prbs.mcap"))
-    model = physical_model(study, saturation_source="the record's wheel parameters")
+    model = physical_model(study, saturation_source="the record's driver settings")
     write_study(study, model, out / "identification", force=True)
     chosen = study.to_dict()["chosen"]
     echo(f"[identify] chosen {chosen['structure']}, validation fit {chosen['fit_percent']:.2f} %")

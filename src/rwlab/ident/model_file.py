@@ -85,7 +85,7 @@ class WheelModelFile:
     accel_limit_rpm_s : float
         Acceleration limit applied to the model's output, rpm/s (paper A: 314).
     saturation_source : str
-        Where the saturations come from (the record's wheel parameters, defaults).
+        Where the saturations come from (the record's driver settings, defaults).
     validation_fit_percent : float
         The linear model's fit on validation data, %.
     servo : ServoModel, optional

@@ -874,7 +874,7 @@ def load_study_data(
 
     ``input_col``/``output_col`` choose the columns (a record's default is
     command → speed_rpm). Returns the data and the saturations to store with
-    the model: from the record's wheel parameters when present, else the RW90
+    the model: from the record's driver settings when present, else the RW90
     defaults; ``current_limit_a`` (a record's only) is the driver's current limit (A). A
     record whose telemetry has a gap longer than one sample time, or a ``Ts`` shorter than
     its telemetry period, is refused (``DataError``): its samples there would repeat a
@@ -914,14 +914,16 @@ def load_study_data(
                 "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
                 "or identify its gap-free parts as separate experiments (--gaps split)."
             ) from None
-        wheel = data.source.get("wheel", {})
+        # the driver's configured limits, as a lab knows them (records before
+        # driver_settings: the twin's own parameters)
+        wheel = data.source.get("driver_settings") or data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:
             saturation = {
                 "speed_limit_rpm": float(wheel["max_speed_rpm"]),
                 "accel_limit_rpm_s": float(wheel["max_accel_rpm_s"]),
-                "saturation_source": "the record's wheel parameters",
+                "saturation_source": "the record's driver settings",
             }
-        if "current_limit" in wheel:  # the driver's configured limit: a known setting
+        if "current_limit" in wheel:
             saturation["current_limit_a"] = float(wheel["current_limit"])
         return data, saturation
     if not Path(path).exists() and path in datasets.NAMES:

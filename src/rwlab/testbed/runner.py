@@ -227,18 +227,34 @@ class ExperimentConfig:
         -------
         WheelParams
         """
-        if base is not None:
-            params = base
-        elif self.wheel.lower().endswith(".toml"):
-            params = WheelParams.from_toml(self.wheel)
-        elif self.wheel in PRESETS:
-            params = WheelParams.preset(self.wheel)
+        if base is None and self.wheel.lower().endswith(".toml"):
+            params = WheelParams.from_toml(self.wheel)  # with the file's own unit, if any
         else:
-            raise ConfigError(
-                f"wheel must be a preset ({', '.join(sorted(PRESETS))}) or a wheel TOML file "
-                f"(*.toml), got {self.wheel!r}"
-            )
+            params = self.nominal_wheel(base)
         return params if self.unit is None else params.for_unit(self.unit)
+
+    def nominal_wheel(self, base: WheelParams | None = None) -> WheelParams:
+        """The wheel as configured, before any unit draw: its limits are the driver's
+        settings a lab knows (the record's ``driver_settings``).
+
+        Parameters
+        ----------
+        base : WheelParams, optional
+
+        Returns
+        -------
+        WheelParams
+        """
+        if base is not None:
+            return base
+        if self.wheel.lower().endswith(".toml"):
+            return WheelParams.from_toml(self.wheel, draw_unit=False)
+        if self.wheel in PRESETS:
+            return WheelParams.preset(self.wheel)
+        raise ConfigError(
+            f"wheel must be a preset ({', '.join(sorted(PRESETS))}) or a wheel TOML file "
+            f"(*.toml), got {self.wheel!r}"
+        )
 
     def tolerance(self) -> float:
         """How late a command may go out, s: ``late_tolerance``, else 10 % of Ts (≥ 1 ms,
@@ -455,10 +471,12 @@ def run_experiment(
     -------
     RunSummary
     """
+    nominal = cfg.nominal_wheel(params)
     params = cfg.wheel_params(params)
     cfg.check_limits(params)
     command = make_signal(cfg, params)
-    detector = _live_detector(cfg)  # before the clock starts: loading delays no command
+    # before the clock starts (loading delays no command) and before the record opens
+    detector = _live_detector(cfg)
     simulated = cfg.interface == "virtual"
     realtime = cfg.realtime or not simulated
     clock = WallClock() if realtime else SimClock()
@@ -471,12 +489,16 @@ def run_experiment(
         "mode": cfg.mode,
         "experiment": cfg.to_dict(),
         "wheel": params.to_dict(),
+        "driver_settings": {  # what a lab knows of its wheel: configured, not drawn
+            "current_limit": nominal.current_limit,
+            "max_speed_rpm": nominal.max_speed_rpm,
+            "max_accel_rpm_s": nominal.max_accel_rpm_s,
+        },
         "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
         "clock": "wall" if realtime else "simulated",
         "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
         "time_origin": "s since the first command",
     }
-    detector = _live_detector(cfg)  # every check before the record opens: no empty record
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
     stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports

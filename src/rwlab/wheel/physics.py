@@ -335,12 +335,13 @@ class WheelParams:
         return PRESETS[name]
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> WheelParams:
+    def from_toml(cls, path: str | Path, *, draw_unit: bool = True) -> WheelParams:
         """Load parameters from a TOML file (a ``[wheel]`` table or top-level keys).
 
         Unknown keys are an error; missing keys keep the defaults of ``preset``
         (``'rw90'``, the realistic twin, or ``'ideal'``). ``unit = N`` then draws
-        unit N around them (:meth:`for_unit`).
+        unit N around them (:meth:`for_unit`) unless ``draw_unit`` is False (the
+        nominal wheel: the settings a lab configured, before unit tolerances).
         """
         from rwlab._toml import read_table
 
@@ -355,7 +356,7 @@ class WheelParams:
                 f"{sorted(known | {'preset', 'unit'})}"
             )
         params = replace(cls.preset(preset), **table)
-        return params if unit is None else params.for_unit(unit)
+        return params if unit is None or not draw_unit else params.for_unit(unit)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
