@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import shutil
-import sys
 from pathlib import Path
 
 import click
@@ -17,7 +15,10 @@ from rwlab.cli._common import (
     Number,
     _engine_options,
     _friendly_errors,
+    _imports_uninterrupted,
+    _only_with,
     _output,
+    _steps_progress,
     _wrote,
     main,
 )
@@ -209,28 +210,30 @@ def _check_run(duration: float, relinearize: float | None) -> None:
         )
 
 
-@contextlib.contextmanager
-def _steps_progress(steps: int, label: str, unit: str = "steps"):
-    """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
-    if sys.stderr.isatty():
-        with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
-            done = [0]
+def _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize) -> dict:
+    """The ``config`` of a simulation's metrics.json: what was flown, as flown."""
+    from rwlab.attitude.sim import disturbance_state
 
-            def update(k):
-                bar.update(k - done[0])
-                done[0] = k
-
-            yield update
-        return
-    shown = [0]
-
-    def report(k):
-        tenth = 10 * k // max(steps, 1)
-        if tenth > shown[0]:
-            shown[0] = tenth
-            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} {unit})", err=True)
-
-    yield report
+    return {
+        "scenario": sc.name,
+        "controller": controller,
+        "estimator": estimator or ("truth" if controller in ("pd", "lqr") else "ekf"),
+        "seed": sc.run.seed if seed is None else seed,
+        "dt_s": sc.run.dt,
+        "duration_s": duration,
+        "rho": rho if controller == "lqg_ltr" else None,
+        "relinearize_period_s": relinearize,
+        "disturbances_known_to_filter": sc.filter.disturbances_known,
+        "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
+        "momentum_unloading": sc.momentum.unloading,
+        "wheel_model": sc.wheels.model,
+        "wheel_faults": list(sc.wheels.faults),
+        "epoch": sc.sky.epoch,
+        "station_longitude_deg": sc.sky.station_longitude_deg,
+        "steady_from_s": None,  # the run's own, filled in after it
+        "gyro": sc.sensors.gyro is not None,
+        "star_tracker": sc.sensors.star_tracker is not None,
+    }
 
 
 @attitude.command("simulate")
@@ -283,11 +286,7 @@ def attitude_simulate(
     force,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
-    from rwlab.attitude.control import fly
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.attitude.sim import disturbance_state
-    from rwlab.report.attitude import write_simulation
-
+    _only_with("rho", controller == "lqg_ltr", "with --controller lqg_ltr")
     _check_run(duration, relinearize)
     if steady_after is not None and not (
         math.isfinite(steady_after) and 0 <= steady_after < duration
@@ -295,47 +294,32 @@ def attitude_simulate(
         raise ConfigError(
             f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
         )
-    overrides = {"run.dt": dt} if dt is not None else {}
-    sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
-    steps = _check_steps(duration, sc)
-    log_every = max(10, -(-steps // 100_000))
-    config = {
-        "scenario": sc.name,
-        "controller": controller,
-        "estimator": estimator or ("truth" if controller in ("pd", "lqr") else "ekf"),
-        "seed": sc.run.seed if seed is None else seed,
-        "dt_s": sc.run.dt,
-        "duration_s": duration,
-        "rho": rho if controller == "lqg_ltr" else None,
-        "relinearize_period_s": relinearize,
-        "disturbances_known_to_filter": sc.filter.disturbances_known,
-        "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
-        "momentum_unloading": sc.momentum.unloading,
-        "wheel_model": sc.wheels.model,
-        "wheel_faults": list(sc.wheels.faults),
-        "epoch": sc.sky.epoch,
-        "station_longitude_deg": sc.sky.station_longitude_deg,
-        "steady_from_s": None,  # the run's own, filled in below
-        "gyro": sc.sensors.gyro is not None,
-        "star_tracker": sc.sensors.star_tracker is not None,
-    }
     files = ["metrics.json", "trace.parquet", "report.html"]
-    with (
-        _output(out, files, force, "simulation") as stage,
-        _steps_progress(steps, f"{controller} on {sc.name}") as progress,
-    ):
-        run, metrics = fly(
-            sc,
-            controller,
-            estimator=estimator,
-            duration=duration,
-            seed=seed,
-            rho=rho,
-            update_period=relinearize,
-            log_every=log_every,
-            progress=progress,
-            steady_after=steady_after,
-        )
+    # the folder is locked before the loop is loaded and compiled: a second run on it is
+    # refused at once
+    with _output(out, files, force, "simulation") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import fly
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import write_simulation
+
+        overrides = {"run.dt": dt} if dt is not None else {}
+        sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
+        steps = _check_steps(duration, sc)
+        config = _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize)
+        with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
+            run, metrics = fly(
+                sc,
+                controller,
+                estimator=estimator,
+                duration=duration,
+                seed=seed,
+                rho=rho,
+                update_period=relinearize,
+                log_every=max(10, -(-steps // 100_000)),
+                progress=progress,
+                steady_after=steady_after,
+            )
         config["steady_from_s"] = run.steady_from_s
         paths = write_simulation(run, metrics, config, sc, stage, force=force)
     for key in (
@@ -425,6 +409,10 @@ def attitude_montecarlo(
     )
     from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
 
+    if resume and force:
+        raise ConfigError(
+            "--resume continues the kept runs and --force starts over: give one of them"
+        )
     check_size(runs)
     _check_run(duration, None)
     sc = load_scenario(scenario)
