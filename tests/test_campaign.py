@@ -447,3 +447,10 @@ def test_runs_get_their_own_epoch_in_the_spread_and_the_filter_keeps_the_nominal
     assert len(epochs) == 20
     with pytest.raises(ConfigError, match="epoch"):
         Campaign(sc, (), 10.0, epoch_spread_days=30)
+
+
+def test_the_campaign_workflow_locks_the_files_the_report_writes():
+    from rwlab.report import montecarlo
+    from rwlab.report.campaign import CAMPAIGN_FILES
+
+    assert sorted(montecarlo._FILES) == sorted(CAMPAIGN_FILES)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import numpy as np
 
@@ -259,5 +259,5 @@ def _check_type(where: str, name: str, value: Any, default: Any) -> None:
         raise ConfigError(f"{where}: {name} must be a DisturbanceModel")
 
 
-def _is_number(v) -> bool:
+def _is_number(v) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)

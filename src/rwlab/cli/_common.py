@@ -26,6 +26,7 @@ FLAGS = {
     "raw_frames": "--raw-frames",
     "rt_priority": "--rt-priority",
     "realtime=True": "--realtime",
+    "resume=True": "--resume",
 }
 _PARAMETER = re.compile(r"\b(" + "|".join(map(re.escape, FLAGS)) + ")")
 
@@ -36,7 +37,11 @@ def _message(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         where = exc.filename if exc.filename is not None else ""
         return f"{where}: {exc.strerror}" if where else exc.strerror
-    text = " ".join(str(exc).split()) or type(exc).__name__
+    return _flags(" ".join(str(exc).split()) or type(exc).__name__)
+
+
+def _flags(text: str) -> str:
+    """``text`` with the library's parameters named by their command-line flags."""
     return _PARAMETER.sub(lambda m: FLAGS[m.group(1)], text)
 
 

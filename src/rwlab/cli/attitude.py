@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
-import shutil
 from pathlib import Path
 
 import click
@@ -13,7 +11,9 @@ from rwlab.cli._common import (
     POSITIVE,
     SECONDS,
     Number,
+    _check_folder,
     _engine_options,
+    _flags,
     _friendly_errors,
     _imports_uninterrupted,
     _only_with,
@@ -22,7 +22,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
-from rwlab.errors import ConfigError, RwlabError
+from rwlab.errors import ConfigError
 
 # -- attitude control -----------------------------------------------------------------
 
@@ -168,28 +168,6 @@ def attitude_ltr(scenario, rho, out, force):
     for rho, gap, gap_c, w, w_c in ltr_rows(res):
         click.echo(f"{rho:<10} {gap:19.2f} {gap_c:22.2f}  {w:.3g} / {w_c:.3g}")
     click.echo(_wrote(out, paths.values()))
-
-
-def _run_store(out, campaign, *, force: bool, resume: bool):
-    """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
-    from rwlab.campaign.montecarlo import RunStore
-
-    base = Path(os.path.abspath(out))
-    store = RunStore(base.with_name(base.name + ".partial"), campaign)
-    if store.exists() and resume:
-        store.check()
-        click.echo(f"resuming: {len(store.rows())} runs kept in {store.folder}", err=True)
-        return store
-    if resume:
-        raise ConfigError(f"nothing to resume: {store.folder} holds no interrupted campaign")
-    if store.exists() and not force:
-        raise FileExistsError(
-            f"{store.folder} holds an interrupted campaign ({len(store.rows())} runs kept); "
-            "continue it with --resume, or start over with --force"
-        )
-    shutil.rmtree(store.folder, ignore_errors=True)
-    store.create()
-    return store
 
 
 def _check_steps(duration: float, sc) -> int:
@@ -395,69 +373,27 @@ def attitude_montecarlo(
     campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
     computing only the runs it lacks, with the results of an uninterrupted one.
     """
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.campaign.dispersions import load_dispersions
-    from rwlab.campaign.engine import dask_client
-    from rwlab.campaign.montecarlo import (
-        Campaign,
-        Execution,
-        budget,
-        check_runs,
-        check_size,
-        fly_run,
-        run_campaign,
-    )
-    from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
+    from rwlab.report.montecarlo import montecarlo
 
-    if resume and force:
-        raise ConfigError(
-            "--resume continues the kept runs and --force starts over: give one of them"
-        )
-    check_size(runs)
     _check_run(duration, None)
-    sc = load_scenario(scenario)
-    _check_steps(duration, sc)
-    campaign = Campaign(
-        sc,
-        load_dispersions(dispersions),
-        duration,
-        controller,
-        seed,
-        runs,
-        epoch=epoch,
-        epoch_spread_days=epoch_spread_days,
-    )
-    with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
-        check_runs(campaign)  # before the cluster starts and anything is kept
-        store = _run_store(out, campaign, force=force, resume=resume)
-        where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
-        click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
-        execution = Execution()
-        try:
-            with (
-                dask_client(workers, scheduler) as client,
-                _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
-            ):
-                rows = run_campaign(
-                    campaign, client, progress=progress, store=store, execution=execution
-                )
-        except (KeyboardInterrupt, RwlabError, OSError):
-            kept = len(store.rows())
-            click.echo(
-                f"\ncampaign stopped: {kept} of {runs} runs kept in {store.folder}; "
-                "continue it with the same options and --resume",
-                err=True,
-            )
-            raise
-        stats = {**budget(rows, campaign), "execution": execution.to_dict()}
-        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
-        paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
-    shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
-    if execution.retries:
-        ex = stats["execution"]
-        click.echo(
-            f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}",
-            err=True,
+    _check_folder(Path(out).absolute().parent)
+    with _steps_progress(runs, f"{controller} campaign", unit="runs") as progress:
+        stats, paths = montecarlo(
+            out,
+            scenario=scenario,
+            runs=runs,
+            duration=duration,
+            controller=controller,
+            dispersions=dispersions,
+            seed=seed,
+            epoch=epoch,
+            epoch_spread_days=epoch_spread_days,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            resume=resume,
+            progress=progress,
+            echo=lambda text: click.echo(_flags(text), err=True),
         )
     click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
     for axis, s in stats["pointing_error_deg"].items():
@@ -466,7 +402,7 @@ def attitude_montecarlo(
         )
     met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.control.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"meeting ±{stats['requirement_deg']:g}°: {met['fraction']:.1%} of runs "
         f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
     for q in stats["quantiles"]:

@@ -182,11 +182,11 @@ def _initial_oe(nb, nf: int, nk, experiments, iterations: int = 3):
             if instrumented:
                 x = sum(sps.lfilter(B, F, _columns(u)[:, j]) for j, B in enumerate(Bs))
                 Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + inputs))
-        Phi, T = np.vstack(Phi), np.concatenate(T)
+        phi, target = np.vstack(Phi), np.concatenate(T)
         if not instrumented:
-            return _least_squares(list(Phi.T), T)
-        Z = np.vstack(Z)
-        return np.linalg.lstsq(Z.T @ Phi, Z.T @ T, rcond=None)[0]
+            return _least_squares(list(phi.T), target)
+        z = np.vstack(Z)
+        return np.linalg.lstsq(z.T @ phi, z.T @ target, rcond=None)[0]
 
     th = regress(False, None, None)
     for i in range(iterations + 1):

@@ -129,6 +129,7 @@ def identify_into(
     from rwlab.report.identification import write_study
 
     Ts = options["Ts"]
+    file = str(file)
     data, saturation = load_study_data(
         file, Ts, input_col=options["input_col"], output_col=options["output_col"]
     )
@@ -170,7 +171,7 @@ def identify_into(
 
 def _after_first(progress, first: Callable[[], None]):
     """``progress`` that calls ``first()`` before its first report."""
-    done = []
+    done: list[bool] = []
 
     def report(*args) -> None:
         if not done:
