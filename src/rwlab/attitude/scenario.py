@@ -31,7 +31,7 @@ fields by their dotted names. A scenario file is TOML with one table per section
     constant_torque = [1e-3, 0.0, 0.0]
     [sensors.gyro]               # gyros fly (their keys over GyroModel's defaults)
 
-Unknown keys and bad values are errors. The flat files of rwlab ≤ 0.x (every
+Unknown keys and bad values are errors. The flat files of earlier versions (every
 field under ``[scenario]``, plus ``[disturbances]``, ``[gyro]``,
 ``[star_tracker]``) are still read, with a :class:`rwlab.errors.FormatWarning`
 naming where each key goes; :func:`convert_scenario_file` writes the sections.
