@@ -75,23 +75,25 @@ _EPOCH = click.option(
 @_friendly_errors
 def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force):
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
-    from rwlab.attitude.control import compare, ltr_study
-    from rwlab.attitude.design import DesignError
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import write_comparison
-
     if not (math.isfinite(rho) and rho > 0):
-        raise DesignError(f"--rho must be a positive number, got {rho:g}")
+        raise ConfigError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
-    sc = load_scenario(scenario, **({"sky.epoch": epoch} if epoch else {}))
-    _check_steps(duration, sc)
-    if wheel_model and sc.sky.epoch:
-        raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
-    if wheel_model:
-        from rwlab.wheel.identified import IdentifiedWheel
-
-        IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
+    # the folder is locked before the loop is loaded: a second run on it is refused at once
     with _output(out, ["report.html", "metrics.json", "sigma.json"], force, "comparison") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import compare, ltr_study
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import write_comparison
+            from rwlab.wheel.identified import IdentifiedWheel
+
+        sc = load_scenario(scenario, **({"sky.epoch": epoch} if epoch else {}))
+        _check_steps(duration, sc)
+        if wheel_model and sc.sky.epoch:
+            raise ConfigError(
+                "--epoch needs ideal wheels: it cannot be combined with --wheel-model"
+            )
+        if wheel_model:
+            IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
         click.echo(
             f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
             f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
@@ -156,12 +158,13 @@ def attitude_convert_scenario(file, out, force):
 @_friendly_errors
 def attitude_ltr(scenario, rho, out, force):
     """Loop singular values at the plant input for each ρ next to LQR's (paper Fig. 8)."""
-    from rwlab.attitude.control import ltr_study
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import ltr_rows, write_ltr
-
-    sc = load_scenario(scenario)
     with _output(out, ["sigma.json", "report.html"], force, "LTR study") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import ltr_study
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import ltr_rows, write_ltr
+
+        sc = load_scenario(scenario)
         res = ltr_study(sc, rhos=rho)
         paths = write_ltr(res, sc.name, stage, force=force)
     click.echo("rho        gap 1e-3..1e-1 [dB]  gap to crossover [dB]  crossover / LQR [rad/s]")
