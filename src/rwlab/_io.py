@@ -164,6 +164,7 @@ def output_folder(
     force: bool = False,
     replace_previous: bool = False,
     what: str = "rwlab run",
+    keep_failed: bool = False,
 ) -> Iterator[Path]:
     """A run's output folder, written whole or not at all, by one run at a time.
 
@@ -187,13 +188,19 @@ def output_folder(
         Replace a previous output even without ``force`` (the demo's habit).
     what : str
         What the folder holds, for messages (``"identification study"``).
+    keep_failed : bool
+        On an exception keep what the run wrote, for diagnosis, as the folder
+        ``OUT.failed-YYYYmmddTHHMMSSZ`` beside ``out`` (never ``out`` itself: it
+        must not look complete); the exception's message then names that folder
+        instead of the staging one. (A run on hardware keeps its record this way.)
 
     Yields
     ------
     Path
         The staging folder (``.OUT.partial-PID`` beside ``out``), empty. When the
         block ends normally it is renamed to ``out``; on any exception, SIGTERM
-        included when the caller turns it into one, it is removed.
+        included when the caller turns it into one, it is removed (or kept under
+        a failed name with ``keep_failed``).
 
     Raises
     ------
@@ -229,11 +236,34 @@ def output_folder(
             yield stage
             _publish(stage, out)
         except OSError as exc:
+            if keep_failed:
+                _keep_failed(exc, stage, out)
             raise _unstaged(exc, stage, out) from exc
+        except BaseException as exc:
+            if keep_failed:
+                _keep_failed(exc, stage, out)
+            raise
         finally:
             shutil.rmtree(stage, ignore_errors=True)
     finally:
         _unlock(fd, lock_path)
+
+
+def _keep_failed(exc: BaseException, stage: Path, out: Path) -> None:
+    """Rename a failed run's ``stage`` to ``OUT.failed-<UTC time>`` and say so in ``exc``."""
+    import time
+
+    if not stage.is_dir() or not any(stage.iterdir()):
+        return
+    failed = out.parent / f"{out.name}.failed-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    try:
+        os.rename(stage, failed)
+    except OSError:
+        return  # the staging folder is then removed: the error itself still stands
+    if exc.args and isinstance(exc.args[0], str):
+        text = exc.args[0].replace(str(stage), str(failed))
+        note = f" (the failed run's outputs are kept in {failed}; {out} was not written)"
+        exc.args = (text + note, *exc.args[1:])
 
 
 def _publish(stage: Path, out: Path) -> None:

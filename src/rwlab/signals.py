@@ -12,11 +12,11 @@ speed command, rpm/s for an acceleration command).
 - :func:`chirp` — linear or logarithmic swept sine (paper A: 0.0001–2 Hz).
 - :func:`steps` — a staircase of levels.
 - :func:`multisine` — Schroeder-phased sum of sines on the period's frequency grid.
-- :func:`rate_limit` — limit the slope of any of the above. The testbed applies
-  it to a speed-mode PRBS by default (``ExperimentConfig.rate_limit``, the
-  wheel's acceleration limit, 314 rpm/s for the RW90): the identification
-  command then ramps rather than steps. Switch it off (``rate_limit = false``,
-  ``rwlab testbed experiment --no-rate-limit``) for true steps.
+- :func:`rate_limit` — limit the slope of any of the above. The testbed can
+  apply it to a speed-mode PRBS (``ExperimentConfig.rate_limit``, ``rwlab
+  experiment --rate-limit``: the wheel's acceleration limit, 314 rpm/s for the
+  RW90), so the command ramps rather than steps. Off by default: paper A's PRBS
+  steps, and the wheel follows each step at its acceleration limit.
 """
 
 from __future__ import annotations

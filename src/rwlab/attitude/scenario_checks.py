@@ -89,6 +89,7 @@ def _check_sky(sc: Scenario) -> None:
 
 _POSITIVE = (
     "wheels.torque_scale",
+    "wheels.friction_factor",
     "wheels.inertia",
     "wheels.max_torque",
     "wheels.max_momentum",
@@ -160,6 +161,12 @@ def _check_ranges(sc: Scenario) -> None:
         )
     if np.linalg.norm(sc.run.initial_axis) == 0:
         raise ConfigError(f"{sc.name}: run.initial_axis must not be the zero vector")
+    room = (1 - m.unload_start_fraction) * sc.wheels.max_momentum  # bias + a window's swing
+    if not (math.isfinite(m.bias) and abs(m.bias) < room):
+        raise ConfigError(
+            f"{sc.name}: momentum.bias must be a number (N·m·s) below (1 − "
+            f"momentum.unload_start_fraction) × wheels.max_momentum ({room:g}), got {m.bias!r}"
+        )
 
 
 def _check_inertia(sc: Scenario) -> None:

@@ -60,6 +60,7 @@ _SCALARS = (
     "run.initial_error_deg",
     "filter.initial_error_deg",
     "momentum.thruster_torque",
+    "wheels.friction_factor",
 )
 _VECTORS = {  # vector fields and the axes a dispersion may name
     "run.initial_axis": _AXES,
@@ -233,7 +234,9 @@ def _split(name: str) -> tuple[str, int | None]:
     return name, None
 
 
-_FLAT = {dotted: flat for flat, dotted in LEGACY_NAMES.items()}
+# the fields dispersible in the flat format keep its names; those added since, their own
+_SINCE_SECTIONS = ("wheels.friction_factor", "wheels.stiction", "momentum.bias")
+_FLAT = {dotted: flat for flat, dotted in LEGACY_NAMES.items() if dotted not in _SINCE_SECTIONS}
 
 
 def _stream_name(name: str) -> str:
@@ -242,7 +245,8 @@ def _stream_name(name: str) -> str:
     if name.startswith(("spacecraft.inertia.", "spacecraft.disturbances.")):
         return name.removeprefix("spacecraft.")
     path, index = _split(name)
-    return _FLAT[path] if index is None else f"{_FLAT[path]}.{_AXES[index]}"
+    flat = _FLAT.get(path, path)
+    return flat if index is None else f"{flat}.{_AXES[index]}"
 
 
 def _nominal(sc: Scenario, name: str) -> tuple[float, float]:

@@ -267,7 +267,9 @@ def _check_folder(folder) -> None:
 
 
 @contextlib.contextmanager
-def _output(out, names, force: bool, what: str = "rwlab run", *, replace_previous=False):
+def _output(
+    out, names, force: bool, what: str = "rwlab run", *, replace_previous=False, keep_failed=False
+):
     """The command's output folder, locked now and written whole or not at all.
 
     ``with _output(out, FILES, force, "simulation") as stage:`` around the whole
@@ -279,7 +281,12 @@ def _output(out, names, force: bool, what: str = "rwlab run", *, replace_previou
 
     _check_folder(Path(out).absolute().parent)
     with output_folder(
-        out, names, force=force, replace_previous=replace_previous, what=what
+        out,
+        names,
+        force=force,
+        replace_previous=replace_previous,
+        what=what,
+        keep_failed=keep_failed,
     ) as stage:
         yield stage
         _check_stop()  # a stop whose exception was lost: the outputs are not published

@@ -7,14 +7,17 @@ import click
 from rwlab.cli._common import (
     SECONDS,
     Number,
-    _check_folder,
     _friendly_errors,
     _only_with,
+    _output,
     _steps_progress,
     _stop_signals,
+    _wrote,
     main,
 )
 from rwlab.errors import ConfigError
+
+HIL_FILES = ("record.mcap", "metrics.json", "report.html")
 
 
 def _nodes(text: str | None) -> tuple[int, ...] | None:
@@ -74,9 +77,9 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 @click.option(
     "--wheel-bias-rpm",
     type=Number(-1e5, 1e5),
-    default=0.0,
-    show_default=True,
-    help="Spin the wheels up along the null space first (pyramid): no zero crossings.",
+    default=None,
+    help="Spin the wheels up along the null space first (pyramid): no zero crossings "
+    "[default: 1000 on a redundant set such as a pyramid, else 0].",
 )
 @click.option(
     "--diagnosis/--no-diagnosis",
@@ -85,11 +88,24 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     "never hover at zero speed where the current test false-alarms].",
 )
 @click.option(
+    "--health-check/--no-health-check",
+    default=None,
+    help="Excite the wheels' null space (no body torque) and test that each wheel follows "
+    "its commanded acceleration [default: on with the diagnosis on a redundant set].",
+)
+@click.option(
+    "--steady-after",
+    type=Number(0, 1e9),
+    default=None,
+    help="Seconds after which steady-state statistics start [default: half the run, "
+    "at most its first hour].",
+)
+@click.option(
     "--calibration",
     type=SECONDS,
     default=300.0,
     show_default=True,
-    help="Seconds of healthy telemetry that calibrate the diagnosis.",
+    help="Seconds of healthy telemetry that calibrate the diagnosis and the health check.",
 )
 @click.option(
     "--rt-priority",
@@ -130,11 +146,16 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
     scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller
     from rwlab.attitude.scenario import load_scenario
 
-    _check_folder(out)
     steps = round(duration / load_scenario(scenario).run.dt) + 1
-    with _stop_signals(), _steps_progress(steps, f"hil {controller}", unit="periods") as progress:
-        result = run_hil(cfg, out, force=force, progress=progress)
-    report = write_hil_report(result, out)
+    # locked before anything starts; published whole on success; a failed run's record is
+    # kept (with its stop event) in OUT.failed-<time>, never in OUT
+    with (
+        _output(out, HIL_FILES, force, "hil run", keep_failed=True) as stage,
+        _stop_signals(),
+        _steps_progress(steps, f"hil {controller}", unit="periods") as progress,
+    ):
+        result = run_hil(cfg, stage, progress=progress)
+        report = write_hil_report(result, stage)
     m = result.metrics
     for key in ("steady_max_error_deg", "steady_rms_error_deg", "max_error_deg"):
         ref = m["reference_simulation"]
@@ -153,4 +174,4 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
         )
     b = m["bench"]
     click.echo(f"lost commands {b['lost_commands']}, lost telemetry {b['lost_telemetry_frames']}")
-    click.echo(f"wrote {', '.join(str(p) for p in (*result.paths.values(), report))}")
+    click.echo(_wrote(out, [*result.paths.values(), report]))

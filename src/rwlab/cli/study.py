@@ -50,11 +50,39 @@ from rwlab.errors import ConfigError, RwlabError
     show_default=True,
     help="Fit points within which the simplest model is chosen.",
 )
+@click.option(
+    "--gaps",
+    type=click.Choice(["refuse", "split"]),
+    default="refuse",
+    show_default=True,
+    help="A record with telemetry gaps: refuse it, or split it at the gaps into segments "
+    "identified as separate experiments merged (MATLAB merge(iddata); reported as segments).",
+)
+@click.option(
+    "--gain-tolerance",
+    type=Number(0, 100, low_open=True),
+    default=2.0,
+    show_default=True,
+    help="Percent within which the chosen model's DC gain must match the steady-state gain "
+    "measured on the record's settled holds (a record without them: fit alone).",
+)
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
 def identify(
-    file, out, Ts, input_col, output_col, preprocess, split, tolerance, workers, scheduler, force
+    file,
+    out,
+    Ts,
+    input_col,
+    output_col,
+    preprocess,
+    split,
+    tolerance,
+    gaps,
+    gain_tolerance,
+    workers,
+    scheduler,
+    force,
 ):
     """Run paper A's whole identification study on a record or data file.
 
@@ -75,6 +103,8 @@ def identify(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gaps=gaps,
+        gain_tolerance=gain_tolerance,
     )
     if Path(file).is_dir():
         _identify_fleet(Path(file), Path(out), options, workers, scheduler, force)
@@ -94,6 +124,9 @@ def identify(
 
         echo = lambda t: click.echo(t, err=True)  # noqa: E731
         study, paths = run_study(file, out, force=force, progress=progress, echo=echo, **options)
+    if study.get("segments"):
+        parts = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in study["segments"])
+        click.echo(f"split at telemetry gaps into {len(study['segments'])} experiments: {parts}")
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
     for row in study["orders"] + study["others"]:

@@ -65,8 +65,9 @@ class _ExperimentCommand(click.Command):
 )
 @click.option(
     "--wheel",
-    type=click.Choice(["rw90", "ideal"]),
-    help="Simulated wheel preset: rw90 (realistic, default) or ideal (no imperfections).",
+    metavar="PRESET|FILE.toml",
+    help="Simulated wheel: the preset rw90 (realistic, default) or ideal (no imperfections), "
+    "or a wheel TOML file (docs/wheels/rw90.toml lists every parameter).",
 )
 @click.option(
     "--file",
@@ -89,8 +90,8 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--rate-limit/--no-rate-limit",
     default=None,
-    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (default on: "
-    "ramps, not steps); --no-rate-limit plays true steps and lets the wheel saturate.",
+    help="Limit a speed-mode PRBS's slope to the wheel's acceleration limit (ramps, not "
+    "steps). Default off: paper A's PRBS steps, and the wheel follows at its limit.",
 )
 @click.option(
     "--fault",
@@ -203,12 +204,19 @@ def _timing_line(t: dict) -> str:
 @click.option(
     "--node", type=click.IntRange(0, 15), help="The wheel, in a record of several (rwlab hil)."
 )
+@click.option(
+    "--satellite",
+    is_flag=True,
+    help="Export the satellite's channel of an `rwlab hil` record (attitude, errors, "
+    "torques, wheel momenta, sun/Earth sensor, gyro and star-tracker readings) as logged.",
+)
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def export(record, fmt, out, Ts, max_gap, node, force):
+def export(record, fmt, out, Ts, max_gap, node, satellite, force):
     """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
 
-    Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a.
+    Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a; with
+    --satellite the satellite channel of a hil record at its logging period.
     """
     from rwlab.testbed import load_record
 
@@ -222,6 +230,18 @@ def export(record, fmt, out, Ts, max_gap, node, force):
     if path.exists() and not force:
         raise FileExistsError(f"{path} exists; pass --force to replace it")
     _check_folder(path.parent)
+    if satellite:
+        if node is not None or Ts is not None or max_gap is not None:
+            raise ConfigError(
+                "--satellite exports the satellite channel as logged; leave out --node, "
+                "--Ts and --max-gap (they choose and sample a wheel's channels)"
+            )
+        from rwlab.hil.record import satellite_data
+
+        data = satellite_data(record)
+        data.write(path, overwrite=force, plain=True)
+        click.echo(f"{path}: {data.N} satellite rows at Ts = {data.Ts:g} s")
+        return
     data = load_record(
         record, Ts, outputs=("speed", "acceleration", "current"), max_gap=max_gap, node=node
     )

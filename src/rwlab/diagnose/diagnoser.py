@@ -18,9 +18,18 @@ friction   constant speed (|α| < 10 rpm/s), |ω| ≥ 500 rpm  relative excess o
 motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess of     increase
                                                            current over the
                                                            inertial current
-speed      command held ≥ 30 s                             speed − command, rpm   either way
+speed      command held ≥ 30 s, wheel and model quiet      speed − command, rpm   either way
+           (|α| < 10 rpm/s) ≥ 10 s
 lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
 =========  ==============================================  =====================  ==========
+
+``friction_change`` compares the friction test's samples at ≥ 1500 rpm with the
+unit's own friction law (viscous, Coulomb and current offset over the
+reference's; ridge least squares on the record's samples older than 300 s): a
+friction rise smaller than the spread between units, when it starts within the
+record. A lag alarm is named by the current balance on the lag samples: a weak
+motor draws 1/F the current the achieved acceleration needs, a lowered clamp
+exactly that current.
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
@@ -56,7 +65,7 @@ from scipy.stats import poisson
 from rwlab.data import IOData
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import Finding, isolate
-from rwlab.diagnose.reference import DEFAULT_TOLERANCE, HealthyReference, block_stats
+from rwlab.diagnose.reference import DEFAULT_TOLERANCE, BlockStats, HealthyReference, block_stats
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError
 
@@ -65,9 +74,15 @@ __all__ = ["Alarm", "Diagnoser", "Diagnosis", "diagnose", "healthy_reference"]
 CUSUM_K = 0.5
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
+GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
+CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
+# friction over the reference's varies with speed beyond its viscous + Coulomb law)
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
+STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 12000 rpm at the
+# acceleration limit outlasts any fixed hold time, s
+STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 DROPOUT_BLOCK_S = 10.0
@@ -182,6 +197,78 @@ class _BlockCusum:
         return v[j:]
 
 
+class _FrictionChange(_BlockCusum):
+    """Friction against this record's own past: the unit's friction law (its viscous and
+    Coulomb excess over the reference's and its current offset) fitted on the record's
+    samples older than ``GUARD_S``, so holds at other speeds compare like with like (a
+    plain mean of the relative excess does not: a unit whose viscous/Coulomb mix and
+    current offset differ from the reference's has a speed-dependent excess), and a fault
+    enters the baseline only ``GUARD_S`` after its onset."""
+
+    def __init__(self, stats, tolerance: float, h: float, baseline_blocks: int, c) -> None:
+        super().__init__(stats, tolerance, h, "up")
+        self.mean = 0.0
+        self.c = np.asarray(c, dtype=float)  # the reference's current model
+        self._need = baseline_blocks * stats.block
+        self._pending: deque = deque()  # (t_s, regressors, residual) younger than GUARD_S
+        self._xtx = np.zeros((3, 3))
+        self._xtr = np.zeros(3)
+        self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the baseline
+        self._signs = [0, 0]  # baseline samples at positive, negative speed
+        self._law: np.ndarray | None = None
+        self._cov = np.zeros((3, 3))
+        self.law_sd: deque = deque()  # (t_s, σ of the law's prediction, value units)
+
+    def _ridge(self) -> np.ndarray:
+        """The law's least squares, shrunk towards the reference's by the spread between
+        units, so a baseline with few speeds does not extrapolate wildly: prior σ 30 % of
+        the reference's viscous and Coulomb currents, 5 mA of offset
+        (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
+        (the samples of a hold are correlated)."""
+        n, s1, s2 = self._r
+        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
+        prior = np.array([0.3 * abs(self.c[1]) + 1e-9, 0.3 * abs(self.c[2]) + 1e-4, 5e-3])
+        A = self._xtx / noise**2 + np.diag(1 / prior**2)
+        self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
+        return self._cov @ self._xtr / noise**2
+
+    def add_sample(self, t_s: float, residual_a: float, speed_rpm: float, friction_a: float):
+        """One constant-speed sample: current residual (A), speed (rpm), the reference's
+        friction current there (A); True on an alarm."""
+        if abs(speed_rpm) < CHANGE_MIN_RPM:
+            return False
+        sign = math.copysign(1.0, speed_rpm)
+        x = np.array([speed_rpm, sign, 1.0])
+        self._pending.append((t_s, x, residual_a))
+        changed = False
+        while self._pending[0][0] <= t_s - GUARD_S:
+            _, xo, ro = self._pending.popleft()
+            self._xtx += np.outer(xo, xo)
+            self._xtr += xo * ro
+            self._r = [self._r[0] + 1, self._r[1] + ro, self._r[2] + ro * ro]
+            self._signs[int(xo[1] < 0)] += 1
+            changed = True
+        n = self._r[0]
+        if changed and (n >= 4 * self._need or (n >= self._need and min(self._signs) >= 20)):
+            self._law = self._ridge()
+        if self._law is None:
+            return False
+        own = float(self._law @ x)
+        friction_own = float(self._law[:2] @ x[:2])  # the offset is no friction
+        unit_friction = max(abs(friction_a) + sign * friction_own, 0.3 * abs(friction_a))
+        # the baseline law's own uncertainty at this speed, in the value's unit: the same
+        # for every sample of a hold, so averaging does not shrink it (sizing's interval)
+        self.law_sd.append((t_s, math.sqrt(float(x @ self._cov @ x)) / unit_friction))
+        while self.law_sd[0][0] < t_s - HISTORY_S:
+            self.law_sd.popleft()
+        return self.add(t_s, sign * (residual_a - own) / unit_friction)
+
+    def law_uncertainty(self, n: int) -> float:
+        """Mean σ of the baseline law's prediction over the last ``n`` values."""
+        sd = [v for _, v in list(self.law_sd)[-n:]]
+        return float(np.mean(sd)) if sd else 0.0
+
+
 class _Dropout:
     """Lost telemetry frames per block, against the reference's Poisson loss rate."""
 
@@ -249,14 +336,16 @@ class Diagnoser:
         self.residuals = ResidualGenerator(wheel)
         self.alarms: list[Alarm] = []
         self.thresholds: dict[str, float] = {}
-        self.collected: dict[str, list[float]] = {name: [] for name in BLOCKS}
+        self.collected: dict[str, list[float]] = {name: [] for name in (*BLOCKS, "friction_change")}
         self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
             name: []
             for name in ("t_s", "speed", "acceleration", "current", *(f"stat_{b}" for b in BLOCKS))
         }
         self._detectors: dict = {}
-        self._lag_currents: deque = deque(maxlen=200)
+        self._lag_currents: deque = deque(maxlen=1200)
+        self._friction_sample = (0.0, 0.0, 0.0)
+        self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
@@ -264,7 +353,12 @@ class Diagnoser:
         self._was_stale = True
         self._lost: float | None = None
         self._command: tuple[float, float] = (math.nan, -math.inf)
-        if reference is not None:
+        self._still_since = math.inf  # since when wheel and model are quiet, s
+        if reference is None:  # measuring a reference: collect the change test's values
+            probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
+            self._change_probe = _FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
+            self._change_probe.add = lambda t, v: self.collected["friction_change"].append(v)  # type: ignore[method-assign]
+        else:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
                 raise ConfigError(
                     f"the healthy reference is at Ts = {reference.Ts} s, the model at {self.Ts} s"
@@ -275,6 +369,8 @@ class Diagnoser:
     # -- thresholds ----------------------------------------------------------------------
     def _arm(self, ref: HealthyReference) -> None:
         for name, stats in ref.tests.items():
+            if name == "friction_change":
+                continue  # armed with the friction test
             sides = {"friction": "up", "motor": "up", "lag": "down"}.get(name, "both")
             arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
             h = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
@@ -283,7 +379,13 @@ class Diagnoser:
             self.thresholds[name] = h
             if name == "friction":  # onsets smaller than the spread between units
                 tol = ref.tolerance.get("friction_change", DEFAULT_TOLERANCE["friction_change"])
-                self._detectors["friction_change"] = _BlockCusum(stats, tol, h, sides, 6)
+                # its own σ where the reference has it (hold-to-hold scatter of the
+                # change values, which the plain friction test's σ does not hold)
+                change = ref.tests.get("friction_change", stats)
+                change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
+                self._detectors["friction_change"] = _FrictionChange(
+                    change, tol, h, 6, ref.current_model
+                )
                 self.thresholds["friction_change"] = h
         p = ref.repeat_probability
         self._detectors["stuck"] = RunTest(run_length(self.arl0, p))
@@ -335,7 +437,13 @@ class Diagnoser:
         # hold a well-regulated wheel's Hall reading repeats; the speed and lag tests and
         # the frozen check catch a sensor stuck there once the command changes)
         self._moving = abs(r["acceleration"] - r["accel_rpm_s"]) >= QUIET_RPM_S
-        if usable and self._moving and speed_rpm != 0 and self._last_speed not in (None, 0.0):
+        if self._moving or abs(r["accel_rpm_s"]) >= QUIET_RPM_S or not usable:
+            self._still_since = math.inf
+        elif self._still_since == math.inf:
+            self._still_since = t_s
+        # a reading near zero repeats while the wheel rests in stiction: no evidence
+        self._moving = self._moving and abs(speed_rpm) >= STILL_RPM
+        if usable and self._moving and self._last_speed not in (None, 0.0):
             self.repeats[0] += repeat
             self.repeats[1] += 1
         self._last_speed = speed_rpm
@@ -347,14 +455,17 @@ class Diagnoser:
                 new += self._fire(t_s, "dropout")
             if usable and self._detectors["stuck"].update(repeat and self._moving):
                 new += self._fire(t_s, "stuck")
-            if "friction" in values:
-                values["friction_change"] = values["friction"]
+            sample = self._friction_sample
+            if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
+                new += self._fire(t_s, "friction_change")
             for name, value in values.items():
                 if self._detectors[name].add(t_s, value):
                     new += self._fire(t_s, name)
         else:
             for name, value in values.items():
                 self.collected[name].append(value)
+            if "friction" in values:  # the change test's values after its baseline
+                self._change_probe.add_sample(t_s, *self._friction_sample)
         self._record(t_s, r, values)
         return new
 
@@ -364,22 +475,27 @@ class Diagnoser:
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
         prev = self._prev
         self._prev = {"accel": accel, "model_accel": model_accel}
-        if t_s - self._command[1] >= SETTLE_S and abs(self._command[0]) <= HELD_MAX_RPM:
+        settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
+        if settled and abs(self._command[0]) <= HELD_MAX_RPM:
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
         lagging = abs(model_accel) >= LAG_SHARE * self.accel_limit
         if lagging and abs(prev.get("model_accel", 0.0)) >= LAG_SHARE * self.accel_limit:
             out["lag"] = (accel - model_accel) * math.copysign(1.0, model_accel) / self.accel_limit
-            self._lag_currents.append(abs(current_a))
+            self._lag_currents.append((t_s, abs(current_a)))
         c = self.residuals.current_model
         if c is None or not math.isfinite(r["current"]):
             return out
         sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
         friction = c[1] * speed_rpm + c[2] * sign
         inertial = c[0] * accel
+        if "lag" in out and abs(inertial) >= MOTOR_MIN_A:
+            excess = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
+            self._lag_excess.append((t_s, excess))
         if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
             out["friction"] = sign * r["current"] / abs(friction)
+            self._friction_sample = (r["current"], speed_rpm, friction)
         sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
@@ -430,7 +546,8 @@ class Diagnoser:
         change = self._detectors.get("friction_change")
         if detector == "friction_change" and change is not None and change.raw:
             # the size relative to the record's start, not to the reference's unit
-            ev["friction"] = (1 + change.since_change()) / (1 + change.mean) - 1
+            ev["friction"] = change.since_change()
+            ev["friction_model_sd"] = change.law_uncertainty(len(ev["friction"]))
             detector = "friction"
         ref = self.reference
         assert ref is not None  # alarms come only from an armed detector
@@ -447,8 +564,11 @@ class Diagnoser:
         ev["moving_repeats"] = self._detectors["stuck"].run
         if any(a.kind == "speed_sensor_stuck" for a in self.alarms):
             ev["moving_repeats"] = math.inf  # a frozen reading misleads every later test
-        n_lag = len(ev.get("lag", ())) * (lag.stats.block if lag is not None else 0)
-        ev["lag_currents"] = np.array(list(self._lag_currents)[-max(n_lag, 1) :])
+        # the lag samples since the change (since_change's single values, the latest ones)
+        n_lag = len(ev.get("lag", ()))
+        t0 = lag.raw[-n_lag][0] if lag is not None and 0 < n_lag <= len(lag.raw) else -math.inf
+        ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
+        ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
@@ -498,10 +618,11 @@ def healthy_reference(
     coef = fit_current_model(accel[keep], speed[keep], current[keep])
     second = Diagnoser(wheel, None)
     second.residuals.current_model = coef
+    second._change_probe.c = coef
     for k in range(data.N):
         second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
     tests = {
-        name: block_stats(np.array(values), BLOCKS[name], data.N)
+        name: block_stats(np.array(values), BLOCKS.get(name, BLOCKS["friction"]), data.N)
         for name, values in second.collected.items()
     }
     reps, readings = second.repeats

@@ -31,8 +31,11 @@ controller does, so with the nominal balance î = î_α + î_ω the relative
 excesses are e_α = 1/F_k − 1 (under acceleration) and e_ω = F_f/F_k − 1 (at
 constant speed). Two faults at once are both named when both are significant
 (a weak motor and worn bearings), or by their own detectors (a sensor fault and
-a rotor fault). Confidence intervals are 95 %, from the block means' σ on the
-healthy reference (sizes are relative to the unit the reference was measured on).
+a rotor fault). Confidence intervals are 95 %: the block means' σ on the healthy
+reference (noise), and model uncertainty where the size rests on a model: a
+friction-change size on the posterior σ of the record's own friction law, an
+absolute friction or a torque-constant size (against the reference's unit) on
+the spread between healthy units (:data:`FRICTION_UNIT_SD`, :data:`MOTOR_UNIT_SD`).
 """
 
 from __future__ import annotations
@@ -45,6 +48,13 @@ import numpy as np
 __all__ = ["Finding", "isolate"]
 
 Z95 = 1.959964
+# σ of the friction ratio between two healthy units: viscous and Coulomb each uniform
+# within ±30 % (rwlab.wheel.imperfections.TOLERANCES), so σ = √2·0.3/√3 ≈ 0.245 relative. A
+# size from the absolute friction test is against the reference's unit; its interval holds
+# this spread as model uncertainty (a friction-change size is against the unit itself).
+FRICTION_UNIT_SD = math.sqrt(2) * 0.3 / math.sqrt(3)
+# ... and of the inertial current I/k_t between two units: I ±2 %, k_t ±5 %, uniform
+MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
@@ -82,6 +92,7 @@ def _motor(ev: dict) -> tuple[float, float] | None:
 
 
 def _torque_constant(e: float, half: float) -> Finding:
+    half = math.hypot(half, Z95 * MOTOR_UNIT_SD * (1 + e))  # against the reference's unit
     lo, hi = 1 / (1 + e + half), 1 / max(1 + e - half, 1e-9)
     return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
 
@@ -95,10 +106,14 @@ def _rotor(ev: dict) -> list[Finding]:
         findings.append(_torque_constant(*motor))  # type: ignore[misc]
     if len(ev.get("friction", ())):
         e_f, half_f = _mean_ci(ev["friction"], ev["sigma"]["friction"])
+        # model uncertainty: the baseline friction law's (a friction-change alarm)
+        half_f = math.hypot(half_f, Z95 * ev.get("friction_model_sd", 0.0))
         e_a, half_a = motor if weak else (0.0, 0.0)  # type: ignore[misc]
         factor = (1 + e_f) / (1 + e_a)
         rel = math.hypot(half_f / (1 + e_f), half_a / (1 + e_a))
         if not weak or factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0):
+            if "friction_model_sd" not in ev:  # sized against the reference's unit
+                rel = math.hypot(rel, Z95 * FRICTION_UNIT_SD)
             findings.append(
                 Finding("friction", factor, (factor * (1 - rel), factor * (1 + rel)), "factor")
             )
@@ -138,9 +153,20 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
+    # the current balance holds at the limit too: a weak motor draws 1/F the current the
+    # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
+    excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
+    excess = excess[np.isfinite(excess)]
+    if excess.size >= 5:
+        e = float(np.median(excess)) - ev["ref_mean"]["motor"]
+        if e > LAG_SPLIT:
+            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
+            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
-    if after.size:  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
+    if (
+        after.size and excess.size < 5
+    ):  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
         base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
         if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one

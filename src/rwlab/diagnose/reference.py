@@ -9,7 +9,10 @@ detectors compare a later record with, and stores it in ``model.json`` under
 - ``tests``: per block test (``friction``, ``motor``, ``speed``, ``lag``) the
   mean and the σ of its block means on the healthy record, the block length
   (qualifying samples), the share of samples that qualify and how many samples
-  the figures rest on;
+  the figures rest on; ``friction_change`` (optional: older files fall back to
+  ``friction``'s σ) holds the σ of the friction-change test's values on the
+  record, its own friction law fitted on the record's older samples, so the
+  hold-to-hold scatter of that comparison is in its threshold;
 - ``repeat_probability``: how often a non-zero speed reading repeats exactly
   (Hall quantisation), counted over the whole record;
 - ``lost_per_sample``: telemetry frames lost per sample (the 8-bit frame
@@ -45,7 +48,7 @@ DEFAULT_TOLERANCE = {
     "motor": 0.15,
     "speed": 2.0,
     "lag": 0.03,
-    "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing's warm-up
+    "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing warm-up
 }
 
 

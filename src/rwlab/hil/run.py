@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,10 +44,18 @@ from rwlab.attitude.control import (
     slew_rate_limit,
 )
 from rwlab.attitude.scenario import Scenario, load_scenario
-from rwlab.attitude.sim import SimResult
+from rwlab.attitude.sim import SimResult, _w_bo
 from rwlab.attitude.wheels import physics_params
 from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
+from rwlab.hil.health import (
+    DITHER_PERIOD_S,
+    DITHER_RPM_S,
+    WINDOW_S,
+    NullSpaceDither,
+    TrackingTest,
+    null_vector,
+)
 from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
@@ -60,6 +68,7 @@ SIM_READ_DELAY = 1e-6  # s after each control instant the simulated host reads (
 SPIN_UP_RPM_S = 20.0  # the bias spin-up's ramp, rpm/s
 SPIN_UP_HOLD_S = 10.0  # and its hold before the run, s
 LATE_S = 0.005  # a wall-clock period that starts this late counts as a late step
+DEFAULT_BIAS_RPM = 1000.0  # a redundant set's momentum bias unless told: far from zero speed
 
 
 _NODE_FAULT = re.compile(r"^\s*(\d+)\s*:(.+)$")
@@ -105,9 +114,10 @@ class HilConfig:
         simulated clock, 50 Hz on the wall clock).
     latency_s : float
         Twins' command-to-effect latency, s.
-    wheel_bias_rpm : float
+    wheel_bias_rpm : float, optional
         Spin the wheels up to this speed along the null space of the wheel matrix
         before the run (a pyramid's momentum bias: no zero crossings, no body momentum).
+        Default :data:`DEFAULT_BIAS_RPM` on a redundant wheel set, 0 otherwise.
     diagnosis : bool, optional
         Live diagnosis of every wheel's telemetry. By default on when the wheels carry
         a momentum bias (``wheel_bias_rpm``): the diagnosers' current balance holds for
@@ -115,6 +125,9 @@ class HilConfig:
         reads 0 below ``min_measurable_rpm``) flips its drive's friction feed-forward
         with a sign the reading cannot show, which the current test takes for a fault
         (measured: a false alarm within 300 s on the orthogonal smallsat).
+    health_check : bool, optional
+        The null-space excitation and every wheel's command-tracking test
+        (:mod:`rwlab.hil.health`). Default: on with the diagnosis on a redundant set.
     diagnosis_period_s : float
         The diagnosers' sample time, s (a whole number of control periods).
     calibration_s, false_alarms_per_hour : the diagnosers' (:class:`rwlab.diagnose.Diagnoser`).
@@ -126,6 +139,9 @@ class HilConfig:
         On the wall clock, run the control loop under the SCHED_FIFO real-time policy at
         this priority (1..99; Linux, needs CAP_SYS_NICE), as a bench computer would: a
         loaded machine then cannot make a control period start late.
+    steady_after : float, optional
+        Seconds after which the steady-state statistics start (as ``attitude simulate
+        --steady-after``; default half the run, at most its first hour).
     reference : bool
         Also fly ``attitude simulate`` on the same scenario and seed with the physics
         wheel (healthy, from the same wheel momenta) for the side-by-side comparison.
@@ -144,8 +160,9 @@ class HilConfig:
     twins: bool | None = None
     telemetry_rate: float | None = None
     latency_s: float = 0.02
-    wheel_bias_rpm: float = 0.0
+    wheel_bias_rpm: float | None = None
     diagnosis: bool | None = None
+    health_check: bool | None = None
     diagnosis_period_s: float = 0.5
     calibration_s: float = 300.0
     false_alarms_per_hour: float = 1e-3
@@ -153,6 +170,7 @@ class HilConfig:
     timeout_s: float = 0.5
     reference: bool = True
     rt_priority: int | None = None
+    steady_after: float | None = None
 
 
 @dataclass
@@ -271,15 +289,13 @@ class _WheelWatch:
 
 def _null_space_bias(sc: Scenario, bias_rpm: float) -> np.ndarray:
     """Wheel speeds (N,) rpm with no body momentum and |speed| = ``bias_rpm`` where possible."""
-    G = sc.wheel_matrix
-    _, s, vt = np.linalg.svd(G)
-    if G.shape[1] <= np.sum(s > 1e-9):
+    n = null_vector(sc.wheel_matrix)
+    if n is None:
         raise ConfigError(
-            f"{sc.name}: its {G.shape[1]} wheels have no null space; a momentum bias needs a "
+            f"{sc.name}: its {sc.n_wheels} wheels have no null space; a momentum bias needs a "
             "redundant set (wheel_axes = 'pyramid')"
         )
-    n = vt[-1]
-    return bias_rpm * n / np.max(np.abs(n))
+    return bias_rpm * n
 
 
 _SAT = {
@@ -294,6 +310,8 @@ _SAT = {
     "wheel_momentum_Nms": {"type": "array"},
     "sun_sensor": {"type": ["array", "null"]},
     "earth_sensor": {"type": ["array", "null"]},
+    "gyro_rad_s": {"type": ["array", "null"]},
+    "star_tracker_q": {"type": ["array", "null"]},
     "active_wheels": {"type": "array"},
 }
 
@@ -378,6 +396,9 @@ def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
             raise ConfigError(f"a fault names node {node}, not one of the wheels {nodes}")
         if fault.t_s > cfg.duration:
             raise ConfigError(f"fault {node}:{fault} starts after the run ends")
+    sa = cfg.steady_after
+    if sa is not None and not (math.isfinite(sa) and 0 <= sa < cfg.duration):
+        raise ConfigError(f"steady_after must be a number of seconds in [0, duration), got {sa!r}")
     every = cfg.diagnosis_period_s / sc.run.dt
     if cfg.diagnosis is not False and (every < 1 or abs(every - round(every)) > 1e-9):
         raise ConfigError("the diagnosis period must be a whole number of control periods")
@@ -415,6 +436,9 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     overrides = {"sky.epoch": cfg.epoch} if cfg.epoch else {}
     sc = load_scenario(cfg.scenario, **overrides)
     nodes = _check(cfg, sc)
+    redundant = null_vector(sc.wheel_matrix) is not None
+    if cfg.wheel_bias_rpm is None:
+        cfg = replace(cfg, wheel_bias_rpm=DEFAULT_BIAS_RPM if redundant else 0.0)
     seed = sc.run.seed if cfg.seed is None else cfg.seed
     ctl, estimator, sim_kw = build_controller(sc, cfg.controller)
     twins = cfg.twins if cfg.twins is not None else cfg.interface in ("virtual", "udp_multicast")
@@ -428,6 +452,12 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     params = physics_params(sc)
     diagnosis = bool(cfg.wheel_bias_rpm) if cfg.diagnosis is None else cfg.diagnosis
+    health = (diagnosis and redundant) if cfg.health_check is None else cfg.health_check
+    if health and not redundant:
+        raise ConfigError(
+            f"{sc.name}: the health check excites the wheels' null space; its "
+            f"{sc.n_wheels} wheels have none (use wheel_axes = 'pyramid' or leave it out)"
+        )
     clock = WallClock() if cfg.realtime else SimClock()
     rate = cfg.telemetry_rate or (50.0 if cfg.realtime else 1.0 / sc.run.dt)
     config = {
@@ -449,6 +479,16 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "wheel_params": params.to_dict(),
         "epoch": sc.sky.epoch,
         "diagnosis": diagnosis,
+        "health_check": (
+            {
+                "dither_rpm_s": DITHER_RPM_S,
+                "dither_period_s": DITHER_PERIOD_S,
+                "window_s": WINDOW_S,
+            }
+            if health
+            else None
+        ),
+        "steady_after_s": cfg.steady_after,
         "wheel_model": "bus",
     }
     _warm_up(sc, ctl, estimator, sim_kw)
@@ -483,6 +523,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         )
         loop = _Loop(cfg, sc, nodes, bank, clock, record, ctl, estimator, sim_kw, seed)
         loop.diagnosis = diagnosis
+        loop.health = health
         loop.fly(progress)
     except BaseException as exc:
         problems = bank.close()  # first of all: every wheel idle
@@ -520,6 +561,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "max_error_from_first_fault_deg": loop.max_error_from_fault if cfg.faults else None,
         "bench": {**loop.bench, "idle_problems": problems},
         "diagnosis_off": loop.diagnosis_off,
+        "health_check": loop.health_summary(),
         "measurement": measurement_effects(loop.wheel_log(), params, sc.run.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
         "config": config,
@@ -546,6 +588,7 @@ def reference_simulation(sc: Scenario, cfg: HilConfig, seed: int, h0: np.ndarray
         estimator=estimator,
         seed=seed,
         log_every=cfg.log_every,
+        steady_after=cfg.steady_after,
         wheel_momentum0=np.asarray(h0, float),
         **kw,
     )
@@ -647,6 +690,10 @@ class _Loop:
         self._t: list[float] = []
         self.t0 = 0.0
         self.diagnosis = False
+        self.health = False
+        self.tracking: dict[int, TrackingTest] = {}
+        self.tracked: dict[int, TrackingTest] = {}
+        self.dither: NullSpaceDither | None = None
         self.diag: dict = {}
         self._recalibrate_when_still = False
         self.diagnosis_off: dict[int, str] = {}
@@ -698,6 +745,7 @@ class _Loop:
             seed=self.seed,
             wheel_momentum0=self.h0,
             log_every=cfg.log_every,
+            steady_after=cfg.steady_after,
             **self.sim_kw,
         )
         if not cfg.wheel_bias_rpm:
@@ -709,6 +757,21 @@ class _Loop:
             bank.twins[self.nodes.index(node)].schedule_faults([fault], origin=t0)
             self.event("fault_scheduled", f"node {node}: {fault}", t0)
         diag = self.diag = self._diagnosers(self.nodes) if self.diagnosis else {}
+        if self.health:
+            self.dither = NullSpaceDither(sc.wheel_matrix, bank.params.inertia)
+            self.tracking = {
+                n: TrackingTest(
+                    sc.run.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour
+                )
+                for n in self.nodes
+            }
+            self.tracked = dict(self.tracking)
+            self.event(
+                "health_check",
+                f"null-space excitation ±{DITHER_RPM_S:g} rpm/s over {DITHER_PERIOD_S:g} s; "
+                f"command-tracking tests calibrate over {cfg.calibration_s:g} s",
+                t0,
+            )
         every = round(cfg.diagnosis_period_s / sc.run.dt)
         acc_sum = {n: 0.0 for n in self.nodes}
         report_every = max(1, sat.steps // 100)
@@ -716,6 +779,8 @@ class _Loop:
             k = sat.k
             t_start = clock.now()
             torques = sat.wheel_torques()
+            if self.dither is not None:  # no body torque: G·n = 0 over the active wheels
+                torques = torques + self.dither.torques(sat.t, sat.active)
             refused = bank.command(torques)
             for node, exc in refused.items():  # the wheel idled itself: it is lost
                 self._wheel_failed(node, "latched_fault", str(exc), t_start, hard=True)
@@ -740,6 +805,8 @@ class _Loop:
                 self._lateness.append(wake - target)
                 self._compute.append(sent - t_start)
                 self._wake.append(wake)
+            if self.tracking:
+                self._track(readings, self._cmd[-1], wake)
             if diag and (k + 1) % every == 0:
                 self._diagnose(diag, readings, acc_sum, every)
                 acc_sum = {n: 0.0 for n in self.nodes}
@@ -759,6 +826,7 @@ class _Loop:
         sat = self.sat
         step = sat._step
         sensors = sat.last_sensors if step.get("measured") else {}
+        tracker = sat.last_tracker if step.get("measured") else None
         x = sat.x
         self.record.write(
             "/satellite",
@@ -768,12 +836,14 @@ class _Loop:
                 "estimation_error_deg": sat.estimation_error_deg,
                 "q": x[:4].tolist(),
                 "q_est": sat.q_hat.tolist(),
-                "w_bo": (x[4:7]).tolist(),
+                "w_bo": _w_bo(x[:4], x[4:7]).tolist(),  # relative to the orbit frame
                 "torque_demand_Nm": step["demand"].tolist(),
                 "wheel_torque_cmd_Nm": np.asarray(torques).tolist(),
                 "wheel_momentum_Nms": x[7:].tolist(),
                 "sun_sensor": None if sensors.get("sun") is None else sensors["sun"].tolist(),
                 "earth_sensor": None if sensors.get("earth") is None else sensors["earth"].tolist(),
+                "gyro_rad_s": sat.w_meas.tolist() if sat.sensors.gyro else None,
+                "star_tracker_q": None if tracker is None else tracker.tolist(),
                 "active_wheels": [n for n in self.nodes if self.bank.active[n]],
             },
         )
@@ -824,6 +894,32 @@ class _Loop:
                 continue
             for a in alarms:
                 self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
+
+    def _track(self, readings, cmd_rpm_s, now: float) -> None:
+        """Every active wheel's command-tracking test, each control period."""
+        for i, r in enumerate(readings):
+            test = self.tracking.get(r.node)
+            if test is None or not self.bank.active[r.node]:
+                continue
+            found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a)
+            if found is not None:
+                del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
+                kind, stat, h = found
+                how = f"command-tracking test (CUSUM {stat:.1f} > {h:.1f})"
+                self._wheel_failed(r.node, kind, how, now)
+
+    def health_summary(self) -> dict | None:
+        """Each tested wheel's calibrated healthy spread of the tracking residual, rpm/s."""
+        if not self.health:
+            return None
+        return {
+            "dither_rpm_s": DITHER_RPM_S,
+            "dither_period_s": DITHER_PERIOD_S,
+            "window_s": WINDOW_S,
+            "residual_sigma_rpm_s": {
+                str(n): t.healthy_spread_rpm_s() for n, t in self.tracked.items()
+            },
+        }
 
     def _wheel_failed(self, node: int, kind: str, how: str, t: float, hard: bool = False) -> None:
         """An alarm: record it, idle the wheel and reallocate when the others span 3 axes.

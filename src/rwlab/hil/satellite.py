@@ -116,6 +116,11 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.run.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.run.dt:g} s)")
+        if scenario.momentum.bias:
+            raise ConfigError(
+                "the HIL loop sets the wheels' bias itself (HilConfig.wheel_bias_rpm, "
+                "rwlab hil --wheel-bias-rpm): set momentum.bias = 0 in the scenario"
+            )
         sc = self.scenario = scenario
         self.controller = controller
         self.use_ekf = estimator == "ekf"
@@ -191,6 +196,7 @@ class Satellite:
         self._hw_prev = np.zeros(self.nw)
         self._step: dict = {}
         self.last_sensors: dict = {}
+        self.last_tracker: np.ndarray | None = None  # the tracker's q at this tick, if any
 
     # -- allocation ------------------------------------------------------------------
     def set_active(self, active: np.ndarray) -> None:
@@ -283,6 +289,7 @@ class Satellite:
             q_meas = np.empty(4)
             e = self.noise.tracker[self.i_tracker]
             kernel._tracker_measurement(x, sn.tracker_frame, sn.tracker_sigma, e, q_meas)
+            self.last_tracker = q_meas.copy()
             attitude_update_into(
                 self.q_hat, self.w_hat, self.P, q_meas, self.filt.tracker_R, self._Wn
             )
@@ -308,6 +315,7 @@ class Satellite:
             )
             self._status = (0.0 if sun_ok else 1.0, 0.0 if earth_ok else 1.0)
             self._sun_b, self._C = sun_b, C
+            self.last_tracker = None
             if sn.tracker and k % sn.tracker_every == 0:
                 self._track(k, sunlit, moon_visible, moon_b)
         measured = self.mode != kernel.TRUTH and tick

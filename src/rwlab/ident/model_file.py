@@ -104,6 +104,9 @@ class WheelModelFile:
     healthy_reference : dict, optional
         What the fault detectors need of the healthy identification record
         (:class:`rwlab.diagnose.HealthyReference`'s JSON form).
+    data_segments : tuple of (float, float), optional
+        The gap-free parts ``(t_start, t_end)`` (s) of a record split at its telemetry
+        gaps and identified as separate experiments (``identify --gaps split``).
     """
 
     model: PolyModel
@@ -121,6 +124,7 @@ class WheelModelFile:
     nonlinear_chosen: str | None = None
     nonlinear_choice: str | None = None
     healthy_reference: dict | None = None
+    data_segments: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
         if self.model.nu != 1:
@@ -190,6 +194,8 @@ class WheelModelFile:
             d["saturation"]["current_limit_a"] = _json_float(self.current_limit_a)
         if self.healthy_reference is not None:
             d["healthy_reference"] = self.healthy_reference
+        if self.data_segments is not None:
+            d["data_segments"] = [[float(a), float(b)] for a, b in self.data_segments]
         return d
 
     @classmethod
@@ -240,6 +246,7 @@ class WheelModelFile:
                 nonlinear_chosen=d.get("nonlinear_chosen"),
                 nonlinear_choice=d.get("nonlinear_choice"),
                 healthy_reference=d.get("healthy_reference"),
+                data_segments=_segments(d.get("data_segments")),
             )
         except (ModelError, FileFormatError) as exc:
             raise FileFormatError(f"{source}: {exc}") from None
@@ -322,3 +329,13 @@ def _float(v: Any) -> float:
 
 def _json_float(v: float | None) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
+
+
+def _segments(value) -> tuple[tuple[float, float], ...] | None:
+    """``data_segments``: None, or ordered finite ``[t_start, t_end]`` pairs."""
+    if value is None:
+        return None
+    pairs = tuple((float(a), float(b)) for a, b in value)
+    if not all(math.isfinite(a) and math.isfinite(b) and a <= b for a, b in pairs):
+        raise ModelError(f"data_segments must be finite [t_start, t_end] pairs, got {value!r}")
+    return pairs

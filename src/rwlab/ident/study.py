@@ -11,7 +11,11 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
 4. residual analysis and validation of the ARX models, ARMAX(2,2,1,nk)
    (Table 3, Fig. 19–22), and OE and BJ of matching order;
 5. model choice: the simplest model whose validation fit is within
-   ``tolerance`` percentage points of the best (the paper's "simplicity wins");
+   ``tolerance`` percentage points of the best (the paper's "simplicity wins")
+   and whose DC gain agrees within ``gain_tolerance`` with the steady-state
+   gain measured on the record's long holds (:func:`steady_state_gain`; beyond
+   the paper: a speed-loop model with the wrong static gain settles at the
+   wrong speed). A record without such holds is chosen by fit alone;
 6. continuous-time models by ZOH and Tustin at the record's real Ts, checked
    against the discrete model on a new input (Fig. 23), and the acceleration
    check (Fig. 24);
@@ -40,8 +44,9 @@ paper's order; they are kept together in that order.
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import control
@@ -60,7 +65,13 @@ from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
 
-__all__ = ["StudyResult", "identification_study", "physical_model", "wheel_model"]
+__all__ = [
+    "StudyResult",
+    "identification_study",
+    "physical_model",
+    "steady_state_gain",
+    "wheel_model",
+]
 
 PREPROCESSING = ("detrend", "scale", "normalize", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
@@ -92,6 +103,9 @@ class StudyResult(ShortRepr):
         ZOH and Tustin transfer functions and the discrete-vs-continuous check.
     acceleration : dict
         The acceleration check (Fig. 24).
+    segments : list of [t_start, t_end] or None
+        The gap-free parts the record was split into (s from its start), each an
+        experiment of its own; None for one record without gaps.
     """
 
     data: IOData
@@ -113,6 +127,8 @@ class StudyResult(ShortRepr):
     greybox: WheelGreyBox | None = None
     nlarx: NLARXModel | None = None
     physical_val: IOData | None = field(default=None, repr=False)
+    segments: list[list[float]] | None = None
+    steady_state: dict | None = None
 
     def to_pandas(self):
         """The structures tried (orders and other structures), one row each.
@@ -153,10 +169,12 @@ class StudyResult(ShortRepr):
             "orders": self.orders,
             "others": self.others,
             "chosen": {**chosen_row, "reason": self.reason},
+            "steady_state_gain": self.steady_state,
             "residuals": self.residuals,
             "continuous": {k: v for k, v in self.continuous.items() if k != "tf"},
             "acceleration": self.acceleration,
             "nonlinear": self.nonlinear,
+            "segments": self.segments,
         }
 
 
@@ -200,12 +218,14 @@ def identification_study(
     orders=(2, 3, 4, 5),
     nk_max: int = 10,
     tolerance: float = 3.0,
+    gain_tolerance: float = 0.02,
     seed: int = 0,
     nonlinear: bool = True,
     limits_rpm: tuple[float, float] = (math.inf, math.inf),
     progress: Callable[[int, int, str], None] | None = None,
     datasheet: dict | None = None,
     current=None,
+    segments: Sequence[tuple[int, int]] | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -232,6 +252,12 @@ def identification_study(
     tolerance : float
         Percentage points of validation fit within which the simplest model wins
         (default 3: paper A kept ARX221 although ARX331 fitted 1.6 points better).
+    gain_tolerance : float
+        Largest relative difference between a model's DC gain (physical units)
+        and the steady-state gain measured on the record (:func:`steady_state_gain`)
+        for the model to be chosen (default 0.02). When no model within
+        ``tolerance`` passes, or the record has too few long holds to measure
+        the gain, the choice is by fit alone and ``reason`` says so.
     seed : int
         For the new input of the continuous-time check.
     nonlinear : bool
@@ -250,6 +276,14 @@ def identification_study(
     current : array_like, shape (N,), optional
         The record's motor current (A) at the speed's instants: the grey box's
         second output (it makes kt and the friction observable).
+    segments : sequence of (int, int), optional
+        ``[i0, i1)`` sample ranges of the record's gap-free parts (e.g. from
+        :func:`rwlab.testbed.load.gap_free_segments`); the samples between them are
+        not used. Each part is an experiment of its own, as MATLAB's
+        ``merge(iddata)``: the estimation part of every segment enters one estimate
+        (the criteria summed, no regressor across a boundary); the delay scan, the
+        validation and the nonlinear stage use the longest piece of their part, and
+        the preprocessing takes its statistics from every estimation piece.
 
     Returns
     -------
@@ -275,8 +309,22 @@ def identification_study(
             f"of at least {math.ceil(needed * Ts)} s, or (in Python) study lower orders "
             "(orders=, nk_max=)"
         )
-    prepared = _preprocessed(data, preprocess, split)
+    if not (math.isfinite(gain_tolerance) and gain_tolerance > 0):
+        raise DataError(f"gain_tolerance must be a positive fraction, got {gain_tolerance!r}")
+    pieces = _pieces(data.N, split, segments, needed_per_piece=worst + 2 * max(orders) + 2)
+    prepared = _preprocessed(data, preprocess, split, pieces)
     est, val = prepared.split(split)
+    fit_data: IOData | list[IOData] = est
+    physical, scan, cur = data, est, current
+    if pieces is not None:
+        est_parts = [prepared[a:b] for a, b in pieces["est"]]
+        fit_data = est_parts if len(est_parts) > 1 else est_parts[0]
+        scan = max(est_parts, key=len)
+        a, b = pieces["val"]
+        val = prepared[a:b]
+        a, b = pieces["longest"]  # the nonlinear stage: one gap-free experiment
+        physical = data[a:b]
+        cur = None if current is None else np.asarray(current, dtype=float)[a:b]
     total, done = len(orders) + 5 + int(nonlinear), 0
 
     def step(label: str) -> None:
@@ -285,7 +333,7 @@ def identification_study(
         if progress is not None:
             progress(done, total, label)
 
-    losses = delay_scan(est, 2, 2, 0, nk_max)
+    losses = delay_scan(scan, 2, 2, 0, nk_max)
     step("delay scan")
     nk = min(losses, key=lambda k: losses[k])
     if nk == 0:
@@ -294,7 +342,7 @@ def identification_study(
     models: dict[str, PolyModel] = {}
     rows = []
     for n in orders:
-        m = arx(est, n, n, nk)
+        m = arx(fit_data, n, n, nk)
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
         step(m.structure)
@@ -305,7 +353,7 @@ def identification_study(
         ("OE", oe, (2, 2, nk_pem)),
         ("BJ", bj, (2, 1, 1, 2, nk_pem)),
     ):
-        m = _try(estimate, est, *args)
+        m = _try(estimate, fit_data, *args)
         if m is not None:
             models[m.structure] = m
             others.append(_row(m, val))
@@ -314,31 +362,25 @@ def identification_study(
     candidates = [r for r in rows + others if r["fit_percent"] is not None]
     if not candidates:
         raise EstimationError("no stable model was found; check the data and the delay")
-    best = max(r["fit_percent"] for r in candidates)
-    pick = min(
-        (r for r in candidates if r["fit_percent"] >= best - tolerance),
-        key=lambda r: (r["n_params"], _SIMPLICITY.index(_kind(r["structure"])), -r["fit_percent"]),
-    )
+    steady = steady_state_gain(data)
+    for r in rows + others:
+        _static_check(r, models[r["structure"]], prepared.trend, steady)
+    pick, reason = _choose(candidates, tolerance, gain_tolerance, steady)
     chosen = models[pick["structure"]]
-    reason = (
-        f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
-        f"then ARX < ARMAX < OE < BJ) whose validation fit ({pick['fit_percent']:.2f} %) "
-        f"is within {tolerance:g} points of the best ({best:.2f} %)"
-    )
 
     residuals = {
         name: resid(models[name], val, max_lag=min(25, val.N // 2 - 1), initial=INITIAL).to_dict()
         for name in (chosen.structure, *(r["structure"] for r in others[:1]))
     }
     rng = np.random.default_rng(seed)
-    new_u = _new_input(rng, est, val.N)
+    new_u = _new_input(rng, scan, val.N)
     continuous = _continuous(chosen, new_u)
     step("validation")
     servo, nl, grey, black = None, None, None, None
     if nonlinear:
-        servo, nl = _nonlinear_stage(data, split, chosen, prepared.trend, limits_rpm)
+        servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
         sheet = None if datasheet is None else {**DATASHEET, **datasheet}
-        grey, black = _wheel_models(data, split, servo, nl, sheet, current)
+        grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
         step("nonlinear")
     return StudyResult(
         data=prepared,
@@ -359,8 +401,159 @@ def identification_study(
         nonlinear=nl,
         greybox=grey,
         nlarx=black,
-        physical_val=data.split(split)[1],
+        physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
+        segments=None if pieces is None else _segment_times(data, pieces["all"]),
+        steady_state=steady,
     )
+
+
+def _segment_times(data: IOData, ranges) -> list[list[float]]:
+    """``[t_start, t_end]`` (s) of the first and last sample of each range."""
+    return [[data.tstart + a * data.Ts, data.tstart + (b - 1) * data.Ts] for a, b in ranges]
+
+
+def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | None:
+    """The segments cut at the estimation/validation split: ``est`` (ranges of every
+    estimation piece long enough to estimate from), ``val`` (the longest validation
+    piece), ``longest`` (the longest segment); None without segments or with one whole."""
+    if segments is None:
+        return None
+    ranges = [(int(a), int(b)) for a, b in segments]
+    if (
+        not ranges
+        or any(not 0 <= a < b <= n for a, b in ranges)
+        or any(b0 > a1 for (_, b0), (a1, _) in itertools.pairwise(ranges))
+    ):
+        raise DataError(f"segments must be ordered, disjoint sample ranges within 0..{n}")
+    if ranges == [(0, n)]:
+        return None
+    k = round(split * n)
+    est = [(a, min(b, k)) for a, b in ranges if min(b, k) - a >= needed_per_piece]
+    val = [(max(a, k), b) for a, b in ranges if b - max(a, k) >= needed_per_piece]
+    if not est or not val:
+        raise DataError(
+            f"the record's gap-free segments {ranges} leave no estimation or validation piece "
+            f"of {needed_per_piece} samples at the split {split:g}; record again without gaps"
+        )
+    return {
+        "est": est,
+        "val": max(val, key=lambda r: r[1] - r[0]),
+        "longest": max(ranges, key=lambda r: r[1] - r[0]),
+        "all": ranges,
+    }
+
+
+def _simplicity(r: dict) -> tuple:
+    return (r["n_params"], _SIMPLICITY.index(_kind(r["structure"])), -r["fit_percent"])
+
+
+def _choose(candidates: list[dict], tolerance: float, gain_tolerance: float, steady) -> tuple:
+    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why."""
+    best = max(r["fit_percent"] for r in candidates)
+    near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
+    limit = 100 * gain_tolerance
+    ok = [r for r in near if r.get("dc_gain_error_percent") is not None]
+    ok = [r for r in ok if abs(r["dc_gain_error_percent"]) <= limit]
+    pick = ok[0] if steady is not None and ok else near[0]
+    reason = (
+        f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
+        f"then ARX < ARMAX < OE < BJ) whose validation fit ({pick['fit_percent']:.2f} %) "
+        f"is within {tolerance:g} points of the best ({best:.2f} %)"
+    )
+    if steady is None:
+        return pick, reason + "; the record has too few settled holds to check the DC gain"
+    g = steady["gain"]
+    if not ok:
+        return pick, reason + (
+            f"; no such model's DC gain is within {limit:g} % of the measured steady-state "
+            f"gain {g:.4f} (this one's: {_dc_text(pick)})"
+        )
+    skipped = near[: near.index(pick)]
+    reason += f" and whose DC gain ({_dc_text(pick)}) is within {limit:g} % of the measured "
+    reason += f"steady-state gain {g:.4f} ({steady['holds']} settled holds)"
+    if skipped:
+        reason += "; passed over for a DC gain off the measured one: " + ", ".join(
+            f"{r['structure']} ({_dc_text(r)})" for r in skipped
+        )
+    return pick, reason
+
+
+def _dc_text(row: dict) -> str:
+    if row.get("dc_gain") is None:
+        return "none: a pole at 1"
+    return f"{row['dc_gain']:.4f}, {row['dc_gain_error_percent']:+.1f} %"
+
+
+def _static_check(row: dict, model: PolyModel, trend, steady) -> None:
+    """Add the model's DC gain in physical units (and its error against ``steady``) to ``row``."""
+    den = float(np.sum(model.A) * np.sum(model.F))
+    scale = float(trend.output_scale[0] / trend.input_scale[0])
+    dc = float(np.sum(model.B)) * scale / den if abs(den) > 1e-12 else None
+    row["dc_gain"] = dc if dc is not None and math.isfinite(dc) else None
+    row["dc_gain_error_percent"] = (
+        None
+        if row["dc_gain"] is None or steady is None
+        else 100.0 * (row["dc_gain"] / steady["gain"] - 1.0)
+    )
+
+
+def steady_state_gain(
+    data: IOData, *, min_hold: float = 30.0, tail: float = 5.0, settled: float = 0.01
+) -> dict | None:
+    """The static gain measured on a record: settled output against input over its long holds.
+
+    Every hold of the input at least ``min_hold`` long gives one point: the input
+    level and the mean output over the hold's last ``tail`` seconds, kept when the
+    output has settled there (its range over the tail within ``settled`` of the
+    input's whole range: a wheel still ramping at its acceleration limit is not).
+    The gain is the least-squares slope through these points (with an intercept,
+    as the physical model ``y − y0 = G·(u − u0)`` has).
+
+    Parameters
+    ----------
+    data : IOData
+        SISO record in physical units (e.g. command rpm → speed rpm).
+    min_hold : float
+        Shortest hold used, s (30 s: five closed-loop time constants of the RW90).
+    tail : float
+        Averaging window at the end of each hold, s.
+    settled : float
+        Largest output range over the tail, as a fraction of the input's range.
+
+    Returns
+    -------
+    dict or None
+        ``gain`` (output units per input unit), ``intercept``, ``holds`` (points
+        used) and the settings; None when fewer than 3 settled holds at two or
+        more levels exist.
+    """
+    if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
+        raise DataError("steady_state_gain needs a single-input single-output IOData")
+    u, y = data.u[:, 0], data.y[:, 0]
+    edges = np.flatnonzero(np.diff(u) != 0) + 1
+    bounds = np.concatenate([[0], edges, [u.size]])
+    n_tail = max(1, round(tail / data.Ts))
+    span = float(np.ptp(u))
+    levels, speeds = [], []
+    for a, b in itertools.pairwise(bounds):
+        if (b - a) * data.Ts < min_hold or b - a < n_tail:
+            continue
+        end = y[b - n_tail : b]
+        if np.ptp(end) <= settled * span:
+            levels.append(float(u[a]))
+            speeds.append(float(end.mean()))
+    if len(levels) < 3 or np.ptp(levels) == 0:
+        return None
+    slope, intercept = np.polyfit(levels, speeds, 1)
+    return {
+        "gain": float(slope),
+        "intercept": float(intercept),
+        "holds": len(levels),
+        "min_hold_s": min_hold,
+        "tail_s": tail,
+        "method": "least-squares slope of the mean output over the last tail_s of every "
+        "settled input hold of at least min_hold_s, against the held input",
+    }
 
 
 DATASHEET = {
@@ -421,11 +614,15 @@ def _nonlinear_row(model, val: IOData) -> dict:
     }
 
 
-def _preprocessed(data: IOData, preprocess: str, split: float) -> IOData:
-    """``data`` preprocessed with the statistics of its estimation part only."""
+def _preprocessed(data: IOData, preprocess: str, split: float, pieces=None) -> IOData:
+    """``data`` preprocessed with the statistics of its estimation part only (of its
+    estimation pieces, with segments: never of the stale samples in a gap)."""
     if preprocess == "none":
         return data
     reference = data.split(split)[0]
+    if pieces is not None:
+        rows = np.concatenate([np.arange(a, b) for a, b in pieces["est"]])
+        reference = IOData(data.u[rows], data.y[rows], data.Ts)
     if preprocess == "detrend":
         return data.detrend(reference=reference)
     if preprocess == "scale":
@@ -618,6 +815,9 @@ def wheel_model(
         nonlinear_models=others,
         nonlinear_chosen=nl.get("chosen"),
         nonlinear_choice=nl.get("choice"),
+        data_segments=None
+        if result.segments is None
+        else tuple((float(a), float(b)) for a, b in result.segments),
     )
 
 
@@ -640,7 +840,7 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
     )
 
 
-def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
+def load_current(path: str, Ts: float | None = None, *, gaps: str = "refuse") -> np.ndarray | None:
     """The motor current (A) of a testbed record at the speed's instants, or None
     for a file without one (the grey box then fits the speed alone).
 
@@ -650,6 +850,8 @@ def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
         A record (``.mcap``); other files give None.
     Ts : float, optional
         Sample time, s (the record's own by default).
+    gaps : {'refuse', 'split'}
+        ``split``: read a record with telemetry gaps whole (see :func:`load_study_data`).
     """
     from pathlib import Path
 
@@ -657,8 +859,10 @@ def load_current(path: str, Ts: float | None = None) -> np.ndarray | None:
 
     if Path(path).suffix.lower() != ".mcap":
         return None
+    extra = {"max_gap": math.inf} if gaps == "split" else {}
     try:
-        return load(path, Ts, input_columns="command", output_columns="current_a").y[:, 0]
+        columns = {"input_columns": "command", "output_columns": "current_a"}
+        return load(path, Ts, **columns, **extra).y[:, 0]
     except DataError:
         return None
 
@@ -671,6 +875,7 @@ def load_study_data(
     output_col: str | None = None,
     max_orders: int = 5,
     nk_max: int = 10,
+    gaps: str = "refuse",
 ) -> tuple[IOData, dict]:
     """Read a testbed record (``.mcap``), an exported or other data file, or a bundled set.
 
@@ -682,7 +887,12 @@ def load_study_data(
     its telemetry period, is refused (``DataError``): its samples there would repeat a
     stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
     a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
+    With ``gaps="split"`` such a record is read whole, stale samples included: the caller
+    identifies its gap-free parts as separate experiments (``identification_study``'s
+    ``segments``, from :func:`rwlab.testbed.load.gap_free_segments`).
     """
+    if gaps not in ("refuse", "split"):
+        raise DataError(f"gaps must be 'refuse' or 'split', got {gaps!r}")
     from pathlib import Path
 
     from rwlab import datasets
@@ -698,12 +908,18 @@ def load_study_data(
         from rwlab.errors import RecordGapError
 
         try:
-            data = load(path, Ts, **columns)  # no max_gap: every gap and a too-fine Ts refused
+            try:  # no max_gap: every gap and a too-fine Ts refused
+                data = load(path, Ts, **columns)
+            except RecordGapError:
+                if gaps != "split":
+                    raise
+                # Ts was accepted before the gaps were found: read it whole
+                data = load(path, Ts, **columns, max_gap=math.inf)
         except RecordGapError as exc:
             raise RecordGapError(
                 f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
                 "with gaps: the held samples would be fitted as wheel dynamics. Record again, "
-                "or export the gap-free parts and identify each."
+                "or identify its gap-free parts as separate experiments (--gaps split)."
             ) from None
         wheel = data.source.get("wheel", {})
         if "max_speed_rpm" in wheel:

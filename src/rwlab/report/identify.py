@@ -44,6 +44,8 @@ def identify(
     preprocess: str = "detrend",
     split: float = 0.7,
     tolerance: float = 3.0,
+    gaps: str = "refuse",
+    gain_tolerance: float = 2.0,
     force: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
     echo: Callable[[str], None] | None = None,
@@ -66,6 +68,12 @@ def identify(
         Estimation share, in (0, 1).
     tolerance : float
         Fit points within which the simplest model is chosen.
+    gaps : {'refuse', 'split'}
+        A record with telemetry gaps: refuse it, or split it at the gaps into segments
+        identified as separate experiments merged (MATLAB ``merge(iddata)``).
+    gain_tolerance : float
+        Percent within which the chosen model's DC gain must match the steady-state gain
+        measured on the record's settled holds.
     force : bool
         Replace a previous study in ``out`` (only when this one succeeds).
     progress : callable, optional
@@ -88,6 +96,8 @@ def identify(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gaps=gaps,
+        gain_tolerance=gain_tolerance,
         force=force,
     )
     with output_folder(out, STUDY_FILES, force=force, what="identification study") as stage:
@@ -115,7 +125,7 @@ def identify_into(
         As in :func:`identify`.
     **options
         ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
-        ``tolerance``, ``force`` as in :func:`identify`.
+        ``tolerance``, ``gaps``, ``gain_tolerance``, ``force`` as in :func:`identify`.
 
     Returns
     -------
@@ -128,11 +138,16 @@ def identify_into(
     from rwlab.ident.study import wheel_model as make_wheel_model
     from rwlab.report.identification import write_study
 
-    Ts = options["Ts"]
+    Ts, gaps = options["Ts"], options.get("gaps", "refuse")
     file = str(file)
     data, saturation = load_study_data(
-        file, Ts, input_col=options["input_col"], output_col=options["output_col"]
+        file, Ts, input_col=options["input_col"], output_col=options["output_col"], gaps=gaps
     )
+    segments = None
+    if gaps == "split" and Path(file).suffix.lower() == ".mcap":
+        from rwlab.testbed.load import gap_free_segments
+
+        segments = gap_free_segments(file, data.Ts)
     if echo is not None:  # the data are shown once the study accepts them (a refusal: one line)
         progress = _after_first(progress, lambda: echo(f"data: {data!r}"))
     datasheet = None
@@ -147,10 +162,12 @@ def identify_into(
         preprocess=options["preprocess"],
         split=options["split"],
         tolerance=options["tolerance"],
+        gain_tolerance=options.get("gain_tolerance", 2.0) / 100.0,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
         datasheet=datasheet,
-        current=load_current(file, Ts),
+        current=load_current(file, Ts, gaps=gaps),
+        segments=segments,
     )
     model = make_wheel_model(  # the owner class: the healthy reference is added below
         result,
@@ -289,7 +306,7 @@ def identify_fleet(
         ``progress(done)``: records finished so far.
     **options
         ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
-        ``tolerance`` as in :func:`identify`.
+        ``tolerance``, ``gaps``, ``gain_tolerance`` as in :func:`identify`.
 
     Returns
     -------
@@ -310,6 +327,8 @@ def identify_fleet(
         "preprocess": "detrend",
         "split": 0.7,
         "tolerance": 3.0,
+        "gaps": "refuse",
+        "gain_tolerance": 2.0,
         **options,
         "force": force,
     }

@@ -12,7 +12,7 @@ from rwlab.datafiles import from_table
 from rwlab.errors import DataError, RecordGapError
 from rwlab.testbed.record import read_record
 
-__all__ = ["load_record", "telemetry_gaps"]
+__all__ = ["gap_free_segments", "load_record", "telemetry_gaps"]
 
 OUTPUTS = {
     "speed": ("speed_rpm", "rpm"),
@@ -163,6 +163,47 @@ def load_record(
         name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
         source=meta,
     )
+
+
+def gap_free_segments(
+    path: str | os.PathLike, Ts: float | None = None, *, node: int | None = None
+) -> list[tuple[int, int]]:
+    """The parts of a record between its telemetry gaps, as sample ranges.
+
+    The gaps are those :func:`load_record` refuses without ``max_gap`` (an
+    interval between frames longer than ``Ts``, by :func:`telemetry_gaps`'s
+    rule); a sample inside one that holds the frame before it for longer than one
+    telemetry period holds a stale frame and belongs to no segment.
+
+    Parameters
+    ----------
+    path : path-like
+        The record.
+    Ts : float, optional
+        Sample time, s (the record's by default), as for :func:`load_record`.
+    node : int, optional
+        The wheel, in a record of several.
+
+    Returns
+    -------
+    list of (int, int)
+        ``[i0, i1)`` ranges of the samples of ``load_record(path, Ts, max_gap=numpy.inf)``,
+        in time order; one range covering every sample when the record has no gap.
+    """
+    data = load_record(path, Ts, outputs=("age",), max_gap=np.inf, node=node)
+    record = read_record(path)
+    prefix = "" if node is None else f"/wheel{node}"
+    t0 = record.topic(f"{prefix}/command")[0]["t"]
+    tt = np.array([m["t"] for m in record.topic(f"{prefix}/telemetry")])
+    grid = t0 + data.tstart + data.Ts * np.arange(data.N)
+    eps = 1e-9 * max(1.0, abs(float(grid[-1])))
+    period = float(np.median(np.diff(tt)))
+    stale = np.zeros(data.N, dtype=bool)
+    for start, length in telemetry_gaps(tt, data.Ts):  # the frame at `start` is held ...
+        held = grid - start  # ... this long: older than one telemetry period is stale
+        stale |= (held > period + eps) & (grid < start + length - eps)
+    edges = np.flatnonzero(np.diff(np.concatenate([[1], stale.astype(int), [1]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _lost_frames(telemetry: list[dict]) -> np.ndarray:

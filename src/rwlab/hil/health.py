@@ -1,0 +1,264 @@
+"""Wheel health in the loop: a null-space excitation and a command-tracking test.
+
+A calm attitude loop barely moves its wheels (a few rpm/s at most), too little
+for the :mod:`rwlab.diagnose` block tests, which need sustained accelerations
+to compare a current against. A redundant wheel set has a direction the body
+cannot feel: the null space ``n`` of the wheel matrix (``G n = 0``). A small
+zero-mean acceleration along ``n`` (:class:`NullSpaceDither`) makes every
+wheel accelerate and decelerate all the time while the satellite feels no
+torque — as long as every wheel follows its command.
+
+:class:`TrackingTest` watches exactly that: over each window it compares the
+speed change a wheel reports with the change its commands asked for. The
+residual (rpm/s) of a healthy wheel is the sensor noise and the drive's
+tracking error; it is calibrated on the wheel's first ``calibration_s`` in the
+loop (its healthy spread, never a fault's) and then standardised into a
+two-sided CUSUM whose threshold gives the requested false-alarm rate
+(:func:`rwlab.diagnose.detect.cusum_threshold`). At an alarm the samples of
+the excursion name the fault by its signature (:func:`name_fault`): the
+dither's share the wheel did not follow (a motor without torque), the current
+the drive delivered against the one its own feed-forward asked for (a clamped
+current), or a drag that does not depend on the command (friction).
+
+Hand-written: no library offers a command-tracking monitor for a wheel drive.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
+from rwlab.errors import ConfigError
+from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
+
+__all__ = ["NullSpaceDither", "TrackingTest", "name_fault", "null_vector"]
+
+DITHER_RPM_S = 10.0  # amplitude of the excitation's acceleration, rpm/s (±6 rpm of speed)
+DITHER_PERIOD_S = 4.0  # its period, s: a few periods fit in the time a fault must be named
+WINDOW_S = 1.0  # the tracking test's window, s
+CLIP = 4.0  # standardised residuals enter the CUSUM clipped to ±CLIP σ
+MIN_NAMING_S = 2.0  # the excursion's samples that name a fault: at least this many seconds
+FOLLOW_MAX = -0.3  # residual ∝ −command beyond this share: the wheel does not follow
+CURRENT_SHARE = 0.5  # delivered current below this share of the requested one: clamped
+
+
+def null_vector(G: np.ndarray) -> np.ndarray | None:
+    """The wheel set's null direction (N,), largest entry ±1; None without one.
+
+    Parameters
+    ----------
+    G : (3, N) array
+        Wheel axes in the body frame (columns).
+
+    Returns
+    -------
+    (N,) array or None
+        ``n`` with ``G n = 0`` (the last right singular vector), scaled so that
+        ``max |n| = 1``; None when the columns have no null space.
+    """
+    G = np.asarray(G, dtype=float)
+    if G.shape[1] == 0:
+        return None
+    _, s, vt = np.linalg.svd(G)
+    if G.shape[1] <= int(np.sum(s > 1e-9 * max(s.max(), 1.0))):
+        return None
+    n = vt[-1]
+    return n / np.max(np.abs(n))
+
+
+class NullSpaceDither:
+    """A zero-mean acceleration of the wheels along the null space of the active set.
+
+    Parameters
+    ----------
+    G : (3, N) array
+        Wheel axes (columns).
+    inertia : float
+        One wheel's rotor inertia, kg·m².
+    amplitude_rpm_s : float
+        Peak commanded acceleration of the wheel that moves most, rpm/s.
+    period_s : float
+        Period of the cosine, s (its speed swing, ``amplitude · period / 2π``, is zero-mean).
+    """
+
+    def __init__(
+        self,
+        G: np.ndarray,
+        inertia: float,
+        amplitude_rpm_s: float = DITHER_RPM_S,
+        period_s: float = DITHER_PERIOD_S,
+    ) -> None:
+        if not (amplitude_rpm_s >= 0 and period_s > 0 and inertia > 0):
+            raise ConfigError("the dither needs an amplitude ≥ 0, a period > 0 and an inertia > 0")
+        self.G = np.asarray(G, dtype=float)
+        self.torque_amplitude = inertia * rpm_to_rad_s(amplitude_rpm_s)  # N·m
+        self.period_s = period_s
+        self._active: tuple[bool, ...] | None = None
+        self._n: np.ndarray | None = None
+
+    def torques(self, t: float, active: np.ndarray) -> np.ndarray:
+        """The excitation's wheel torques (N,) at time ``t`` (s), N·m; zero on idle wheels
+        and everywhere once the active wheels have no null space left."""
+        key = tuple(bool(a) for a in active)
+        if key != self._active:
+            self._active = key
+            mask = np.array(key)
+            n = null_vector(self.G[:, mask])
+            self._n = None
+            if n is not None:
+                self._n = np.zeros(mask.size)
+                self._n[mask] = n
+        if self._n is None:
+            return np.zeros(len(key))
+        return self.torque_amplitude * math.cos(2 * math.pi * t / self.period_s) * self._n
+
+
+def name_fault(
+    accel_cmd: np.ndarray,
+    accel_meas: np.ndarray,
+    current: np.ndarray,
+    current_requested: np.ndarray,
+    speed_rpm: float,
+) -> str:
+    """Name a tracking fault from its excursion's samples (one per control period).
+
+    Parameters
+    ----------
+    accel_cmd, accel_meas : (K,) arrays
+        Commanded and reported acceleration of each period, rpm/s.
+    current, current_requested : (K,) arrays
+        Reported current and the current the drive's feed-forward asks for, A.
+    speed_rpm : float
+        The wheel's speed, rpm (the sign a drag opposes).
+
+    Returns
+    -------
+    str
+        ``current_limit`` (the drive delivered well under the current it asked for),
+        ``torque_constant`` (the current flows but the wheel does not follow its
+        command), ``friction`` (it follows, with a drag against the rotation) or
+        ``speed_sensor_bias`` (the reading moves without command or drag).
+    """
+    a_c, a_m = np.asarray(accel_cmd, float), np.asarray(accel_meas, float)
+    asked = float(np.mean(np.abs(current_requested)))
+    if asked > 0 and float(np.mean(np.abs(current))) < CURRENT_SHARE * asked:
+        return "current_limit"
+    r = a_m - a_c
+    X = np.column_stack([a_c, np.ones_like(a_c)])
+    (slope, offset), *_ = np.linalg.lstsq(X, r, rcond=None)
+    if np.ptp(a_c) > 0 and slope < FOLLOW_MAX:
+        return "torque_constant"
+    if offset * math.copysign(1.0, speed_rpm) < 0:
+        return "friction"
+    return "speed_sensor_bias"
+
+
+class TrackingTest:
+    """One wheel's command-tracking test (see the module's docstring).
+
+    Parameters
+    ----------
+    dt : float
+        The control period, s (one :meth:`update` per period).
+    params : WheelParams
+        The wheel's nominal parameters (its drive's feed-forward: the current it asks for).
+    calibration_s : float
+        Seconds of the wheel's own healthy residuals that calibrate the test.
+    false_alarms_per_hour : float
+        Accepted false-alarm rate of this wheel's test.
+    window_s : float
+        The residual's window, s (a whole number of control periods).
+    """
+
+    def __init__(
+        self,
+        dt: float,
+        params: WheelParams,
+        calibration_s: float,
+        false_alarms_per_hour: float,
+        window_s: float = WINDOW_S,
+    ) -> None:
+        self.every = max(1, round(window_s / dt))
+        self.dt, self.window_s, self.params = dt, self.every * dt, params
+        self.calibration_windows = max(30, math.ceil(calibration_s / self.window_s))
+        arl0 = arl_to_samples(false_alarms_per_hour, self.window_s)
+        self.cusum = Cusum(cusum_threshold(arl0), clip=CLIP)
+        self.mean = self.sigma = math.nan
+        self._calibration: list[float] = []
+        self._last_speed: float | None = None
+        self._start_speed: float | None = None
+        self._commanded = 0.0  # commanded speed change over the window so far, rpm
+        self._n = 0
+        keep = round(600.0 / dt)  # the longest excursion that names a fault, periods
+        self._samples: deque[tuple[float, float, float, float]] = deque(maxlen=keep)
+        self._excursion = 0  # samples since the alarming side of the CUSUM left zero
+
+    @property
+    def calibrated(self) -> bool:
+        return math.isfinite(self.sigma)
+
+    def _requested_current(self, accel_rpm_s: float, speed_rpm: float) -> float:
+        p, w = self.params, rpm_to_rad_s(speed_rpm)
+        friction = p.viscous_friction * w + p.coulomb_friction * math.copysign(1.0, w) * (
+            abs(w) > 1e-9
+        )
+        torque = p.inertia * rpm_to_rad_s(accel_rpm_s) + friction
+        return max(-p.current_limit, min(p.current_limit, torque / p.torque_constant))
+
+    def update(
+        self, accel_cmd_rpm_s: float, speed_rpm: float, current_a: float
+    ) -> tuple[str, float, float] | None:
+        """One control period: the acceleration commanded over it (rpm/s), and the speed
+        (rpm) and current (A) reported at its end.
+
+        Returns
+        -------
+        tuple or None
+            ``(named kind, CUSUM statistic, threshold)`` at an alarm, else None.
+        """
+        last = speed_rpm if self._last_speed is None else self._last_speed
+        self._last_speed = speed_rpm
+        if self._start_speed is None:
+            self._start_speed = last
+        self._samples.append(
+            (
+                accel_cmd_rpm_s,
+                (speed_rpm - last) / self.dt,
+                current_a,
+                self._requested_current(accel_cmd_rpm_s, speed_rpm),
+            )
+        )
+        self._commanded += accel_cmd_rpm_s * self.dt
+        self._n += 1
+        self._excursion += 1
+        if self._n < self.every:
+            return None
+        residual = (speed_rpm - self._start_speed - self._commanded) / self.window_s
+        self._start_speed, self._commanded, self._n = speed_rpm, 0.0, 0
+        if not self.calibrated:
+            self._calibration.append(residual)
+            if len(self._calibration) >= self.calibration_windows:
+                values = np.array(self._calibration)
+                self.mean = float(np.mean(values))
+                floor = self.params.speed_resolution_rpm / self.window_s / math.sqrt(12)
+                self.sigma = max(float(np.std(values, ddof=1)), floor)
+            return None
+        before = self.cusum.statistic
+        alarm = self.cusum.update((residual - self.mean) / self.sigma)
+        if before == 0.0:
+            self._excursion = self.every  # the excursion starts with this window
+        if not alarm:
+            if self.cusum.statistic == 0.0:
+                self._excursion = 0
+            return None
+        k = min(len(self._samples), max(self._excursion, round(MIN_NAMING_S / self.dt)))
+        rows = np.array(list(self._samples)[-k:])
+        kind = name_fault(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], speed_rpm)
+        return kind, self.cusum.statistic, self.cusum.h
+
+    def healthy_spread_rpm_s(self) -> float:
+        """The calibrated σ of the window residual, rpm/s (NaN before calibration)."""
+        return self.sigma

@@ -1,0 +1,88 @@
+"""The HIL wheel health check: null-space excitation and the command-tracking test."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from rwlab.attitude.scenario import load_scenario
+from rwlab.hil.health import NullSpaceDither, TrackingTest, name_fault, null_vector
+from rwlab.wheel.physics import RW90, rad_s_to_rpm
+
+PYRAMID = load_scenario("geo-smallsat-pyramid").wheel_matrix
+
+
+def test_null_vector_of_a_pyramid_and_none_for_three_axes():
+    n = null_vector(PYRAMID)
+    assert n is not None
+    np.testing.assert_allclose(PYRAMID @ n, 0, atol=1e-12)
+    assert np.max(np.abs(n)) == pytest.approx(1.0)
+    assert null_vector(np.eye(3)) is None
+    assert null_vector(PYRAMID[:, [0, 2, 3]]) is None  # any three of a pyramid span the body
+
+
+@given(
+    t=st.floats(0, 1e5),
+    idle=st.sampled_from([None, 0, 1, 2, 3]),
+)
+def test_the_dither_puts_no_torque_on_the_body(t, idle):
+    """Physics invariant: the excitation lies in the null space of the wheels it drives."""
+    active = np.ones(4, bool)
+    if idle is not None:
+        active[idle] = False
+    tau = NullSpaceDither(PYRAMID, 4.2e-4).torques(t, active)
+    np.testing.assert_allclose(PYRAMID @ tau, 0, atol=1e-15)
+    if idle is not None:  # three wheels left: no null space, no excitation
+        assert not np.any(tau)
+
+
+def test_the_dither_is_zero_mean_with_the_stated_amplitude():
+    inertia = 4.2e-4
+    d = NullSpaceDither(PYRAMID, inertia, amplitude_rpm_s=10.0, period_s=4.0)
+    t = np.arange(0, 4.0, 0.001)
+    tau = np.array([d.torques(x, np.ones(4, bool)) for x in t])
+    accel_rpm_s = rad_s_to_rpm(tau / inertia)
+    assert np.max(np.abs(accel_rpm_s)) == pytest.approx(10.0, rel=1e-6)
+    np.testing.assert_allclose(accel_rpm_s.mean(axis=0), 0, atol=1e-9)
+
+
+def _wheel(test, rng, steps, follow, drag_rpm_s=0.0, speed=1000.0, dt=0.1, t0=0.0):
+    """A synthetic wheel under the dither: the speed it reports (0.5 rpm noise and quantum)
+    follows ``follow`` × the command, less a drag; returns the first alarm or None."""
+    for k in range(steps):
+        cmd = 10.0 * math.cos(2 * math.pi * (t0 + k * dt) / 4.0)
+        speed += (follow * cmd - drag_rpm_s) * dt
+        reading = round((speed + rng.normal(0, 0.5)) * 2) / 2
+        found = test.update(cmd, reading, 0.02)
+        if found is not None:
+            return k, found
+    return None
+
+
+def test_a_healthy_wheel_raises_no_alarm_and_a_dead_one_is_named_in_seconds():
+    rng = np.random.default_rng(5)
+    test = TrackingTest(0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3)
+    assert _wheel(test, rng, 3000 + 36_000, follow=1.0) is None  # calibration + 1 h healthy
+    assert test.healthy_spread_rpm_s() == pytest.approx(0.5 * math.sqrt(2), rel=0.2)
+    # the motor dies: the wheel coasts against its friction and ignores its command
+    k, (kind, stat, h) = _wheel(test, rng, 600, follow=0.0, drag_rpm_s=6.8, t0=3900.0)
+    assert k * 0.1 <= 10.0 and stat > h
+    assert kind == "torque_constant"
+
+
+def test_extra_friction_is_told_from_a_dead_motor():
+    rng = np.random.default_rng(8)
+    test = TrackingTest(0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3)
+    assert _wheel(test, rng, 3000, follow=1.0) is None
+    found = _wheel(test, rng, 600, follow=1.0, drag_rpm_s=6.8, t0=300.0)
+    assert found is not None and found[1][0] == "friction"
+
+
+def test_name_fault_reads_a_clamped_current():
+    a_c = 10 * np.cos(np.linspace(0, 6, 40))
+    kind = name_fault(a_c, np.zeros(40), np.full(40, 0.001), np.full(40, 0.05), 1000.0)
+    assert kind == "current_limit"
