@@ -27,8 +27,13 @@ FLAGS = {
     "rt_priority": "--rt-priority",
     "realtime=True": "--realtime",
     "resume=True": "--resume",
+    "steady_after": "--steady-after",
 }
-_PARAMETER = re.compile(r"\b(" + "|".join(map(re.escape, FLAGS)) + ")")
+_PARAMETER = re.compile(
+    r"\b("
+    + "|".join(re.escape(k) + ("(?!\\w)" if k[-1].isalnum() or k[-1] == "_" else "") for k in FLAGS)
+    + ")"
+)
 
 
 def _message(exc: BaseException) -> str:
