@@ -30,7 +30,7 @@ def _realise(w, t, dt, cmd, momenta):
     out = np.empty(len(cmd))
     realise(
         w.kind, t, dt, np.asarray(cmd, float), x, w.healthy, w.faulty, w.fault_s, w.state,
-        w.A, w.B, w.C, w.ident, w.servo, w.nominal, out,
+        (w.A, w.B, w.C, w.ident, w.servo), w.nominal, out,
     )  # fmt: skip
     return out
 

@@ -429,6 +429,21 @@ def cases() -> list[tuple[str, list[str]]]:
     c.append(
         ("attitude simulate --scenario flat-nan.toml", [*sim, "--scenario", "{D}/flat-nan.toml"])
     )
+    # contradictory options: one of them would be silently ignored
+    c += [
+        (
+            "attitude simulate --rho with --controller pd",
+            [*sim, "--controller", "pd", "--rho", "2"],
+        ),
+        ("experiment --protocol nsp --raw-frames", [*exp, "--protocol", "nsp", "--raw-frames"]),
+        ("experiment --file with --signal prbs", [*exp, "--file", "{D}/setpoints.txt"]),
+        ("experiment --unit on a real bus", [*exp, "--interface", "udp_multicast", "--unit", "3"]),
+        ("experiment --port without --monitor", [*exp, "--port", "5007"]),
+        ("hil --rt-priority without --realtime", [*hil, "--rt-priority", "10"]),
+        ("hil --calibration with --no-diagnosis", [*hil, "--no-diagnosis", "--calibration", "60"]),
+        ("attitude montecarlo --resume --force", [*mc, "--runs", "2", "--resume", "--force"]),
+        ("identify a record too short for the study", ["identify", "{D}/rec.mcap", *out]),
+    ]
     return c
 
 
@@ -468,6 +483,43 @@ def test_there_are_at_least_150_cases_across_every_command():
         if path[0] == "ident" and path[1] not in ("arx", "armax", "oe", "ar"):
             continue  # the ident group: arx, armax, oe and ar stand for its estimators
         assert any(args[: len(path)] == list(path) for _, args in CASES), path
+
+
+def test_contradictions_and_short_records_say_what_to_do(where):
+    """The messages name the flags (not the library's parameters) and the way out."""
+    answers = {what: refuse(args, where, CASES.index((what, args)))[1] for what, args in CASES[-9:]}
+    assert (
+        "--rho applies only with --controller lqg_ltr"
+        in answers["attitude simulate --rho with --controller pd"]
+    )
+    raw = answers["experiment --protocol nsp --raw-frames"]
+    assert "--raw-frames records CAN frames" in raw and "raw_frames" not in raw
+    assert "--rt-priority" in answers["hil --rt-priority without --realtime"]
+    short = answers["identify a record too short for the study"]
+    # 30 s at Ts = 0.5 s: 61 samples; ARX55 with delays to 10 at a 0.7 split needs 667
+    assert "61 samples (30.5 s at Ts = 0.5 s)" in short and "at least 667 samples" in short
+    assert "record an experiment of at least 334 s" in short
+
+
+def test_a_second_simulation_on_a_folder_is_refused_before_the_loop_loads(tmp_path):
+    """The lock is taken first: the refused run never imports the compiled loop."""
+    import subprocess
+
+    from rwlab._io import output_folder
+
+    out = tmp_path / "sim"
+    code = (
+        "import sys\n"
+        "from rwlab.cli import main\n"
+        "try:\n"
+        f"    main(['attitude', 'simulate', '--duration', '60', '--out', {str(out)!r}])\n"
+        "except SystemExit as exc:\n"
+        "    print('exit', exc.code, 'rwlab.attitude.kernel' in sys.modules)\n"
+    )
+    with output_folder(out, ["metrics.json"]):  # another run holds the folder
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "another rwlab run is writing this output folder" in r.stderr
+    assert r.stdout.split() == ["exit", "2", "False"]
 
 
 def test_the_documented_table_lists_every_case():

@@ -16,7 +16,14 @@ from scipy import stats
 from rwlab import datasets
 from rwlab.attitude.frames import from_axis_angle
 from rwlab.attitude.scenario import SCENARIOS, load_scenario
-from rwlab.campaign.dispersions import Dispersion, apply, draw, load_dispersions
+from rwlab.campaign.dispersions import (
+    FIELDS,
+    Dispersion,
+    _stream_name,
+    apply,
+    draw,
+    load_dispersions,
+)
 from rwlab.campaign.engine import batches, dask_client
 from rwlab.campaign.montecarlo import (
     Campaign,
@@ -176,6 +183,22 @@ def test_a_truncated_normal_has_the_textbook_moments():
     assert abs(x.mean() - truth.mean()) < 4 * se
     assert abs(x.std() / truth.std() - 1) < 0.05
     assert x.min() >= -0.3 and x.max() <= 1.5
+
+
+def test_a_field_draws_what_it_drew_under_its_flat_name():
+    """The streams are seeded by the old flat names: a campaign's runs did not change when
+    the scenario's fields moved into sections (a documented budget stays reproducible)."""
+    import zlib
+
+    cases = (
+        ("wheels.max_torque", "wheel_max_torque", SMALLSAT.wheels.max_torque),
+        ("run.initial_rate.y", "initial_rate.y", SMALLSAT.run.initial_rate[1]),
+    )
+    for field, flat, nominal in cases:
+        d = Dispersion(field, "uniform", bounds=(0.0, 1.0))
+        rng = np.random.default_rng([77, zlib.crc32(flat.encode())])
+        assert draw([d], SMALLSAT, 77)[field] == nominal + rng.uniform(0.0, 1.0)
+    assert {_stream_name(f) for f in FIELDS} >= {"inertia.xy", "estimator_error_deg"}
 
 
 def test_each_field_draws_from_its_own_stream():
@@ -451,3 +474,10 @@ def test_runs_get_their_own_epoch_in_the_spread_and_the_filter_keeps_the_nominal
     assert len(epochs) == 20
     with pytest.raises(ConfigError, match="epoch"):
         Campaign(sc, (), 10.0, epoch_spread_days=30)
+
+
+def test_the_campaign_workflow_locks_the_files_the_report_writes():
+    from rwlab.report import montecarlo
+    from rwlab.report.campaign import CAMPAIGN_FILES
+
+    assert sorted(montecarlo._FILES) == sorted(CAMPAIGN_FILES)

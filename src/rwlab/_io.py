@@ -152,8 +152,7 @@ def _check_existing(out: Path, names: set[str], force: bool, replace_previous: b
         )
     if held and not (force or replace_previous):
         raise FileExistsError(
-            f"{', '.join(str(out / n) for n in held)} exist; pass force=True (--force) "
-            "to replace them"
+            f"{', '.join(str(out / n) for n in held)} exist; pass force=True to replace them"
         )
 
 

@@ -9,6 +9,9 @@ precisely because its data silently carried MATLAB's default ``Ts = 1``.
 Preprocessing (``detrend``, ``normalize``) returns a new record and keeps what
 it removed in a :class:`Trend`, so results can be reported in physical units.
 Nothing here modifies the caller's arrays.
+
+Why this module is long: ``IOData`` and its file formats (CSV, .dat, Parquet, .mat and
+the registered readers) are one concept: the container and how it is read and written.
 """
 
 from __future__ import annotations

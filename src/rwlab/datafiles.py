@@ -73,7 +73,7 @@ def _choose(names, data_cols, inputs, outputs, path) -> tuple[list[int], list[in
         shown = [names[i] for i in data_cols]
         raise DataError(
             f"{path}: which columns are inputs and which outputs is ambiguous ({shown}); "
-            "choose with --input and --output (input_columns=/output_columns=), "
+            "choose with input_columns= and output_columns=, "
             "several as a,b"
         )
     both = sorted({names[i] for i in in_idx} & {names[i] for i in out_idx})

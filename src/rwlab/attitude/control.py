@@ -3,11 +3,11 @@
 - **LQR**: discrete gain (MATLAB ``lqrd``) for the plant linearised at the
   reference and sampled with a hold at the control period ``dt``, acting on the
   true state. Weights (Bryson) come from the scenario: attitude
-  ``lqr_attitude_deg`` (the pointing requirement), rate ``lqr_rate_deg_s`` and a
-  torque of ``lqr_torque_fraction`` × the wheels' torque capacity, so the wheels
+  ``control.lqr_attitude_deg`` (the pointing requirement), rate ``control.lqr_rate_deg_s`` and a
+  torque of ``control.lqr_torque_fraction`` × the wheels' torque capacity, so the wheels
   never saturate inside the pointing budget (paper B, eq. 26). Large errors are
   flown as a rate-limited slew (``kernel.control_torque``) that leaves
-  ``slew_torque_fraction`` of the torque in reserve. Paper B re-linearises
+  ``control.slew_torque_fraction`` of the torque in reserve. Paper B re-linearises
   every step; ``update_period`` keeps that available (off by default: measured
   benefit below 0.2 % of K, see the README).
 - **LQG**: the same gain on the MEKF's estimate. In paper B's setting the filter
@@ -17,12 +17,16 @@
   fictitious torque noise q² through B, sensor noise ρ·R₀ (paper B: ρ = 0.7692).
   q² is sized for the LQR loop's real crossover ω_c on its slowest axis (the
   smallest singular value of B, i.e. the largest inertia): at ρ = 1 the filter
-  bandwidth is ``ltr_bandwidth_factor`` × ω_c on every axis. This is our reading
+  bandwidth is ``filter.ltr_bandwidth_factor`` × ω_c on every axis. This is our reading
   of the paper's "LTR applied to the slowest dynamics found by an SVD".
 
 The σ analysis (``ltr_study``, ``crossover``) is discrete at the control period,
 with the 2 Hz sensors represented by an equivalent measurement at ``dt`` of the
 same noise PSD (valid while the loop's bandwidth ≪ the sensors' Nyquist rate).
+
+Why this module is long: paper B's three controllers and the study that compares them
+share the scenario's design weights, the linearised plant and its discretisation; apart,
+each file would reach into the other's helpers.
 """
 
 from __future__ import annotations
@@ -262,7 +266,7 @@ def ltr_noise(scenario: Scenario, ctl: LQRController | None = None) -> tuple[flo
     """(q², r_c) of the LTR filter: fictitious torque PSD (N²·m²·s) and attitude noise PSD (rad²·s).
 
     q² = (κ ω_c)⁴ J_slow² r_c puts a double integrator's Kalman bandwidth
-    (q²/(J² r_c))^¼ at κ = ``ltr_bandwidth_factor`` times the LQR crossover ω_c
+    (q²/(J² r_c))^¼ at κ = ``filter.ltr_bandwidth_factor`` times the LQR crossover ω_c
     on the slowest axis, J_slow = 1/σ_min(B) from the SVD of B.
 
     Parameters
@@ -353,7 +357,7 @@ def loop_margins(scenario: Scenario, rho: float = CHOSEN_RHO) -> dict:
 
     LQR: K(zI − A)⁻¹B; LQG: the compensator with the filter's own noise model;
     LQG/LTR: the compensator with the LTR filter at ρ. With a disturbance state
-    (``filter_disturbance_state``) both compensators estimate an input torque and
+    (``filter.disturbance_state``) both compensators estimate an input torque and
     cancel it (:func:`_with_disturbance_state`). Returns, per controller,
     ``crossover_rad_s`` (largest σ of L falls through 1) and
     ``return_difference_min`` = min over ω of σ_min(I + L): a multivariable
@@ -425,7 +429,7 @@ def compare(
 
     Every run draws its process noise, sensor noise and initial estimate from
     its own stream of the same seed, so the controllers see identical
-    disturbances. With ``wheel_model_file`` the LQG loop is also run with the
+    disturbances. With ``wheels.model_file`` the LQG loop is also run with the
     identified wheel model as the actuator (``lqg_identified_wheel``).
     ``progress(name)`` is called before each run.
 
@@ -496,9 +500,9 @@ CONTROLLERS = ("pd", "lqr", "lqg", "lqg_ltr")
 
 
 def pd_gains(scenario: Scenario) -> tuple[float, float]:
-    """(kp N·m/rad, kd N·m·s/rad) of a PD law with the LQR design's proportional gain
-    (Bryson: ``lqr_torque_fraction`` of the torque at ``lqr_attitude_deg``) and ζ = 0.707
-    on the largest inertia.
+    """(kp N·m/rad, kd N·m·s/rad) of a PD law with the LQR design's proportional gain (Bryson:
+    ``control.lqr_torque_fraction`` of the torque at ``control.lqr_attitude_deg``), ζ = 0.707 on
+    the largest inertia.
 
     Parameters
     ----------

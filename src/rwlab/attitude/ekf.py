@@ -34,6 +34,11 @@ direction, r known in the orbital frame) has ``H = [[A(q̂) r ×], 0, 0]``.
 Prediction propagates q̂, ω̂ with the plant's own RK4 (known wheel torques and
 momenta, modelled disturbances) and P with Φ = expm(F·dt) and the matching
 discrete process noise (Van Loan). Updates use the Joseph form.
+
+Why this module is long: every step of the filter (Jacobian, covariance prediction,
+measurement updates with their gate, the reset) is here twice on purpose — a readable
+reference and the allocation-free twin the compiled loop calls, tested against each
+other — and the two only make sense side by side.
 """
 
 from __future__ import annotations

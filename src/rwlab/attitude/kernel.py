@@ -24,6 +24,10 @@ otherwise lacks).
 Filter timing: the estimate is propagated with the plant model every step (the
 controller needs it); the covariance only once per sensor period, at the
 measurement (``ekf.predict_covariance_into``).
+
+Why this module is long: it is one numba-compiled loop. The step functions it calls are
+compiled with it (numba inlines and caches them together), and the state and statistics
+layouts they share are defined here once.
 """
 
 from __future__ import annotations
@@ -714,11 +718,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             wheels.faulty,
             wheels.fault_s,
             wheels.state,
-            wheels.A,
-            wheels.B,
-            wheels.C,
-            wheels.ident,
-            wheels.servo,
+            (wheels.A, wheels.B, wheels.C, wheels.ident, wheels.servo),
             wheels.nominal,
             hw_real,
         )

@@ -22,7 +22,7 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
     ``r.steady_from_s`` (half the run, at most its first hour), and every
     ``steady_*``, ``*_desaturation*`` and ``torque_saturated_fraction`` /
     ``torque_rms_Nm`` figure is over that window ("excluding desaturation" also
-    leaves out unloading windows and ``unload_recovery_s`` after each).
+    leaves out unloading windows and ``momentum.unload_recovery_s`` after each).
     ``max_error_deg`` and ``torque_peak_Nm`` cover the whole run, the initial
     slew included. ``steady_p99_73_error_deg`` (the 3σ-equivalent percentile)
     and settling come from the logged trace.

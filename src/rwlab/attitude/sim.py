@@ -1,6 +1,6 @@
 """Closed-loop simulation: plant, wheels, sensors, estimator and a controller, step by step.
 
-Each step of ``dt`` seconds: sensors measure (every ``sensor_period``), the
+Each step of ``run.dt`` seconds: sensors measure (every ``sensors.period``), the
 estimator updates, the controller returns a body torque, the torque is
 allocated to the wheels (minimum-norm, clipped to their limits), the wheels
 realise it (ideal, the RW physics of ``rwlab.wheel``, or the identified model
@@ -9,6 +9,11 @@ from ``model.json``), and the plant and the filter move one step.
 Controllers are linear laws τ = −K s (:class:`LinearController`) acting on the
 estimate (or on the truth with ``estimator='truth'``); the whole loop runs
 compiled (``kernel.run_block``, wheel models in ``wheels``).
+
+Why this module is long: the loop's set-up (noise streams, the filter's design noise,
+initial state and estimate), its controllers and its result type sit beside the loop
+that uses them; ``hil.satellite`` mirrors this file step by step, and one file per side
+keeps the mirror readable.
 """
 
 from __future__ import annotations
@@ -203,12 +208,12 @@ def unknown_torque_bound(sc: Scenario) -> float:
 def default_filter_psd(sc: Scenario) -> float:
     """The torque PSD the filter assumes on its rate, N²·m²·s.
 
-    With a disturbance state (``filter_disturbance_state``) the unknown torque
+    With a disturbance state (``filter.disturbance_state``) the unknown torque
     is that state's job (:func:`bias_torque_psd`) and the rate carries only the
-    white ``process_noise_torque``. Without it (paper B: SRP as process noise)
+    white ``spacecraft.process_noise_torque``. Without it (paper B: SRP as process noise)
     and with the disturbances unknown to the filter, its process noise is sized so
     that the estimate's lag on the worst-case unmodelled torque τ_u stays within
-    ``filter_disturbance_budget_deg`` (τ_u: ``filter_torque_bound``, or
+    ``filter.disturbance_budget_deg`` (τ_u: ``filter.torque_bound``, or
     :func:`unknown_torque_bound` when that is 0): a Kalman filter on J θ̈ = τ measuring θ
     with PSD r lags a constant τ by τ/√(q/r), whatever J, so q = r (τ_u/θ_b)².
 
@@ -231,7 +236,7 @@ def default_filter_psd(sc: Scenario) -> float:
 
 
 def disturbance_state(sc: Scenario) -> str:
-    """The filter's disturbance state as flown: ``filter_disturbance_state``, or "none"
+    """The filter's disturbance state as flown: ``filter.disturbance_state``, or "none"
     when there is nothing left to estimate (every disturbance known to the filter, or a
     torque bound of 0).
 
@@ -250,7 +255,7 @@ def disturbance_state(sc: Scenario) -> str:
 
 
 def filter_torque_scale(sc: Scenario) -> float:
-    """τ_u, N·m: the unmodelled torque the filter is designed for (``filter_torque_bound``,
+    """τ_u, N·m: the unmodelled torque the filter is designed for (``filter.torque_bound``,
     else :func:`unknown_torque_bound`; 0 with the disturbances known to the filter)."""
     if sc.filter.disturbances_known:
         return 0.0
@@ -261,9 +266,9 @@ def disturbance_psd(sc: Scenario) -> np.ndarray:
     """PSDs of the filter's disturbance random walks, N²·m²/s, one per state (n − 6,).
 
     Each walk spreads by τ_u (:func:`filter_torque_scale`) over its drift time: the
-    constant torque over ``filter_torque_drift_s`` (a year: it is constant, the walk only keeps the
+    constant torque over ``filter.torque_drift_s`` (a year: it is constant, the walk only keeps the
     filter from locking onto a wrong value), the SRP lever arm over
-    ``filter_srp_drift_s`` (a day: the arrays turn once a day and the centre of
+    ``filter.srp_drift_s`` (a day: the arrays turn once a day and the centre of
     pressure moves with them and with the seasons).
 
     Parameters

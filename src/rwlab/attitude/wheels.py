@@ -272,14 +272,14 @@ def _identified_tick(s, A, B, C, ident, servo):
 
 
 @njit(cache=True)
-def realise(
-    kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, servo, nominal, out
-):
+def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, model, nominal, out):
     """Realised wheel torques ``out`` (N,) for the commands ``cmd`` (N,) over one step.
 
     ``cmd`` is already clipped to the rated torque; ``x`` is the plant state (wheel
-    momenta from x[7], N·m·s).
+    momenta from x[7], N·m·s); ``model`` is the identified model's arrays
+    ``(A, B, C, ident, servo)`` (see :class:`WheelArrays`).
     """
+    A, B, C, ident, servo = model
     nw = cmd.shape[0]
     if kind == PHYSICS:
         for i in range(nw):

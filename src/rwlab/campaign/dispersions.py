@@ -19,7 +19,9 @@ set (``default_dispersions.toml``, package data) is what a reviewer of a GEO com
 pointing budget expects.
 
 Each field draws from its own stream, seeded by the run's seed and the field's
-name: adding or removing a dispersion never changes the draws of the others.
+name (its flat name of the old format, so the draws did not change when the fields
+moved into sections): adding or removing a dispersion never changes the draws of
+the others.
 """
 
 from __future__ import annotations
@@ -232,6 +234,21 @@ def _split(name: str) -> tuple[str, int | None]:
     return name, None
 
 
+# the fields dispersible in the flat format keep its names; those added since, their own
+_SINCE_SECTIONS = ("wheels.friction_factor", "wheels.stiction", "momentum.bias")
+_FLAT = {dotted: flat for flat, dotted in LEGACY_NAMES.items() if dotted not in _SINCE_SECTIONS}
+
+
+def _stream_name(name: str) -> str:
+    """The name a field's random stream is seeded with: its name in the flat scenario
+    format, so that a campaign draws the same values since the fields moved into sections."""
+    if name.startswith(("spacecraft.inertia.", "spacecraft.disturbances.")):
+        return name.removeprefix("spacecraft.")
+    path, index = _split(name)
+    flat = _FLAT.get(path, path)
+    return flat if index is None else f"{flat}.{_AXES[index]}"
+
+
 def _nominal(sc: Scenario, name: str) -> tuple[float, float]:
     """(nominal value, scale of a relative δ) of a field."""
     if name.startswith("spacecraft.inertia."):
@@ -262,7 +279,7 @@ def draw(dispersions, nominal: Scenario, run_seed: int) -> dict[str, float]:
     """
     values = {}
     for d in dispersions:
-        rng = np.random.default_rng([run_seed, zlib.crc32(d.field.encode())])
+        rng = np.random.default_rng([run_seed, zlib.crc32(_stream_name(d.field).encode())])
         value, scale = _nominal(nominal, d.field)
         delta = d.sample(rng)
         values[d.field] = value + (delta * scale if d.relative else delta)

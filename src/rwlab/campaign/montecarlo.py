@@ -122,7 +122,7 @@ def run_seeds(seed: int, runs: int) -> list[int]:
 def dispersed(campaign: Campaign, run_seed: int) -> tuple[Scenario, dict]:
     """The run's scenario and its dispersed values (with its epoch, when dispersed).
 
-    The filter keeps the nominal inertia (``filter_inertia``) while the truth's is
+    The filter keeps the nominal inertia (``filter.inertia``) while the truth's is
     dispersed: the filter's model error a flight filter has."""
     values: dict = draw(campaign.dispersions, campaign.scenario, run_seed)
     sc = apply(campaign.scenario, values)

@@ -1,6 +1,16 @@
 """The ``rwlab`` command line: one module per command group, registered on ``main``."""
 
-from rwlab.cli import attitude, compare, demo, hil, ident, study, testbed, wheel  # noqa: F401
+from rwlab.cli import (  # noqa: F401
+    attitude,
+    compare,
+    demo,
+    hil,
+    ident,
+    nonparametric,
+    study,
+    testbed,
+    wheel,
+)
 from rwlab.cli._common import main
 
 __all__ = ["main"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import re
 import sys
 import threading
 from pathlib import Path
@@ -15,13 +16,51 @@ import click
 from rwlab import __version__
 from rwlab.errors import ConfigError, RwlabError
 
+#: How the library names a parameter in a message → the flag the command line has for it.
+FLAGS = {
+    "force=True": "--force",
+    "max_gap=": "--max-gap",
+    "node=": "--node",
+    "input_columns=": "--input",
+    "output_columns=": "--output",
+    "raw_frames": "--raw-frames",
+    "rt_priority": "--rt-priority",
+    "realtime=True": "--realtime",
+    "resume=True": "--resume",
+    "steady_after": "--steady-after",
+}
+_PARAMETER = re.compile(
+    r"\b("
+    + "|".join(re.escape(k) + ("(?!\\w)" if k[-1].isalnum() or k[-1] == "_" else "") for k in FLAGS)
+    + ")"
+)
+
 
 def _message(exc: BaseException) -> str:
-    """One line for an error a user caused (an OS error names its file)."""
+    """One line for an error a user caused (an OS error names its file); the library's
+    parameters are named by their flags."""
     if isinstance(exc, OSError) and exc.strerror:
         where = exc.filename if exc.filename is not None else ""
         return f"{where}: {exc.strerror}" if where else exc.strerror
-    return " ".join(str(exc).split()) or type(exc).__name__
+    return _flags(" ".join(str(exc).split()) or type(exc).__name__)
+
+
+def _flags(text: str) -> str:
+    """``text`` with the library's parameters named by their command-line flags."""
+    return _PARAMETER.sub(lambda m: FLAGS[m.group(1)], text)
+
+
+def _only_with(option: str, applies: bool, when: str) -> None:
+    """Refuse ``option`` given on the command line where it would have no effect.
+
+    ``option`` is the parameter's name (``"rho"``); ``when`` says where it applies
+    (``"with --controller lqg_ltr"``). Defaults never count as given.
+    """
+    from click.core import ParameterSource
+
+    source = click.get_current_context().get_parameter_source(option)
+    if not applies and source not in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+        raise ConfigError(f"--{option.replace('_', '-')} applies only {when}")
 
 
 def _fail(exc: BaseException) -> NoReturn:
@@ -79,6 +118,37 @@ def _one_line_warnings():
         yield
 
 
+#: The signal that stopped the run. Its KeyboardInterrupt, raised wherever the program
+#: was, can be swallowed there (measured: inside the loop's imports the run then went on
+#: to the end); ``_check_stop`` raises it again at the command's checkpoints.
+_STOPPED: list[str] = []
+
+
+_HELD: list[bool] = []
+
+
+@contextlib.contextmanager
+def _imports_uninterrupted():
+    """A stop signal waits for the block's imports to end, then takes effect.
+
+    A KeyboardInterrupt raised inside an import leaves a half-imported module
+    (measured: numpy's lazy f2py, an encodings module), after which the run went
+    on, or the interpreter ended by SIGINT instead of exit status 130.
+    """
+    _HELD.append(True)
+    try:
+        yield
+    finally:
+        _HELD.pop()
+    _check_stop()
+
+
+def _check_stop() -> None:
+    """Raise KeyboardInterrupt again if a stop signal came and its exception was lost."""
+    if _STOPPED:
+        raise KeyboardInterrupt(_STOPPED[0])
+
+
 @contextlib.contextmanager
 def _stop_signals():
     """SIGTERM and SIGHUP stop a run the way Ctrl-C does (KeyboardInterrupt).
@@ -90,11 +160,14 @@ def _stop_signals():
     import signal
 
     stops = (signal.SIGTERM, signal.SIGHUP)
+    _STOPPED.clear()
 
     def interrupt(signum, frame):
         for s in stops:
             signal.signal(s, signal.SIG_IGN)
-        raise KeyboardInterrupt(signal.Signals(signum).name)
+        _STOPPED.append(signal.Signals(signum).name)
+        if not _HELD:
+            raise KeyboardInterrupt(_STOPPED[0])
 
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only be set from the main thread
@@ -152,6 +225,32 @@ SECONDS = Number(0, 1e9, low_open=True)  # > 0 and below 30 years
 POSITIVE = Number(0, 1e6, low_open=True)
 
 
+@contextlib.contextmanager
+def _steps_progress(steps: int, label: str, unit: str = "steps"):
+    """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
+    if sys.stderr.isatty():
+        with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
+            done = [0]
+
+            def update(k):
+                _check_stop()
+                bar.update(k - done[0])
+                done[0] = k
+
+            yield update
+        return
+    shown = [0]
+
+    def report(k):
+        _check_stop()
+        tenth = 10 * k // max(steps, 1)
+        if tenth > shown[0]:
+            shown[0] = tenth
+            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} {unit})", err=True)
+
+    yield report
+
+
 def _check_folder(folder) -> None:
     """Fail now, not after minutes of work, if files cannot be written into ``folder``."""
     import errno
@@ -195,6 +294,7 @@ def _output(
         keep_failed=keep_failed,
     ) as stage:
         yield stage
+        _check_stop()  # a stop whose exception was lost: the outputs are not published
 
 
 def _wrote(out, paths) -> str:

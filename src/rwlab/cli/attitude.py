@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import shutil
-import sys
 from pathlib import Path
 
 import click
@@ -15,13 +11,18 @@ from rwlab.cli._common import (
     POSITIVE,
     SECONDS,
     Number,
+    _check_folder,
     _engine_options,
+    _flags,
     _friendly_errors,
+    _imports_uninterrupted,
+    _only_with,
     _output,
+    _steps_progress,
     _wrote,
     main,
 )
-from rwlab.errors import ConfigError, RwlabError
+from rwlab.errors import ConfigError
 
 # -- attitude control -----------------------------------------------------------------
 
@@ -74,23 +75,25 @@ _EPOCH = click.option(
 @_friendly_errors
 def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force):
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
-    from rwlab.attitude.control import compare, ltr_study
-    from rwlab.attitude.design import DesignError
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import write_comparison
-
     if not (math.isfinite(rho) and rho > 0):
-        raise DesignError(f"--rho must be a positive number, got {rho:g}")
+        raise ConfigError(f"--rho must be a positive number, got {rho:g}")
     _check_run(duration, relinearize)
-    sc = load_scenario(scenario, **({"sky.epoch": epoch} if epoch else {}))
-    _check_steps(duration, sc)
-    if wheel_model and sc.sky.epoch:
-        raise ConfigError("--epoch needs ideal wheels: it cannot be combined with --wheel-model")
-    if wheel_model:
-        from rwlab.wheel.identified import IdentifiedWheel
-
-        IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
+    # the folder is locked before the loop is loaded: a second run on it is refused at once
     with _output(out, ["report.html", "metrics.json", "sigma.json"], force, "comparison") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import compare, ltr_study
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import write_comparison
+            from rwlab.wheel.identified import IdentifiedWheel
+
+        sc = load_scenario(scenario, **({"sky.epoch": epoch} if epoch else {}))
+        _check_steps(duration, sc)
+        if wheel_model and sc.sky.epoch:
+            raise ConfigError(
+                "--epoch needs ideal wheels: it cannot be combined with --wheel-model"
+            )
+        if wheel_model:
+            IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
         click.echo(
             f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
             f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
@@ -155,40 +158,19 @@ def attitude_convert_scenario(file, out, force):
 @_friendly_errors
 def attitude_ltr(scenario, rho, out, force):
     """Loop singular values at the plant input for each ρ next to LQR's (paper Fig. 8)."""
-    from rwlab.attitude.control import ltr_study
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.report.attitude import ltr_rows, write_ltr
-
-    sc = load_scenario(scenario)
     with _output(out, ["sigma.json", "report.html"], force, "LTR study") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import ltr_study
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import ltr_rows, write_ltr
+
+        sc = load_scenario(scenario)
         res = ltr_study(sc, rhos=rho)
         paths = write_ltr(res, sc.name, stage, force=force)
     click.echo("rho        gap 1e-3..1e-1 [dB]  gap to crossover [dB]  crossover / LQR [rad/s]")
     for rho, gap, gap_c, w, w_c in ltr_rows(res):
         click.echo(f"{rho:<10} {gap:19.2f} {gap_c:22.2f}  {w:.3g} / {w_c:.3g}")
     click.echo(_wrote(out, paths.values()))
-
-
-def _run_store(out, campaign, *, force: bool, resume: bool):
-    """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
-    from rwlab.campaign.montecarlo import RunStore
-
-    base = Path(os.path.abspath(out))
-    store = RunStore(base.with_name(base.name + ".partial"), campaign)
-    if store.exists() and resume:
-        store.check()
-        click.echo(f"resuming: {len(store.rows())} runs kept in {store.folder}", err=True)
-        return store
-    if resume:
-        raise ConfigError(f"nothing to resume: {store.folder} holds no interrupted campaign")
-    if store.exists() and not force:
-        raise FileExistsError(
-            f"{store.folder} holds an interrupted campaign ({len(store.rows())} runs kept); "
-            "continue it with --resume, or start over with --force"
-        )
-    shutil.rmtree(store.folder, ignore_errors=True)
-    store.create()
-    return store
 
 
 def _check_steps(duration: float, sc) -> int:
@@ -209,28 +191,30 @@ def _check_run(duration: float, relinearize: float | None) -> None:
         )
 
 
-@contextlib.contextmanager
-def _steps_progress(steps: int, label: str, unit: str = "steps"):
-    """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
-    if sys.stderr.isatty():
-        with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
-            done = [0]
+def _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize) -> dict:
+    """The ``config`` of a simulation's metrics.json: what was flown, as flown."""
+    from rwlab.attitude.sim import disturbance_state
 
-            def update(k):
-                bar.update(k - done[0])
-                done[0] = k
-
-            yield update
-        return
-    shown = [0]
-
-    def report(k):
-        tenth = 10 * k // max(steps, 1)
-        if tenth > shown[0]:
-            shown[0] = tenth
-            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} {unit})", err=True)
-
-    yield report
+    return {
+        "scenario": sc.name,
+        "controller": controller,
+        "estimator": estimator or ("truth" if controller in ("pd", "lqr") else "ekf"),
+        "seed": sc.run.seed if seed is None else seed,
+        "dt_s": sc.run.dt,
+        "duration_s": duration,
+        "rho": rho if controller == "lqg_ltr" else None,
+        "relinearize_period_s": relinearize,
+        "disturbances_known_to_filter": sc.filter.disturbances_known,
+        "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
+        "momentum_unloading": sc.momentum.unloading,
+        "wheel_model": sc.wheels.model,
+        "wheel_faults": list(sc.wheels.faults),
+        "epoch": sc.sky.epoch,
+        "station_longitude_deg": sc.sky.station_longitude_deg,
+        "steady_from_s": None,  # the run's own, filled in after it
+        "gyro": sc.sensors.gyro is not None,
+        "star_tracker": sc.sensors.star_tracker is not None,
+    }
 
 
 @attitude.command("simulate")
@@ -283,11 +267,7 @@ def attitude_simulate(
     force,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
-    from rwlab.attitude.control import fly
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.attitude.sim import disturbance_state
-    from rwlab.report.attitude import write_simulation
-
+    _only_with("rho", controller == "lqg_ltr", "with --controller lqg_ltr")
     _check_run(duration, relinearize)
     if steady_after is not None and not (
         math.isfinite(steady_after) and 0 <= steady_after < duration
@@ -295,47 +275,32 @@ def attitude_simulate(
         raise ConfigError(
             f"--steady-after must be in [0, --duration) seconds, got {steady_after:g}"
         )
-    overrides = {"run.dt": dt} if dt is not None else {}
-    sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
-    steps = _check_steps(duration, sc)
-    log_every = max(10, -(-steps // 100_000))
-    config = {
-        "scenario": sc.name,
-        "controller": controller,
-        "estimator": estimator or ("truth" if controller in ("pd", "lqr") else "ekf"),
-        "seed": sc.run.seed if seed is None else seed,
-        "dt_s": sc.run.dt,
-        "duration_s": duration,
-        "rho": rho if controller == "lqg_ltr" else None,
-        "relinearize_period_s": relinearize,
-        "disturbances_known_to_filter": sc.filter.disturbances_known,
-        "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
-        "momentum_unloading": sc.momentum.unloading,
-        "wheel_model": sc.wheels.model,
-        "wheel_faults": list(sc.wheels.faults),
-        "epoch": sc.sky.epoch,
-        "station_longitude_deg": sc.sky.station_longitude_deg,
-        "steady_from_s": None,  # the run's own, filled in below
-        "gyro": sc.sensors.gyro is not None,
-        "star_tracker": sc.sensors.star_tracker is not None,
-    }
     files = ["metrics.json", "trace.parquet", "report.html"]
-    with (
-        _output(out, files, force, "simulation") as stage,
-        _steps_progress(steps, f"{controller} on {sc.name}") as progress,
-    ):
-        run, metrics = fly(
-            sc,
-            controller,
-            estimator=estimator,
-            duration=duration,
-            seed=seed,
-            rho=rho,
-            update_period=relinearize,
-            log_every=log_every,
-            progress=progress,
-            steady_after=steady_after,
-        )
+    # the folder is locked before the loop is loaded and compiled: a second run on it is
+    # refused at once
+    with _output(out, files, force, "simulation") as stage:
+        with _imports_uninterrupted():
+            from rwlab.attitude.control import fly
+            from rwlab.attitude.scenario import load_scenario
+            from rwlab.report.attitude import write_simulation
+
+        overrides = {"run.dt": dt} if dt is not None else {}
+        sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
+        steps = _check_steps(duration, sc)
+        config = _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize)
+        with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
+            run, metrics = fly(
+                sc,
+                controller,
+                estimator=estimator,
+                duration=duration,
+                seed=seed,
+                rho=rho,
+                update_period=relinearize,
+                log_every=max(10, -(-steps // 100_000)),
+                progress=progress,
+                steady_after=steady_after,
+            )
         config["steady_from_s"] = run.steady_from_s
         paths = write_simulation(run, metrics, config, sc, stage, force=force)
     for key in (
@@ -411,65 +376,27 @@ def attitude_montecarlo(
     campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
     computing only the runs it lacks, with the results of an uninterrupted one.
     """
-    from rwlab.attitude.scenario import load_scenario
-    from rwlab.campaign.dispersions import load_dispersions
-    from rwlab.campaign.engine import dask_client
-    from rwlab.campaign.montecarlo import (
-        Campaign,
-        Execution,
-        budget,
-        check_runs,
-        check_size,
-        fly_run,
-        run_campaign,
-    )
-    from rwlab.report.campaign import CAMPAIGN_FILES, write_campaign
+    from rwlab.report.montecarlo import montecarlo
 
-    check_size(runs)
     _check_run(duration, None)
-    sc = load_scenario(scenario)
-    _check_steps(duration, sc)
-    campaign = Campaign(
-        sc,
-        load_dispersions(dispersions),
-        duration,
-        controller,
-        seed,
-        runs,
-        epoch=epoch,
-        epoch_spread_days=epoch_spread_days,
-    )
-    with _output(out, CAMPAIGN_FILES, force, "Monte Carlo campaign") as stage:
-        check_runs(campaign)  # before the cluster starts and anything is kept
-        store = _run_store(out, campaign, force=force, resume=resume)
-        where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
-        click.echo(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...", err=True)
-        execution = Execution()
-        try:
-            with (
-                dask_client(workers, scheduler) as client,
-                _steps_progress(runs, f"{controller} on {sc.name}", unit="runs") as progress,
-            ):
-                rows = run_campaign(
-                    campaign, client, progress=progress, store=store, execution=execution
-                )
-        except (KeyboardInterrupt, RwlabError, OSError):
-            kept = len(store.rows())
-            click.echo(
-                f"\ncampaign stopped: {kept} of {runs} runs kept in {store.folder}; "
-                "continue it with the same options and --resume",
-                err=True,
-            )
-            raise
-        stats = {**budget(rows, campaign), "execution": execution.to_dict()}
-        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
-        paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
-    shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
-    if execution.retries:
-        ex = stats["execution"]
-        click.echo(
-            f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}",
-            err=True,
+    _check_folder(Path(out).absolute().parent)
+    with _steps_progress(runs, f"{controller} campaign", unit="runs") as progress:
+        stats, paths = montecarlo(
+            out,
+            scenario=scenario,
+            runs=runs,
+            duration=duration,
+            controller=controller,
+            dispersions=dispersions,
+            seed=seed,
+            epoch=epoch,
+            epoch_spread_days=epoch_spread_days,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            resume=resume,
+            progress=progress,
+            echo=lambda text: click.echo(_flags(text), err=True),
         )
     click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
     for axis, s in stats["pointing_error_deg"].items():
@@ -478,7 +405,7 @@ def attitude_montecarlo(
         )
     met = stats["meets_requirement"]
     click.echo(
-        f"meeting ±{sc.control.pointing_requirement_deg:g}°: {met['fraction']:.1%} of runs "
+        f"meeting ±{stats['requirement_deg']:g}°: {met['fraction']:.1%} of runs "
         f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
     )
     for q in stats["quantiles"]:

@@ -8,7 +8,9 @@ from rwlab.cli._common import (
     SECONDS,
     Number,
     _friendly_errors,
+    _only_with,
     _output,
+    _steps_progress,
     _stop_signals,
     _wrote,
     main,
@@ -115,29 +117,7 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
-def hil(
-    scenario,
-    controller,
-    interface,
-    channel,
-    nodes,
-    duration,
-    seed,
-    realtime,
-    epoch,
-    faults,
-    wheels_running,
-    telemetry_rate,
-    wheel_bias_rpm,
-    diagnosis,
-    health_check,
-    steady_after,
-    calibration,
-    rt_priority,
-    no_reference,
-    out,
-    force,
-):
+def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **settings):
     """Fly the satellite on the host with its wheels on a bus: record.mcap, metrics.json,
     report.html.
 
@@ -148,32 +128,22 @@ def hil(
     a silent wheel, a broken bus, Ctrl-C, SIGTERM, an error), every wheel is
     idled and the record closed with a stop event.
     """
-    from rwlab.cli.attitude import _single_thread_blas, _steps_progress
+    from rwlab.cli.attitude import _single_thread_blas
     from rwlab.hil.run import HilConfig, parse_node_fault, run_hil
     from rwlab.report.hil import write_hil_report
 
+    _only_with("calibration", settings["diagnosis"] is not False, "with the diagnosis on")
     _single_thread_blas()
+    # the options not named here are named after their HilConfig field
     cfg = HilConfig(
-        scenario=scenario,
-        controller=controller,
-        interface=interface,
-        channel=channel,
         nodes=_nodes(nodes),
-        duration=duration,
-        seed=seed,
-        realtime=realtime,
-        epoch=epoch,
         faults=tuple(parse_node_fault(f) for f in faults),
         twins=False if wheels_running else None,
-        telemetry_rate=telemetry_rate,
-        wheel_bias_rpm=wheel_bias_rpm,
-        diagnosis=diagnosis,
-        health_check=health_check,
-        steady_after=steady_after,
         calibration_s=calibration,
         reference=not no_reference,
-        rt_priority=rt_priority,
+        **settings,
     )
+    scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller
     from rwlab.attitude.scenario import load_scenario
 
     steps = round(duration / load_scenario(scenario).run.dt) + 1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -16,12 +15,11 @@ from rwlab.cli._common import (
     _columns_option,
     _engine_options,
     _friendly_errors,
-    _message,
     _output,
+    _steps_progress,
     _wrote,
     main,
 )
-from rwlab.cli.attitude import _steps_progress
 from rwlab.errors import ConfigError, RwlabError
 
 
@@ -96,6 +94,8 @@ def identify(
     studied in parallel on a Dask cluster (--workers, --scheduler), into
     OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
     """
+    from rwlab.report.identify import identify as run_study
+
     options = dict(
         Ts=Ts,
         input_col=input_col,
@@ -105,17 +105,14 @@ def identify(
         tolerance=tolerance,
         gaps=gaps,
         gain_tolerance=gain_tolerance,
-        force=force,
     )
     if Path(file).is_dir():
         _identify_fleet(Path(file), Path(out), options, workers, scheduler, force)
         return
     if workers is not None or scheduler is not None:
         raise ConfigError("--workers and --scheduler apply to a folder of records")
-    with (
-        _output(out, STUDY_FILES, force, "identification study") as stage,
-        contextlib.ExitStack() as stack,
-    ):
+    _check_folder(Path(out).absolute().parent)
+    with contextlib.ExitStack() as stack:
         bars: list = []
 
         def progress(done: int, total: int, label: str) -> None:
@@ -125,9 +122,8 @@ def identify(
             bars[0].label = f"identification study: {label}"
             bars[0].update(1)
 
-        study, paths = _identify_one(
-            file, stage, progress=progress, echo=lambda t: click.echo(t, err=True), **options
-        )
+        echo = lambda t: click.echo(t, err=True)  # noqa: E731
+        study, paths = run_study(file, out, force=force, progress=progress, echo=echo, **options)
     if study.get("segments"):
         parts = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in study["segments"])
         click.echo(f"split at telemetry gaps into {len(study['segments'])} experiments: {parts}")
@@ -147,9 +143,6 @@ def identify(
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
     click.echo(_wrote(out, paths.values()))
-
-
-STUDY_FILES = ("report.html", "study.json", "model.json")
 
 
 def _rate_unit(study: dict) -> str:
@@ -247,147 +240,23 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     click.echo(_wrote(out, paths.values()))
 
 
-def _identify_one(
-    file,
-    out,
-    *,
-    Ts,
-    input_col,
-    output_col,
-    preprocess,
-    split,
-    tolerance,
-    force,
-    gaps="refuse",
-    gain_tolerance=2.0,
-    progress=None,
-    echo=None,
-):
-    """`rwlab identify` on one record: the study written into ``out``; (study dict, paths)."""
-    from rwlab.ident.study import (
-        identification_study,
-        load_current,
-        load_study_data,
-        wheel_model,
-    )
-    from rwlab.report.identification import write_study
-
-    data, saturation = load_study_data(
-        file, Ts, input_col=input_col, output_col=output_col, gaps=gaps
-    )
-    segments = None
-    if gaps == "split" and Path(file).suffix.lower() == ".mcap":
-        from rwlab.testbed.load import gap_free_segments
-
-        segments = gap_free_segments(file, data.Ts)
-    if echo is not None:
-        echo(f"data: {data!r}")
-    result = identification_study(
-        data,
-        preprocess=preprocess,
-        split=split,
-        tolerance=tolerance,
-        gain_tolerance=gain_tolerance / 100.0,
-        limits_rpm=(saturation["speed_limit_rpm"],) * 2,
-        progress=progress,
-        datasheet=None
-        if "current_limit_a" not in saturation
-        else {
-            "current_limit": saturation["current_limit_a"],
-            "max_speed_rpm": saturation["speed_limit_rpm"],
-            "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
-        },
-        current=load_current(file, Ts, gaps=gaps),
-        segments=segments,
-    )
-    model = wheel_model(  # the owner class: the healthy reference is added below
-        result,
-        speed_limit_rpm=saturation["speed_limit_rpm"],
-        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
-        saturation_source=saturation["saturation_source"],
-    )
-    reference = _healthy_reference(file, model)
-    if isinstance(reference, dict):
-        model = dataclasses.replace(model, healthy_reference=reference)
-    elif echo is not None:
-        echo(f"no healthy reference for fault diagnosis: {reference}")
-    paths = write_study(result, model, out, force=force)
-    study = result.to_dict()
-    study["data"]["output_unit"] = data.output_units[0]  # for the messages only
-    return study, paths
-
-
-def _healthy_reference(file, model) -> dict | str:
-    """The healthy reference measured on a testbed record, or why there is none."""
-    import numpy as np
-
-    from rwlab.diagnose import healthy_reference
-    from rwlab.testbed import load_record
-    from rwlab.wheel import IdentifiedWheel
-
-    if Path(file).suffix.lower() != ".mcap":
-        return "not a testbed record (.mcap with motor current)"
-    try:
-        wheel = IdentifiedWheel.from_file(model)
-        data = load_record(
-            file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
-        )
-        return healthy_reference(data, wheel, source=Path(file).name).to_dict()
-    except RwlabError as exc:
-        return _message(exc)
-
-
-_RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")
-
-
-def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
-    """One fleet line per (record, study folder): its chosen model, or why it failed."""
-    lines = []
-    for record, out in jobs:
-        line = {"record": Path(record).name, "study": Path(out).name, "error": None}
-        line |= {"nk": None, "structure": None, "fit_percent": None}
-        try:
-            study, _ = _identify_one(record, out, **options)
-        except (RwlabError, OSError) as exc:
-            line["error"] = _message(exc)
-        else:
-            chosen = study["chosen"]
-            line |= {
-                "nk": study["delay"]["nk"],
-                "structure": chosen["structure"],
-                "fit_percent": chosen["fit_percent"],
-            }
-        lines.append(line)
-    return lines
-
-
 def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
-    """`rwlab identify FOLDER`: every record's study on the Dask engine, and a fleet summary."""
-    from rwlab.campaign.engine import dask_client, map_batches
-    from rwlab.report.campaign import FLEET_FILES, write_fleet
+    """`rwlab identify FOLDER`: :func:`rwlab.report.identify.identify_fleet`, and its lines."""
+    from rwlab.report.identify import fleet_records, identify_fleet
 
-    records = sorted(
-        p
-        for p in folder.iterdir()
-        if p.is_file()
-        and p.suffix.lower() in _RECORD_SUFFIXES
-        and not p.name.endswith(".partial.mcap")
-    )
-    if not records:
-        raise ConfigError(f"{folder}: no records ({', '.join(_RECORD_SUFFIXES)}) in the folder")
-    stems = [p.stem for p in records]
-    twins = sorted({s for s in stems if stems.count(s) > 1})
-    if twins:
-        raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
-    with _output(out, [*FLEET_FILES, *stems], force, "fleet identification") as stage:
-        jobs = [[(str(p), str(stage / p.stem))] for p in records]
-        click.echo(f"identifying {len(records)} records on Dask...", err=True)
-        with (
-            dask_client(workers, scheduler) as client,
-            _steps_progress(len(records), "fleet identification", unit="records") as progress,
-        ):
-            lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
-        paths = write_fleet(lines, stage, force=force)
+    count = len(fleet_records(folder))
+    _check_folder(out.absolute().parent)
+    click.echo(f"identifying {count} records on Dask...", err=True)
+    with _steps_progress(count, "fleet identification", unit="records") as progress:
+        lines, paths = identify_fleet(
+            folder,
+            out,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            progress=progress,
+            **options,
+        )
     for line in lines:
         fit = "" if line["fit_percent"] is None else f"{line['fit_percent']:8.2f}"
         click.echo(f"{line['record']:<32} {line['structure'] or 'failed':<12} {fit:>8}")

@@ -13,6 +13,7 @@ from rwlab.cli._common import (
     Number,
     _check_folder,
     _friendly_errors,
+    _only_with,
     _stop_signals,
     main,
 )
@@ -32,8 +33,7 @@ class _ExperimentCommand(click.Command):
 
         defaults = {f.name: f.default for f in fields(ExperimentConfig)}
         for p in self.params:
-            name = {"setpoint_file": "file", "model_file": "model"}.get(p.name or "", p.name)
-            value = defaults.get(name)
+            value = defaults.get(p.name or "")
             unset = p.get_default(ctx) in (None, getattr(click.core, "UNSET", None))
             if isinstance(p, click.Option) and unset and value not in (None, ()):
                 shown = ("on" if value else "off") if isinstance(value, bool) else value
@@ -65,14 +65,12 @@ class _ExperimentCommand(click.Command):
 )
 @click.option(
     "--wheel",
-    "wheel_preset",
     metavar="PRESET|FILE.toml",
     help="Simulated wheel: the preset rw90 (realistic, default) or ideal (no imperfections), "
     "or a wheel TOML file (docs/wheels/rw90.toml lists every parameter).",
 )
 @click.option(
     "--file",
-    "setpoint_file",
     type=click.Path(dir_okay=False),
     help="CSV of setpoints for --signal file.",
 )
@@ -106,7 +104,6 @@ class _ExperimentCommand(click.Command):
 )
 @click.option(
     "--model",
-    "model_file",
     type=click.Path(dir_okay=False),
     help="model.json: run the fault detector live; alarms become record events.",
 )
@@ -116,32 +113,7 @@ class _ExperimentCommand(click.Command):
 )
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def experiment(
-    config_file,
-    signal,
-    mode,
-    amplitude,
-    duration,
-    Ts,
-    out,
-    realtime,
-    telemetry_rate,
-    seed,
-    unit,
-    wheel_preset,
-    setpoint_file,
-    interface,
-    channel,
-    node_id,
-    protocol,
-    raw_frames,
-    rate_limit,
-    faults,
-    model_file,
-    monitor,
-    port,
-    force,
-):
+def experiment(config_file, out, monitor, port, force, **settings):
     """Play a test signal into a wheel and record every command and telemetry frame.
 
     With the default virtual interface a simulated RW90 answers, on a simulated
@@ -150,27 +122,9 @@ def experiment(
     """
     from rwlab.testbed import ExperimentConfig, run_experiment
 
-    overrides = dict(
-        signal=signal,
-        mode=mode,
-        amplitude=amplitude,
-        duration=duration,
-        Ts=Ts,
-        realtime=realtime,
-        telemetry_rate=telemetry_rate,
-        seed=seed,
-        unit=unit,
-        wheel=wheel_preset,
-        file=setpoint_file,
-        interface=interface,
-        channel=channel,
-        node_id=node_id,
-        protocol=protocol,
-        raw_frames=raw_frames,
-        rate_limit=rate_limit,
-        faults=tuple(faults) or None,
-        model=model_file,
-    )
+    _only_with("port", monitor, "with --monitor")
+    # every other option is named after its ExperimentConfig field (None: not given)
+    overrides = settings | {"faults": tuple(settings["faults"]) or None}
     if config_file:
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:

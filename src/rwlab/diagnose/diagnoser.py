@@ -47,6 +47,10 @@ readings, length from the reference's repeat probability) and ``dropout``
 allows, Poisson). Samples without a new frame, and the one after them, enter
 no test. A detector alarms once and stays latched (``latch=False`` restarts it,
 for measuring false-alarm rates).
+
+Why this module is long: one class, :class:`Diagnoser`, whose calibration, per-sample
+tests and verdicts share its state; split, the state would be passed around instead of
+kept.
 """
 
 from __future__ import annotations

@@ -16,6 +16,10 @@ Everything that crosses the bus, the satellite's channels and every event go
 into one MCAP record. Whatever ends the run — its end, a silent wheel, a
 broken bus, Ctrl-C, SIGTERM, any error — every wheel is idled and the record
 is closed with a ``stop`` event.
+
+Why this module is long: one run: its configuration, the bus and twins it starts, the
+loop, the fault handling and the record share one run state, and every exit path (end,
+silent wheel, broken bus, signal, error) must idle the wheels in one place.
 """
 
 from __future__ import annotations
@@ -375,25 +379,26 @@ def _frame_writer(record, node: int, clock):
 def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
     nodes = cfg.nodes or tuple(range(1, sc.n_wheels + 1))
     if len(nodes) != sc.n_wheels:
-        raise ConfigError(
-            f"{sc.name} has {sc.n_wheels} wheels; --nodes names {len(nodes)} ({nodes})"
-        )
+        raise ConfigError(f"{sc.name} has {sc.n_wheels} wheels; nodes names {len(nodes)} ({nodes})")
     if not (math.isfinite(cfg.duration) and cfg.duration >= sc.run.dt):
-        raise ConfigError(f"--duration must be at least one control period ({sc.run.dt:g} s)")
+        raise ConfigError(f"duration must be at least one control period ({sc.run.dt:g} s)")
+    if cfg.rt_priority is not None and not cfg.realtime:
+        raise ConfigError(
+            "rt_priority schedules the wall-clock loop; this run is on the simulated clock: "
+            "leave rt_priority out or set realtime=True"
+        )
     if cfg.realtime and sc.run.dt > 0.1 + 1e-12:
         raise ConfigError(
             f"the wall-clock loop runs at 10 Hz or faster; {sc.name} has dt {sc.run.dt:g} s"
         )
     for node, fault in cfg.faults:
         if node not in nodes:
-            raise ConfigError(f"--fault names node {node}, not one of the wheels {nodes}")
+            raise ConfigError(f"a fault names node {node}, not one of the wheels {nodes}")
         if fault.t_s > cfg.duration:
-            raise ConfigError(f"--fault {node}:{fault} starts after the run ends")
+            raise ConfigError(f"fault {node}:{fault} starts after the run ends")
     sa = cfg.steady_after
     if sa is not None and not (math.isfinite(sa) and 0 <= sa < cfg.duration):
-        raise ConfigError(
-            f"--steady-after must be a number of seconds in [0, duration), got {sa!r}"
-        )
+        raise ConfigError(f"steady_after must be a number of seconds in [0, duration), got {sa!r}")
     every = cfg.diagnosis_period_s / sc.run.dt
     if cfg.diagnosis is not False and (every < 1 or abs(every - round(every)) > 1e-9):
         raise ConfigError("the diagnosis period must be a whole number of control periods")
@@ -444,7 +449,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     # report.html is the report layer's, written after: refused here too, before the run
     existing = [str(p) for p in [*targets.values(), out / "report.html"] if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     params = physics_params(sc)
     diagnosis = bool(cfg.wheel_bias_rpm) if cfg.diagnosis is None else cfg.diagnosis
     health = (diagnosis and redundant) if cfg.health_check is None else cfg.health_check
@@ -636,14 +641,14 @@ def _real_time(priority: int | None):
     if priority is None:
         return None
     if not 1 <= priority <= 99:
-        raise ConfigError(f"--rt-priority must be 1..99, got {priority}")
+        raise ConfigError(f"rt_priority must be 1..99, got {priority}")
     before = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError) as exc:
         raise ConfigError(
             f"cannot run the loop real-time ({exc}); run as a user with CAP_SYS_NICE "
-            "(e.g. `sudo setcap cap_sys_nice+ep $(which python3)`) or leave --rt-priority out"
+            "(e.g. `sudo setcap cap_sys_nice+ep $(which python3)`) or leave rt_priority out"
         ) from None
     return lambda: os.sched_setscheduler(0, before[0], before[1])
 

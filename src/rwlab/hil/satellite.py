@@ -16,6 +16,9 @@ MEKF of ``attitude.ekf``, the sky of ``sim.sky_table`` and the noise streams
 of ``sim.simulate``, drawn in the same blocks, so that the same scenario and
 seed flown here with ideal wheels repeats ``attitude simulate`` (a test holds
 them equal) and every difference on the bench is the wheels'.
+
+Why this module is long: it mirrors ``attitude.sim``'s compiled loop period by period (a
+test holds them equal); kept as one class so the two can be read side by side.
 """
 
 from __future__ import annotations

@@ -37,6 +37,9 @@ at rest, and far closer than zero for normalised data, where physical zero is
 not 0. This is not MATLAB ``compare``'s default (``'estimate'``, an initial
 state fitted to the validation output), which can only score higher; the
 convention is recorded in ``study.json`` as ``initial_conditions``.
+
+Why this module is long: paper A's procedure is one function whose steps follow the
+paper's order; they are kept together in that order.
 """
 
 from __future__ import annotations
@@ -297,10 +300,14 @@ def identification_study(
     worst = 2 * max(orders) + nk_max
     needed = math.ceil(10 * worst / min(split, 1 - split))
     if data.N < needed:
+        Ts = data.Ts
         raise DataError(
-            f"the record is too short for this study: {data.N} samples, but ARX{max(orders)}"
-            f"{max(orders)} with delays up to {nk_max} needs at least {needed} (ten samples "
-            "per parameter and lag in each part); record longer or lower the orders"
+            f"the record is too short for this study: {data.N} samples "
+            f"({data.N * Ts:g} s at Ts = {Ts:g} s), but ARX{max(orders)}{max(orders)} with "
+            f"delays up to {nk_max} needs at least {needed} samples, {needed * Ts:g} s (ten "
+            "samples per parameter and lag in each part of the split); record an experiment "
+            f"of at least {math.ceil(needed * Ts)} s, or (in Python) study lower orders "
+            "(orders=, nk_max=)"
         )
     if not (math.isfinite(gain_tolerance) and gain_tolerance > 0):
         raise DataError(f"gain_tolerance must be a positive fraction, got {gain_tolerance!r}")

@@ -43,7 +43,7 @@ def check_outputs(out: str | os.PathLike, names: list[str], force: bool) -> dict
     targets = {n: out / n for n in names}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     return targets
 
 

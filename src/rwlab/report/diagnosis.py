@@ -44,7 +44,7 @@ def write_diagnosis(
     targets = {name: out / name for name in ("diagnosis.json", "report.html")}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     out.mkdir(parents=True, exist_ok=True)
     payload = diagnosis.to_dict()
     text = json.dumps(payload, indent=2)
@@ -157,7 +157,7 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     targets = {name: out / name for name in ("trend.json", "trend.html")}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     out.mkdir(parents=True, exist_ok=True)
     points = sorted(points, key=lambda p: (p["start_utc"], p["record"]))
     text = json.dumps({"format": TREND_FORMAT, "records": points}, indent=2)

@@ -146,7 +146,7 @@ def write_study(
     targets = {name: out / name for name in ("report.html", "study.json", "model.json")}
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; use --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
     out.mkdir(parents=True, exist_ok=True)
     study = result.to_dict()
     study["model_file"] = "model.json"

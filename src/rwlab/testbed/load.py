@@ -108,9 +108,7 @@ def load_record(
         t.split("/")[1] for t in record.messages if t.endswith("/telemetry") and t[1:6] == "wheel"
     )
     if node is None and wheels and not record.topic("/telemetry"):
-        raise DataError(
-            f"{path} holds several wheels ({', '.join(wheels)}): choose one (node=, CLI --node)"
-        )
+        raise DataError(f"{path} holds several wheels ({', '.join(wheels)}): choose one (node=)")
     commands = record.topic(f"{prefix}/command")
     telemetry = record.topic(f"{prefix}/telemetry")
     if not commands or len(telemetry) < 2:
@@ -133,7 +131,7 @@ def load_record(
         raise RecordGapError(
             f"{path}: {len(gaps)} telemetry gap(s) longer than {limit:g} s ({shown}"
             f"{', ...' if len(gaps) > 5 else ''}); frames were lost, so samples there are stale. "
-            "Pass max_gap (CLI: --max-gap) to accept them."
+            "Pass max_gap= to accept them."
         )
     t0 = tc[0]
     n = int(np.floor((tt[-1] - t0) / Ts + 1e-9)) + 1

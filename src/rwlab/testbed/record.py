@@ -161,7 +161,7 @@ class RecordWriter:
         self.path = Path(path)
         self.partial = partial_path(self.path)
         if self.path.exists() and not force:
-            raise FileExistsError(f"{self.path} exists; use --force (force=True) to replace it")
+            raise FileExistsError(f"{self.path} exists; pass force=True to replace it")
         if self.path.is_dir():
             raise IsADirectoryError(errno.EISDIR, "is a directory", str(self.path))
         if self.path.parent.exists() and not self.path.parent.is_dir():

@@ -8,6 +8,10 @@ wheel fault, any error — the wheel is left idle and the record is closed.
 Against the simulated wheel the experiment runs on the simulated clock by
 default (a 20-minute PRBS finishes in seconds, through real CAN frames);
 ``realtime=True`` runs it on the wall clock. A real bus always runs in real time.
+
+Why this module is long: ``ExperimentConfig`` and the runner share the experiment's
+checks and limits, and the real-time loop that must leave the wheel idle on every exit
+is kept whole.
 """
 
 from __future__ import annotations
@@ -198,9 +202,10 @@ class ExperimentConfig:
             raise ConfigError(f"step_levels must be a list of numbers, got {self.step_levels!r}")
         from rwlab.wheel.link import get_protocol
 
-        get_protocol(self.protocol)  # ConfigError naming the known ones
+        protocol = get_protocol(self.protocol)  # ConfigError naming the known ones
         if self.signal == "file" and not self.file:
             raise ConfigError("signal 'file' needs file = a CSV of setpoints")
+        self._check_contradictions(protocol.transports)
         if self.duration < self.Ts:
             raise ConfigError(f"duration {self.duration} s is shorter than Ts = {self.Ts} s")
         if not isinstance(self.faults, tuple):
@@ -214,6 +219,24 @@ class ExperimentConfig:
             raise ConfigError(
                 f"duration / Ts = {self.duration / self.Ts:.3g} commands; at most "
                 f"{MAX_COMMANDS:.0e} in one experiment"
+            )
+
+    def _check_contradictions(self, transports) -> None:
+        """Settings that would be silently ignored next to the others are refused."""
+        if self.file and self.signal != "file":
+            raise ConfigError(
+                f"file gives the setpoints of signal 'file', not of signal {self.signal!r}: "
+                "leave file out or set signal = 'file'"
+            )
+        if self.raw_frames and "can" not in transports:
+            raise ConfigError(
+                f"raw_frames records CAN frames, and protocol {self.protocol!r} has none (it "
+                "runs on a byte stream): leave raw_frames off or choose a CAN protocol"
+            )
+        if self.unit is not None and self.interface != "virtual":
+            raise ConfigError(
+                f"unit draws a simulated wheel; on interface {self.interface!r} a real wheel "
+                "answers: leave unit out or use interface 'virtual'"
             )
 
     def wheel_params(self, base: WheelParams | None = None) -> WheelParams:

@@ -16,6 +16,10 @@ Speed is measured like a Hall-sensor wheel: quantised (``speed_resolution_rpm``)
 with noise, reading 0 below the slowest speed that still produces Hall edges.
 Faults latch (overspeed, overcurrent, overtemperature) and clear only on an
 explicit clear-fault command; a latched fault idles the motor.
+
+Why this module is long: the wheel is one set of coupled equations (motor, flywheel,
+friction, speed loop, Hall sensing) integrated together; split, the state vector's
+layout would be shared across files.
 """
 
 from __future__ import annotations

@@ -1,0 +1,341 @@
+"""The ``rwlab identify`` workflows, callable from Python with the command's arguments.
+
+:func:`identify` runs paper A's study on one record and writes its folder
+(``report.html``, ``study.json``, ``model.json`` with the healthy reference of
+the fault diagnosis when the record is a testbed record); :func:`identify_fleet`
+does it for every record of a folder on a Dask cluster, one study folder per
+record, and writes ``fleet.json`` and ``fleet.html``. Both write their output
+folder whole or not at all, and refuse a second run on it at once
+(:func:`rwlab._io.output_folder`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from rwlab._io import output_folder
+from rwlab.errors import ConfigError, RwlabError
+
+__all__ = [
+    "RECORD_SUFFIXES",
+    "STUDY_FILES",
+    "fleet_records",
+    "identify",
+    "identify_fleet",
+    "identify_into",
+]
+
+STUDY_FILES = ("report.html", "study.json", "model.json")
+#: The files ``identify_fleet`` takes from a folder (partial records are left out).
+RECORD_SUFFIXES = (".mcap", ".csv", ".parquet", ".mat", ".dat", ".txt")
+
+
+def identify(
+    file: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    Ts: float | None = None,
+    input_col: str | None = None,
+    output_col: str | None = None,
+    preprocess: str = "detrend",
+    split: float = 0.7,
+    tolerance: float = 3.0,
+    gaps: str = "refuse",
+    gain_tolerance: float = 2.0,
+    force: bool = False,
+    progress: Callable[[int, int, str], None] | None = None,
+    echo: Callable[[str], None] | None = None,
+) -> tuple[dict, dict[str, Path]]:
+    """Paper A's identification study on one record, written into the folder ``out``.
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        A testbed record (.mcap) or a data file (.csv, .dat, .parquet, .mat).
+    out : str or os.PathLike
+        The output folder (locked while the study runs; written whole or not at all).
+    Ts : float, optional
+        Sample time, s (a record's own by default).
+    input_col, output_col : str, optional
+        Columns or .mat variables (records: command and speed_rpm).
+    preprocess : {'detrend', 'scale', 'normalize', 'none'}
+        See :func:`rwlab.ident.study.identification_study`.
+    split : float
+        Estimation share, in (0, 1).
+    tolerance : float
+        Fit points within which the simplest model is chosen.
+    gaps : {'refuse', 'split'}
+        A record with telemetry gaps: refuse it, or split it at the gaps into segments
+        identified as separate experiments merged (MATLAB ``merge(iddata)``).
+    gain_tolerance : float
+        Percent within which the chosen model's DC gain must match the steady-state gain
+        measured on the record's settled holds.
+    force : bool
+        Replace a previous study in ``out`` (only when this one succeeds).
+    progress : callable, optional
+        ``progress(done, total, stage)`` after each stage.
+    echo : callable, optional
+        ``echo(line)`` for what the study notes on the way (the data, a missing
+        healthy reference).
+
+    Returns
+    -------
+    study : dict
+        Every number of ``study.json``.
+    paths : dict of str to Path
+        The files written, by name (in ``out``).
+    """
+    options = dict(
+        Ts=Ts,
+        input_col=input_col,
+        output_col=output_col,
+        preprocess=preprocess,
+        split=split,
+        tolerance=tolerance,
+        gaps=gaps,
+        gain_tolerance=gain_tolerance,
+        force=force,
+    )
+    with output_folder(out, STUDY_FILES, force=force, what="identification study") as stage:
+        study, paths = identify_into(file, stage, progress=progress, echo=echo, **options)
+    return study, {name: Path(out) / Path(p).name for name, p in paths.items()}
+
+
+def identify_into(
+    file: str | os.PathLike,
+    folder: str | os.PathLike,
+    *,
+    progress: Callable[[int, int, str], None] | None = None,
+    echo: Callable[[str], None] | None = None,
+    **options: Any,
+) -> tuple[dict, dict[str, Path]]:
+    """The study of one record written straight into ``folder`` (no lock, no staging).
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        The record.
+    folder : str or os.PathLike
+        Where the files go (a staging folder the caller publishes).
+    progress, echo : callable, optional
+        As in :func:`identify`.
+    **options
+        ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
+        ``tolerance``, ``gaps``, ``gain_tolerance``, ``force`` as in :func:`identify`.
+
+    Returns
+    -------
+    study : dict
+        Every number of ``study.json``.
+    paths : dict of str to Path
+        The files written, by name.
+    """
+    from rwlab.ident.study import identification_study, load_current, load_study_data
+    from rwlab.ident.study import wheel_model as make_wheel_model
+    from rwlab.report.identification import write_study
+
+    Ts, gaps = options["Ts"], options.get("gaps", "refuse")
+    file = str(file)
+    data, saturation = load_study_data(
+        file, Ts, input_col=options["input_col"], output_col=options["output_col"], gaps=gaps
+    )
+    segments = None
+    if gaps == "split" and Path(file).suffix.lower() == ".mcap":
+        from rwlab.testbed.load import gap_free_segments
+
+        segments = gap_free_segments(file, data.Ts)
+    if echo is not None:  # the data are shown once the study accepts them (a refusal: one line)
+        progress = _after_first(progress, lambda: echo(f"data: {data!r}"))
+    datasheet = None
+    if "current_limit_a" in saturation:
+        datasheet = {
+            "current_limit": saturation["current_limit_a"],
+            "max_speed_rpm": saturation["speed_limit_rpm"],
+            "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
+        }
+    result = identification_study(
+        data,
+        preprocess=options["preprocess"],
+        split=options["split"],
+        tolerance=options["tolerance"],
+        gain_tolerance=options.get("gain_tolerance", 2.0) / 100.0,
+        limits_rpm=(saturation["speed_limit_rpm"],) * 2,
+        progress=progress,
+        datasheet=datasheet,
+        current=load_current(file, Ts, gaps=gaps),
+        segments=segments,
+    )
+    model = make_wheel_model(  # the owner class: the healthy reference is added below
+        result,
+        speed_limit_rpm=saturation["speed_limit_rpm"],
+        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
+        saturation_source=saturation["saturation_source"],
+    )
+    reference = _healthy_reference(file, model)
+    if isinstance(reference, dict):
+        model = dataclasses.replace(model, healthy_reference=reference)
+    elif echo is not None:
+        echo(f"no healthy reference for fault diagnosis: {reference}")
+    paths = write_study(result, model, folder, force=options["force"])
+    study = result.to_dict()
+    study["data"]["output_unit"] = data.output_units[0]  # for the messages only
+    return study, paths
+
+
+def _after_first(progress, first: Callable[[], None]):
+    """``progress`` that calls ``first()`` before its first report."""
+    done: list[bool] = []
+
+    def report(*args) -> None:
+        if not done:
+            done.append(True)
+            first()
+        if progress is not None:
+            progress(*args)
+
+    return report
+
+
+def _healthy_reference(file, model) -> dict | str:
+    """The healthy reference measured on a testbed record, or why there is none."""
+    import numpy as np
+
+    from rwlab.diagnose import healthy_reference
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
+
+    if Path(file).suffix.lower() != ".mcap":
+        return "not a testbed record (.mcap with motor current)"
+    try:
+        wheel = IdentifiedWheel.from_file(model)
+        data = load_record(
+            file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
+        return healthy_reference(data, wheel, source=Path(file).name).to_dict()
+    except RwlabError as exc:
+        return _message(exc)
+
+
+def _message(exc: BaseException) -> str:
+    """One line for an error (an OS error names its file)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename is not None else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def fleet_records(folder: str | os.PathLike) -> list[Path]:
+    """The records of a fleet folder, sorted; their names must differ (one study each).
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        A folder of records.
+
+    Returns
+    -------
+    list of Path
+    """
+    folder = Path(folder)
+    records = sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file()
+        and p.suffix.lower() in RECORD_SUFFIXES
+        and not p.name.endswith(".partial.mcap")
+    )
+    if not records:
+        raise ConfigError(f"{folder}: no records ({', '.join(RECORD_SUFFIXES)}) in the folder")
+    stems = [p.stem for p in records]
+    twins = sorted({s for s in stems if stems.count(s) > 1})
+    if twins:
+        raise ConfigError(f"{folder}: records {twins} share a name; their studies would collide")
+    return records
+
+
+def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
+    """One fleet line per (record, study folder): its chosen model, or why it failed."""
+    lines = []
+    for record, out in jobs:
+        line: dict[str, Any] = {"record": Path(record).name, "study": Path(out).name}
+        line |= {"error": None, "nk": None, "structure": None, "fit_percent": None}
+        try:
+            study, _ = identify_into(record, out, **options)
+        except (RwlabError, OSError) as exc:
+            line["error"] = _message(exc)
+        else:
+            chosen = study["chosen"]
+            line |= {
+                "nk": study["delay"]["nk"],
+                "structure": chosen["structure"],
+                "fit_percent": chosen["fit_percent"],
+            }
+        lines.append(line)
+    return lines
+
+
+def identify_fleet(
+    folder: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: Callable[[int], None] | None = None,
+    **options: Any,
+) -> tuple[list[dict], dict[str, Path]]:
+    """Every record of ``folder`` studied on a Dask cluster, and the fleet's summary.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        A folder of records (a wheel fleet's acceptance tests).
+    out : str or os.PathLike
+        The output folder: ``OUT/<record name>/`` per record, ``fleet.json`` and
+        ``fleet.html`` (locked while it runs; written whole or not at all).
+    workers : int, optional
+        Processes of a new local Dask cluster (default: the cores).
+    scheduler : str, optional
+        Address of a running Dask scheduler, e.g. ``tcp://host:8786``.
+    force : bool
+        Replace a previous output in ``out`` (only when this run succeeds).
+    progress : callable, optional
+        ``progress(done)``: records finished so far.
+    **options
+        ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
+        ``tolerance``, ``gaps``, ``gain_tolerance`` as in :func:`identify`.
+
+    Returns
+    -------
+    lines : list of dict
+        Per record: ``record``, ``study``, ``nk``, ``structure``, ``fit_percent``
+        and ``error`` (None, or why its study failed; the others are still written).
+    paths : dict of str to Path
+        ``fleet.json`` and ``fleet.html`` in ``out``.
+    """
+    from rwlab.campaign.engine import dask_client, map_batches
+    from rwlab.report.campaign import FLEET_FILES, write_fleet
+
+    records = fleet_records(folder)
+    options = {
+        "Ts": None,
+        "input_col": None,
+        "output_col": None,
+        "preprocess": "detrend",
+        "split": 0.7,
+        "tolerance": 3.0,
+        "gaps": "refuse",
+        "gain_tolerance": 2.0,
+        **options,
+        "force": force,
+    }
+    names = [*FLEET_FILES, *(p.stem for p in records)]
+    with output_folder(out, names, force=force, what="fleet identification") as stage:
+        jobs = [[(str(p), str(stage / p.stem))] for p in records]
+        with dask_client(workers, scheduler) as client:
+            lines = map_batches(client, _identify_batch, jobs, options, progress=progress)
+        paths = write_fleet(lines, stage, force=force)
+    return lines, {name: Path(out) / Path(p).name for name, p in paths.items()}

@@ -1,0 +1,165 @@
+"""The ``rwlab attitude montecarlo`` workflow, callable from Python with the command's arguments.
+
+:func:`montecarlo` runs a pointing campaign on Dask and writes its folder
+(``results.parquet``, ``budget.json``, ``report.html``). Finished runs are kept
+in ``OUT.partial`` as they finish, so that an interrupted campaign continues
+with ``resume=True``, computing only the runs it lacks.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+from rwlab._io import output_folder
+from rwlab.errors import ConfigError, RwlabError
+
+__all__ = ["montecarlo"]
+
+# write_campaign's files (report.campaign.CAMPAIGN_FILES, a test holds them equal), named
+# here so that the folder is locked before the loop is loaded
+_FILES = ("results.parquet", "budget.json", "report.html")
+
+
+def montecarlo(
+    out: str | os.PathLike,
+    *,
+    scenario: str = "geo-comsat",
+    runs: int = 100,
+    duration: float = 3600.0,
+    controller: str = "lqg",
+    dispersions: str | os.PathLike | None = None,
+    seed: int = 0,
+    epoch: str | None = None,
+    epoch_spread_days: float = 0.0,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    resume: bool = False,
+    progress: Callable[[int], None] | None = None,
+    echo: Callable[[str], None] | None = None,
+) -> tuple[dict, dict[str, Path]]:
+    """A Monte Carlo pointing campaign, written into the folder ``out``.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder (locked first; written whole or not at all).
+    scenario : str
+        A built-in scenario or a scenario TOML file.
+    runs : int
+        Number of runs.
+    duration : float
+        Seconds per run.
+    controller : {'pd', 'lqr', 'lqg', 'lqg_ltr'}
+        Designed on the nominal scenario, flown on each dispersed one.
+    dispersions : str or os.PathLike, optional
+        A dispersions TOML file (rwlab's GEO set by default).
+    seed : int
+        The campaign's seed; each run's is a child of it.
+    epoch : str, optional
+        UTC start, ISO 8601: the real sky.
+    epoch_spread_days : float
+        Each run starts at ``epoch`` plus a uniform draw of up to this many days.
+    workers : int, optional
+        Processes of a new local Dask cluster (default: the cores).
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    force : bool
+        Replace a previous campaign in ``out`` and start over (only when this one
+        succeeds).
+    resume : bool
+        Continue the interrupted campaign kept in ``OUT.partial`` (same arguments).
+    progress : callable, optional
+        ``progress(done)``: runs finished so far.
+    echo : callable, optional
+        ``echo(line)`` for what the campaign says on the way (where it runs,
+        resuming, stopped, retried batches).
+
+    Returns
+    -------
+    stats : dict
+        Every number of ``budget.json``.
+    paths : dict of str to Path
+        The files written, by name (in ``out``).
+    """
+    say = echo or (lambda _text: None)
+    if resume and force:
+        raise ConfigError(
+            "resume=True continues the kept runs and force=True starts over: give one of them"
+        )
+    with output_folder(out, _FILES, force=force, what="Monte Carlo campaign") as stage:
+        from rwlab.attitude.scenario import load_scenario
+        from rwlab.campaign.dispersions import load_dispersions
+        from rwlab.campaign.engine import dask_client
+        from rwlab.campaign.montecarlo import (
+            Campaign,
+            Execution,
+            budget,
+            check_runs,
+            check_size,
+            fly_run,
+            run_campaign,
+        )
+        from rwlab.report.campaign import write_campaign
+
+        check_size(runs)
+        sc = load_scenario(scenario)
+        campaign = Campaign(
+            sc,
+            load_dispersions(dispersions),
+            duration,
+            controller,
+            seed,
+            runs,
+            epoch=epoch,
+            epoch_spread_days=epoch_spread_days,
+        )
+        check_runs(campaign)  # before the cluster starts and anything is kept
+        store = _run_store(out, campaign, force=force, resume=resume, say=say)
+        where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
+        say(f"{runs} runs of {duration:g} s on {where} (workers load the loop)...")
+        execution = Execution()
+        try:
+            with dask_client(workers, scheduler) as client:
+                rows = run_campaign(
+                    campaign, client, progress=progress, store=store, execution=execution
+                )
+        except (KeyboardInterrupt, RwlabError, OSError):
+            say(
+                f"\ncampaign stopped: {len(store.rows())} of {runs} runs kept in "
+                f"{store.folder}; continue it with the same arguments and resume=True"
+            )
+            raise
+        stats = {**budget(rows, campaign), "execution": execution.to_dict()}
+        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
+        paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
+    shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
+    if execution.retries:
+        ex = stats["execution"]
+        say(f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}")
+    return stats, {name: Path(out) / Path(p).name for name, p in paths.items()}
+
+
+def _run_store(out, campaign, *, force: bool, resume: bool, say: Callable[[str], None]):
+    """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
+    from rwlab.campaign.montecarlo import RunStore
+
+    base = Path(os.path.abspath(out))
+    store = RunStore(base.with_name(base.name + ".partial"), campaign)
+    if store.exists() and resume:
+        store.check()
+        say(f"resuming: {len(store.rows())} runs kept in {store.folder}")
+        return store
+    if resume:
+        raise ConfigError(f"nothing to resume: {store.folder} holds no interrupted campaign")
+    if store.exists() and not force:
+        raise FileExistsError(
+            f"{store.folder} holds an interrupted campaign ({len(store.rows())} runs kept); "
+            "continue it with resume=True, or start over with force=True"
+        )
+    shutil.rmtree(store.folder, ignore_errors=True)
+    store.create()
+    return store
