@@ -10,7 +10,8 @@ on hours of healthy records of units other than the identified one. A requested
 rate maps to the threshold whose measured rate it is (log-linear interpolation);
 below the rates the hours resolve (fewer than :data:`RESOLVED` alarms) the tail
 is extrapolated with the measured slope of log(rate), never steeper than the
-Gaussian's 2k, so the unresolved thresholds err high.
+Gaussian's 2k, and the threshold is the larger of that and the analytic one: an
+unverified rate errs towards fewer alarms (the default 1e-3/h is such a rate).
 
 Where a detector cannot deliver a rate (a healthy unit never leaves its
 tolerance band, or no threshold gives a rate within a factor 2 of the request:
@@ -203,7 +204,9 @@ class ThresholdCalibration:
             lo, hi = rate[j - 1], rate[j]
             x = (math.log(lo) - math.log(per_hour)) / (math.log(lo) - math.log(hi))
             return float(h[j - 1] + x * (h[j] - h[j - 1])), ""
-        return max(self._tail(name, h, rate, ok, per_hour), 0.0), ""
+        # unmeasured: the larger of the extrapolated and the analytic threshold (a lower
+        # one would trade the isolation of other faults for a rate nobody has verified)
+        return max(self._tail(name, h, rate, ok, per_hour), analytic, 0.0), ""
 
     def _tail(self, name, h, rate, ok, per_hour) -> float:
         """Below the resolved rates: the measured log-rate slope, at most Gaussian's 2k."""
