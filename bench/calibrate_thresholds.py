@@ -19,8 +19,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from bench_diagnose import _model, _record, records
 
+from bench_diagnose import _model, _record, records
 from rwlab.diagnose import HealthyReference
 from rwlab.diagnose.diagnoser import measure_calibration
 from rwlab.testbed import load_record
@@ -61,7 +61,8 @@ def main() -> None:
     print(f"{cal.hours:.2f} h of healthy records, {len(data)} records -> {args.out}")
     print(f"{'detector':<16} {'k':>6} {'decisions/h':>12} {'max alarms/h':>13}")
     for name, c in cal.curves.items():
-        print(f"{name:<16} {c.k:>6.3g} {c.decisions / cal.hours:>12.1f} {cal.max_per_hour(name):>13.3g}")
+        per_hour = c.decisions / cal.hours
+        print(f"{name:<16} {c.k:>6.3g} {per_hour:>12.1f} {cal.max_per_hour(name):>13.3g}")
 
 
 if __name__ == "__main__":

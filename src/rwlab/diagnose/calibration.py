@@ -220,8 +220,15 @@ class ThresholdCalibration:
         return float(h[last] + math.log(rate[last] / per_hour) / slope)
 
     def _count(self, name, n, rate, per_hour, analytic, resolvable) -> tuple[float, str]:
-        """An integer threshold: the smallest whose measured rate is at most the request."""
-        j = int(np.nonzero(rate <= per_hour)[0][0]) if (rate <= per_hour).any() else len(n) - 1
+        """An integer threshold: the one whose measured rate is nearest the request within a
+        factor 2, else the smallest whose rate is at most the request."""
+        near = np.nonzero((rate >= per_hour / 2) & (rate <= 2 * per_hour))[0]
+        if near.size:
+            j = int(near[np.argmin(np.abs(np.log(rate[near] / per_hour)))])
+        elif (rate <= per_hour).any():
+            j = int(np.nonzero(rate <= per_hour)[0][0])
+        else:
+            j = len(n) - 1
         value = float(n[j])
         if rate[j] * self.hours < RESOLVED:  # not measured: the analytic one if higher
             value = max(value, float(analytic))

@@ -7,7 +7,6 @@ Figure ids: ``fig-residuals`` (speed, acceleration and current residuals),
 from __future__ import annotations
 
 import html
-
 import json
 import os
 from pathlib import Path
