@@ -206,7 +206,9 @@ def _healthy(args, run, cache: Path, specs: dict) -> None:
             counts[rate].update(a.detector for a in result.alarms)
             thresholds[rate] = result.thresholds
             for note in result.notes:
-                notes[rate].setdefault(note.split(":")[0], note.split(": ", 1)[1])
+                name, text = note.split(": ", 1)
+                if text not in notes[rate].get(name, ""):
+                    notes[rate][name] = "; ".join(filter(None, (notes[rate].get(name), text)))
     units = sorted(s[0] for s in specs.values())
     print(
         f"healthy: {hours:.2f} h, units {units[0]}–{units[-1]} ({', '.join(SIGNALS)} in turn); "

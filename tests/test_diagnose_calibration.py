@@ -140,7 +140,7 @@ def test_calibration_file_round_trips_and_refuses_other_formats(tmp_path):
 
 def test_the_package_calibration_covers_every_detector_and_says_where_it_came_from():
     cal = ThresholdCalibration.load()
-    assert set(cal.curves) == {
+    assert {name.split("@")[0] for name in cal.curves} == {
         "friction",
         "friction_change",
         "motor",
@@ -150,6 +150,25 @@ def test_the_package_calibration_covers_every_detector_and_says_where_it_came_fr
         "dropout",
     }
     assert cal.hours >= 8.0 and "bench/calibrate_thresholds.py" in cal.origin
+    assert cal.curves["speed@0"].k == pytest.approx(0.5)  # no tolerance: the textbook k
     for name in cal.curves:
         rates = cal.rates(name)
         assert np.all(np.diff(rates) <= 0)
+
+
+def test_a_rate_beyond_the_full_tolerance_is_sought_with_less_of_it():
+    grid = (0.0, 1.0, 2.0)
+    curves = {
+        "speed": Curve("cusum", grid, (0, 0, 0), 12.0, 600),
+        "speed@0.5": Curve("cusum", grid, (16, 8, 0), 6.25, 600, 0.5),
+        "speed@0": Curve("cusum", grid, (400, 200, 100), 0.5, 600, 0.0),
+    }
+    cal = ThresholdCalibration(0.5, 8.0, curves)
+    assert cal.setting("speed", 1e-3, analytic=9.0) == (9.0, 1.0, "")  # the default stays
+    h, share, note = cal.setting("speed", 1.0, analytic=9.0)
+    assert (share, note) == (0.5, "") and h == pytest.approx(1.0)  # 8 alarms in 8 h at h = 1
+    h, share, note = cal.setting("speed", 20.0, analytic=9.0)  # 25/h at h = 1, 12.5 at 2
+    assert share == 0.0 and 1.0 < h < 2.0 and note == ""
+    h, share, note = cal.setting("speed", 100.0, analytic=9.0)
+    assert (h, share) == (0.0, 0.0) and "no tolerance between units" in note
+    assert "cannot deliver 100/h" in note

@@ -53,6 +53,9 @@ DEFAULT_FILE = Path(__file__).with_name("thresholds.json")
 RESOLVED = 5  # alarms behind a rate the calibration counts as measured
 H_GRID = tuple(float(h) for h in np.round(np.arange(0.0, 60.0001, 0.1), 3))
 N_MAX = 40  # run / count thresholds scanned
+# shares of the tolerance between units kept in a CUSUM's reference value, scanned for
+# rates the full tolerance cannot deliver (curves named "<detector>@<share>")
+SHARES = (0.75, 0.5, 0.35, 0.25, 0.15, 0.1, 0.05, 0.0)
 
 
 def cusum_alarms(zs: list[np.ndarray], k: float, sides: str, grid=H_GRID) -> np.ndarray:
@@ -118,6 +121,8 @@ class Curve:
         The CUSUM's reference value (σ) it was measured with (0 for counts).
     decisions : int
         Decisions (blocks or qualifying samples) behind the curve.
+    share : float
+        The share of the tolerance between units in ``k`` (1: the detector's own).
     """
 
     kind: str
@@ -125,6 +130,7 @@ class Curve:
     alarms: tuple[int, ...]
     k: float = 0.0
     decisions: int = 0
+    share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -155,6 +161,43 @@ class ThresholdCalibration:
     def max_per_hour(self, name: str) -> float:
         """The most false alarms per hour the detector raised at its lowest threshold."""
         return float(self.rates(name)[0])
+
+    def setting(self, name: str, per_hour: float, analytic: float) -> tuple[float, float, str]:
+        """Threshold and tolerance share whose measured false-alarm rate is ``per_hour``.
+
+        A rate the detector's full tolerance between units cannot deliver is sought
+        with less of that tolerance in the CUSUM's reference value (the largest share
+        that reaches it): asking for more false alarms buys sensitivity to the spread
+        between units.
+
+        Parameters
+        ----------
+        name : str
+            Detector.
+        per_hour : float
+            Requested false alarms per hour.
+        analytic : float
+            The analytic threshold, used where the calibration cannot say.
+
+        Returns
+        -------
+        threshold : float
+        share : float
+            Share of the tolerance to keep in the reference value (1: all).
+        note : str
+            Empty, or why the request cannot be honoured (within a factor 2).
+        """
+        h, note = self.threshold(name, per_hour, analytic)
+        if not note or self.curves[name].kind != "cusum" or per_hour < self.max_per_hour(name):
+            return h, 1.0, note
+        scaled = sorted(
+            (c.share, key) for key, c in self.curves.items() if key.startswith(f"{name}@")
+        )
+        for share, key in reversed(scaled):
+            if self.max_per_hour(key) >= per_hour or share == scaled[0][0]:
+                h, note = self.threshold(key, per_hour, 0.0)
+                return h, share, note.replace(key, f"{name} (no tolerance between units)")
+        return h, 1.0, note
 
     def threshold(self, name: str, per_hour: float, analytic: float) -> tuple[float, str]:
         """The threshold whose measured false-alarm rate is ``per_hour``.
@@ -254,6 +297,7 @@ class ThresholdCalibration:
                     "kind": c.kind,
                     "k": c.k,
                     "decisions": c.decisions,
+                    "share": c.share,
                     "thresholds": list(c.thresholds),
                     "alarms": list(c.alarms),
                 }
@@ -273,6 +317,7 @@ class ThresholdCalibration:
                     tuple(int(x) for x in c["alarms"]),
                     float(c["k"]),
                     int(c["decisions"]),
+                    float(c.get("share", 1.0)),
                 )
                 for name, c in d["curves"].items()
             }

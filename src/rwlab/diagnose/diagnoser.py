@@ -69,6 +69,7 @@ from rwlab.diagnose.calibration import (
     cusum_alarms,
     run_alarms,
 )
+from rwlab.diagnose.calibration import SHARES as _SHARES
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import Finding, isolate
@@ -423,7 +424,7 @@ class Diagnoser:
             h_analytic = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
             self._detectors[name] = _BlockCusum(stats, tol, h_analytic, sides)
-            h = self._calibrated(name, h_analytic, self._detectors[name].k)
+            h = self._calibrated(name, h_analytic, self._detectors[name])
             self._detectors[name].h = self.thresholds[name] = h
             if name == "friction":  # onsets smaller than the spread between units
                 tol = ref.tolerance.get("friction_change", DEFAULT_TOLERANCE["friction_change"])
@@ -432,7 +433,7 @@ class Diagnoser:
                 change = ref.tests.get("friction_change", stats)
                 change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
                 det = _FrictionChange(change, tol, h_analytic, 6, ref.current_model)
-                det.h = self._calibrated("friction_change", h_analytic, det.k)
+                det.h = self._calibrated("friction_change", h_analytic, det)
                 self._detectors["friction_change"] = det
                 self.thresholds["friction_change"] = det.h
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
@@ -448,11 +449,13 @@ class Diagnoser:
         self._detectors["dropout"] = _Dropout(block, n)
         self.thresholds["dropout"] = n
 
-    def _calibrated(self, name: str, analytic: float, k: float = 0.0) -> float:
+    def _calibrated(self, name: str, analytic: float, det=None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
-        calibration holds this detector at this sample time (and CUSUM reference value)."""
+        calibration holds this detector at this sample time (and CUSUM reference value);
+        a CUSUM ``det`` gets the tolerance share that rate needs."""
         cal = self.calibration
         curve = None if cal is None else cal.curves.get(name)
+        k = 0.0 if det is None else det.k
         if cal is None or curve is None:
             return analytic
         same_ts = math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
@@ -469,7 +472,14 @@ class Diagnoser:
                 ),
             )
         else:
-            value, note = cal.threshold(name, self.false_alarms_per_hour, analytic)
+            value, share, note = cal.setting(name, self.false_alarms_per_hour, analytic)
+            if share < 1.0 and det is not None:
+                det.k = CUSUM_K + share * (det.k - CUSUM_K)
+                self.notes.append(
+                    f"{name}: {self.false_alarms_per_hour:g}/h needs the tolerance between "
+                    f"units cut to {share:.0%} (k = {det.k:.3g} σ): a healthy unit farther "
+                    "from the reference than that alarms"
+                )
         if note:
             self.notes.append(note)
             warnings.warn(note, RwlabWarning, stacklevel=4)
@@ -777,16 +787,18 @@ def measure_calibration(
                 k[name], sides[name] = det.k, det.sides
         moving += d.repeats[1]
     hours = sum(data.N * data.Ts for data in records) / 3600
-    curves = {
-        name: _Curve(
-            "cusum",
-            tuple(float(h) for h in _H_GRID),
-            tuple(int(a) for a in cusum_alarms(traces[name], k[name], sides[name])),
-            float(k[name]),
-            int(sum(z.size for z in traces[name])),
-        )
-        for name in k
-    }
+    curves = {}
+    for name in k:
+        for share in (1.0, *_SHARES):
+            k_share = CUSUM_K + share * (k[name] - CUSUM_K)
+            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
+                "cusum",
+                tuple(float(h) for h in _H_GRID),
+                tuple(int(a) for a in cusum_alarms(traces[name], k_share, sides[name])),
+                float(k_share),
+                int(sum(z.size for z in traces[name])),
+                share,
+            )
     n = tuple(float(x) for x in range(1, _N_MAX + 1))
     runs = [int(r) for rec in traces["stuck"] for r in rec]
     curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
