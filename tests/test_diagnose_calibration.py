@@ -169,6 +169,7 @@ def test_a_rate_beyond_the_full_tolerance_is_sought_with_less_of_it():
     assert (share, note) == (0.5, "") and h == pytest.approx(1.0)  # 8 alarms in 8 h at h = 1
     h, share, note = cal.setting("speed", 20.0, analytic=9.0)  # 25/h at h = 1, 12.5 at 2
     assert share == 0.0 and 1.0 < h < 2.0 and note == ""
-    h, share, note = cal.setting("speed", 100.0, analytic=9.0)
+    assert cal.setting("speed", 100.0, analytic=9.0) == (0.0, 0.0, "")  # 50/h: within x2
+    h, share, note = cal.setting("speed", 200.0, analytic=9.0)
     assert (h, share) == (0.0, 0.0) and "no tolerance between units" in note
-    assert "cannot deliver 100/h" in note
+    assert "cannot deliver 200/h" in note
