@@ -196,7 +196,8 @@ class ThresholdCalibration:
         for share, key in reversed(scaled):
             if self.max_per_hour(key) >= per_hour or share == scaled[0][0]:
                 h, note = self.threshold(key, per_hour, 0.0)
-                return h, share, note.replace(key, f"{name} (no tolerance between units)")
+                within = f"{name}: with {share:.0%} of the tolerance between units,"
+                return h, share, note.replace(f"{key}:", within, 1)
         return h, 1.0, note
 
     def threshold(self, name: str, per_hour: float, analytic: float) -> tuple[float, str]:
