@@ -39,8 +39,11 @@ balance (``lag`` without ``motor``); a biased sensor shifts the held speed.
 A block test averages ``block`` qualifying values, standardises the mean by
 the reference's mean and σ, and runs a one-sided CUSUM (two for ``speed``)
 whose reference value is 0.5 σ plus the tolerance between healthy units; its
-threshold gives ARL₀ = the requested false alarms per hour, counted in the
-reference's block durations (Siegmund's approximation, :mod:`detect`). Two
+threshold is the one whose false-alarm rate, measured on healthy records of
+other units, is the requested one (:mod:`~rwlab.diagnose.calibration`; a rate
+the full tolerance cannot deliver keeps less of it, and a rate no setting
+delivers is a warning), Siegmund's approximation (:mod:`detect`) where the
+calibration cannot say. Two
 sample tests complete the set: ``stuck`` (a run of identical non-zero speed
 readings, length from the reference's repeat probability) and ``dropout``
 (telemetry frames lost in a 10 s block beyond what the reference's loss rate
