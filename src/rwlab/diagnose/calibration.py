@@ -51,7 +51,13 @@ __all__ = [
 FORMAT = "rwlab.ThresholdCalibration/1"
 DEFAULT_FILE = Path(__file__).with_name("thresholds.json")
 RESOLVED = 5  # alarms behind a rate the calibration counts as measured
-H_GRID = tuple(float(h) for h in np.round(np.arange(0.0, 60.0001, 0.1), 3))
+H_GRID = tuple(  # CUSUM thresholds scanned, σ: finer where the requested rates fall
+    float(h)
+    for h in np.round(
+        np.concatenate([np.arange(0, 2, 0.02), np.arange(2, 10, 0.1), np.arange(10, 60.01, 0.5)]),
+        3,
+    )
+)
 N_MAX = 40  # run / count thresholds scanned
 # shares of the tolerance between units kept in a CUSUM's reference value, scanned for
 # rates the full tolerance cannot deliver (curves named "<detector>@<share>")
@@ -288,6 +294,11 @@ class ThresholdCalibration:
 
     # -- file ------------------------------------------------------------------------------
     def to_dict(self) -> dict:
+        """The file's content; each curve ends at its first threshold without an alarm."""
+
+        def end(c: Curve) -> int:
+            return next((i + 1 for i, a in enumerate(c.alarms) if a == 0), len(c.alarms))
+
         return {
             "format": FORMAT,
             "Ts": self.Ts,
@@ -299,8 +310,8 @@ class ThresholdCalibration:
                     "k": c.k,
                     "decisions": c.decisions,
                     "share": c.share,
-                    "thresholds": list(c.thresholds),
-                    "alarms": list(c.alarms),
+                    "thresholds": list(c.thresholds[: end(c)]),
+                    "alarms": list(c.alarms[: end(c)]),
                 }
                 for name, c in self.curves.items()
             },
@@ -360,8 +371,14 @@ class ThresholdCalibration:
         """
         p = Path(path)
         fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=p.name, suffix=".partial")
-        with os.fdopen(fd, "w") as f:
-            json.dump(self.to_dict(), f, indent=1)
-            f.write("\n")
+        d = self.to_dict()
+        curves = d.pop("curves")
+        with os.fdopen(fd, "w") as f:  # one line per curve: a small, diffable file
+            f.write(json.dumps(d, ensure_ascii=False)[:-1] + ', "curves": {\n')
+            f.write(
+                ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in curves.items())
+            )
+            f.write("\n}}\n")
+        os.chmod(tmp, 0o644)
         os.replace(tmp, p)
         return p
