@@ -375,9 +375,7 @@ class ThresholdCalibration:
         curves = d.pop("curves")
         with os.fdopen(fd, "w") as f:  # one line per curve: a small, diffable file
             f.write(json.dumps(d, ensure_ascii=False)[:-1] + ', "curves": {\n')
-            f.write(
-                ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in curves.items())
-            )
+            f.write(",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in curves.items()))
             f.write("\n}}\n")
         os.chmod(tmp, 0o644)
         os.replace(tmp, p)
