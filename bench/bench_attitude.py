@@ -3,7 +3,8 @@
 Run:  python bench/bench_attitude.py [--hours 6] [--peer SCRIPT --basilisk-python PATH]
 
 Rows (µs per step and s per simulated day at dt = 0.1 s; ×floor = that step's
-cost over the minimal loop's, both measured in this run, best of three):
+cost over the minimal loop's, both measured in this run as CPU time of this
+process, best of five; the whole-process row is wall time):
 - "minimal loop": ``minimal_loop.py`` — rigid body + 3 wheels + gravity
   gradient, PD on the true state, allocation-free numba RK4, nothing else;
 - "PD (truth), <wheels>": rwlab's loop on geo-comsat with every disturbance,
@@ -45,6 +46,12 @@ DAY_CMD = (
 )
 
 
+# CPU time of this process: on a shared machine the wall clock also counts the time other
+# jobs hold the core; the loop is single-threaded, so CPU time is its cost. Best of REPEATS.
+CLOCK = time.process_time
+REPEATS = 5
+
+
 def rwlab_case(
     hours: float, controller: str, wheel_model: str = "ideal", scenario: str = "geo-comsat"
 ) -> float:
@@ -54,14 +61,14 @@ def rwlab_case(
     fly(sc, controller, duration=10)  # compile or load the kernels outside the timing
 
     def timed(h: float) -> float:
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         _, m = fly(sc, controller, duration=h * 3600, log_every=100)
         assert m["steady_max_error_deg"] < sc.control.pointing_requirement_deg, (
             "the loop did not close"
         )
-        return time.perf_counter() - t0
+        return CLOCK() - t0
 
-    best = min(timed(2 * hours) - timed(hours) for _ in range(3))
+    best = min(timed(2 * hours) - timed(hours) for _ in range(REPEATS))
     return best / (hours * 36_000) * 1e6
 
 

@@ -1,13 +1,13 @@
 """Nonlinear wheel models judged on wheel units they were not identified on (issue 22).
 
-One 20-minute rate-limited PRBS record (Ts = 0.5 s) of twin unit ``--unit``
+One 20-minute PRBS record (Ts = 0.5 s, paper A's steps: the default) of twin unit ``--unit``
 is studied as ``rwlab identify`` does (its ``model.json``: the linear model,
 the servo model, the grey-box wheel, the NLARX). Then every model is scored
 by ``rwlab compare``'s function (simulation from the record's first speed, the
 record's saturations applied) on records of *other* units, other seeds:
 
-- ``unit B``: a nominal unit, the default rate-limited PRBS;
-- ``unit B, steps``: the same unit, PRBS without the rate limit (true steps);
+- ``unit B``: a nominal unit, the default (stepped) PRBS;
+- ``unit B, ramps``: the same unit, the PRBS rate-limited to 314 rpm/s (``--rate-limit``);
 - ``unit B, ±300 rpm``: the same unit at low speed (friction, Hall quantisation);
 - ``unit C, 0.35 A``: a unit whose driver limits the current to 0.35 A, so the
   current limit binds in every fast transient (it cannot reach 314 rpm/s).
@@ -62,7 +62,7 @@ print(json.dumps(out))
 
 RECORDS = {
     "unit B": dict(seed=11, unit=2),
-    "unit B, steps": dict(seed=12, unit=2, rate_limit=False),
+    "unit B, ramps": dict(seed=12, unit=2, rate_limit=True),
     "unit B, ±300 rpm": dict(seed=13, unit=2, amplitude=300.0),
     "unit C, 0.35 A": dict(seed=23, unit=3),
 }
@@ -93,10 +93,13 @@ def main() -> None:
         model.write_text(json.dumps(physical_model(study)))
         grey = study.greybox
         print(f"identified on twin unit {args.unit}, seed {args.seed} ({seconds:.0f} s, study)")
+        print(f"chosen linear model: {study.reason}")
         print(f"chosen nonlinear model: {study.nonlinear['choice']}")
         print("grey box (J fixed at the datasheet 4.2e-4 kg·m²), estimate ± std:")
         for k, v in grey.std.items():
             print(f"  {k:<16} {getattr(grey, k):.5g} ± {v:.2g}")
+        for k in grey.unidentified:
+            print(f"  {k:<16} {getattr(grey, k):.5g}  (not identified by this record)")
         scores, npz = {}, {}
         est = data.split(0.7)[0]
         npz["ue"], npz["ye"] = est.u[:, 0], est.y[:, 0]
@@ -123,7 +126,8 @@ def main() -> None:
             narx = json.loads(out.stdout.strip().splitlines()[-1])
     names = ["linear", "servo", "greybox", "nlarx"]
     head = f"{'record':<18}" + "".join(f"{n:>9}" for n in names)
-    head += f"{'NARX(sysidentpy)':>18}{'grey − linear':>15}"
+    chosen = study.nonlinear["chosen"]
+    head += f"{'NARX(sysidentpy)':>18}{chosen + ' − linear':>17}"
     print("\nsimulated fit % (rwlab compare), whole record, from its first speed")
     print(head)
     for i, (name, row) in enumerate(scores.items()):
@@ -134,8 +138,8 @@ def main() -> None:
             line += f"{fit_percent(row['_y'], yhat):18.2f}" if ok else f"{'diverged':>18}"
         else:
             line += f"{'—':>18}"
-        gain = row["greybox"]["fit_percent"] - row["linear"]["fit_percent"]
-        print(line + f"{gain:15.2f}")
+        gain = row[chosen]["fit_percent"] - row["linear"]["fit_percent"]
+        print(line + f"{gain:17.2f}")
     if narx is not None:
         print(f"sysidentpy NARX: {narx['terms']} terms, fitted in {narx['seconds']:.2f} s")
 

@@ -8,14 +8,17 @@ defaults. Printed per record:
   on the record's command, fit % on the validation part (last 30 %), in rpm;
 - ``chosen``: the study's chosen model and its validation fit (the study's
   own preprocessing);
+- ``ARX221``: the study's own ARX221 (paper A's choice), its fit and DC gain error;
 - ``dc``: the chosen model's DC gain in rpm/rpm, and its error against the
-  measured steady-state gain (settled speed over command on every PRBS hold of
-  at least 30 s: the mean of its last 5 s).
+  measured steady-state gain (``rwlab.ident.study.steady_state_gain``: the
+  least-squares slope of settled speed against command over every PRBS hold of
+  at least 30 s, the speed averaged over the hold's last 5 s).
 
 Paper A reached 76.5 % on the real wheel. Usage::
 
     python bench/bench_twin_difficulty.py                   # units 0-3, seeds 0 and 7
-    python bench/bench_twin_difficulty.py --units 0 --seeds 0 --no-rate-limit --wheel ideal
+    python bench/bench_twin_difficulty.py --pairs n:0 1:7 2:3 5:11   # unit:seed, n nominal
+    python bench/bench_twin_difficulty.py --units 0 --seeds 0 --rate-limit --wheel ideal
 """
 
 from __future__ import annotations
@@ -28,25 +31,11 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.ident.models import PolyModel
-from rwlab.ident.study import _to_physical, identification_study, load_study_data
+from rwlab.ident.study import identification_study, load_study_data, steady_state_gain
 from rwlab.ident.validation import fit_percent
 from rwlab.testbed import ExperimentConfig, run_experiment
 
 PAPER_ARX221 = ([1.0, -1.758, 0.7852], [0.0, 0.0275, -0.0012])  # SPEC.md, paper A Table 2
-
-
-def measured_steady_gain(u: np.ndarray, y: np.ndarray, Ts: float) -> float:
-    """Settled speed over command on holds ≥ 30 s (mean of the last 5 s), least squares."""
-    edges = np.flatnonzero(np.diff(u) != 0) + 1
-    bounds = np.concatenate([[0], edges, [len(u)]])
-    c, s = [], []
-    for a, b in itertools.pairwise(bounds):
-        if (b - a) * Ts >= 30 and u[a] != 0:
-            tail = slice(b - round(5 / Ts), b)
-            c.append(u[a])
-            s.append(y[tail].mean())
-    c, s = np.array(c), np.array(s)
-    return float(c @ s / (c @ c))
 
 
 def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path) -> dict:
@@ -59,11 +48,13 @@ def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path)
     n_est = res.est.N
     paper = PolyModel(*map(np.array, PAPER_ARX221), Ts=data.Ts, nk=1)
     y_paper = np.ravel(paper.simulate(u[:, None]))
-    phys = _to_physical(res.chosen, res.data.trend)
-    dc = float(np.sum(phys.B) / (np.sum(phys.A) * np.sum(phys.F)))  # deterministic part
-    gain = measured_steady_gain(u, y, data.Ts)
+    gain = steady_state_gain(data)["gain"]
     row = next(r for r in res.orders + res.others if r["structure"] == res.chosen.structure)
+    dc = row["dc_gain"]  # the deterministic part's, physical units
+    arx221 = res.orders[0]
     return {
+        "arx221": arx221["fit_percent"],
+        "arx221_dc": arx221["dc_gain_error_percent"],
         "unit": unit,
         "seed": seed,
         "paper": fit_percent(y[n_est:], y_paper[n_est:]),
@@ -78,27 +69,37 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, nargs="+", default=[0, 1, 2, 3])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 7])
-    ap.add_argument("--no-rate-limit", action="store_true", help="PRBS steps (paper A's)")
+    ap.add_argument("--pairs", nargs="+", help="unit:seed pairs (unit n: nominal)")
+    ap.add_argument(
+        "--rate-limit", action="store_true", help="PRBS ramps at 314 rpm/s (default: steps)"
+    )
     ap.add_argument("--wheel", default="rw90", choices=["rw90", "ideal"])
     args = ap.parse_args()
     print(
-        f"wheel {args.wheel}, PRBS {'steps' if args.no_rate_limit else 'rate-limited'}, "
+        f"wheel {args.wheel}, PRBS {'rate-limited' if args.rate_limit else 'steps'}, "
         "20 min at Ts = 0.5 s"
     )
     print(
         f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>10} {'fit %':>7} "
-        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8}"
+        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8} {'ARX221 %':>9} {'its DC err':>10}"
     )
+    if args.pairs:
+        pairs = [
+            (None if a == "n" else int(a), int(b)) for a, b in (p.split(":") for p in args.pairs)
+        ]
+    else:
+        pairs = list(itertools.product(args.units, args.seeds))
     with tempfile.TemporaryDirectory() as tmp:
-        for unit in args.units:
-            for seed in args.seeds:
-                r = one(unit, seed, not args.no_rate_limit, args.wheel, Path(tmp))
-                err = 100 * (r["dc"] / r["gain"] - 1)
-                print(
-                    f"{unit:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
-                    f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f}",
-                    flush=True,
-                )
+        for unit, seed in pairs:
+            r = one(unit, seed, args.rate_limit, args.wheel, Path(tmp))
+            err = 100 * (r["dc"] / r["gain"] - 1)
+            name = "-" if unit is None else unit
+            print(
+                f"{name:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
+                f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f} {r['arx221']:9.2f} "
+                f"{r['arx221_dc']:10.2f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

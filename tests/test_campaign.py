@@ -103,6 +103,10 @@ def test_the_default_set_covers_what_a_geo_reviewer_expects():
         "run.initial_error_deg",
         "run.initial_rate.x",
         "filter.initial_error_deg",
+        "sensors.sun_sensor_bias_deg.x",
+        "sensors.earth_sensor_misalignment_deg.z",
+        "wheels.torque_scale",
+        "wheels.friction_factor",
     ):
         assert expected in fields
 

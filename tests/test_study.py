@@ -5,14 +5,15 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy.signal import lfilter
 
 from rwlab.cli import main
 from rwlab.data import IOData
 from rwlab.errors import DataError, RecordGapError
 from rwlab.ident import fit_percent
-from rwlab.ident.study import identification_study, physical_model
+from rwlab.ident.study import _choose, identification_study, physical_model, steady_state_gain
 from rwlab.report.identification import FIGURES
-from rwlab.signals import prbs, rate_limit
+from rwlab.signals import prbs
 from rwlab.testbed import ExperimentConfig, RecordWriter, run_experiment
 from rwlab.wheel import IdentifiedWheel
 from rwlab.wheel.physics import simulate_speed_command
@@ -57,11 +58,28 @@ def test_study_picks_delay_1_and_reports_orders_fit_and_whiteness(study_dir):
     assert study["delay"]["nk"] == 1
     assert set(study["delay"]["losses"]) == {str(k) for k in range(11)}
     assert [r["structure"] for r in study["orders"]] == ["ARX221", "ARX331", "ARX441", "ARX551"]
-    assert all(r["fit_percent"] > 80 and r["mse"] > 0 for r in study["orders"])
+    # paper A's stepped PRBS: the wheel follows each step at its 314 rpm/s limit, which no
+    # linear model explains (paper A on the real wheel: 76.5 %); every order is scored, and
+    # each falls well short of the nonlinear models that carry the limit
+    nonlinear = study["nonlinear"]
+    ceiling = max(nonlinear[k]["fit_percent"] for k in ("greybox", "nlarx"))
+    assert ceiling > 95
+    assert all(60 < r["fit_percent"] < ceiling - 10 and r["mse"] > 0 for r in study["orders"])
     chosen = study["chosen"]
-    assert chosen["structure"] == "ARX221" and chosen["fit_percent"] > 80
+    rows = study["orders"] + study["others"]
+    best = max(r["fit_percent"] for r in rows)
+    assert best - 3 <= chosen["fit_percent"] <= best
     assert "simplest" in chosen["reason"]
-    res = study["residuals"]["ARX221"]
+    # the wheel's speed loop has integral action: its true static gain is 1 (rpm/rpm)
+    steady = study["steady_state_gain"]
+    assert steady["gain"] == pytest.approx(1.0, abs=0.005) and steady["holds"] >= 5
+    assert chosen["dc_gain"] == pytest.approx(1.0, abs=0.025)
+    # nothing simpler within the fit tolerance had its static gain right
+    simpler = [
+        r for r in rows if r["n_params"] < chosen["n_params"] and r["fit_percent"] >= best - 3
+    ]
+    assert all(abs(r["dc_gain_error_percent"]) > 2 for r in simpler)
+    res = study["residuals"][chosen["structure"]]
     assert isinstance(res["white"], bool) and 0 <= res["whiteness_p"] <= 1
     assert {o["structure"][:2] for o in study["others"]} == {"AR", "OE", "BJ"}
 
@@ -80,16 +98,19 @@ def test_report_has_every_figure_of_the_paper_and_no_external_links(study_dir):
 
 def test_model_json_is_physical_and_simulates_the_wheel(study_dir):
     info = json.loads((study_dir / "model.json").read_text())
-    assert info["structure"] == "ARX221" and info["Ts"] == 0.5
+    chosen = json.loads((study_dir / "study.json").read_text())["chosen"]["structure"]
+    assert info["structure"] == chosen and info["Ts"] == 0.5
     assert info["saturation"] == {
         "speed_rpm": 7800.0,
         "accel_rpm_s": 314.0,
         "source": "the record's wheel parameters",
     }
     wheel = IdentifiedWheel.from_json(study_dir / "model.json", model="linear")  # copied limits
-    u = rate_limit(prbs(600, 0.5, 5000, 5, 60, seed=42), 314, 0.5, initial=0.0)
+    # a new stepped PRBS, in rpm: the physical model (offsets, saturations) reproduces the
+    # wheel about as well as the study's validation fit says (preprocessed units)
+    u = prbs(600, 0.5, 5000, 5, 60, seed=42)
     truth = simulate_speed_command(u, 0.5, seed=42)
-    assert fit_percent(truth, wheel.simulate(u)) > 85  # a new input, in rpm
+    assert fit_percent(truth, wheel.simulate(u)) > min(65.0, info["validation_fit_percent"] - 5)
     assert np.max(np.abs(wheel.simulate(np.full(200, 7800.0)))) <= 7800.0
     steps = np.diff(wheel.simulate(np.full(60, -7000.0)))
     assert np.max(np.abs(steps)) <= 314 * 0.5 + 1e-9  # the acceleration limit holds
@@ -171,7 +192,8 @@ def test_report_renders_in_headless_chromium_without_network(study_dir, browser)
         "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
     )
     assert len(widths) >= len(FIGURES) and min(widths) > 100
-    assert re.search(r"Chosen model: ARX221", driver.page_source)
+    chosen = json.loads((study_dir / "study.json").read_text())["chosen"]["structure"]
+    assert re.search(rf"Chosen model: {chosen}", driver.page_source)
 
 
 def _offset_record(seed: int, N: int = 3000) -> IOData:
@@ -219,6 +241,41 @@ def test_default_preprocessing_leaves_the_arx_gain_unbiased_and_normalize_does_n
     g_norm = float(biased.models["ARX221"].dc_gain()) * t.output_scale[0] / t.input_scale[0]
     # physical zero maps to −min/range: the model's static map through the origin is off
     assert abs(g_norm - 1) > 3 * abs(gain - 1)
+
+
+def test_steady_state_gain_reads_a_known_static_map_from_settled_holds_only():
+    # a first-order lag (τ = 2 s) with gain 2.5 and offset 30, noise-free: settled to
+    # e^(-25/2) ≈ 4e-6 at the start of a 30-s hold's last 5 s
+    u = prbs(1200, 0.5, 100.0, 5, 60, seed=4)
+    y = 30 + 2.5 * lfilter([1 - np.exp(-0.5 / 2)], [1, -np.exp(-0.5 / 2)], u)
+    got = steady_state_gain(IOData(u, y, 0.5))
+    assert got["gain"] == pytest.approx(2.5, rel=1e-4)
+    assert got["intercept"] == pytest.approx(30, abs=0.01) and got["holds"] >= 5
+    # a slow lag (τ = 40 s) never settles within a hold: no point is taken
+    slow = 2.5 * lfilter([1 - np.exp(-0.5 / 40)], [1, -np.exp(-0.5 / 40)], u)
+    assert steady_state_gain(IOData(u, slow, 0.5)) is None
+    assert steady_state_gain(IOData(np.sin(np.arange(500.0)), np.ones(500), 0.5)) is None
+
+
+def test_the_choice_passes_over_a_model_whose_dc_gain_is_off_and_says_so():
+    rows = [
+        {"structure": "ARX221", "n_params": 4, "fit_percent": 70.0, "dc_gain": 0.92,
+         "dc_gain_error_percent": -8.0},
+        {"structure": "OE221", "n_params": 4, "fit_percent": 71.0, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0},
+        {"structure": "ARX551", "n_params": 10, "fit_percent": 72.0, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0},
+    ]  # fmt: skip
+    steady = {"gain": 1.0, "holds": 9}
+    pick, why = _choose(rows, 3.0, 0.02, steady)
+    assert pick["structure"] == "OE221" and "ARX221 (0.9200, -8.0 %)" in why
+    pick, why = _choose(rows, 3.0, 0.1, steady)
+    assert pick["structure"] == "ARX221"  # within 10 %: the paper's choice
+    pick, why = _choose(rows, 3.0, 0.02, None)
+    assert pick["structure"] == "ARX221" and "too few settled holds" in why
+    off = [{**r, "dc_gain_error_percent": 5.0} for r in rows]
+    pick, why = _choose(off, 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221" and "no such model" in why
 
 
 def test_rwlab_compare_scores_every_model_in_model_json_on_a_record(study_dir):

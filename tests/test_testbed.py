@@ -111,6 +111,30 @@ def test_experiment_config_file_and_its_errors(tmp_path):
     assert not (tmp_path / "x.mcap").exists()
 
 
+def test_experiment_takes_a_wheel_toml_and_records_its_driver_settings(tmp_path):
+    toml = tmp_path / "limited.toml"
+    toml.write_text('[wheel]\npreset = "ideal"\ncurrent_limit = 0.35\n')
+    out = tmp_path / "step.mcap"
+    r = CliRunner().invoke(
+        main,
+        ["experiment", "--signal", "step", "--amplitude", "3000", "--duration", "40",
+         "--wheel", str(toml), "--out", str(out)],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert read_record(out).metadata["wheel"]["current_limit"] == 0.35
+    # the ideal twin reports the current exactly: the driver's clamp shows as the peak
+    current = load_record(out, outputs=("current",)).y[:, 0]
+    assert np.max(np.abs(current)) == pytest.approx(0.35, abs=1e-6)
+    unit = ExperimentConfig(wheel=str(toml), unit=3).wheel_params()
+    assert unit.current_limit == pytest.approx(0.35, rel=0.021)  # ±2 % per unit
+    bad = CliRunner().invoke(main, ["experiment", "--wheel", "rw91", "--out", str(out)])
+    assert bad.exit_code == 2 and "error:" in bad.output and "TOML" in bad.output
+    missing = CliRunner().invoke(
+        main, ["experiment", "--wheel", str(tmp_path / "no.toml"), "--out", str(out)]
+    )
+    assert missing.exit_code == 2 and "error:" in missing.output
+
+
 def test_records_are_never_overwritten_without_force(tmp_path, prbs_record):
     path, _ = prbs_record
     before = path.read_bytes()

@@ -137,24 +137,37 @@ def predict_covariance(P, F, Qc, T):
 
 @njit(cache=True, inline="always")
 def _mm(A, B, out):
-    """out = A @ B (out must not alias A or B)."""
+    """out = A @ B (out must not alias A or B), skipping A's zeros.
+
+    The filter's matrices are mostly zeros (F, Φ = I + F T + …, I − K H, Qc), so the
+    products run row by row over A's non-zero entries. Each out[i, j] still sums its
+    terms in the order k = 0, 1, …: the result equals the plain triple loop's bit for bit
+    (a skipped term adds an exact 0). Hand-written: numba's ``@`` calls BLAS, which costs
+    microseconds on matrices this small.
+    """
     for i in range(A.shape[0]):
         for j in range(B.shape[1]):
-            acc = 0.0
-            for k in range(A.shape[1]):
-                acc += A[i, k] * B[k, j]
-            out[i, j] = acc
+            out[i, j] = 0.0
+        for k in range(A.shape[1]):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(B.shape[1]):
+                    out[i, j] += a * B[k, j]
 
 
 @njit(cache=True, inline="always")
 def _mmt(A, B, out):
-    """out = A @ B.T (out must not alias A or B)."""
+    """out = A @ B.T (out must not alias A or B), skipping B's zeros (as :func:`_mm`: the
+    same sums in the same order as the plain loop)."""
     for i in range(A.shape[0]):
         for j in range(B.shape[0]):
-            acc = 0.0
-            for k in range(A.shape[1]):
-                acc += A[i, k] * B[j, k]
-            out[i, j] = acc
+            out[i, j] = 0.0
+    for j in range(B.shape[0]):
+        for k in range(B.shape[1]):
+            b = B[j, k]
+            if b != 0.0:
+                for i in range(A.shape[0]):
+                    out[i, j] += A[i, k] * b
 
 
 @njit(cache=True)
@@ -380,6 +393,86 @@ def gyro_jacobian_into(w, F):
         F[i, 3 + i] = -1.0
 
 
+@njit(cache=True)
+def gyro_predict_covariance_into(P, w, Qc, T, W):
+    """:func:`predict_covariance_into` for the gyro-driven filter's F (``gyro_jacobian_into``
+    at ω̂ = ``w``), in place on P (n, n ≥ 6), with a (≥ 5, n, n) scratch W.
+
+    The same third-order Φ and Q_d, written by blocks: with A = −[ω̂×], F = [[A, −I, 0],
+    0] so Φ = [[Φ₁₁, Φ₁₂, 0], [0, I, 0], [0, 0, I]], Φ₁₁ = I + A T + A² T²/2 + A³ T³/6,
+    Φ₁₂ = −(I T + A T²/2 + A² T³/6), and Qc block-diagonal [Q₁, Q₂, Q₃] (the filter's own:
+    ``gyro_process_noise``) gives Q_d₁₁ = Q₁ T + (A Q₁ + Q₁ Aᵀ) T²/2 + (A Q₁ Aᵀ + Q₂
+    + (A² Q₁ + Q₁ A²ᵀ)/2) T³/3, Q_d₁₂ = −Q₂ T²/2 − A Q₂ T³/6, Q_d₂₂ = Q₂ T, Q_d₃₃ = Q₃ T.
+    Only the three attitude rows and columns of Φ P Φᵀ differ from P: about a tenth of
+    the dense products' work. Equal to the dense form to round-off (a test holds them to
+    1e-12 relative).
+    """
+    nx = P.shape[0]
+    A, A2, A3 = W[2, :3, :3], W[2, :3, 3:6], W[2, 3:6, :3]  # views: nothing allocated
+    P11, P12 = W[2, 3:6, 3:6], W[3, :3, :3]  # Φ₁₁, Φ₁₂
+    AQ1, AQ2, A2Q1, X = W[3, :3, 3:6], W[3, 3:6, :3], W[3, 3:6, 3:6], W[4, :3, :3]
+    A[0, 0], A[0, 1], A[0, 2] = 0.0, w[2], -w[1]
+    A[1, 0], A[1, 1], A[1, 2] = -w[2], 0.0, w[0]
+    A[2, 0], A[2, 1], A[2, 2] = w[1], -w[0], 0.0
+    _mm(A, A, A2)
+    _mm(A2, A, A3)
+    T2, T3 = T * T, T * T * T
+    for i in range(3):
+        for j in range(3):
+            d = 1.0 if i == j else 0.0
+            P11[i, j] = d + A[i, j] * T + A2[i, j] * T2 / 2 + A3[i, j] * T3 / 6
+            P12[i, j] = -(d * T + A[i, j] * T2 / 2 + A2[i, j] * T3 / 6)
+    M, Z = W[0], W[1]
+    for i in range(3):  # M = Φ P: only the attitude rows mix; the rest are P's own rows
+        for j in range(nx):
+            acc = 0.0
+            for k in range(3):
+                acc += P11[i, k] * P[k, j] + P12[i, k] * P[3 + k, j]
+            M[i, j] = acc
+    for i in range(nx):  # Z = M Φᵀ, its attitude columns (the others are M's)
+        R = M if i < 3 else P
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += R[i, k] * P11[j, k] + R[i, 3 + k] * P12[j, k]
+            Z[i, j] = acc
+    for i in range(3):  # symmetrised; rows and columns ≥ 3 keep P's (already symmetric)
+        for j in range(i, 3):
+            v = 0.5 * (Z[i, j] + Z[j, i])
+            P[i, j] = v
+            P[j, i] = v
+        for j in range(3, nx):
+            v = 0.5 * (M[i, j] + Z[j, i])
+            P[i, j] = v
+            P[j, i] = v
+    # Q_d, added symmetrised by blocks
+    Q1, Q2 = Qc[:3, :3], Qc[3:6, 3:6]
+    _mm(A, Q1, AQ1)
+    _mm(A, Q2, AQ2)
+    _mm(A2, Q1, A2Q1)
+    _mmt(AQ1, A, X)  # A Q₁ Aᵀ
+    for i in range(3):
+        for j in range(3):
+            q11 = (
+                Q1[i, j] * T
+                + 0.5 * T2 * (AQ1[i, j] + AQ1[j, i])
+                + T3 / 3.0 * (X[i, j] + Q2[i, j] + 0.5 * (A2Q1[i, j] + A2Q1[j, i]))
+            )
+            q11t = (
+                Q1[j, i] * T
+                + 0.5 * T2 * (AQ1[j, i] + AQ1[i, j])
+                + T3 / 3.0 * (X[j, i] + Q2[j, i] + 0.5 * (A2Q1[j, i] + A2Q1[i, j]))
+            )
+            P[i, j] += 0.5 * (q11 + q11t)
+            q12 = -0.5 * T2 * Q2[i, j] - T3 / 6.0 * AQ2[i, j]  # Q_d₂₁ = Q_d₁₂ᵀ
+            P[i, 3 + j] += q12
+            P[3 + j, i] += q12
+            P[3 + i, 3 + j] += 0.5 * T * (Q2[i, j] + Q2[j, i])
+    for i in range(6, nx):
+        for j in range(6, nx):
+            P[i, j] += 0.5 * T * (Qc[i, j] + Qc[j, i])
+
+
 def gyro_process_noise(psd_v: float, psd_u: float, n: int = 6) -> np.ndarray:
     """Qc (n, n) of the gyro-driven filter: σ_v² on δθ, σ_u² on δβ (rad²/s, rad²/s³); the
     rest (sensor alignment states) zero for the caller to fill."""
@@ -428,7 +521,7 @@ def attitude_update_into(q, w, P, q_meas, R, W):
     ``W`` is a (4, n, n) scratch (n ≥ 6)."""
     nx = P.shape[0]
     nu0, nu1, nu2 = attitude_error(q_meas, q)
-    PHt, K, X, Y = W[0], W[1], W[2], W[3]
+    K, X, Y = W[1], W[2], W[3]
     S, L = Y[:3, :3], Y[3:6, :3]  # n ≥ 6
     for i in range(3):
         for j in range(3):
@@ -442,21 +535,21 @@ def attitude_update_into(q, w, P, q_meas, R, W):
     d0, d1, d2 = dx[0], dx[1], dx[2]  # X is reused below
     for i in range(nx - 3):
         w[i] += dx[3 + i]
-    for i in range(nx):  # I − K H
+    # Joseph form with H = [I, 0] never formed (as in ``aligned_update_into``):
+    # M = P − K P[:3, :], P⁺ = M − M[:, :3] Kᵀ + K R Kᵀ (equal to round-off, tested)
+    M = Y  # free once K is known
+    for i in range(nx):
         for j in range(nx):
-            v = 1.0 if i == j else 0.0
-            if j < 3:
-                v -= K[i, j]
-            PHt[i, j] = v
-    _mm(PHt, P, X)
-    _mmt(X, PHt, Y)
+            M[i, j] = P[i, j] - (K[i, 0] * P[0, j] + K[i, 1] * P[1, j] + K[i, 2] * P[2, j])
     for i in range(nx):
         for j in range(i, nx):
             kk = 0.0
             for a in range(3):
                 for b in range(3):
                     kk += K[i, a] * R[a, b] * K[j, b]
-            v = 0.5 * (Y[i, j] + Y[j, i]) + kk
+            v_ij = M[i, j] - (M[i, 0] * K[j, 0] + M[i, 1] * K[j, 1] + M[i, 2] * K[j, 2])
+            v_ji = M[j, i] - (M[j, 0] * K[i, 0] + M[j, 1] * K[i, 1] + M[j, 2] * K[i, 2])
+            v = 0.5 * (v_ij + v_ji) + kk
             P[i, j] = v
             P[j, i] = v
     _reset_attitude(q, d0, d1, d2)
@@ -473,23 +566,24 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
     the axis that sensor alone observes stays at its prior: the filter then carries that
     misalignment as the uncertainty it is (a consider state)."""
     nx = P.shape[0]
-    A = np.empty((3, 3))
+    PHt, K, X, Y = W[0], W[1], W[2], W[3]
+    A, H = K[:3, 3:6], Y[6:9, :]  # scratch views (n ≥ 9), free until K and Y are written
     _dcm_rows_into(q, A)
     b0 = A[0, 0] * ref[0] + A[0, 1] * ref[1] + A[0, 2] * ref[2]
     b1 = A[1, 0] * ref[0] + A[1, 1] * ref[1] + A[1, 2] * ref[2]
     b2 = A[2, 0] * ref[0] + A[2, 1] * ref[1] + A[2, 2] * ref[2]
     f0, f1, f2 = w[at - 3], w[at - 2], w[at - 1]  # predicted report: b + φ × b
     p0, p1, p2 = b0 + f1 * b2 - f2 * b1, b1 + f2 * b0 - f0 * b2, b2 + f0 * b1 - f1 * b0
-    H = np.zeros((3, nx))
+    H[:, :] = 0.0
     H[0, 1], H[0, 2], H[1, 0], H[1, 2], H[2, 0], H[2, 1] = -b2, b1, b2, -b0, -b1, b0  # [b×]
     for i in range(3):
         for j in range(3):
             H[i, at + j] = -H[i, j]
-    PHt, K, X, Y = W[0], W[1], W[2], W[3]
-    for i in range(nx):
+    cols = (0, 1, 2, at, at + 1, at + 2)  # H's non-zero columns, ascending: the sums below
+    for i in range(nx):  # skip only exact zeros, so they equal the full ones bit for bit
         for j in range(3):
             acc = 0.0
-            for k in range(nx):
+            for k in cols:
                 acc += P[i, k] * H[j, k]
             PHt[i, j] = acc
     r = sigma * sigma
@@ -497,7 +591,7 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
     for i in range(3):
         for j in range(3):
             acc = r if i == j else 0.0
-            for k in range(nx):
+            for k in cols:
                 acc += H[i, k] * PHt[k, j]
             S[i, j] = acc
     _cholesky3_into(S, L)
@@ -514,18 +608,26 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
     d0, d1, d2 = dx[0], dx[1], dx[2]
     for i in range(nx - 3):
         w[i] += dx[3 + i]
-    for i in range(nx):  # I − K H
+    # Joseph form (I − K H) P (I − K H)ᵀ + r K Kᵀ through H's six columns, never forming
+    # I − K H: M = P − K (H P), V = M Hᵀ (n, 3), P⁺ = M − V Kᵀ + r K Kᵀ, with H P = (P Hᵀ)ᵀ
+    # (P is kept exactly symmetric). The same terms as the dense products, summed in
+    # another order (equal to round-off, tested).
+    M, V = X, K[:, 3:6]  # X and K's spare columns are free by now
+    for i in range(nx):
         for j in range(nx):
-            PHt[i, j] = (1.0 if i == j else 0.0) - (
-                K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j]
-            )
-    _mm(PHt, P, X)
-    _mmt(X, PHt, Y)
+            M[i, j] = P[i, j] - (K[i, 0] * PHt[j, 0] + K[i, 1] * PHt[j, 1] + K[i, 2] * PHt[j, 2])
+    for i in range(nx):
+        for a in range(3):
+            acc = 0.0
+            for c in cols:
+                acc += M[i, c] * H[a, c]
+            V[i, a] = acc
     for i in range(nx):
         for j in range(i, nx):
-            v = 0.5 * (Y[i, j] + Y[j, i]) + r * (
-                K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2]
-            )
+            kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
+            v_ij = M[i, j] - (V[i, 0] * K[j, 0] + V[i, 1] * K[j, 1] + V[i, 2] * K[j, 2])
+            v_ji = M[j, i] - (V[j, 0] * K[i, 0] + V[j, 1] * K[i, 1] + V[j, 2] * K[i, 2])
+            v = 0.5 * (v_ij + v_ji) + kk
             P[i, j] = v
             P[j, i] = v
     _reset_attitude(q, d0, d1, d2)

@@ -41,7 +41,7 @@ from rwlab.attitude.ekf import (
     attitude_update_into,
     error_jacobian_into,
     gated_update_into,
-    gyro_jacobian_into,
+    gyro_predict_covariance_into,
     predict_covariance_into,
     propagate_attitude_into,
 )
@@ -98,6 +98,7 @@ STATS = (
     "star_tracker_blinded",
     "steady_torque_jitter_sq_sum",
     "steady_wheel_power_sum",
+    "wheel_zero_crossings",
 )
 _AT = {name: i for i, name in enumerate(STATS)}  # the indices, generated from the list
 MAX_ERR, STEADY_MAX = _AT["max_error_deg"], _AT["steady_max_error_deg"]
@@ -120,6 +121,7 @@ SUN_OUT, EARTH_BLIND = _AT["sun_sensor_outages"], _AT["earth_sensor_blinded"]
 SUN_GATED, EARTH_GATED = _AT["sun_sensor_gated"], _AT["earth_sensor_gated"]
 NO_UPDATE, TRACKER_BLIND = _AT["no_update_ticks"], _AT["star_tracker_blinded"]
 JITTER_SQ, POWER = _AT["steady_torque_jitter_sq_sum"], _AT["steady_wheel_power_sum"]
+ZERO_CROSS = _AT["wheel_zero_crossings"]
 
 # the filter's modes (``Filter.mode``)
 TRUTH, DYNAMICS, GYRO = 0, 1, 2
@@ -146,13 +148,17 @@ class Plant(NamedTuple):
 
 
 class Law(NamedTuple):
-    """The control law's K_ω (3, 3), K_ω⁻¹ K_θ (3, 3), rate limit ``w_max`` (rad/s), and the
-    momentum unloading vector ``unload`` (see :func:`run_block`)."""
+    """The control law's K_ω (3, 3), K_ω⁻¹ K_θ (3, 3), rate limit ``w_max`` (rad/s), the
+    momentum unloading vector ``unload`` (see :func:`run_block`), the wheel momenta the
+    unloading steers to, ``hw_target`` (N,) N·m·s (the momentum bias; zeros: none), and the
+    wheels' unit null vector ``null`` (N,) (G·null = 0; zeros with three wheels)."""
 
     K_w: np.ndarray
     M: np.ndarray
     w_max: float
     unload: np.ndarray
+    hw_target: np.ndarray
+    null: np.ndarray
 
 
 class Sky(NamedTuple):
@@ -238,7 +244,8 @@ class Log(NamedTuple):
 class State(NamedTuple):
     """What a block changes in place: the plant x, the estimate q̂ (4,), ŵ (the rest of the
     filter's state: ω̂ [, b̂] or the gyro bias β̂), P (n, n), the gyros' state (9,) =
-    [β walk, β Gauss–Markov, ω at the last sample] and ``stats`` (:data:`STATS`)."""
+    [β walk, β Gauss–Markov, ω at the last sample], ``stats`` (:data:`STATS`) and each
+    wheel's last sign of spin (N,) (0 before it first turns), for counting zero crossings."""
 
     x: np.ndarray
     q_hat: np.ndarray
@@ -246,6 +253,7 @@ class State(NamedTuple):
     P: np.ndarray
     gyro: np.ndarray
     stats: np.ndarray
+    wheel_sign: np.ndarray
 
 
 class Wheels(NamedTuple):
@@ -261,6 +269,7 @@ class Wheels(NamedTuple):
     C: np.ndarray
     ident: np.ndarray
     servo: np.ndarray
+    nominal: np.ndarray
 
 
 def new_stats() -> np.ndarray:
@@ -399,38 +408,57 @@ def _control_into(K_w, M, w_max, s, work, tau):
 
 
 @njit(cache=True)
-def _unload_step(stats, unload, x, G, h_max, err, t, k, dt, h_body, tau_thr):
+def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, tau_thr):
     """Momentum unloading: thruster pulses (into ``tau_thr``) against the wheels' body
-    momentum (into ``h_body``); returns the fullest wheel's momentum fraction."""
+    momentum off its target G·``hw_target`` (the body momentum into ``h_body``); returns the
+    fullest wheel's momentum fraction. Windows start and stop on the wheels' distance from
+    ``hw_target`` (the momentum bias), a share of their limits."""
     nw = h_max.shape[0]
     for i in range(3):
         h_body[i] = G[i, 0] * x[7]
         for c in range(1, nw):
             h_body[i] += G[i, c] * x[7 + c]
         tau_thr[i] = 0.0
-    h_frac = 0.0
+    h_frac = dev_frac = 0.0
     for i in range(nw):
         h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
+        dev_frac = max(dev_frac, abs(x[7 + i] - hw_target[i]) / h_max[i])
     if unload[0] > 0:
         pointing = err <= unload[6]
-        if stats[UNLOADING] == 0 and h_frac > unload[1] and pointing:
+        if stats[UNLOADING] == 0 and dev_frac > unload[1] and pointing:
             stats[UNLOADING] = 1
             stats[DESAT_COUNT] += 1
         if stats[UNLOADING] == 1:
-            if h_frac <= unload[2]:
+            if dev_frac <= unload[2]:
                 stats[UNLOADING] = 0
                 stats[UNLOAD_END] = t
             elif k % int(unload[4]) == 0 and pointing:  # no pulses during a slew
                 fired = False
                 for i in range(3):
-                    if abs(h_body[i]) > unload[2] * h_max.min():
-                        tau_thr[i] = -math.copysign(unload[3], h_body[i])
+                    dev = h_body[i]
+                    for c in range(nw):
+                        dev -= G[i, c] * hw_target[c]
+                    if abs(dev) > unload[2] * h_max.min():
+                        tau_thr[i] = -math.copysign(unload[3], dev)
                         stats[IMPULSE] += unload[3] * dt
                         fired = True
                 if not fired:  # what is left lies in the wheels' null space
                     stats[UNLOADING] = 0
                     stats[UNLOAD_END] = t
     return h_frac
+
+
+@njit(cache=True, inline="always")
+def _count_zero_crossings(stats, x, h_max, sign):
+    """Count the wheels whose spin changed sign since their last non-zero speed (a wheel
+    within 1e-9 of its momentum limit of zero is at rest: no sign)."""
+    for i in range(h_max.shape[0]):
+        h = x[7 + i]
+        s = 1.0 if h > 1e-9 * h_max[i] else (-1.0 if h < -1e-9 * h_max[i] else 0.0)
+        if s != 0.0:
+            if sign[i] != 0.0 and s != sign[i]:
+                stats[ZERO_CROSS] += 1
+            sign[i] = s
 
 
 @njit(cache=True)
@@ -482,7 +510,8 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     rows from ``log_k`` (:class:`Log`). The records say what each input is; besides them:
     ``law.unload`` = [enabled, start fraction, stop fraction, pulse torque N·m, steps
     between pulses, recovery s, pointing error (°) above which no window starts and no
-    pulse fires]; ``filt.gate`` = [χ² innovation bound (0: none), consecutive rejections
+    pulse fires, null-space bias gain (1/s; 0: none), its torque limit N·m];
+    ``filt.gate`` = [χ² innovation bound (0: none), consecutive rejections
     after which a sensor's next measurement is taken anyway]. In the DYNAMICS mode
     ``state.w_hat`` is [ω̂] with P 6×6, or [ω̂, b̂] with the disturbance state of kind
     ``filt.bias_kind`` (1: a body torque b (3); 2: an SRP lever arm β (3), acting as
@@ -493,7 +522,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
     sunlit fraction and the sun sensor's, earth sensor's and star tracker's status (0 used,
     1 unavailable, 2 gated).
     """
-    x, q_hat, w_hat, P, gs, stats = state
+    x, q_hat, w_hat, P, gs, stats, wheel_sign = state
     J, J_inv, G, h_max, n, dt = plant.J, plant.J_inv, plant.G, plant.h_max, plant.n, plant.dt
     unload = law.unload
     nadir = np.array([0.0, 0.0, 1.0])
@@ -635,7 +664,9 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
                 stats[NO_UPDATE] += 1
         qv = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         err = math.degrees(2.0 * math.asin(min(1.0, qv)))  # the true error (target: orbital frame)
-        h_frac = _unload_step(stats, unload, x, G, h_max, err, t, k, dt, h_body, tau_thr)
+        h_frac = _unload_step(
+            stats, unload, law.hw_target, x, G, h_max, err, t, k, dt, h_body, tau_thr
+        )
 
         for i in range(4):
             est[i] = x[i] if mode == TRUTH else q_hat[i]
@@ -657,6 +688,13 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
         for i in range(3):  # feedback, plus the known thruster torque fed forward to the wheels
             work[i] = tau_thr[i] - tau[i]
         _matvec(plant.G_pinv, work, hw_cmd)
+        if unload[7] > 0:  # null-space momentum bias: wheel torques that turn no body
+            c = 0.0
+            for i in range(nw):
+                c += law.null[i] * (law.hw_target[i] - x[7 + i])
+            c = min(max(unload[7] * c, -unload[8]), unload[8])
+            for i in range(nw):
+                hw_cmd[i] += c * law.null[i]
         at_limit = False
         for i in range(nw):
             if abs(hw_cmd[i]) >= plant.tau_max:
@@ -681,6 +719,7 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             wheels.C,
             wheels.ident,
             wheels.servo,
+            wheels.nominal,
             hw_real,
         )
         if plant.torque_scale != 1.0:  # the tachometers see what the wheels really did
@@ -745,13 +784,13 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
         d[1] = plant.dist[1] * srp_scale  # SRP: none in the shadow, ∝ 1/r² of the Sun
         dm[1] = filt.dist_model[1] * srp_scale
         if measured:  # covariance to the next measurement, F at this estimate
-            if mode == GYRO:
-                gyro_jacobian_into(est[4:7], F)
+            if mode == GYRO:  # F's blocks written out: a tenth of the dense products
+                gyro_predict_covariance_into(P, est[4:7], filt.Qc, T_sensor, Wn)
             else:
                 error_jacobian_into(
                     q_hat, w_hat, h_body, filt.J, filt.J_inv, n, filt.dist_model[0], Bmap, F, W3
                 )
-            predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
+                predict_covariance_into(P, F, filt.Qc, T_sensor, Wn)
         if mode == DYNAMICS:
             xm[:4] = q_hat
             xm[4:7] = w_hat[:3]
@@ -765,4 +804,5 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
             for i in range(3):
                 w_hat[i] = xm[4 + i]
         rk4_step(x, hw_real, dt, J, J_inv, G, h_max, n, d, s_orb, m_orb, rk4_work)
+        _count_zero_crossings(stats, x, h_max, wheel_sign)
     return log_k, saturated

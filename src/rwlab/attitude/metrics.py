@@ -78,6 +78,9 @@ def metrics(r: SimResult, band_deg: float = 0.1) -> dict:
         # σ of its white part); power: mean Σ|τ ω| of the wheels (mechanical, W)
         "torque_jitter_rms_Nm": math.sqrt(st.get("steady_torque_jitter_sq_sum", 0.0) / steady_n),
         "wheel_mechanical_power_W": st.get("steady_wheel_power_sum", 0.0) / steady_n,
+        # times any wheel's spin changed sign over the whole run (through the friction's
+        # breakaway at rest: see ``Scenario.wheel_stiction`` and ``momentum_bias``)
+        "wheel_zero_crossings": int(st.get("wheel_zero_crossings", 0)),
         "meets_requirement": bool(st["steady_max_error_deg"] <= band_deg),
         **_sky_metrics(st),
     }

@@ -110,6 +110,13 @@ class Wheels:
         torque_constant = factor, current_limit = A}`` (any of the last three).
     torque_scale : float
         Realised wheel torque over the command (1: exact).
+    stiction : bool
+        For ``"physics"``: the twin's friction law at low speed (breakaway + Stribeck +
+        Coulomb + viscous, stuck at rest until the motor beats the breakaway torque;
+        ``rwlab.attitude.wheels``); False: Coulomb + viscous only.
+    friction_factor : float
+        The true friction over what the drive's feed-forward assumes (a worn or cold
+        bearing; ``"physics"`` wheels).
     """
 
     axes: str = "orthogonal"
@@ -121,6 +128,8 @@ class Wheels:
     model_file: str | None = None
     faults: tuple = ()
     torque_scale: float = 1.0
+    stiction: bool = True
+    friction_factor: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -302,6 +311,11 @@ class Momentum:
         s between pulses.
     unload_recovery_s : float
         s after a window still counted as "during desaturation".
+    bias : float
+        N·m·s the wheels are held at, off zero speed (0: none): with four wheels along
+        the null vector of the wheel matrix (no body momentum, no torque; a slow
+        null-space loop holds it), with three orthogonal wheels on the pitch wheel (the
+        target the unloading steers to); see ``sim.bias_momenta``.
     """
 
     unloading: bool = True
@@ -311,6 +325,7 @@ class Momentum:
     unload_stop_fraction: float = 0.1
     unload_pulse_period_s: float = 2.0
     unload_recovery_s: float = 300.0
+    bias: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -368,6 +383,8 @@ LEGACY_NAMES: dict[str, str] = {
     "wheel_model_file": "wheels.model_file",
     "wheel_faults": "wheels.faults",
     "wheel_torque_scale": "wheels.torque_scale",
+    "wheel_stiction": "wheels.stiction",
+    "wheel_friction_factor": "wheels.friction_factor",
     "sensor_period": "sensors.period",
     "sun_noise_deg": "sensors.sun_noise_deg",
     "earth_noise_deg": "sensors.earth_noise_deg",
@@ -413,6 +430,7 @@ LEGACY_NAMES: dict[str, str] = {
     "unload_stop_fraction": "momentum.unload_stop_fraction",
     "unload_pulse_period_s": "momentum.unload_pulse_period_s",
     "unload_recovery_s": "momentum.unload_recovery_s",
+    "momentum_bias": "momentum.bias",
     "dt": "run.dt",
     "duration": "run.duration",
     "seed": "run.seed",
@@ -599,6 +617,7 @@ def _set_path(obj: Any, path: str, value: Any, full: str) -> Any:
 
 _POSITIVE = (
     "wheels.torque_scale",
+    "wheels.friction_factor",
     "wheels.inertia",
     "wheels.max_torque",
     "wheels.max_momentum",
@@ -670,6 +689,12 @@ def _check_ranges(sc: Scenario) -> None:
         )
     if np.linalg.norm(sc.run.initial_axis) == 0:
         raise ConfigError(f"{sc.name}: run.initial_axis must not be the zero vector")
+    room = (1 - m.unload_start_fraction) * sc.wheels.max_momentum  # bias + a window's swing
+    if not (math.isfinite(m.bias) and abs(m.bias) < room):
+        raise ConfigError(
+            f"{sc.name}: momentum.bias must be a number (N·m·s) below (1 − "
+            f"momentum.unload_start_fraction) × wheels.max_momentum ({room:g}), got {m.bias!r}"
+        )
 
 
 def _check_inertia(sc: Scenario) -> None:

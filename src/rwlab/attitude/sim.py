@@ -449,7 +449,7 @@ def _initial(sc: Scenario, rng, wheel_momentum0):
     at its prior mean 0 with σ the designer's torque bound (:func:`filter_torque_scale`)."""
     q0 = from_axis_angle(sc.run.initial_axis, math.radians(sc.run.initial_error_deg))
     w0 = dcm(q0) @ np.array([0.0, -GEO_RATE, 0.0]) + np.asarray(sc.run.initial_rate, float)
-    hw0 = np.zeros(sc.n_wheels) if wheel_momentum0 is None else np.asarray(wheel_momentum0, float)
+    hw0 = bias_momenta(sc) if wheel_momentum0 is None else np.asarray(wheel_momentum0, float)
     dq = from_axis_angle(rng.standard_normal(3), math.radians(sc.filter.initial_error_deg))
     s0 = math.radians(max(sc.filter.initial_error_deg, 0.1))
     P0 = np.diag([s0**2] * 3 + [(1e-4) ** 2] * 3)
@@ -508,8 +508,49 @@ def _unload_vector(sc: Scenario) -> np.ndarray:
             max(1, round(sc.momentum.unload_pulse_period_s / sc.run.dt)),
             sc.momentum.unload_recovery_s,
             sc.control.pointing_requirement_deg,
+            NULL_BIAS_GAIN if sc.n_wheels > 3 and sc.momentum.bias else 0.0,
+            NULL_BIAS_TORQUE_FRACTION * sc.wheels.max_torque,
         ]
     )
+
+
+NULL_BIAS_GAIN = 1.0 / 600.0  # 1/s: the null-space loop's 10-min time constant
+NULL_BIAS_TORQUE_FRACTION = 0.02  # of the rated torque: what the null loop may use
+
+
+def null_vector(G: np.ndarray) -> np.ndarray:
+    """The wheels' unit null vector n (N,), G n = 0, its first entry > 0; zeros when the
+    wheels have no null space (three wheels).
+
+    Parameters
+    ----------
+    G : numpy.ndarray, shape (3, N)
+        Wheel spin axes in body axes.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+    """
+    if G.shape[1] <= 3:
+        return np.zeros(G.shape[1])
+    n = np.linalg.svd(G)[2][-1]
+    return n * np.sign(n[np.flatnonzero(np.abs(n) > 1e-12)[0]])
+
+
+def bias_momenta(sc: Scenario) -> np.ndarray:
+    """The wheel momenta (N,) N·m·s the momentum bias holds the wheels at: with a null
+    space (the 4-wheel pyramid) ``momentum_bias`` along the unit null vector — no body
+    momentum, so no body torque and nothing for the thrusters to unload; with three
+    orthogonal wheels the pitch wheel (body y) at ``momentum_bias``: the orbit rate's axis,
+    so that momentum stays put inertially (no roll/yaw interchange) and the unloading
+    keeps it there. Roll and yaw wheels of a 3-wheel set cannot be biased: a body-fixed
+    roll/yaw momentum turns once an orbit in inertial space and would cost thrust."""
+    if not sc.momentum.bias:
+        return np.zeros(sc.n_wheels)
+    G = sc.wheel_matrix
+    if G.shape[1] > 3:
+        return sc.momentum.bias * null_vector(G)
+    return np.linalg.pinv(G) @ np.array([0.0, sc.momentum.bias, 0.0])
 
 
 SKY_STEP = 1.0  # s between rows of the sky table the kernel interpolates
@@ -524,8 +565,13 @@ def sky_table(sc: Scenario, t: np.ndarray) -> np.ndarray:
         epoch = ephemeris.parse_epoch(sc.sky.epoch)
         sun, moon = ephemeris.sun_moon_orbital(epoch, sc.sky.station_longitude_deg, t)
     else:
+        moon = MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8
+        if sc.sky.sun != "moving":  # paper B's fixed sky: every row the same, computed once
+            sun = sun_direction(sc, 0.0) * ephemeris.AU
+            row = ephemeris.sky_table(sun[None, :], moon[None, :])
+            return np.repeat(row, len(t), axis=0)
         sun = np.array([sun_direction(sc, ti) for ti in t]) * ephemeris.AU
-        moon = np.broadcast_to(MOON_DIRECTION / np.linalg.norm(MOON_DIRECTION) * 3.844e8, sun.shape)
+        moon = np.broadcast_to(moon, sun.shape)
     return ephemeris.sky_table(sun, moon)
 
 
@@ -653,6 +699,8 @@ def _law_record(sc: Scenario, controller, K: np.ndarray) -> kernel.Law:
         M=_rate_map(K),
         w_max=float(controller.rate_limit),
         unload=_unload_vector(sc),
+        hw_target=bias_momenta(sc),
+        null=null_vector(sc.wheel_matrix),
     )
 
 
@@ -685,7 +733,13 @@ def _simulate_compiled(
     filt = _filter_record(sc, estimator, P.shape[0], filter_psd, noise_scale)
     log = _log_record(steps, log_every, steady_from, x.size)
     state = kernel.State(
-        x=x, q_hat=q_hat, w_hat=w_hat, P=P, gyro=gyro_state, stats=kernel.new_stats()
+        x=x,
+        q_hat=q_hat,
+        w_hat=w_hat,
+        P=P,
+        gyro=gyro_state,
+        stats=kernel.new_stats(),
+        wheel_sign=np.sign(hw0),
     )
     wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
     period = controller.update_period

@@ -6,8 +6,15 @@ wheel delivers depends on the model (``Scenario.wheels.model``):
 - ``ideal``: the command, clipped to the rated torque.
 - ``physics``: the RW physics of :class:`rwlab.wheel.physics.WheelPhysics` in
   acceleration mode — the motor torque needed for the commanded acceleration
-  plus the friction, limited by the current limit, and no drive beyond the
-  maximum speed; the wheel feels friction. Per-wheel faults (friction or
+  plus the drive's Coulomb + viscous feed-forward, limited by the current limit,
+  and no drive beyond the maximum speed. The rotor feels the twin's friction law
+  (:func:`rwlab.wheel.imperfections.stribeck_friction`, compiled here from the same
+  function): breakaway + Stribeck + Coulomb + viscous, and at rest it stays stuck
+  until the motor torque exceeds the breakaway torque — what a wheel meets at
+  every zero crossing, and what the drive's feed-forward does not cancel.
+  ``wheels.stiction = false`` gives the plain Coulomb + viscous law (no
+  Stribeck rise, no stuck state); ``wheel_friction_factor`` scales the true
+  friction the drive does not know of. Per-wheel faults (friction or
   torque-constant factors, a lower current limit) switch on at a time.
 - ``identified``: the model ``rwlab identify`` chose (``model.json``: the linear
   model with its saturations, or the nonlinear servo model where it validates
@@ -30,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from rwlab.ident.nonlinear import servo_advance
+from rwlab.wheel.imperfections import stribeck_friction
 from rwlab.wheel.physics import IDEAL as IDEAL_PARAMS
 from rwlab.wheel.physics import RW90, WheelParams, rad_s_to_rpm
 
@@ -39,8 +47,14 @@ IDEAL, PHYSICS, IDENTIFIED = 0, 1, 2
 RPM = 30.0 / math.pi  # rad/s → rpm
 
 # physics parameter columns (per wheel): inertia, torque constant, current limit,
-# viscous and Coulomb friction, maximum speed (rad/s)
-P_I, P_KT, P_ILIM, P_VISC, P_COUL, P_WMAX = range(6)
+# viscous and Coulomb friction, maximum speed (rad/s), breakaway friction (N·m), Stribeck
+# speed (rad/s), 1 with stiction (the stuck state and the Stribeck law)
+P_I, P_KT, P_ILIM, P_VISC, P_COUL, P_WMAX, P_BRK, P_WS, P_STICK = range(9)
+# below this speed (rad/s) a wheel with stiction is at rest: the loop's wheel speed is
+# h_w/J_s, which a wheel at rest on the body leaves at gᵀω (≤ 7.3e-5 rad/s at GEO)
+AT_REST = 1e-9
+# the twin's law, compiled from the same function (no copy): the rotor's true friction
+_stribeck = njit(cache=True, inline="always")(stribeck_friction)
 # identified state columns (per wheel): speed command (rpm), time since the last model
 # sample (s), model speed (rpm), realised torque (N·m), then the model's states (linear:
 # x, then n scratch; servo: the loop's integral and the last command)
@@ -58,8 +72,10 @@ class WheelArrays:
     ----------
     kind : int
         IDEAL, PHYSICS or IDENTIFIED.
-    healthy, faulty : (N, 6) arrays
-        Physics parameters before and after each wheel's fault (columns P_*).
+    healthy, faulty : (N, 9) arrays
+        The true physics parameters before and after each wheel's fault (columns P_*).
+    nominal : (N, 9) array
+        What the drive assumes (its friction feed-forward and motor constant).
     fault_s : (N,) array
         When each wheel's fault starts, s (inf: never).
     state : (N, 4 + 2n) array
@@ -82,14 +98,24 @@ class WheelArrays:
     C: np.ndarray
     ident: np.ndarray
     servo: np.ndarray
+    nominal: np.ndarray
 
 
 def physics_params(sc) -> WheelParams:
     """The RW physics scaled to the scenario's wheel (RW90's friction and electrical model).
 
-    The ideal twin's law (:data:`rwlab.wheel.physics.IDEAL`): the compiled kernel
-    here is that law, exactly; the realistic twin's imperfections are not flown.
+    The ideal twin (:data:`rwlab.wheel.physics.IDEAL`: no drift, cogging, ripple or
+    temperature effects) with the RW90's friction law (:data:`rwlab.wheel.physics.RW90`:
+    Coulomb 2e-4 N·m, breakaway 3e-4 N·m, Stribeck speed 10 rpm, viscous 1e-6 N·m·s/rad —
+    paper A's wheel with issue 22's datasheet-class imperfections) when
+    ``sc.wheels.stiction``, each friction torque scaled by the wheel's rated torque over
+    the RW90's (0.015 N·m): a bigger wheel's bearings and seals drag in proportion (no
+    datasheet of the comsat class is in the project; for its 0.2 N·m wheel this gives
+    Coulomb 2.7 mN·m, breakaway 4 mN·m, 8.4 mN·m viscous drag at 6000 rpm, ≈ 7 W of loss
+    at full speed). The compiled kernel here is that law, exactly (tested against
+    :class:`rwlab.wheel.physics.WheelPhysics`).
     """
+    scale = sc.wheels.max_torque / RW90.nominal_torque
     return replace(
         IDEAL_PARAMS,
         inertia=sc.wheels.inertia,
@@ -98,6 +124,14 @@ def physics_params(sc) -> WheelParams:
         max_accel_rpm_s=rad_s_to_rpm(sc.wheels.max_torque / sc.wheels.inertia),
         # the current limit then allows 5 % more than the rated torque
         torque_constant=sc.wheels.max_torque / RW90.current_limit * 1.05,
+        viscous_friction=RW90.viscous_friction * scale,
+        coulomb_friction=RW90.coulomb_friction * scale,
+        stiction=sc.wheels.stiction,
+        breakaway_friction=(
+            RW90.breakaway_friction if sc.wheels.stiction else RW90.coulomb_friction
+        )
+        * scale,
+        stribeck_speed_rpm=RW90.stribeck_speed_rpm,
     )
 
 
@@ -110,6 +144,9 @@ def _physics_row(p: WheelParams) -> np.ndarray:
             p.viscous_friction,
             p.coulomb_friction,
             p.max_speed,
+            p.breakaway_friction,
+            p.stribeck_speed_rpm * math.pi / 30,
+            float(p.stiction),
         ]
     )
 
@@ -131,15 +168,15 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
     """
     nw = sc.n_wheels
     kind = {"ideal": IDEAL, "physics": PHYSICS, "identified": IDENTIFIED}[sc.wheels.model]
-    row = _physics_row(physics_params(sc))
-    healthy = np.tile(row, (nw, 1))
+    nominal = np.tile(_physics_row(physics_params(sc)), (nw, 1))
+    healthy = nominal.copy()  # the true wheel: its friction off the drive's by a factor
+    healthy[:, [P_VISC, P_COUL, P_BRK]] *= sc.wheels.friction_factor
     faulty = healthy.copy()
     fault_s = np.full(nw, math.inf)
     for f in sc.wheels.faults:
         i = f["wheel"] - 1
         fault_s[i] = f["at_s"]
-        faulty[i, P_VISC] *= f.get("friction", 1.0)
-        faulty[i, P_COUL] *= f.get("friction", 1.0)
+        faulty[i, [P_VISC, P_COUL, P_BRK]] *= f.get("friction", 1.0)
         faulty[i, P_KT] *= f.get("torque_constant", 1.0)
         faulty[i, P_ILIM] = f.get("current_limit", faulty[i, P_ILIM])
     A = np.zeros((0, 0))
@@ -172,7 +209,7 @@ def wheel_setup(sc, hw0: np.ndarray) -> WheelArrays:
             state[i, S_CMD] = state[i, S_SPEED] = unit.speed_rpm
             x = unit.model_state()
             state[i, S_X : S_X + x.size] = x
-    return WheelArrays(kind, healthy, faulty, fault_s, state, A, B, C, ident, servo)
+    return WheelArrays(kind, healthy, faulty, fault_s, state, A, B, C, ident, servo, nominal)
 
 
 @njit(cache=True, inline="always")
@@ -181,11 +218,14 @@ def _friction(p, w):
 
 
 @njit(cache=True, inline="always")
-def _physics(nominal, true, cmd, h):
+def _physics(nominal, true, cmd, h, dt):
     """WheelPhysics.step in acceleration mode, as the torque it puts on the rotor, N·m.
 
-    The drive computes its current from the ``nominal`` motor and friction (it does not
-    know a fault); the rotor feels the ``true`` ones, and the true current limit clamps.
+    The drive computes its current from the ``nominal`` motor and its Coulomb + viscous
+    feed-forward (it knows neither a fault nor the Stribeck rise); the rotor feels the
+    ``true`` motor and friction, and the true current limit clamps. With stiction
+    (``WheelPhysics._stick_slip``): a wheel at rest stays there until the motor torque
+    exceeds the breakaway torque, and a wheel that would reverse within the step stops.
     """
     w = h / nominal[P_I]
     fr = _friction(nominal, w)
@@ -193,7 +233,17 @@ def _physics(nominal, true, cmd, h):
     current = min(max((cmd + fr) / nominal[P_KT], -lim), lim)
     if abs(w) >= nominal[P_WMAX] and current * w > 0:  # never drive beyond the maximum speed
         current = min(max(fr / nominal[P_KT], -lim), lim)
-    return true[P_KT] * current - _friction(true, w)
+    motor = true[P_KT] * current
+    if true[P_STICK] == 0.0:
+        return motor - _friction(true, w)
+    if abs(w) < AT_REST:
+        if abs(motor) <= true[P_BRK]:
+            return -h / dt  # held at rest by the bearing: no wheel torque reaches the body
+        return motor - math.copysign(true[P_BRK], motor)
+    tau = motor - _stribeck(w, true[P_COUL], true[P_BRK], true[P_WS], true[P_VISC])
+    if (h + tau * dt) * h < 0.0:
+        return -h / dt  # stops within the step; the breakaway torque decides the next one
+    return tau
 
 
 @njit(cache=True)
@@ -222,7 +272,9 @@ def _identified_tick(s, A, B, C, ident, servo):
 
 
 @njit(cache=True)
-def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, servo, out):
+def realise(
+    kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident, servo, nominal, out
+):
     """Realised wheel torques ``out`` (N,) for the commands ``cmd`` (N,) over one step.
 
     ``cmd`` is already clipped to the rated torque; ``x`` is the plant state (wheel
@@ -232,7 +284,7 @@ def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, A, B, C, ident
     if kind == PHYSICS:
         for i in range(nw):
             true = faulty[i] if t >= fault_s[i] else healthy[i]
-            out[i] = _physics(healthy[i], true, cmd[i], x[7 + i])
+            out[i] = _physics(nominal[i], true, cmd[i], x[7 + i], dt)
     elif kind == IDENTIFIED:
         inertia, Ts = ident[I_INERTIA], ident[I_TS]
         for i in range(nw):

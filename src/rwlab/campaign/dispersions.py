@@ -58,6 +58,7 @@ _SCALARS = (
     "run.initial_error_deg",
     "filter.initial_error_deg",
     "momentum.thruster_torque",
+    "wheels.friction_factor",
 )
 _VECTORS = {  # vector fields and the axes a dispersion may name
     "run.initial_axis": _AXES,

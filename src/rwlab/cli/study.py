@@ -60,6 +60,14 @@ from rwlab.errors import ConfigError, RwlabError
     help="A record with telemetry gaps: refuse it, or split it at the gaps into segments "
     "identified as separate experiments merged (MATLAB merge(iddata); reported as segments).",
 )
+@click.option(
+    "--gain-tolerance",
+    type=Number(0, 100, low_open=True),
+    default=2.0,
+    show_default=True,
+    help="Percent within which the chosen model's DC gain must match the steady-state gain "
+    "measured on the record's settled holds (a record without them: fit alone).",
+)
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors
@@ -73,6 +81,7 @@ def identify(
     split,
     tolerance,
     gaps,
+    gain_tolerance,
     workers,
     scheduler,
     force,
@@ -95,6 +104,7 @@ def identify(
         split=split,
         tolerance=tolerance,
         gaps=gaps,
+        gain_tolerance=gain_tolerance,
         force=force,
     )
     if Path(file).is_dir():
@@ -250,6 +260,7 @@ def _identify_one(
     tolerance,
     force,
     gaps="refuse",
+    gain_tolerance=2.0,
     progress=None,
     echo=None,
 ):
@@ -277,6 +288,7 @@ def _identify_one(
         preprocess=preprocess,
         split=split,
         tolerance=tolerance,
+        gain_tolerance=gain_tolerance / 100.0,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
         datasheet=None

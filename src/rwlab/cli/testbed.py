@@ -66,8 +66,9 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--wheel",
     "wheel_preset",
-    type=click.Choice(["rw90", "ideal"]),
-    help="Simulated wheel preset: rw90 (realistic, default) or ideal (no imperfections).",
+    metavar="PRESET|FILE.toml",
+    help="Simulated wheel: the preset rw90 (realistic, default) or ideal (no imperfections), "
+    "or a wheel TOML file (docs/wheels/rw90.toml lists every parameter).",
 )
 @click.option(
     "--file",

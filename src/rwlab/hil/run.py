@@ -755,7 +755,9 @@ class _Loop:
         if self.health:
             self.dither = NullSpaceDither(sc.wheel_matrix, bank.params.inertia)
             self.tracking = {
-                n: TrackingTest(sc.run.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour)
+                n: TrackingTest(
+                    sc.run.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour
+                )
                 for n in self.nodes
             }
             self.tracked = dict(self.tracking)

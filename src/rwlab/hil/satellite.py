@@ -113,6 +113,11 @@ class Satellite:
             raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")
         if not (math.isfinite(duration) and duration >= scenario.run.dt):
             raise ConfigError(f"duration must be at least one step ({scenario.run.dt:g} s)")
+        if scenario.momentum.bias:
+            raise ConfigError(
+                "the HIL loop sets the wheels' bias itself (HilConfig.wheel_bias_rpm, "
+                "rwlab hil --wheel-bias-rpm): set momentum.bias = 0 in the scenario"
+            )
         sc = self.scenario = scenario
         self.controller = controller
         self.use_ekf = estimator == "ekf"

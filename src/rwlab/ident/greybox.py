@@ -120,7 +120,15 @@ class WheelGreyBox:
     substeps : int
         Euler steps per sample.
     std : dict
-        Standard deviation of each estimated parameter (same units), or empty.
+        Standard deviation of each estimated parameter (same units), or empty;
+        a parameter the record did not inform is left out (see ``unidentified``).
+    unidentified : tuple of str
+        Estimated parameters the record did not inform: the simulation error
+        does not change with them at the optimum (e.g. ``breakaway`` when the
+        wheel only crosses zero at its acceleration limit, where it dwells
+        milliseconds in a 0.5-s sample, and the fit leaves it at ``coulomb``).
+        Their values are not estimates; a λ(JᵀJ)⁻¹ standard deviation would be
+        a meaningless ~0.
     """
 
     Ts: float
@@ -140,6 +148,7 @@ class WheelGreyBox:
     max_speed: float
     substeps: int = 50
     std: dict | None = None
+    unidentified: tuple[str, ...] = ()
 
     nu = 1
     ny = 1
@@ -147,7 +156,10 @@ class WheelGreyBox:
     structure = STRUCTURE
 
     def __post_init__(self) -> None:
-        values = [v for k, v in asdict(self).items() if k != "std"]
+        object.__setattr__(self, "unidentified", tuple(self.unidentified))
+        if not set(self.unidentified) <= set(ESTIMATED):
+            raise ModelError(f"unidentified must name estimated parameters {ESTIMATED}")
+        values = [v for k, v in asdict(self).items() if k not in ("std", "unidentified")]
         if not all(math.isfinite(float(v)) for v in values):
             raise ModelError(f"grey-box parameters must be finite, got {values}")
         if min(self.Ts, self.inertia, self.torque_constant, self.current_limit) <= 0:
@@ -244,6 +256,7 @@ class WheelGreyBox:
         d["structure"] = STRUCTURE
         d["units"] = "SI (N·m, A, rad/s, kg·m²); model input and output in rpm"
         d["estimated"] = list(ESTIMATED)
+        d["unidentified"] = list(self.unidentified)
         return d
 
     @classmethod
@@ -378,8 +391,17 @@ def greybox_fit(
     for res, jac in parts:
         lam = float(res @ res) / max(res.size - len(x0), 1)  # in scaled units
         info += (jac.T @ jac) / lam
-    cov = np.linalg.pinv(info) / np.outer(1 / scale, 1 / scale)
-    std = {k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(ESTIMATED)}
+    # a parameter the loss does not see at the optimum (zero Jacobian column, or breakaway
+    # clipped to Coulomb) has no standard deviation: it is reported as unidentified
     fitted = dict(zip(ESTIMATED, (float(v) for v in values), strict=True))
+    norms = np.linalg.norm(sol.jac, axis=0)
+    blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
+    blind[ESTIMATED.index("breakaway")] |= fitted["breakaway"] <= fitted["coulomb"]
+    seen = ~blind
+    cov = np.zeros((len(x0), len(x0)))
+    cov[np.ix_(seen, seen)] = np.linalg.pinv(info[np.ix_(seen, seen)])
+    cov /= np.outer(1 / scale, 1 / scale)
+    std = {k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(ESTIMATED) if seen[i]}
+    unidentified = tuple(k for i, k in enumerate(ESTIMATED) if blind[i])
     fitted["breakaway"] = max(fitted["breakaway"], fitted["coulomb"])
-    return replace(base, **fitted, std=std)  # type: ignore[arg-type]
+    return replace(base, **fitted, std=std, unidentified=unidentified)  # type: ignore[arg-type]

@@ -11,7 +11,11 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
 4. residual analysis and validation of the ARX models, ARMAX(2,2,1,nk)
    (Table 3, Fig. 19–22), and OE and BJ of matching order;
 5. model choice: the simplest model whose validation fit is within
-   ``tolerance`` percentage points of the best (the paper's "simplicity wins");
+   ``tolerance`` percentage points of the best (the paper's "simplicity wins")
+   and whose DC gain agrees within ``gain_tolerance`` with the steady-state
+   gain measured on the record's long holds (:func:`steady_state_gain`; beyond
+   the paper: a speed-loop model with the wrong static gain settles at the
+   wrong speed). A record without such holds is chosen by fit alone;
 6. continuous-time models by ZOH and Tustin at the record's real Ts, checked
    against the discrete model on a new input (Fig. 23), and the acceleration
    check (Fig. 24);
@@ -58,7 +62,13 @@ from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
 
-__all__ = ["StudyResult", "identification_study", "physical_model", "wheel_model"]
+__all__ = [
+    "StudyResult",
+    "identification_study",
+    "physical_model",
+    "steady_state_gain",
+    "wheel_model",
+]
 
 PREPROCESSING = ("detrend", "scale", "normalize", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
@@ -115,6 +125,7 @@ class StudyResult(ShortRepr):
     nlarx: NLARXModel | None = None
     physical_val: IOData | None = field(default=None, repr=False)
     segments: list[list[float]] | None = None
+    steady_state: dict | None = None
 
     def to_pandas(self):
         """The structures tried (orders and other structures), one row each.
@@ -155,6 +166,7 @@ class StudyResult(ShortRepr):
             "orders": self.orders,
             "others": self.others,
             "chosen": {**chosen_row, "reason": self.reason},
+            "steady_state_gain": self.steady_state,
             "residuals": self.residuals,
             "continuous": {k: v for k, v in self.continuous.items() if k != "tf"},
             "acceleration": self.acceleration,
@@ -203,6 +215,7 @@ def identification_study(
     orders=(2, 3, 4, 5),
     nk_max: int = 10,
     tolerance: float = 3.0,
+    gain_tolerance: float = 0.02,
     seed: int = 0,
     nonlinear: bool = True,
     limits_rpm: tuple[float, float] = (math.inf, math.inf),
@@ -236,6 +249,12 @@ def identification_study(
     tolerance : float
         Percentage points of validation fit within which the simplest model wins
         (default 3: paper A kept ARX221 although ARX331 fitted 1.6 points better).
+    gain_tolerance : float
+        Largest relative difference between a model's DC gain (physical units)
+        and the steady-state gain measured on the record (:func:`steady_state_gain`)
+        for the model to be chosen (default 0.02). When no model within
+        ``tolerance`` passes, or the record has too few long holds to measure
+        the gain, the choice is by fit alone and ``reason`` says so.
     seed : int
         For the new input of the continuous-time check.
     nonlinear : bool
@@ -283,6 +302,8 @@ def identification_study(
             f"{max(orders)} with delays up to {nk_max} needs at least {needed} (ten samples "
             "per parameter and lag in each part); record longer or lower the orders"
         )
+    if not (math.isfinite(gain_tolerance) and gain_tolerance > 0):
+        raise DataError(f"gain_tolerance must be a positive fraction, got {gain_tolerance!r}")
     pieces = _pieces(data.N, split, segments, needed_per_piece=worst + 2 * max(orders) + 2)
     prepared = _preprocessed(data, preprocess, split, pieces)
     est, val = prepared.split(split)
@@ -334,17 +355,11 @@ def identification_study(
     candidates = [r for r in rows + others if r["fit_percent"] is not None]
     if not candidates:
         raise EstimationError("no stable model was found; check the data and the delay")
-    best = max(r["fit_percent"] for r in candidates)
-    pick = min(
-        (r for r in candidates if r["fit_percent"] >= best - tolerance),
-        key=lambda r: (r["n_params"], _SIMPLICITY.index(_kind(r["structure"])), -r["fit_percent"]),
-    )
+    steady = steady_state_gain(data)
+    for r in rows + others:
+        _static_check(r, models[r["structure"]], prepared.trend, steady)
+    pick, reason = _choose(candidates, tolerance, gain_tolerance, steady)
     chosen = models[pick["structure"]]
-    reason = (
-        f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
-        f"then ARX < ARMAX < OE < BJ) whose validation fit ({pick['fit_percent']:.2f} %) "
-        f"is within {tolerance:g} points of the best ({best:.2f} %)"
-    )
 
     residuals = {
         name: resid(models[name], val, max_lag=min(25, val.N // 2 - 1), initial=INITIAL).to_dict()
@@ -381,6 +396,7 @@ def identification_study(
         nlarx=black,
         physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
         segments=None if pieces is None else _segment_times(data, pieces["all"]),
+        steady_state=steady,
     )
 
 
@@ -417,6 +433,119 @@ def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | Non
         "val": max(val, key=lambda r: r[1] - r[0]),
         "longest": max(ranges, key=lambda r: r[1] - r[0]),
         "all": ranges,
+    }
+
+
+def _simplicity(r: dict) -> tuple:
+    return (r["n_params"], _SIMPLICITY.index(_kind(r["structure"])), -r["fit_percent"])
+
+
+def _choose(candidates: list[dict], tolerance: float, gain_tolerance: float, steady) -> tuple:
+    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why."""
+    best = max(r["fit_percent"] for r in candidates)
+    near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
+    limit = 100 * gain_tolerance
+    ok = [r for r in near if r.get("dc_gain_error_percent") is not None]
+    ok = [r for r in ok if abs(r["dc_gain_error_percent"]) <= limit]
+    pick = ok[0] if steady is not None and ok else near[0]
+    reason = (
+        f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
+        f"then ARX < ARMAX < OE < BJ) whose validation fit ({pick['fit_percent']:.2f} %) "
+        f"is within {tolerance:g} points of the best ({best:.2f} %)"
+    )
+    if steady is None:
+        return pick, reason + "; the record has too few settled holds to check the DC gain"
+    g = steady["gain"]
+    if not ok:
+        return pick, reason + (
+            f"; no such model's DC gain is within {limit:g} % of the measured steady-state "
+            f"gain {g:.4f} (this one's: {_dc_text(pick)})"
+        )
+    skipped = near[: near.index(pick)]
+    reason += f" and whose DC gain ({_dc_text(pick)}) is within {limit:g} % of the measured "
+    reason += f"steady-state gain {g:.4f} ({steady['holds']} settled holds)"
+    if skipped:
+        reason += "; passed over for a DC gain off the measured one: " + ", ".join(
+            f"{r['structure']} ({_dc_text(r)})" for r in skipped
+        )
+    return pick, reason
+
+
+def _dc_text(row: dict) -> str:
+    if row.get("dc_gain") is None:
+        return "none: a pole at 1"
+    return f"{row['dc_gain']:.4f}, {row['dc_gain_error_percent']:+.1f} %"
+
+
+def _static_check(row: dict, model: PolyModel, trend, steady) -> None:
+    """Add the model's DC gain in physical units (and its error against ``steady``) to ``row``."""
+    den = float(np.sum(model.A) * np.sum(model.F))
+    scale = float(trend.output_scale[0] / trend.input_scale[0])
+    dc = float(np.sum(model.B)) * scale / den if abs(den) > 1e-12 else None
+    row["dc_gain"] = dc if dc is not None and math.isfinite(dc) else None
+    row["dc_gain_error_percent"] = (
+        None
+        if row["dc_gain"] is None or steady is None
+        else 100.0 * (row["dc_gain"] / steady["gain"] - 1.0)
+    )
+
+
+def steady_state_gain(
+    data: IOData, *, min_hold: float = 30.0, tail: float = 5.0, settled: float = 0.01
+) -> dict | None:
+    """The static gain measured on a record: settled output against input over its long holds.
+
+    Every hold of the input at least ``min_hold`` long gives one point: the input
+    level and the mean output over the hold's last ``tail`` seconds, kept when the
+    output has settled there (its range over the tail within ``settled`` of the
+    input's whole range: a wheel still ramping at its acceleration limit is not).
+    The gain is the least-squares slope through these points (with an intercept,
+    as the physical model ``y − y0 = G·(u − u0)`` has).
+
+    Parameters
+    ----------
+    data : IOData
+        SISO record in physical units (e.g. command rpm → speed rpm).
+    min_hold : float
+        Shortest hold used, s (30 s: five closed-loop time constants of the RW90).
+    tail : float
+        Averaging window at the end of each hold, s.
+    settled : float
+        Largest output range over the tail, as a fraction of the input's range.
+
+    Returns
+    -------
+    dict or None
+        ``gain`` (output units per input unit), ``intercept``, ``holds`` (points
+        used) and the settings; None when fewer than 3 settled holds at two or
+        more levels exist.
+    """
+    if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
+        raise DataError("steady_state_gain needs a single-input single-output IOData")
+    u, y = data.u[:, 0], data.y[:, 0]
+    edges = np.flatnonzero(np.diff(u) != 0) + 1
+    bounds = np.concatenate([[0], edges, [u.size]])
+    n_tail = max(1, round(tail / data.Ts))
+    span = float(np.ptp(u))
+    levels, speeds = [], []
+    for a, b in itertools.pairwise(bounds):
+        if (b - a) * data.Ts < min_hold or b - a < n_tail:
+            continue
+        end = y[b - n_tail : b]
+        if np.ptp(end) <= settled * span:
+            levels.append(float(u[a]))
+            speeds.append(float(end.mean()))
+    if len(levels) < 3 or np.ptp(levels) == 0:
+        return None
+    slope, intercept = np.polyfit(levels, speeds, 1)
+    return {
+        "gain": float(slope),
+        "intercept": float(intercept),
+        "holds": len(levels),
+        "min_hold_s": min_hold,
+        "tail_s": tail,
+        "method": "least-squares slope of the mean output over the last tail_s of every "
+        "settled input hold of at least min_hold_s, against the held input",
     }
 
 

@@ -189,6 +189,16 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f"{ch['fit_percent']:.2f} %. {ch['reason']}.</p>"
     )
 
+    steady = study.get("steady_state_gain")
+    if steady:
+        page.html(
+            f"<p>Steady-state gain measured on the record: {steady['gain']:.4f} "
+            f"({steady['holds']} settled holds of at least {steady['min_hold_s']:g} s, the "
+            f"output averaged over the last {steady['tail_s']:g} s of each). The DC gain "
+            "columns give each model's static gain in physical units and its error "
+            "against it.</p>"
+        )
+
     page.heading("1. Input delay (paper Fig. 16)", "delay")
     nk = study["delay"]["nk"]
     losses = {int(k): v for k, v in study["delay"]["losses"].items()}
@@ -209,9 +219,17 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     page.heading("2. ARX orders (paper Table 2, Fig. 17, Fig. 18)", "orders")
     rows = study["orders"]
     page.table(
-        ["model", "fit %", "MSE", "FPE", "A(q)", "B(q)"],
+        ["model", "fit %", "MSE", "FPE", "DC gain", "A(q)", "B(q)"],
         [
-            [r["structure"], r["fit_percent"], r["mse"], r["fpe"], _poly(r, "A"), _poly(r, "B")]
+            [
+                r["structure"],
+                r["fit_percent"],
+                r["mse"],
+                r["fpe"],
+                _dc(r),
+                _poly(r, "A"),
+                _poly(r, "B"),
+            ]
             for r in rows
         ],
         table_id="table2-orders",
@@ -247,12 +265,13 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     page.heading("4. ARMAX, OE and BJ (paper Table 3, Fig. 21, Fig. 22)", "others")
     others = study["others"]
     page.table(
-        ["model", "fit %", "MSE", "stable", "A", "B", "C", "D", "F"],
+        ["model", "fit %", "MSE", "DC gain", "stable", "A", "B", "C", "D", "F"],
         [
             [
                 r["structure"],
                 r["fit_percent"],
                 r["mse"],
+                _dc(r),
                 r["stable"],
                 _poly(r, "A"),
                 _poly(r, "B"),
@@ -405,6 +424,14 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         "estimated rate limit and settles.",
     )
     _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
+
+
+def _dc(row: dict) -> str:
+    """A row's DC gain (physical units) and its error against the measured gain."""
+    if row.get("dc_gain") is None:
+        return "—"
+    err = row.get("dc_gain_error_percent")
+    return f"{row['dc_gain']:.4f}" + ("" if err is None else f" ({err:+.1f} %)")
 
 
 def _study_fit(result: StudyResult) -> float:

@@ -34,6 +34,7 @@ from rwlab.wheel.bus import open_bus, open_transport, transport_names
 from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
+from rwlab.wheel.physics import PRESETS
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 from rwlab.wheel.serial import open_pty
 
@@ -92,9 +93,12 @@ class ExperimentConfig:
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
-    wheel : {'rw90', 'ideal'}
-        The simulated wheel's parameter preset: the realistic RW90 twin (default)
-        or the one without imperfections (:data:`rwlab.wheel.physics.IDEAL`).
+    wheel : str
+        The simulated wheel: a preset, ``'rw90'`` (the realistic twin, default) or
+        ``'ideal'`` (no imperfections, :data:`rwlab.wheel.physics.IDEAL`), or a
+        wheel TOML file (``*.toml``, :meth:`rwlab.wheel.WheelParams.from_toml`,
+        e.g. a unit whose driver limits the current to 0.35 A); ``unit`` then
+        draws around it (leave ``unit`` out of the TOML).
     unit : int, optional
         Unit seed of the simulated wheel: another RW90 drawn within its tolerances
         (:meth:`rwlab.wheel.WheelParams.for_unit`); None is the nominal wheel.
@@ -162,7 +166,7 @@ class ExperimentConfig:
             "model": ((str, type(None)), "a path to model.json"),
             "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
-            "wheel": (str, "a wheel preset name"),
+            "wheel": (str, "a wheel preset name or a wheel TOML file"),
             "unit": ((int, type(None)), "an integer ≥ 0"),
         }
         for name, (kind, text) in expected.items():
@@ -223,7 +227,17 @@ class ExperimentConfig:
         -------
         WheelParams
         """
-        params = WheelParams.preset(self.wheel) if base is None else base
+        if base is not None:
+            params = base
+        elif self.wheel.lower().endswith(".toml"):
+            params = WheelParams.from_toml(self.wheel)
+        elif self.wheel in PRESETS:
+            params = WheelParams.preset(self.wheel)
+        else:
+            raise ConfigError(
+                f"wheel must be a preset ({', '.join(sorted(PRESETS))}) or a wheel TOML file "
+                f"(*.toml), got {self.wheel!r}"
+            )
         return params if self.unit is None else params.for_unit(self.unit)
 
     def tolerance(self) -> float:
