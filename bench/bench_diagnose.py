@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import warnings
 from collections import Counter, defaultdict
 from pathlib import Path
 
@@ -41,6 +42,7 @@ from click.testing import CliRunner
 
 from rwlab.cli import main as cli
 from rwlab.diagnose import HealthyReference, diagnose
+from rwlab.errors import RwlabWarning
 from rwlab.testbed import ExperimentConfig, load_record, run_experiment
 from rwlab.wheel import IdentifiedWheel
 
@@ -86,6 +88,7 @@ POWER_UP = (
 )
 EARLY_CHIRP = ("friction=1.5", "speed_sensor_bias=15")
 HEALTHY = {"tune": (1, 6, 100), "eval": (21, 12, 1000)}  # first unit, records, first seed
+CALIBRATION = (101, 18, 3000)  # more healthy tune records (units 101–118): the thresholds' data
 FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61}
 
 
@@ -106,6 +109,10 @@ def records(which: str) -> dict[str, tuple]:
     first, n, seed = HEALTHY[which]
     for i in range(n):
         out[f"{which}_h{i}"] = (first + i, seed + i, SIGNALS[i % 4], 1200, (), "", None)
+    if which == "tune":
+        first, n, seed = CALIBRATION
+        for i in range(n):
+            out[f"tune_x{i}"] = (first + i, seed + i, SIGNALS[i % 4], 1200, (), "", None)
     unit = FIRST_FAULTY_UNIT[which] - 1
     for fault in FAULTS[which]:
         for signal in ("prbs", "chirp"):
@@ -161,6 +168,7 @@ def main() -> None:
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 10.0, 100.0])
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
     args = parser.parse_args()
+    warnings.simplefilter("ignore", RwlabWarning)  # the table prints each detector's note
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
         cache.mkdir(parents=True, exist_ok=True)
@@ -184,6 +192,8 @@ def main() -> None:
 
 def _healthy(args, run, cache: Path, specs: dict) -> None:
     counts: dict[float, Counter] = {rate: Counter() for rate in args.rates}
+    notes: dict[float, dict[str, str]] = {rate: {} for rate in args.rates}
+    thresholds: dict[float, dict] = {}
     latched, hours = [], 0.0
     for name, spec in specs.items():
         path = _record(cache, name, spec)
@@ -192,9 +202,13 @@ def _healthy(args, run, cache: Path, specs: dict) -> None:
             f"{name} ({spec[2]}, unit {spec[0]}): {a.kind} at {a.t_s}" for a in run(path).alarms
         ]
         for rate in args.rates:
-            counts[rate].update(
-                a.detector for a in run(path, false_alarms_per_hour=rate, latch=False).alarms
-            )
+            result = run(path, false_alarms_per_hour=rate, latch=False)
+            counts[rate].update(a.detector for a in result.alarms)
+            thresholds[rate] = result.thresholds
+            for note in result.notes:
+                name, text = note.split(": ", 1)
+                if text not in notes[rate].get(name, ""):
+                    notes[rate][name] = "; ".join(filter(None, (notes[rate].get(name), text)))
     units = sorted(s[0] for s in specs.values())
     print(
         f"healthy: {hours:.2f} h, units {units[0]}–{units[-1]} ({', '.join(SIGNALS)} in turn); "
@@ -202,11 +216,22 @@ def _healthy(args, run, cache: Path, specs: dict) -> None:
     )
     for line in latched:
         print("  ", line)
-    print(f"{'requested /h':>12} " + " ".join(f"{d:>15}" for d in DETECTORS) + "   hours")
-    for rate in args.rates:
-        row = " ".join(f"{counts[rate][d] / hours:>15.3g}" for d in DETECTORS)
-        print(f"{rate:>12g} {row}   {hours:.2f}")
-    print("(measured alarms per hour, detectors restarted after each alarm)\n")
+    print(
+        f"{'detector':<16} {'requested/h':>11} {'threshold':>9} {'measured/h':>10} {'alarms':>6} "
+        f"{'hours':>5} {'ratio':>6}  within x2 / what the detector says"
+    )
+    for d in DETECTORS:
+        for rate in args.rates:
+            n = counts[rate][d]
+            ratio = n / hours / rate
+            ok = "yes" if 0.5 <= ratio <= 2 else "no"
+            note = notes[rate].get(d, "")
+            print(
+                f"{d:<16} {rate:>11g} {thresholds[rate][d]:>9.3g} {n / hours:>10.3g} {n:>6} "
+                f"{hours:>5.2f} {ratio:>6.2f}  {ok}{'; ' + note if note else ''}"
+            )
+    print("(detectors restarted after each alarm; thresholds from src/rwlab/diagnose/")
+    print(" thresholds.json, measured on the tune set by bench/calibrate_thresholds.py)\n")
 
 
 def _truth(text: str) -> set[str]:

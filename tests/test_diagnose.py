@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -281,3 +282,35 @@ def test_friction_change_compares_a_unit_with_its_own_law():
                 det.restart()
     assert alarms and 1500 <= alarms[0] <= 1600, alarms
     assert sizes[0] == pytest.approx(1.5, abs=0.1)
+
+
+def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
+    # the twin's healthy units stay within their tolerance of the reference's: the absolute
+    # friction test never alarmed on the calibration's healthy hours, so 100/h is refused
+    # in words (the thresholds still set), not silently delivered as none
+    from rwlab.diagnose import Diagnoser
+    from rwlab.diagnose.calibration import Curve, ThresholdCalibration
+    from rwlab.errors import RwlabWarning
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model_file)
+    reference = HealthyReference.from_model_file(model_file)
+    k = Diagnoser(wheel, reference, calibration=False)._detectors["friction"].k
+    never = Curve("cusum", (0.0, 5.0), (0, 0), k, 560)  # no alarm in 8 h at any threshold
+    cal = ThresholdCalibration(wheel.Ts, 8.0, {"friction": never})
+    with pytest.warns(RwlabWarning, match="friction: .*cannot deliver 100/h"):
+        d = Diagnoser(wheel, reference, false_alarms_per_hour=100.0, calibration=cal)
+    assert any(n.startswith("friction:") for n in d.notes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the default rate is below what hours can resolve
+        assert Diagnoser(wheel, reference, calibration=cal).notes == []
+        assert Diagnoser(wheel, reference).notes == []
+    path = tmp_path / "healthy.mcap"
+    run_experiment(ExperimentConfig(duration=60, seed=5), path)
+    out = tmp_path / "d"
+    args = ["diagnose", str(path), "--model", str(model_file), "--out", str(out)]
+    result = CliRunner().invoke(main, [*args, "--false-alarms", "100"])
+    assert result.exit_code == 0, result.output
+    assert "warning: " in result.output and "/h" in result.output
+    notes = json.loads((out / "diagnosis.json").read_text())["threshold_notes"]
+    assert any("cannot deliver 100/h" in n for n in notes)

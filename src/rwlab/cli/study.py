@@ -163,7 +163,8 @@ def _rate_unit(study: dict) -> str:
     type=POSITIVE,
     default=1e-3,
     show_default=True,
-    help="Wanted false alarms per hour per detector (sets the thresholds).",
+    help="Wanted false alarms per hour per detector: thresholds from the rates measured on "
+    "healthy records of other units; a rate a detector cannot deliver is a warning.",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_friendly_errors

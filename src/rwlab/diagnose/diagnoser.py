@@ -39,8 +39,11 @@ balance (``lag`` without ``motor``); a biased sensor shifts the held speed.
 A block test averages ``block`` qualifying values, standardises the mean by
 the reference's mean and σ, and runs a one-sided CUSUM (two for ``speed``)
 whose reference value is 0.5 σ plus the tolerance between healthy units; its
-threshold gives ARL₀ = the requested false alarms per hour, counted in the
-reference's block durations (Siegmund's approximation, :mod:`detect`). Two
+threshold is the one whose false-alarm rate, measured on healthy records of
+other units, is the requested one (:mod:`~rwlab.diagnose.calibration`; a rate
+the full tolerance cannot deliver keeps less of it, and a rate no setting
+delivers is a warning), Siegmund's approximation (:mod:`detect`) where the
+calibration cannot say. Two
 sample tests complete the set: ``stuck`` (a run of identical non-zero speed
 readings, length from the reference's repeat probability) and ``dropout``
 (telemetry frames lost in a 10 s block beyond what the reference's loss rate
@@ -56,6 +59,7 @@ kept.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -63,13 +67,31 @@ import numpy as np
 from scipy.stats import poisson
 
 from rwlab.data import IOData
+from rwlab.diagnose.calibration import H_GRID as _H_GRID
+from rwlab.diagnose.calibration import N_MAX as _N_MAX
+from rwlab.diagnose.calibration import (
+    RESOLVED,
+    ThresholdCalibration,
+    count_alarms,
+    cusum_alarms,
+    run_alarms,
+)
+from rwlab.diagnose.calibration import SHARES as _SHARES
+from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import Finding, isolate
 from rwlab.diagnose.reference import DEFAULT_TOLERANCE, BlockStats, HealthyReference, block_stats
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
-from rwlab.errors import ConfigError, DataError
+from rwlab.errors import ConfigError, DataError, RwlabWarning
 
-__all__ = ["Alarm", "Diagnoser", "Diagnosis", "diagnose", "healthy_reference"]
+__all__ = [
+    "Alarm",
+    "Diagnoser",
+    "Diagnosis",
+    "diagnose",
+    "healthy_reference",
+    "measure_calibration",
+]
 
 CUSUM_K = 0.5
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
@@ -145,6 +167,7 @@ class _BlockCusum:
         self._values: list[float] = []
         self.up = self.down = 0.0
         self.means: deque = deque()  # (t_s, block mean, up, down)
+        self.trace: list[float] | None = None  # every block's z, when calibrating
         self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
 
     @property
@@ -165,6 +188,8 @@ class _BlockCusum:
             self.mean = float(np.mean(self._baseline))
             return False
         z = (mean - self.mean) / self.stats.sigma
+        if self.trace is not None:
+            self.trace.append(z)
         if self.sides in ("up", "both"):
             self.up = max(0.0, self.up + z - self.k)
         if self.sides in ("down", "both"):
@@ -276,6 +301,7 @@ class _Dropout:
         self.block, self.n = block, n
         self.count = self.samples = 0
         self.last_count = 0
+        self.trace: list[int] | None = None  # every block's count, when calibrating
 
     @property
     def statistic(self) -> float:
@@ -286,6 +312,8 @@ class _Dropout:
         self.samples += 1
         fired = self.count >= self.n
         if self.samples >= self.block or fired:
+            if self.trace is not None:
+                self.trace.append(self.count)
             self.last_count = self.count
             self.count = self.samples = 0
         return fired
@@ -317,6 +345,20 @@ class Diagnoser:
     latch : bool
         A detector alarms once (True), or restarts after each alarm (False: for
         counting false alarms).
+    calibration : ThresholdCalibration or bool
+        Where the thresholds come from: True, the package's calibration (false
+        alarms measured on healthy records of other units of the twin,
+        :mod:`~rwlab.diagnose.calibration`) where it matches the model; False,
+        the analytic approximations alone; or a calibration of one's own.
+    trace : bool
+        Keep every block's standardised mean, the runs of repeated readings and
+        the lost frames per block (for measuring a calibration).
+
+    Warns
+    -----
+    RwlabWarning
+        A detector cannot deliver the requested rate (within a factor 2); the
+        reasons are kept in ``notes``.
     """
 
     def __init__(
@@ -326,6 +368,8 @@ class Diagnoser:
         *,
         false_alarms_per_hour: float = 1e-3,
         latch: bool = True,
+        calibration: ThresholdCalibration | bool = True,
+        trace: bool = False,
     ) -> None:
         self.Ts = float(wheel.Ts)
         self.accel_limit = float(wheel.accel_limit_rpm_s)
@@ -336,6 +380,13 @@ class Diagnoser:
         self.residuals = ResidualGenerator(wheel)
         self.alarms: list[Alarm] = []
         self.thresholds: dict[str, float] = {}
+        self.notes: list[str] = []  # why a threshold does not give the requested rate
+        self._trace = trace
+        self.stuck_runs: list[int] = []  # runs of repeated readings while moving (trace)
+        self._stuck_run = 0
+        if calibration is True:
+            calibration = ThresholdCalibration.load() if reference is not None else False
+        self.calibration = calibration or None
         self.collected: dict[str, list[float]] = {name: [] for name in (*BLOCKS, "friction_change")}
         self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
@@ -365,6 +416,10 @@ class Diagnoser:
                 )
             self.residuals.current_model = np.asarray(reference.current_model, dtype=float)
             self._arm(reference)
+            if trace:
+                for det in self._detectors.values():
+                    if isinstance(det, (_BlockCusum, _Dropout)):
+                        det.trace = []
 
     # -- thresholds ----------------------------------------------------------------------
     def _arm(self, ref: HealthyReference) -> None:
@@ -373,22 +428,23 @@ class Diagnoser:
                 continue  # armed with the friction test
             sides = {"friction": "up", "motor": "up", "lag": "down"}.get(name, "both")
             arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
-            h = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
+            h_analytic = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
-            self._detectors[name] = _BlockCusum(stats, tol, h, sides)
-            self.thresholds[name] = h
+            self._detectors[name] = _BlockCusum(stats, tol, h_analytic, sides)
+            h = self._calibrated(name, h_analytic, self._detectors[name])
+            self._detectors[name].h = self.thresholds[name] = h
             if name == "friction":  # onsets smaller than the spread between units
                 tol = ref.tolerance.get("friction_change", DEFAULT_TOLERANCE["friction_change"])
                 # its own σ where the reference has it (hold-to-hold scatter of the
                 # change values, which the plain friction test's σ does not hold)
                 change = ref.tests.get("friction_change", stats)
                 change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
-                self._detectors["friction_change"] = _FrictionChange(
-                    change, tol, h, 6, ref.current_model
-                )
-                self.thresholds["friction_change"] = h
-        p = ref.repeat_probability
-        self._detectors["stuck"] = RunTest(run_length(self.arl0, p))
+                det = _FrictionChange(change, tol, h_analytic, 6, ref.current_model)
+                det.h = self._calibrated("friction_change", h_analytic, det)
+                self._detectors["friction_change"] = det
+                self.thresholds["friction_change"] = det.h
+        n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
+        self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
         block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
         mean = ref.lost_per_sample * block
@@ -396,8 +452,45 @@ class Diagnoser:
         n = 1
         while poisson.sf(n - 1, mean) > p_block:
             n += 1
+        n = int(self._calibrated("dropout", n))
         self._detectors["dropout"] = _Dropout(block, n)
         self.thresholds["dropout"] = n
+
+    def _calibrated(self, name: str, analytic: float, det=None) -> float:
+        """The threshold whose measured false-alarm rate is the requested one, where the
+        calibration holds this detector at this sample time (and CUSUM reference value);
+        a CUSUM ``det`` gets the tolerance share that rate needs."""
+        cal = self.calibration
+        curve = None if cal is None else cal.curves.get(name)
+        k = 0.0 if det is None else det.k
+        if cal is None or curve is None:
+            return analytic
+        same_ts = math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
+        if not same_ts or (curve.kind == "cusum" and not math.isclose(curve.k, k, rel_tol=0.1)):
+            if self.false_alarms_per_hour * cal.hours < RESOLVED:
+                return analytic  # a rate no calibration could resolve: nothing lost
+            value, note = (
+                analytic,
+                (
+                    f"{name}: the calibration was measured at Ts = {cal.Ts:g} s with reference "
+                    f"value k = {curve.k:.3g} σ, this model's are {self.Ts:g} s and {k:.3g} σ: the "
+                    "analytic threshold, whose rate is not measured "
+                    "(bench/calibrate_thresholds.py measures one for this model)"
+                ),
+            )
+        else:
+            value, share, note = cal.setting(name, self.false_alarms_per_hour, analytic)
+            if share < 1.0 and det is not None:
+                det.k = CUSUM_K + share * (det.k - CUSUM_K)
+                self.notes.append(
+                    f"{name}: {self.false_alarms_per_hour:g}/h needs the tolerance between "
+                    f"units cut to {share:.0%} (k = {det.k:.3g} σ): a healthy unit farther "
+                    "from the reference than that alarms"
+                )
+        if note:
+            self.notes.append(note)
+            warnings.warn(note, RwlabWarning, stacklevel=4)
+        return value
 
     # -- one sample ----------------------------------------------------------------------
     def update(
@@ -455,6 +548,8 @@ class Diagnoser:
                 new += self._fire(t_s, "dropout")
             if usable and self._detectors["stuck"].update(repeat and self._moving):
                 new += self._fire(t_s, "stuck")
+            if usable and self._trace:
+                self._trace_run(repeat and self._moving)
             sample = self._friction_sample
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
@@ -468,6 +563,25 @@ class Diagnoser:
                 self._change_probe.add_sample(t_s, *self._friction_sample)
         self._record(t_s, r, values)
         return new
+
+    def _trace_run(self, event: bool) -> None:
+        if event:
+            self._stuck_run += 1
+        elif self._stuck_run:
+            self.stuck_runs.append(self._stuck_run)
+            self._stuck_run = 0
+
+    def traces(self) -> dict:
+        """What a calibration counts: each block test's standardised block means, the
+        runs of repeated readings while moving, the lost frames per dropout block."""
+        self._trace_run(False)
+        out: dict = {
+            name: list(det.trace)
+            for name, det in self._detectors.items()
+            if isinstance(det, (_BlockCusum, _Dropout)) and det.trace is not None
+        }
+        out["stuck"] = list(self.stuck_runs)
+        return out
 
     def _values(self, t_s: float, r: dict, speed_rpm: float, current_a: float) -> dict:
         """The qualifying test values of a usable sample."""
@@ -639,6 +753,69 @@ def healthy_reference(
     )
 
 
+def measure_calibration(
+    records: list[IOData], wheel, reference: HealthyReference, *, origin: str = ""
+) -> ThresholdCalibration:
+    """Count each detector's false alarms over its thresholds on healthy records.
+
+    Parameters
+    ----------
+    records : list of IOData
+        Healthy records of units other than the reference's, as :func:`diagnose`
+        takes them.
+    wheel : IdentifiedWheel
+    reference : HealthyReference
+        The identified unit's, as the detectors will use it.
+    origin : str
+        How the records were made (stored with the calibration).
+
+    Returns
+    -------
+    ThresholdCalibration
+        Alarms per threshold (detectors restarted after each alarm) and the hours.
+    """
+    if not records:
+        raise ConfigError("a calibration needs at least one healthy record")
+    traces: dict[str, list] = {}
+    k: dict[str, float] = {}
+    sides: dict[str, str] = {}
+    moving = 0
+    for data in records:
+        t, held, speed, current, age, lost = _columns(data, wheel)
+        d = Diagnoser(
+            wheel, reference, false_alarms_per_hour=1e-9, latch=False, calibration=False, trace=True
+        )
+        for i in range(data.N):
+            d.update(float(t[i]), float(held[i]), speed[i], current[i], age[i], lost[i])
+        for name, values in d.traces().items():
+            traces.setdefault(name, []).append(np.array(values))
+        for name, det in d._detectors.items():
+            if isinstance(det, _BlockCusum):
+                k[name], sides[name] = det.k, det.sides
+        moving += d.repeats[1]
+    hours = sum(data.N * data.Ts for data in records) / 3600
+    curves = {}
+    for name in k:
+        for share in (1.0, *_SHARES):
+            k_share = CUSUM_K + share * (k[name] - CUSUM_K)
+            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
+                "cusum",
+                tuple(float(h) for h in _H_GRID),
+                tuple(int(a) for a in cusum_alarms(traces[name], k_share, sides[name])),
+                float(k_share),
+                int(sum(z.size for z in traces[name])),
+                share,
+            )
+    n = tuple(float(x) for x in range(1, _N_MAX + 1))
+    runs = [int(r) for rec in traces["stuck"] for r in rec]
+    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
+    blocks = [int(c) for rec in traces["dropout"] for c in rec]
+    curves["dropout"] = _Curve(
+        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
+    )
+    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
+
+
 @dataclass
 class Diagnosis:
     """What :func:`diagnose` found in a record.
@@ -655,8 +832,10 @@ class Diagnosis:
         The residuals and statistics at every sample (``t_s``, ``speed``, ...).
     false_alarms_per_hour : float
         The false-alarm rate the thresholds were set for, per detector.
-    calibration_s : float
-        Length of the calibration window, s.
+    duration_s : float
+        Length of the record, s.
+    notes : list of str
+        Detectors that cannot deliver the requested rate, and why.
     """
 
     alarms: list[Alarm]
@@ -665,6 +844,7 @@ class Diagnosis:
     history: dict[str, np.ndarray]
     false_alarms_per_hour: float
     duration_s: float = 0.0
+    notes: list[str] = field(default_factory=list)
 
     def faults(self) -> list[str]:
         """The faults named, in the order of their first alarm."""
@@ -698,6 +878,7 @@ class Diagnosis:
             "thresholds": self.thresholds,
             "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
             "duration_s": self.duration_s,
+            "threshold_notes": list(self.notes),
             "reference": self.reference.to_dict(),
             "residual_statistics": self.residual_statistics(),
         }
@@ -741,6 +922,7 @@ def diagnose(
     *,
     false_alarms_per_hour: float = 1e-3,
     latch: bool = True,
+    calibration: ThresholdCalibration | bool = True,
 ) -> Diagnosis:
     """Run the detector over a record's samples.
 
@@ -754,7 +936,7 @@ def diagnose(
     wheel : IdentifiedWheel
     reference : HealthyReference
         From the model file (:meth:`HealthyReference.from_model_file`).
-    false_alarms_per_hour, latch :
+    false_alarms_per_hour, latch, calibration :
         See :class:`Diagnoser`.
 
     Returns
@@ -768,7 +950,13 @@ def diagnose(
         Another Ts, no speed, an acceleration-mode record.
     """
     t, held, speed, current, age, lost = _columns(data, wheel)
-    d = Diagnoser(wheel, reference, false_alarms_per_hour=false_alarms_per_hour, latch=latch)
+    d = Diagnoser(
+        wheel,
+        reference,
+        false_alarms_per_hour=false_alarms_per_hour,
+        latch=latch,
+        calibration=calibration,
+    )
     for k in range(data.N):
         d.update(float(t[k]), float(held[k]), speed[k], current[k], age[k], lost[k])
     return Diagnosis(
@@ -778,4 +966,5 @@ def diagnose(
         {k: np.asarray(v, dtype=float) for k, v in d.history.items()},
         false_alarms_per_hour,
         data.N * data.Ts,
+        list(d.notes),
     )

@@ -6,6 +6,7 @@ Figure ids: ``fig-residuals`` (speed, acceleration and current residuals),
 
 from __future__ import annotations
 
+import html
 import json
 import os
 from pathlib import Path
@@ -66,11 +67,15 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         f"The identified model ran beside the telemetry at Ts = {np.median(np.diff(t)):g} s. "
         f"The detectors compare it with the healthy reference measured on the identification "
         f"record ({diagnosis.reference.source or 'see model.json'}), from the first sample on; "
-        f"the thresholds hold each detector to {diagnosis.false_alarms_per_hour:g} false alarms "
-        "per hour on healthy records (block CUSUMs: Siegmund's approximation of ARL₀ in the "
-        "reference's block durations; frozen speed: the exact run-length ARL₀ of the reference's "
-        "repeat probability; dropouts: Poisson counts of lost frames)."
+        f"the thresholds were asked for {diagnosis.false_alarms_per_hour:g} false alarms "
+        "per hour per detector on healthy records: the rate measured on healthy records of "
+        "other units (rwlab.diagnose.calibration) where it resolves that rate, otherwise the "
+        "larger of its extrapolation and the analytic threshold (block CUSUMs: Siegmund's "
+        "approximation of ARL₀; frozen speed: the run-length ARL₀ of the reference's repeat "
+        "probability; dropouts: Poisson counts of lost frames)."
     )
+    for note in diagnosis.notes:
+        page.html(f'<p class="note">Cannot be honoured: {html.escape(note)}</p>')
     page.heading("Alarms", "alarms-heading")
     if diagnosis.alarms:
         page.table(
@@ -121,7 +126,7 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
     for ax, name in zip(axes[:, 0], stats, strict=True):
         ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
         ax.axhline(diagnosis.thresholds[name], color="k", ls=":", label="threshold")
-        ax.set_yscale("symlog", linthresh=diagnosis.thresholds[name])
+        ax.set_yscale("symlog", linthresh=max(diagnosis.thresholds[name], 0.1))
         ax.set_ylim(bottom=0)
         ax.set_ylabel("statistic [σ]")
         ax.legend(loc="upper left", fontsize=8)
