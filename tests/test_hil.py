@@ -18,7 +18,7 @@ from rwlab.attitude.sim import simulate
 from rwlab.cli import main
 from rwlab.errors import ConfigError, WheelTimeout
 from rwlab.hil.bench import WheelBank
-from rwlab.hil.run import HilConfig, HilStopped, parse_node_fault, run_hil
+from rwlab.hil.run import HilConfig, HilStopped, parse_node_fault, run_hil, zero_crossings
 from rwlab.hil.satellite import Satellite
 from rwlab.testbed.record import read_record
 from rwlab.wheel.clock import SimClock, WallClock
@@ -202,6 +202,94 @@ def test_the_plant_took_the_wheels_momentum_from_their_telemetry(short_run):
             assert h == pytest.approx(
                 load_scenario("geo-smallsat").wheels.inertia * rpm_to_rad_s(speed)
             )
+
+
+@given(
+    signs=st.lists(st.sampled_from([-1.0, 1.0]), min_size=1, max_size=12),
+    dwell=st.lists(st.integers(0, 4), min_size=12, max_size=12),
+    hold=st.lists(st.integers(1, 3), min_size=12, max_size=12),
+)
+def test_zero_crossings_count_sign_changes_a_dwell_at_zero_once(signs, dwell, hold):
+    """Built from a known sequence of spin signs, each held a while and each followed by
+    a dwell at exactly 0: the count is the sign changes of that sequence."""
+    speed: list[float] = []
+    for s, d, h in zip(signs, dwell, hold, strict=False):
+        speed += [s * 100.0] * h + [0.0] * d
+    expected = sum(a != b for a, b in itertools.pairwise(signs))
+    assert zero_crossings(np.array(speed)) == expected
+    assert zero_crossings(np.zeros(5)) == 0
+
+
+@pytest.fixture(scope="module")
+def pyramid_fault(tmp_path_factory):
+    """A pyramid spun up to its 1000-rpm null-space bias (a minute before flight time 0),
+    a dead motor on node 2 at 90 s: with three wheels left the bias is lost and wheel 1
+    coasts through zero and sticks there (measured: 136 s reading 0)."""
+    out = tmp_path_factory.mktemp("hil-pyramid")
+    cfg = HilConfig(
+        scenario="geo-smallsat-pyramid", duration=400.0, seed=13, channel=_channel(),
+        reference=False, calibration_s=60.0, faults=(parse_node_fault("2:torque_constant=0@90"),),
+    )  # fmt: skip
+    return run_hil(cfg, out), out
+
+
+def _telemetry_crossings(rec, node) -> int:
+    speeds = [m["speed_rpm"] for m in rec.topic(f"/wheel{node}/telemetry") if m["t"] > 0]
+    signs = [np.sign(v) for v in speeds if v != 0]
+    return sum(a != b for a, b in itertools.pairwise(signs))
+
+
+def test_healthy_wheels_crossing_zero_after_a_reallocation_raise_no_alarm(pyramid_fault):
+    """The dead motor is named and idled; the three others lose their bias, and the one
+    that crosses zero and dwells in stiction is not taken for a fault (the old tracking
+    test named wheel 1 at 285 s: CUSUM 14.1 > 13.9)."""
+    result, out = pyramid_fault
+    [fault] = result.metrics["wheel_faults"]
+    assert fault["node"] == 2 and fault["named_kind"] == "torque_constant"
+    assert fault["detected_s"] - 90.0 <= 60.0 and fault["action"].startswith("idled")
+    rec = read_record(out / "record.mcap")
+    assert _telemetry_crossings(rec, 1) >= 1  # the situation the test is about happened
+    assert result.metrics["steady_max_error_deg"] <= 0.1
+
+
+def test_metrics_count_the_zero_crossings_of_the_reported_speeds(pyramid_fault):
+    """``wheel_zero_crossings`` as ``attitude simulate`` defines it, on the telemetry the
+    wheels sent during the flight (read back from the record, independently)."""
+    result, out = pyramid_fault
+    rec = read_record(out / "record.mcap")
+    total = sum(_telemetry_crossings(rec, n) for n in (1, 2, 3, 4))
+    assert total > 0
+    assert result.metrics["wheel_zero_crossings"] == total
+
+
+def test_every_channel_of_a_spun_up_run_reads_on_the_flight_clock(pyramid_fault):
+    """The pyramid spins up for a minute before flight time 0: `export --node` keeps the
+    record's flight time (the spin-up at negative times), as the satellite channel and
+    the events do, so node 2's idling shows at its alarm's time on every channel."""
+    from rwlab.hil.record import satellite_data
+    from rwlab.testbed.load import load_record
+
+    result, out = pyramid_fault
+    path = out / "record.mcap"
+    sat = satellite_data(path)
+    wheel = load_record(path, outputs=("speed",), node=2, max_gap=np.inf)
+    assert sat.tstart == pytest.approx(0.0)
+    assert wheel.tstart < -50  # the spin-up (1000 rpm at 20 rpm/s, 10 s hold) before 0
+    t_wheel = wheel.tstart + wheel.Ts * np.arange(wheel.N)
+    # ends with the flight (and the 1.2 s the closing idle is watched), not a minute on
+    assert t_wheel[-1] == pytest.approx(400.0, abs=2.0)
+    rec = read_record(path)
+    tel = rec.topic("/wheel2/telemetry")
+    tt = np.array([m["t"] for m in tel])
+    for k in (wheel.N // 4, wheel.N // 2, wheel.N - 1):  # each sample: the frame at its time
+        last = np.searchsorted(tt, t_wheel[k] + 1e-9, side="right") - 1
+        assert wheel.y[k, 0] == tel[last]["speed_rpm"]
+    detected = result.metrics["wheel_faults"][0]["detected_s"]
+    [alarm] = [e for e in rec.topic("/event") if e["kind"] == "alarm"]
+    assert alarm["t"] == pytest.approx(detected)
+    idle = [c["t"] for c in rec.topic("/wheel2/command") if c["mode"] == "IDLE"]
+    k = int(np.searchsorted(t_wheel, idle[0]))  # export's first sample after the idling
+    assert wheel.u[k, 0] == 0 and wheel.u[k - 2, 0] != 0
 
 
 # -- a wheel failure survived ------------------------------------------------------------------

@@ -20,6 +20,16 @@ dither's share the wheel did not follow (a motor without torque), the current
 the drive delivered against the one its own feed-forward asked for (a clamped
 current), or a drag that does not depend on the command (friction).
 
+A window in which the wheel's reading comes within :data:`STICTION_BAND` ×
+its Stribeck speed of zero (or of the Hall sensor's dead zone, where it reads
+0) is not tested: there the healthy law is breakaway — the wheel sticks at
+zero until its motor torque beats the static friction, which its drive's
+Coulomb feed-forward does not model — so a healthy wheel's residual is not its
+calibrated spread (measured: after a pyramid loses a wheel the three others
+lose their null-space bias, cross zero and dwell there ~10 s, which the CUSUM
+took for friction). At three Stribeck speeds the Stribeck excess is e⁻⁹ of
+itself: outside the band the test sees the wheel as calibrated.
+
 Hand-written: no library offers a command-tracking monitor for a wheel drive.
 """
 
@@ -43,6 +53,7 @@ CLIP = 4.0  # standardised residuals enter the CUSUM clipped to ±CLIP σ
 MIN_NAMING_S = 2.0  # the excursion's samples that name a fault: at least this many seconds
 FOLLOW_MAX = -0.3  # residual ∝ −command beyond this share: the wheel does not follow
 CURRENT_SHARE = 0.5  # delivered current below this share of the requested one: clamped
+STICTION_BAND = 3.0  # × the Stribeck speed (or the Hall dead zone): breakaway rules inside
 
 
 def null_vector(G: np.ndarray) -> np.ndarray | None:
@@ -187,6 +198,10 @@ class TrackingTest:
         arl0 = arl_to_samples(false_alarms_per_hour, self.window_s)
         self.cusum = Cusum(cusum_threshold(arl0), clip=CLIP)
         self.mean = self.sigma = math.nan
+        stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
+        self.band_rpm = STICTION_BAND * max(stribeck, params.min_measurable_rpm)
+        self._in_band = False  # the current window touched the stiction band
+        self.skipped_windows = 0
         self._calibration: list[float] = []
         self._last_speed: float | None = None
         self._start_speed: float | None = None
@@ -234,10 +249,15 @@ class TrackingTest:
         self._commanded += accel_cmd_rpm_s * self.dt
         self._n += 1
         self._excursion += 1
+        self._in_band |= abs(speed_rpm) < self.band_rpm or abs(last) < self.band_rpm
         if self._n < self.every:
             return None
         residual = (speed_rpm - self._start_speed - self._commanded) / self.window_s
         self._start_speed, self._commanded, self._n = speed_rpm, 0.0, 0
+        if self._in_band:  # breakaway, not tracking, rules this window: no evidence
+            self._in_band = False
+            self.skipped_windows += 1
+            return None
         if not self.calibrated:
             self._calibration.append(residual)
             if len(self._calibration) >= self.calibration_windows:

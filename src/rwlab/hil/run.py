@@ -62,7 +62,14 @@ from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.physics import rad_s_to_rpm
 
-__all__ = ["HilConfig", "HilResult", "HilStopped", "parse_node_fault", "run_hil"]
+__all__ = [
+    "HilConfig",
+    "HilResult",
+    "HilStopped",
+    "parse_node_fault",
+    "run_hil",
+    "zero_crossings",
+]
 
 SIM_READ_DELAY = 1e-6  # s after each control instant the simulated host reads (see run_hil)
 SPIN_UP_RPM_S = 20.0  # the bias spin-up's ramp, rpm/s
@@ -516,6 +523,8 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 "config": config,
                 "dbc_sha256": proto.dbc_sha256(),
                 "Ts": sc.run.dt,  # what `rwlab export --node N` samples a wheel at
+                # every channel's t is flight time (the spin-up before 0): export keeps it
+                "time_axis": "flight",
                 "mode": "acceleration",
             },
             force=force,
@@ -554,6 +563,9 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     reference = ref_metrics = None
     if cfg.reference:
         reference, ref_metrics = reference_simulation(sc, cfg, seed, loop.h0, run.t.size)
+    wheel_log = loop.wheel_log()
+    # the plant's momenta are the readings: count on them (the Satellite does not)
+    m["wheel_zero_crossings"] = sum(zero_crossings(w["speed_rpm"]) for w in wheel_log.values())
     payload = {
         **m,
         "timing": loop.timing(),
@@ -562,7 +574,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "bench": {**loop.bench, "idle_problems": problems},
         "diagnosis_off": loop.diagnosis_off,
         "health_check": loop.health_summary(),
-        "measurement": measurement_effects(loop.wheel_log(), params, sc.run.dt, cfg.latency_s),
+        "measurement": measurement_effects(wheel_log, params, sc.run.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
         "config": config,
     }
@@ -570,7 +582,6 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     atomic_write_bytes(targets["metrics.json"], lambda tmp: tmp.write_text(text))
     record.event(clock.now(), "stop", "end of run; every wheel idled")
     record.close()
-    wheel_log = loop.wheel_log()
     return HilResult(run, payload, loop.events, wheel_log, sc, loop.h0, reference, dict(targets))
 
 
@@ -621,17 +632,36 @@ def measurement_effects(wheel_log: dict, params, dt: float, latency: float) -> d
             continue
         realised = np.diff(speed) / dt  # rpm/s over each period after the first
         diff = (realised - cmd[1:]) * params.inertia * np.pi / 30
-        s = np.sign(speed[np.abs(speed) > 0])
         out["wheels"][str(node)] = {
             "torque_error_rms_Nm": float(np.sqrt(np.mean(diff**2))),
             "torque_error_mean_Nm": float(np.mean(diff)),
             "torque_command_rms_Nm": float(
                 np.sqrt(np.mean((cmd * params.inertia * np.pi / 30) ** 2))
             ),
-            "zero_crossings": int(np.sum(s[1:] != s[:-1])),
+            "zero_crossings": zero_crossings(speed),
             "time_reading_zero_s": float(np.sum(speed == 0) * dt),
         }
     return out
+
+
+def zero_crossings(speed_rpm: np.ndarray) -> int:
+    """Times a wheel's reported spin changed sign, as ``attitude simulate`` counts them.
+
+    Parameters
+    ----------
+    speed_rpm : (K,) array
+        The wheel's reported speed at each control period, rpm.
+
+    Returns
+    -------
+    int
+        Sign changes since the last non-zero reading: a dwell at exactly 0 between
+        opposite signs counts once, one between equal signs not at all (the kernel's
+        ``wheel_zero_crossings`` on the plant's momenta, which here are the readings).
+    """
+    speed = np.asarray(speed_rpm, dtype=float)
+    s = np.sign(speed[speed != 0])
+    return int(np.sum(s[1:] != s[:-1]))
 
 
 def _real_time(priority: int | None):

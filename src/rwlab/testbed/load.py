@@ -91,7 +91,10 @@ def load_record(
         u = the command (rpm or rpm/s) issued at sample k (sent within Ts/2 after
         t₀ + k·Ts: on the wall clock a command leaves a little after its
         instant), y = the chosen outputs; sample k is the last value received
-        at or before t₀ + k·Ts, t₀ the first command.
+        at or before t₀ + k·Ts, t₀ the first command. ``tstart`` counts from t₀, or
+        on the record's own clock where its metadata says ``"time_axis": "flight"``
+        (``rwlab hil``: flight time, the spin-up at negative times), so every
+        channel of such a record reads on one clock.
     """
     record = read_record(path)
     meta = record.metadata
@@ -159,10 +162,16 @@ def load_record(
         output_names=[OUTPUTS[o][0] for o in outputs],
         input_units=["rpm" if mode == "speed" else "rpm/s"],
         output_units=[OUTPUTS[o][1] for o in outputs],
-        tstart=float(grid[0] - t0),
+        tstart=float(grid[0] - _origin(meta, t0)),
         name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
         source=meta,
     )
+
+
+def _origin(meta: dict, first_command_t: float) -> float:
+    """Where a record's samples count from: its own clock's zero for a record on the
+    flight clock (``rwlab hil``), else its first command."""
+    return 0.0 if meta.get("time_axis") == "flight" else first_command_t
 
 
 def gap_free_segments(
@@ -195,7 +204,7 @@ def gap_free_segments(
     prefix = "" if node is None else f"/wheel{node}"
     t0 = record.topic(f"{prefix}/command")[0]["t"]
     tt = np.array([m["t"] for m in record.topic(f"{prefix}/telemetry")])
-    grid = t0 + data.tstart + data.Ts * np.arange(data.N)
+    grid = _origin(record.metadata, t0) + data.tstart + data.Ts * np.arange(data.N)
     eps = 1e-9 * max(1.0, abs(float(grid[-1])))
     period = float(np.median(np.diff(tt)))
     stale = np.zeros(data.N, dtype=bool)
