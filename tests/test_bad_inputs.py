@@ -442,6 +442,14 @@ def cases() -> list[tuple[str, list[str]]]:
         ("hil --rt-priority without --realtime", [*hil, "--rt-priority", "10"]),
         ("hil --calibration with --no-diagnosis", [*hil, "--no-diagnosis", "--calibration", "60"]),
         ("attitude montecarlo --resume --force", [*mc, "--runs", "2", "--resume", "--force"]),
+        (
+            "attitude simulate --relinearize with --controller pd",
+            [*sim, "--controller", "pd", "--relinearize", "10"],
+        ),
+        (
+            "attitude montecarlo --workers with --scheduler",
+            [*mc, "--runs", "2", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+        ),
         ("identify a record too short for the study", ["identify", "{D}/rec.mcap", *out]),
     ]
     return c

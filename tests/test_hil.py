@@ -406,6 +406,29 @@ def _assert_idled_and_closed(out, kind):
         assert rec.topic(f"/wheel{n}/telemetry")[-1]["mode"] == "IDLE"  # and they obeyed
 
 
+def test_ctrl_c_on_the_cli_exits_130_and_keeps_the_failed_record(tmp_path, monkeypatch):
+    """A stopped hil run ends as every command stopped by a signal: status 130, one line
+    that names what stopped it, the record kept in OUT.failed-<time>, OUT not written."""
+    real = Satellite.advance
+
+    def advance(self, h):
+        if self.k == 50:
+            raise KeyboardInterrupt
+        real(self, h)
+
+    monkeypatch.setattr(Satellite, "advance", advance)
+    out = tmp_path / "o"
+    r = CliRunner().invoke(
+        main,
+        ["hil", "--duration", "60", "--no-reference", "--channel", _channel(), "--out", str(out)],
+    )
+    assert r.exit_code == 130, r.output
+    assert "interrupted (Ctrl-C); every wheel was idled" in r.output
+    assert not out.exists()
+    [failed] = tmp_path.glob("o.failed-*")
+    _assert_idled_and_closed(failed, "interrupt")
+
+
 @pytest.mark.parametrize("exc", [RuntimeError("boom"), KeyboardInterrupt()])
 def test_an_error_or_ctrl_c_idles_every_wheel_and_closes_the_record(tmp_path, monkeypatch, exc):
     real = Satellite.advance

@@ -49,3 +49,35 @@ def test_a_bad_top_level_copy_is_refused(model_dict, tmp_path, key, value):
         WheelModelFile.load(path)
     with pytest.raises(FileFormatError):
         IdentifiedWheel.from_json(path)
+
+
+def _greybox(Ts=0.5):
+    from rwlab.ident.greybox import WheelGreyBox
+
+    rw90 = dict(inertia=4.2e-4, torque_constant=0.0214, current_limit=0.7, coulomb=2e-4)
+    return WheelGreyBox(
+        Ts=Ts,
+        **rw90,
+        breakaway=3e-4,
+        stribeck_speed=1.05,
+        viscous=1e-6,
+        accel_limit=32.9,
+        kp=0.5,
+        ki=0.1,
+        nominal_torque_constant=0.0214,
+        nominal_coulomb=2e-4,
+        nominal_viscous=1e-6,
+        max_speed=816.8,
+    ).to_dict()
+
+
+@pytest.mark.parametrize("Ts", [math.nan, 0.25])
+def test_a_bad_nonlinear_model_is_refused_when_the_file_is_loaded(model_dict, tmp_path, Ts):
+    """Every command reads model.json through the owner class: a NaN (or another Ts) in
+    the grey box is refused there, not only by the command that simulates it."""
+    good, path = tmp_path / "good.json", tmp_path / "model.json"
+    good.write_text(json.dumps({**model_dict, "greybox": _greybox()}))
+    assert WheelModelFile.load(good).Ts == 0.5  # the valid grey box loads
+    path.write_text(json.dumps({**model_dict, "greybox": {**_greybox(), "Ts": Ts}}))
+    with pytest.raises(FileFormatError, match="greybox"):
+        WheelModelFile.load(path)

@@ -421,12 +421,18 @@ def convert_scenario_file(path: str | Path) -> str:
         TOML text with the same values (comments are not carried over).
     """
     path = Path(path)
+    if str(path) in SCENARIOS and not path.is_file():
+        raise ConfigError(
+            f"{path} is a built-in scenario, already in sections; convert-scenario takes a "
+            "scenario TOML file"
+        )
     raw = _read_toml(path)
     if _is_flat(raw):
         raw = _sections_of_flat(raw, path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FormatWarning)
         load_scenario(str(path))  # the values must be valid before they are rewritten
+    raw.setdefault("scenario", {}).setdefault("name", path.stem)  # the same name as before
     lines = [f"# {path.name} in section tables (rwlab.attitude.scenario)"]
     for table in ("scenario", *SECTIONS):
         values = dict(raw.get(table, {}))

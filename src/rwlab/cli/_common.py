@@ -28,6 +28,9 @@ FLAGS = {
     "realtime=True": "--realtime",
     "resume=True": "--resume",
     "steady_after": "--steady-after",
+    "workers=": "--workers",
+    "scheduler=": "--scheduler",
+    "epoch_spread_days": "--epoch-spread-days",
 }
 _PARAMETER = re.compile(
     r"\b("

@@ -268,6 +268,9 @@ def attitude_simulate(
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     _only_with("rho", controller == "lqg_ltr", "with --controller lqg_ltr")
+    _only_with(
+        "relinearize", controller != "pd", "with an LQR design (--controller lqr, lqg, lqg_ltr)"
+    )
     _check_run(duration, relinearize)
     if steady_after is not None and not (
         math.isfinite(steady_after) and 0 <= steady_after < duration

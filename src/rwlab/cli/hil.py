@@ -15,7 +15,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
-from rwlab.errors import ConfigError
+from rwlab.errors import ConfigError, HilStopped
 
 HIL_FILES = ("record.mcap", "metrics.json", "report.html")
 
@@ -149,13 +149,19 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
     steps = round(duration / load_scenario(scenario).run.dt) + 1
     # locked before anything starts; published whole on success; a failed run's record is
     # kept (with its stop event) in OUT.failed-<time>, never in OUT
-    with (
-        _output(out, HIL_FILES, force, "hil run", keep_failed=True) as stage,
-        _stop_signals(),
-        _steps_progress(steps, f"hil {controller}", unit="periods") as progress,
-    ):
-        result = run_hil(cfg, stage, progress=progress)
-        report = write_hil_report(result, stage)
+    try:
+        with (
+            _output(out, HIL_FILES, force, "hil run", keep_failed=True) as stage,
+            _stop_signals(),
+            _steps_progress(steps, f"hil {controller}", unit="periods") as progress,
+        ):
+            result = run_hil(cfg, stage, progress=progress)
+            report = write_hil_report(result, stage)
+    except HilStopped as exc:
+        if not exc.interrupted:
+            raise
+        click.echo(str(exc), err=True)  # "interrupted (…); every wheel was idled …"
+        raise SystemExit(130) from None  # as every command stopped by a signal
     m = result.metrics
     for key in ("steady_max_error_deg", "steady_rms_error_deg", "max_error_deg"):
         ref = m["reference_simulation"]

@@ -546,8 +546,9 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         record.close()
         if isinstance(exc, KeyboardInterrupt):
             raise HilStopped(
-                f"interrupted ({exc or 'Ctrl-C'}); every wheel was idled and the record "
-                f"{targets['record.mcap']} closed"
+                f"interrupted ({str(exc) or 'Ctrl-C'}); every wheel was idled and the record "
+                f"{targets['record.mcap']} closed",
+                interrupted=True,
             ) from None
         if isinstance(exc, Exception):
             raise HilStopped(

@@ -139,6 +139,7 @@ class WheelModelFile:
                 raise ModelError(f"{name} must be a positive number, got {value}")
         if self.servo is not None and self.servo.Ts != self.model.Ts:
             raise ModelError(f"the servo model's Ts {self.servo.Ts} differs from {self.model.Ts}")
+        _check_nonlinear_models(self.nonlinear_models or {}, self.model.Ts)
 
     @property
     def Ts(self) -> float:
@@ -301,6 +302,23 @@ def _channel(d: dict) -> dict:
         "unit": str(d.get("unit") or ""),
         "offset": float(d["offset"]),
     }
+
+
+def _check_nonlinear_models(models: dict, Ts: float) -> None:
+    """Every nonlinear model in the file readable, finite and at the linear model's Ts: a
+    bad one is refused when the file is loaded, whichever command reads it."""
+    from rwlab.ident.greybox import WheelGreyBox
+    from rwlab.ident.nlarx import NLARXModel
+
+    readers = {"greybox": WheelGreyBox.from_dict, "nlarx": NLARXModel.from_dict}
+    for name, d in models.items():
+        try:
+            model = readers[name](d)
+        except (ModelError, KeyError, TypeError, ValueError) as exc:
+            raise ModelError(f"bad {name} model ({exc})") from None
+        ts = getattr(model, "Ts", Ts)
+        if not (math.isfinite(ts) and abs(ts - Ts) <= 1e-9 * Ts):
+            raise ModelError(f"the {name} model's Ts {ts} differs from the linear model's {Ts}")
 
 
 def _check_top_level(d: dict, source: str) -> None:

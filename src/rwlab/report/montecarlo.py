@@ -90,6 +90,8 @@ def montecarlo(
         raise ConfigError(
             "resume=True continues the kept runs and force=True starts over: give one of them"
         )
+    if workers is not None and scheduler is not None:  # before anything is kept
+        raise ConfigError("workers= and scheduler= both given: give one of them")
     with output_folder(out, _FILES, force=force, what="Monte Carlo campaign") as stage:
         from rwlab.attitude.scenario import load_scenario
         from rwlab.campaign.dispersions import load_dispersions
