@@ -446,7 +446,7 @@ def test_engine_option_errors(tmp_path):
         "--out",
         tmp_path / "o",
     )
-    assert both.exit_code == 2 and "not both" in both.output
+    assert both.exit_code == 2 and "both given: give one of them" in both.output
     r = _rwlab("identify", "dryer", "--workers", 2, "--out", tmp_path / "o")
     assert r.exit_code == 2 and "folder of records" in r.output
 
