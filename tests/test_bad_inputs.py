@@ -495,7 +495,9 @@ def test_there_are_at_least_150_cases_across_every_command():
 
 def test_contradictions_and_short_records_say_what_to_do(where):
     """The messages name the flags (not the library's parameters) and the way out."""
-    answers = {what: refuse(args, where, CASES.index((what, args)))[1] for what, args in CASES[-11:]}
+    answers = {
+        what: refuse(args, where, CASES.index((what, args)))[1] for what, args in CASES[-11:]
+    }
     assert (
         "--rho applies only with --controller lqg_ltr"
         in answers["attitude simulate --rho with --controller pd"]
