@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import click
 
 from rwlab.cli._common import (
@@ -145,8 +147,11 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
     )
     scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller
     from rwlab.attitude.scenario import load_scenario
+    from rwlab.errors import FormatWarning
 
-    steps = round(duration / load_scenario(scenario).run.dt) + 1
+    with warnings.catch_warnings():  # a flat file's warning: once, from run_hil
+        warnings.simplefilter("ignore", FormatWarning)
+        steps = round(duration / load_scenario(scenario).run.dt) + 1
     # locked before anything starts; published whole on success; a failed run's record is
     # kept (with its stop event) in OUT.failed-<time>, never in OUT
     try:

@@ -99,7 +99,7 @@ def partial_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.partial{path.suffix or '.mcap'}")
 
 
-def _open_locked(path: Path):
+def _open_locked(path: Path, asked: Path):
     """Open ``path`` for writing under an exclusive lock, or raise ``RecordBusyError``.
 
     ``fcntl.flock`` (advisory, released by the OS when the process dies) guards
@@ -115,7 +115,8 @@ def _open_locked(path: Path):
         except BlockingIOError:
             os.close(fd)
             raise RecordBusyError(
-                f"{path} is being written by another run; wait for it or choose another --out"
+                f"{asked} is being written by another run (into {path.name}); wait for it or "
+                "choose another --out"
             ) from None
         try:
             same = os.stat(path).st_ino == os.fstat(fd).st_ino
@@ -167,7 +168,7 @@ class RecordWriter:
         if self.path.parent.exists() and not self.path.parent.is_dir():
             raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(self.path.parent))
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = _open_locked(self.partial)
+        self._fh = _open_locked(self.partial, self.path)
         self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
         self._writer.start(profile="rwlab", library="rwlab")
         self._channels = {}
