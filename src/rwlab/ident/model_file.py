@@ -243,7 +243,7 @@ class WheelModelFile:
                 servo_fit_percent=None if nl is None else _float(nl.get("validation_fit_percent")),
                 preferred=d.get("preferred", "linear"),
                 current_limit_a=_optional_float(sat.get("current_limit_a")),
-                nonlinear_models={k: d[k] for k in NONLINEAR_MODELS if isinstance(d.get(k), dict)},
+                nonlinear_models={k: d[k] for k in NONLINEAR_MODELS if d.get(k) is not None},
                 nonlinear_chosen=d.get("nonlinear_chosen"),
                 nonlinear_choice=d.get("nonlinear_choice"),
                 healthy_reference=d.get("healthy_reference"),
@@ -312,6 +312,8 @@ def _check_nonlinear_models(models: dict, Ts: float) -> None:
 
     readers = {"greybox": WheelGreyBox.from_dict, "nlarx": NLARXModel.from_dict}
     for name, d in models.items():
+        if not isinstance(d, dict):
+            raise ModelError(f"{name} must be a JSON object, got {type(d).__name__}")
         try:
             model = readers[name](d)
         except (ModelError, KeyError, TypeError, ValueError) as exc:

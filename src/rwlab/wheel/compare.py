@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.data import IOData
-from rwlab.errors import DataError, FileFormatError, ModelError
+from rwlab.errors import DataError, FileFormatError
 from rwlab.ident.greybox import RPM, WheelGreyBox
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.nlarx import NLARXModel
@@ -99,20 +99,13 @@ def compare_wheel_models(
     if "nonlinear" in info:
         sims["servo"] = ("servo", _identified(model_json, "nonlinear", y[0], u, sat))
     if "greybox" in info:
-        try:
-            grey = WheelGreyBox.from_dict(info["greybox"])
-        except ModelError as exc:
-            raise FileFormatError(f"{model_json}: bad grey-box model ({exc})") from None
-        grey = grey.with_limits(
+        grey = WheelGreyBox.from_dict(info["greybox"]).with_limits(  # checked by _read
             current_limit=sat.get("current_limit_a"),
             max_speed=None if "speed_limit_rpm" not in sat else sat["speed_limit_rpm"] * RPM,
         )
         sims["greybox"] = ("greybox", grey.simulate(u, y[0]))
     if "nlarx" in info:
-        try:
-            black = NLARXModel.from_dict(info["nlarx"])
-        except ModelError as exc:
-            raise FileFormatError(f"{model_json}: bad NLARX model ({exc})") from None
+        black = NLARXModel.from_dict(info["nlarx"])  # checked by _read
         sims["nlarx"] = ("nlarx", black.predict(data, np.inf))
     out = {}
     for name, (structure, yhat) in sims.items():
