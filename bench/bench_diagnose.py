@@ -10,7 +10,10 @@ from other units, in two disjoint sets:
 
 - ``tune``: healthy units 1–6 (2 h), faulty units 41–54: what the detectors
   were developed on;
-- ``eval``: healthy units 21–32 (4 h), faulty units 61–85: judged only.
+- ``eval``: healthy units 21–32 (4 h), faulty units 61–85: judged only (it
+  has been looked at while the detectors were developed);
+- ``eval2``: healthy units 201–212 (4 h), faulty units 221–245, the eval set's
+  faults and signals on fresh units and seeds: run once, after all tuning.
 
 1. false alarms: the healthy 20-minute records (PRBS, chirp, multisine, steps
    in turn) diagnosed at the default rate (latched) and with restarting
@@ -48,6 +51,7 @@ from rwlab.wheel import IdentifiedWheel
 
 SIGNALS = ("prbs", "chirp", "multisine", "step")
 DETECTORS = (
+    "offset",
     "friction",
     "friction_change",
     "motor",
@@ -66,6 +70,7 @@ FAULTS = {
         "speed_sensor_stuck",
         "telemetry_dropout=0.3",
         "friction=1.5+speed_sensor_bias=15",
+        "torque_constant=0.8+speed_sensor_bias=20",
     ),
     "eval": (
         "friction=1.5",
@@ -79,6 +84,7 @@ FAULTS = {
         "torque_constant=0.8+speed_sensor_bias=20",
     ),
 }
+FAULTS["eval2"] = FAULTS["eval"]
 POWER_UP = (
     "friction=1.5",
     "torque_constant=0.8",
@@ -87,9 +93,11 @@ POWER_UP = (
     "speed_sensor_stuck",
 )
 EARLY_CHIRP = ("friction=1.5", "speed_sensor_bias=15")
-HEALTHY = {"tune": (1, 6, 100), "eval": (21, 12, 1000)}  # first unit, records, first seed
+HEALTHY = {"tune": (1, 6, 100), "eval": (21, 12, 1000), "eval2": (201, 12, 7000)}
+# (first unit, records, first seed)
 CALIBRATION = (101, 18, 3000)  # more healthy tune records (units 101–118): the thresholds' data
-FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61}
+FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61, "eval2": 221}
+FAULT_SEED = {"tune": 200, "eval": 2000, "eval2": 8000}  # + unit
 
 
 def _faults(text: str, onset: float) -> tuple[str, ...]:
@@ -117,7 +125,7 @@ def records(which: str) -> dict[str, tuple]:
     for fault in FAULTS[which]:
         for signal in ("prbs", "chirp"):
             unit += 1
-            seed = (200 if which == "tune" else 2000) + unit
+            seed = FAULT_SEED[which] + unit
             out[f"{which}_f{unit}"] = (
                 unit,
                 seed,
@@ -127,14 +135,15 @@ def records(which: str) -> dict[str, tuple]:
                 fault,
                 ONSET,
             )
-    if which == "eval":
-        for fault in POWER_UP:
-            unit += 1
-            out[f"eval_p{unit}"] = (unit, 2000 + unit, "prbs", 600, _faults(fault, 0), fault, 0.0)
-        for fault in EARLY_CHIRP:  # onset in the chirp's slow first third
-            unit += 1
-            spec = (unit, 2000 + unit, "chirp", 900, _faults(fault, 300), fault, 300.0)
-            out[f"eval_c{unit}"] = spec
+    seed = FAULT_SEED[which]
+    for fault in POWER_UP if which != "tune" else ():
+        unit += 1
+        spec = (unit, seed + unit, "prbs", 600, _faults(fault, 0), fault, 0.0)
+        out[f"{which}_p{unit}"] = spec
+    for fault in EARLY_CHIRP:  # onset in the chirp's slow first third
+        unit += 1
+        spec = (unit, seed + unit, "chirp", 900, _faults(fault, 300), fault, 300.0)
+        out[f"{which}_c{unit}"] = spec
     return out
 
 
@@ -163,7 +172,7 @@ def _model(cache: Path, out: Path) -> Path:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--set", choices=["tune", "eval"], default="eval")
+    parser.add_argument("--set", choices=["tune", "eval", "eval2"], default="eval")
     parser.add_argument("--part", choices=["all", "healthy", "faults"], default="all")
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 10.0, 100.0])
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")

@@ -107,6 +107,14 @@ STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 1
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
+OFFSET_WINDOW = 120  # samples of one speed-offset regression (60 s at 0.5 s)
+OFFSET_SWING_RPM = 200.0  # the model's speed reaches ± this within the window
+OFFSET_SE_RPM = 1.5  # the intercept's standard error must be below this, rpm
+OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no holds)
+# σ of one window's intercept on healthy units of the twin (model mismatch, not noise):
+# measured on the tune set's healthy chirp and multisine records (units 1–6, 101–118;
+# bench/calibrate_thresholds.py prints it), never on the eval sets
+OFFSET_SIGMA_RPM = 4.0
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -151,6 +159,44 @@ class Alarm:
             "ci95": None if self.ci is None else list(self.ci),
             "unit": self.unit,
         }
+
+
+def speed_offset(window: np.ndarray) -> float | None:
+    """The speed residual's offset over a window of a continuously changing command.
+
+    A biased speed sensor adds a constant to the measured speed, which no model of the
+    wheel's dynamics explains; the identified model's mismatch with another unit (gain,
+    lag) is proportional to the model's speed and acceleration. The offset is the
+    intercept of the least squares r_ω ≈ b + g·ω_m + c·sign ω_m + h·α_m(k) + h'·α_m(k − 1)
+    (c: a friction unlike the model's lags the wheel by a Coulomb-like term): where the
+    model's speed swings through zero (both signs beyond :data:`OFFSET_SWING_RPM`), b is
+    the residual at zero speed, an interpolation, not an extrapolation.
+
+    Parameters
+    ----------
+    window : ndarray, shape (n, 4)
+        Per sample: speed residual (rpm), model speed (rpm), model acceleration (rpm/s),
+        1 if the command changed at that sample else 0.
+
+    Returns
+    -------
+    float or None
+        The offset b, rpm; None where the window does not qualify (holds, no swing
+        through zero, or an intercept less certain than :data:`OFFSET_SE_RPM`).
+    """
+    rs, m, am, changed = window.T
+    if np.mean(changed) < OFFSET_CONTINUOUS or m.min() > -OFFSET_SWING_RPM:
+        return None
+    if m.max() < OFFSET_SWING_RPM:
+        return None
+    X = np.column_stack([np.ones(len(rs) - 1), m[1:], np.sign(m[1:]), am[1:], am[:-1]])
+    coef, *_ = np.linalg.lstsq(X, rs[1:], rcond=None)
+    e = rs[1:] - X @ coef
+    dof = len(e) - X.shape[1]
+    cov = np.linalg.pinv(X.T @ X) * float(e @ e) / dof
+    if not math.sqrt(max(cov[0, 0], 0.0)) <= OFFSET_SE_RPM:
+        return None
+    return float(coef[0])
 
 
 class _BlockCusum:
@@ -387,7 +433,9 @@ class Diagnoser:
         if calibration is True:
             calibration = ThresholdCalibration.load() if reference is not None else False
         self.calibration = calibration or None
-        self.collected: dict[str, list[float]] = {name: [] for name in (*BLOCKS, "friction_change")}
+        self.collected: dict[str, list[float]] = {
+            name: [] for name in (*BLOCKS, "friction_change", "offset")
+        }
         self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
             name: []
@@ -398,6 +446,8 @@ class Diagnoser:
         self._friction_sample = (0.0, 0.0, 0.0)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
+        self._offset_window: list[tuple[float, float, float, float]] = []
+        self._offset_command = math.nan
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
         self._moving = False
@@ -443,6 +493,13 @@ class Diagnoser:
                 det.h = self._calibrated("friction_change", h_analytic, det)
                 self._detectors["friction_change"] = det
                 self.thresholds["friction_change"] = det.h
+        # the speed offset on a continuously changing command: its σ is the tune set's
+        # (the identification record, a stepped PRBS, has no window that qualifies)
+        stats = BlockStats(0.0, OFFSET_SIGMA_RPM, 1, 1 / OFFSET_WINDOW, 0, "tune set")
+        h_analytic = cusum_threshold(max(self.arl0 / stats.block_s * 2, 1.5), CUSUM_K)
+        det = _BlockCusum(stats, 0.0, h_analytic, "both")
+        det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
+        self._detectors["offset"] = det
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
         self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
@@ -542,6 +599,9 @@ class Diagnoser:
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
+        offset = self._offset(r, command_rpm, usable)
+        if offset is not None:
+            values["offset"] = offset
         new: list[Alarm] = []
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
@@ -563,6 +623,20 @@ class Diagnoser:
                 self._change_probe.add_sample(t_s, *self._friction_sample)
         self._record(t_s, r, values)
         return new
+
+    def _offset(self, r: dict, command_rpm: float, usable: bool) -> float | None:
+        """Collect a window of usable samples; its speed offset when it is full."""
+        if not usable:
+            return None
+        model_accel = r["accel_rpm_s"] - r["acceleration"]
+        changed = float(command_rpm != self._offset_command)
+        self._offset_command = command_rpm
+        self._offset_window.append((r["speed"], r["model_rpm"], model_accel, changed))
+        if len(self._offset_window) < OFFSET_WINDOW:
+            return None
+        window = np.array(self._offset_window)
+        self._offset_window.clear()
+        return speed_offset(window)
 
     def _trace_run(self, event: bool) -> None:
         if event:
@@ -654,7 +728,7 @@ class Diagnoser:
         """What isolation reads: each block test's recent block means, and more."""
         ev: dict = {
             name: self._detectors[name].since_change()
-            for name in BLOCKS
+            for name in (*BLOCKS, "offset")
             if name in self._detectors and self._detectors[name].raw
         }
         change = self._detectors.get("friction_change")
@@ -667,6 +741,7 @@ class Diagnoser:
         assert ref is not None  # alarms come only from an armed detector
         # σ of one value, the block-mean σ scaled back (correlation included)
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
+        ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
         if motor is not None and lag is not None:  # the motor test before and after the lag
@@ -738,6 +813,7 @@ def healthy_reference(
     tests = {
         name: block_stats(np.array(values), BLOCKS.get(name, BLOCKS["friction"]), data.N)
         for name, values in second.collected.items()
+        if name != "offset"  # no window of a stepped PRBS qualifies: its σ is a constant
     }
     reps, readings = second.repeats
     return HealthyReference(
@@ -796,7 +872,8 @@ def measure_calibration(
     hours = sum(data.N * data.Ts for data in records) / 3600
     curves = {}
     for name in k:
-        for share in (1.0, *_SHARES):
+        # no tolerance between units in the reference value (offset): nothing to share
+        for share in (1.0, *_SHARES) if k[name] > CUSUM_K else (1.0,):
             k_share = CUSUM_K + share * (k[name] - CUSUM_K)
             curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
                 "cusum",

@@ -20,6 +20,7 @@ motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 +
 friction    excess only at constant speed                     ``friction``, factor
                                                               (1 + e_ω)/(1 + e_α)
 speed       held speed offset from the command                 ``speed_sensor_bias``, rpm
+offset      offset of the speed residual, continuous command   ``speed_sensor_bias``, rpm
 lag         slower than the model at its acceleration limit   ``current_limit``: the
             with a healthy motor test                         current it flattens at (A);
                                                               with the motor test in
@@ -125,7 +126,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'friction', 'motor', 'speed', 'lag'}
+    detector : {'dropout', 'stuck', 'friction', 'friction_change', 'motor', 'speed', 'offset', 'lag'}
     ev : dict
         The evidence (see the module docstring).
 
@@ -146,6 +147,9 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         ]
     if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev)
+    if detector == "offset":  # the speed residual's offset on a continuous command
+        bias, half = _mean_ci(ev["offset"], ev["sigma"]["offset"])
+        return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
     if detector == "speed":
         held = np.asarray(ev["speed"], dtype=float)
         if held.size >= 5 and np.ptp(held) == 0:  # one reading, over and over: not noise
