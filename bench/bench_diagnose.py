@@ -52,6 +52,7 @@ from rwlab.wheel import IdentifiedWheel
 SIGNALS = ("prbs", "chirp", "multisine", "step")
 DETECTORS = (
     "offset",
+    "slew",
     "friction",
     "friction_change",
     "motor",

@@ -115,6 +115,10 @@ OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no hol
 # measured on the tune set's healthy chirp and multisine records (units 1–6, 101–118;
 # bench/calibrate_thresholds.py prints it), never on the eval sets
 OFFSET_SIGMA_RPM = 4.0
+SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
+SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
+# the Stribeck band's low speeds, below the back-EMF's supply limit
+SLEW_MIN = 3  # samples in each half of a slew
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -197,6 +201,49 @@ def speed_offset(window: np.ndarray) -> float | None:
     if not math.sqrt(max(cov[0, 0], 0.0)) <= OFFSET_SE_RPM:
         return None
     return float(coef[0])
+
+
+def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None:
+    """How much faster a wheel slews towards zero speed than away from it.
+
+    At its acceleration limit the wheel's controller sets the current open loop (the
+    inertial current plus its friction feed-forward), so friction the feed-forward does
+    not know changes the acceleration, not the current: it slows the half of a slew that
+    runs away from zero speed and speeds up the half that runs towards it. Each half's
+    acceleration is taken from its first and last speed (the samples' own differences
+    are Hall noise); the difference is in units of the reference's Coulomb deceleration
+    τ_c/I (the current model's c₂/c₀). A friction factor F raises it by about 2(F − 1).
+    A clamped current (no feed-forward step at the zero crossing) is the lag test's.
+
+    Parameters
+    ----------
+    segment : list of (t_s, speed_rpm, current_a)
+        Consecutive samples of one slew (one sign of acceleration).
+    c : array_like, shape (4,)
+        The reference's current model [A per rpm/s, A per rpm, A, A].
+
+    Returns
+    -------
+    float or None
+        The asymmetry; None where either half has fewer than :data:`SLEW_MIN` samples
+        in :data:`SLEW_SPEED_RPM` or the current does not step at the zero crossing.
+    """
+    inner = segment[1:-1]  # the first and last samples enter and leave the limit
+    lo, hi = SLEW_SPEED_RPM
+    pos = [x for x in inner if lo < x[1] < hi]
+    neg = [x for x in inner if -hi < x[1] < -lo]
+    if min(len(pos), len(neg)) < SLEW_MIN or not c[0] > 0 or not c[2] > 0:
+        return None
+    step = np.mean([x[2] for x in pos]) - np.mean([x[2] for x in neg])
+    if step < c[2]:  # half the reference's feed-forward step: a clamped current
+        return None
+
+    def rate(half):
+        return abs(half[-1][1] - half[0][1]) / (half[-1][0] - half[0][0])
+
+    rising = inner[-1][1] > inner[0][1]
+    toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
+    return float((toward - away) / (c[2] / c[0]))
 
 
 class _BlockCusum:
@@ -434,7 +481,7 @@ class Diagnoser:
             calibration = ThresholdCalibration.load() if reference is not None else False
         self.calibration = calibration or None
         self.collected: dict[str, list[float]] = {
-            name: [] for name in (*BLOCKS, "friction_change", "offset")
+            name: [] for name in (*BLOCKS, "friction_change", "offset", "slew")
         }
         self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
@@ -448,6 +495,8 @@ class Diagnoser:
         self._recent_speed: deque = deque(maxlen=8)
         self._offset_window: list[tuple[float, float, float, float]] = []
         self._offset_command = math.nan
+        self._slew: list[tuple[float, float, float]] = []
+        self._slew_sign = 0.0
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
         self._moving = False
@@ -474,8 +523,8 @@ class Diagnoser:
     # -- thresholds ----------------------------------------------------------------------
     def _arm(self, ref: HealthyReference) -> None:
         for name, stats in ref.tests.items():
-            if name == "friction_change":
-                continue  # armed with the friction test
+            if name in ("friction_change", "slew"):
+                continue  # armed with the friction test, and after the loop
             sides = {"friction": "up", "motor": "up", "lag": "down"}.get(name, "both")
             arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
             h_analytic = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
@@ -500,6 +549,13 @@ class Diagnoser:
         det = _BlockCusum(stats, 0.0, h_analytic, "both")
         det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
         self._detectors["offset"] = det
+        if "slew" in ref.tests:  # older references lack it
+            stats = ref.tests["slew"]
+            h_analytic = cusum_threshold(max(self.arl0 / stats.block_s, 1.5), CUSUM_K)
+            tol = ref.tolerance.get("slew", DEFAULT_TOLERANCE["slew"])
+            det = _BlockCusum(stats, tol, h_analytic, "up")
+            det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
+            self._detectors["slew"] = det
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
         self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
@@ -602,6 +658,9 @@ class Diagnoser:
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
             values["offset"] = offset
+        slew = self._slew_value(t_s, r, speed_rpm, current_a, usable)
+        if slew is not None:
+            values["slew"] = slew
         new: list[Alarm] = []
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
@@ -637,6 +696,24 @@ class Diagnoser:
         window = np.array(self._offset_window)
         self._offset_window.clear()
         return speed_offset(window)
+
+    def _slew_value(
+        self, t_s: float, r: dict, speed_rpm: float, current_a: float, usable: bool
+    ) -> float | None:
+        """Collect one slew's samples; its asymmetry when it ends."""
+        accel = r["accel_rpm_s"]
+        slewing = usable and abs(accel) >= SLEW_SHARE * self.accel_limit
+        slewing = slewing and math.isfinite(current_a)
+        sign = math.copysign(1.0, accel) if slewing else 0.0
+        value = None
+        if sign != self._slew_sign and self._slew:
+            c = self.residuals.current_model
+            value = None if c is None else slew_asymmetry(self._slew, c)
+            self._slew = []
+        self._slew_sign = sign
+        if slewing:
+            self._slew.append((t_s, speed_rpm, current_a))
+        return value
 
     def _trace_run(self, event: bool) -> None:
         if event:
@@ -728,7 +805,7 @@ class Diagnoser:
         """What isolation reads: each block test's recent block means, and more."""
         ev: dict = {
             name: self._detectors[name].since_change()
-            for name in (*BLOCKS, "offset")
+            for name in (*BLOCKS, "offset", "slew")
             if name in self._detectors and self._detectors[name].raw
         }
         change = self._detectors.get("friction_change")
@@ -813,8 +890,10 @@ def healthy_reference(
     tests = {
         name: block_stats(np.array(values), BLOCKS.get(name, BLOCKS["friction"]), data.N)
         for name, values in second.collected.items()
-        if name != "offset"  # no window of a stepped PRBS qualifies: its σ is a constant
+        if name not in ("offset", "slew")  # no window of a stepped PRBS qualifies: its σ is a constant
     }
+    if len(second.collected["slew"]) >= 4:  # slews through zero speed: few in a record
+        tests["slew"] = block_stats(np.array(second.collected["slew"]), 1, data.N)
     reps, readings = second.repeats
     return HealthyReference(
         Ts=float(data.Ts),

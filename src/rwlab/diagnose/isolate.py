@@ -21,6 +21,8 @@ friction    excess only at constant speed                     ``friction``, fact
                                                               (1 + e_ω)/(1 + e_α)
 speed       held speed offset from the command                 ``speed_sensor_bias``, rpm
 offset      offset of the speed residual, continuous command   ``speed_sensor_bias``, rpm
+slew        at the acceleration limit: faster towards zero      ``friction``, factor
+            speed than away (friction beyond the feed-forward)  1 + Δ/2
 lag         slower than the model at its acceleration limit   ``current_limit``: the
             with a healthy motor test                         current it flattens at (A);
                                                               with the motor test in
@@ -121,12 +123,27 @@ def _rotor(ev: dict) -> list[Finding]:
     return findings or [Finding("friction", None, None, "factor")]
 
 
+def _slew(ev: dict) -> Finding:
+    """A slew faster towards zero speed than away from it: friction beyond the
+    feed-forward's, F ≈ 1 + Δ/2 (Δ in Coulomb decelerations over the reference's level);
+    a weak motor (the motor test in excess) slews slower both ways."""
+    motor = _motor(ev)
+    if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
+        return _torque_constant(*motor)
+    e, half = _mean_ci(ev["slew"], ev["sigma"]["slew"])
+    e -= ev["ref_mean"]["slew"]
+    # model uncertainty: the healthy level's spread between slew profiles
+    half = math.hypot(half, Z95 * ev["tolerance"].get("slew", 0.0))
+    return Finding("friction", 1 + e / 2, (1 + (e - half) / 2, 1 + (e + half) / 2), "factor")
+
+
 def isolate(detector: str, ev: dict) -> list[Finding]:
     """The faults that explain an alarm of ``detector``, sized.
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'friction', 'friction_change', 'motor', 'speed', 'offset', 'lag'}
+    detector : {'dropout', 'stuck', 'friction', 'friction_change', 'motor', 'speed', 'offset',
+        'slew', 'lag'}
     ev : dict
         The evidence (see the module docstring).
 
@@ -147,6 +164,8 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         ]
     if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev)
+    if detector == "slew":
+        return [_slew(ev)]
     if detector == "offset":  # the speed residual's offset on a continuous command
         bias, half = _mean_ci(ev["offset"], ev["sigma"]["offset"])
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]

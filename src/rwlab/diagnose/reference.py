@@ -49,6 +49,9 @@ DEFAULT_TOLERANCE = {
     "speed": 2.0,
     "lag": 0.03,
     "friction_change": 0.15,  # within one record: drift 5 %/√h and the bearing warm-up
+    # slew asymmetry (units of the Coulomb deceleration): its healthy level moves with the
+    # slew's profile (speeds, length) by about this much between a PRBS and a chirp
+    "slew": 0.3,
 }
 
 
