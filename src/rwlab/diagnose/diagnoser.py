@@ -95,6 +95,7 @@ __all__ = [
 
 CUSUM_K = 0.5
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
+STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
@@ -504,6 +505,7 @@ class Diagnoser:
         self._lost: float | None = None
         self._command: tuple[float, float] = (math.nan, -math.inf)
         self._still_since = math.inf  # since when wheel and model are quiet, s
+        self._still_speeds: deque = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
         if reference is None:  # measuring a reference: collect the change test's values
             probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
             self._change_probe = _FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
@@ -643,7 +645,14 @@ class Diagnoser:
         # hold a well-regulated wheel's Hall reading repeats; the speed and lag tests and
         # the frozen check catch a sensor stuck there once the command changes)
         self._moving = abs(r["acceleration"] - r["accel_rpm_s"]) >= QUIET_RPM_S
-        if self._moving or abs(r["accel_rpm_s"]) >= QUIET_RPM_S or not usable:
+        # the wheel's own quiet: its mean acceleration over STILL_SPAN_S (a weak motor's
+        # loop holds a speed with a few rpm of ripple, which a single difference reads
+        # as acceleration)
+        self._still_speeds.append(speed_rpm if usable else math.nan)
+        span = (self._still_speeds[-1] - self._still_speeds[0]) / (
+            (len(self._still_speeds) - 1) * self.Ts or math.inf
+        )
+        if self._moving or not abs(span) < QUIET_RPM_S or not usable:
             self._still_since = math.inf
         elif self._still_since == math.inf:
             self._still_since = t_s
@@ -741,7 +750,9 @@ class Diagnoser:
         prev = self._prev
         self._prev = {"accel": accel, "model_accel": model_accel}
         settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
-        if settled and abs(self._command[0]) <= HELD_MAX_RPM:
+        # (not a hold inside the stiction band: there the wheel may rest at 0 instead)
+        held = abs(self._command[0])
+        if settled and (STILL_RPM <= held <= HELD_MAX_RPM or held == 0.0):
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
