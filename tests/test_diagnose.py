@@ -149,7 +149,7 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
     expected = RW90.inertia * 2 * math.pi / 60 / RW90.torque_constant
     assert ref.current_model[0] == pytest.approx(expected, rel=0.05)
     assert ref.repeat_samples >= 500  # moving samples of the 20-min record (issue: 36–214)
-    assert set(ref.tests) == {"friction", "friction_change", "motor", "speed", "lag"}
+    assert set(ref.tests) == {"friction", "friction_change", "motor", "speed", "lag", "slew"}
     assert all(s.samples >= 4 * s.block for s in ref.tests.values())
     again = HealthyReference.from_dict(json.loads(json.dumps(ref.to_dict())))
     assert again == ref

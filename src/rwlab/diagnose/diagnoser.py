@@ -119,7 +119,8 @@ OFFSET_SIGMA_RPM = 4.0
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit
-SLEW_MIN = 3  # samples in each half of a slew
+SLEW_MIN = 4  # samples in each half of a slew (over ≥ 1.5 s: the Hall reading's noise
+# over a shorter half moves its acceleration by about the Coulomb deceleration)
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -219,7 +220,8 @@ def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None
     Parameters
     ----------
     segment : list of (t_s, speed_rpm, current_a)
-        Consecutive samples of one slew (one sign of acceleration).
+        Consecutive samples of one slew (one sign of acceleration); t_s the time the
+        telemetry was measured.
     c : array_like, shape (4,)
         The reference's current model [A per rpm/s, A per rpm, A, A].
 
@@ -667,7 +669,7 @@ class Diagnoser:
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
             values["offset"] = offset
-        slew = self._slew_value(t_s, r, speed_rpm, current_a, usable)
+        slew = self._slew_value(t_s - age_s, r, speed_rpm, current_a, usable)
         if slew is not None:
             values["slew"] = slew
         new: list[Alarm] = []
@@ -709,7 +711,8 @@ class Diagnoser:
     def _slew_value(
         self, t_s: float, r: dict, speed_rpm: float, current_a: float, usable: bool
     ) -> float | None:
-        """Collect one slew's samples; its asymmetry when it ends."""
+        """Collect one slew's samples (at the telemetry's own time); its asymmetry when
+        it ends."""
         accel = r["accel_rpm_s"]
         slewing = usable and abs(accel) >= SLEW_SHARE * self.accel_limit
         slewing = slewing and math.isfinite(current_a)

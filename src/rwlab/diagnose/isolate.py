@@ -58,6 +58,7 @@ Z95 = 1.959964
 FRICTION_UNIT_SD = math.sqrt(2) * 0.3 / math.sqrt(3)
 # ... and of the inertial current I/k_t between two units: I ±2 %, k_t ±5 %, uniform
 MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
+SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
@@ -132,8 +133,9 @@ def _slew(ev: dict) -> Finding:
         return _torque_constant(*motor)
     e, half = _mean_ci(ev["slew"], ev["sigma"]["slew"])
     e -= ev["ref_mean"]["slew"]
-    # model uncertainty: the healthy level's spread between slew profiles
-    half = math.hypot(half, Z95 * ev["tolerance"].get("slew", 0.0))
+    # model uncertainty: the healthy level's spread between slew profiles, and the
+    # factor's scale (on the twin, ×1.5 reads 1.4–1.6 and ×2 reads up to 2.9)
+    half = math.hypot(half, Z95 * ev["tolerance"].get("slew", 0.0), Z95 * SLEW_SCALE_SD * e)
     return Finding("friction", 1 + e / 2, (1 + (e - half) / 2, 1 + (e + half) / 2), "factor")
 
 
