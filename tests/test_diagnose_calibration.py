@@ -145,6 +145,8 @@ def test_the_package_calibration_covers_every_detector_and_says_where_it_came_fr
         "friction_change",
         "motor",
         "speed",
+        "offset",
+        "slew",
         "lag",
         "stuck",
         "dropout",
