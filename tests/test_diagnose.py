@@ -314,3 +314,84 @@ def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
     assert "warning: " in result.output and "/h" in result.output
     notes = json.loads((out / "diagnosis.json").read_text())["threshold_notes"]
     assert any("cannot deliver 100/h" in n for n in notes)
+
+
+# -- faults during a chirp: the speed offset and the slew asymmetry ----------------------
+
+
+def test_speed_offset_is_the_residual_at_zero_speed_whatever_the_model_mismatch():
+    """A residual made of a gain error, a lag (acceleration) term, a Coulomb-like term and a
+    constant bias, with noise: the window's offset is the bias (truth built here); holds and
+    a window that never crosses zero speed do not qualify."""
+    from rwlab.diagnose.diagnoser import OFFSET_WINDOW, speed_offset
+
+    rng = np.random.default_rng(3)
+    t = 0.5 * np.arange(OFFSET_WINDOW)
+    model = 800 * np.sin(2 * np.pi * t / 13.0)
+    accel = np.gradient(model, 0.5)
+    for bias in (-20.0, 0.0, 12.5):
+        rs = bias + 0.01 * model + 0.02 * accel + 3 * np.sign(model)
+        rs += rng.normal(0, 1.0, model.size)
+        window = np.column_stack([rs, model, accel, np.ones_like(t)])
+        assert speed_offset(window) == pytest.approx(bias, abs=1.0)
+    held = np.column_stack([rs, model, accel, (np.arange(t.size) % 10 == 0).astype(float)])
+    assert speed_offset(held) is None  # a stepped command: the held-speed test's
+    one_sided = np.column_stack([rs, model + 2000, accel, np.ones_like(t)])
+    assert speed_offset(one_sided) is None  # an intercept would be an extrapolation
+
+
+def _slew(toward: float, away: float, rising: bool = True, step: float = 0.02):
+    """A slew through zero: 8 samples each side at 0.5 s, the half towards zero at
+    ``toward`` rpm/s and the half away at ``away``; the current steps by ``step`` A."""
+    sign = 1 if rising else -1
+    first = [(0.5 * k, sign * (-2000 + toward * 0.5 * k), -0.54 * sign) for k in range(8)]
+    t0, w0 = first[-1][0] + 1.0, sign * 150.0
+    second = [(t0 + 0.5 * k, w0 + sign * away * 0.5 * k, sign * (step - 0.54)) for k in range(8)]
+    return first + second
+
+
+def test_slew_asymmetry_reads_friction_the_feed_forward_does_not_know():
+    from rwlab.diagnose.diagnoser import slew_asymmetry
+
+    c = (1.8e-3, 2.5e-6, 9e-3, 0.0)  # the Coulomb deceleration c2/c0 = 5 rpm/s
+    for rising in (True, False):
+        assert slew_asymmetry(_slew(314, 314, rising), c) == pytest.approx(0.0, abs=1e-9)
+        # a friction 5 rpm/s beyond the feed-forward's: towards zero +5, away −5
+        assert slew_asymmetry(_slew(319, 309, rising), c) == pytest.approx(2.0)
+    assert slew_asymmetry(_slew(319, 309, step=0.0), c) is None  # a clamped current
+    assert slew_asymmetry(_slew(319, 309)[:10], c) is None  # too short a half
+
+
+@pytest.fixture(scope="module")
+def unit_model_file(tmp_path_factory):
+    """As the bench and the package's thresholds: identified on unit 0's 20-minute PRBS."""
+    out = tmp_path_factory.mktemp("ident_unit0")
+    run_experiment(ExperimentConfig(duration=1200, seed=0, unit=0), out / "prbs.mcap")
+    result = CliRunner().invoke(main, ["identify", str(out / "prbs.mcap"), "--out", str(out / "m")])
+    assert result.exit_code == 0, result.output
+    return out / "m" / "model.json"
+
+
+@pytest.mark.slow
+def test_a_biased_sensor_and_worn_bearings_are_named_during_a_chirp(tmp_path, unit_model_file):
+    """The wheel never holds a speed: a 15 rpm bias and friction ×1.5 from 600 s of a
+    15-minute chirp (other units than the model's) are found within 300 s and named."""
+    found = {}
+    for fault, seed in (("speed_sensor_bias=15@600", 31), ("friction=1.5@600", 32)):
+        path = tmp_path / f"{seed}.mcap"
+        cfg = ExperimentConfig(signal="chirp", duration=900, seed=seed, unit=seed, faults=(fault,))
+        run_experiment(cfg, path)
+        alarms = _diagnose(path, unit_model_file).alarms
+        assert alarms and all(600 <= a.t_s <= 900 for a in alarms), alarms
+        found[fault] = alarms[0]
+    bias = found["speed_sensor_bias=15@600"]
+    assert bias.kind == "speed_sensor_bias" and bias.ci[0] <= 15 <= bias.ci[1]
+    worn = found["friction=1.5@600"]
+    assert worn.kind == "friction" and worn.ci[0] <= 1.5 <= worn.ci[1]
+
+
+@pytest.mark.slow
+def test_a_healthy_chirp_of_another_unit_raises_no_alarm(tmp_path, unit_model_file):
+    path = tmp_path / "chirp.mcap"
+    run_experiment(ExperimentConfig(signal="chirp", duration=1200, seed=33, unit=33), path)
+    assert _diagnose(path, unit_model_file).alarms == []

@@ -904,7 +904,8 @@ def healthy_reference(
     tests = {
         name: block_stats(np.array(values), BLOCKS.get(name, BLOCKS["friction"]), data.N)
         for name, values in second.collected.items()
-        if name not in ("offset", "slew")  # no window of a stepped PRBS qualifies: its σ is a constant
+        if name
+        not in ("offset", "slew")  # no window of a stepped PRBS qualifies: its σ is a constant
     }
     if len(second.collected["slew"]) >= 4:  # slews through zero speed: few in a record
         tests["slew"] = block_stats(np.array(second.collected["slew"]), 1, data.N)
