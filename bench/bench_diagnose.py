@@ -8,11 +8,11 @@ the defaults (paper A's stepped PRBS), on a fault-free 20-minute record of unit
 0 of the realistic twin (``ExperimentConfig.unit``). Every other record comes
 from other units, in two disjoint sets:
 
-- ``tune``: healthy units 1–6 (2 h), faulty units 41–54: what the detectors
-  were developed on;
-- ``eval``: healthy units 21–32 (4 h), faulty units 61–85: judged only (it
+- ``tune``: healthy units 1–6 (2 h) and the calibration's 101–136 (12 h),
+  faulty units 41–58: what the detectors were developed on;
+- ``eval``: healthy units 21–44 (8 h), faulty units 61–85: judged only (it
   has been looked at while the detectors were developed);
-- ``eval2``: healthy units 201–212 (4 h), faulty units 221–245, the eval set's
+- ``eval2``: healthy units 201–224 (8 h), faulty units 231–255, the eval set's
   faults and signals on fresh units and seeds: run once, after all tuning.
 
 1. false alarms: the healthy 20-minute records (PRBS, chirp, multisine, steps
@@ -94,10 +94,10 @@ POWER_UP = (
     "speed_sensor_stuck",
 )
 EARLY_CHIRP = ("friction=1.5", "speed_sensor_bias=15")
-HEALTHY = {"tune": (1, 6, 100), "eval": (21, 12, 1000), "eval2": (201, 12, 7000)}
+HEALTHY = {"tune": (1, 6, 100), "eval": (21, 24, 1000), "eval2": (201, 24, 7000)}
 # (first unit, records, first seed)
-CALIBRATION = (101, 18, 3000)  # more healthy tune records (units 101–118): the thresholds' data
-FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61, "eval2": 221}
+CALIBRATION = (101, 36, 3000)  # more healthy tune records (units 101–136): the thresholds' data
+FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61, "eval2": 231}
 FAULT_SEED = {"tune": 200, "eval": 2000, "eval2": 8000}  # + unit
 
 

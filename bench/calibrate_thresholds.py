@@ -4,8 +4,8 @@ Run:  python bench/calibrate_thresholds.py [--cache DIR] [--out FILE]
 
 The model is bench_diagnose's (``rwlab identify`` with the defaults on unit 0's
 fault-free 20-minute stepped PRBS); the healthy records are the tune set's
-(``bench_diagnose.records('tune')``: units 1–6 and 101–118, 20 minutes each,
-PRBS, chirp, multisine and steps in turn), never the eval set's units 21–32,
+(``bench_diagnose.records('tune')``: units 1–6 and 101–136, 20 minutes each,
+PRBS, chirp, multisine and steps in turn), never the eval sets' units (21–44, 201–224),
 on which ``bench_diagnose.py --set eval`` judges the thresholds. Each detector
 runs restarted after every alarm over every record; the counts per threshold
 go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
