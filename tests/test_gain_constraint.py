@@ -15,7 +15,7 @@ from scipy.signal import lfilter
 from rwlab.data import IOData
 from rwlab.errors import DataError
 from rwlab.ident import armax, arx, bj, oe
-from rwlab.ident.study import _choose, identification_study
+from rwlab.ident.study import _choose, _parts, identification_study
 
 A_TRUE, B_TRUE = [1.0, -1.2, 0.5], [0.0, 0.3, 0.2]  # static gain 0.5 / 0.3
 K_TRUE = 0.5 / 0.3
@@ -163,3 +163,25 @@ def test_the_study_imposes_the_gain_of_the_estimation_part_only():
     assert whole > 1.01  # the whole record's gain is pulled up by the validation part
     for r in study.constrained:
         assert r["dc_gain"] == pytest.approx(k["gain"], rel=1e-9)
+
+
+def test_the_study_says_when_its_validation_part_swings_wider_than_its_estimation_part():
+    """Steps twice as large after the split through a rate limit: the same model fits the
+    validation part worse, and the study measures why (independent of the model)."""
+    rng = np.random.default_rng(2)
+    n, hold = 2400, 40
+    levels = rng.choice([-1.0, 1.0], n // hold) * np.where(np.arange(n // hold) < 42, 1.0, 2.0)
+    u = np.repeat(levels, hold)
+    y = np.zeros(n)
+    for t in range(1, n):  # first-order lag with a slew limit of 0.3 per sample
+        y[t] = y[t - 1] + np.clip(0.2 * (u[t - 1] - y[t - 1]), -0.3, 0.3)
+    y += rng.normal(0, 0.002, n)
+    est, val = IOData(u[:1680], y[:1680], 1.0), IOData(u[1680:], y[1680:], 1.0)
+    parts = _parts(arx(est, 2, 2, 1), est, val)
+    e, v = parts["estimation"], parts["validation"]
+    assert v["input_step_rms"] / e["input_step_rms"] == pytest.approx(2.0, rel=0.05)
+    assert v["fast_share"] > 2 * e["fast_share"]  # more time at the slew limit
+    assert e["fit_percent"] - v["fit_percent"] >= 5
+    assert "the validation part's input steps are 2.0" in parts["note"]
+    alike = _parts(arx(est, 2, 2, 1), est, est)
+    assert alike["note"] is None

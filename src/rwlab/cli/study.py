@@ -134,6 +134,8 @@ def identify(
         mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
     click.echo(f"chosen: {study['chosen']['reason']}")
+    if (study.get("parts") or {}).get("note"):
+        click.echo(f"estimation vs validation part: {study['parts']['note']}")
     nl = study["nonlinear"]
     if nl and "error" not in nl:
         click.echo(

@@ -83,6 +83,27 @@ class StaticGain:
                 f"this structure has na = {self.na} and nf = {self.nf}"
             )
 
+    @classmethod
+    def of(cls, dc_gain: float | None, orders) -> StaticGain | None:
+        """The constraint on a prediction-error structure's parameters, or None.
+
+        Parameters
+        ----------
+        dc_gain : float or None
+            K, or None for no constraint.
+        orders
+            The structure (``na``, ``nb``, ``nc``, ``nd``, ``nf``; ``nb``/``nf`` per input).
+
+        Returns
+        -------
+        StaticGain or None
+        """
+        if dc_gain is None:
+            return None
+        if len(orders.nb) != 1:
+            raise DataError(f"dc_gain applies to one input; the data have {len(orders.nb)}")
+        return cls(dc_gain, orders.na, orders.nb[0], orders.nc, orders.nd, orders.nf[0])
+
     @property
     def vector(self) -> np.ndarray:
         """c, shape (d,): the constraint is ``c @ theta == gain``."""

@@ -49,11 +49,14 @@ from rwlab.ident.arx import check_order
 from rwlab.ident.gain_constraint import StaticGain
 from rwlab.ident.models import PolyModel
 from rwlab.ident.pem_starts import (
+    _check_starts,
     _columns,
     _dynamics_starts,
     _initial_armax,
     _initial_bj,
     _initial_oe,
+    _input_orders,
+    _needs_input,
     _Orders,
 )
 from rwlab.ident.polynomials import check_initial, filt, stabilize
@@ -215,23 +218,6 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float, gain=None):
 
 
 # -- starting values -------------------------------------------------------------------
-def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
-    """One order per input (MATLAB's order vectors); a scalar applies to every input."""
-    if nu == 0:
-        if value is None or (isinstance(value, Sequence) and len(value) == 0):
-            return ()
-        raise DataError(
-            f"the data have no input (a time series), so {name} must be omitted or []; "
-            "an ARMA model is armax(data, na, nc=...)"
-        )
-    if value is None:
-        raise DataError(f"{name} is required: the data have {nu} input(s)")
-    values = list(value) if isinstance(value, Sequence) else [value] * nu
-    if len(values) != nu:
-        raise DataError(f"{name} needs one value per input ({nu}), got {values}")
-    return tuple(check_order(name, v, minimum) for v in values)
-
-
 def _prepare(data, orders: _Orders, what: str):
     experiments = as_experiments(data)
     first = experiments[0]
@@ -429,7 +415,7 @@ def armax(
         _input_orders("nk", nk if nu else None, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    gain = _gain(dc_gain, orders)
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "armax")
     subset = _init_subset(series)
     starts = [_initial_armax(orders, subset)]
@@ -440,29 +426,9 @@ def armax(
     return _finish(orders, starts, experiments, series, _method("armax", gain), max_iter, tol, gain)
 
 
-def _gain(dc_gain, orders: _Orders) -> StaticGain | None:
-    """The static-gain constraint on ``orders``' parameters, or None without ``dc_gain``."""
-    if dc_gain is None:
-        return None
-    if orders.nu != 1:
-        raise DataError(f"dc_gain applies to one input; the data have {orders.nu}")
-    return StaticGain(dc_gain, orders.na, orders.nb[0], orders.nc, orders.nd, orders.nf[0])
-
-
 def _method(name: str, gain: StaticGain | None) -> str:
     extra = "" if gain is None else ", static gain constrained"
     return f"{name} (prediction error, LM{extra})"
-
-
-def _check_starts(starts) -> int:
-    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 0:
-        raise DataError(f"starts must be a non-negative integer, got {starts!r}")
-    return int(starts)
-
-
-def _needs_input(what: str, nu: int) -> None:
-    if nu == 0:
-        raise DataError(f"{what} needs an input; for a time series use ar, arx or armax")
 
 
 def oe(
@@ -514,7 +480,7 @@ def oe(
         _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    gain = _gain(dc_gain, orders)
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "oe")
     thetas = [
         orders.pack(np.ones(1), Bs, np.ones(1), np.ones(1), Fs)
@@ -572,7 +538,7 @@ def bj(
         _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
-    gain = _gain(dc_gain, orders)
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "bj")
     subset = _init_subset(series)
     thetas = [

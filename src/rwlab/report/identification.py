@@ -188,6 +188,9 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
         f"{ch['fit_percent']:.2f} %. {ch['reason']}.</p>"
     )
+    note = (study.get("parts") or {}).get("note")
+    if note:
+        page.text(f"Estimation and validation parts differ: {note}.", note=True)
 
     steady = study.get("steady_state_gain")
     if steady:
