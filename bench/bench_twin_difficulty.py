@@ -12,7 +12,13 @@ defaults. Printed per record:
 - ``dc``: the chosen model's DC gain in rpm/rpm, and its error against the
   measured steady-state gain (``rwlab.ident.study.steady_state_gain``: the
   least-squares slope of settled speed against command over every PRBS hold of
-  at least 30 s, the speed averaged over the hold's last 5 s).
+  at least 30 s, the speed averaged over the hold's last 5 s);
+- ``twin``: for a gain-constrained choice (``…+K``), its unconstrained twin's
+  fit and DC gain error; ``K``: the gain imposed, measured on the estimation
+  part's settled holds alone, ± its standard error (holds);
+- ``amp val/est``: the RMS of the speed's deviation from its mean on the
+  validation part over the same on the estimation part (a validation part that
+  swings wider or narrower than the part the model learnt from).
 
 Paper A reached 76.5 % on the real wheel. Usage::
 
@@ -49,16 +55,23 @@ def one(unit: int | None, seed: int, rate_limit: bool, wheel: str, folder: Path)
     paper = PolyModel(*map(np.array, PAPER_ARX221), Ts=data.Ts, nk=1)
     y_paper = np.ravel(paper.simulate(u[:, None]))
     gain = steady_state_gain(data)["gain"]
-    row = next(r for r in res.orders + res.others if r["structure"] == res.chosen.structure)
+    row = next(r for r in res.rows if r["structure"] == res.chosen_name)
     dc = row["dc_gain"]  # the deterministic part's, physical units
     arx221 = res.orders[0]
+    twin = res.to_dict()["chosen"]["unconstrained_twin"]
+    n_val = data.N - n_est
+    rms = [float(np.std(part)) for part in (y[:n_est], y[n_est:])]
     return {
+        "twin": twin,
+        "anchor": res.gain_constraint,
+        "amplitude": rms[1] / rms[0],
+        "n_val": n_val,
         "arx221": arx221["fit_percent"],
         "arx221_dc": arx221["dc_gain_error_percent"],
         "unit": unit,
         "seed": seed,
         "paper": fit_percent(y[n_est:], y_paper[n_est:]),
-        "chosen": res.chosen.structure,
+        "chosen": res.chosen_name,
         "fit": row["fit_percent"],
         "dc": dc,
         "gain": gain,
@@ -80,8 +93,9 @@ def main() -> None:
         "20 min at Ts = 0.5 s"
     )
     print(
-        f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>10} {'fit %':>7} "
-        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8} {'ARX221 %':>9} {'its DC err':>10}"
+        f"{'unit':>4} {'seed':>4} {'paper %':>8} {'chosen':>11} {'fit %':>7} "
+        f"{'DC gain':>8} {'measured':>8} {'DC err %':>8} {'ARX221 %':>9} {'its DC err':>10} "
+        f"{'twin fit':>8} {'twin err':>8} {'K (estimation holds)':>24} {'amp val/est':>11}"
     )
     if args.pairs:
         pairs = [
@@ -94,10 +108,17 @@ def main() -> None:
             r = one(unit, seed, args.rate_limit, args.wheel, Path(tmp))
             err = 100 * (r["dc"] / r["gain"] - 1)
             name = "-" if unit is None else unit
+            twin, k = r["twin"], r["anchor"]
+            tw = (
+                f"{twin['fit_percent']:8.2f} {twin['dc_gain_error_percent']:8.2f}"
+                if twin
+                else f"{'-':>8} {'-':>8}"
+            )
+            kk = "-" if k is None else f"{k['gain']:.4f} ± {k['gain_std']:.4f} ({k['holds']})"
             print(
-                f"{name:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>10} {r['fit']:7.2f} "
+                f"{name:>4} {seed:>4} {r['paper']:8.2f} {r['chosen']:>11} {r['fit']:7.2f} "
                 f"{r['dc']:8.4f} {r['gain']:8.4f} {err:8.2f} {r['arx221']:9.2f} "
-                f"{r['arx221_dc']:10.2f}",
+                f"{r['arx221_dc']:10.2f} {tw} {kk:>24} {r['amplitude']:11.3f}",
                 flush=True,
             )
 

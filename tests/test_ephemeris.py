@@ -321,3 +321,16 @@ def test_srp_scale_falls_with_the_square_of_the_suns_distance():
         1 / 1.0167**2
     )
     assert np.all(table[:, SKY_COLUMNS.index("sunlit")] == 1.0)
+
+
+def test_a_run_inside_the_shadow_is_in_eclipse_for_exactly_its_duration(tmp_path):
+    """10 minutes around midnight after the March equinox lie inside the Earth's shadow
+    (its ~72 min end at 00:43 UTC): the run's 6001 samples span 600 s, so eclipse_s is
+    600, not 600.1 (one sample per step, not per sample)."""
+    out = tmp_path / "night"
+    args = ["attitude", "simulate", "--scenario", "geo-comsat", "--controller", "lqr"]
+    args += ["--epoch", "2027-03-21T00:00:00Z", "--duration", "600", "--out", str(out)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["eclipse_s"] == pytest.approx(600.0, abs=1e-9)

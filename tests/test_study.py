@@ -66,7 +66,7 @@ def test_study_picks_delay_1_and_reports_orders_fit_and_whiteness(study_dir):
     assert ceiling > 95
     assert all(60 < r["fit_percent"] < ceiling - 10 and r["mse"] > 0 for r in study["orders"])
     chosen = study["chosen"]
-    rows = study["orders"] + study["others"]
+    rows = study["orders"] + study["others"] + study["constrained"]
     best = max(r["fit_percent"] for r in rows)
     assert best - 3 <= chosen["fit_percent"] <= best
     assert "simplest" in chosen["reason"]
@@ -79,6 +79,12 @@ def test_study_picks_delay_1_and_reports_orders_fit_and_whiteness(study_dir):
         r for r in rows if r["n_params"] < chosen["n_params"] and r["fit_percent"] >= best - 3
     ]
     assert all(abs(r["dc_gain_error_percent"]) > 2 for r in simpler)
+    if chosen.get("gain_constrained"):  # an imposed gain is said, with its free twin's numbers
+        k = study["gain_constraint"]
+        assert f"static gain constrained to K = {k['gain']:.4f}" in chosen["reason"]
+        twin = chosen["unconstrained_twin"]
+        assert twin["structure"] + "+K" == chosen["structure"]
+        assert f"fits {twin['fit_percent']:.2f} %" in chosen["reason"]
     res = study["residuals"][chosen["structure"]]
     assert isinstance(res["white"], bool) and 0 <= res["whiteness_p"] <= 1
     assert {o["structure"][:2] for o in study["others"]} == {"AR", "OE", "BJ"}
@@ -193,7 +199,7 @@ def test_report_renders_in_headless_chromium_without_network(study_dir, browser)
     )
     assert len(widths) >= len(FIGURES) and min(widths) > 100
     chosen = json.loads((study_dir / "study.json").read_text())["chosen"]["structure"]
-    assert re.search(rf"Chosen model: {chosen}", driver.page_source)
+    assert re.search(rf"Chosen model: {re.escape(chosen)}", driver.page_source)
 
 
 def _offset_record(seed: int, N: int = 3000) -> IOData:

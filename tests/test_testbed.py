@@ -43,6 +43,7 @@ def test_prbs_experiment_to_identification_end_to_end(prbs_record):
     assert summary.status == "completed" and summary.commands == 2400 and summary.lost_frames == 0
     data = load_record(path)
     assert data.Ts == 0.5 and data.N == 2401 and data.input_names == ("command",)
+    assert data.name == path.name  # a run that reached its end: nothing said
     est, _ = data.normalize().split(0.7)
     assert delayest(est, nk_max=5) == 1
     model = arx(est, 2, 2, 1)
@@ -80,6 +81,8 @@ def test_interrupted_experiment_idles_the_wheel_and_closes_the_record(tmp_path):
     last_event = rec.topic("/event")[-1]
     assert (last_event["kind"], last_event["message"]) == ("stop", "interrupted")
     assert rec.topic("/telemetry")[-1]["mode"] == "IDLE"
+    # what identify reads says the run was cut short
+    assert load_record(path).name == "stop.mcap (interrupted: the run stopped before its end)"
 
 
 def test_realtime_experiment_runs_on_the_wall_clock(tmp_path):

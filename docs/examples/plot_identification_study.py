@@ -24,11 +24,11 @@ print(summary)
 
 data, saturation = load_study_data(str(work / "prbs.mcap"))
 result = identification_study(data, nonlinear=False)
-print(result.chosen.structure, "—", result.reason)
+print(result.chosen_name, "—", result.reason)
 
 # %%
 # The order table: validation fit against the number of parameters.
-rows = result.orders + result.others
+rows = result.rows
 fig, ax = plt.subplots(figsize=(8, 3), constrained_layout=True)
 ax.plot([r["n_params"] for r in rows], [r["fit_percent"] for r in rows], "o")
 for r in rows:

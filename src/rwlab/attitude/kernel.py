@@ -569,10 +569,11 @@ def run_block(state, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wh
         t = k * dt
         u = (t - sky.t0) / sky.step
         sunlit, earth_lit, moon_visible, srp_scale = _sky_at(sky.table, u, s_orb, m_orb)
-        if earth_lit < 1.0:
-            stats[ECL_STEPS] += 1
-        if sunlit < earth_lit:
-            stats[MOON_STEPS] += 1
+        if k > 0:  # sample k stands for the step that ends there: steps + 1 samples, steps·dt
+            if earth_lit < 1.0:
+                stats[ECL_STEPS] += 1
+            if sunlit < earth_lit:
+                stats[MOON_STEPS] += 1
         if sensors.gyro:  # the angle turned over the last step, as a rate
             for c in range(3):
                 w_mean[c] = 0.5 * (gs[6 + c] + x[4 + c])

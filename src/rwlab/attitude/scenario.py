@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from rwlab._toml import unknown_keys
 from rwlab.attitude.plant import DisturbanceModel
 from rwlab.attitude.scenario_checks import _is_number, check
 from rwlab.attitude.sections import (
@@ -330,7 +331,7 @@ def _sections_of_flat(raw: dict, path: Path) -> dict:
     out: dict[str, dict] = {
         "scenario": {k: scenario.pop(k) for k in ("base", "name") if k in scenario}
     }
-    unknown = sorted(set(scenario) - set(LEGACY_NAMES))
+    unknown = unknown_keys(scenario, [*LEGACY_NAMES, "base", "name"])
     if unknown:
         raise ConfigError(f"{path}: unknown key(s) {unknown}")
     for flat, value in [*scenario.items(), *((t, raw[t]) for t in _FLAT_TABLES if t in raw)]:
@@ -356,8 +357,8 @@ def _section_changes(table: dict, section: str, base: Scenario, path: Path) -> d
     """One section table of a file → ``with_`` changes; anything unknown is an error."""
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [{section}] must be a table")
-    known = {f.name for f in fields(SECTIONS[section])}
-    unknown = sorted(f"{section}.{k}" for k in set(table) - known)
+    known = [f"{section}.{f.name}" for f in fields(SECTIONS[section])]
+    unknown = unknown_keys((f"{section}.{k}" for k in table), known)
     if unknown:
         raise ConfigError(f"{path}: unknown key(s) {unknown}")
     changes: dict[str, Any] = {}
@@ -384,9 +385,10 @@ def _subtable(table: Any, name: str, base: Scenario, path: Path) -> Any:
     table = dict(table)
     if cls is not DisturbanceModel and table.pop("fly", True) is False:
         return None
-    unknown = sorted(set(table) - {f.name for f in fields(cls)})
+    known = [f"{name}.{f.name}" for f in fields(cls)]
+    unknown = unknown_keys((f"{name}.{k}" for k in table), known)
     if unknown:
-        raise ConfigError(f"{path}: unknown key(s) {[f'{name}.{k}' for k in unknown]}")
+        raise ConfigError(f"{path}: unknown key(s) {unknown}")
     current = base.get(name) or cls()
     for key, value in table.items():
         default = getattr(current, key)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, TypeGuard
 
 import numpy as np
 
+from rwlab._toml import unknown_keys
 from rwlab.attitude.plant import DisturbanceModel
 from rwlab.attitude.sections import SECTIONS
 from rwlab.attitude.sensors import GyroModel, StarTrackerModel
@@ -199,7 +200,7 @@ def _check_wheel_faults(sc: Scenario) -> None:
     for f in faults:
         if not isinstance(f, dict):
             raise ConfigError(f"{sc.name}: each wheel fault must be a table, got {f!r}")
-        unknown = sorted(set(f) - {"wheel", "at_s", *_FAULT_KEYS})
+        unknown = unknown_keys(f, {"wheel", "at_s", *_FAULT_KEYS})
         wheel = f.get("wheel")
         if unknown:
             raise ConfigError(f"{sc.name}: wheel fault has unknown key(s) {unknown}")

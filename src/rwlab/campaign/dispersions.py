@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from rwlab._toml import read_table
+from rwlab._toml import read_table, unknown_keys
 from rwlab.attitude.scenario import LEGACY_NAMES, SECTIONS, Scenario
 from rwlab.errors import ConfigError, FormatWarning
 
@@ -125,7 +125,7 @@ def _is_number(v) -> bool:
 
 def _parse(name: str, spec: dict, where: str) -> Dispersion:
     """One field's table → :class:`Dispersion`; anything wrong is a ``ConfigError``."""
-    bad = sorted(set(spec) - _KEYS)
+    bad = unknown_keys(spec, _KEYS)
     if bad:
         raise ConfigError(f"{where}: {name}: unknown key(s) {bad}; allowed {sorted(_KEYS)}")
     kind = spec["distribution"]
@@ -198,7 +198,8 @@ def load_dispersions(path=None) -> tuple[Dispersion, ...]:
             renamed.append(f"{old} → {name}")
         if name not in FIELDS:
             raise ConfigError(
-                f"{path}: unknown field {old!r}; dispersible fields: {', '.join(FIELDS)}"
+                f"{path}: unknown field {unknown_keys([old], FIELDS)[1:-1]}; dispersible "
+                f"fields: {', '.join(FIELDS)}"
             )
         out.append(_parse(name, spec, str(path)))
     if renamed:

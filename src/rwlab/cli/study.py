@@ -129,11 +129,13 @@ def identify(
         click.echo(f"split at telemetry gaps into {len(study['segments'])} experiments: {parts}")
     click.echo(f"delay nk = {study['delay']['nk']}")
     click.echo(f"{'model':<12} {'fit %':>8} {'MSE':>11}")
-    for row in study["orders"] + study["others"]:
+    for row in study["orders"] + study["others"] + study.get("constrained", []):
         fit = "unstable" if row["fit_percent"] is None else f"{row['fit_percent']:8.2f}"
         mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
     click.echo(f"chosen: {study['chosen']['reason']}")
+    if (study.get("parts") or {}).get("note"):
+        click.echo(f"estimation vs validation part: {study['parts']['note']}")
     nl = study["nonlinear"]
     if nl and "error" not in nl:
         click.echo(

@@ -397,10 +397,11 @@ class Satellite:
         if k == 0 or k - self.block_k0 >= self.block:
             self._new_block()
         s_orb, m_orb, sunlit, earth_lit, moon_visible, srp_scale = self._sky_at(t)
-        if earth_lit < 1.0:
-            st[_S["eclipse_steps"]] += 1
-        if sunlit < earth_lit:
-            st[_S["moon_shadow_steps"]] += 1
+        if k > 0:  # as the simulation kernel: sample k stands for the step that ends there
+            if earth_lit < 1.0:
+                st[_S["eclipse_steps"]] += 1
+            if sunlit < earth_lit:
+                st[_S["moon_shadow_steps"]] += 1
         if self.sensors.gyro:
             self._sample_gyros(k)
         measured = self._sense(k, s_orb, m_orb, sunlit, moon_visible)

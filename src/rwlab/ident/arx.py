@@ -18,6 +18,7 @@ from scipy import linalg
 
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError
+from rwlab.ident.gain_constraint import StaticGain, constrained_least_squares
 from rwlab.ident.models import PolyModel
 from rwlab.ident.validation import estimation_report
 
@@ -109,7 +110,7 @@ def first_row(na: int, nb: list[int], nk: list[int]) -> int:
 
 
 def _solve(experiments, na, nb, nk, n0=None):
-    """QR least squares over all experiments. Returns θ, R11, sum of squares, rows."""
+    """QR least squares over all experiments. Returns θ, R11, sum of squares, rows, Qᵀy."""
     n0 = first_row(na, nb, nk) if n0 is None else n0
     d = na + sum(nb)
     used = [e for e in experiments if e.N > n0]
@@ -133,10 +134,12 @@ def _solve(experiments, na, nb, nk, n0=None):
             "(constant or too-slow input, or orders too high for this record)"
         )
     theta = linalg.solve_triangular(R11, r12) if d else np.zeros(0)
-    return theta, R11, float(r22**2), rows
+    return theta, R11, float(r22**2), rows, r12
 
 
-def arx(data: IOData | Sequence[IOData], na: int, nb=None, nk=None) -> PolyModel:
+def arx(
+    data: IOData | Sequence[IOData], na: int, nb=None, nk=None, *, dc_gain: float | None = None
+) -> PolyModel:
     """Estimate an ARX model by least squares (MATLAB ``arx(data, [na nb nk])``).
 
     With no input (a time series) this is the AR model ``A y = e`` by forward
@@ -152,12 +155,17 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=None, nk=None) -> PolyModel
         Number of B coefficients per input (≥ 0; default 2). Omit for a time series.
     nk : int or sequence of int, optional
         Input delay in samples per input (≥ 0; default 1). Omit for a time series.
+    dc_gain : float, optional
+        A known static gain K (output unit per input unit, single input only):
+        the estimate is the least-squares one subject to ``B(1) = K·A(1)``,
+        solved exactly (:mod:`rwlab.ident.gain_constraint`; beyond MATLAB).
 
     Returns
     -------
     PolyModel
         With ``noise_variance`` = SSE/(rows − d) and the parameter covariance
-        ``noise_variance · (ΦᵀΦ)⁻¹``.
+        ``noise_variance · (ΦᵀΦ)⁻¹``; with ``dc_gain``, SSE/(rows − d + 1) and the
+        constrained estimate's covariance (rank d − 1), and ``report['dc_gain']``.
     """
     experiments = as_experiments(data)
     first = experiments[0]
@@ -171,11 +179,18 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=None, nk=None) -> PolyModel
     nb = _per_input("nb", nb, first.nu, 0)
     nk = _per_input("nk", nk, first.nu, 0)
     _check_excitation(experiments, nb)
-    theta, R11, sse, rows = _solve(experiments, na, nb, nk)
+    theta, R11, sse, rows, r12 = _solve(experiments, na, nb, nk)
     d = len(theta)
-    lam = sse / (rows - d)
-    Rinv = linalg.solve_triangular(R11, np.eye(d)) if d else np.zeros((0, 0))
-    cov = lam * Rinv @ Rinv.T
+    if dc_gain is not None:
+        if first.nu != 1:
+            raise DataError(f"dc_gain applies to one input; the data have {first.nu}")
+        constraint = StaticGain(dc_gain, na, nb[0])
+        theta, cov, sse = constrained_least_squares(R11, r12, sse, rows, constraint)
+        lam = sse / (rows - d + 1)
+    else:
+        lam = sse / (rows - d)
+        Rinv = linalg.solve_triangular(R11, np.eye(d)) if d else np.zeros((0, 0))
+        cov = lam * Rinv @ Rinv.T
     A = np.concatenate([[1.0], theta[:na]])
     width = max([k + b for b, k in zip(nb, nk, strict=True)] + [1])
     B = np.zeros((first.nu, width))
@@ -194,8 +209,13 @@ def arx(data: IOData | Sequence[IOData], na: int, nb=None, nk=None) -> PolyModel
         input_name=first.input_names[0] if first.nu == 1 else first.input_names,
         output_name=first.output_names[0],
     )
+    method = "arx (QR least squares)"
+    extra = {}
+    if dc_gain is not None:
+        method = "arx (QR least squares, static gain constrained)"
+        extra = {"dc_gain": float(dc_gain), "n_free": d - 1}
     model.report.update(
-        estimation_report(model, experiments, method="arx (QR least squares)", loss=sse / rows)
+        estimation_report(model, experiments, method=method, loss=sse / rows, **extra)
     )
     return model
 
@@ -222,7 +242,7 @@ def arx_loss(est: IOData, val: IOData | None, na: int, nb: int, nk: int, n0: int
     float
         Mean squared one-step prediction error, in the output's unit squared.
     """
-    theta, _, sse, rows = _solve([est], na, [nb], [nk], n0)
+    theta, _, sse, rows, _ = _solve([est], na, [nb], [nk], n0)
     if val is None:
         return sse / rows
     phi, t = regression(val, na, [nb], [nk], n0)

@@ -26,6 +26,7 @@ from typing import Any
 
 from rwlab.errors import FileFormatError, ModelError
 from rwlab.ident.base import save_model_json
+from rwlab.ident.gain_constraint import study_name
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
 from rwlab.schemas import format_tag, read_versioned
@@ -148,8 +149,9 @@ class WheelModelFile:
 
     @property
     def structure(self) -> str:
-        """The linear model's structure, e.g. ``"ARX(2,2,1)"``."""
-        return self.model.structure
+        """The linear model's structure, e.g. ``"ARX221"``; ``"ARX221+K"`` when its static
+        gain was imposed (:func:`rwlab.ident.gain_constraint.study_name`)."""
+        return study_name(self.model)
 
     def __repr__(self) -> str:
         servo = f", servo fit {self.servo_fit_percent:.1f} %" if self.servo is not None else ""

@@ -46,13 +46,17 @@ from scipy import linalg
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident.arx import check_order
+from rwlab.ident.gain_constraint import StaticGain
 from rwlab.ident.models import PolyModel
 from rwlab.ident.pem_starts import (
+    _check_starts,
     _columns,
     _dynamics_starts,
     _initial_armax,
     _initial_bj,
     _initial_oe,
+    _input_orders,
+    _needs_input,
     _Orders,
 )
 from rwlab.ident.polynomials import check_initial, filt, stabilize
@@ -68,9 +72,20 @@ EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-fre
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
 
-def _stabilized(orders: _Orders, theta: np.ndarray) -> np.ndarray:
+def _stabilized(orders: _Orders, theta: np.ndarray, gain: StaticGain | None = None) -> np.ndarray:
+    """Roots of C, D and F reflected inside the unit circle; back on ``gain``'s constraint
+    (reflecting F's roots changes F(1))."""
     A, Bs, C, D, Fs = orders.unpack(theta)
-    return orders.pack(A, Bs, stabilize(C), stabilize(D), [stabilize(F) for F in Fs])
+    theta = orders.pack(A, Bs, stabilize(C), stabilize(D), [stabilize(F) for F in Fs])
+    return theta if gain is None else gain.project(theta)
+
+
+def _reduced(H: np.ndarray, g: np.ndarray, gain: StaticGain | None):
+    """ψᵀψ and ψᵀε in the coordinates η the constraint leaves free (θ = θ₀ + Nη)."""
+    if gain is None:
+        return H, g
+    N = gain.basis
+    return N.T @ H @ N, N.T @ g
 
 
 def _signals(orders: _Orders, theta, y, u):
@@ -159,9 +174,11 @@ def _stalled(Hs, gs, sse: float, tol: float) -> str:
     return "no further decrease possible (local minimum)"
 
 
-def _minimize(orders, theta, experiments, max_iter: int, tol: float):
-    """Levenberg–Marquardt on ½Σε². Returns θ, H, sse, iterations, reason."""
-    theta = _stabilized(orders, theta)
+def _minimize(orders, theta, experiments, max_iter: int, tol: float, gain=None):
+    """Levenberg–Marquardt on ½Σε² (on the free coordinates of ``gain``'s constraint,
+    when given). Returns θ, H, sse, iterations, reason."""
+    theta = _stabilized(orders, theta, gain)
+    N = None if gain is None else gain.basis
     mu = 1e-4
     reason = MAX_ITER
     it = 0
@@ -171,16 +188,18 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float):
         if sse <= exact:
             reason = "converged (exact fit)"
             break
-        scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
-        Hs = H / np.outer(scale, scale)
-        gs = g / scale
+        Hr, gr = _reduced(H, g, gain)
+        scale = np.sqrt(np.maximum(np.diag(Hr), 1e-300))
+        Hs = Hr / np.outer(scale, scale)
+        gs = gr / scale
         while True:
             try:
                 step = -linalg.solve(Hs + mu * np.eye(len(gs)), gs, assume_a="pos") / scale
             except (linalg.LinAlgError, ValueError):
                 step = None
             if step is not None:
-                trial = _stabilized(orders, theta + step)
+                step = step if N is None else N @ step
+                trial = _stabilized(orders, theta + step, gain)
                 sse_trial = _sse(orders, trial, experiments)
                 if sse_trial < sse:
                     break
@@ -199,23 +218,6 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float):
 
 
 # -- starting values -------------------------------------------------------------------
-def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
-    """One order per input (MATLAB's order vectors); a scalar applies to every input."""
-    if nu == 0:
-        if value is None or (isinstance(value, Sequence) and len(value) == 0):
-            return ()
-        raise DataError(
-            f"the data have no input (a time series), so {name} must be omitted or []; "
-            "an ARMA model is armax(data, na, nc=...)"
-        )
-    if value is None:
-        raise DataError(f"{name} is required: the data have {nu} input(s)")
-    values = list(value) if isinstance(value, Sequence) else [value] * nu
-    if len(values) != nu:
-        raise DataError(f"{name} needs one value per input ({nu}), got {values}")
-    return tuple(check_order(name, v, minimum) for v in values)
-
-
 def _prepare(data, orders: _Orders, what: str):
     experiments = as_experiments(data)
     first = experiments[0]
@@ -243,7 +245,7 @@ def _init_subset(series):
     return [(y[:START_SAMPLES], u[:START_SAMPLES]) for y, u in series]
 
 
-def _search(orders, starts, series, max_iter, tol):
+def _search(orders, starts, series, max_iter, tol, gain=None):
     """LM from every start on the first ``START_SAMPLES`` samples; the best, refined on all data.
 
     Several starts guard against local minima (ARMAX's likelihood has them);
@@ -254,11 +256,11 @@ def _search(orders, starts, series, max_iter, tol):
     whole = all(len(y) <= START_SAMPLES for y, _ in series)
     # many starts: a short search from each, then the best one's to convergence
     first = min(max_iter, SCREEN_ITER) if len(starts) > 2 else max_iter
-    fits = [_minimize(orders, theta, subset, first, tol) for theta in starts]
+    fits = [_minimize(orders, theta, subset, first, tol, gain) for theta in starts]
     best = min(fits, key=lambda fit: fit[2] if np.isfinite(fit[2]) else np.inf)
     if best[4] == MAX_ITER and first < max_iter:
-        best = _minimize(orders, best[0], subset, max_iter, tol)
-    return best if whole else _minimize(orders, best[0], series, max_iter, tol)
+        best = _minimize(orders, best[0], subset, max_iter, tol, gain)
+    return best if whole else _minimize(orders, best[0], series, max_iter, tol, gain)
 
 
 def _padded(rows: list[np.ndarray]) -> np.ndarray:
@@ -269,8 +271,8 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyModel:
-    theta, H, sse, iterations, reason = _search(orders, starts, series, max_iter, tol)
+def _finish(orders, starts, experiments, series, method, max_iter, tol, gain=None) -> PolyModel:
+    theta, H, sse, iterations, reason = _search(orders, starts, series, max_iter, tol, gain)
     if reason == MAX_ITER:
         warnings.warn(
             f"{method.split()[0]}: stopped after {iterations} iterations without converging; "
@@ -279,7 +281,10 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyM
             stacklevel=3,
         )
     N = sum(len(y) for y, _ in series)
-    lam = sse / max(N - orders.d, 1)
+    free = orders.d - (gain is not None)
+    lam = sse / max(N - free, 1)
+    basis = None if gain is None else gain.basis
+    H = H if basis is None else basis.T @ H @ basis
     scale = sum(float(y @ y) for y, _ in series)
     note = {}
     if sse <= EXACT_FIT * max(scale, 1e-300):
@@ -301,6 +306,8 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyM
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", linalg.LinAlgWarning)
                 cov = lam * linalg.inv(Hs) / np.outer(unit, unit)
+            if basis is not None:  # back to θ: rank d − 1, the constrained sum has no variance
+                cov = basis @ cov @ basis.T
         except linalg.LinAlgError:
             raise EstimationError(
                 "the Hessian is singular at the optimum: some parameters are not identifiable "
@@ -337,6 +344,7 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol) -> PolyM
             termination=reason,
             initial_conditions="steady" if orders.steady else "zero",
             **note,
+            **({} if gain is None else {"dc_gain": float(gain.gain), "n_free": free}),
         )
     )
     return model
@@ -356,6 +364,7 @@ def armax(
     max_iter: int = 100,
     tol: float = 1e-8,
     initial: str = "zero",
+    dc_gain: float | None = None,
 ) -> PolyModel:
     """Estimate ``A y = Σⱼ Bⱼ uⱼ(t−nkⱼ) + C e`` (MATLAB ``armax(data,[na nb nc nk])``).
 
@@ -381,11 +390,17 @@ def armax(
         Pre-sample values: zero (MATLAB ``InitialCondition='zero'``), or every
         signal held at its first sample (a record that starts at rest, in any
         units: use it for normalised or offset data).
+    dc_gain : float, optional
+        A known static gain K (single input): the search keeps ``B(1) = K·A(1)·F(1)``
+        exactly, on the d − 1 free coordinates (:mod:`rwlab.ident.gain_constraint`;
+        beyond MATLAB). Also for :func:`oe` and :func:`bj`.
 
     Returns
     -------
     PolyModel
-        With ``noise_variance`` = Σε²/(N − d) and covariance λ (ψᵀψ)⁻¹.
+        With ``noise_variance`` = Σε²/(N − d) and covariance λ (ψᵀψ)⁻¹; with
+        ``dc_gain``, Σε²/(N − d + 1), the constrained covariance (rank d − 1) and
+        ``report['dc_gain']``.
     """
     nu = _nu(data)
     if nc is None:
@@ -400,6 +415,7 @@ def armax(
         _input_orders("nk", nk if nu else None, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "armax")
     subset = _init_subset(series)
     starts = [_initial_armax(orders, subset)]
@@ -407,20 +423,12 @@ def armax(
         Bs, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
         C = np.concatenate([[1.0], np.zeros(orders.nc)])
         starts.append(orders.pack(F, Bs, C, np.ones(1), [np.ones(1)] * orders.nu))
-    return _finish(
-        orders, starts, experiments, series, "armax (prediction error, LM)", max_iter, tol
-    )
+    return _finish(orders, starts, experiments, series, _method("armax", gain), max_iter, tol, gain)
 
 
-def _check_starts(starts) -> int:
-    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 0:
-        raise DataError(f"starts must be a non-negative integer, got {starts!r}")
-    return int(starts)
-
-
-def _needs_input(what: str, nu: int) -> None:
-    if nu == 0:
-        raise DataError(f"{what} needs an input; for a time series use ar, arx or armax")
+def _method(name: str, gain: StaticGain | None) -> str:
+    extra = "" if gain is None else ", static gain constrained"
+    return f"{name} (prediction error, LM{extra})"
 
 
 def oe(
@@ -433,6 +441,7 @@ def oe(
     tol: float = 1e-8,
     initial: str = "zero",
     starts: int = RANDOM_STARTS,
+    dc_gain: float | None = None,
 ) -> PolyModel:
     """Estimate ``y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + e`` (MATLAB ``oe(data,[nb nf nk])``).
 
@@ -450,7 +459,7 @@ def oe(
         Orders of B (≥ 1) and F, per input.
     nk : int or sequence of int
         Input delay, samples, per input.
-    max_iter, tol, initial
+    max_iter, tol, initial, dc_gain
         As for :func:`armax`.
     starts : int
         Random stable starts besides the instrumental-variable and ARX ones (≥ 0).
@@ -471,12 +480,13 @@ def oe(
         _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "oe")
     thetas = [
         orders.pack(np.ones(1), Bs, np.ones(1), np.ones(1), Fs)
         for Bs, Fs in _dynamics_starts(orders, _init_subset(series), _check_starts(starts))
     ]
-    return _finish(orders, thetas, experiments, series, "oe (prediction error, LM)", max_iter, tol)
+    return _finish(orders, thetas, experiments, series, _method("oe", gain), max_iter, tol, gain)
 
 
 def bj(
@@ -491,6 +501,7 @@ def bj(
     tol: float = 1e-8,
     initial: str = "zero",
     starts: int = RANDOM_STARTS,
+    dc_gain: float | None = None,
 ) -> PolyModel:
     """Estimate ``y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + (C/D) e`` (MATLAB ``bj(data,[nb nc nd nf nk])``).
 
@@ -508,7 +519,7 @@ def bj(
         Orders of the noise model's C and D.
     nk : int or sequence of int
         Input delay, samples, per input.
-    max_iter, tol, initial, starts
+    max_iter, tol, initial, starts, dc_gain
         As for :func:`oe` and :func:`armax`.
 
     Returns
@@ -527,13 +538,14 @@ def bj(
         _input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
+    gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "bj")
     subset = _init_subset(series)
     thetas = [
         _initial_bj(orders, subset, dynamics)
         for dynamics in _dynamics_starts(orders, subset, _check_starts(starts))
     ]
-    return _finish(orders, thetas, experiments, series, "bj (prediction error, LM)", max_iter, tol)
+    return _finish(orders, thetas, experiments, series, _method("bj", gain), max_iter, tol, gain)
 
 
 def pem(

@@ -10,6 +10,7 @@ land in the basin of the optimum; ``pem`` searches from all of them.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ from scipy import linalg
 from scipy import signal as sps
 
 from rwlab.errors import DataError
+from rwlab.ident.arx import check_order
 from rwlab.ident.polynomials import stabilize
 
 
@@ -288,3 +290,32 @@ def _dynamics_starts(orders: _Orders, experiments, count: int) -> list[tuple[lis
 
 
 # -- public estimators ---------------------------------------------------------------
+
+
+# -- order checks of the estimators -----------------------------------------------
+def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
+    """One order per input (MATLAB's order vectors); a scalar applies to every input."""
+    if nu == 0:
+        if value is None or (isinstance(value, Sequence) and len(value) == 0):
+            return ()
+        raise DataError(
+            f"the data have no input (a time series), so {name} must be omitted or []; "
+            "an ARMA model is armax(data, na, nc=...)"
+        )
+    if value is None:
+        raise DataError(f"{name} is required: the data have {nu} input(s)")
+    values = list(value) if isinstance(value, Sequence) else [value] * nu
+    if len(values) != nu:
+        raise DataError(f"{name} needs one value per input ({nu}), got {values}")
+    return tuple(check_order(name, v, minimum) for v in values)
+
+
+def _check_starts(starts) -> int:
+    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 0:
+        raise DataError(f"starts must be a non-negative integer, got {starts!r}")
+    return int(starts)
+
+
+def _needs_input(what: str, nu: int) -> None:
+    if nu == 0:
+        raise DataError(f"{what} needs an input; for a time series use ar, arx or armax")

@@ -15,7 +15,15 @@ The steps, in the paper's order (SPEC.md, paper A, "Procedure and results"):
    and whose DC gain agrees within ``gain_tolerance`` with the steady-state
    gain measured on the record's long holds (:func:`steady_state_gain`; beyond
    the paper: a speed-loop model with the wrong static gain settles at the
-   wrong speed). A record without such holds is chosen by fit alone;
+   wrong speed). A record without such holds is chosen by fit alone.
+   Also beyond the paper: when the estimation part has settled holds, every
+   structure is estimated again with its static gain constrained to the gain
+   measured on them (``ARX221+K`` …, :mod:`rwlab.ident.gain_constraint`): a wheel
+   that sometimes runs at its rate or current limit biases a free linear fit's
+   gain low, while the speed loop's integral action makes the true one 1. The
+   +K models compete under the same rule, each after its free twin (an imposed
+   gain is an assumption: the free estimate wins when its own gain agrees), and
+   ``reason`` states K, its holds and standard error, and the twin's fit and gain;
 6. continuous-time models by ZOH and Tustin at the record's real Ts, checked
    against the discrete model on a new input (Fig. 23), and the acceleration
    check (Fig. 24);
@@ -56,6 +64,7 @@ from rwlab._display import ShortRepr
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
+from rwlab.ident.gain_constraint import SUFFIX, study_name
 from rwlab.ident.greybox import WheelGreyBox, greybox_fit
 from rwlab.ident.model_file import Channel, WheelModelFile
 from rwlab.ident.models import PolyModel
@@ -77,8 +86,11 @@ PREPROCESSING = ("detrend", "scale", "normalize", "none")
 _SIMPLICITY = ("ARX", "ARMAX", "OE", "BJ", "POLY")
 
 
+CONSTRAINED = SUFFIX  # the name's suffix of a model whose static gain was imposed
+
+
 def _kind(structure: str) -> str:
-    return structure.rstrip("0123456789[], ")
+    return structure.removesuffix(CONSTRAINED).rstrip("0123456789[], ")
 
 
 @dataclass(repr=False)
@@ -97,8 +109,12 @@ class StudyResult(ShortRepr):
         One row per ARX order (the paper's Table 2).
     others : list of dict
         ARMAX, OE and BJ rows (Table 3 and completeness).
+    constrained : list of dict
+        The same structures with their static gain constrained to the gain measured
+        on the estimation part's settled holds (``gain_constraint``), named
+        ``ARX221+K`` …; empty when that part has too few settled holds.
     chosen : PolyModel
-        The selected model; ``reason`` says why.
+        The selected model; ``chosen_name`` is its row's name, ``reason`` says why.
     continuous : dict
         ZOH and Tustin transfer functions and the discrete-vs-continuous check.
     acceleration : dict
@@ -129,6 +145,18 @@ class StudyResult(ShortRepr):
     physical_val: IOData | None = field(default=None, repr=False)
     segments: list[list[float]] | None = None
     steady_state: dict | None = None
+    constrained: list[dict] = field(default_factory=list)
+    gain_constraint: dict | None = None
+    chosen_name: str = ""
+    parts: dict | None = None
+
+    def __post_init__(self) -> None:
+        self.chosen_name = self.chosen_name or self.chosen.structure
+
+    @property
+    def rows(self) -> list[dict]:
+        """Every model's row: ARX orders, other structures, gain-constrained ones."""
+        return self.orders + self.others + self.constrained
 
     def to_pandas(self):
         """The structures tried (orders and other structures), one row each.
@@ -141,14 +169,18 @@ class StudyResult(ShortRepr):
         from rwlab._display import pandas
 
         keep = ("structure", "n_params", "fit_percent", "prediction_fit_percent", "mse", "fpe")
-        rows = [{k: r.get(k) for k in (*keep, "stable")} for r in self.orders + self.others]
+        rows = [{k: r.get(k) for k in (*keep, "stable")} for r in self.rows]
         return pandas().DataFrame(rows).set_index("structure")
 
     def to_dict(self) -> dict:
         """Every number of the report, as plain JSON."""
-        chosen_row = next(
-            r for r in self.orders + self.others if r["structure"] == self.chosen.structure
-        )
+        chosen_row = next(r for r in self.rows if r["structure"] == self.chosen_name)
+        twin = None
+        if chosen_row.get("gain_constrained"):
+            name = self.chosen_name.removesuffix(CONSTRAINED)
+            row = next((r for r in self.rows if r["structure"] == name), None)
+            keep = ("structure", "fit_percent", "dc_gain", "dc_gain_error_percent")
+            twin = None if row is None else {k: row.get(k) for k in keep}
         return {
             "data": {
                 "name": self.data.name,
@@ -168,8 +200,11 @@ class StudyResult(ShortRepr):
             },
             "orders": self.orders,
             "others": self.others,
-            "chosen": {**chosen_row, "reason": self.reason},
+            "constrained": self.constrained,
+            "chosen": {**chosen_row, "reason": self.reason, "unconstrained_twin": twin},
             "steady_state_gain": self.steady_state,
+            "gain_constraint": self.gain_constraint,
+            "parts": self.parts,
             "residuals": self.residuals,
             "continuous": {k: v for k, v in self.continuous.items() if k != "tf"},
             "acceleration": self.acceleration,
@@ -203,9 +238,9 @@ def _row(model: PolyModel, val: IOData) -> dict:
     }
 
 
-def _try(estimate, *args):
+def _try(estimate, *args, **options):
     try:
-        return estimate(*args, initial=INITIAL)
+        return estimate(*args, initial=INITIAL, **options)
     except EstimationError:
         return None
 
@@ -325,7 +360,7 @@ def identification_study(
         a, b = pieces["longest"]  # the nonlinear stage: one gap-free experiment
         physical = data[a:b]
         cur = None if current is None else np.asarray(current, dtype=float)[a:b]
-    total, done = len(orders) + 5 + int(nonlinear), 0
+    total, done = len(orders) + 6 + int(nonlinear), 0
 
     def step(label: str) -> None:
         nonlocal done
@@ -359,18 +394,24 @@ def identification_study(
             others.append(_row(m, val))
         step(name)
 
-    candidates = [r for r in rows + others if r["fit_percent"] is not None]
+    anchor = _estimation_gain(data, split, pieces)
+    fixed: list[dict] = []
+    if anchor is not None:
+        scale = float(prepared.trend.input_scale[0] / prepared.trend.output_scale[0])
+        fixed = _constrained_rows(fit_data, val, nk, orders, anchor["gain"] * scale, models)
+    step("gain-constrained models")
+    candidates = [r for r in rows + others + fixed if r["fit_percent"] is not None]
     if not candidates:
         raise EstimationError("no stable model was found; check the data and the delay")
     steady = steady_state_gain(data)
-    for r in rows + others:
+    for r in rows + others + fixed:
         _static_check(r, models[r["structure"]], prepared.trend, steady)
-    pick, reason = _choose(candidates, tolerance, gain_tolerance, steady)
+    pick, reason = _choose(candidates, tolerance, gain_tolerance, steady, anchor)
     chosen = models[pick["structure"]]
 
     residuals = {
         name: resid(models[name], val, max_lag=min(25, val.N // 2 - 1), initial=INITIAL).to_dict()
-        for name in (chosen.structure, *(r["structure"] for r in others[:1]))
+        for name in dict.fromkeys((pick["structure"], *(r["structure"] for r in others[:1])))
     }
     rng = np.random.default_rng(seed)
     new_u = _new_input(rng, scan, val.N)
@@ -404,7 +445,44 @@ def identification_study(
         physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
         segments=None if pieces is None else _segment_times(data, pieces["all"]),
         steady_state=steady,
+        constrained=fixed,
+        gain_constraint=anchor,
+        chosen_name=pick["structure"],
+        parts=_parts(chosen, scan, val),
     )
+
+
+def _parts(chosen: PolyModel, est: IOData, val: IOData) -> dict:
+    """How the estimation and validation parts differ, and what the chosen model makes of
+    each: its simulation fit on both, the RMS input step and the output's spread (the
+    parts' units: ratios between them do not depend on the preprocessing), and the share
+    of samples slewing at ≥ 80 % of the fastest output rate of the two (a wheel at its
+    rate or torque limit, which no linear model explains). ``note`` compares them when the
+    validation fit is 5 points or more below the estimation fit."""
+    # the fastest rate: the 99th percentile of |Δy|, so that one glitch does not set it
+    fastest = float(np.quantile(np.abs(np.diff(np.concatenate([est.y[:, 0], val.y[:, 0]]))), 0.99))
+    out: dict = {}
+    for name, part in (("estimation", est), ("validation", val)):
+        du, dy = np.diff(part.u[:, 0]), np.abs(np.diff(part.y[:, 0]))
+        moved = du[du != 0]
+        out[name] = {
+            "fit_percent": compare(chosen, part, initial=INITIAL).fit_percent,
+            "input_step_rms": float(np.sqrt(np.mean(moved**2))) if moved.size else 0.0,
+            "output_std": float(np.std(part.y[:, 0])),
+            "fast_share": float(np.mean(dy >= 0.8 * fastest)) if fastest > 0 else 0.0,
+        }
+    e, v = out["estimation"], out["validation"]
+    out["note"] = None
+    if e["fit_percent"] - v["fit_percent"] >= 5 and e["input_step_rms"] > 0:
+        out["note"] = (
+            f"the chosen model fits the estimation part at {e['fit_percent']:.1f} % and the "
+            f"validation part at {v['fit_percent']:.1f} %; the validation part's input steps "
+            f"are {v['input_step_rms'] / e['input_step_rms']:.2f}× the estimation part's "
+            f"(RMS), its output spread {v['output_std'] / max(e['output_std'], 1e-300):.2f}×, "
+            f"and its output slews at ≥ 80 % of the fastest rate in "
+            f"{100 * v['fast_share']:.1f} % of its samples against {100 * e['fast_share']:.1f} %"
+        )
+    return out
 
 
 def _segment_times(data: IOData, ranges) -> list[list[float]]:
@@ -444,10 +522,37 @@ def _pieces(n: int, split: float, segments, needed_per_piece: int) -> dict | Non
 
 
 def _simplicity(r: dict) -> tuple:
-    return (r["n_params"], _SIMPLICITY.index(_kind(r["structure"])), -r["fit_percent"])
+    """Fewest parameters of the structure, then ARX < ARMAX < OE < BJ, then a structure
+    before its gain-constrained twin (an imposed gain is an assumption: the free
+    estimate is preferred when its own gain agrees with the measured one)."""
+    kind = _SIMPLICITY.index(_kind(r["structure"]))
+    return (r["n_params"], kind, bool(r.get("gain_constrained")), -r["fit_percent"])
 
 
-def _choose(candidates: list[dict], tolerance: float, gain_tolerance: float, steady) -> tuple:
+def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, models) -> list[dict]:
+    """Every ARX order, ARMAX, OE and BJ again with the static gain ``gain`` (the data's
+    units) imposed (:mod:`rwlab.ident.gain_constraint`); their rows, named ``…+K``."""
+    nk_pem = max(nk, 1)
+    fits = [(arx, (n, n, nk)) for n in orders]
+    fits += [(armax, (2, 2, 1, nk_pem)), (oe, (2, 2, nk_pem)), (bj, (2, 1, 1, 2, nk_pem))]
+    out = []
+    for estimate, args in fits:
+        if estimate is arx:
+            m = arx(fit_data, *args, dc_gain=gain)
+        else:
+            m = _try(estimate, fit_data, *args, dc_gain=gain)
+        if m is None:
+            continue
+        name = study_name(m)
+        models[name] = m
+        row = {**_row(m, val), "structure": name, "gain_constrained": True}
+        out.append({**row, "n_params": m.n_params, "n_free": m.n_params - 1})
+    return out
+
+
+def _choose(
+    candidates: list[dict], tolerance: float, gain_tolerance: float, steady, anchor=None
+) -> tuple:
     """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why."""
     best = max(r["fit_percent"] for r in candidates)
     near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
@@ -457,7 +562,8 @@ def _choose(candidates: list[dict], tolerance: float, gain_tolerance: float, ste
     pick = ok[0] if steady is not None and ok else near[0]
     reason = (
         f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
-        f"then ARX < ARMAX < OE < BJ) whose validation fit ({pick['fit_percent']:.2f} %) "
+        "then ARX < ARMAX < OE < BJ, a free model before its gain-constrained twin +K) "
+        f"whose validation fit ({pick['fit_percent']:.2f} %) "
         f"is within {tolerance:g} points of the best ({best:.2f} %)"
     )
     if steady is None:
@@ -470,12 +576,34 @@ def _choose(candidates: list[dict], tolerance: float, gain_tolerance: float, ste
         )
     skipped = near[: near.index(pick)]
     reason += f" and whose DC gain ({_dc_text(pick)}) is within {limit:g} % of the measured "
-    reason += f"steady-state gain {g:.4f} ({steady['holds']} settled holds)"
+    reason += f"steady-state gain {g:.4f} ({steady['holds']} settled holds of the whole record)"
     if skipped:
         reason += "; passed over for a DC gain off the measured one: " + ", ".join(
             f"{r['structure']} ({_dc_text(r)})" for r in skipped
         )
+    if pick.get("gain_constrained") and anchor is not None:
+        reason += "; " + _constraint_text(pick, anchor, candidates)
     return pick, reason
+
+
+def _constraint_text(pick: dict, anchor: dict, candidates: list[dict]) -> str:
+    """What imposing the gain did: K and its source, and the unconstrained twin's numbers."""
+    text = (
+        f"static gain constrained to K = {anchor['gain']:.4f} ± {anchor['gain_std']:.4f} "
+        f"measured on {anchor['holds']} settled holds of the estimation part (its DC gain "
+        "agrees with the whole record's by construction, up to that difference)"
+    )
+    name = pick["structure"].removesuffix(CONSTRAINED)
+    twin = next((r for r in candidates if r["structure"] == name), None)
+    if twin is None:
+        return text + f"; its unconstrained twin {name} is unstable or failed"
+    delta = pick["fit_percent"] - twin["fit_percent"]
+    text += (
+        f"; its unconstrained twin {name} fits {twin['fit_percent']:.2f} % with DC gain "
+        f"{_dc_text(twin)}: the constraint "
+        + (f"costs {-delta:.2f} points of fit" if delta < 0 else f"adds {delta:.2f} points of fit")
+    )
+    return text
 
 
 def _dc_text(row: dict) -> str:
@@ -523,17 +651,25 @@ def steady_state_gain(
     Returns
     -------
     dict or None
-        ``gain`` (output units per input unit), ``intercept``, ``holds`` (points
-        used) and the settings; None when fewer than 3 settled holds at two or
-        more levels exist.
+        ``gain`` (output units per input unit), ``gain_std`` (its standard error),
+        ``intercept``, ``holds`` (points used) and the settings; None when fewer
+        than 3 settled holds at two or more levels exist.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("steady_state_gain needs a single-input single-output IOData")
+    settings = {"min_hold": min_hold, "tail": tail, "settled": settled}
+    return _gain_from_holds(*_hold_points(data, **settings), min_hold=min_hold, tail=tail)
+
+
+def _hold_points(
+    data: IOData, *, min_hold: float, tail: float, settled: float, span: float | None = None
+) -> tuple[list[float], list[float]]:
+    """(input level, settled mean output) of every long settled hold of ``data``."""
     u, y = data.u[:, 0], data.y[:, 0]
     edges = np.flatnonzero(np.diff(u) != 0) + 1
     bounds = np.concatenate([[0], edges, [u.size]])
     n_tail = max(1, round(tail / data.Ts))
-    span = float(np.ptp(u))
+    span = float(np.ptp(u)) if span is None else span
     levels, speeds = [], []
     for a, b in itertools.pairwise(bounds):
         if (b - a) * data.Ts < min_hold or b - a < n_tail:
@@ -542,18 +678,45 @@ def steady_state_gain(
         if np.ptp(end) <= settled * span:
             levels.append(float(u[a]))
             speeds.append(float(end.mean()))
+    return levels, speeds
+
+
+def _gain_from_holds(levels, speeds, *, min_hold: float, tail: float) -> dict | None:
+    """The least-squares line through the hold points, with the slope's standard error."""
     if len(levels) < 3 or np.ptp(levels) == 0:
         return None
-    slope, intercept = np.polyfit(levels, speeds, 1)
+    x, z = np.asarray(levels), np.asarray(speeds)
+    slope, intercept = np.polyfit(x, z, 1)
+    spread = float(np.sum((x - x.mean()) ** 2))
+    rss = float(np.sum((z - intercept - slope * x) ** 2))
     return {
         "gain": float(slope),
+        "gain_std": math.sqrt(rss / (len(x) - 2) / spread) if len(x) > 2 else None,
         "intercept": float(intercept),
         "holds": len(levels),
         "min_hold_s": min_hold,
         "tail_s": tail,
         "method": "least-squares slope of the mean output over the last tail_s of every "
-        "settled input hold of at least min_hold_s, against the held input",
+        "settled input hold of at least min_hold_s, against the held input; gain_std its "
+        "standard error from the scatter about the line",
     }
+
+
+def _estimation_gain(data: IOData, split: float, pieces) -> dict | None:
+    """The steady-state gain measured on the estimation part alone (every estimation piece
+    with segments): what a gain-constrained model may be given without the validation
+    part informing it. None when that part has fewer than 3 settled holds."""
+    parts = [data.split(split)[0]] if pieces is None else [data[a:b] for a, b in pieces["est"]]
+    span = float(max(np.ptp(p.u[:, 0]) for p in parts))
+    levels, speeds = [], []
+    for part in parts:
+        x, z = _hold_points(part, min_hold=30.0, tail=5.0, settled=0.01, span=span)
+        levels += x
+        speeds += z
+    out = _gain_from_holds(levels, speeds, min_hold=30.0, tail=5.0)
+    if out is not None:
+        out["part"] = "estimation"
+    return out
 
 
 DATASHEET = {
@@ -791,9 +954,7 @@ def wheel_model(
     if np.any(trend.input_slope) or np.any(trend.output_slope):
         raise ModelError("a linear trend cannot be folded into model.json; use 'normalize'")
     d = result.data
-    fit = next(
-        r["fit_percent"] for r in result.orders + result.others if r["structure"] == m.structure
-    )
+    fit = next(r["fit_percent"] for r in result.rows if r["structure"] == result.chosen_name)
     nl = result.nonlinear or {}
     servo_fit = None if result.servo is None or not nl else nl["fit_percent"]
     others = {
@@ -824,6 +985,9 @@ def wheel_model(
 def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:
     """The preprocessed model ``m`` between the physical signals (offsets aside)."""
     gain = float(trend.output_scale[0] / trend.input_scale[0])
+    report = {}
+    if "dc_gain" in m.report:  # say that the static gain was imposed, in physical units
+        report = {"method": m.report["method"], "dc_gain": m.report["dc_gain"] * gain}
     return PolyModel(
         m.A,
         m.B * gain,
@@ -837,6 +1001,7 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
         else m.noise_variance * trend.output_scale[0] ** 2,
         input_name=input_name,
         output_name=output_name,
+        report=report,
     )
 
 

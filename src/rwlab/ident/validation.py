@@ -129,7 +129,7 @@ def estimation_report(
     initial = extra.get("initial_conditions", "zero")
     yhat = np.concatenate([model.predict(d, 1, initial=initial) for d in experiments])
     N = y.size
-    d = model.n_params
+    d = int(extra.get("n_free", model.n_params))  # a constrained estimate has fewer
     V = max(float(loss), np.finfo(float).tiny)
     const = N * (math.log(2 * math.pi) + 1)
     report = {

@@ -188,6 +188,9 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
         f"{ch['fit_percent']:.2f} %. {ch['reason']}.</p>"
     )
+    note = (study.get("parts") or {}).get("note")
+    if note:
+        page.text(f"Estimation and validation parts differ: {note}.", note=True)
 
     steady = study.get("steady_state_gain")
     if steady:
@@ -197,6 +200,15 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
             f"output averaged over the last {steady['tail_s']:g} s of each). The DC gain "
             "columns give each model's static gain in physical units and its error "
             "against it.</p>"
+        )
+    anchor = study.get("gain_constraint")
+    if anchor:
+        page.html(
+            f"<p>Gain-constrained models (+K, section 4b): static gain constrained to "
+            f"K = {anchor['gain']:.4f} ± {anchor['gain_std']:.4f} measured on "
+            f"{anchor['holds']} settled holds of the estimation part only (the validation "
+            "part does not inform them). Their DC gain equals K by construction; its "
+            "agreement with the whole record's gain is no test of the dynamics.</p>"
         )
 
     page.heading("1. Input delay (paper Fig. 16)", "delay")
@@ -303,6 +315,8 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         "All prediction-error models on validation data.",
     )
 
+    _constrained_section(page, study)
+
     page.heading("5. Continuous-time model (paper eq. 14, Fig. 23)", "continuous")
     cont = study["continuous"]
     lines = []
@@ -380,7 +394,7 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
     if servo is None or val is None:  # the caller checked: a study with a servo model has both
         raise ValueError("the nonlinear section needs the study's servo model and data")
     trend = result.data.trend
-    ch = chosen.structure
+    ch = result.chosen_name
     page.heading("8. Nonlinear model: rate-limited servo (beyond the paper)", "nonlinear")
     par = nl["parameters"]
     page.text(
@@ -426,6 +440,35 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
     _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
 
 
+def _constrained_section(page: Page, study: dict) -> None:
+    """Section 4b: every gain-constrained model next to its unconstrained twin."""
+    fixed = study.get("constrained") or []
+    if not fixed:
+        return
+    page.heading("4b. Static gain imposed (beyond the paper)", "constrained")
+    free = {r["structure"]: r for r in study["orders"] + study["others"]}
+    lines = []
+    for r in fixed:
+        twin = free.get(r["structure"].removesuffix("+K"), {})
+        lines.append([r["structure"], r["fit_percent"], _dc(r), twin.get("fit_percent"), _dc(twin)])
+    page.table(
+        ["model", "fit %", "DC gain", "unconstrained fit %", "unconstrained DC gain"],
+        lines,
+        table_id="table-constrained",
+        highlight=next(
+            (i for i, r in enumerate(fixed) if r["structure"] == study["chosen"]["structure"]),
+            None,
+        ),
+    )
+    page.text(
+        "A linear model fitted to a wheel that sometimes runs at its rate or current limit "
+        "underestimates the static gain; the speed loop's integral action makes the true "
+        "one 1. The +K models are the same structures estimated with B(1) = K·A(1)·F(1) "
+        "imposed (equality-constrained least squares for ARX, the prediction-error search "
+        "on the remaining parameters for the others)."
+    )
+
+
 def _dc(row: dict) -> str:
     """A row's DC gain (physical units) and its error against the measured gain."""
     if row.get("dc_gain") is None:
@@ -435,8 +478,7 @@ def _dc(row: dict) -> str:
 
 
 def _study_fit(result: StudyResult) -> float:
-    rows = result.orders + result.others
-    return next(r["fit_percent"] for r in rows if r["structure"] == result.chosen.structure)
+    return next(r["fit_percent"] for r in result.rows if r["structure"] == result.chosen_name)
 
 
 def _tf_text(num, den) -> str:

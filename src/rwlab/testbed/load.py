@@ -163,9 +163,20 @@ def load_record(
         input_units=["rpm" if mode == "speed" else "rpm/s"],
         output_units=[OUTPUTS[o][1] for o in outputs],
         tstart=float(grid[0] - _origin(meta, t0)),
-        name=f"{os.path.basename(path)}{'' if record.complete else ' (truncated)'}",
+        name=f"{os.path.basename(path)}{_cut_short(record)}",
         source=meta,
     )
+
+
+def _cut_short(record) -> str:
+    """What the data's name says of a record that did not run to its end: a file cut off
+    mid-write, or a run stopped by Ctrl-C, a wheel fault or an error (its ``stop`` event)."""
+    if not record.complete:
+        return " (truncated)"
+    stops = [e["message"] for e in record.topic("/event") if e["kind"] == "stop"]
+    if stops and not stops[-1].startswith("completed"):
+        return f" ({stops[-1]}: the run stopped before its end)"
+    return ""
 
 
 def _origin(meta: dict, first_command_t: float) -> float:

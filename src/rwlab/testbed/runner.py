@@ -306,7 +306,7 @@ class ExperimentConfig:
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides) -> ExperimentConfig:
         """Read an ``[experiment]`` table (or top-level keys); ``overrides`` win."""
-        from rwlab._toml import read_table
+        from rwlab._toml import read_table, unknown_keys
 
         table = read_table(path, "experiment", "experiment")
         if not table:
@@ -315,7 +315,7 @@ class ExperimentConfig:
                 "least the signal and its duration"
             )
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(table) - known)
+        unknown = unknown_keys(table, known)
         if unknown:
             raise ConfigError(
                 f"{path}: unknown experiment key(s) {unknown}; known: {sorted(known)}"

@@ -347,13 +347,13 @@ class WheelParams:
         unit N around them (:meth:`for_unit`) unless ``draw_unit`` is False (the
         nominal wheel: the settings a lab configured, before unit tolerances).
         """
-        from rwlab._toml import read_table
+        from rwlab._toml import read_table, unknown_keys
 
         table = read_table(path, "wheel", "wheel parameter")
         preset = table.pop("preset", "rw90")
         unit = table.pop("unit", None)
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(table) - known)
+        unknown = unknown_keys(table, known)
         if unknown:
             raise ConfigError(
                 f"{path}: unknown wheel parameter(s) {unknown}; known: "
