@@ -1,6 +1,6 @@
 """Measure the detectors' false-alarm rates over their thresholds: the package's thresholds.json.
 
-Run:  python bench/calibrate_thresholds.py [--cache DIR] [--out FILE]
+Run:  python bench/calibrate_thresholds.py [--cache DIR] [--out FILE] [--offset-sigma]
 
 The model is bench_diagnose's (``rwlab identify`` with the defaults on unit 0's
 fault-free 20-minute stepped PRBS); the healthy records are the tune set's
@@ -10,6 +10,8 @@ on which ``bench_diagnose.py --set eval`` judges the thresholds. Each detector
 runs restarted after every alarm over every record; the counts per threshold
 go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
 ~10 s per record to make (cached in ``--cache``), ~1 s to count.
+``--offset-sigma`` also prints the σ of the offset test's window intercepts on
+these records (the constant ``OFFSET_SIGMA_RPM`` of rwlab.diagnose.diagnoser).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from bench_diagnose import _model, _record, records
 from rwlab.diagnose import HealthyReference
-from rwlab.diagnose.diagnoser import measure_calibration
+from rwlab.diagnose.diagnoser import OFFSET_SIGMA_RPM, Diagnoser, _columns, measure_calibration
 from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
@@ -33,6 +35,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--offset-sigma", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
@@ -58,11 +61,27 @@ def main() -> None:
         )
         cal = measure_calibration(data, wheel, ref, origin=origin)
         cal.save(args.out)
+        if args.offset_sigma:
+            _offset_sigma(data, wheel, ref)
     print(f"{cal.hours:.2f} h of healthy records, {len(data)} records -> {args.out}")
     print(f"{'detector':<16} {'k':>6} {'decisions/h':>12} {'max alarms/h':>13}")
     for name, c in cal.curves.items():
         per_hour = c.decisions / cal.hours
         print(f"{name:<16} {c.k:>6.3g} {per_hour:>12.1f} {cal.max_per_hour(name):>13.3g}")
+
+
+def _offset_sigma(data, wheel, ref) -> None:
+    values = []
+    for d in data:
+        diag = Diagnoser(wheel, ref, calibration=False, trace=True)
+        for row in zip(*_columns(d, wheel), strict=True):
+            diag.update(*(float(x) for x in row))
+        values += [z * OFFSET_SIGMA_RPM for z in diag.traces()["offset"]]
+    x = np.array(values)
+    print(
+        f"offset: {x.size} windows, mean {x.mean():.2f} rpm, σ {x.std(ddof=1):.2f} rpm "
+        f"(OFFSET_SIGMA_RPM = {OFFSET_SIGMA_RPM})"
+    )
 
 
 if __name__ == "__main__":
