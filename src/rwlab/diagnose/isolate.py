@@ -58,6 +58,9 @@ Z95 = 1.959964
 FRICTION_UNIT_SD = math.sqrt(2) * 0.3 / math.sqrt(3)
 # ... and of the inertial current I/k_t between two units: I ±2 %, k_t ±5 %, uniform
 MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
+# σ of the held-speed error between two healthy units (Hall reading at a hold; the
+# tune set's healthy units sit within about ±1 rpm of each other), rpm
+SPEED_UNIT_SD = 0.5
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
@@ -177,6 +180,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
             return [Finding("speed_sensor_stuck", float(speed[-1]), None, "rpm")]
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
+        half = math.hypot(half, Z95 * SPEED_UNIT_SD)  # ... which is not this unit's
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
     # the current balance holds at the limit too: a weak motor draws 1/F the current the
     # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
