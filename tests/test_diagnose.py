@@ -395,3 +395,13 @@ def test_a_healthy_chirp_of_another_unit_raises_no_alarm(tmp_path, unit_model_fi
     path = tmp_path / "chirp.mcap"
     run_experiment(ExperimentConfig(signal="chirp", duration=1200, seed=33, unit=33), path)
     assert _diagnose(path, unit_model_file).alarms == []
+
+
+def test_a_sensor_frozen_at_rest_from_power_up_is_not_a_current_limit(tmp_path, model_file):
+    """The reading stays 0 rpm while the wheel draws its full current at the model's
+    acceleration limit: the lag test fires first, and names the frozen sensor."""
+    path = tmp_path / "frozen.mcap"
+    cfg = ExperimentConfig(duration=300, seed=41, unit=301, faults=("speed_sensor_stuck@0",))
+    run_experiment(cfg, path)
+    alarms = _diagnose(path, model_file).alarms
+    assert alarms and {a.kind for a in alarms} == {"speed_sensor_stuck"}, alarms

@@ -182,6 +182,11 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
         half = math.hypot(half, Z95 * SPEED_UNIT_SD)  # ... which is not this unit's
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
+    # lag: a reading that does not change at all while the model runs at its acceleration
+    # limit is a frozen sensor (a clamped or weak wheel still moves; one resting at 0 rpm
+    # on the full current for seconds is no wheel), also at 0 rpm, where repeats count not
+    if speed.size >= 5 and np.ptp(speed) == 0:
+        return [Finding("speed_sensor_stuck", float(speed[-1]), None, "rpm")]
     # the current balance holds at the limit too: a weak motor draws 1/F the current the
     # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
     excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
