@@ -21,7 +21,17 @@ motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess o
 speed      command held ≥ 30 s, wheel and model quiet      speed − command, rpm   either way
            (|α| < 10 rpm/s) ≥ 10 s
 lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
+offset     a 60-s window of a continuously changing         the speed residual's   either way
+           command whose model speed swings through zero    intercept, rpm
+           (:func:`speed_offset`; one value per window)
+slew       a slew at the acceleration limit through zero    towards-zero minus     increase
+           speed (:func:`slew_asymmetry`; one per slew)     away-from-zero rate
 =========  ==============================================  =====================  ==========
+
+The offset and slew tests see a biased sensor and worn bearings where the wheel
+never holds a speed (a chirp): the speed residual's offset at zero speed is no
+model mismatch, and at its limit the wheel's controller sets the current open loop,
+so friction it does not know shows in the slew's acceleration, not its current.
 
 ``friction_change`` compares the friction test's samples at ≥ 1500 rpm with the
 unit's own friction law (viscous, Coulomb and current offset over the
