@@ -24,7 +24,8 @@ import numpy as np
 
 from bench_diagnose import _model, _record, records
 from rwlab.diagnose import HealthyReference
-from rwlab.diagnose.diagnoser import OFFSET_SIGMA_RPM, Diagnoser, _columns, measure_calibration
+from rwlab.diagnose.diagnoser import Diagnoser, _columns, measure_calibration
+from rwlab.diagnose.motion import OFFSET_SIGMA_RPM
 from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 

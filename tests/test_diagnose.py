@@ -323,7 +323,7 @@ def test_speed_offset_is_the_residual_at_zero_speed_whatever_the_model_mismatch(
     """A residual made of a gain error, a lag (acceleration) term, a Coulomb-like term and a
     constant bias, with noise: the window's offset is the bias (truth built here); holds and
     a window that never crosses zero speed do not qualify."""
-    from rwlab.diagnose.diagnoser import OFFSET_WINDOW, speed_offset
+    from rwlab.diagnose.motion import OFFSET_WINDOW, speed_offset
 
     rng = np.random.default_rng(3)
     t = 0.5 * np.arange(OFFSET_WINDOW)
@@ -351,7 +351,7 @@ def _slew(toward: float, away: float, rising: bool = True, step: float = 0.02):
 
 
 def test_slew_asymmetry_reads_friction_the_feed_forward_does_not_know():
-    from rwlab.diagnose.diagnoser import slew_asymmetry
+    from rwlab.diagnose.motion import slew_asymmetry
 
     c = (1.8e-3, 2.5e-6, 9e-3, 0.0)  # the Coulomb deceleration c2/c0 = 5 rpm/s
     for rising in (True, False):

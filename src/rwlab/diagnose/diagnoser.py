@@ -21,17 +21,17 @@ motor      sustained acceleration, |I·α/k_t| ≥ 0.1 A       relative excess o
 speed      command held ≥ 30 s, wheel and model quiet      speed − command, rpm   either way
            (|α| < 10 rpm/s) ≥ 10 s
 lag        model at ≥ 80 % of its acceleration limit       (α − α_model)/α_lim    decrease
-offset     a 60-s window of a continuously changing         the speed residual's   either way
-           command whose model speed swings through zero    intercept, rpm
-           (:func:`speed_offset`; one value per window)
-slew       a slew at the acceleration limit through zero    towards-zero minus     increase
-           speed (:func:`slew_asymmetry`; one per slew)     away-from-zero rate
+offset     a 60-s window of a continuously changing        the speed residual's   either way
+           command whose model speed swings through zero   intercept, rpm
+slew       a slew at the acceleration limit through zero   towards-zero minus     increase
+           speed                                           away-from-zero rate
 =========  ==============================================  =====================  ==========
 
-The offset and slew tests see a biased sensor and worn bearings where the wheel
-never holds a speed (a chirp): the speed residual's offset at zero speed is no
-model mismatch, and at its limit the wheel's controller sets the current open loop,
-so friction it does not know shows in the slew's acceleration, not its current.
+The offset and slew tests (:func:`~rwlab.diagnose.motion.speed_offset`,
+:func:`~rwlab.diagnose.motion.slew_asymmetry`) see a biased sensor and worn bearings
+where the wheel never holds a speed (a chirp): the speed residual's offset at zero
+speed is no model mismatch, and at its limit the wheel's controller sets the current
+open loop, so friction it does not know shows in the slew's acceleration.
 
 ``friction_change`` compares the friction test's samples at ≥ 1500 rpm with the
 unit's own friction law (viscous, Coulomb and current offset over the
@@ -90,6 +90,13 @@ from rwlab.diagnose.calibration import SHARES as _SHARES
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import Finding, isolate
+from rwlab.diagnose.motion import (
+    OFFSET_SIGMA_RPM,
+    OFFSET_WINDOW,
+    SLEW_SHARE,
+    slew_asymmetry,
+    speed_offset,
+)
 from rwlab.diagnose.reference import DEFAULT_TOLERANCE, BlockStats, HealthyReference, block_stats
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
@@ -118,20 +125,6 @@ STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 1
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
-OFFSET_WINDOW = 120  # samples of one speed-offset regression (60 s at 0.5 s)
-OFFSET_SWING_RPM = 200.0  # the model's speed reaches ± this within the window
-OFFSET_SE_RPM = 1.5  # the intercept's standard error must be below this, rpm
-OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no holds)
-# σ of one window's intercept on healthy units of the twin (model mismatch, not noise):
-# measured on the tune set's healthy records (units 1–6, 101–136: 295 windows, σ 3.44, on
-# chirps and multisines; `bench/calibrate_thresholds.py --offset-sigma`), never on the
-# eval sets
-OFFSET_SIGMA_RPM = 3.5
-SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
-SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
-# the Stribeck band's low speeds, below the back-EMF's supply limit
-SLEW_MIN = 4  # samples in each half of a slew (over ≥ 1.5 s: the Hall reading's noise
-# over a shorter half moves its acceleration by about the Coulomb deceleration)
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -176,88 +169,6 @@ class Alarm:
             "ci95": None if self.ci is None else list(self.ci),
             "unit": self.unit,
         }
-
-
-def speed_offset(window: np.ndarray) -> float | None:
-    """The speed residual's offset over a window of a continuously changing command.
-
-    A biased speed sensor adds a constant to the measured speed, which no model of the
-    wheel's dynamics explains; the identified model's mismatch with another unit (gain,
-    lag) is proportional to the model's speed and acceleration. The offset is the
-    intercept of the least squares r_ω ≈ b + g·ω_m + c·sign ω_m + h·α_m(k) + h'·α_m(k − 1)
-    (c: a friction unlike the model's lags the wheel by a Coulomb-like term): where the
-    model's speed swings through zero (both signs beyond :data:`OFFSET_SWING_RPM`), b is
-    the residual at zero speed, an interpolation, not an extrapolation.
-
-    Parameters
-    ----------
-    window : ndarray, shape (n, 4)
-        Per sample: speed residual (rpm), model speed (rpm), model acceleration (rpm/s),
-        1 if the command changed at that sample else 0.
-
-    Returns
-    -------
-    float or None
-        The offset b, rpm; None where the window does not qualify (holds, no swing
-        through zero, or an intercept less certain than :data:`OFFSET_SE_RPM`).
-    """
-    rs, m, am, changed = window.T
-    if np.mean(changed) < OFFSET_CONTINUOUS or m.min() > -OFFSET_SWING_RPM:
-        return None
-    if m.max() < OFFSET_SWING_RPM:
-        return None
-    X = np.column_stack([np.ones(len(rs) - 1), m[1:], np.sign(m[1:]), am[1:], am[:-1]])
-    coef, *_ = np.linalg.lstsq(X, rs[1:], rcond=None)
-    e = rs[1:] - X @ coef
-    dof = len(e) - X.shape[1]
-    cov = np.linalg.pinv(X.T @ X) * float(e @ e) / dof
-    if not math.sqrt(max(cov[0, 0], 0.0)) <= OFFSET_SE_RPM:
-        return None
-    return float(coef[0])
-
-
-def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None:
-    """How much faster a wheel slews towards zero speed than away from it.
-
-    At its acceleration limit the wheel's controller sets the current open loop (the
-    inertial current plus its friction feed-forward), so friction the feed-forward does
-    not know changes the acceleration, not the current: it slows the half of a slew that
-    runs away from zero speed and speeds up the half that runs towards it. Each half's
-    acceleration is taken from its first and last speed (the samples' own differences
-    are Hall noise); the difference is in units of the reference's Coulomb deceleration
-    τ_c/I (the current model's c₂/c₀). A friction factor F raises it by about 2(F − 1).
-    A clamped current (no feed-forward step at the zero crossing) is the lag test's.
-
-    Parameters
-    ----------
-    segment : list of (t_s, speed_rpm, current_a)
-        Consecutive samples of one slew (one sign of acceleration); t_s the time the
-        telemetry was measured.
-    c : array_like, shape (4,)
-        The reference's current model [A per rpm/s, A per rpm, A, A].
-
-    Returns
-    -------
-    float or None
-        The asymmetry; None where either half has fewer than :data:`SLEW_MIN` samples
-        in :data:`SLEW_SPEED_RPM` or the current does not step at the zero crossing.
-    """
-    inner = segment[1:-1]  # the first and last samples enter and leave the limit
-    lo, hi = SLEW_SPEED_RPM
-    pos = [x for x in inner if lo < x[1] < hi]
-    neg = [x for x in inner if -hi < x[1] < -lo]
-    if min(len(pos), len(neg)) < SLEW_MIN or not c[0] > 0 or not c[2] > 0:
-        return None
-    step = np.mean([x[2] for x in pos]) - np.mean([x[2] for x in neg])
-    if step < c[2]:  # half the reference's feed-forward step: a clamped current
-        return None
-
-    def rate(half):
-        return abs(half[-1][1] - half[0][1]) / (half[-1][0] - half[0][0])
-
-    rising = inner[-1][1] > inner[0][1]
-    toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
-    return float((toward - away) / (c[2] / c[0]))
 
 
 class _BlockCusum:
