@@ -7,11 +7,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
 from rwlab.data import IOData
 from rwlab.errors import DataError, ModelError
 from rwlab.ident import arx, fit_percent
-from rwlab.ident.greybox import RPM, WheelGreyBox, greybox_fit
+from rwlab.ident.greybox import RPM, Uncertainty, WheelGreyBox, greybox_fit
 from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.study import DATASHEET
 from rwlab.signals import prbs, rate_limit
@@ -118,3 +119,64 @@ def test_nlarx_fits_a_static_nonlinearity_a_linear_arx_cannot():
     assert fit_percent(val.y[:, 0], sim) > 95
     assert fit_percent(val.y[:, 0], sim) > fit_percent(val.y[:, 0], lin.simulate(val.u)) + 5
     assert NLARXModel.from_dict(model.to_dict()) == model
+
+
+def test_greybox_std_is_a_budget_and_covers_the_units_truth(grey, unit_a):
+    model, _ = grey
+    # J's datasheet tolerance (±2 %, uniform) enters every parameter that needs J, and
+    # only those; σ is the root sum of squares of the budget's terms
+    for name, parts in model.std_budget.items():
+        assert model.std[name] == pytest.approx(math.sqrt(sum(v**2 for v in parts.values())))
+        needs_j = name in ("torque_constant", "coulomb", "breakaway", "viscous")
+        assert ("inertia" in parts) == needs_j
+        if needs_j:
+            assert parts["inertia"] == pytest.approx(abs(getattr(model, name)) * 0.02 / 3**0.5)
+    ratio = model.ratios["torque_constant/inertia"]
+    assert ratio["value"] == pytest.approx(model.torque_constant / model.inertia)
+    # the unit's truth within 3 σ: the physical kt (J off by the unit's draw) and kt/J
+    z_kt = (model.torque_constant - unit_a.torque_constant) / model.std["torque_constant"]
+    true_ratio = unit_a.torque_constant / unit_a.inertia
+    z_ratio = (ratio["value"] - true_ratio) / ratio["std"]
+    assert abs(z_kt) < 3 and abs(z_ratio) < 3
+    assert model.accel_limit == pytest.approx(
+        unit_a.max_accel_rpm_s * RPM, abs=3 * model.std["accel_limit"]
+    )
+    assert "Newey–West" in model.std_method
+
+
+def test_greybox_refuses_bad_uncertainty_settings(unit_a):
+    data, current = _record(unit_a, 3, minutes=2.0)
+    with pytest.raises(DataError, match="inertia_tolerance"):
+        Uncertainty(inertia_tolerance=-0.1)
+    with pytest.raises(DataError, match="hac_lags"):
+        Uncertainty(hac_lags=-1)
+    with pytest.raises(DataError, match="structure_error"):
+        Uncertainty(structure_error={"mass": 0.1})
+    # no J tolerance, no structure error, white residuals: σ is the statistical term alone
+    bare = greybox_fit(data, current=current, uncertainty=Uncertainty(0.0, 0, {}), **DATASHEET)
+    assert all(p["structure"] == 0 and p.get("inertia", 0) == 0 for p in bare.std_budget.values())
+    assert all(bare.std[k] == pytest.approx(p["statistical"]) for k, p in bare.std_budget.items())
+
+
+def test_newey_west_sandwich_matches_the_spread_under_coloured_errors():
+    """Least squares with an autocorrelated regressor and AR(1) errors (ρ = 0.9): the
+    white-noise covariance is too small, the Newey–West sandwich matches the spread."""
+    from rwlab.ident.greybox import _sandwich
+
+    rng = np.random.default_rng(0)
+    n, runs = 800, 300
+    x = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n))
+    X = np.column_stack([x, np.ones(n)])
+    seen = np.array([True, True])
+    slopes, hac, white = [], [], []
+    for _ in range(runs):
+        e = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n))
+        beta, *_ = np.linalg.lstsq(X, 2.0 * x + e, rcond=None)
+        r = X @ beta - (2.0 * x + e)
+        slopes.append(beta[0])
+        hac.append(math.sqrt(_sandwich(r, X, n, seen, None)[0][0, 0]))
+        lam = r @ r / (n - 2)
+        white.append(math.sqrt(lam * np.linalg.inv(X.T @ X)[0, 0]))
+    spread = np.std(slopes, ddof=1)
+    assert np.mean(hac) == pytest.approx(spread, rel=0.25)
+    assert np.mean(white) < 0.5 * spread  # what λ(JᵀJ)⁻¹ reports here

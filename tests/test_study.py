@@ -100,6 +100,13 @@ def test_report_has_every_figure_of_the_paper_and_no_external_links(study_dir):
     )
     assert {"table2-orders", "table3-others", "table-continuous"} <= parser.tables
     assert parser.links == []  # nothing to fetch: it opens offline
+    # the gain-constrained models next to their free twins, and what K is and where from
+    study = json.loads((study_dir / "study.json").read_text())
+    assert study["constrained"] and "table-constrained" in parser.tables
+    k = study["gain_constraint"]
+    text = (study_dir / "report.html").read_text()
+    assert f"static gain constrained to K = {k['gain']:.4f} ± {k['gain_std']:.4f}" in text
+    assert f"{k['holds']} settled holds of the estimation part" in text
 
 
 def test_model_json_is_physical_and_simulates_the_wheel(study_dir):

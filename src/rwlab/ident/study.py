@@ -533,7 +533,7 @@ def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, model
     """Every ARX order, ARMAX, OE and BJ again with the static gain ``gain`` (the data's
     units) imposed (:mod:`rwlab.ident.gain_constraint`); their rows, named ``…+K``."""
     nk_pem = max(nk, 1)
-    fits = [(arx, (n, n, nk)) for n in orders]
+    fits: list[tuple[Callable[..., PolyModel], tuple]] = [(arx, (n, n, nk)) for n in orders]
     fits += [(armax, (2, 2, 1, nk_pem)), (oe, (2, 2, nk_pem)), (bj, (2, 1, 1, 2, nk_pem))]
     out = []
     for estimate, args in fits:
