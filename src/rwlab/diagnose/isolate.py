@@ -19,10 +19,12 @@ motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 +
             1/F the current for everything
 friction    excess only at constant speed                     ``friction``, factor
                                                               (1 + e_ω)/(1 + e_α)
-speed       held speed offset from the command                 ``speed_sensor_bias``, rpm
-offset      offset of the speed residual, continuous command   ``speed_sensor_bias``, rpm
-slew        at the acceleration limit: faster towards zero      ``friction``, factor
-            speed than away (friction beyond the feed-forward)  1 + Δ/2
+speed       held speed offset from the command                ``speed_sensor_bias``,
+                                                              rpm
+offset      offset of the speed residual at zero speed,       ``speed_sensor_bias``,
+            continuous command                                rpm
+slew        at the acceleration limit: faster towards zero    ``friction``, factor
+            speed than away (unknown friction)                1 + Δ/2
 lag         slower than the model at its acceleration limit   ``current_limit``: the
             with a healthy motor test                         current it flattens at (A);
                                                               with the motor test in
