@@ -289,6 +289,46 @@ def test_the_choice_passes_over_a_model_whose_dc_gain_is_off_and_says_so():
     off = [{**r, "dc_gain_error_percent": 5.0} for r in rows]
     pick, why = _choose(off, 3.0, 0.02, steady)
     assert pick["structure"] == "ARX221" and "no such model" in why
+    # none passes: the nearest gain wins, so a tighter tolerance never picks a worse gain
+    near = [{**r, "dc_gain_error_percent": e} for r, e in zip(rows, (-9.4, 1.3, 0.5))]
+    for tol in (0.0001, 0.01):
+        pick, why = _choose(near[:2], 3.0, tol, steady)
+        assert pick["structure"] == "OE221" and "the one nearest it is chosen" in why
+
+
+def test_the_reason_says_why_paper_a_s_arx221_was_not_chosen():
+    rows = [
+        {"structure": "ARX221", "n_params": 4, "fit_percent": 64.9, "dc_gain": 0.90,
+         "dc_gain_error_percent": -10.0},
+        {"structure": "ARX221+K", "n_params": 4, "fit_percent": 65.1, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.1, "gain_constrained": True},
+        {"structure": "OE221+K", "n_params": 4, "fit_percent": 69.2, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.1, "gain_constrained": True},
+    ]  # fmt: skip
+    steady = {"gain": 1.0, "holds": 20}
+    pick, why = _choose(rows, 3.0, 0.02, steady)
+    assert pick["structure"] == "OE221+K"
+    assert "ARX221 fits 64.90 % (4.30 points below the best)" in why
+    assert "ARX221+K fits 65.10 % (4.10 points below the best)" in why
+    pick, why = _choose(rows[:2], 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221+K" and "paper A's choice" not in why
+    # every model poor: the choice says no model is good instead
+    poor = [{**r, "fit_percent": r["fit_percent"] - 100} for r in rows]
+    assert "no model is good" in _choose(poor, 3.0, 0.02, steady)[1]
+
+
+def test_a_hold_still_closing_in_on_its_level_is_not_settled():
+    # every hold of 40 s settles exactly on its level, except one whose output still
+    # closes in (e^(-t/15 s) from 15 % off): its last 5 s range within 1 % of the span,
+    # but its mean moves from one 5-s window to the next. Taken, it would bias the gain.
+    levels = [1000.0, -2000.0, 3000.0, -500.0, 4000.0, -3000.0]
+    u = np.repeat(levels, 80)
+    y = u.copy()
+    t = np.arange(80) * 0.5
+    y[-80:] = levels[-1] * (1 + 0.15 * np.exp(-t / 15.0))
+    assert np.ptp(y[-10:]) <= 0.01 * np.ptp(u)  # the range test alone would take it
+    got = steady_state_gain(IOData(u, y, 0.5))
+    assert got["holds"] == 5 and got["gain"] == pytest.approx(1.0, abs=1e-12)
 
 
 def test_rwlab_compare_scores_every_model_in_model_json_on_a_record(study_dir):

@@ -559,7 +559,11 @@ def _choose(
     limit = 100 * gain_tolerance
     ok = [r for r in near if r.get("dc_gain_error_percent") is not None]
     ok = [r for r in ok if abs(r["dc_gain_error_percent"]) <= limit]
-    pick = ok[0] if steady is not None and ok else near[0]
+    if steady is None or ok:
+        pick = ok[0] if steady is not None else near[0]
+    else:  # none passes: the nearest gain, not the simplest (a tighter tolerance never
+        # chooses a worse gain than a looser one)
+        pick = min(near, key=lambda r: abs(r.get("dc_gain_error_percent") or math.inf))
     reason = (
         f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
         "then ARX < ARMAX < OE < BJ, a free model before its gain-constrained twin +K) "
@@ -567,12 +571,14 @@ def _choose(
         f"is within {tolerance:g} points of the best ({best:.2f} %)"
     )
     if steady is None:
-        return pick, reason + "; the record has too few settled holds to check the DC gain"
+        reason += "; the record has too few settled holds to check the DC gain"
+        return pick, reason + _paper_text(pick, candidates, best)
     g = steady["gain"]
     if not ok:
         return pick, reason + (
             f"; no such model's DC gain is within {limit:g} % of the measured steady-state "
-            f"gain {g:.4f} (this one's: {_dc_text(pick)})"
+            f"gain {g:.4f}: the one nearest it is chosen ({_dc_text(pick)})"
+            + _paper_text(pick, candidates, best)
         )
     skipped = near[: near.index(pick)]
     reason += f" and whose DC gain ({_dc_text(pick)}) is within {limit:g} % of the measured "
@@ -583,7 +589,39 @@ def _choose(
         )
     if pick.get("gain_constrained") and anchor is not None:
         reason += "; " + _constraint_text(pick, anchor, candidates)
-    return pick, reason
+    return pick, reason + _paper_text(pick, candidates, best)
+
+
+POOR_FIT = 50.0
+"""Validation fit, %, below which the choice comes with a warning that no model is good."""
+
+
+def _paper_text(pick: dict, candidates: list[dict], best: float) -> str:
+    """Why paper A's ARX221 (and its +K twin) was not chosen, when it was not; a warning
+    when even the best model fits poorly."""
+    if best < POOR_FIT:
+        return (
+            f"; no model is good: the best validation fit is {best:.2f} % (a record that "
+            "does not excite the wheel's dynamics, e.g. a chirp too fast for it, or a wheel "
+            "beyond its linear range)"
+        )
+    if pick["structure"] in (PAPER_STRUCTURE, PAPER_STRUCTURE + CONSTRAINED):
+        return ""
+    named = {r["structure"]: r for r in candidates}
+    parts = [
+        f"{name} fits {named[name]['fit_percent']:.2f} % "
+        f"({best - named[name]['fit_percent']:.2f} points below the best), DC gain "
+        f"{_dc_text(named[name])}"
+        for name in (PAPER_STRUCTURE, PAPER_STRUCTURE + CONSTRAINED)
+        if name in named
+    ]
+    if not parts:
+        return f"; paper A's {PAPER_STRUCTURE} is unstable or failed on this record"
+    return f"; paper A's choice is not: {'; '.join(parts)}"
+
+
+PAPER_STRUCTURE = "ARX221"
+"""Paper A's chosen structure, which the reason discusses when another is chosen."""
 
 
 def _constraint_text(pick: dict, anchor: dict, candidates: list[dict]) -> str:
@@ -591,7 +629,9 @@ def _constraint_text(pick: dict, anchor: dict, candidates: list[dict]) -> str:
     text = (
         f"static gain constrained to K = {anchor['gain']:.4f} ± {anchor['gain_std']:.4f} "
         f"measured on {anchor['holds']} settled holds of the estimation part (its DC gain "
-        "agrees with the whole record's by construction, up to that difference)"
+        "agrees with the whole record's by construction, up to that difference; the "
+        "model's covariance holds its dynamics given K, so its static gain's uncertainty "
+        "is K's)"
     )
     name = pick["structure"].removesuffix(CONSTRAINED)
     twin = next((r for r in candidates if r["structure"] == name), None)
@@ -632,8 +672,11 @@ def steady_state_gain(
 
     Every hold of the input at least ``min_hold`` long gives one point: the input
     level and the mean output over the hold's last ``tail`` seconds, kept when the
-    output has settled there (its range over the tail within ``settled`` of the
-    input's whole range: a wheel still ramping at its acceleration limit is not).
+    output has settled there: its range over the tail within ``settled`` of the
+    input's whole range (a wheel still ramping at its acceleration limit is not),
+    and its mean over the tail within a tenth of that of its mean over the tail
+    before (a wheel still closing in on the level after an overshoot is not: its
+    last mean would bias the gain).
     The gain is the least-squares slope through these points (with an intercept,
     as the physical model ``y − y0 = G·(u − u0)`` has).
 
@@ -672,10 +715,11 @@ def _hold_points(
     span = float(np.ptp(u)) if span is None else span
     levels, speeds = [], []
     for a, b in itertools.pairwise(bounds):
-        if (b - a) * data.Ts < min_hold or b - a < n_tail:
+        if (b - a) * data.Ts < min_hold or b - a < 2 * n_tail:
             continue
-        end = y[b - n_tail : b]
-        if np.ptp(end) <= settled * span:
+        end, before = y[b - n_tail : b], y[b - 2 * n_tail : b - n_tail]
+        drift = abs(end.mean() - before.mean())
+        if np.ptp(end) <= settled * span and drift <= 0.1 * settled * span:
             levels.append(float(u[a]))
             speeds.append(float(end.mean()))
     return levels, speeds

@@ -8,6 +8,7 @@ and ``table3-others``.
 
 from __future__ import annotations
 
+import html
 import json
 import os
 from pathlib import Path
@@ -186,7 +187,7 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     ch = study["chosen"]
     page.html(
         f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
-        f"{ch['fit_percent']:.2f} %. {ch['reason']}.</p>"
+        f"{ch['fit_percent']:.2f} %. {html.escape(ch['reason'])}.</p>"
     )
     note = (study.get("parts") or {}).get("note")
     if note:
@@ -209,6 +210,12 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
             f"{anchor['holds']} settled holds of the estimation part only (the validation "
             "part does not inform them). Their DC gain equals K by construction; its "
             "agreement with the whole record's gain is no test of the dynamics.</p>"
+        )
+    else:
+        page.text(
+            "No gain-constrained models (+K): the estimation part has fewer than 3 settled "
+            "holds at two or more levels to measure the static gain on.",
+            note=True,
         )
 
     page.heading("1. Input delay (paper Fig. 16)", "delay")
