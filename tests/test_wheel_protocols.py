@@ -340,7 +340,8 @@ def test_experiment_over_a_pty_to_a_served_nsp_wheel(tmp_path):
             capture_output=True, text=True, env=env, timeout=120,
         )  # fmt: skip
         assert run.returncode == 0, run.stderr
-        assert "(completed)" in run.stdout and " 0 lost" in run.stdout
+        # completed (on a loaded machine a real-time run may add "with timing faults")
+        assert "(completed" in run.stdout and " 0 lost" in run.stdout
         record = read_record(tmp_path / "r.mcap")
         assert record.metadata["protocol"] == "nsp"
         assert max(t["speed_rpm"] for t in record.topic("/telemetry")) > 200

@@ -203,7 +203,8 @@ def test_a_burst_of_junk_leaves_the_served_wheel_and_the_experiment_running():
     assert r["junk_sent"] > 1000
     for phase in ("rate_before", "rate_during", "rate_after"):
         assert r[phase] >= 35, r  # served at 50 Hz (counted on arrival: a lower bound)
-    assert r["exp_rc"] == 0 and "(completed)" in r["exp_stdout"], r
+    # completed ("with timing faults" allowed: the junk is not what a loaded machine delays)
+    assert r["exp_rc"] == 0 and "(completed" in r["exp_stdout"], r
     lost = int(r["exp_stdout"].split(" lost")[0].rsplit(",", 1)[1])
     # the burst costs no frame: the realistic twin loses ~1 in 1000 on purpose (frame_loss_rate)
     assert lost <= 3, r
