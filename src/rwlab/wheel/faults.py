@@ -18,7 +18,14 @@ name                          value      what changes
 
 The wheel's own controller does not know about rotor or driver faults (it
 keeps its nominal k_t and friction feed-forward), and its speed loop runs on
-the true speed: the sensor faults touch only what the telemetry reports.
+the true speed: the sensor faults touch only what the telemetry reports — a
+fault of the reporting path (a firmware offset, a frozen telemetry register),
+not of the sensor the loop closes on. That choice decides what diagnosis can
+see: a bias inside the loop's own sensor is hidden by the loop (the wheel runs
+at command − bias and reports the command), so no test on command, speed and
+current alone separates it from a healthy wheel; it needs an independent speed
+reference (the satellite's gyros, a bench tachometer). An independent reviewer
+moved the bias into the loop: 1 of 4 biases of 15–20 rpm was then detected.
 """
 
 from __future__ import annotations
