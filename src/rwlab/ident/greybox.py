@@ -21,14 +21,18 @@ record has it, the motor current.
 Identifiability (stated, not hidden): with the current telemetry, kt/J, τc/kt
 and b/kt are observable (the current is what the driver commands), so with J
 fixed at its datasheet value kt, τc and b are estimated; without it they are
-observable only while the current limit binds. The current limit ``i_max`` is a
-known setting of the driver (a record that never reaches it cannot tell where
-it is), as is ω_max. Estimated: kt, τc, τbrk, b, α, kp, ki. ωs is fixed (10 rpm
-typical: a Stribeck speed is not identifiable from a PRBS that crosses zero a few
-times).
+observable only while the current limit binds. Estimated: kt, τc, τbrk, b, α,
+kp, ki, and the current limit ``i_max`` when the record shows it binding (at
+least :data:`CLAMP_SAMPLES` measured currents at the configured limit, less
+three tolerances: a clamp is visible in the current telemetry). Otherwise
+``i_max`` stays at the driver's configured value, which the unit's clamp
+misses by its tolerance (current-sense shunt and reference: ±2 %); a record
+that never reaches the clamp cannot tell where it is. ω_max is a known setting.
+ωs is fixed (10 rpm typical: a Stribeck speed is not identifiable from a PRBS
+that crosses zero a few times).
 
 Standard deviations (``std``, itemised in ``std_budget``) are the root sum of
-squares of three terms, because λ·(JᵀJ)⁻¹ alone was far too small (measured on
+squares of these terms, because λ·(JᵀJ)⁻¹ alone was far too small (measured on
 held-out twin units: |z| up to 25):
 
 - statistical: the sandwich H⁻¹SH⁻¹ of the simulation error with S the
@@ -37,9 +41,17 @@ held-out twin units: |z| up to 25):
 - inertia: J is fixed at its datasheet value, so the record identifies kt/J,
   τc/J, τbrk/J and b/J (``ratios``, with σ without this term); the physical
   values carry J's datasheet tolerance (±2 % uniform by default);
-- structure: the relative error the model's structure leaves
-  (:data:`STRUCTURE_ERROR`, measured on three twin records against the units'
-  truth; judged on six other units by ``bench/bench_greybox_z.py``).
+- current_limit: when ``i_max`` is held at its configured value, its tolerance
+  carried through the fit (the estimates' sensitivity to ``i_max`` at the
+  optimum, −(JᵀJ)⁻¹Jᵀ∂r/∂i_max, times σ of the tolerance): zero when the record
+  never reaches the clamp, the dominant term of kt/J and α when it binds
+  without a current telemetry to estimate it from;
+- structure: a bias envelope, not a noise term. :data:`STRUCTURE_ERROR` is the
+  RMS relative error the model's structure left on three twin records against
+  the units' truth (judged on other units by ``bench/bench_greybox_z.py``). The
+  estimates of α and kt/J are biased low on every nominal twin unit and this
+  term is most of their σ: it covers the twin's effects the grey box leaves
+  out, and carries to a real wheel only as far as the twin is right about them.
 
 No library offers this model; the simulation is written here and compiled with
 numba, the fit is ``scipy.optimize.least_squares`` on the simulation error.
@@ -62,6 +74,9 @@ __all__ = ["STRUCTURE_ERROR", "Uncertainty", "WheelGreyBox", "greybox_fit"]
 STRUCTURE = "greybox"
 RPM = math.pi / 30.0  # rad/s per rpm
 ESTIMATED = ("torque_constant", "coulomb", "breakaway", "viscous", "accel_limit", "kp", "ki")
+CLAMP = "current_limit"  # estimated too when the record shows the clamp binding
+_POSITION = dict(zip((*ESTIMATED, CLAMP), (1, 3, 4, 6, 7, 8, 9, 2), strict=True))  # in vector
+CLAMP_SAMPLES = 10  # measured-current samples at the clamp that make it visible
 
 
 @njit(cache=True)
@@ -114,7 +129,8 @@ class WheelGreyBox:
     torque_constant : float
         kt, N·m/A (estimated).
     current_limit : float
-        i_max, A (known driver setting).
+        i_max, A: estimated when the record shows the clamp binding (then in
+        ``std``), else the driver's configured value.
     coulomb, breakaway : float
         τc and τbrk ≥ τc, N·m (estimated).
     stribeck_speed : float
@@ -148,8 +164,12 @@ class WheelGreyBox:
     std_method : str
         How ``std`` was computed (module docstring).
     std_budget : dict
-        Per estimated parameter, its σ's terms: ``statistical``, ``structure`` and,
-        for those that need J, ``inertia`` (same units as the parameter).
+        Per estimated parameter, its σ's terms: ``statistical``, ``structure``,
+        ``current_limit`` (the configured limit's tolerance, when it is not
+        estimated) and, for those that need J, ``inertia`` (same units as the
+        parameter).
+    current_limit_estimated : bool
+        Whether ``current_limit`` was estimated (the record showed the clamp).
     """
 
     Ts: float
@@ -173,6 +193,7 @@ class WheelGreyBox:
     ratios: dict | None = None
     std_method: str = ""
     std_budget: dict | None = None
+    current_limit_estimated: bool = False
 
     nu = 1
     ny = 1
@@ -181,9 +202,10 @@ class WheelGreyBox:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "unidentified", tuple(self.unidentified))
-        if not set(self.unidentified) <= set(ESTIMATED):
-            raise ModelError(f"unidentified must name estimated parameters {ESTIMATED}")
+        if not set(self.unidentified) <= set(self.estimated):
+            raise ModelError(f"unidentified must name estimated parameters {self.estimated}")
         skip = ("std", "unidentified", "ratios", "std_method", "std_budget")
+        skip += ("current_limit_estimated",)
         values = [v for k, v in asdict(self).items() if k not in skip]
         if not all(math.isfinite(float(v)) for v in values):
             raise ModelError(f"grey-box parameters must be finite, got {values}")
@@ -219,7 +241,12 @@ class WheelGreyBox:
     @property
     def n_params(self) -> int:
         """Number of estimated parameters."""
-        return len(ESTIMATED)
+        return len(self.estimated)
+
+    @property
+    def estimated(self) -> tuple[str, ...]:
+        """Names of the estimated parameters."""
+        return (*ESTIMATED, CLAMP) if self.current_limit_estimated else ESTIMATED
 
     def with_limits(self, *, current_limit=None, max_speed=None) -> WheelGreyBox:
         """The same wheel under other known saturations (A, rad/s); None keeps one."""
@@ -280,7 +307,7 @@ class WheelGreyBox:
         d = asdict(self)
         d["structure"] = STRUCTURE
         d["units"] = "SI (N·m, A, rad/s, kg·m²); model input and output in rpm"
-        d["estimated"] = list(ESTIMATED)
+        d["estimated"] = list(self.estimated)
         d["unidentified"] = list(self.unidentified)
         return d
 
@@ -304,30 +331,39 @@ class Uncertainty:
         J's datasheet tolerance, ± as a fraction (uniform within it: σ_J/J =
         tolerance/√3; default ±2 %, rotor machining). It enters the standard
         deviation of every parameter that needs J (kt, τc, τbrk, b).
+    current_limit_tolerance : float
+        How far the unit's current clamp may sit from the driver's configured
+        limit, ± as a fraction (uniform; default ±2 %: current-sense shunt 1 % +
+        reference 1 %). With the limit held at its configured value it enters
+        every σ through the fit's sensitivity to it; it also sets how close to
+        the configured limit a measured current counts as at the clamp.
     hac_lags : int, optional
         Lags of the Newey–West long-run covariance of the scores (0: residuals
         taken as white); None (default) chooses them by Andrews' AR(1) plug-in.
     structure_error : dict, optional
-        Relative error of each estimated parameter that the model's structure leaves
-        (what it does not model: the firmware's Hall-speed feedback, k_t's fall with
-        temperature, friction drift, torque ripple); None: :data:`STRUCTURE_ERROR`,
-        measured on the twin; ``{}`` for none.
+        Relative bias envelope of each estimated parameter that the model's structure
+        leaves (what it does not model: the firmware's Hall-speed feedback, k_t's
+        fall with temperature, friction drift, torque ripple); None:
+        :data:`STRUCTURE_ERROR`, calibrated on the twin (it holds on a real wheel
+        only as far as the twin is right); ``{}`` for none.
     """
 
     inertia_tolerance: float = 0.02
     hac_lags: int | None = None
     structure_error: dict | None = None
+    current_limit_tolerance: float = 0.02
 
     def __post_init__(self) -> None:
-        tol = self.inertia_tolerance
-        if isinstance(tol, bool) or not (math.isfinite(tol) and 0 <= tol < 1):
-            raise DataError(f"inertia_tolerance must be a fraction in [0, 1), got {tol!r}")
+        for name in ("inertia_tolerance", "current_limit_tolerance"):
+            tol = getattr(self, name)
+            if isinstance(tol, bool) or not (math.isfinite(tol) and 0 <= tol < 1):
+                raise DataError(f"{name} must be a fraction in [0, 1), got {tol!r}")
         lags = self.hac_lags
         bad = isinstance(lags, bool) or not isinstance(lags, (int, np.integer))
         if lags is not None and (bad or lags < 0):
             raise DataError(f"hac_lags must be a non-negative integer or None, got {lags!r}")
         shape = self.structure_error or {}
-        if not set(shape) <= set(ESTIMATED) or not all(
+        if not set(shape) <= {*ESTIMATED, CLAMP} or not all(
             math.isfinite(v) and v >= 0 for v in shape.values()
         ):
             raise DataError(
@@ -351,6 +387,7 @@ def greybox_fit(
     substeps: int = 50,
     current=None,
     uncertainty: Uncertainty | None = None,
+    estimate_current_limit: bool | None = None,
 ) -> WheelGreyBox:
     """Estimate the grey-box wheel by simulation error from its datasheet values.
 
@@ -359,9 +396,9 @@ def greybox_fit(
     data : IOData
         Speed command → measured speed, both rpm, SISO, starting at rest.
     inertia, torque_constant, current_limit, coulomb, viscous : float
-        Datasheet values (kg·m², N·m/A, A, N·m, N·m·s/rad): J, the current
-        limit and the firmware's feed-forward stay fixed; kt and the friction
-        start from them.
+        Datasheet values (kg·m², N·m/A, A, N·m, N·m·s/rad): J and the firmware's
+        feed-forward stay fixed; kt, the friction and the current limit (the
+        driver's configured value) start from them.
     accel_limit_rpm_s, max_speed_rpm : float
         The rate limit's start value and the known speed limit.
     kp, ki : float
@@ -376,6 +413,10 @@ def greybox_fit(
         and current errors are each scaled by their output's spread.
     uncertainty : Uncertainty, optional
         How the standard deviations are formed (default: ``Uncertainty()``).
+    estimate_current_limit : bool, optional
+        Estimate the current limit (True), hold it at ``current_limit`` with its
+        tolerance in every σ (False), or (None, default) estimate it when the
+        measured ``current`` shows the clamp binding (:func:`clamp_visible`).
 
     Returns
     -------
@@ -408,11 +449,6 @@ def greybox_fit(
         max_speed_rpm * RPM,
         substeps,
     )
-    x0 = np.array([getattr(base, k) for k in ESTIMATED], dtype=float)
-    scale = np.abs(x0) + 1e-12
-    p = base.vector
-    index = [1, 3, 4, 6, 7, 8, 9]  # positions of ESTIMATED in the vector
-    sd_y = float(np.std(y)) or 1.0
     i_meas = None
     if current is not None:
         i_meas = np.asarray(current, dtype=float).ravel()
@@ -420,9 +456,18 @@ def greybox_fit(
             raise DataError("current must be finite with one sample per speed sample")
     sd_i = float(np.std(i_meas)) if i_meas is not None else 1.0
     sd_i = sd_i or 1.0
+    tol_c = unc.current_limit_tolerance
+    if estimate_current_limit is None:
+        estimate_current_limit = i_meas is not None and clamp_visible(i_meas, current_limit, tol_c)
+    names = (*ESTIMATED, CLAMP) if estimate_current_limit else ESTIMATED
+    x0 = np.array([getattr(base, k) for k in names], dtype=float)
+    scale = np.abs(x0) + 1e-12
+    p = base.vector
+    index = [_POSITION[k] for k in names]
+    sd_y = float(np.std(y)) or 1.0
 
-    def residuals(z):
-        q = p.copy()
+    def residuals(z, q=p):
+        q = q.copy()
         q[index] = z * scale
         q[4] = max(q[4], q[3])
         speed, cur = _simulate(u, float(y[0]), q)
@@ -430,8 +475,8 @@ def greybox_fit(
             return (speed - y) / sd_y
         return np.concatenate([(speed - y) / sd_y, (cur - i_meas) / sd_i])
 
-    lower = np.array([0.2, 0.0, 0.0, 0.0, 0.2, 1e-3, 0.0])
-    upper = np.array([5.0, 20.0, 30.0, 50.0, 5.0, 1e3, 1e3])
+    lower = np.array([0.2, 0.0, 0.0, 0.0, 0.2, 1e-3, 0.0, 0.5][: len(names)])
+    upper = np.array([5.0, 20.0, 30.0, 50.0, 5.0, 1e3, 1e3, 1.5][: len(names)])
     # the loss is piecewise smooth (anti-windup switching, stiction): from a few starts
     # of the PI gains, with finite differences wide enough to see across the kinks
     sol = None
@@ -454,34 +499,47 @@ def greybox_fit(
             "the grey-box fit diverged; check the record and the datasheet values"
         )
     values = sol.x * scale
-    fitted = dict(zip(ESTIMATED, (float(v) for v in values), strict=True))
+    fitted = dict(zip(names, (float(v) for v in values), strict=True))
     # a parameter the loss does not see at the optimum (zero Jacobian column, or breakaway
     # clipped to Coulomb) has no standard deviation: it is reported as unidentified
     norms = np.linalg.norm(sol.jac, axis=0)
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
-    blind[ESTIMATED.index("breakaway")] |= fitted["breakaway"] <= fitted["coulomb"]
+    blind[names.index("breakaway")] |= fitted["breakaway"] <= fitted["coulomb"]
     cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
     cov /= np.outer(1 / scale, 1 / scale)
     fit_std = {
-        k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(ESTIMATED) if not blind[i]
+        k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(names) if not blind[i]
     }
+    clamp = {}  # the fixed limit's tolerance carried through the fit, per parameter
+    if not estimate_current_limit:
+        clamp = _clamp_sensitivity(residuals, sol, p, current_limit, ~blind, names)
+        clamp = {k: abs(v) * current_limit * tol_c / math.sqrt(3.0) for k, v in clamp.items()}
     rel_j = inertia_tolerance / math.sqrt(3.0)
     shape = STRUCTURE_ERROR if unc.structure_error is None else unc.structure_error
     std, ratios, budget = {}, {}, {}
     for k, s_fit in fit_std.items():
         parts = {"statistical": s_fit, "structure": abs(fitted[k]) * shape.get(k, 0.0)}
+        if not estimate_current_limit:
+            parts["current_limit"] = clamp.get(k, 0.0)
         if k in NEEDS_J:  # value = (value/J)·J: the record fixes the ratio, J its datasheet
-            ratio = math.hypot(parts["statistical"], parts["structure"]) / inertia
+            ratio = math.sqrt(sum(v**2 for v in parts.values())) / inertia
             ratios[f"{k}/inertia"] = {"value": fitted[k] / inertia, "std": ratio}
             parts["inertia"] = abs(fitted[k]) * rel_j
         budget[k] = parts
         std[k] = math.sqrt(sum(v**2 for v in parts.values()))
-    unidentified = tuple(k for i, k in enumerate(ESTIMATED) if blind[i])
+    unidentified = tuple(k for i, k in enumerate(names) if blind[i])
     fitted["breakaway"] = max(fitted["breakaway"], fitted["coulomb"])
+    limit = (
+        "current_limit: estimated (the record shows the clamp binding)"
+        if estimate_current_limit
+        else f"current_limit: held at the configured {current_limit:g} A, its tolerance "
+        f"±{100 * tol_c:g} % (uniform) carried through the fit's sensitivity to it"
+    )
     method = (
         f"statistical: sandwich H⁻¹SH⁻¹ of the simulation error, S by Newey–West with {lags} "
         f"lags ({'Andrews AR(1) plug-in' if hac_lags is None else 'given'}); structure: the "
-        "relative error the model's structure leaves (measured on the twin); inertia: J's "
+        "bias envelope the model's structure leaves (calibrated on the twin); "
+        f"{limit}; inertia: J's "
         f"datasheet tolerance ±{100 * inertia_tolerance:g} % (uniform) for the parameters "
         "that need J; std is their root sum of squares; ratios (x/J, the combinations the "
         "record identifies) leave the inertia term out"
@@ -494,7 +552,52 @@ def greybox_fit(
         ratios=ratios,
         std_method=method,
         std_budget=budget,
+        current_limit_estimated=bool(estimate_current_limit),
     )
+
+
+def clamp_visible(current, current_limit: float, tolerance: float = 0.02) -> bool:
+    """Whether a measured motor current shows the driver's clamp binding.
+
+    Parameters
+    ----------
+    current : array_like, shape (N,)
+        Measured motor current, A.
+    current_limit : float
+        The driver's configured limit, A.
+    tolerance : float
+        How far the unit's clamp may sit from it, ± fraction.
+
+    Returns
+    -------
+    bool
+        True when at least :data:`CLAMP_SAMPLES` samples reach the configured limit
+        less three tolerances (the clamp's spread, the sensor's offset and noise).
+    """
+    level = float(current_limit) * (1.0 - 3.0 * tolerance)
+    return int(np.count_nonzero(np.abs(np.asarray(current, dtype=float)) >= level)) >= (
+        CLAMP_SAMPLES
+    )
+
+
+def _clamp_sensitivity(residuals, sol, p, current_limit, seen, names) -> dict:
+    """d(estimate)/d(i_max) at the optimum with i_max held fixed (implicit function:
+    −(JᵀJ)⁻¹Jᵀ ∂r/∂i_max), per parameter, in its units per A. A central difference
+    over ±1 % of i_max: the clamp switches the simulation, a smaller step sees noise."""
+    step = 0.01 * current_limit
+    plus, minus = p.copy(), p.copy()
+    plus[2] += step
+    minus[2] -= step
+    column = (residuals(sol.x, plus) - residuals(sol.x, minus)) / (2 * step)
+    jac = sol.jac[:, seen]
+    shift = -np.linalg.lstsq(jac, column, rcond=None)[0]
+    scale = np.abs(np.array([p[_POSITION[k]] for k in names])) + 1e-12
+    out, j = {}, 0
+    for i, k in enumerate(names):
+        if seen[i]:
+            out[k] = float(shift[j] * scale[i])  # z-space → physical units
+            j += 1
+    return out
 
 
 NEEDS_J = ("torque_constant", "coulomb", "breakaway", "viscous")  # identified only as x/J
