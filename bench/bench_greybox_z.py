@@ -164,7 +164,10 @@ def main() -> None:
     for label, cols in zs.items():
         z = np.abs(np.concatenate([np.asarray(v) for v in cols.values()]))
         z = z[np.isfinite(z)]
-        worst = {c: float(np.nanmax(np.abs(v))) for c, v in cols.items()}
+        worst = {  # a column held on every record (α behind a binding clamp) has none
+            c: float(np.nanmax(np.abs(v))) if np.isfinite(v).any() else np.nan
+            for c, v in ((c, np.asarray(v, dtype=float)) for c, v in cols.items())
+        }
         print(
             f"{label:>12}: {np.mean(z < 3):.0%} of {z.size} below 3, max "
             + ", ".join(f"{c} {v:.1f}" for c, v in worst.items())
