@@ -650,12 +650,16 @@ STRUCTURE_ERROR = {
     "kp": 0.0089,
     "ki": 0.0177,
 }
-"""Relative error of each estimate that the model's structure leaves, measured on the twin
-(``python bench/bench_greybox_z.py --pairs n:0 1:7 2:3 --calibrate``: the RMS relative
-error of the J-free quantities against the units' truth, three records; judged on other
-units). What the grey box leaves out: the firmware's loop runs on the Hall speed (late
-and coarse), k_t falls with the magnet's temperature, friction drifts over a record,
-torque ripple and cogging."""
+"""A bias envelope, calibrated on the twin: the relative error the model's structure left
+on each estimate (``python bench/bench_greybox_z.py --pairs n:0 1:7 2:3 --calibrate``: the
+RMS relative error of the J-free quantities against the units' truth, three records;
+judged on other units). It is not noise: on every nominal twin unit α and kt/J come out
+low by about this much (z −0.6 to −1.1), and it is most of their σ. What the grey box
+leaves out: the firmware's loop runs on the Hall speed (late and coarse), k_t falls with
+the magnet's temperature, friction drifts over a record, torque ripple and cogging. On a
+real wheel it holds only as far as the twin is right about these effects; a wheel with
+others (a different loop, a different sensor) needs its own calibration against a unit
+whose parameters are measured."""
 
 
 def _sandwich(fun, jac, n_y: int, seen, lags: int | None) -> tuple[np.ndarray, int]:
