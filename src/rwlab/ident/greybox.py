@@ -48,8 +48,8 @@ held-out twin units: |z| up to 25):
 - current_limit: when ``i_max`` is held at its configured value, its tolerance
   carried through the fit (the estimates' sensitivity to ``i_max`` at the
   optimum, −(JᵀJ)⁻¹Jᵀ∂r/∂i_max, times σ of the tolerance): zero when the record
-  never reaches the clamp, the dominant term of kt/J and α when it binds
-  without a current telemetry to estimate it from;
+  never reaches the clamp, the dominant term of kt/J when the clamp binds and
+  the limit is held (no current telemetry, or ``estimate_current_limit=False``);
 - structure: a bias envelope, not a noise term. :data:`STRUCTURE_ERROR` is the
   RMS relative error the model's structure left on three twin records against
   the units' truth (judged on other units by ``bench/bench_greybox_z.py``). The
