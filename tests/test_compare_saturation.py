@@ -106,3 +106,25 @@ def test_compare_chooses_columns_with_input_and_output(setup, tmp_path):
     assert named["greybox"]["fit_percent"] == pytest.approx(default["greybox"]["fit_percent"])
     refused = _cli("compare", str(model), str(csv), "--current-limit", "-1")
     assert refused.exit_code == 2
+
+
+def test_each_saturation_comes_from_the_option_then_the_record_then_the_model_file():
+    from rwlab.wheel.compare import resolve_saturation
+
+    info = {
+        "saturation": {"speed_rpm": 7800.0, "accel_rpm_s": 314.0},
+        "greybox": {"current_limit": 0.3412, "current_limit_estimated": True},
+    }
+    # nothing given: the model file's, the grey box's estimate for the current limit
+    out = resolve_saturation(info, {})
+    assert out["current_limit_a"]["value"] == 0.3412
+    assert "estimate" in out["current_limit_a"]["source"]
+    assert out["speed_limit_rpm"]["source"].startswith("model file")
+    # a limit the identification record only configured is named so
+    held = {**info, "greybox": {"current_limit": 0.7, "current_limit_estimated": False}}
+    assert "configured" in resolve_saturation(held, {})["current_limit_a"]["source"]
+    # the record's (or the caller's) value wins, with its source
+    given = {"current_limit_a": 0.25, "sources": {"current_limit_a": "record"}}
+    out = resolve_saturation(info, given)
+    assert out["current_limit_a"] == {"value": 0.25, "source": "record"}
+    assert resolve_saturation({}, {}) == {}  # known nowhere: left out
