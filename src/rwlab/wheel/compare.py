@@ -96,7 +96,8 @@ def compare_wheel_models(
     saturation : dict, optional
         The record's wheel: ``speed_limit_rpm``, ``accel_limit_rpm_s``,
         ``current_limit_a`` (as :func:`rwlab.ident.study.load_study_data`
-        returns them). Missing keys keep the model file's values.
+        returns them), and optionally ``sources`` (key → where the value came
+        from). Missing keys keep the model file's values.
 
     Returns
     -------
@@ -154,7 +155,7 @@ def resolve_saturation(info: dict, given: dict) -> dict[str, dict]:
     given : dict
         The saturations the caller or the record knows (keys of :data:`SATURATIONS`,
         rpm, rpm/s, A), with ``"sources"``: key → where that value came from; a key
-        without a source is the caller's.
+        without one is named by ``"saturation_source"``, else ``"given"``.
 
     Returns
     -------
@@ -163,8 +164,9 @@ def resolve_saturation(info: dict, given: dict) -> dict[str, dict]:
         nowhere is left out.
     """
     sources = given.get("sources", {})
+    default = str(given.get("saturation_source", "given"))
     out = {
-        k: {"value": float(given[k]), "source": sources.get(k, "given")}
+        k: {"value": float(given[k]), "source": sources.get(k, default)}
         for k in SATURATIONS
         if given.get(k) is not None
     }
