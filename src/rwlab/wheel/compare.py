@@ -102,7 +102,9 @@ def compare_wheel_models(
     Returns
     -------
     dict
-        Model name → ``{"fit_percent", "mse", "n_samples", "structure"}``, and
+        Model name → ``{"fit_percent", "mse", "n_samples", "structure", "saturation"}``
+        (``saturation``: the limits that model applied, each ``{"value", "source"}``
+        from :func:`resolve_saturation`; the servo model and the NLARX take none), and
         ``"yhat"`` (numpy array, shape (N,)) for plotting.
     """
     info = _read(model_json)
