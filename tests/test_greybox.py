@@ -12,7 +12,7 @@ from scipy.signal import lfilter
 from rwlab.data import IOData
 from rwlab.errors import DataError, ModelError
 from rwlab.ident import arx, fit_percent
-from rwlab.ident.greybox import RPM, Uncertainty, WheelGreyBox, greybox_fit
+from rwlab.ident.greybox import RPM, Uncertainty, WheelGreyBox, clamp_visible, greybox_fit
 from rwlab.ident.nlarx import NLARXModel, nlarx
 from rwlab.ident.study import DATASHEET
 from rwlab.signals import prbs, rate_limit
@@ -180,3 +180,49 @@ def test_newey_west_sandwich_matches_the_spread_under_coloured_errors():
     spread = np.std(slopes, ddof=1)
     assert np.mean(hac) == pytest.approx(spread, rel=0.25)
     assert np.mean(white) < 0.5 * spread  # what λ(JᵀJ)⁻¹ reports here
+
+
+@pytest.fixture(scope="module")
+def clamped():
+    """A unit whose driver is configured to 0.35 A; its clamp drawn 1.4 % lower (0.345 A):
+    the PRBS's large steps run into it, below the 314 rpm/s rate limit."""
+    unit = replace(IDEAL, current_limit=0.35).for_unit(8)
+    data, current = _record(unit, 5, minutes=5.0)
+    sheet = {**DATASHEET, "current_limit": 0.35}
+    return unit, data, current, sheet
+
+
+def test_greybox_estimates_a_binding_current_limit_and_keeps_kt_over_j_unbiased(clamped):
+    unit, data, current, sheet = clamped
+    assert clamp_visible(current, 0.35)
+    model = greybox_fit(data, current=current, **sheet)
+    assert model.current_limit_estimated and "current_limit" in model.std
+    # the unit's clamp, not the configured value: 0.35 A is 1.4 % off, the estimate 0.2 %
+    assert abs(unit.current_limit / 0.35 - 1) > 0.01
+    assert model.current_limit == pytest.approx(unit.current_limit, rel=0.002)
+    # kt/J is what the clamp's acceleration and the current tell apart (within 0.5 %)
+    true_ratio = unit.torque_constant / unit.inertia
+    assert model.ratios["torque_constant/inertia"]["value"] == pytest.approx(true_ratio, rel=5e-3)
+    # the clamp keeps the wheel below 314 rpm/s: α is held, not estimated
+    assert not model.accel_limit_estimated and "accel_limit" not in model.std
+    assert model.accel_limit == pytest.approx(314 * RPM)
+    assert WheelGreyBox.from_dict(model.to_dict()).estimated == model.estimated
+
+
+def test_greybox_carries_a_fixed_current_limits_tolerance_into_sigma(clamped, grey):
+    unit, data, current, sheet = clamped
+    held = greybox_fit(data, current=current, estimate_current_limit=False, **sheet)
+    assert not held.current_limit_estimated and held.current_limit == 0.35
+    # held at 0.35 A while the clamp is at 0.345 A: kt/J absorbs it; σ says so
+    ratio = held.ratios["torque_constant/inertia"]
+    true_ratio = unit.torque_constant / unit.inertia
+    assert abs(ratio["value"] / true_ratio - 1) > 0.005  # biased by the clamp's offset
+    assert abs(ratio["value"] - true_ratio) < 3 * ratio["std"]  # ...and σ covers it
+    assert (
+        held.std_budget["torque_constant"]["current_limit"]
+        > (held.std_budget["torque_constant"]["statistical"])
+    )
+    # a record that never reaches the clamp: the term is zero
+    model, _ = grey
+    assert not model.current_limit_estimated
+    assert all(p["current_limit"] == 0 for p in model.std_budget.values())
