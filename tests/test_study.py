@@ -290,7 +290,7 @@ def test_the_choice_passes_over_a_model_whose_dc_gain_is_off_and_says_so():
     pick, why = _choose(off, 3.0, 0.02, steady)
     assert pick["structure"] == "ARX221" and "no such model" in why
     # none passes: the nearest gain wins, so a tighter tolerance never picks a worse gain
-    near = [{**r, "dc_gain_error_percent": e} for r, e in zip(rows, (-9.4, 1.3, 0.5))]
+    near = [{**r, "dc_gain_error_percent": e} for r, e in zip(rows, (-9.4, 1.3, 0.5), strict=True)]
     for tol in (0.0001, 0.01):
         pick, why = _choose(near[:2], 3.0, tol, steady)
         assert pick["structure"] == "OE221" and "the one nearest it is chosen" in why
