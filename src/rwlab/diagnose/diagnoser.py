@@ -119,6 +119,7 @@ CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
+LAG_MIN_RPM = 50.0  # ... and at least this fast (a Hall reading near zero is no rate), rpm
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
 STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 12000 rpm at the
 # acceleration limit outlasts any fixed hold time, s
@@ -673,7 +674,8 @@ class Diagnoser:
         out: dict[str, float] = {}
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
         prev = self._prev
-        self._prev = {"accel": accel, "model_accel": model_accel}
+        model_rpm = r["model_rpm"]
+        self._prev = {"accel": accel, "model_accel": model_accel, "model_rpm": model_rpm}
         settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
         # (not a hold inside the stiction band: there the wheel may rest at 0 instead)
         held = abs(self._command[0])
@@ -681,8 +683,7 @@ class Diagnoser:
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
-        lagging = abs(model_accel) >= LAG_SHARE * self.accel_limit
-        if lagging and abs(prev.get("model_accel", 0.0)) >= LAG_SHARE * self.accel_limit:
+        if self._lagging(model_accel, model_rpm, prev):
             out["lag"] = (accel - model_accel) * math.copysign(1.0, model_accel) / self.accel_limit
             self._lag_currents.append((t_s, abs(current_a)))
         c = self.residuals.current_model
@@ -701,6 +702,27 @@ class Diagnoser:
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
+
+    def _lagging(self, model_accel: float, model_rpm: float, prev: dict) -> bool:
+        """The model ran at its acceleration limit, one way, over this and the last sample.
+
+        Not a sample in which the model reverses (a triangle's corner: its mean rate is
+        no limit, and where in the sample the wheel turns is the model's timing error),
+        nor one in which it passes through zero speed: there a Hall-period reading is the
+        speed of the last, long edge interval, or 0 below its measurable speed, so the
+        reading's rate over that sample is not the wheel's. Both are at every reversal of
+        a fast chirp, whose share of such samples depends on the model's timing: with
+        them the test alarmed on healthy chirps for one reference model and not another.
+        """
+        limit = LAG_SHARE * self.accel_limit
+        before, before_rpm = prev.get("model_accel", 0.0), prev.get("model_rpm", 0.0)
+        return (
+            abs(model_accel) >= limit
+            and abs(before) >= limit
+            and model_accel * before > 0
+            and model_rpm * before_rpm > 0
+            and min(abs(model_rpm), abs(before_rpm)) >= LAG_MIN_RPM
+        )
 
     def _record(self, t_s: float, r: dict, values: dict) -> None:
         h = self.history
