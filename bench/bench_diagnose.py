@@ -51,6 +51,7 @@ from rwlab.wheel import IdentifiedWheel
 
 SIGNALS = ("prbs", "chirp", "multisine", "step")
 DETECTORS = (
+    "rest",
     "offset",
     "slew",
     "friction",

@@ -405,3 +405,35 @@ def test_a_sensor_frozen_at_rest_from_power_up_is_not_a_current_limit(tmp_path, 
     run_experiment(cfg, path)
     alarms = _diagnose(path, model_file).alarms
     assert alarms and {a.kind for a in alarms} == {"speed_sensor_stuck"}, alarms
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay_s", [0.040, 0.045, 0.055])
+def test_a_nominal_model_with_any_timing_raises_no_alarm_on_a_healthy_chirp(
+    tmp_path_factory, model_file, delay_s
+):
+    """As a README user: the model identified on the nominal wheel (no ``--unit``), a
+    healthy chirp of another unit. Models of healthy units differ in their servo delay
+    by a few ms (0.047–0.050 s on units 0, 7, 400 and the nominal); at a fast chirp's
+    reversals that timing decided whether the lag test alarmed (it did at 0.040 and
+    0.045 s). No alarm for delays within ±5 ms of the identified one."""
+    import dataclasses
+
+    from rwlab.wheel import IdentifiedWheel
+
+    path = tmp_path_factory.getbasetemp() / "chirp_unit501.mcap"
+    if not path.exists():
+        run_experiment(ExperimentConfig(signal="chirp", duration=1200, seed=501, unit=501), path)
+    fitted = IdentifiedWheel.from_json(model_file)
+    assert fitted.servo is not None and abs(fitted.servo.delay - 0.05) < 0.005
+    wheel = IdentifiedWheel(
+        fitted.model,
+        input_offset=fitted.u0,
+        output_offset=fitted.y0,
+        speed_limit_rpm=fitted.speed_limit_rpm,
+        accel_limit_rpm_s=fitted.accel_limit_rpm_s,
+        servo=dataclasses.replace(fitted.servo, delay=delay_s),
+    )
+    data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
+    alarms = diagnose(data, wheel, HealthyReference.from_model_file(model_file)).alarms
+    assert alarms == [], alarms
