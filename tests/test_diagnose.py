@@ -437,3 +437,46 @@ def test_a_nominal_model_with_any_timing_raises_no_alarm_on_a_healthy_chirp(
     data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
     alarms = diagnose(data, wheel, HealthyReference.from_model_file(model_file)).alarms
     assert alarms == [], alarms
+
+
+@given(
+    bias=st.sampled_from([-25.0, -10.0, 10.0, 15.0, 20.0]),
+    noise=st.lists(
+        st.integers(-299, 299).filter(lambda x: x != 0).map(lambda x: x / 10),
+        min_size=8,
+        max_size=40,
+        unique=True,
+    ),
+)
+def test_rest_reading_names_the_value_a_bias_reads_at_zero_speed(bias, noise):
+    """Healthy: the no-edge reading is 0 between chance readings, never an alarm; with a
+    bias every no-edge reading is the bias: the fourth names it, whatever lies between."""
+    from rwlab.diagnose.motion import RestReading
+
+    healthy = RestReading(4)
+    readings = [v for x in noise for v in (x, x, x, 0.0)]  # ≤ 3 of a value, then a 0
+    assert not any(healthy.add(v) for v in readings)
+    biased = RestReading(4)
+    fired = []
+    for x in [x for x in noise if x != bias][:7]:  # chance readings between, once each
+        fired.append(biased.add(x))
+        fired.append(biased.add(bias))
+    assert fired.index(True) == 7 and biased.value == bias
+
+
+@pytest.mark.slow
+def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, model_file):
+    """k_t × 0.8 and a 20 rpm bias from 600 s of a 15-minute chirp of another unit (the
+    wheel cannot follow the model's acceleration): both named within 300 s, with the
+    nominal model, the bias to its reading's quantum."""
+    path = tmp_path / "two.mcap"
+    faults = ("torque_constant=0.8@600", "speed_sensor_bias=20@600")
+    run_experiment(
+        ExperimentConfig(signal="chirp", duration=900, seed=502, unit=502, faults=faults), path
+    )
+    alarms = _diagnose(path, model_file).alarms
+    assert alarms and all(600 <= a.t_s <= 900 for a in alarms), alarms
+    found = {a.kind: a for a in alarms}
+    assert set(found) == {"torque_constant", "speed_sensor_bias"}, alarms
+    kt, bias = found["torque_constant"], found["speed_sensor_bias"]
+    assert kt.ci[0] <= 0.8 <= kt.ci[1] and bias.ci[0] <= 20 <= bias.ci[1]
