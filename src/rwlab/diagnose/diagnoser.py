@@ -595,7 +595,11 @@ class Diagnoser:
         if usable and self._moving and self._last_speed not in (None, 0.0):
             self.repeats[0] += repeat
             self.repeats[1] += 1
+        # near zero speed and passing through it (a healthy reading held at a low speed
+        # may repeat one value)
+        model_accel = r["accel_rpm_s"] - r["acceleration"]
         near_zero = abs(speed_rpm) < REST_BAND_RPM and abs(r["model_rpm"]) < REST_MODEL_RPM
+        near_zero = near_zero and abs(model_accel) >= QUIET_RPM_S
         rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)

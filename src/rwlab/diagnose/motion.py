@@ -149,7 +149,10 @@ class RestReading:
     bias itself, exactly, every time; a healthy reading near zero repeats a non-zero
     value only by chance. The test counts the non-zero values read near zero speed
     (changed readings only: a frozen sensor is the stuck test's) and alarms when one
-    value comes :data:`REST_COUNT` times with no 0 between.
+    value comes :data:`REST_COUNT` times with no 0 between. The diagnoser gives it
+    readings within :data:`REST_BAND_RPM` where the model passes through zero (within
+    :data:`REST_MODEL_RPM`, accelerating): a wheel held at a low speed may repeat one
+    reading by itself.
 
     What it needs of a real wheel: firmware that reports a fixed 0 for "no edge" (the
     twin's Hall sensor does, as Hall-period firmware does) and a bias added after that
