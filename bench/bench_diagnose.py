@@ -171,11 +171,17 @@ def _record(cache: Path, name: str, spec: tuple) -> Path:
     return path
 
 
-def _model(cache: Path, out: Path) -> Path:
-    """Identified with this code every run (the reference is the detector's); record cached."""
-    record = cache / "model_unit0.mcap"
+def _model(cache: Path, out: Path, unit: str = "0") -> Path:
+    """Identified with this code every run (the reference is the detector's); record cached.
+
+    ``unit``: the model's wheel, a unit number (seed = unit; the bench's is 0, seed 0)
+    or 'nominal' (no unit, seed 0: ``rwlab experiment --duration 1200`` as the README).
+    """
+    record = cache / f"model_unit{unit}.mcap"
     if not record.exists():
-        run_experiment(ExperimentConfig(duration=1200, seed=0, unit=0), cache / "m.mcap")
+        number = None if unit == "nominal" else int(unit)
+        cfg = ExperimentConfig(duration=1200, seed=number or 0, unit=number)
+        run_experiment(cfg, cache / "m.mcap")
         (cache / "m.mcap").rename(record)
     result = CliRunner().invoke(cli, ["identify", str(record), "--out", str(out / "model")])
     assert result.exit_code == 0, result.output
@@ -188,12 +194,17 @@ def main() -> None:
     parser.add_argument("--part", choices=["all", "healthy", "faults"], default="all")
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 10.0, 100.0])
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
+    parser.add_argument(
+        "--model-unit",
+        default="0",
+        help="the model's wheel: a unit number or 'nominal' (thresholds stay unit 0's)",
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore", RwlabWarning)  # the table prints each detector's note
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
         cache.mkdir(parents=True, exist_ok=True)
-        model = _model(cache, Path(tmp))
+        model = _model(cache, Path(tmp), args.model_unit)
         wheel = IdentifiedWheel.from_json(model)
         ref = HealthyReference.from_model_file(model)
 
@@ -204,7 +215,7 @@ def main() -> None:
             return diagnose(data, wheel, ref, **kw)
 
         specs = records(args.set)
-        print(f"set {args.set}; model: unit 0, 20-min PRBS (defaults)\n")
+        print(f"set {args.set}; model: unit {args.model_unit}, 20-min PRBS (defaults)\n")
         if args.part != "faults":
             _healthy(args, run, cache, {k: v for k, v in specs.items() if not v[5]})
         if args.part != "healthy":
