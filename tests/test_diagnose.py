@@ -480,3 +480,27 @@ def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path
     assert set(found) == {"torque_constant", "speed_sensor_bias"}, alarms
     kt, bias = found["torque_constant"], found["speed_sensor_bias"]
     assert kt.ci[0] <= 0.8 <= kt.ci[1] and bias.ci[0] <= 20 <= bias.ci[1]
+
+
+def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, model_file):
+    """Units differ by ±5 mA of current-sense offset, as much as the friction current
+    at 500 rpm. The same record with 5 mA added to every current reading gives the
+    friction test the same block values (the offset cancels between speed signs)."""
+    from rwlab.diagnose.diagnoser import Diagnoser, _columns
+    from rwlab.wheel import IdentifiedWheel
+
+    path = tmp_path / "prbs.mcap"
+    run_experiment(ExperimentConfig(duration=600, seed=503, unit=503), path)
+    wheel = IdentifiedWheel.from_json(model_file)
+    ref = HealthyReference.from_model_file(model_file)
+    data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
+    traces = []
+    for shift_a in (0.0, 0.005):
+        diag = Diagnoser(wheel, ref, calibration=False, trace=True)
+        columns = list(_columns(data, wheel))
+        columns[3] = columns[3] + shift_a  # a copy: the record's array is not touched
+        for row in zip(*columns, strict=True):
+            diag.update(*(float(x) for x in row))
+        traces.append(np.array(diag.traces()["friction"]))
+    assert traces[0].size >= 5
+    np.testing.assert_allclose(traces[1], traces[0], atol=1e-6)
