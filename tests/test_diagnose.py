@@ -405,3 +405,102 @@ def test_a_sensor_frozen_at_rest_from_power_up_is_not_a_current_limit(tmp_path, 
     run_experiment(cfg, path)
     alarms = _diagnose(path, model_file).alarms
     assert alarms and {a.kind for a in alarms} == {"speed_sensor_stuck"}, alarms
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay_s", [0.040, 0.045, 0.055])
+def test_a_nominal_model_with_any_timing_raises_no_alarm_on_a_healthy_chirp(
+    tmp_path_factory, model_file, delay_s
+):
+    """As a README user: the model identified on the nominal wheel (no ``--unit``), a
+    healthy chirp of another unit. Models of healthy units differ in their servo delay
+    by a few ms (0.047–0.050 s on units 0, 7, 400 and the nominal); at a fast chirp's
+    reversals that timing decided whether the lag test alarmed (it did at 0.040 and
+    0.045 s). No alarm for delays within ±5 ms of the identified one."""
+    import dataclasses
+
+    from rwlab.wheel import IdentifiedWheel
+
+    path = tmp_path_factory.getbasetemp() / "chirp_unit501.mcap"
+    if not path.exists():
+        run_experiment(ExperimentConfig(signal="chirp", duration=1200, seed=501, unit=501), path)
+    fitted = IdentifiedWheel.from_json(model_file)
+    assert fitted.servo is not None and abs(fitted.servo.delay - 0.05) < 0.005
+    wheel = IdentifiedWheel(
+        fitted.model,
+        input_offset=fitted.u0,
+        output_offset=fitted.y0,
+        speed_limit_rpm=fitted.speed_limit_rpm,
+        accel_limit_rpm_s=fitted.accel_limit_rpm_s,
+        servo=dataclasses.replace(fitted.servo, delay=delay_s),
+    )
+    data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
+    alarms = diagnose(data, wheel, HealthyReference.from_model_file(model_file)).alarms
+    assert alarms == [], alarms
+
+
+@given(
+    bias=st.sampled_from([-25.0, -10.0, 10.0, 15.0, 20.0]),
+    noise=st.lists(
+        st.integers(-299, 299).filter(lambda x: x != 0).map(lambda x: x / 10),
+        min_size=8,
+        max_size=40,
+        unique=True,
+    ),
+)
+def test_rest_reading_names_the_value_a_bias_reads_at_zero_speed(bias, noise):
+    """Healthy: the no-edge reading is 0 between chance readings, never an alarm; with a
+    bias every no-edge reading is the bias: the fourth names it, whatever lies between."""
+    from rwlab.diagnose.motion import RestReading
+
+    healthy = RestReading(4)
+    readings = [v for x in noise for v in (x, x, x, 0.0)]  # ≤ 3 of a value, then a 0
+    assert not any(healthy.add(v) for v in readings)
+    biased = RestReading(4)
+    fired = []
+    for x in [x for x in noise if x != bias][:7]:  # chance readings between, once each
+        fired.append(biased.add(x))
+        fired.append(biased.add(bias))
+    assert fired.index(True) == 7 and biased.value == bias
+
+
+@pytest.mark.slow
+def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, model_file):
+    """k_t × 0.8 and a 20 rpm bias from 600 s of a 15-minute chirp of another unit (the
+    wheel cannot follow the model's acceleration): both named within 300 s, with the
+    nominal model, the bias to its reading's quantum."""
+    path = tmp_path / "two.mcap"
+    faults = ("torque_constant=0.8@600", "speed_sensor_bias=20@600")
+    run_experiment(
+        ExperimentConfig(signal="chirp", duration=900, seed=502, unit=502, faults=faults), path
+    )
+    alarms = _diagnose(path, model_file).alarms
+    assert alarms and all(600 <= a.t_s <= 900 for a in alarms), alarms
+    found = {a.kind: a for a in alarms}
+    assert set(found) == {"torque_constant", "speed_sensor_bias"}, alarms
+    kt, bias = found["torque_constant"], found["speed_sensor_bias"]
+    assert kt.ci[0] <= 0.8 <= kt.ci[1] and bias.ci[0] <= 20 <= bias.ci[1]
+
+
+def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, model_file):
+    """Units differ by ±5 mA of current-sense offset, as much as the friction current
+    at 500 rpm. The same record with 5 mA added to every current reading gives the
+    friction test the same block values (the offset cancels between speed signs)."""
+    from rwlab.diagnose.diagnoser import Diagnoser, _columns
+    from rwlab.wheel import IdentifiedWheel
+
+    path = tmp_path / "prbs.mcap"
+    run_experiment(ExperimentConfig(duration=600, seed=503, unit=503), path)
+    wheel = IdentifiedWheel.from_json(model_file)
+    ref = HealthyReference.from_model_file(model_file)
+    data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
+    traces = []
+    for shift_a in (0.0, 0.005):
+        diag = Diagnoser(wheel, ref, calibration=False, trace=True)
+        columns = list(_columns(data, wheel))
+        columns[3] = columns[3] + shift_a  # a copy: the record's array is not touched
+        for row in zip(*columns, strict=True):
+            diag.update(*(float(x) for x in row))
+        traces.append(np.array(diag.traces()["friction"]))
+    assert traces[0].size >= 5
+    np.testing.assert_allclose(traces[1], traces[0], atol=1e-6)

@@ -57,9 +57,11 @@ calibration cannot say. Two
 sample tests complete the set: ``stuck`` (a run of identical non-zero speed
 readings, length from the reference's repeat probability) and ``dropout``
 (telemetry frames lost in a 10 s block beyond what the reference's loss rate
-allows, Poisson). Samples without a new frame, and the one after them, enter
-no test. A detector alarms once and stays latched (``latch=False`` restarts it,
-for measuring false-alarm rates).
+allows, Poisson); a third, ``rest``
+(:class:`~rwlab.diagnose.motion.RestReading`), reads a telemetry bias in the
+reading where the wheel passes through zero speed. Samples without a new frame,
+and the one after them, enter no test. A detector alarms once and stays latched
+(``latch=False`` restarts it, for measuring false-alarm rates).
 
 Why this module is long: one class, :class:`Diagnoser`, whose calibration, per-sample
 tests and verdicts share its state; split, the state would be passed around instead of
@@ -93,7 +95,10 @@ from rwlab.diagnose.isolate import Finding, isolate
 from rwlab.diagnose.motion import (
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
+    REST_BAND_RPM,
+    REST_MODEL_RPM,
     SLEW_SHARE,
+    RestReading,
     slew_asymmetry,
     speed_offset,
 )
@@ -117,8 +122,10 @@ FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare rela
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
+OFFSET_MIN_SAMPLES = 10  # friction samples of each sign before the current offset counts
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
+LAG_MIN_RPM = 50.0  # ... and at least this fast (a Hall reading near zero is no rate), rpm
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
 STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 12000 rpm at the
 # acceleration limit outlasts any fixed hold time, s
@@ -416,6 +423,7 @@ class Diagnoser:
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
         self._friction_sample = (0.0, 0.0, 0.0)
+        self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
         self._offset_window: list[tuple[float, float, float, float]] = []
@@ -482,6 +490,8 @@ class Diagnoser:
             det = _BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
+        self._detectors["rest"] = RestReading()
+        self.thresholds["rest"] = self._detectors["rest"].n
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
         self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
@@ -585,6 +595,12 @@ class Diagnoser:
         if usable and self._moving and self._last_speed not in (None, 0.0):
             self.repeats[0] += repeat
             self.repeats[1] += 1
+        # near zero speed and passing through it (a healthy reading held at a low speed
+        # may repeat one value)
+        model_accel = r["accel_rpm_s"] - r["acceleration"]
+        near_zero = abs(speed_rpm) < REST_BAND_RPM and abs(r["model_rpm"]) < REST_MODEL_RPM
+        near_zero = near_zero and abs(model_accel) >= QUIET_RPM_S
+        rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
@@ -598,6 +614,8 @@ class Diagnoser:
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
                 new += self._fire(t_s, "dropout")
+            if rest and self._detectors["rest"].add(speed_rpm):
+                new += self._fire(t_s, "rest")
             if usable and self._detectors["stuck"].update(repeat and self._moving):
                 new += self._fire(t_s, "stuck")
             if usable and self._trace:
@@ -673,7 +691,8 @@ class Diagnoser:
         out: dict[str, float] = {}
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
         prev = self._prev
-        self._prev = {"accel": accel, "model_accel": model_accel}
+        model_rpm = r["model_rpm"]
+        self._prev = {"accel": accel, "model_accel": model_accel, "model_rpm": model_rpm}
         settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
         # (not a hold inside the stiction band: there the wheel may rest at 0 instead)
         held = abs(self._command[0])
@@ -681,8 +700,7 @@ class Diagnoser:
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
-        lagging = abs(model_accel) >= LAG_SHARE * self.accel_limit
-        if lagging and abs(prev.get("model_accel", 0.0)) >= LAG_SHARE * self.accel_limit:
+        if self._lagging(model_accel, model_rpm, prev):
             out["lag"] = (accel - model_accel) * math.copysign(1.0, model_accel) / self.accel_limit
             self._lag_currents.append((t_s, abs(current_a)))
         c = self.residuals.current_model
@@ -695,12 +713,53 @@ class Diagnoser:
             excess = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
             self._lag_excess.append((t_s, excess))
         if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
-            out["friction"] = sign * r["current"] / abs(friction)
+            offset = self._current_offset(sign, r["current"])
+            if offset is not None:
+                out["friction"] = sign * (r["current"] - offset) / abs(friction)
             self._friction_sample = (r["current"], speed_rpm, friction)
         sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
+
+    def _current_offset(self, sign: float, residual_a: float) -> float | None:
+        """This unit's current-sense offset beyond the reference's, A (None until the
+        wheel has held speeds of both signs).
+
+        The friction current turns with the speed's sign, an offset does not: half the
+        sum of the mean residuals at either sign is the offset, and friction (also a
+        fault's) cancels in it. Units differ by up to ±5 mA of offset, as much as the
+        friction current itself at 500 rpm: without this a reference from a unit with
+        little friction and the opposite offset read friction ×3 on healthy units.
+        """
+        sums = self._offset_sums
+        i = 0 if sign > 0 else 1
+        sums[i] += residual_a
+        sums[i + 2] += 1
+        if min(sums[2], sums[3]) < OFFSET_MIN_SAMPLES:
+            return None
+        return 0.5 * (sums[0] / sums[2] + sums[1] / sums[3])
+
+    def _lagging(self, model_accel: float, model_rpm: float, prev: dict) -> bool:
+        """The model ran at its acceleration limit, one way, over this and the last sample.
+
+        Not a sample in which the model reverses (a triangle's corner: its mean rate is
+        no limit, and where in the sample the wheel turns is the model's timing error),
+        nor one in which it passes through zero speed: there a Hall-period reading is the
+        speed of the last, long edge interval, or 0 below its measurable speed, so the
+        reading's rate over that sample is not the wheel's. Both are at every reversal of
+        a fast chirp, whose share of such samples depends on the model's timing: with
+        them the test alarmed on healthy chirps for one reference model and not another.
+        """
+        limit = LAG_SHARE * self.accel_limit
+        before, before_rpm = prev.get("model_accel", 0.0), prev.get("model_rpm", 0.0)
+        return (
+            abs(model_accel) >= limit
+            and abs(before) >= limit
+            and model_accel * before > 0
+            and model_rpm * before_rpm > 0
+            and min(abs(model_rpm), abs(before_rpm)) >= LAG_MIN_RPM
+        )
 
     def _record(self, t_s: float, r: dict, values: dict) -> None:
         h = self.history
@@ -772,6 +831,7 @@ class Diagnoser:
         ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
         ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
+        ev["rest_value"] = self._detectors["rest"].value
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)

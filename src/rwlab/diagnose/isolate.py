@@ -23,6 +23,8 @@ speed       held speed offset from the command                ``speed_sensor_bia
                                                               rpm
 offset      offset of the speed residual at zero speed,       ``speed_sensor_bias``,
             continuous command                                rpm
+rest        one non-zero reading, exactly, where the wheel    ``speed_sensor_bias``,
+            passes through zero speed (healthy: 0)            that reading (rpm)
 slew        at the acceleration limit: faster towards zero    ``friction``, factor
             speed than away (unknown friction)                1 + Δ/2
 lag         slower than the model at its acceleration limit   ``current_limit``: the
@@ -64,6 +66,7 @@ MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 # tune set's healthy units sit within about ±1 rpm of each other), rpm
 SPEED_UNIT_SD = 0.5
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
+REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
@@ -149,8 +152,8 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'friction', 'friction_change', 'motor', 'speed', 'offset',
-        'slew', 'lag'}
+    detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'motor', 'speed',
+        'offset', 'slew', 'lag'}
     ev : dict
         The evidence (see the module docstring).
 
@@ -162,6 +165,9 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     speed = np.asarray(ev.get("recent_speed", ()), dtype=float)
     if detector == "dropout":
         return [Finding("telemetry_dropout", float(ev.get("lost", 0)), None, "frames")]
+    if detector == "rest":  # the no-edge reading at zero speed: the bias itself
+        bias = float(ev["rest_value"])
+        return [Finding("speed_sensor_bias", bias, (bias - REST_RPM, bias + REST_RPM), "rpm")]
     # identical readings while the model says the wheel moves (in a hold a regulated
     # wheel's reading repeats by itself)
     frozen = ev.get("moving_repeats", 0) >= 1  # healthy: p ≈ 1e-3 per moving sample

@@ -14,6 +14,10 @@ take no sample there. Two statistics use what such a record does have:
   friction the feed-forward does not know changes the acceleration: a slew runs
   faster towards zero speed than away from it.
 
+- :class:`RestReading`: the reading the firmware gives when no Hall edge came
+  within its timeout (the wheel passing through zero speed) is exactly 0 on a
+  healthy wheel; with a telemetry bias it is exactly the bias, over and over.
+
 Hand-written (no library computes these).
 """
 
@@ -23,7 +27,16 @@ import math
 
 import numpy as np
 
-__all__ = ["OFFSET_SIGMA_RPM", "OFFSET_WINDOW", "SLEW_SHARE", "slew_asymmetry", "speed_offset"]
+__all__ = [
+    "OFFSET_SIGMA_RPM",
+    "OFFSET_WINDOW",
+    "REST_BAND_RPM",
+    "REST_MODEL_RPM",
+    "SLEW_SHARE",
+    "RestReading",
+    "slew_asymmetry",
+    "speed_offset",
+]
 
 OFFSET_WINDOW = 120  # samples of one speed-offset regression (60 s at 0.5 s)
 OFFSET_SWING_RPM = 200.0  # the model's speed reaches ± this within the window
@@ -34,6 +47,10 @@ OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no hol
 # chirps and multisines; `bench/calibrate_thresholds.py --offset-sigma`), never on the
 # eval sets
 OFFSET_SIGMA_RPM = 3.5
+REST_BAND_RPM = 30.0  # a reading within this of zero may be the no-edge reading, rpm
+REST_MODEL_RPM = 60.0  # ... taken where the model passes this close to zero speed, rpm
+REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (healthy units:
+# at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit
@@ -121,3 +138,52 @@ def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None
     rising = inner[-1][1] > inner[0][1]
     toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
     return float((toward - away) / (c[2] / c[0]))
+
+
+class RestReading:
+    """The speed reading where the wheel passes through zero: 0, or a telemetry bias.
+
+    A Hall-period firmware reads 0 when no edge came within its timeout, which it
+    does, for a sample now and then, each time the wheel passes through zero speed
+    (a chirp does often). A bias added to the reported speed makes that reading the
+    bias itself, exactly, every time; a healthy reading near zero repeats a non-zero
+    value only by chance. The test counts the non-zero values read near zero speed
+    (changed readings only: a frozen sensor is the stuck test's) and alarms when one
+    value comes :data:`REST_COUNT` times with no 0 between. The diagnoser gives it
+    readings within :data:`REST_BAND_RPM` where the model passes through zero (within
+    :data:`REST_MODEL_RPM`, accelerating): a wheel held at a low speed may repeat one
+    reading by itself.
+
+    What it needs of a real wheel: firmware that reports a fixed 0 for "no edge" (the
+    twin's Hall sensor does, as Hall-period firmware does) and a bias added after that
+    reading (a telemetry or scaling offset, as the twin's ``speed_sensor_bias``). A
+    bias inside the sensing (an analog tachometer's offset) reads noise around the
+    bias, never the same value: this test then stays silent and the held-speed and
+    offset tests remain.
+
+    Parameters
+    ----------
+    n : int
+        How many times one non-zero value must come (default :data:`REST_COUNT`).
+    """
+
+    def __init__(self, n: int = REST_COUNT) -> None:
+        self.n = int(n)
+        self._counts: dict[float, int] = {}
+        self.value = 0.0  # the latest counted reading, rpm
+        self.statistic = 0.0
+
+    def add(self, speed_rpm: float) -> bool:
+        """Count one changed reading taken near zero speed; True when it alarms."""
+        if speed_rpm == 0.0:
+            self.restart()
+            return False
+        self._counts[speed_rpm] = self._counts.get(speed_rpm, 0) + 1
+        self.value = speed_rpm
+        self.statistic = float(self._counts[speed_rpm])
+        return self._counts[speed_rpm] >= self.n
+
+    def restart(self) -> None:
+        """Forget the counts (after an alarm, or a 0 reading)."""
+        self._counts.clear()
+        self.statistic = 0.0
