@@ -504,3 +504,29 @@ def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, mod
         traces.append(np.array(diag.traces()["friction"]))
     assert traces[0].size >= 5
     np.testing.assert_allclose(traces[1], traces[0], atol=1e-6)
+
+
+def _held_speed_evidence(held_error_rpm: float, command_rpm: float) -> dict:
+    """What isolation reads after a held-speed alarm: the same reading, block after block."""
+    return {
+        "speed": np.full(6, held_error_rpm),
+        "held_command_rpm": command_rpm,
+        "recent_speed": np.full(8, command_rpm + held_error_rpm),
+        "sigma": {"speed": 0.5},
+        "ref_mean": {"speed": 0.0},
+    }
+
+
+@pytest.mark.parametrize("bias", [-18.0, 8.0, 15.0])
+def test_a_constant_reading_of_a_wheel_resting_at_zero_is_a_bias_not_a_stuck_sensor(bias):
+    """A resting wheel's Hall reading is exactly 0 (no edge comes): a small non-zero value
+    repeated there is an offset on the report (a reviewer's step record with a 15-rpm bias
+    from power-up was named stuck). Held at a speed, one value over and over is stuck."""
+    from rwlab.diagnose.isolate import isolate
+
+    (found,) = isolate("speed", _held_speed_evidence(bias, 0.0))
+    assert found.kind == "speed_sensor_bias" and found.magnitude == bias
+    assert found.ci[0] < bias < found.ci[1]
+    assert isolate("speed", _held_speed_evidence(bias, 1500.0))[0].kind == "speed_sensor_stuck"
+    # far beyond what a bias of the report could be: a reading frozen at an old speed
+    assert isolate("speed", _held_speed_evidence(900.0, 0.0))[0].kind == "speed_sensor_stuck"

@@ -822,6 +822,7 @@ class Diagnoser:
             ev["motor_after"] = np.array([x for t, x in motor.raw if t >= t_change])
         ev["tolerance"] = dict(ref.tolerance)
         ev["recent_speed"] = np.array(self._recent_speed)
+        ev["held_command_rpm"] = self._command[0]
         ev["moving_repeats"] = self._detectors["stuck"].run
         if any(a.kind == "speed_sensor_stuck" for a in self.alarms):
             ev["moving_repeats"] = math.inf  # a frozen reading misleads every later test

@@ -52,6 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwlab.diagnose.motion import REST_BAND_RPM
+
 __all__ = ["Finding", "isolate"]
 
 Z95 = 1.959964
@@ -185,6 +187,13 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     if detector == "speed":
         held = np.asarray(ev["speed"], dtype=float)
         if held.size >= 5 and np.ptp(held) == 0:  # one reading, over and over: not noise
+            value = float(held[-1])
+            if ev.get("held_command_rpm") == 0.0 and 0 < abs(value) <= REST_BAND_RPM:
+                # ... but a wheel resting at 0 rpm reads exactly 0 (no Hall edge comes):
+                # one small non-zero reading there is an offset on the report, the bias
+                return [
+                    Finding("speed_sensor_bias", value, (value - REST_RPM, value + REST_RPM), "rpm")
+                ]
             return [Finding("speed_sensor_stuck", float(speed[-1]), None, "rpm")]
         bias, half = _mean_ci(ev["speed"], ev["sigma"]["speed"])
         bias -= ev.get("ref_mean", {}).get("speed", 0.0)  # the reference unit's held error
