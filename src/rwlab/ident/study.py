@@ -977,7 +977,9 @@ def wheel_model(
     The study's model maps preprocessed input to preprocessed output. With
     ``u_p = (u − u_off)/u_scale`` and ``y = y_off + y_scale·y_p``, the physical
     model is ``y − y_off = G(q)·(u − u_off)`` with G's numerator scaled by
-    ``y_scale/u_scale``; ``model.json`` stores G and both offsets.
+    ``y_scale/u_scale``; ``model.json`` stores G and both offsets, ``y_off`` the
+    wheel's measured static speed at ``u_off`` where the record has settled holds
+    (an equilibrium, so the model's static map is the wheel's).
 
     Parameters
     ----------
@@ -1009,7 +1011,7 @@ def wheel_model(
     return WheelModelFile(
         _to_physical(m, trend, d.input_names[0], d.output_names[0]),
         Channel(d.input_names[0], d.input_units[0] or "rpm", float(trend.input_offset[0])),
-        Channel(d.output_names[0], d.output_units[0] or "rpm", float(trend.output_offset[0])),
+        Channel(d.output_names[0], d.output_units[0] or "rpm", _output_offset(result)),
         speed_limit_rpm=speed_limit_rpm,
         accel_limit_rpm_s=accel_limit_rpm_s,
         saturation_source=saturation_source,
@@ -1024,6 +1026,20 @@ def wheel_model(
         if result.segments is None
         else tuple((float(a), float(b)) for a, b in result.segments),
     )
+
+
+def _output_offset(result: StudyResult) -> float:
+    """The output offset ``model.json`` stores with the input offset u₀: the measured static
+    line at u₀ (the estimation part's settled holds, else the whole record's), so that
+    (u₀, y₀) is an equilibrium of the wheel and the model at rest reads what the wheel
+    does. The estimation means are no equilibrium of a rate-limited wheel (its speed lags
+    the command on every slew): a model without intercept between them settled at −286
+    rpm for a zero command on the twin. Without settled holds: the estimation mean."""
+    trend = result.data.trend
+    line = result.gain_constraint or result.steady_state
+    if line is None:
+        return float(trend.output_offset[0])
+    return float(line["gain"] * trend.input_offset[0] + line["intercept"])
 
 
 def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = "y") -> PolyModel:
