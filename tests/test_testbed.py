@@ -284,3 +284,13 @@ def test_experiment_command_line(tmp_path):
     assert bad.exit_code == 2 and "limit" in bad.output
     unknown = CliRunner().invoke(main, ["experiment", "--signal", "sawtooth", "--out", "x.mcap"])
     assert unknown.exit_code == 2
+
+
+def test_a_unit_in_the_wheel_file_and_another_unit_option_are_refused(tmp_path):
+    """Both would draw: unit 4 around unit 3, a wheel that is neither (newcomer finding)."""
+    wheel = tmp_path / "w.toml"
+    wheel.write_text('[wheel]\npreset = "rw90"\nunit = 3\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match="give the unit in one place"):
+        ExperimentConfig(wheel=str(wheel), unit=4).wheel_params()
+    drawn = ExperimentConfig(wheel=str(wheel)).wheel_params()  # the file's unit alone
+    assert drawn == ExperimentConfig(unit=3).wheel_params()

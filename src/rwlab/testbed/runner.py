@@ -251,6 +251,14 @@ class ExperimentConfig:
         WheelParams
         """
         if base is None and self.wheel.lower().endswith(".toml"):
+            from rwlab._toml import read_table
+
+            own = read_table(self.wheel, "wheel", "wheel parameter").get("unit")
+            if own is not None and self.unit is not None:
+                raise ConfigError(
+                    f"{self.wheel} draws unit {own} and unit = {self.unit} would draw a second "
+                    "time around it (a wheel that is neither): give the unit in one place"
+                )
             params = WheelParams.from_toml(self.wheel)  # with the file's own unit, if any
         else:
             params = self.nominal_wheel(base)
