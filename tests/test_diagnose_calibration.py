@@ -175,3 +175,17 @@ def test_a_rate_beyond_the_full_tolerance_is_sought_with_less_of_it():
     h, share, note = cal.setting("speed", 200.0, analytic=9.0)
     assert (h, share) == (0.0, 0.0) and note.startswith("speed: with 0% of the tolerance")
     assert "cannot deliver 200/h" in note
+
+
+def test_a_flat_measured_curve_does_not_extrapolate_to_an_endless_threshold():
+    """A few healthy records above every measured threshold make the curve flat; its slope
+    says nothing of the tail. Extrapolated as measured, friction_change's threshold for
+    1e-3/h was 6.6e15 (the detector off); at least half of Gaussian's 2k bounds it."""
+    grid = tuple(0.1 * i for i in range(16))
+    k = 2.8
+    cal = ThresholdCalibration(
+        0.5, 14.0, {"fc": Curve("cusum", grid, (5,) * 15 + (0,), k, 135)}, "x"
+    )
+    h, _ = cal.threshold("fc", 1e-3, analytic=0.0)
+    rate_last = 5 / 14.0  # alarms per hour at the last measured threshold, 1.4
+    assert 1.4 < h <= 1.4 + math.log(rate_last / 1e-3) / k + 1e-9

@@ -259,14 +259,16 @@ class ThresholdCalibration:
         return max(self._tail(name, h, rate, ok, per_hour), analytic, 0.0), ""
 
     def _tail(self, name, h, rate, ok, per_hour) -> float:
-        """Below the resolved rates: the measured log-rate slope, at most Gaussian's 2k."""
+        """Below the resolved rates: the measured log-rate slope, between half and all of
+        Gaussian's 2k. A flatter measured curve is a few records' excursions above every
+        threshold measured, which says nothing of the tail; extrapolated, it put
+        friction_change's default threshold at 6.6e15 (the detector off)."""
         last = int(np.nonzero(ok)[0][-1])
         fit = ok & (rate * self.hours <= 10 * RESOLVED)
         slope = 2 * max(self.curves[name].k, 0.5)
         if fit.sum() >= 3:
             s = -np.polyfit(h[fit], np.log(rate[fit]), 1)[0]
-            if s > 0:
-                slope = min(slope, float(s))
+            slope = min(slope, max(float(s), slope / 2))
         return float(h[last] + math.log(rate[last] / per_hour) / slope)
 
     def _count(self, name, n, rate, per_hour, analytic, resolvable) -> tuple[float, str]:
