@@ -72,6 +72,14 @@ from scipy.optimize import least_squares
 
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
+from rwlab.ident.greybox_std import (
+    CLAMP,
+    ESTIMATED,
+    NEEDS_J,
+    STRUCTURE_ERROR,
+    Uncertainty,
+    _sandwich,
+)
 
 __all__ = [
     "CLAMP_SAMPLES",
@@ -84,8 +92,6 @@ __all__ = [
 
 STRUCTURE = "greybox"
 RPM = math.pi / 30.0  # rad/s per rpm
-ESTIMATED = ("torque_constant", "coulomb", "breakaway", "viscous", "accel_limit", "kp", "ki")
-CLAMP = "current_limit"  # estimated too when the record shows the clamp binding
 _POSITION = dict(zip((*ESTIMATED, CLAMP), (1, 3, 4, 6, 7, 8, 9, 2), strict=True))  # in vector
 CLAMP_SAMPLES = 10  # measured-current samples at the clamp that make it visible
 
@@ -338,56 +344,6 @@ class WheelGreyBox:
             raise ModelError(f"bad grey-box model: {exc}") from None
 
 
-@dataclass(frozen=True)
-class Uncertainty:
-    """How :func:`greybox_fit` forms its standard deviations (module docstring).
-
-    Parameters
-    ----------
-    inertia_tolerance : float
-        J's datasheet tolerance, ± as a fraction (uniform within it: σ_J/J =
-        tolerance/√3; default ±2 %, rotor machining). It enters the standard
-        deviation of every parameter that needs J (kt, τc, τbrk, b).
-    current_limit_tolerance : float
-        How far the unit's current clamp may sit from the driver's configured
-        limit, ± as a fraction (uniform; default ±2 %: current-sense shunt 1 % +
-        reference 1 %). With the limit held at its configured value it enters
-        every σ through the fit's sensitivity to it; it also sets how close to
-        the configured limit a measured current counts as at the clamp.
-    hac_lags : int, optional
-        Lags of the Newey–West long-run covariance of the scores (0: residuals
-        taken as white); None (default) chooses them by Andrews' AR(1) plug-in.
-    structure_error : dict, optional
-        Relative bias envelope of each estimated parameter that the model's structure
-        leaves (what it does not model: the firmware's Hall-speed feedback, k_t's
-        fall with temperature, friction drift, torque ripple); None:
-        :data:`STRUCTURE_ERROR`, calibrated on the twin (it holds on a real wheel
-        only as far as the twin is right); ``{}`` for none.
-    """
-
-    inertia_tolerance: float = 0.02
-    hac_lags: int | None = None
-    structure_error: dict | None = None
-    current_limit_tolerance: float = 0.02
-
-    def __post_init__(self) -> None:
-        for name in ("inertia_tolerance", "current_limit_tolerance"):
-            tol = getattr(self, name)
-            if isinstance(tol, bool) or not (math.isfinite(tol) and 0 <= tol < 1):
-                raise DataError(f"{name} must be a fraction in [0, 1), got {tol!r}")
-        lags = self.hac_lags
-        bad = isinstance(lags, bool) or not isinstance(lags, (int, np.integer))
-        if lags is not None and (bad or lags < 0):
-            raise DataError(f"hac_lags must be a non-negative integer or None, got {lags!r}")
-        shape = self.structure_error or {}
-        if not set(shape) <= {*ESTIMATED, CLAMP} or not all(
-            math.isfinite(v) and v >= 0 for v in shape.values()
-        ):
-            raise DataError(
-                f"structure_error maps estimated parameters {ESTIMATED} to relative errors ≥ 0"
-            )
-
-
 def greybox_fit(
     data: IOData,
     *,
@@ -637,68 +593,3 @@ def _clamp_sensitivity(residuals, sol, p, current_limit, seen, names) -> dict:
             out[k] = float(shift[j] * scale[i])  # z-space → physical units
             j += 1
     return out
-
-
-NEEDS_J = ("torque_constant", "coulomb", "breakaway", "viscous")  # identified only as x/J
-
-STRUCTURE_ERROR = {
-    "torque_constant": 0.0039,
-    "coulomb": 0.1389,
-    "breakaway": 0.1389,
-    "viscous": 0.0849,
-    "accel_limit": 0.0042,
-    "kp": 0.0089,
-    "ki": 0.0177,
-}
-"""A bias envelope, calibrated on the twin: the relative error the model's structure left
-on each estimate (``python bench/bench_greybox_z.py --pairs n:0 1:7 2:3 --calibrate``: the
-RMS relative error of the J-free quantities against the units' truth, three records;
-judged on other units). It is not noise: on every nominal twin unit α and kt/J come out
-low by about this much (z −0.6 to −1.1), and it is most of their σ. What the grey box
-leaves out: the firmware's loop runs on the Hall speed (late and coarse), k_t falls with
-the magnet's temperature, friction drifts over a record, torque ripple and cogging. On a
-real wheel it holds only as far as the twin is right about these effects; a wheel with
-others (a different loop, a different sensor) needs its own calibration against a unit
-whose parameters are measured."""
-
-
-def _sandwich(fun, jac, n_y: int, seen, lags: int | None) -> tuple[np.ndarray, int]:
-    """Covariance of the least-squares estimate H⁻¹ S H⁻¹ (H = JᵀJ) with S the long-run
-    covariance of the per-sample scores gₜ = Σ_outputs Jₜᵀrₜ: the simulation errors are
-    coloured (a missed ramp is wrong for many samples), which λ(JᵀJ)⁻¹ ignores, and the
-    two outputs' errors are scaled, not weighted by their variances. Hand-written
-    (Newey–West 1987, Bartlett weights; bandwidth by Andrews 1991, AR(1) plug-in):
-    statsmodels has it, but is not a dependency for these lines."""
-    d = jac.shape[1]
-    blocks = range(0, fun.size, n_y)  # speed rows, then current rows: the same instants
-    scores = sum(jac[a : a + n_y] * fun[a : a + n_y, None] for a in blocks)
-    scores = np.asarray(scores)[:, seen]
-    if lags is None:
-        lags = _andrews_lags(scores)
-    S = scores.T @ scores
-    for lag in range(1, lags + 1):
-        G = scores[lag:].T @ scores[:-lag]
-        S += (1.0 - lag / (lags + 1.0)) * (G + G.T)
-    J = jac[:, seen]
-    Hinv = np.linalg.pinv(J.T @ J)
-    cov = np.zeros((d, d))
-    cov[np.ix_(seen, seen)] = Hinv @ S @ Hinv
-    return cov, lags
-
-
-def _andrews_lags(scores: np.ndarray) -> int:
-    """Andrews' (1991) bandwidth for the Bartlett kernel from AR(1) fits of each score
-    series: 1.1447·(α̂·N)^(1/3), α̂ = Σ4ρ²σ⁴/((1−ρ)⁶(1+ρ)²) / Σσ⁴/(1−ρ)⁴; at most N/4."""
-    n = scores.shape[0]
-    num = den = 0.0
-    for x in scores.T:
-        x = x - x.mean()
-        if not np.any(x):
-            continue
-        rho = float(np.clip(x[1:] @ x[:-1] / (x[:-1] @ x[:-1]), -0.99, 0.99))
-        s4 = float(np.var(x[1:] - rho * x[:-1])) ** 2
-        num += 4 * rho**2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2)
-        den += s4 / (1 - rho) ** 4
-    if den == 0:
-        return 0
-    return int(min(math.ceil(1.1447 * (num / den * n) ** (1 / 3)), n // 4))
