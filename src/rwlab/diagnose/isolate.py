@@ -69,6 +69,7 @@ MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 SPEED_UNIT_SD = 0.5
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
+LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
 
 
@@ -208,7 +209,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
     excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
     excess = excess[np.isfinite(excess)]
-    if excess.size >= 5:
+    if excess.size >= LAG_EXCESS_MIN:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
         if e > LAG_SPLIT:
             half = _mean_ci(excess, ev["sigma"]["motor"])[1]
@@ -216,7 +217,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
     if (
-        after.size and excess.size < 5
+        after.size and excess.size < LAG_EXCESS_MIN
     ):  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
         base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
