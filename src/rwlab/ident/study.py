@@ -557,13 +557,14 @@ def _choose(
     best = max(r["fit_percent"] for r in candidates)
     near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
     limit = 100 * gain_tolerance
-    ok = [r for r in near if r.get("dc_gain_error_percent") is not None]
-    ok = [r for r in ok if abs(r["dc_gain_error_percent"]) <= limit]
-    if steady is None or ok:
-        pick = ok[0] if steady is not None else near[0]
+    ok = [r for r in near if _gain_error(r) <= limit]
+    if steady is None:
+        pick = near[0]
+    elif ok:
+        pick = ok[0]
     else:  # none passes: the nearest gain, not the simplest (a tighter tolerance never
         # chooses a worse gain than a looser one)
-        pick = min(near, key=lambda r: abs(r.get("dc_gain_error_percent") or math.inf))
+        pick = min(near, key=_gain_error)
     reason = (
         f"{pick['structure']} is the simplest model (fewest parameters: {pick['n_params']}; "
         "then ARX < ARMAX < OE < BJ, a free model before its gain-constrained twin +K) "
@@ -594,6 +595,12 @@ def _choose(
 
 POOR_FIT = 50.0
 """Validation fit, %, below which the choice comes with a warning that no model is good."""
+
+
+def _gain_error(row: dict) -> float:
+    """|DC gain error| of a row, %; a model without a DC gain (a pole at 1) is the farthest."""
+    err = row.get("dc_gain_error_percent")
+    return math.inf if err is None else abs(err)
 
 
 def _paper_text(pick: dict, candidates: list[dict], best: float) -> str:
