@@ -132,6 +132,12 @@ STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 1
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
+HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
+HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
+# the bearing's warm-up), relative to its own friction current
+LOAD_SETTLE_S = 30.0  # a held-speed error the loop rejects (a load step) is gone by then, s
+HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
+CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # σ of a unit's current-sense offset (±5 mA)
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -319,6 +325,76 @@ class _FrictionChange(_BlockCusum):
         return float(np.mean(sd)) if sd else 0.0
 
 
+class _HoldChange(_BlockCusum):
+    """Friction at a held speed against this record's own current at that speed.
+
+    The wheel's loop holds the true speed at the command, so at a command held before
+    (the same value: a step's or a PRBS's levels come back) the motor current is the
+    unit's own friction there plus its current-sense offset, whatever the unit: the
+    first :data:`HOLD_BASE` settled samples at each command are its baseline (their
+    mean and σ), and each later block of settled samples there gives v, the current's
+    rise relative to the baseline's (≈ F − 1 for friction × F, 1/F_k − 1 for a weak
+    motor: the motor test tells them apart). The block's v beyond
+    :data:`HOLD_TOLERANCE`, standardised by its noise (the baseline's σ per sample),
+    feeds a one-sided CUSUM. Within a record only: a fault present from the first hold
+    at a speed is its baseline (the absolute tests see those)."""
+
+    def __init__(self, h: float, block: int) -> None:
+        stats = BlockStats(0.0, 1.0, 1, 0.05, 0, "the record's own first settled samples")
+        super().__init__(stats, 0.0, h, "up")
+        self.block = block
+        self._base: dict[float, list[float]] = {}  # command (rpm) → baseline currents (A)
+        self._values: list[float] = []  # the block in progress: currents at one command
+        self._key = math.nan
+        self.sizes: deque = deque()  # (t_s, v, σ of v, relative σ of the baseline level)
+        self.recent: deque = deque(maxlen=400)  # (t_s, command rpm, current A)
+
+    def load_change(self, t0: float, command_rpm: float) -> bool:
+        """The current at this held command (its latest 8 samples) rose beyond the
+        tolerance over the one before ``t0`` (three σ): the wheel's load changed."""
+        rows = [(t, i) for t, c, i in self.recent if c == command_rpm]
+        before = np.array([i for t, i in rows if t <= t0])
+        after = np.array([i for t, i in rows if t > t0][-8:])
+        if min(before.size, after.size) < 4:
+            return False
+        scale = max(abs(float(before.mean())), 2 * HOLD_MIN_SD_A)
+        e = math.copysign(1.0, command_rpm) * float(after.mean() - before.mean()) / scale
+        sd = max(float(np.std(before, ddof=1)), HOLD_MIN_SD_A)
+        return e - HOLD_TOLERANCE > 3 * sd * math.sqrt(1 / before.size + 1 / after.size) / scale
+
+    def add_sample(self, t_s: float, command_rpm: float, current_a: float) -> bool:
+        """One settled sample at a held speed; True when the CUSUM exceeds its threshold."""
+        self.recent.append((t_s, command_rpm, current_a))
+        base = self._base.setdefault(command_rpm, [])
+        if len(base) < HOLD_BASE:
+            base.append(current_a)
+            return False
+        if command_rpm != self._key:
+            self._values, self._key = [], command_rpm
+        self._values.append(current_a)
+        if len(self._values) < self.block:
+            return False
+        level = float(np.mean(base))
+        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
+        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
+        v = math.copysign(1.0, command_rpm) * (float(np.mean(self._values)) - level) / scale
+        sd_v = sd * math.sqrt(1 / len(self._values) + 1 / len(base)) / scale
+        self._values = []
+        self.sizes.append((t_s, v, sd_v, CURRENT_OFFSET_SD_A / scale))
+        while self.sizes[0][0] < t_s - HISTORY_S:
+            self.sizes.popleft()
+        return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
+
+    def since_change_sizes(self) -> np.ndarray:
+        """(v, σ of v, relative σ of the level) of the blocks since the statistic last
+        left zero, shape (n, 3)."""
+        t0 = self.change_time()
+        rows = [row[1:] for row in self.sizes if row[0] > t0] or [
+            row[1:] for row in self.sizes
+        ][-1:]
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+
 class _Dropout:
     """Lost telemetry frames per block, against the reference's Poisson loss rate."""
 
@@ -423,6 +499,7 @@ class Diagnoser:
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
         self._friction_sample = (0.0, 0.0, 0.0)
+        self._hold_sample: tuple[float, float] | None = None  # (command rpm, current A)
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
@@ -490,6 +567,10 @@ class Diagnoser:
             det = _BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
+        h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
+        det = _HoldChange(h_analytic, BLOCKS["friction"])
+        det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
+        self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
         self.thresholds["rest"] = self._detectors["rest"].n
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
@@ -603,6 +684,7 @@ class Diagnoser:
         rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
+        self._hold_sample = None
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
@@ -620,12 +702,18 @@ class Diagnoser:
                 new += self._fire(t_s, "stuck")
             if usable and self._trace:
                 self._trace_run(repeat and self._moving)
+            hold = self._detectors["hold"]
+            if self._hold_sample is not None:
+                hold.add_sample(t_s, *self._hold_sample)
+            if hold.statistic > hold.h and self._motor_seen_since(hold.change_time()):
+                new += self._fire(t_s, "hold")
             sample = self._friction_sample
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
             for name, value in values.items():
-                if self._detectors[name].add(t_s, value):
-                    new += self._fire(t_s, name)
+                if not self._detectors[name].add(t_s, value):
+                    continue
+                new += self._speed_alarm(t_s) if name == "speed" else self._fire(t_s, name)
         else:
             for name, value in values.items():
                 self.collected[name].append(value)
@@ -713,6 +801,8 @@ class Diagnoser:
             excess = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
             self._lag_excess.append((t_s, excess))
         if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
+            if settled and STILL_RPM <= held <= HELD_MAX_RPM:  # the hold test's sample
+                self._hold_sample = (self._command[0], current_a)
             offset = self._current_offset(sign, r["current"])
             if offset is not None:
                 out["friction"] = sign * (r["current"] - offset) / abs(friction)
@@ -721,6 +811,31 @@ class Diagnoser:
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
+
+    def _speed_alarm(self, t_s: float) -> list[Alarm]:
+        """A held-speed error is a bias when it stays: where the current at the hold rose
+        with it (a load step: more friction, a weak motor), the wheel's loop brings the
+        speed back within seconds, so wait :data:`LOAD_SETTLE_S` and alarm only if the
+        latest block still holds the error (else forget it)."""
+        det = self._detectors["speed"]
+        t0 = det.change_time()
+        if self._detectors["hold"].load_change(t0, self._command[0]):
+            if t_s - t0 < LOAD_SETTLE_S:
+                return []
+            z = (det.means[-1][1] - det.mean) / det.stats.sigma
+            if abs(z) <= det.k:
+                det.restart()
+                return []
+        return self._fire(t_s, "speed")
+
+    def _motor_seen_since(self, t0: float) -> bool:
+        """The motor test has a block after ``t0``: a weak motor and more friction both
+        raise the current at a held speed; only the current under acceleration tells
+        which, so the hold test names nothing before it has one."""
+        motor = self._detectors.get("motor")
+        if motor is None:
+            return True
+        return sum(t > t0 for t, _ in motor.raw) >= motor.stats.block
 
     def _current_offset(self, sign: float, residual_a: float) -> float | None:
         """This unit's current-sense offset beyond the reference's, A (None until the
@@ -832,6 +947,10 @@ class Diagnoser:
         ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
         ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
+        hold = self._detectors["hold"]
+        ev["hold"] = hold.since_change_sizes()
+        if detector == "hold" and motor is not None:  # the motor test since the change
+            ev["motor"] = np.array([x for t, x in motor.raw if t > hold.change_time()])
         ev["rest_value"] = self._detectors["rest"].value
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too

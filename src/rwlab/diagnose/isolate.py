@@ -150,13 +150,28 @@ def _slew(ev: dict) -> Finding:
     return Finding("friction", 1 + e / 2, (1 + (e - half) / 2, 1 + (e + half) / 2), "factor")
 
 
+def _hold(ev: dict) -> Finding:
+    """The current's rise at a held speed over this record's own earlier current there:
+    a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
+    too), else friction, F ≈ 1 + v (v relative to the unit's own friction current there,
+    whose level holds the unknown current-sense offset: its σ enters the interval)."""
+    motor = _motor(ev)
+    if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
+        return _torque_constant(*motor)
+    rows = np.asarray(ev["hold"], dtype=float).reshape(-1, 3)
+    weight = 1 / rows[:, 1] ** 2
+    e = float(np.sum(weight * rows[:, 0]) / np.sum(weight))
+    half = math.hypot(Z95 / math.sqrt(float(np.sum(weight))), Z95 * e * float(rows[:, 2].max()))
+    return Finding("friction", 1 + e, (1 + e - half, 1 + e + half), "factor")
+
+
 def isolate(detector: str, ev: dict) -> list[Finding]:
     """The faults that explain an alarm of ``detector``, sized.
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'motor', 'speed',
-        'offset', 'slew', 'lag'}
+    detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'hold', 'motor',
+        'speed', 'offset', 'slew', 'lag'}
     ev : dict
         The evidence (see the module docstring).
 
@@ -182,6 +197,8 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return _rotor(ev)
     if detector == "slew":
         return [_slew(ev)]
+    if detector == "hold":
+        return [_hold(ev)]
     if detector == "offset":  # the speed residual's offset on a continuous command
         bias, half = _mean_ci(ev["offset"], ev["sigma"]["offset"])
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
