@@ -67,6 +67,12 @@ MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 # σ of the held-speed error between two healthy units (Hall reading at a hold; the
 # tune set's healthy units sit within about ±1 rpm of each other), rpm
 SPEED_UNIT_SD = 0.5
+# σ of the offset test's record-mean between healthy units beyond its windows' noise
+# (the model's mismatch with a unit persists over a record): tune set's healthy records,
+# 21 records with ≥ 3 windows, σ of the record means 1.22 rpm where independent windows
+# would give 0.85
+OFFSET_UNIT_SD_RPM = 0.9
+CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # a unit's current-sense offset, ±5 mA uniform
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
@@ -201,6 +207,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return [_hold(ev)]
     if detector == "offset":  # the speed residual's offset on a continuous command
         bias, half = _mean_ci(ev["offset"], ev["sigma"]["offset"])
+        half = math.hypot(half, Z95 * OFFSET_UNIT_SD_RPM)
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
     if detector == "speed":
         held = np.asarray(ev["speed"], dtype=float)
@@ -244,5 +251,11 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     currents = currents[np.isfinite(currents)]
     if currents.size == 0:
         return [Finding("current_limit", None, None, "A")]
-    lo, mid, hi = np.percentile(currents, [2.5, 50, 97.5])
-    return [Finding("current_limit", float(mid), (float(lo), float(hi)), "A")]
+    # the clamp: the median current at the limit; its interval, not the currents' spread:
+    # the median's standard error (consecutive samples: half as many independent) and the
+    # unit's current-sense offset, which every measured current carries
+    mid = float(np.median(currents))
+    spread = 1.4826 * float(np.median(np.abs(currents - mid)))
+    se = 1.2533 * spread / math.sqrt(max(currents.size / 2, 1))
+    half = Z95 * math.hypot(se, CURRENT_OFFSET_SD_A)
+    return [Finding("current_limit", mid, (mid - half, mid + half), "A")]
