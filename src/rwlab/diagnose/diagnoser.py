@@ -339,10 +339,10 @@ class _HoldChange(_BlockCusum):
     feeds a one-sided CUSUM. Within a record only: a fault present from the first hold
     at a speed is its baseline (the absolute tests see those)."""
 
-    def __init__(self, h: float, block: int) -> None:
+    def __init__(self, h: float, block: int, Ts: float) -> None:
         stats = BlockStats(0.0, 1.0, 1, 0.05, 0, "the record's own first settled samples")
         super().__init__(stats, 0.0, h, "up")
-        self.block = block
+        self.block, self.Ts = block, Ts
         self._base: dict[float, list[float]] = {}  # command (rpm) → baseline currents (A)
         self._values: list[float] = []  # the block in progress: currents at one command
         self._key = math.nan
@@ -385,13 +385,20 @@ class _HoldChange(_BlockCusum):
             self.sizes.popleft()
         return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
 
+    def onset(self) -> float:
+        """Start of the first block after the statistic last was zero, s (the blocks
+        between may be minutes apart: other speeds, accelerations)."""
+        t0 = self.change_time()
+        after = [row[0] for row in self.means if row[0] > t0]
+        return after[0] - self.block * self.Ts if after else t0
+
     def since_change_sizes(self) -> np.ndarray:
         """(v, σ of v, relative σ of the level) of the blocks since the statistic last
         left zero, shape (n, 3)."""
         t0 = self.change_time()
-        rows = [row[1:] for row in self.sizes if row[0] > t0] or [
-            row[1:] for row in self.sizes
-        ][-1:]
+        rows = [row[1:] for row in self.sizes if row[0] > t0] or [row[1:] for row in self.sizes][
+            -1:
+        ]
         return np.array(rows, dtype=float).reshape(-1, 3)
 
 
@@ -568,7 +575,7 @@ class Diagnoser:
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
         h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
-        det = _HoldChange(h_analytic, BLOCKS["friction"])
+        det = _HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
         self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
@@ -705,7 +712,7 @@ class Diagnoser:
             hold = self._detectors["hold"]
             if self._hold_sample is not None:
                 hold.add_sample(t_s, *self._hold_sample)
-            if hold.statistic > hold.h and self._motor_seen_since(hold.change_time()):
+            if hold.statistic > hold.h and self._motor_seen_since(hold.onset()):
                 new += self._fire(t_s, "hold")
             sample = self._friction_sample
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
@@ -956,7 +963,7 @@ class Diagnoser:
         hold = self._detectors["hold"]
         ev["hold"] = hold.since_change_sizes()
         if detector == "hold" and motor is not None:  # the motor test since the change
-            ev["motor"] = np.array([x for t, x in motor.raw if t > hold.change_time()])
+            ev["motor"] = np.array([x for t, x in motor.raw if t > hold.onset()])
         ev["rest_value"] = self._detectors["rest"].value
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
