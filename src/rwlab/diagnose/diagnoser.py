@@ -137,6 +137,13 @@ HOLD_BASE = 20  # settled samples at a held speed that give this record's own cu
 HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
 # the bearing's warm-up), relative to its own friction current
 LOAD_SETTLE_S = 30.0  # a held-speed error the loop rejects (a load step) is gone by then, s
+HOLD_DRIFT_SD = 0.05  # relative drift of a unit's friction between two holds (the twin's
+# random walk is 5 %/√h; a record's holds are minutes apart)
+HOLD_SIGN_SD = 0.03  # relative σ between a unit's friction at +ω and −ω (tune set's healthy
+# step records, 10 units: |i(+6000) − off| and |i(−6000) − off| within 0.3–3 %)
+REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a 0-rpm
+# command is the sense offset (the loop's integrator has not moved); after a motion the
+# rest holds the integrator's residue (up to ~4 mA on the twin's units)
 HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
@@ -348,6 +355,7 @@ class _HoldChange(_BlockCusum):
         self._key = math.nan
         self.sizes: deque = deque()  # (t_s, v, σ of v, relative σ of the baseline level)
         self.recent: deque = deque(maxlen=400)  # (t_s, command rpm, current A)
+        self._rest = [0, 0.0, 0.0]  # count, Σi, Σi² of the currents at rest (0 rpm)
 
     def load_change(self, t0: float, command_rpm: float) -> bool:
         """The current at this held command (its latest 8 samples) rose beyond the
@@ -362,28 +370,69 @@ class _HoldChange(_BlockCusum):
         sd = max(float(np.std(before, ddof=1)), HOLD_MIN_SD_A)
         return e - HOLD_TOLERANCE > 3 * sd * math.sqrt(1 / before.size + 1 / after.size) / scale
 
+    def add_rest(self, current_a: float) -> None:
+        """One settled sample of the wheel resting at a 0-rpm command (reading 0)."""
+        n, s1, s2 = self._rest
+        self._rest = [n + 1, s1 + current_a, s2 + current_a * current_a]
+
+    def _offset(self) -> tuple[float, float] | None:
+        """The current-sense offset from the rest samples and its σ, A (None: too few)."""
+        n, s1, s2 = self._rest
+        if n < HOLD_BASE:
+            return None
+        sd = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * n / (n - 1))
+        return s1 / n, math.hypot(sd / math.sqrt(n), REST_CURRENT_SD_A)
+
     def add_sample(self, t_s: float, command_rpm: float, current_a: float) -> bool:
         """One settled sample at a held speed; True when the CUSUM exceeds its threshold."""
         self.recent.append((t_s, command_rpm, current_a))
         base = self._base.setdefault(command_rpm, [])
+        mirror = self._base.get(-command_rpm, [])
+        offset = self._offset()
+        cross = len(mirror) >= HOLD_BASE and offset is not None
         if len(base) < HOLD_BASE:
             base.append(current_a)
-            return False
+            if not cross:
+                return False
         if command_rpm != self._key:
             self._values, self._key = [], command_rpm
         self._values.append(current_a)
         if len(self._values) < self.block:
             return False
-        level = float(np.mean(base))
-        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
-        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
-        v = math.copysign(1.0, command_rpm) * (float(np.mean(self._values)) - level) / scale
-        sd_v = sd * math.sqrt(1 / len(self._values) + 1 / len(base)) / scale
-        self._values = []
-        self.sizes.append((t_s, v, sd_v, CURRENT_OFFSET_SD_A / scale))
+        values, self._values = np.array(self._values), []
+        tests = []  # (v, σ of v, σ common to every block) of each comparison
+        if len(base) >= HOLD_BASE and values.size:
+            tests.append(self._compare(values, np.array(base), command_rpm, 0.0, 0.0))
+        if cross:
+            off, off_sd = offset  # type: ignore[misc]
+            level = -(np.array(mirror) - off) + off  # the mirror speed's current, sign turned
+            tests.append(self._compare(values, level, command_rpm, off, off_sd))
+        v, sd_v, level_sd = max(tests, key=lambda x: (x[0] - HOLD_TOLERANCE) / x[1])
+        self.sizes.append((t_s, v, sd_v, level_sd))
         while self.sizes[0][0] < t_s - HISTORY_S:
             self.sizes.popleft()
         return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
+
+    @staticmethod
+    def _compare(values, base, command_rpm: float, off: float, off_sd: float):
+        """A block against a baseline: the relative rise v of the friction current, its σ
+        and the σ that every block shares (the baseline's). Against the same command the offset
+        cancels (``off_sd`` 0); against the mirror speed (friction is even in speed: the
+        healthy units' ± levels agree within ~3 %) the rest's offset estimate enters
+        twice, and the unit's asymmetry."""
+        sign = math.copysign(1.0, command_rpm)
+        level = sign * (float(np.mean(base)) - off)
+        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
+        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
+        v = (sign * (float(np.mean(values)) - off) - level) / scale
+        noise = sd * math.sqrt(1 / values.size + 1 / base.size) / scale
+        # what averaging blocks does not shrink: the drift between the holds and, against
+        # the same command, the level's offset (relative), against the mirror speed the
+        # offset estimate and the unit's asymmetry (additive)
+        if off_sd == 0.0:
+            return v, noise, math.hypot(HOLD_DRIFT_SD, v * CURRENT_OFFSET_SD_A / scale)
+        sd_v = math.hypot(noise, 2 * off_sd / scale, HOLD_SIGN_SD)
+        return v, sd_v, math.hypot(2 * off_sd / scale, HOLD_SIGN_SD, HOLD_DRIFT_SD)
 
     def onset(self) -> float:
         """Start of the first block after the statistic last was zero, s (the blocks
@@ -393,7 +442,7 @@ class _HoldChange(_BlockCusum):
         return after[0] - self.block * self.Ts if after else t0
 
     def since_change_sizes(self) -> np.ndarray:
-        """(v, σ of v, relative σ of the level) of the blocks since the statistic last
+        """(v, σ of v, σ common to all blocks) of the blocks since the statistic last
         left zero, shape (n, 3)."""
         t0 = self.change_time()
         rows = [row[1:] for row in self.sizes if row[0] > t0] or [row[1:] for row in self.sizes][
@@ -507,6 +556,9 @@ class Diagnoser:
         self._lag_currents: deque = deque(maxlen=1200)
         self._friction_sample = (0.0, 0.0, 0.0)
         self._hold_sample: tuple[float, float] | None = None  # (command rpm, current A)
+        self._rest_current: float | None = None  # current of a settled 0-rpm rest, A
+        self._moved = False  # a non-zero command came (the rest after it holds the loop's
+        # integrator: up to a few mA on the twin's units)
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
@@ -692,6 +744,7 @@ class Diagnoser:
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
         self._hold_sample = None
+        self._rest_current: float | None = None
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
@@ -710,6 +763,8 @@ class Diagnoser:
             if usable and self._trace:
                 self._trace_run(repeat and self._moving)
             hold = self._detectors["hold"]
+            if self._rest_current is not None:
+                hold.add_rest(self._rest_current)
             if self._hold_sample is not None:
                 hold.add_sample(t_s, *self._hold_sample)
             if hold.statistic > hold.h and self._motor_seen_since(hold.onset()):
@@ -791,6 +846,9 @@ class Diagnoser:
         settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
         # (not a hold inside the stiction band: there the wheel may rest at 0 instead)
         held = abs(self._command[0])
+        self._moved = self._moved or self._command[0] != 0.0
+        if settled and not self._moved and speed_rpm == 0.0 and math.isfinite(current_a):
+            self._rest_current = current_a  # at rest since power-up: the sense offset
         if settled and (STILL_RPM <= held <= HELD_MAX_RPM or held == 0.0):
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
@@ -964,6 +1022,9 @@ class Diagnoser:
         ev["hold"] = hold.since_change_sizes()
         if detector == "hold" and motor is not None:  # the motor test since the change
             ev["motor"] = np.array([x for t, x in motor.raw if t > hold.onset()])
+        weak = [a for a in self.alarms if a.kind == "torque_constant" and a.ci is not None]
+        if weak:  # a weak motor named before: its share of a held current's rise
+            ev["torque_constant"] = (weak[-1].magnitude, weak[-1].ci)
         ev["rest_value"] = self._detectors["rest"].value
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too

@@ -159,16 +159,23 @@ def _slew(ev: dict) -> Finding:
 def _hold(ev: dict) -> Finding:
     """The current's rise at a held speed over this record's own earlier current there:
     a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
-    too), else friction, F ≈ 1 + v (v relative to the unit's own friction current there,
-    whose level holds the unknown current-sense offset: its σ enters the interval)."""
+    too), or when a weak motor named before explains it; else friction, F ≈ 1 + v (v
+    relative to the unit's own friction current there; what every block shares — the
+    baseline's offset, drift, the mirror speed's asymmetry — does not average out)."""
     motor = _motor(ev)
     if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
         return _torque_constant(*motor)
     rows = np.asarray(ev["hold"], dtype=float).reshape(-1, 3)
     weight = 1 / rows[:, 1] ** 2
     e = float(np.sum(weight * rows[:, 0]) / np.sum(weight))
-    half = math.hypot(Z95 / math.sqrt(float(np.sum(weight))), Z95 * e * float(rows[:, 2].max()))
-    return Finding("friction", 1 + e, (1 + e - half, 1 + e + half), "factor")
+    half = Z95 * math.hypot(1 / math.sqrt(float(np.sum(weight))), float(rows[:, 2].mean()))
+    factor, lo, hi = 1 + e, 1 + e - half, 1 + e + half
+    if "torque_constant" in ev:  # the current rises by 1/F_k with a weak motor alone
+        k, (k_lo, k_hi) = ev["torque_constant"]
+        if lo * k_lo <= 1 <= hi * k_hi:
+            return Finding("torque_constant", k, (k_lo, k_hi), "factor")
+        factor, lo, hi = factor * k, lo * k_lo, hi * k_hi
+    return Finding("friction", factor, (lo, hi), "factor")
 
 
 def isolate(detector: str, ev: dict) -> list[Finding]:
