@@ -588,3 +588,18 @@ def test_the_current_limit_interval_is_on_the_clamp_not_the_currents(offset_a):
     assert found.kind == "current_limit"
     assert found.ci[0] <= clamp <= found.ci[1]
     assert found.ci[1] - found.ci[0] < 0.03  # still a useful size
+
+
+def test_friction_after_a_rest_is_seen_against_the_mirror_speed(tmp_path, model_file):
+    """Worn bearings from a 0-rpm rest on: the next hold (−A) has no earlier hold at that
+    speed, but friction is even in speed and the current before the first motion is the
+    unit's sense offset, so the +A hold tells (a reviewer's step record was missed)."""
+    path = tmp_path / "mirror.mcap"
+    cfg = ExperimentConfig(
+        signal="step", duration=600, seed=37, unit=37, faults=("friction=1.5@300",)
+    )
+    run_experiment(cfg, path)
+    alarms = _diagnose(path, model_file).alarms
+    assert alarms and all(a.t_s >= 300 for a in alarms), alarms
+    assert {a.kind for a in alarms} == {"friction"}, alarms
+    assert alarms[0].t_s <= 600 and alarms[0].ci[0] <= 1.5 <= alarms[0].ci[1]
