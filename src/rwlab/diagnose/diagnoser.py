@@ -959,10 +959,11 @@ class Diagnoser:
             return []
         else:
             det.restart() if detector == "dropout" else None
-        if detector == "offset" and any(a.kind in ROTOR_FAULTS for a in self.alarms):
+        if self.latch and detector == "offset" and any(a.kind in ROTOR_FAULTS for a in self.alarms):
             # a rotor fault moves the speed residual's zero-speed offset too (friction
             # ×1.5–2.5 on a chirp: 20–25 rpm): after one, the offset names nothing (the
-            # rest and held-speed tests still see a bias)
+            # rest and held-speed tests still see a bias). Not when counting false alarms
+            # (latch off): there each detector's own alarms count
             det.restart()
             return []
         findings: list[Finding] = isolate(detector, self._evidence(detector))
