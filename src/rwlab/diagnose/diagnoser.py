@@ -37,9 +37,13 @@ open loop, so friction it does not know shows in the slew's acceleration.
 unit's own friction law (viscous, Coulomb and current offset over the
 reference's; ridge least squares on the record's samples older than 300 s): a
 friction rise smaller than the spread between units, when it starts within the
-record. A lag alarm is named by the current balance on the lag samples: a weak
-motor draws 1/F the current the achieved acceleration needs, a lowered clamp
-exactly that current.
+record. ``hold`` (:class:`_HoldChange`) compares the current at a held
+command with this record's own first settled samples there, or with the mirror
+command's level (friction is even in speed; the sense offset from the rest before
+the first motion): friction ×1.5 on steps, named once the motor test has seen an
+acceleration since (a weak motor raises the held current too). A lag alarm is
+named by the current balance on the lag samples: a weak motor draws 1/F the
+current the achieved acceleration needs, a lowered clamp exactly that current.
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a

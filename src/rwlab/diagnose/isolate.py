@@ -19,6 +19,9 @@ motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 +
             1/F the current for everything
 friction    excess only at constant speed                     ``friction``, factor
                                                               (1 + e_ω)/(1 + e_α)
+hold        the held current above this record's own at the   ``friction``, 1 + v
+            same (or mirror) speed, no motor excess           (``torque_constant``
+                                                              with a motor excess)
 speed       held speed offset from the command                ``speed_sensor_bias``,
                                                               rpm
 offset      offset of the speed residual at zero speed,       ``speed_sensor_bias``,
