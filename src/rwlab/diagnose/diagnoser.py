@@ -884,17 +884,29 @@ class Diagnoser:
     def _speed_alarm(self, t_s: float) -> list[Alarm]:
         """A held-speed error is a bias when it stays: where the current at the hold rose
         with it (a load step: more friction, a weak motor), the wheel's loop brings the
-        speed back within seconds, so wait :data:`LOAD_SETTLE_S` and alarm only if the
-        latest block still holds the error (else forget it)."""
+        speed back within seconds, so wait :data:`LOAD_SETTLE_S`; alarm only if the
+        latest block still holds the error (else forget it). Isolation's rule: with
+        ``latch`` off (counting false alarms) every alarm of the detector counts."""
         det = self._detectors["speed"]
+        if not self.latch:  # counting false alarms: the detector's own, as calibrated
+            return self._fire(t_s, "speed")
         t0 = det.change_time()
-        if self._detectors["hold"].load_change(t0, self._command[0]):
-            if t_s - t0 < LOAD_SETTLE_S:
+        if self._detectors["hold"].load_change(t0, self._command[0]) and t_s - t0 < LOAD_SETTLE_S:
+            return []
+        # a bias stays; forget an error that no longer holds (a load step at an earlier
+        # hold, an overshoot the loop has since removed): at a hold begun since the change,
+        # on its own values (wait for 4), else on the latest block
+        error = det.means[-1][1] - det.mean
+        if self._command[1] > t0:
+            now = [v for t, v in det.raw if t > self._command[1]]
+            if len(now) < 4:
                 return []
-            z = (det.means[-1][1] - det.mean) / det.stats.sigma
-            if abs(z) <= det.k:
+            if abs(float(np.mean(now)) - det.mean) < 0.5 * abs(error):
                 det.restart()
                 return []
+        elif abs(error) / det.stats.sigma <= det.k:
+            det.restart()
+            return []
         return self._fire(t_s, "speed")
 
     def _motor_seen_since(self, t0: float) -> bool:
