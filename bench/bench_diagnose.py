@@ -9,7 +9,7 @@ the defaults (paper A's stepped PRBS), on a fault-free 20-minute record of unit
 from other units, in two disjoint sets:
 
 - ``tune``: healthy units 1–6 (2 h) and the calibration's 101–136 (12 h),
-  faulty units 41–58: what the detectors were developed on;
+  faulty units 41–63: what the detectors were developed on;
 - ``eval``: healthy units 21–44 (8 h), faulty units 61–85: judged only (it
   has been looked at while the detectors were developed);
 - ``eval2``: healthy units 201–224 (8 h), faulty units 231–255, the eval set's
@@ -24,7 +24,11 @@ from other units, in two disjoint sets:
    requested vs measured per detector and the hours behind each figure;
 2. faults: each fault of issue 23 (two at once too), onset at 600 s of a
    15-minute PRBS and chirp, and present from power-up (t = 0, 10-minute PRBS);
-   in the eval set also friction and bias at 300 s of a chirp (its slow part):
+   in the eval set also friction and bias at 300 s of a chirp (its slow part);
+   in every set, on units after the set's others (tune 59–63, eval 86–90, eval2
+   256–260, eval3 656–660), the review's cases: friction on a multisine and on
+   steps, friction + current limit (PRBS), bias + current limit (multisine),
+   friction + bias (steps):
    any alarm before onset, detected within 300 s of onset (any time when
    present from t = 0), named right (the first name is the fault's and no
    other fault is named within the 300 s; two faults: both named and no
@@ -61,6 +65,7 @@ DETECTORS = (
     "slew",
     "friction",
     "friction_change",
+    "hold",
     "motor",
     "speed",
     "lag",
@@ -100,6 +105,15 @@ POWER_UP = (
     "speed_sensor_stuck",
 )
 EARLY_CHIRP = ("friction=1.5", "speed_sensor_bias=15")
+# issue 23's review (units 300–363): friction on the signals with no through-zero slew at
+# the limit, and the pairs that were named as one fault; onset at 600 s of 15 minutes
+MORE = (
+    ("friction=1.5", "multisine"),
+    ("friction=1.5", "step"),
+    ("friction=1.5+current_limit=0.45", "prbs"),
+    ("speed_sensor_bias=15+current_limit=0.45", "multisine"),
+    ("friction=1.5+speed_sensor_bias=15", "step"),
+)
 HEALTHY = {
     "tune": (1, 6, 100),
     "eval": (21, 24, 1000),
@@ -156,6 +170,10 @@ def records(which: str) -> dict[str, tuple]:
         unit += 1
         spec = (unit, seed + unit, "chirp", 900, _faults(fault, 300), fault, 300.0)
         out[f"{which}_c{unit}"] = spec
+    for fault, signal in MORE:
+        unit += 1
+        spec = (unit, seed + unit, signal, 900, _faults(fault, ONSET), fault, ONSET)
+        out[f"{which}_e{unit}"] = spec
     return out
 
 

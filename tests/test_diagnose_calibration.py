@@ -143,6 +143,7 @@ def test_the_package_calibration_covers_every_detector_and_says_where_it_came_fr
     assert {name.split("@")[0] for name in cal.curves} == {
         "friction",
         "friction_change",
+        "hold",
         "motor",
         "speed",
         "offset",

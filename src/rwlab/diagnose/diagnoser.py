@@ -37,9 +37,13 @@ open loop, so friction it does not know shows in the slew's acceleration.
 unit's own friction law (viscous, Coulomb and current offset over the
 reference's; ridge least squares on the record's samples older than 300 s): a
 friction rise smaller than the spread between units, when it starts within the
-record. A lag alarm is named by the current balance on the lag samples: a weak
-motor draws 1/F the current the achieved acceleration needs, a lowered clamp
-exactly that current.
+record. ``hold`` (:class:`_HoldChange`) compares the current at a held
+command with this record's own first settled samples there, or with the mirror
+command's level (friction is even in speed; the sense offset from the rest before
+the first motion): friction ×1.5 on steps, named once the motor test has seen an
+acceleration since (a weak motor raises the held current too). A lag alarm is
+named by the current balance on the lag samples: a weak motor draws 1/F the
+current the achieved acceleration needs, a lowered clamp exactly that current.
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
@@ -91,7 +95,7 @@ from rwlab.diagnose.calibration import (
 from rwlab.diagnose.calibration import SHARES as _SHARES
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
-from rwlab.diagnose.isolate import Finding, isolate
+from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, isolate
 from rwlab.diagnose.motion import (
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
@@ -132,6 +136,19 @@ STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 1
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
+ROTOR_FAULTS = ("friction", "torque_constant", "current_limit")
+HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
+HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
+# the bearing's warm-up), relative to its own friction current
+LOAD_SETTLE_S = 30.0  # a held-speed error the loop rejects (a load step) is gone by then, s
+HOLD_DRIFT_SD = 0.05  # relative drift of a unit's friction between two holds (the twin's
+# random walk is 5 %/√h; a record's holds are minutes apart)
+HOLD_SIGN_SD = 0.03  # relative σ between a unit's friction at +ω and −ω (tune set's healthy
+# step records, 10 units: |i(+6000) − off| and |i(−6000) − off| within 0.3–3 %)
+REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a 0-rpm
+# command is the sense offset (the loop's integrator has not moved); after a motion the
+# rest holds the integrator's residue (up to ~4 mA on the twin's units)
+HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
 DROPOUT_BLOCK_S = 10.0
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
@@ -319,6 +336,125 @@ class _FrictionChange(_BlockCusum):
         return float(np.mean(sd)) if sd else 0.0
 
 
+class _HoldChange(_BlockCusum):
+    """Friction at a held speed against this record's own current at that speed.
+
+    The wheel's loop holds the true speed at the command, so at a command held before
+    (the same value: a step's or a PRBS's levels come back) the motor current is the
+    unit's own friction there plus its current-sense offset, whatever the unit: the
+    first :data:`HOLD_BASE` settled samples at each command are its baseline (their
+    mean and σ), and each later block of settled samples there gives v, the current's
+    rise relative to the baseline's (≈ F − 1 for friction × F, 1/F_k − 1 for a weak
+    motor: the motor test tells them apart). The block's v beyond
+    :data:`HOLD_TOLERANCE`, standardised by its noise (the baseline's σ per sample),
+    feeds a one-sided CUSUM. Within a record only: a fault present from the first hold
+    at a speed is its baseline (the absolute tests see those)."""
+
+    def __init__(self, h: float, block: int, Ts: float) -> None:
+        stats = BlockStats(0.0, 1.0, 1, 0.05, 0, "the record's own first settled samples")
+        super().__init__(stats, 0.0, h, "up")
+        self.block, self.Ts = block, Ts
+        self._base: dict[float, list[float]] = {}  # command (rpm) → baseline currents (A)
+        self._values: list[float] = []  # the block in progress: currents at one command
+        self._key = math.nan
+        self.sizes: deque = deque()  # (t_s, v, σ of v, relative σ of the baseline level)
+        self.recent: deque = deque(maxlen=400)  # (t_s, command rpm, current A)
+        self._rest = [0, 0.0, 0.0]  # count, Σi, Σi² of the currents at rest (0 rpm)
+
+    def load_change(self, t0: float, command_rpm: float) -> bool:
+        """The current at this held command (its latest 8 samples) rose beyond the
+        tolerance over the one before ``t0`` (three σ): the wheel's load changed."""
+        rows = [(t, i) for t, c, i in self.recent if c == command_rpm]
+        before = np.array([i for t, i in rows if t <= t0])
+        after = np.array([i for t, i in rows if t > t0][-8:])
+        if min(before.size, after.size) < 4:
+            return False
+        scale = max(abs(float(before.mean())), 2 * HOLD_MIN_SD_A)
+        e = math.copysign(1.0, command_rpm) * float(after.mean() - before.mean()) / scale
+        sd = max(float(np.std(before, ddof=1)), HOLD_MIN_SD_A)
+        return e - HOLD_TOLERANCE > 3 * sd * math.sqrt(1 / before.size + 1 / after.size) / scale
+
+    def add_rest(self, current_a: float) -> None:
+        """One settled sample of the wheel resting at a 0-rpm command (reading 0)."""
+        n, s1, s2 = self._rest
+        self._rest = [n + 1, s1 + current_a, s2 + current_a * current_a]
+
+    def _offset(self) -> tuple[float, float] | None:
+        """The current-sense offset from the rest samples and its σ, A (None: too few)."""
+        n, s1, s2 = self._rest
+        if n < HOLD_BASE:
+            return None
+        sd = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * n / (n - 1))
+        return s1 / n, math.hypot(sd / math.sqrt(n), REST_CURRENT_SD_A)
+
+    def add_sample(self, t_s: float, command_rpm: float, current_a: float) -> bool:
+        """One settled sample at a held speed; True when the CUSUM exceeds its threshold."""
+        self.recent.append((t_s, command_rpm, current_a))
+        base = self._base.setdefault(command_rpm, [])
+        mirror = self._base.get(-command_rpm, [])
+        offset = self._offset()
+        cross = len(mirror) >= HOLD_BASE and offset is not None
+        if len(base) < HOLD_BASE:
+            base.append(current_a)
+            if not cross:
+                return False
+        if command_rpm != self._key:
+            self._values, self._key = [], command_rpm
+        self._values.append(current_a)
+        if len(self._values) < self.block:
+            return False
+        values, self._values = np.array(self._values), []
+        tests = []  # (v, σ of v, σ common to every block) of each comparison
+        if len(base) >= HOLD_BASE and values.size:
+            tests.append(self._compare(values, np.array(base), command_rpm, 0.0, 0.0))
+        if cross:
+            off, off_sd = offset  # type: ignore[misc]
+            level = -(np.array(mirror) - off) + off  # the mirror speed's current, sign turned
+            tests.append(self._compare(values, level, command_rpm, off, off_sd))
+        v, sd_v, level_sd = max(tests, key=lambda x: (x[0] - HOLD_TOLERANCE) / x[1])
+        self.sizes.append((t_s, v, sd_v, level_sd))
+        while self.sizes[0][0] < t_s - HISTORY_S:
+            self.sizes.popleft()
+        return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
+
+    @staticmethod
+    def _compare(values, base, command_rpm: float, off: float, off_sd: float):
+        """A block against a baseline: the relative rise v of the friction current, its σ
+        and the σ that every block shares (the baseline's). Against the same command the offset
+        cancels (``off_sd`` 0); against the mirror speed (friction is even in speed: the
+        healthy units' ± levels agree within ~3 %) the rest's offset estimate enters
+        twice, and the unit's asymmetry."""
+        sign = math.copysign(1.0, command_rpm)
+        level = sign * (float(np.mean(base)) - off)
+        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
+        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
+        v = (sign * (float(np.mean(values)) - off) - level) / scale
+        noise = sd * math.sqrt(1 / values.size + 1 / base.size) / scale
+        # what averaging blocks does not shrink: the drift between the holds and, against
+        # the same command, the level's offset (relative), against the mirror speed the
+        # offset estimate and the unit's asymmetry (additive)
+        if off_sd == 0.0:
+            return v, noise, math.hypot(HOLD_DRIFT_SD, v * CURRENT_OFFSET_SD_A / scale)
+        sd_v = math.hypot(noise, 2 * off_sd / scale, HOLD_SIGN_SD)
+        return v, sd_v, math.hypot(2 * off_sd / scale, HOLD_SIGN_SD, HOLD_DRIFT_SD)
+
+    def onset(self) -> float:
+        """Start of the first block after the statistic last was zero, s (the blocks
+        between may be minutes apart: other speeds, accelerations)."""
+        t0 = self.change_time()
+        after = [row[0] for row in self.means if row[0] > t0]
+        return after[0] - self.block * self.Ts if after else t0
+
+    def since_change_sizes(self) -> np.ndarray:
+        """(v, σ of v, σ common to all blocks) of the blocks since the statistic last
+        left zero, shape (n, 3)."""
+        t0 = self.change_time()
+        rows = [row[1:] for row in self.sizes if row[0] > t0] or [row[1:] for row in self.sizes][
+            -1:
+        ]
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+
 class _Dropout:
     """Lost telemetry frames per block, against the reference's Poisson loss rate."""
 
@@ -423,6 +559,10 @@ class Diagnoser:
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
         self._friction_sample = (0.0, 0.0, 0.0)
+        self._hold_sample: tuple[float, float] | None = None  # (command rpm, current A)
+        self._rest_current: float | None = None  # current of a settled 0-rpm rest, A
+        self._moved = False  # a non-zero command came (the rest after it holds the loop's
+        # integrator: up to a few mA on the twin's units)
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
@@ -490,6 +630,10 @@ class Diagnoser:
             det = _BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
+        h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
+        det = _HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
+        det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
+        self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
         self.thresholds["rest"] = self._detectors["rest"].n
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
@@ -603,6 +747,8 @@ class Diagnoser:
         rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
+        self._hold_sample = None
+        self._rest_current: float | None = None
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
@@ -620,12 +766,20 @@ class Diagnoser:
                 new += self._fire(t_s, "stuck")
             if usable and self._trace:
                 self._trace_run(repeat and self._moving)
+            hold = self._detectors["hold"]
+            if self._rest_current is not None:
+                hold.add_rest(self._rest_current)
+            if self._hold_sample is not None:
+                hold.add_sample(t_s, *self._hold_sample)
+            if hold.statistic > hold.h and self._motor_seen_since(hold.onset()):
+                new += self._fire(t_s, "hold")
             sample = self._friction_sample
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
             for name, value in values.items():
-                if self._detectors[name].add(t_s, value):
-                    new += self._fire(t_s, name)
+                if not self._detectors[name].add(t_s, value):
+                    continue
+                new += self._speed_alarm(t_s) if name == "speed" else self._fire(t_s, name)
         else:
             for name, value in values.items():
                 self.collected[name].append(value)
@@ -696,6 +850,9 @@ class Diagnoser:
         settled = t_s - self._command[1] >= SETTLE_S and t_s - self._still_since >= STILL_S
         # (not a hold inside the stiction band: there the wheel may rest at 0 instead)
         held = abs(self._command[0])
+        self._moved = self._moved or self._command[0] != 0.0
+        if settled and not self._moved and speed_rpm == 0.0 and math.isfinite(current_a):
+            self._rest_current = current_a  # at rest since power-up: the sense offset
         if settled and (STILL_RPM <= held <= HELD_MAX_RPM or held == 0.0):
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
@@ -713,6 +870,8 @@ class Diagnoser:
             excess = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
             self._lag_excess.append((t_s, excess))
         if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
+            if settled and STILL_RPM <= held <= HELD_MAX_RPM:  # the hold test's sample
+                self._hold_sample = (self._command[0], current_a)
             offset = self._current_offset(sign, r["current"])
             if offset is not None:
                 out["friction"] = sign * (r["current"] - offset) / abs(friction)
@@ -721,6 +880,43 @@ class Diagnoser:
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
+
+    def _speed_alarm(self, t_s: float) -> list[Alarm]:
+        """A held-speed error is a bias when it stays: where the current at the hold rose
+        with it (a load step: more friction, a weak motor), the wheel's loop brings the
+        speed back within seconds, so wait :data:`LOAD_SETTLE_S`; alarm only if the
+        latest block still holds the error (else forget it). Isolation's rule: with
+        ``latch`` off (counting false alarms) every alarm of the detector counts."""
+        det = self._detectors["speed"]
+        if not self.latch:  # counting false alarms: the detector's own, as calibrated
+            return self._fire(t_s, "speed")
+        t0 = det.change_time()
+        if self._detectors["hold"].load_change(t0, self._command[0]) and t_s - t0 < LOAD_SETTLE_S:
+            return []
+        # a bias stays; forget an error that no longer holds (a load step at an earlier
+        # hold, an overshoot the loop has since removed): at a hold begun since the change,
+        # on its own values (wait for 4), else on the latest block
+        error = det.means[-1][1] - det.mean
+        if self._command[1] > t0:
+            now = [v for t, v in det.raw if t > self._command[1]]
+            if len(now) < 4:
+                return []
+            if abs(float(np.mean(now)) - det.mean) < 0.5 * abs(error):
+                det.restart()
+                return []
+        elif abs(error) / det.stats.sigma <= det.k:
+            det.restart()
+            return []
+        return self._fire(t_s, "speed")
+
+    def _motor_seen_since(self, t0: float) -> bool:
+        """The motor test has a block after ``t0``: a weak motor and more friction both
+        raise the current at a held speed; only the current under acceleration tells
+        which, so the hold test names nothing before it has one."""
+        motor = self._detectors.get("motor")
+        if motor is None:
+            return True
+        return sum(t > t0 for t, _ in motor.raw) >= motor.stats.block
 
     def _current_offset(self, sign: float, residual_a: float) -> float | None:
         """This unit's current-sense offset beyond the reference's, A (None until the
@@ -779,6 +975,13 @@ class Diagnoser:
             return []
         else:
             det.restart() if detector == "dropout" else None
+        if self.latch and detector == "offset" and any(a.kind in ROTOR_FAULTS for a in self.alarms):
+            # a rotor fault moves the speed residual's zero-speed offset too (friction
+            # ×1.5–2.5 on a chirp: 20–25 rpm): after one, the offset names nothing (the
+            # rest and held-speed tests still see a bias). Not when counting false alarms
+            # (latch off): there each detector's own alarms count
+            det.restart()
+            return []
         findings: list[Finding] = isolate(detector, self._evidence(detector))
         alarms = [
             Alarm(
@@ -832,6 +1035,13 @@ class Diagnoser:
         ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
         ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
+        hold = self._detectors["hold"]
+        ev["hold"] = hold.since_change_sizes()
+        if detector == "hold" and motor is not None:  # the motor test since the change
+            ev["motor"] = np.array([x for t, x in motor.raw if t > hold.onset()])
+        weak = [a for a in self.alarms if a.kind == "torque_constant" and a.ci is not None]
+        if weak:  # a weak motor named before: its share of a held current's rise
+            ev["torque_constant"] = (weak[-1].magnitude, weak[-1].ci)
         ev["rest_value"] = self._detectors["rest"].value
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too

@@ -19,6 +19,9 @@ motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 +
             1/F the current for everything
 friction    excess only at constant speed                     ``friction``, factor
                                                               (1 + e_ω)/(1 + e_α)
+hold        the held current above this record's own at the   ``friction``, 1 + v
+            same (or mirror) speed, no motor excess           (``torque_constant``
+                                                              with a motor excess)
 speed       held speed offset from the command                ``speed_sensor_bias``,
                                                               rpm
 offset      offset of the speed residual at zero speed,       ``speed_sensor_bias``,
@@ -67,6 +70,12 @@ MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
 # σ of the held-speed error between two healthy units (Hall reading at a hold; the
 # tune set's healthy units sit within about ±1 rpm of each other), rpm
 SPEED_UNIT_SD = 0.5
+# σ of the offset test's record-mean between healthy units beyond its windows' noise
+# (the model's mismatch with a unit persists over a record): tune set's healthy records,
+# 21 records with ≥ 3 windows, σ of the record means 1.22 rpm where independent windows
+# would give 0.85
+OFFSET_UNIT_SD_RPM = 0.9
+CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # a unit's current-sense offset, ±5 mA uniform
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
@@ -150,13 +159,35 @@ def _slew(ev: dict) -> Finding:
     return Finding("friction", 1 + e / 2, (1 + (e - half) / 2, 1 + (e + half) / 2), "factor")
 
 
+def _hold(ev: dict) -> Finding:
+    """The current's rise at a held speed over this record's own earlier current there:
+    a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
+    too), or when a weak motor named before explains it; else friction, F ≈ 1 + v (v
+    relative to the unit's own friction current there; what every block shares — the
+    baseline's offset, drift, the mirror speed's asymmetry — does not average out)."""
+    motor = _motor(ev)
+    if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
+        return _torque_constant(*motor)
+    rows = np.asarray(ev["hold"], dtype=float).reshape(-1, 3)
+    weight = 1 / rows[:, 1] ** 2
+    e = float(np.sum(weight * rows[:, 0]) / np.sum(weight))
+    half = Z95 * math.hypot(1 / math.sqrt(float(np.sum(weight))), float(rows[:, 2].mean()))
+    factor, lo, hi = 1 + e, 1 + e - half, 1 + e + half
+    if "torque_constant" in ev:  # the current rises by 1/F_k with a weak motor alone
+        k, (k_lo, k_hi) = ev["torque_constant"]
+        if lo * k_lo <= 1 <= hi * k_hi:
+            return Finding("torque_constant", k, (k_lo, k_hi), "factor")
+        factor, lo, hi = factor * k, lo * k_lo, hi * k_hi
+    return Finding("friction", factor, (lo, hi), "factor")
+
+
 def isolate(detector: str, ev: dict) -> list[Finding]:
     """The faults that explain an alarm of ``detector``, sized.
 
     Parameters
     ----------
-    detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'motor', 'speed',
-        'offset', 'slew', 'lag'}
+    detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'hold', 'motor',
+        'speed', 'offset', 'slew', 'lag'}
     ev : dict
         The evidence (see the module docstring).
 
@@ -182,8 +213,11 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return _rotor(ev)
     if detector == "slew":
         return [_slew(ev)]
+    if detector == "hold":
+        return [_hold(ev)]
     if detector == "offset":  # the speed residual's offset on a continuous command
         bias, half = _mean_ci(ev["offset"], ev["sigma"]["offset"])
+        half = math.hypot(half, Z95 * OFFSET_UNIT_SD_RPM)
         return [Finding("speed_sensor_bias", bias, (bias - half, bias + half), "rpm")]
     if detector == "speed":
         held = np.asarray(ev["speed"], dtype=float)
@@ -227,5 +261,11 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     currents = currents[np.isfinite(currents)]
     if currents.size == 0:
         return [Finding("current_limit", None, None, "A")]
-    lo, mid, hi = np.percentile(currents, [2.5, 50, 97.5])
-    return [Finding("current_limit", float(mid), (float(lo), float(hi)), "A")]
+    # the clamp: the median current at the limit; its interval, not the currents' spread:
+    # the median's standard error (consecutive samples: half as many independent) and the
+    # unit's current-sense offset, which every measured current carries
+    mid = float(np.median(currents))
+    spread = 1.4826 * float(np.median(np.abs(currents - mid)))
+    se = 1.2533 * spread / math.sqrt(max(currents.size / 2, 1))
+    half = Z95 * math.hypot(se, CURRENT_OFFSET_SD_A)
+    return [Finding("current_limit", mid, (mid - half, mid + half), "A")]
