@@ -316,6 +316,35 @@ def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
     assert any("cannot deliver 100/h" in n for n in notes)
 
 
+def test_a_calibration_over_two_model_units_counts_each_with_its_own_reference(
+    tmp_path, model_file
+):
+    """Two references (the second as from a unit whose friction test scatters 30 % more)
+    over one healthy record: hours count records × models, each CUSUM's k range spans
+    both models' k, and every threshold's alarms are those of each model counted alone."""
+    from dataclasses import replace
+
+    from rwlab.diagnose import Diagnoser, measure_calibration
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model_file)
+    ref_a = HealthyReference.from_model_file(model_file)
+    f = ref_a.tests["friction"]
+    ref_b = replace(ref_a, tests={**ref_a.tests, "friction": replace(f, sigma=1.3 * f.sigma)})
+    path = tmp_path / "healthy.mcap"
+    run_experiment(ExperimentConfig(duration=240, seed=6, unit=6), path)
+    data = load_record(path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf)
+    both = measure_calibration([data], wheel, ref_a, more_models=((wheel, ref_b),))
+    a = measure_calibration([data], wheel, ref_a)
+    b = measure_calibration([data], wheel, ref_b)
+    assert both.hours == pytest.approx(2 * data.N * data.Ts / 3600)
+    k = [Diagnoser(wheel, r, calibration=False)._detectors["friction"].k for r in (ref_a, ref_b)]
+    assert both.curves["friction"].k_range == pytest.approx((min(k), max(k)))
+    for name, curve in both.curves.items():
+        total = np.add(a.curves[name].alarms, b.curves[name].alarms)
+        assert curve.alarms == tuple(total), name
+
+
 # -- faults during a chirp: the speed offset and the slew asymmetry ----------------------
 
 
@@ -360,6 +389,69 @@ def test_slew_asymmetry_reads_friction_the_feed_forward_does_not_know():
         assert slew_asymmetry(_slew(319, 309, rising), c) == pytest.approx(2.0)
     assert slew_asymmetry(_slew(319, 309, step=0.0), c) is None  # a clamped current
     assert slew_asymmetry(_slew(319, 309)[:10], c) is None  # too short a half
+
+
+def test_slew_asymmetry_in_nominal_units_does_not_depend_on_the_reference_split():
+    """Two references whose current models split friction differently (unit 300's
+    identified c2/c0 was 3.2 rpm/s, unit 0's 5.1) read one slew alike in the datasheet's
+    Coulomb decelerations: the physics (rpm/s) over a fixed unit."""
+    from rwlab.diagnose.motion import slew_asymmetry
+    from rwlab.diagnose.reference import nominal_coulomb_deceleration
+
+    scale = nominal_coulomb_deceleration()
+    # τ_c/I of the RW90's datasheet values, rpm/s (truth: the parameters, not the code)
+    assert scale == pytest.approx(RW90.coulomb_friction / RW90.inertia * 60 / (2 * math.pi))
+    low, high = (1.8e-3, 2.9e-6, 5.6e-3, 0.0), (1.8e-3, 2.5e-6, 9.2e-3, 0.0)
+    seg = _slew(314 + scale, 314 - scale)  # one nominal Coulomb deceleration each way
+    assert slew_asymmetry(seg, low, scale) == pytest.approx(2.0)
+    assert slew_asymmetry(seg, high, scale) == pytest.approx(2.0)
+    assert slew_asymmetry(seg, low) != pytest.approx(slew_asymmetry(seg, high))  # the old unit
+
+
+def _slew_reference(sigma: float, samples: int = 10):
+    from rwlab.diagnose.reference import BlockStats, nominal_coulomb_deceleration
+
+    stats = {
+        "friction": BlockStats(0.2, 0.08, 20, 0.3, 900, "batch means"),
+        "slew": BlockStats(-0.8, sigma, 1, 0.004, samples, "AR(1)"),
+    }
+    return HealthyReference(
+        0.5, (1.8e-3, 2.9e-6, 5.6e-3, 0.0), stats, 0.01, 1000, 1e-4, 2400,
+        slew_scale_rpm_s=nominal_coulomb_deceleration(),
+    )  # fmt: skip
+
+
+def test_a_slew_reference_from_ten_slews_does_not_set_the_healthy_spread(model_file):
+    """A reference whose 10 slews happened to scatter little (σ 0.13, unit 300's) against
+    healthy units whose slews scatter with the tune set's σ: the detector's σ is the
+    larger, and its tolerance holds the reference level's own standard error, so healthy
+    slews (drawn here from the twin's measured spread, independent of the code) do not
+    alarm; with the reference's σ they would."""
+    from rwlab.diagnose import Diagnoser
+    from rwlab.diagnose.detect import cusum_threshold
+    from rwlab.diagnose.motion import SLEW_SIGMA
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model_file)
+    narrow = _slew_reference(0.13)
+    det = Diagnoser(wheel, narrow, calibration=False)._detectors["slew"]
+    assert det.stats.sigma == SLEW_SIGMA
+    se = 1.959964 * SLEW_SIGMA / math.sqrt(10)
+    assert det.k == pytest.approx(0.5 + math.hypot(0.3, se) / SLEW_SIGMA)
+    rng = np.random.default_rng(42)
+    slews = -0.8 + 0.15 + rng.normal(0.0, SLEW_SIGMA, 2000)  # a unit 0.15 off the reference
+    h = cusum_threshold(200.0, 0.5)  # an ARL of 200 slews without a tolerance
+
+    def alarms(stats_sigma, k):
+        up, n = 0.0, 0
+        for x in slews:
+            up = max(0.0, up + (x + 0.8) / stats_sigma - k)
+            if up > h:
+                n, up = n + 1, 0.0
+        return n
+
+    assert alarms(det.stats.sigma, det.k) <= 2  # within the 2000 slews' sampling
+    assert alarms(0.13, 0.5 + 0.3 / 0.13) > 10  # the reference's own σ: alarm after alarm
 
 
 @pytest.fixture(scope="module")

@@ -98,11 +98,18 @@ from rwlab.diagnose.motion import (
     REST_BAND_RPM,
     REST_MODEL_RPM,
     SLEW_SHARE,
+    SLEW_SIGMA,
     RestReading,
     slew_asymmetry,
     speed_offset,
 )
-from rwlab.diagnose.reference import DEFAULT_TOLERANCE, BlockStats, HealthyReference, block_stats
+from rwlab.diagnose.reference import (
+    DEFAULT_TOLERANCE,
+    BlockStats,
+    HealthyReference,
+    block_stats,
+    nominal_coulomb_deceleration,
+)
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
 
@@ -116,6 +123,7 @@ __all__ = [
 ]
 
 CUSUM_K = 0.5
+_Z95 = 1.959964
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
@@ -430,6 +438,7 @@ class Diagnoser:
         self._offset_command = math.nan
         self._slew: list[tuple[float, float, float]] = []
         self._slew_sign = 0.0
+        self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
         self._moving = False
@@ -484,9 +493,11 @@ class Diagnoser:
         det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
         self._detectors["offset"] = det
         if "slew" in ref.tests:  # older references lack it
-            stats = ref.tests["slew"]
+            stats = self._slew_stats(ref)
             h_analytic = cusum_threshold(max(self.arl0 / stats.block_s, 1.5), CUSUM_K)
             tol = ref.tolerance.get("slew", DEFAULT_TOLERANCE["slew"])
+            if ref.slew_scale_rpm_s is not None:  # the reference's level rests on ~10 slews
+                tol = math.hypot(tol, _Z95 * stats.sigma / math.sqrt(stats.samples))
             det = _BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
@@ -505,6 +516,19 @@ class Diagnoser:
         self._detectors["dropout"] = _Dropout(block, n)
         self.thresholds["dropout"] = n
 
+    @staticmethod
+    def _slew_stats(ref: HealthyReference) -> BlockStats:
+        """The slew test's healthy statistics: the reference's level, and the larger of its
+        σ and the tune set's (:data:`~rwlab.diagnose.motion.SLEW_SIGMA`), where the values
+        are in nominal Coulomb decelerations: 9–10 slews of one record put σ anywhere in
+        0.13–0.46 (unit 300's 0.13 alarmed on a healthy unit's PRBS)."""
+        stats = ref.tests["slew"]
+        if ref.slew_scale_rpm_s is None or stats.sigma >= SLEW_SIGMA:
+            return stats
+        return BlockStats(
+            stats.mean, SLEW_SIGMA, stats.block, stats.fraction, stats.samples, "tune set"
+        )
+
     def _calibrated(self, name: str, analytic: float, det=None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
         calibration holds this detector at this sample time (and CUSUM reference value);
@@ -515,7 +539,7 @@ class Diagnoser:
         if cal is None or curve is None:
             return analytic
         same_ts = math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
-        if not same_ts or (curve.kind == "cusum" and not math.isclose(curve.k, k, rel_tol=0.1)):
+        if not same_ts or (curve.kind == "cusum" and not curve.holds(k)):
             if self.false_alarms_per_hour * cal.hours < RESOLVED:
                 return analytic  # a rate no calibration could resolve: nothing lost
             value, note = (
@@ -660,7 +684,7 @@ class Diagnoser:
         value = None
         if sign != self._slew_sign and self._slew:
             c = self.residuals.current_model
-            value = None if c is None else slew_asymmetry(self._slew, c)
+            value = None if c is None else slew_asymmetry(self._slew, c, self._slew_scale)
             self._slew = []
         self._slew_sign = sign
         if slewing:
@@ -813,6 +837,8 @@ class Diagnoser:
         assert ref is not None  # alarms come only from an armed detector
         # σ of one value, the block-mean σ scaled back (correlation included)
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
+        if "slew" in self._detectors:
+            ev["sigma"]["slew"] = self._detectors["slew"].stats.sigma
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
@@ -882,6 +908,7 @@ def healthy_reference(
     second = Diagnoser(wheel, None)
     second.residuals.current_model = coef
     second._change_probe.c = coef
+    second._slew_scale = scale = nominal_coulomb_deceleration()
     for k in range(data.N):
         second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
     tests = {
@@ -903,35 +930,82 @@ def healthy_reference(
         samples=int(data.N),
         tolerance=dict(DEFAULT_TOLERANCE if tolerance is None else tolerance),
         source=source,
+        slew_scale_rpm_s=scale,
     )
 
 
 def measure_calibration(
-    records: list[IOData], wheel, reference: HealthyReference, *, origin: str = ""
+    records: list[IOData],
+    wheel,
+    reference: HealthyReference,
+    *,
+    origin: str = "",
+    more_models: tuple = (),
 ) -> ThresholdCalibration:
     """Count each detector's false alarms over its thresholds on healthy records.
 
     Parameters
     ----------
     records : list of IOData
-        Healthy records of units other than the reference's, as :func:`diagnose`
+        Healthy records of units other than the references', as :func:`diagnose`
         takes them.
     wheel : IdentifiedWheel
     reference : HealthyReference
         The identified unit's, as the detectors will use it.
     origin : str
         How the records were made (stored with the calibration).
+    more_models : sequence of (IdentifiedWheel, HealthyReference)
+        Models of other units (same Ts): each runs over every record too, so the
+        rates are those of a model from any of these units (the user identifies on
+        one unit and diagnoses others), and each CUSUM's alarms are counted with
+        that model's own reference value (``Curve.k_range`` spans them).
 
     Returns
     -------
     ThresholdCalibration
-        Alarms per threshold (detectors restarted after each alarm) and the hours.
+        Alarms per threshold (detectors restarted after each alarm) and the hours
+        (record hours times models).
     """
     if not records:
         raise ConfigError("a calibration needs at least one healthy record")
+    models = [(wheel, reference), *more_models]
+    if any(not math.isclose(w.Ts, wheel.Ts, rel_tol=1e-6) for w, _ in models):
+        raise ConfigError("a calibration's models must share one sample time")
+    per_model = [_model_traces(records, w, ref) for w, ref in models]
+    hours = len(models) * sum(data.N * data.Ts for data in records) / 3600
+    curves = {}
+    for name, (k0, sides) in per_model[0][1].items():
+        # no tolerance between units in the reference value (offset): nothing to share
+        for share in (1.0, *_SHARES) if k0 > CUSUM_K else (1.0,):
+            ks = [CUSUM_K + share * (m[1][name][0] - CUSUM_K) for m in per_model]
+            alarms = sum(
+                cusum_alarms(m[0][name], k, sides) for m, k in zip(per_model, ks, strict=True)
+            )
+            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
+                "cusum",
+                tuple(float(h) for h in _H_GRID),
+                tuple(int(a) for a in alarms),
+                float(np.median(ks)),
+                int(sum(z.size for m in per_model for z in m[0][name])),
+                share,
+                (float(min(ks)), float(max(ks))),
+            )
+    n = tuple(float(x) for x in range(1, _N_MAX + 1))
+    runs = [int(r) for m in per_model for rec in m[0]["stuck"] for r in rec]
+    moving = sum(m[2] for m in per_model)
+    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
+    blocks = [int(c) for m in per_model for rec in m[0]["dropout"] for c in rec]
+    curves["dropout"] = _Curve(
+        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
+    )
+    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
+
+
+def _model_traces(records: list[IOData], wheel, reference: HealthyReference):
+    """One model over every record: each test's traces per record, each CUSUM's (k,
+    sides), and the moving samples."""
     traces: dict[str, list] = {}
-    k: dict[str, float] = {}
-    sides: dict[str, str] = {}
+    k: dict[str, tuple[float, str]] = {}
     moving = 0
     for data in records:
         t, held, speed, current, age, lost = _columns(data, wheel)
@@ -944,30 +1018,9 @@ def measure_calibration(
             traces.setdefault(name, []).append(np.array(values))
         for name, det in d._detectors.items():
             if isinstance(det, _BlockCusum):
-                k[name], sides[name] = det.k, det.sides
+                k[name] = (det.k, det.sides)
         moving += d.repeats[1]
-    hours = sum(data.N * data.Ts for data in records) / 3600
-    curves = {}
-    for name in k:
-        # no tolerance between units in the reference value (offset): nothing to share
-        for share in (1.0, *_SHARES) if k[name] > CUSUM_K else (1.0,):
-            k_share = CUSUM_K + share * (k[name] - CUSUM_K)
-            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
-                "cusum",
-                tuple(float(h) for h in _H_GRID),
-                tuple(int(a) for a in cusum_alarms(traces[name], k_share, sides[name])),
-                float(k_share),
-                int(sum(z.size for z in traces[name])),
-                share,
-            )
-    n = tuple(float(x) for x in range(1, _N_MAX + 1))
-    runs = [int(r) for rec in traces["stuck"] for r in rec]
-    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
-    blocks = [int(c) for rec in traces["dropout"] for c in rec]
-    curves["dropout"] = _Curve(
-        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
-    )
-    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
+    return traces, k, moving
 
 
 @dataclass
