@@ -109,6 +109,7 @@ from rwlab.diagnose.reference import (
     HealthyReference,
     block_stats,
     nominal_coulomb_deceleration,
+    nominal_friction_currents,
 )
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
@@ -127,6 +128,11 @@ _Z95 = 1.959964
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
+# σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
+# currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
+# identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
+CHANGE_PRIOR = 0.5
+FRICTION_UPPER = 1.3  # a healthy unit's friction at most this × nominal (TOLERANCES: ±30 %)
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
@@ -207,8 +213,11 @@ class _BlockCusum:
     def statistic(self) -> float:
         return max(self.up, self.down)
 
-    def add(self, t_s: float, value: float) -> bool:
-        self._values.append(value)
+    def add(self, t_s: float, value: float, allowance: float = 0.0) -> bool:
+        """One qualifying value; ``allowance``: tolerance beyond the CUSUM's own at this
+        value (value units), taken off before the block mean (the value kept for sizing
+        is the plain one). True on an alarm."""
+        self._values.append(value - allowance)
         self.raw.append((t_s, value))
         while self.raw[0][0] < t_s - HISTORY_S:
             self.raw.popleft()
@@ -279,13 +288,17 @@ class _FrictionChange(_BlockCusum):
 
     def _ridge(self) -> np.ndarray:
         """The law's least squares, shrunk towards the reference's by the spread between
-        units, so a baseline with few speeds does not extrapolate wildly: prior σ 30 % of
-        the reference's viscous and Coulomb currents, 5 mA of offset
+        units, so a baseline with few speeds does not extrapolate wildly: prior σ
+        :data:`CHANGE_PRIOR` of the datasheet's nominal viscous and Coulomb currents (the
+        spread is the datasheet's ±30 % around nominal, not around the reference unit: 30 %
+        of a low-friction reference's currents held a high-friction unit's law down, and
+        its holds at new speeds alarmed), 5 mA of offset
         (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
         (the samples of a hold are correlated)."""
         n, s1, s2 = self._r
         noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
-        prior = np.array([0.3 * abs(self.c[1]) + 1e-9, 0.3 * abs(self.c[2]) + 1e-4, 5e-3])
+        viscous, coulomb = nominal_friction_currents()
+        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
         A = self._xtx / noise**2 + np.diag(1 / prior**2)
         self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
         return self._cov @ self._xtr / noise**2
@@ -430,6 +443,7 @@ class Diagnoser:
         }
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
+        self._friction_allowance = 0.0
         self._friction_sample = (0.0, 0.0, 0.0)
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
@@ -648,7 +662,8 @@ class Diagnoser:
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
             for name, value in values.items():
-                if self._detectors[name].add(t_s, value):
+                allowance = self._friction_allowance if name == "friction" else 0.0
+                if self._detectors[name].add(t_s, value, allowance):
                     new += self._fire(t_s, name)
         else:
             for name, value in values.items():
@@ -740,11 +755,28 @@ class Diagnoser:
             offset = self._current_offset(sign, r["current"])
             if offset is not None:
                 out["friction"] = sign * (r["current"] - offset) / abs(friction)
+                self._friction_allowance = self._allowance(abs(friction), speed_rpm)
             self._friction_sample = (r["current"], speed_rpm, friction)
         sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
+
+    def _allowance(self, friction_a: float, speed_rpm: float) -> float:
+        """How far beyond the friction test's tolerance a healthy unit may sit at this
+        speed, relative to the reference's friction current ``friction_a`` (A): the
+        datasheet's upper bound, 1.3 × the nominal friction current at this speed, over
+        the reference's, less the tolerance the CUSUM already holds. A reference from a
+        low-friction unit (or one whose identified viscous part is low) makes the bound
+        a larger excess than the constant tolerance (×1.86, a reference at exactly the
+        lower bound), most at high speeds: unit 100's model read healthy units ×2.0–2.4
+        there and alarmed."""
+        ref = self.reference
+        if ref is None:
+            return 0.0
+        viscous, coulomb = nominal_friction_currents()
+        upper = FRICTION_UPPER * (viscous * abs(speed_rpm) + coulomb) / friction_a - 1.0
+        return max(0.0, upper - ref.tolerance.get("friction", DEFAULT_TOLERANCE["friction"]))
 
     def _current_offset(self, sign: float, residual_a: float) -> float | None:
         """This unit's current-sense offset beyond the reference's, A (None until the

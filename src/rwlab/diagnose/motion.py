@@ -52,11 +52,13 @@ REST_BAND_RPM = 30.0  # a reading within this of zero may be the no-edge reading
 REST_MODEL_RPM = 60.0  # ... taken where the model passes this close to zero speed, rpm
 REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (healthy units:
 # at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
-# σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations): pooled over the
-# tune set's healthy records (units 1–6, 101–136 with unit 0's model: 357 slews; within a record
-# 0.29 on PRBS, 0.40 on chirps, 0.46 on multisines). One identification record has 9–10
-# slews, whose σ reads 0.13–0.46 by chance: the detector takes the larger of the two
-SLEW_SIGMA = 0.4
+# σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations) on the
+# identification's signal, a stepped PRBS: pooled over the tune set's healthy PRBS records
+# (units 1–6, 101–136 with unit 0's model: 125 slews, within-record σ 0.29; chirps 0.40,
+# multisines 0.46, whose larger scatter is in the calibration's measured rates). One
+# identification record has 9–10 slews, whose σ reads 0.13–0.46 by chance (unit 300's 0.13
+# alarmed on a healthy unit): the detector takes the larger of the two
+SLEW_SIGMA = 0.3
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit

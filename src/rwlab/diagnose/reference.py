@@ -44,6 +44,7 @@ __all__ = [
     "HealthyReference",
     "block_stats",
     "nominal_coulomb_deceleration",
+    "nominal_friction_currents",
 ]
 
 FORMAT = "rwlab.HealthyReference/1"
@@ -79,6 +80,24 @@ def nominal_coulomb_deceleration() -> float:
 
     p = WheelParams()
     return p.coulomb_friction / p.inertia * 60.0 / (2.0 * math.pi)
+
+
+def nominal_friction_currents() -> tuple[float, float]:
+    """The wheel model's datasheet friction as motor current: viscous and Coulomb.
+
+    Returns
+    -------
+    viscous : float
+        b/k_t, A per rpm.
+    coulomb : float
+        τ_c/k_t, A.
+    """
+    from rwlab.wheel.physics import WheelParams
+
+    p = WheelParams()
+    return p.viscous_friction / p.torque_constant * 2.0 * math.pi / 60.0, (
+        p.coulomb_friction / p.torque_constant
+    )
 
 
 @dataclass(frozen=True)
