@@ -348,6 +348,51 @@ def test_a_calibration_over_two_model_units_counts_each_with_its_own_reference(
         assert curve.alarms == tuple(total), name
 
 
+def _holds(diagnoser, factor: float, hours: float = 0.5, seed: int = 0) -> list:
+    """Holds at ±3000 rpm (two minutes each) of a unit whose friction current is ``factor``
+    × the datasheet's nominal (truth from the RW90's parameters, 1 mA of noise)."""
+    rng = np.random.default_rng(seed)
+    viscous = RW90.viscous_friction / RW90.torque_constant * 2 * math.pi / 60  # A per rpm
+    coulomb = RW90.coulomb_friction / RW90.torque_constant  # A
+    alarms = []
+    for k in range(int(hours * 3600 / 0.5)):
+        speed = 3000.0 if (k // 240) % 2 == 0 else -3000.0
+        current = math.copysign(factor * (viscous * 3000 + coulomb), speed)
+        alarms += diagnoser.update(0.5 * k, speed, speed, current + rng.normal(0, 1e-3), 0.0)
+    return [a for a in alarms if a.detector == "friction"]
+
+
+def test_a_low_friction_reference_does_not_alarm_on_a_high_friction_healthy_unit(model_file):
+    """A reference identified on a unit at the datasheet's lower friction bound, whose fit
+    also put the viscous part low (unit 100's: 0.5 of nominal viscous, 0.7 Coulomb), and a
+    healthy unit at the upper bound (1.3 × nominal): 1.25 of relative excess at 3000 rpm,
+    beyond the constant tolerance (0.86) but within the datasheet's spread: no alarm.
+    The same unit with friction × 1.5 alarms."""
+    from rwlab.diagnose import Diagnoser
+    from rwlab.diagnose.reference import BlockStats
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model_file)
+    viscous = RW90.viscous_friction / RW90.torque_constant * 2 * math.pi / 60
+    coulomb = RW90.coulomb_friction / RW90.torque_constant
+    c0 = HealthyReference.from_model_file(model_file).current_model[0]
+    stats = {
+        "friction": BlockStats(0.0, 0.08, 20, 0.3, 900, "batch means"),
+        "motor": BlockStats(0.0, 0.035, 10, 0.3, 900, "batch means"),
+        "speed": BlockStats(0.0, 0.1, 20, 0.2, 400, "batch means"),
+        "lag": BlockStats(0.0, 0.005, 10, 0.2, 600, "batch means"),
+    }
+    low = HealthyReference(
+        0.5, (c0, 0.5 * viscous, 0.7 * coulomb, 0.0), stats, 0.01, 1000, 1e-4, 2400
+    )
+
+    def fresh():
+        return Diagnoser(wheel, low, calibration=False)
+
+    assert _holds(fresh(), 1.3) == []
+    assert _holds(fresh(), 1.3 * 1.5) != []
+
+
 # -- faults during a chirp: the speed offset and the slew asymmetry ----------------------
 
 
