@@ -348,18 +348,20 @@ def test_a_calibration_over_two_model_units_counts_each_with_its_own_reference(
         assert curve.alarms == tuple(total), name
 
 
-def _holds(diagnoser, factor: float, hours: float = 0.5, seed: int = 0) -> list:
+def _holds(diagnoser, factor: float, hours: float = 0.5, seed: int = 0, **kw) -> list:
     """Holds at ±3000 rpm (two minutes each) of a unit whose friction current is ``factor``
-    × the datasheet's nominal (truth from the RW90's parameters, 1 mA of noise)."""
+    × the datasheet's nominal (truth from the RW90's parameters, 1 mA of noise); the
+    friction alarms (``detector``: another test's)."""
     rng = np.random.default_rng(seed)
     viscous = RW90.viscous_friction / RW90.torque_constant * 2 * math.pi / 60  # A per rpm
     coulomb = RW90.coulomb_friction / RW90.torque_constant  # A
+    v_factor, speeds = kw.get("viscous", factor), kw.get("speeds", lambda t: 3000.0)
     alarms = []
     for k in range(int(hours * 3600 / 0.5)):
-        speed = 3000.0 if (k // 240) % 2 == 0 else -3000.0
-        current = math.copysign(factor * (viscous * 3000 + coulomb), speed)
+        speed = math.copysign(speeds(0.5 * k), 1 if (k // 240) % 2 == 0 else -1)
+        current = math.copysign(v_factor * viscous * abs(speed) + factor * coulomb, speed)
         alarms += diagnoser.update(0.5 * k, speed, speed, current + rng.normal(0, 1e-3), 0.0)
-    return [a for a in alarms if a.detector == "friction"]
+    return [a for a in alarms if a.detector == kw.get("detector", "friction")]
 
 
 def test_a_low_friction_reference_does_not_alarm_on_a_high_friction_healthy_unit(model_file):
@@ -391,6 +393,12 @@ def test_a_low_friction_reference_does_not_alarm_on_a_high_friction_healthy_unit
 
     assert _holds(fresh(), 1.3) == []
     assert _holds(fresh(), 1.3 * 1.5) != []
+    # the change test: a healthy unit of high viscous friction, held at 2000 rpm first and
+    # at 5500 rpm later; its own law from the first holds is shrunk towards the reference's
+    # by the datasheet's spread (with 30 % of this low reference's currents the law stayed
+    # near the reference's and the unit's own friction alarmed, at 580 s)
+    later = {"viscous": 1.3, "speeds": lambda t: 2000.0 if t < 900 else 5500.0}
+    assert _holds(fresh(), 1.0, 0.75, detector="friction_change", **later) == []
 
 
 # -- faults during a chirp: the speed offset and the slew asymmetry ----------------------
