@@ -1,12 +1,14 @@
 """False-alarm rates, detection and naming of ``rwlab diagnose`` on units it was not tuned on.
 
 Run:  python bench/bench_diagnose.py [--set eval] [--part all] [--cache DIR]
-      [--rates 1 10 100]
+      [--rates 1 10 100] [--model-unit 0 [N ...| nominal | path/model.json]]
 
 A model (with its healthy reference) is identified by ``rwlab identify``, with
 the defaults (paper A's stepped PRBS), on a fault-free 20-minute record of unit
-0 of the realistic twin (``ExperimentConfig.unit``). Every other record comes
-from other units, in two disjoint sets:
+0 of the realistic twin (``ExperimentConfig.unit``), or of each ``--model-unit``
+(the user identifies on one unit and diagnoses others: every model is judged on
+its own, then the tables are pooled over the models; a model file is taken as it
+is). Every other record comes from other units, in disjoint sets:
 
 - ``tune``: healthy units 1–6 (2 h) and the calibration's 101–136 (12 h),
   faulty units 41–58: what the detectors were developed on;

@@ -110,6 +110,7 @@ from rwlab.diagnose.reference import (
     block_stats,
     nominal_coulomb_deceleration,
     nominal_friction_currents,
+    nominal_inertial_current,
 )
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
@@ -132,6 +133,7 @@ FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare rela
 # currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
 # identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
 CHANGE_PRIOR = 0.5
+MOTOR_UPPER = 1.02 / 0.95  # a healthy unit's I/k_t at most this × nominal (TOLERANCES)
 FRICTION_UPPER = 1.3  # a healthy unit's friction at most this × nominal (TOLERANCES: ±30 %)
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
@@ -486,6 +488,8 @@ class Diagnoser:
             arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
             h_analytic = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
+            if name == "motor":
+                tol = min(tol, self._motor_headroom(ref))
             self._detectors[name] = _BlockCusum(stats, tol, h_analytic, sides)
             h = self._calibrated(name, h_analytic, self._detectors[name])
             self._detectors[name].h = self.thresholds[name] = h
@@ -529,6 +533,17 @@ class Diagnoser:
         n = int(self._calibrated("dropout", n))
         self._detectors["dropout"] = _Dropout(block, n)
         self.thresholds["dropout"] = n
+
+    @staticmethod
+    def _motor_headroom(ref: HealthyReference) -> float:
+        """How far above the reference's inertial current a healthy unit's may sit: the
+        datasheet's upper bound of I/k_t (I +2 %, k_t −5 %: 1.074 × nominal) over the
+        reference's identified one (within 0.5 % of its unit's on the twin). The constant
+        tolerance (0.15, two units at opposite bounds) made the rate a requested 1/h
+        delivers depend on where the reference unit sits: 0 to 4.5/h over the tune set's
+        model units (a reference at 1.056 × nominal leaves healthy units 2 % of room)."""
+        nominal = nominal_inertial_current()
+        return max(MOTOR_UPPER * nominal / ref.current_model[0] - 1.0, 0.0)
 
     @staticmethod
     def _slew_stats(ref: HealthyReference) -> BlockStats:

@@ -23,7 +23,11 @@ detectors compare a later record with, and stores it in ``model.json`` under
   from this one, relative (friction, motor) or absolute (speed, rpm; lag,
   fraction of the acceleration limit). A stated assumption of the
   datasheet-like spread between units, not a measurement: one record of one
-  unit cannot measure it.
+  unit cannot measure it. Where the reference unit sits within that spread
+  matters, so the detectors also hold each test against the datasheet's bounds
+  about nominal (:func:`nominal_friction_currents`, :func:`nominal_inertial_current`):
+  a reference from a low-friction unit allows a healthy unit more friction
+  excess, one from a unit of high I/k_t less motor excess.
 
 Because the reference comes from the identification record, a record under
 test is tested from its first sample on: a fault present at power-up is a fault.
@@ -45,6 +49,7 @@ __all__ = [
     "block_stats",
     "nominal_coulomb_deceleration",
     "nominal_friction_currents",
+    "nominal_inertial_current",
 ]
 
 FORMAT = "rwlab.HealthyReference/1"
@@ -98,6 +103,15 @@ def nominal_friction_currents() -> tuple[float, float]:
     return p.viscous_friction / p.torque_constant * 2.0 * math.pi / 60.0, (
         p.coulomb_friction / p.torque_constant
     )
+
+
+def nominal_inertial_current() -> float:
+    """The wheel model's datasheet inertial current I/k_t per rpm/s, A (the current
+    model's c₀ of a nominal unit)."""
+    from rwlab.wheel.physics import WheelParams
+
+    p = WheelParams()
+    return p.inertia / p.torque_constant * 2.0 * math.pi / 60.0
 
 
 @dataclass(frozen=True)
