@@ -1,12 +1,14 @@
 """False-alarm rates, detection and naming of ``rwlab diagnose`` on units it was not tuned on.
 
 Run:  python bench/bench_diagnose.py [--set eval] [--part all] [--cache DIR]
-      [--rates 1 10 100]
+      [--rates 1 10 100] [--model-unit 0 [N ...| nominal | path/model.json]]
 
 A model (with its healthy reference) is identified by ``rwlab identify``, with
 the defaults (paper A's stepped PRBS), on a fault-free 20-minute record of unit
-0 of the realistic twin (``ExperimentConfig.unit``). Every other record comes
-from other units, in two disjoint sets:
+0 of the realistic twin (``ExperimentConfig.unit``), or of each ``--model-unit``
+(the user identifies on one unit and diagnoses others: every model is judged on
+its own, then the tables are pooled over the models; a model file is taken as it
+is). Every other record comes from other units, in disjoint sets:
 
 - ``tune``: healthy units 1–6 (2 h) and the calibration's 101–136 (12 h),
   faulty units 41–63: what the detectors were developed on;
@@ -214,33 +216,54 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
     parser.add_argument(
         "--model-unit",
-        default="0",
-        help="the model's wheel: a unit number or 'nominal' (thresholds stay unit 0's)",
+        nargs="+",
+        default=["0"],
+        help="the models' wheels: unit numbers or 'nominal' (each judged on its own, then "
+        "pooled); a model file's path (model.json) is taken as it is",
     )
     args = parser.parse_args()
     warnings.simplefilter("ignore", RwlabWarning)  # the table prints each detector's note
+    specs = records(args.set)
+    healthy = {k: v for k, v in specs.items() if not v[5]}
+    faulty = {k: v for k, v in specs.items() if v[5]}
+    pooled_h: list[tuple] = []
+    pooled_f: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
         cache.mkdir(parents=True, exist_ok=True)
-        model = _model(cache, Path(tmp), args.model_unit)
-        wheel = IdentifiedWheel.from_json(model)
-        ref = HealthyReference.from_model_file(model)
+        for unit in args.model_unit:
+            if unit.endswith(".json"):
+                model = Path(unit)
+            else:
+                model = _model(cache, Path(tmp) / f"u{unit}", unit)
+            wheel = IdentifiedWheel.from_json(model)
+            ref = HealthyReference.from_model_file(model)
 
-        def run(path, **kw):
-            data = load_record(
-                path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+            def run(path, wheel=wheel, ref=ref, **kw):
+                data = load_record(
+                    path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+                )
+                return diagnose(data, wheel, ref, **kw)
+
+            print(f"set {args.set}; model: unit {unit}, 20-min PRBS (defaults)\n")
+            if args.part != "faults":
+                pooled_h.append(_healthy(args, run, cache, healthy))
+            if args.part != "healthy":
+                pooled_f.append(_faults_part(run, cache, faulty))
+    if len(args.model_unit) > 1:
+        print(f"=== pooled over the model units {', '.join(args.model_unit)} ===\n")
+        if pooled_h:
+            _pooled_healthy(args, pooled_h)
+        if pooled_f:
+            _print_totals(
+                {
+                    k: sum((t[k] for t in pooled_f), start=type(pooled_f[0][k])())
+                    for k in pooled_f[0]
+                }
             )
-            return diagnose(data, wheel, ref, **kw)
-
-        specs = records(args.set)
-        print(f"set {args.set}; model: unit {args.model_unit}, 20-min PRBS (defaults)\n")
-        if args.part != "faults":
-            _healthy(args, run, cache, {k: v for k, v in specs.items() if not v[5]})
-        if args.part != "healthy":
-            _faults_part(run, cache, {k: v for k, v in specs.items() if v[5]})
 
 
-def _healthy(args, run, cache: Path, specs: dict) -> None:
+def _healthy(args, run, cache: Path, specs: dict) -> tuple:
     counts: dict[float, Counter] = {rate: Counter() for rate in args.rates}
     notes: dict[float, dict[str, str]] = {rate: {} for rate in args.rates}
     thresholds: dict[float, dict] = {}
@@ -266,23 +289,39 @@ def _healthy(args, run, cache: Path, specs: dict) -> None:
     )
     for line in latched:
         print("  ", line)
+    _rate_table(args.rates, counts, hours, thresholds, notes)
+    return counts, hours, len(latched)
+
+
+def _pooled_healthy(args, pooled: list[tuple]) -> None:
+    counts = {rate: sum((p[0][rate] for p in pooled), Counter()) for rate in args.rates}
+    hours = sum(p[1] for p in pooled)
+    print(
+        f"healthy, all models: {hours:.2f} h (records × models); alarms at the default "
+        f"1e-3/h: {sum(p[2] for p in pooled)}"
+    )
+    _rate_table(args.rates, counts, hours, None, None)
+
+
+def _rate_table(rates, counts, hours, thresholds, notes) -> None:
     print(
         f"{'detector':<16} {'requested/h':>11} {'threshold':>9} {'measured/h':>10} "
         f"{'95 % interval/h':>15} {'alarms':>6} {'hours':>5} {'ratio':>6}  "
         "within x2 / what the detector says"
     )
     for d in DETECTORS:
-        for rate in args.rates:
+        for rate in rates:
             n = counts[rate][d]
             ratio = n / hours / rate
             lo, hi = poisson_interval(n)
             ok = "yes" if 0.5 <= ratio <= 2 else "no"
             if ok == "no" and lo / hours <= 2 * rate and hi / hours >= rate / 2:
                 ok = "no, within sampling (its 95 % interval reaches ×2)"
-            note = notes[rate].get(d, "")
+            note = notes[rate].get(d, "") if notes else ""
             interval = f"{lo / hours:.3g}–{hi / hours:.3g}"
+            h = thresholds[rate].get(d, math.nan) if thresholds else math.nan
             print(
-                f"{d:<16} {rate:>11g} {thresholds[rate].get(d, math.nan):>9.3g} "
+                f"{d:<16} {rate:>11g} {h:>9.3g} "
                 f"{n / hours:>10.3g} {interval:>15} {n:>6} {hours:>5.2f} {ratio:>6.2f}  "
                 f"{ok}{'; ' + note if note else ''}"
             )
@@ -310,7 +349,7 @@ def _sizes(text: str) -> dict[str, float]:
     return {name: float(value) for name, value in pairs if name in SIZED}
 
 
-def _faults_part(run, cache: Path, specs: dict) -> None:
+def _faults_part(run, cache: Path, specs: dict) -> dict:
     confusion: dict[str, Counter] = defaultdict(Counter)
     detected = named = early = both = pairs = 0
     covered: Counter = Counter()
@@ -355,20 +394,41 @@ def _faults_part(run, cache: Path, specs: dict) -> None:
             f"{name:<10} {unit:>4} {label:<40} {signal:<6} {delay:>6} {ok!s:>5} "
             f"{len(before):>5} {sizes}"
         )
-    n = len(specs)
+    tally = {
+        "n": len(specs),
+        "detected": detected,
+        "named": named,
+        "both": both,
+        "pairs": pairs,
+        "early": early,
+        "covered": covered,
+        "intervals": intervals,
+        "confusion": Counter({(f, k): v for f, c in confusion.items() for k, v in c.items()}),
+    }
+    _print_totals(tally)
+    return tally
+
+
+def _print_totals(t: dict) -> None:
+    n, detected, named = t["n"], t["detected"], t["named"]
     print(
         f"\ndetected {detected}/{n} ({100 * detected / n:.0f} %); named right {named}/{detected} "
-        f"({100 * named / max(detected, 1):.0f} %); both named {both}/{pairs}; "
-        f"records with an alarm before onset: {early}"
+        f"({100 * named / max(detected, 1):.0f} %); both named {t['both']}/{t['pairs']}; "
+        f"records with an alarm before onset: {t['early']}"
     )
+    covered, intervals = t["covered"], t["intervals"]
     print(
         "95 % intervals holding the injected size: "
         + ", ".join(f"{k} {covered[k]}/{intervals[k]}" for k in SIZED if intervals[k])
         + " (current limit: the unit's true clamp is within ±2 % of the injected value)"
     )
     print("\nconfusion (injected → first name within the window):")
+    confusion: dict[str, dict] = defaultdict(dict)
+    for (fault, kind), count in t["confusion"].items():
+        confusion[fault][kind] = count
     for fault, c in confusion.items():
-        print(f"  {fault:<44} {dict(c)}")
+        print(f"  {fault:<44} {c}")
+    print()
 
 
 if __name__ == "__main__":

@@ -1,9 +1,14 @@
 """Measure the detectors' false-alarm rates over their thresholds: the package's thresholds.json.
 
 Run:  python bench/calibrate_thresholds.py [--cache DIR] [--out FILE] [--offset-sigma]
+      [--model-units 0 7 89 94 100]
 
-The model is bench_diagnose's (``rwlab identify`` with the defaults on unit 0's
-fault-free 20-minute stepped PRBS); the healthy records are the tune set's
+The models are bench_diagnose's (``rwlab identify`` with the defaults on a unit's
+fault-free 20-minute stepped PRBS), one per ``--model-units`` unit (default: unit 0
+and four tune-range units spanning the friction tolerance: 7 high Coulomb and
+viscous, 89 low Coulomb, 94 low viscous, 100 low both), each run over every healthy
+record, so the rates hold for a model of any unit, not of unit 0 only; the healthy
+records are the tune set's
 (``bench_diagnose.records('tune')``: units 1–6 and 101–136, 20 minutes each,
 PRBS, chirp, multisine and steps in turn), never the eval sets' units (21–44, 201–224),
 on which ``bench_diagnose.py --set eval`` judges the thresholds. Each detector
@@ -37,14 +42,24 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--offset-sigma", action="store_true")
+    parser.add_argument(
+        "--model-units",
+        nargs="+",
+        default=["0", "7", "89", "94", "100"],
+        help="units whose identified models the rates are counted with (never the records')",
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
         cache.mkdir(parents=True, exist_ok=True)
-        model = _model(cache, Path(tmp))
-        wheel = IdentifiedWheel.from_json(model)
-        ref = HealthyReference.from_model_file(model)
+        models = []
+        for unit in args.model_units:
+            path = _model(cache, Path(tmp) / f"u{unit}", unit)
+            models.append((IdentifiedWheel.from_json(path), HealthyReference.from_model_file(path)))
+        wheel, ref = models[0]
         specs = {k: v for k, v in records("tune").items() if not v[5]}
+        if {str(v[0]) for v in specs.values()} & set(args.model_units):
+            parser.error("a model unit is one of the healthy records' units")
         data = [
             load_record(
                 _record(cache, name, spec),
@@ -58,13 +73,17 @@ def main() -> None:
         origin = (
             f"python bench/calibrate_thresholds.py: {len(data)} healthy 20-minute records of "
             f"twin units {', '.join(map(str, units))} (bench_diagnose.records('tune'); PRBS, "
-            "chirp, multisine, steps in turn), model identified with the defaults on unit 0"
+            "chirp, multisine, steps in turn), each diagnosed with the models identified with "
+            f"the defaults on units {', '.join(args.model_units)} (hours: records x models)"
         )
-        cal = measure_calibration(data, wheel, ref, origin=origin)
+        cal = measure_calibration(data, wheel, ref, origin=origin, more_models=tuple(models[1:]))
         cal.save(args.out)
         if args.offset_sigma:
             _offset_sigma(data, wheel, ref)
-    print(f"{cal.hours:.2f} h of healthy records, {len(data)} records -> {args.out}")
+    print(
+        f"{cal.hours:.2f} h of healthy records x models, {len(data)} records, "
+        f"{len(args.model_units)} models -> {args.out}"
+    )
     print(f"{'detector':<16} {'k':>6} {'decisions/h':>12} {'max alarms/h':>13}")
     for name, c in cal.curves.items():
         per_hour = c.decisions / cal.hours

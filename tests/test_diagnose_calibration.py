@@ -190,3 +190,17 @@ def test_a_flat_measured_curve_does_not_extrapolate_to_an_endless_threshold():
     h, _ = cal.threshold("fc", 1e-3, analytic=0.0)
     rate_last = 5 / 14.0  # alarms per hour at the last measured threshold, 1.4
     assert 1.4 < h <= 1.4 + math.log(rate_last / 1e-3) / k + 1e-9
+
+
+def test_a_curve_counted_over_several_models_holds_each_models_reference_value(tmp_path):
+    """Models of different units standardise by their own σ, so one detector's k differs
+    between them (friction: 10.3 for unit 300's reference, 11.6 for unit 0's); a curve
+    counted over several models holds every k in their range (10 % beyond it), and the
+    range survives the file."""
+    curve = Curve("cusum", (0.0, 1.0), (3, 1), 11.0, 9, 1.0, (10.3, 11.6))
+    assert curve.holds(10.3) and curve.holds(11.6) and curve.holds(9.4) and curve.holds(12.7)
+    assert not curve.holds(9.3) and not curve.holds(12.8)
+    single = Curve("cusum", (0.0, 1.0), (3, 1), 11.0, 9)
+    assert single.holds(10.1) and not single.holds(9.9)  # one model: 10 % of its k
+    cal = ThresholdCalibration(0.5, 2.0, {"friction": curve, "lag": single}, "x")
+    assert ThresholdCalibration.load(cal.save(tmp_path / "t.json")) == cal

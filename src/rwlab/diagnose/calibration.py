@@ -111,6 +111,11 @@ def count_alarms(counts: list[int], n_max: int = N_MAX) -> np.ndarray:
     return np.array([int((c >= m).sum()) for m in range(1, n_max + 1)], dtype=int)
 
 
+def _pair(x) -> tuple[float, float]:
+    lo, hi = (float(v) for v in x)
+    return lo, hi
+
+
 @dataclass(frozen=True)
 class Curve:
     """One detector's measured false alarms over its thresholds.
@@ -129,6 +134,9 @@ class Curve:
         Decisions (blocks or qualifying samples) behind the curve.
     share : float
         The share of the tolerance between units in ``k`` (1: the detector's own).
+    k_range : (float, float) or None
+        The smallest and largest reference value of the models it was counted with
+        (a calibration over several model units: each model's own k); None: ``k`` only.
     """
 
     kind: str
@@ -137,6 +145,13 @@ class Curve:
     k: float = 0.0
     decisions: int = 0
     share: float = 1.0
+    k_range: tuple[float, float] | None = None
+
+    def holds(self, k: float) -> bool:
+        """Whether a CUSUM with reference value ``k`` (σ) is one this curve measured:
+        within the models' range of k, or 10 % of it."""
+        lo, hi = self.k_range or (self.k, self.k)
+        return lo / 1.1 <= k <= hi * 1.1
 
 
 @dataclass(frozen=True)
@@ -312,6 +327,7 @@ class ThresholdCalibration:
                     "k": c.k,
                     "decisions": c.decisions,
                     "share": c.share,
+                    **({} if c.k_range is None else {"k_range": list(c.k_range)}),
                     "thresholds": list(c.thresholds[: end(c)]),
                     "alarms": list(c.alarms[: end(c)]),
                 }
@@ -332,6 +348,7 @@ class ThresholdCalibration:
                     float(c["k"]),
                     int(c["decisions"]),
                     float(c.get("share", 1.0)),
+                    None if c.get("k_range") is None else _pair(c["k_range"]),
                 )
                 for name, c in d["curves"].items()
             }

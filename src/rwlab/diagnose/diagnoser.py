@@ -102,11 +102,20 @@ from rwlab.diagnose.motion import (
     REST_BAND_RPM,
     REST_MODEL_RPM,
     SLEW_SHARE,
+    SLEW_SIGMA,
     RestReading,
     slew_asymmetry,
     speed_offset,
 )
-from rwlab.diagnose.reference import DEFAULT_TOLERANCE, BlockStats, HealthyReference, block_stats
+from rwlab.diagnose.reference import (
+    DEFAULT_TOLERANCE,
+    BlockStats,
+    HealthyReference,
+    block_stats,
+    nominal_coulomb_deceleration,
+    nominal_friction_currents,
+    nominal_inertial_current,
+)
 from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
 
@@ -120,9 +129,16 @@ __all__ = [
 ]
 
 CUSUM_K = 0.5
+_Z95 = 1.959964
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
+# σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
+# currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
+# identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
+CHANGE_PRIOR = 0.5
+MOTOR_UPPER = 1.02 / 0.95  # a healthy unit's I/k_t at most this × nominal (TOLERANCES)
+FRICTION_UPPER = 1.3  # a healthy unit's friction at most this × nominal (TOLERANCES: ±30 %)
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
@@ -216,8 +232,11 @@ class _BlockCusum:
     def statistic(self) -> float:
         return max(self.up, self.down)
 
-    def add(self, t_s: float, value: float) -> bool:
-        self._values.append(value)
+    def add(self, t_s: float, value: float, allowance: float = 0.0) -> bool:
+        """One qualifying value; ``allowance``: tolerance beyond the CUSUM's own at this
+        value (value units), taken off before the block mean (the value kept for sizing
+        is the plain one). True on an alarm."""
+        self._values.append(value - allowance)
         self.raw.append((t_s, value))
         while self.raw[0][0] < t_s - HISTORY_S:
             self.raw.popleft()
@@ -288,13 +307,17 @@ class _FrictionChange(_BlockCusum):
 
     def _ridge(self) -> np.ndarray:
         """The law's least squares, shrunk towards the reference's by the spread between
-        units, so a baseline with few speeds does not extrapolate wildly: prior σ 30 % of
-        the reference's viscous and Coulomb currents, 5 mA of offset
+        units, so a baseline with few speeds does not extrapolate wildly: prior σ
+        :data:`CHANGE_PRIOR` of the datasheet's nominal viscous and Coulomb currents (the
+        spread is the datasheet's ±30 % around nominal, not around the reference unit: 30 %
+        of a low-friction reference's currents held a high-friction unit's law down, and
+        its holds at new speeds alarmed), 5 mA of offset
         (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
         (the samples of a hold are correlated)."""
         n, s1, s2 = self._r
         noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
-        prior = np.array([0.3 * abs(self.c[1]) + 1e-9, 0.3 * abs(self.c[2]) + 1e-4, 5e-3])
+        viscous, coulomb = nominal_friction_currents()
+        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
         A = self._xtx / noise**2 + np.diag(1 / prior**2)
         self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
         return self._cov @ self._xtr / noise**2
@@ -558,6 +581,7 @@ class Diagnoser:
         }
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
+        self._friction_allowance = 0.0
         self._friction_sample = (0.0, 0.0, 0.0)
         self._hold_sample: tuple[float, float] | None = None  # (command rpm, current A)
         self._rest_current: float | None = None  # current of a settled 0-rpm rest, A
@@ -570,6 +594,7 @@ class Diagnoser:
         self._offset_command = math.nan
         self._slew: list[tuple[float, float, float]] = []
         self._slew_sign = 0.0
+        self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
         self._moving = False
@@ -603,6 +628,8 @@ class Diagnoser:
             arl_blocks = self.arl0 / stats.block_s * (2 if sides == "both" else 1)
             h_analytic = cusum_threshold(max(arl_blocks, 1.5), CUSUM_K)
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
+            if name == "motor":
+                tol = min(tol, self._motor_headroom(ref))
             self._detectors[name] = _BlockCusum(stats, tol, h_analytic, sides)
             h = self._calibrated(name, h_analytic, self._detectors[name])
             self._detectors[name].h = self.thresholds[name] = h
@@ -624,9 +651,11 @@ class Diagnoser:
         det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
         self._detectors["offset"] = det
         if "slew" in ref.tests:  # older references lack it
-            stats = ref.tests["slew"]
+            stats = self._slew_stats(ref)
             h_analytic = cusum_threshold(max(self.arl0 / stats.block_s, 1.5), CUSUM_K)
             tol = ref.tolerance.get("slew", DEFAULT_TOLERANCE["slew"])
+            if ref.slew_scale_rpm_s is not None:  # the reference's level rests on ~10 slews
+                tol = math.hypot(tol, _Z95 * stats.sigma / math.sqrt(stats.samples))
             det = _BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
@@ -649,6 +678,30 @@ class Diagnoser:
         self._detectors["dropout"] = _Dropout(block, n)
         self.thresholds["dropout"] = n
 
+    @staticmethod
+    def _motor_headroom(ref: HealthyReference) -> float:
+        """How far above the reference's inertial current a healthy unit's may sit: the
+        datasheet's upper bound of I/k_t (I +2 %, k_t −5 %: 1.074 × nominal) over the
+        reference's identified one (within 0.5 % of its unit's on the twin). The constant
+        tolerance (0.15, two units at opposite bounds) made the rate a requested 1/h
+        delivers depend on where the reference unit sits: 0 to 4.5/h over the tune set's
+        model units (a reference at 1.056 × nominal leaves healthy units 2 % of room)."""
+        nominal = nominal_inertial_current()
+        return max(MOTOR_UPPER * nominal / ref.current_model[0] - 1.0, 0.0)
+
+    @staticmethod
+    def _slew_stats(ref: HealthyReference) -> BlockStats:
+        """The slew test's healthy statistics: the reference's level, and the larger of its
+        σ and the tune set's (:data:`~rwlab.diagnose.motion.SLEW_SIGMA`), where the values
+        are in nominal Coulomb decelerations: 9–10 slews of one record put σ anywhere in
+        0.13–0.46 (unit 300's 0.13 alarmed on a healthy unit's PRBS)."""
+        stats = ref.tests["slew"]
+        if ref.slew_scale_rpm_s is None or stats.sigma >= SLEW_SIGMA:
+            return stats
+        return BlockStats(
+            stats.mean, SLEW_SIGMA, stats.block, stats.fraction, stats.samples, "tune set"
+        )
+
     def _calibrated(self, name: str, analytic: float, det=None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
         calibration holds this detector at this sample time (and CUSUM reference value);
@@ -659,7 +712,7 @@ class Diagnoser:
         if cal is None or curve is None:
             return analytic
         same_ts = math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
-        if not same_ts or (curve.kind == "cusum" and not math.isclose(curve.k, k, rel_tol=0.1)):
+        if not same_ts or (curve.kind == "cusum" and not curve.holds(k)):
             if self.false_alarms_per_hour * cal.hours < RESOLVED:
                 return analytic  # a rate no calibration could resolve: nothing lost
             value, note = (
@@ -777,7 +830,8 @@ class Diagnoser:
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
             for name, value in values.items():
-                if not self._detectors[name].add(t_s, value):
+                allowance = self._friction_allowance if name == "friction" else 0.0
+                if not self._detectors[name].add(t_s, value, allowance):
                     continue
                 new += self._speed_alarm(t_s) if name == "speed" else self._fire(t_s, name)
         else:
@@ -814,7 +868,7 @@ class Diagnoser:
         value = None
         if sign != self._slew_sign and self._slew:
             c = self.residuals.current_model
-            value = None if c is None else slew_asymmetry(self._slew, c)
+            value = None if c is None else slew_asymmetry(self._slew, c, self._slew_scale)
             self._slew = []
         self._slew_sign = sign
         if slewing:
@@ -875,6 +929,7 @@ class Diagnoser:
             offset = self._current_offset(sign, r["current"])
             if offset is not None:
                 out["friction"] = sign * (r["current"] - offset) / abs(friction)
+                self._friction_allowance = self._allowance(abs(friction), speed_rpm)
             self._friction_sample = (r["current"], speed_rpm, friction)
         sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
         if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
@@ -917,6 +972,22 @@ class Diagnoser:
         if motor is None:
             return True
         return sum(t > t0 for t, _ in motor.raw) >= motor.stats.block
+
+    def _allowance(self, friction_a: float, speed_rpm: float) -> float:
+        """How far beyond the friction test's tolerance a healthy unit may sit at this
+        speed, relative to the reference's friction current ``friction_a`` (A): the
+        datasheet's upper bound, 1.3 × the nominal friction current at this speed, over
+        the reference's, less the tolerance the CUSUM already holds. A reference from a
+        low-friction unit (or one whose identified viscous part is low) makes the bound
+        a larger excess than the constant tolerance (×1.86, a reference at exactly the
+        lower bound), most at high speeds: unit 100's model read healthy units ×2.0–2.4
+        there and alarmed."""
+        ref = self.reference
+        if ref is None:
+            return 0.0
+        viscous, coulomb = nominal_friction_currents()
+        upper = FRICTION_UPPER * (viscous * abs(speed_rpm) + coulomb) / friction_a - 1.0
+        return max(0.0, upper - ref.tolerance.get("friction", DEFAULT_TOLERANCE["friction"]))
 
     def _current_offset(self, sign: float, residual_a: float) -> float | None:
         """This unit's current-sense offset beyond the reference's, A (None until the
@@ -1016,6 +1087,8 @@ class Diagnoser:
         assert ref is not None  # alarms come only from an armed detector
         # σ of one value, the block-mean σ scaled back (correlation included)
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
+        if "slew" in self._detectors:
+            ev["sigma"]["slew"] = self._detectors["slew"].stats.sigma
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
@@ -1024,6 +1097,11 @@ class Diagnoser:
             ev["motor_before"] = np.array([x for t, x in motor.raw if t < t_change])
             ev["motor_after"] = np.array([x for t, x in motor.raw if t >= t_change])
         ev["tolerance"] = dict(ref.tolerance)
+        # a weak motor is named on the motor test's own tolerance (the datasheet's headroom):
+        # on the constant one, unit 7's model called its own k_t x 0.8 alarms friction
+        ev["tolerance"]["motor"] = min(
+            ev["tolerance"].get("motor", DEFAULT_TOLERANCE["motor"]), self._motor_headroom(ref)
+        )
         ev["recent_speed"] = np.array(self._recent_speed)
         ev["held_command_rpm"] = self._command[0]
         ev["moving_repeats"] = self._detectors["stuck"].run
@@ -1092,6 +1170,7 @@ def healthy_reference(
     second = Diagnoser(wheel, None)
     second.residuals.current_model = coef
     second._change_probe.c = coef
+    second._slew_scale = scale = nominal_coulomb_deceleration()
     for k in range(data.N):
         second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
     tests = {
@@ -1113,35 +1192,82 @@ def healthy_reference(
         samples=int(data.N),
         tolerance=dict(DEFAULT_TOLERANCE if tolerance is None else tolerance),
         source=source,
+        slew_scale_rpm_s=scale,
     )
 
 
 def measure_calibration(
-    records: list[IOData], wheel, reference: HealthyReference, *, origin: str = ""
+    records: list[IOData],
+    wheel,
+    reference: HealthyReference,
+    *,
+    origin: str = "",
+    more_models: tuple = (),
 ) -> ThresholdCalibration:
     """Count each detector's false alarms over its thresholds on healthy records.
 
     Parameters
     ----------
     records : list of IOData
-        Healthy records of units other than the reference's, as :func:`diagnose`
+        Healthy records of units other than the references', as :func:`diagnose`
         takes them.
     wheel : IdentifiedWheel
     reference : HealthyReference
         The identified unit's, as the detectors will use it.
     origin : str
         How the records were made (stored with the calibration).
+    more_models : sequence of (IdentifiedWheel, HealthyReference)
+        Models of other units (same Ts): each runs over every record too, so the
+        rates are those of a model from any of these units (the user identifies on
+        one unit and diagnoses others), and each CUSUM's alarms are counted with
+        that model's own reference value (``Curve.k_range`` spans them).
 
     Returns
     -------
     ThresholdCalibration
-        Alarms per threshold (detectors restarted after each alarm) and the hours.
+        Alarms per threshold (detectors restarted after each alarm) and the hours
+        (record hours times models).
     """
     if not records:
         raise ConfigError("a calibration needs at least one healthy record")
+    models = [(wheel, reference), *more_models]
+    if any(not math.isclose(w.Ts, wheel.Ts, rel_tol=1e-6) for w, _ in models):
+        raise ConfigError("a calibration's models must share one sample time")
+    per_model = [_model_traces(records, w, ref) for w, ref in models]
+    hours = len(models) * sum(data.N * data.Ts for data in records) / 3600
+    curves = {}
+    for name, (k0, sides) in per_model[0][1].items():
+        # no tolerance between units in the reference value (offset): nothing to share
+        for share in (1.0, *_SHARES) if k0 > CUSUM_K else (1.0,):
+            ks = [CUSUM_K + share * (m[1][name][0] - CUSUM_K) for m in per_model]
+            alarms = sum(
+                cusum_alarms(m[0][name], k, sides) for m, k in zip(per_model, ks, strict=True)
+            )
+            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
+                "cusum",
+                tuple(float(h) for h in _H_GRID),
+                tuple(int(a) for a in alarms),
+                float(np.median(ks)),
+                int(sum(z.size for m in per_model for z in m[0][name])),
+                share,
+                (float(min(ks)), float(max(ks))),
+            )
+    n = tuple(float(x) for x in range(1, _N_MAX + 1))
+    runs = [int(r) for m in per_model for rec in m[0]["stuck"] for r in rec]
+    moving = sum(m[2] for m in per_model)
+    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
+    blocks = [int(c) for m in per_model for rec in m[0]["dropout"] for c in rec]
+    curves["dropout"] = _Curve(
+        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
+    )
+    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
+
+
+def _model_traces(records: list[IOData], wheel, reference: HealthyReference):
+    """One model over every record: each test's traces per record, each CUSUM's (k,
+    sides), and the moving samples."""
     traces: dict[str, list] = {}
-    k: dict[str, float] = {}
-    sides: dict[str, str] = {}
+    k: dict[str, tuple[float, str]] = {}
     moving = 0
     for data in records:
         t, held, speed, current, age, lost = _columns(data, wheel)
@@ -1154,30 +1280,9 @@ def measure_calibration(
             traces.setdefault(name, []).append(np.array(values))
         for name, det in d._detectors.items():
             if isinstance(det, _BlockCusum):
-                k[name], sides[name] = det.k, det.sides
+                k[name] = (det.k, det.sides)
         moving += d.repeats[1]
-    hours = sum(data.N * data.Ts for data in records) / 3600
-    curves = {}
-    for name in k:
-        # no tolerance between units in the reference value (offset): nothing to share
-        for share in (1.0, *_SHARES) if k[name] > CUSUM_K else (1.0,):
-            k_share = CUSUM_K + share * (k[name] - CUSUM_K)
-            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
-                "cusum",
-                tuple(float(h) for h in _H_GRID),
-                tuple(int(a) for a in cusum_alarms(traces[name], k_share, sides[name])),
-                float(k_share),
-                int(sum(z.size for z in traces[name])),
-                share,
-            )
-    n = tuple(float(x) for x in range(1, _N_MAX + 1))
-    runs = [int(r) for rec in traces["stuck"] for r in rec]
-    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
-    blocks = [int(c) for rec in traces["dropout"] for c in rec]
-    curves["dropout"] = _Curve(
-        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
-    )
-    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
+    return traces, k, moving
 
 
 @dataclass

@@ -33,6 +33,7 @@ __all__ = [
     "REST_BAND_RPM",
     "REST_MODEL_RPM",
     "SLEW_SHARE",
+    "SLEW_SIGMA",
     "RestReading",
     "slew_asymmetry",
     "speed_offset",
@@ -51,6 +52,13 @@ REST_BAND_RPM = 30.0  # a reading within this of zero may be the no-edge reading
 REST_MODEL_RPM = 60.0  # ... taken where the model passes this close to zero speed, rpm
 REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (healthy units:
 # at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
+# σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations) on the
+# identification's signal, a stepped PRBS: pooled over the tune set's healthy PRBS records
+# (units 1–6, 101–136 with unit 0's model: 125 slews, within-record σ 0.29; chirps 0.40,
+# multisines 0.46, whose larger scatter is in the calibration's measured rates). One
+# identification record has 9–10 slews, whose σ reads 0.13–0.46 by chance (unit 300's 0.13
+# alarmed on a healthy unit): the detector takes the larger of the two
+SLEW_SIGMA = 0.3
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit
@@ -96,7 +104,9 @@ def speed_offset(window: np.ndarray) -> float | None:
     return float(coef[0])
 
 
-def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None:
+def slew_asymmetry(
+    segment: list[tuple[float, float, float]], c, scale_rpm_s: float | None = None
+) -> float | None:
     """How much faster a wheel slews towards zero speed than away from it.
 
     At its acceleration limit the wheel's controller sets the current open loop (the
@@ -104,8 +114,12 @@ def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None
     not know changes the acceleration, not the current: it slows the half of a slew that
     runs away from zero speed and speeds up the half that runs towards it. Each half's
     acceleration is taken from its first and last speed (the samples' own differences
-    are Hall noise); the difference is in units of the reference's Coulomb deceleration
-    τ_c/I (the current model's c₂/c₀). A friction factor F raises it by about 2(F − 1).
+    are Hall noise); the difference is in units of ``scale_rpm_s``: the wheel model's
+    nominal (datasheet) Coulomb deceleration τ_c/I, the same for every reference (the
+    reference unit's identified c₂/c₀ splits Coulomb and viscous friction poorly: 3.2 rpm/s
+    for a unit whose true value is 4.7). The healthy level is a unit's own (its controller
+    feeds its own friction forward), so it hardly moves between units. A friction factor F
+    raises it by about 2(F − 1) times the unit's friction over the nominal Coulomb torque.
     A clamped current (no feed-forward step at the zero crossing) is the lag test's.
 
     Parameters
@@ -115,6 +129,9 @@ def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None
         telemetry was measured.
     c : array_like, shape (4,)
         The reference's current model [A per rpm/s, A per rpm, A, A].
+    scale_rpm_s : float, optional
+        The unit of the result, rpm/s (default: the current model's c₂/c₀, as older
+        references were measured).
 
     Returns
     -------
@@ -137,7 +154,8 @@ def slew_asymmetry(segment: list[tuple[float, float, float]], c) -> float | None
 
     rising = inner[-1][1] > inner[0][1]
     toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
-    return float((toward - away) / (c[2] / c[0]))
+    scale = c[2] / c[0] if scale_rpm_s is None else scale_rpm_s
+    return float((toward - away) / scale)
 
 
 class RestReading:

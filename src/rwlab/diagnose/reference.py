@@ -17,11 +17,17 @@ detectors compare a later record with, and stores it in ``model.json`` under
   (Hall quantisation), counted over the whole record;
 - ``lost_per_sample``: telemetry frames lost per sample (the 8-bit frame
   counter's gaps);
+- ``slew_scale_rpm_s`` (optional: older files use the current model's c₂/c₀): the
+  unit of the slew test's values, the wheel model's nominal Coulomb deceleration;
 - ``tolerance``: how far another healthy unit of the same wheel model may sit
   from this one, relative (friction, motor) or absolute (speed, rpm; lag,
   fraction of the acceleration limit). A stated assumption of the
   datasheet-like spread between units, not a measurement: one record of one
-  unit cannot measure it.
+  unit cannot measure it. Where the reference unit sits within that spread
+  matters, so the detectors also hold each test against the datasheet's bounds
+  about nominal (:func:`nominal_friction_currents`, :func:`nominal_inertial_current`):
+  a reference from a low-friction unit allows a healthy unit more friction
+  excess, one from a unit of high I/k_t less motor excess.
 
 Because the reference comes from the identification record, a record under
 test is tested from its first sample on: a fault present at power-up is a fault.
@@ -36,7 +42,15 @@ import numpy as np
 
 from rwlab.errors import DataError, FileFormatError
 
-__all__ = ["FORMAT", "BlockStats", "HealthyReference", "block_stats"]
+__all__ = [
+    "FORMAT",
+    "BlockStats",
+    "HealthyReference",
+    "block_stats",
+    "nominal_coulomb_deceleration",
+    "nominal_friction_currents",
+    "nominal_inertial_current",
+]
 
 FORMAT = "rwlab.HealthyReference/1"
 # Between two healthy units (the reference's and another) of a wheel model whose friction
@@ -53,6 +67,51 @@ DEFAULT_TOLERANCE = {
     # slew's profile (speeds, length) by about this much between a PRBS and a chirp
     "slew": 0.3,
 }
+
+
+def nominal_coulomb_deceleration() -> float:
+    """The wheel model's datasheet Coulomb deceleration τ_c/I, rpm/s.
+
+    The unit in which the slew test reads friction: the same for every reference, so
+    a slew's healthy level and its size do not inherit the identified reference unit's
+    Coulomb/viscous split.
+
+    Returns
+    -------
+    float
+        τ_c/I of the nominal RW90 (:class:`rwlab.wheel.WheelParams`), rpm/s.
+    """
+    from rwlab.wheel.physics import WheelParams
+
+    p = WheelParams()
+    return p.coulomb_friction / p.inertia * 60.0 / (2.0 * math.pi)
+
+
+def nominal_friction_currents() -> tuple[float, float]:
+    """The wheel model's datasheet friction as motor current: viscous and Coulomb.
+
+    Returns
+    -------
+    viscous : float
+        b/k_t, A per rpm.
+    coulomb : float
+        τ_c/k_t, A.
+    """
+    from rwlab.wheel.physics import WheelParams
+
+    p = WheelParams()
+    return p.viscous_friction / p.torque_constant * 2.0 * math.pi / 60.0, (
+        p.coulomb_friction / p.torque_constant
+    )
+
+
+def nominal_inertial_current() -> float:
+    """The wheel model's datasheet inertial current I/k_t per rpm/s, A (the current
+    model's c₀ of a nominal unit)."""
+    from rwlab.wheel.physics import WheelParams
+
+    p = WheelParams()
+    return p.inertia / p.torque_constant * 2.0 * math.pi / 60.0
 
 
 @dataclass(frozen=True)
@@ -149,6 +208,9 @@ class HealthyReference:
     tolerance : dict of str to float
     source : str
         Which record it was measured on.
+    slew_scale_rpm_s : float or None
+        The slew test's unit, rpm/s: the nominal Coulomb deceleration of the wheel model
+        (None: the current model's c₂/c₀, as older references were measured).
     """
 
     Ts: float
@@ -160,6 +222,7 @@ class HealthyReference:
     samples: int
     tolerance: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCE))
     source: str = ""
+    slew_scale_rpm_s: float | None = None
 
     def to_dict(self) -> dict:
         """The JSON form stored under ``model.json``'s ``"healthy_reference"``."""
@@ -189,7 +252,7 @@ class HealthyReference:
             "samples": self.samples,
             "tolerance": dict(self.tolerance),
             "source": self.source,
-        }
+        } | ({} if self.slew_scale_rpm_s is None else {"slew_scale_rpm_s": self.slew_scale_rpm_s})
 
     @classmethod
     def from_dict(cls, d: dict) -> HealthyReference:
@@ -225,6 +288,9 @@ class HealthyReference:
                 samples=int(d["samples"]),
                 tolerance={k: float(v) for k, v in d["tolerance"].items()},
                 source=str(d.get("source", "")),
+                slew_scale_rpm_s=(
+                    None if d.get("slew_scale_rpm_s") is None else float(d["slew_scale_rpm_s"])
+                ),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(
