@@ -12,7 +12,9 @@ records are the tune set's
 (``bench_diagnose.records('tune')``: units 1–6 and 101–136, 20 minutes each,
 PRBS, chirp, multisine and steps in turn), never the eval sets' units (21–44, 201–224),
 on which ``bench_diagnose.py --set eval`` judges the thresholds. Each detector
-runs restarted after every alarm over every record; the counts per threshold
+runs restarted after every alarm over every record; a CUSUM's block means of every
+model are counted over the grid of reference values (``calibration.K_GRID``), so a
+model of any unit is calibrated at its own k; the counts per threshold
 go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
 ~10 s per record to make (cached in ``--cache``), ~1 s to count.
 ``--offset-sigma`` also prints the σ of the offset test's window intercepts on
@@ -84,10 +86,11 @@ def main() -> None:
         f"{cal.hours:.2f} h of healthy records x models, {len(data)} records, "
         f"{len(args.model_units)} models -> {args.out}"
     )
-    print(f"{'detector':<16} {'k':>6} {'decisions/h':>12} {'max alarms/h':>13}")
+    print(f"{'curve':<16} {'k':>6} {'decisions/h':>12} {'max alarms/h':>13}")
     for name, c in cal.curves.items():
-        per_hour = c.decisions / cal.hours
-        print(f"{name:<16} {c.k:>6.3g} {per_hour:>12.1f} {cal.max_per_hour(name):>13.3g}")
+        if cal.max_per_hour(name) > 0 or c.kind == "count":
+            per_hour = c.decisions / cal.hours
+            print(f"{name:<16} {c.k:>6.3g} {per_hour:>12.1f} {cal.max_per_hour(name):>13.3g}")
 
 
 def _offset_sigma(data, wheel, ref) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
@@ -11,11 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rwlab.diagnose.calibration import (
+    K_GRID,
     RESOLVED,
     Curve,
     ThresholdCalibration,
     count_alarms,
     cusum_alarms,
+    cusum_alarms_k,
+    cusum_curves,
     run_alarms,
 )
 from rwlab.diagnose.detect import Cusum, RunTest, cusum_threshold
@@ -49,6 +53,9 @@ def test_the_threshold_scan_counts_what_a_restarted_cusum_raises(zs, k, sides):
     grid = (0.0, 0.3, 1.0, 2.5, 6.0)
     counts = cusum_alarms([np.array(z) for z in zs], k, sides, grid)
     assert list(counts) == [sum(_direct(z, k, h, sides) for z in zs) for h in grid]
+    both = cusum_alarms_k([np.array(z) for z in zs], (k, k + 0.7), sides, grid)
+    assert list(both[1]) == [sum(_direct(z, k + 0.7, h, sides) for z in zs) for h in grid]
+    assert list(both[0]) == list(counts)
 
 
 @given(st.lists(st.booleans(), max_size=60))
@@ -75,11 +82,7 @@ def test_count_alarms_counts_blocks_at_or_above_each_threshold():
 
 def _gaussian_calibration(rng, blocks_per_hour=100.0, hours=1000.0):
     z = rng.standard_normal(int(blocks_per_hour * hours))
-    curve_alarms = cusum_alarms([z], 0.5, "both")
-    from rwlab.diagnose.calibration import H_GRID
-
-    curve = Curve("cusum", H_GRID, tuple(int(a) for a in curve_alarms), 0.5, z.size)
-    return ThresholdCalibration(0.5, hours, {"speed": curve})
+    return ThresholdCalibration(0.5, hours, cusum_curves("speed", [z], "both", ks=(0.5, 1.0)))
 
 
 def test_on_gaussian_block_means_the_measured_threshold_is_siegmunds():
@@ -91,7 +94,7 @@ def test_on_gaussian_block_means_the_measured_threshold_is_siegmunds():
     for per_hour in (0.1, 1.0):
         arl_blocks = 100.0 / per_hour
         analytic = cusum_threshold(arl_blocks, 0.5)  # two-sided ARL₀ (each side at 2·ARL₀)
-        h, note = cal.threshold("speed", per_hour, analytic=99.0)
+        h, note = cal.threshold("speed", per_hour, analytic=99.0, k=0.5)
         assert note == ""
         assert h == pytest.approx(analytic, abs=0.25)
         fresh = rng.standard_normal(100_000)
@@ -99,46 +102,99 @@ def test_on_gaussian_block_means_the_measured_threshold_is_siegmunds():
         assert 0.6 * per_hour <= measured <= 1.6 * per_hour
 
 
-def test_unresolved_rates_keep_the_higher_threshold():
+def _ar1(rng, n, phi):
+    """A stationary AR(1) stream of unit variance."""
+    e = rng.standard_normal(n) * math.sqrt(1 - phi**2)
+    x = np.empty(n)
+    x[0] = rng.standard_normal()
+    for i in range(1, n):
+        x[i] = phi * x[i - 1] + e[i]
+    return x
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.5])
+def test_a_reference_value_between_the_grids_gets_the_rate_asked_on_held_out_data(phi):
+    """Counted at k = 0.5, 1 and 1.5 only, a model whose k is 1.2 σ (between two curves)
+    gets thresholds whose rate, simulated independently on a held-out stream, is the
+    requested one: on Gaussian block means and on AR(1) ones (φ = 0.5: correlated block
+    means, whose rate no i.i.d. formula gives)."""
+    rng = np.random.default_rng(11)
+    blocks_per_hour, hours, k = 100.0, 800.0, 1.2
+    train = _ar1(rng, int(blocks_per_hour * hours), phi)
+    cal = ThresholdCalibration(0.5, hours, cusum_curves("motor", [train], "up", ks=(0.5, 1.0, 1.5)))
+    fresh = _ar1(rng, int(blocks_per_hour * hours), phi)
+    for per_hour in (1.0, 10.0):
+        s = cal.setting("motor", per_hour, analytic=99.0, k=k)
+        assert (s.k, s.note, s.info) == (k, "", "")
+        measured = _direct(fresh, k, s.threshold, "up") / hours
+        assert 0.75 * per_hour <= measured <= 1.33 * per_hour, (per_hour, measured)
+    # the curve nearest below (k = 1) would have given too many alarms: interpolation
+    # in k matters
+    h1 = cal.setting("motor", 1.0, analytic=99.0, k=1.0).threshold
+    assert _direct(fresh, k, h1, "up") / hours < 0.75
+
+
+def test_unresolved_rates_keep_the_higher_threshold_and_say_so():
     cal = _gaussian_calibration(np.random.default_rng(4), hours=200.0)
-    last = cal.threshold("speed", RESOLVED / 200.0, analytic=0.0)[0]
-    h, note = cal.threshold("speed", 1e-3, analytic=0.0)
-    assert h > last and note == ""  # the extrapolated tail lies beyond the resolved rates
-    assert cal.threshold("speed", 1e-3, analytic=h + 5)[0] == h + 5
+    last = cal.threshold("speed", RESOLVED / 200.0, analytic=0.0, k=0.5)[0]
+    s = cal.setting("speed", 1e-3, analytic=0.0, k=0.5)
+    assert s.threshold > last and s.note == ""  # the tail lies beyond the resolved rates
+    assert "extrapolated" in s.info and "not verified" in s.info
+    s = cal.setting("speed", 1e-3, analytic=s.threshold + 5, k=0.5)
+    assert "the analytic one" in s.info and s.note == ""
+    measured = cal.setting("speed", 1.0, analytic=0.0, k=0.5)
+    assert measured.info == measured.note == ""  # a measured rate needs no word
 
 
 def test_a_rate_a_detector_cannot_deliver_is_said():
     grid = (0.0, 1.0, 2.0)
     curves = {
-        "friction": Curve("cusum", grid, (0, 0, 0), 11.5, 500),
-        "lag": Curve("cusum", grid, (12, 4, 1), 6.0, 800),
+        "friction@0.5": Curve("cusum", grid, (0, 0, 0), 0.5, 500),
+        "friction@11.5": Curve("cusum", grid, (0, 0, 0), 11.5, 500),
+        "lag@6": Curve("cusum", grid, (12, 4, 1), 6.0, 800),
         "dropout": Curve("count", (1.0, 2.0, 3.0), (33, 0, 0), 0.0, 2880),
     }
     cal = ThresholdCalibration(0.5, 8.0, curves)
-    h, note = cal.threshold("friction", 10.0, analytic=2.0)
-    assert h == 2.0 and "cannot deliver 10/h" in note
-    assert cal.threshold("friction", 0.01, analytic=2.0) == (2.0, "")  # unresolvable: silent
-    h, note = cal.threshold("lag", 10.0, analytic=5.0)
+    s = cal.setting("friction", 10.0, analytic=2.0, k=11.5)
+    assert s.threshold == 2.0 and "cannot deliver 10/h" in s.note and s.k == 0.5
+    s = cal.setting("friction", 0.01, analytic=2.0, k=11.5)  # unresolvable: said, no warning
+    assert (s.threshold, s.k, s.note) == (2.0, 11.5, "") and "analytic" in s.info
+    h, note = cal.threshold("lag", 10.0, analytic=5.0, k=6.0)
     assert h == 0.0 and "at most 1.5" in note
-    assert cal.threshold("lag", 2.0, analytic=5.0) == (0.0, "")  # within a factor 2
+    assert cal.threshold("lag", 2.0, analytic=5.0, k=6.0) == (0.0, "")  # within a factor 2
     n, note = cal.threshold("dropout", 1.0, analytic=2.0)
     assert n == 2.0 and "whole events" in note
     assert cal.threshold("dropout", 3.0, analytic=2.0)[0] == 1.0
 
 
+def test_a_model_beyond_the_grid_of_k_is_told_what_its_threshold_rests_on():
+    grid = (0.0, 1.0, 2.0)
+    curves = {f"lag@{k:g}": Curve("cusum", grid, (40, 20, 10), k, 800) for k in (1.0, 2.0)}
+    cal = ThresholdCalibration(0.5, 8.0, curves)
+    s = cal.setting("lag", 2.5, analytic=9.0, k=3.0)  # fewer alarms than at k = 2
+    assert s.k == 3.0 and s.threshold == pytest.approx(1.0) and "upper bound" in s.info
+    s = cal.setting("lag", 2.5, analytic=9.0, k=0.7)  # more alarms than measured
+    assert (s.threshold, s.k) == (9.0, 0.7) and "not measured" in s.info
+
+
 def test_calibration_file_round_trips_and_refuses_other_formats(tmp_path):
-    cal = ThresholdCalibration(0.5, 2.0, {"lag": Curve("cusum", (0.0, 1.0), (3, 1), 6.0, 9)}, "x")
+    curve = Curve("cusum", (0.0, 1.0), (3, 1), 6.0, 9)
+    cal = ThresholdCalibration(0.5, 2.0, {"lag@6": curve}, "x")
     path = cal.save(tmp_path / "t.json")
     assert ThresholdCalibration.load(path) == cal
     assert not list(tmp_path.glob("*.partial"))
     path.write_text(json.dumps({**cal.to_dict(), "format": "other/1"}))
     with pytest.raises(FileFormatError, match="not a threshold calibration"):
         ThresholdCalibration.load(path)
+    # the first format held one k per detector: refused, with what re-measures it
+    path.write_text(json.dumps({**cal.to_dict(), "format": "rwlab.ThresholdCalibration/1"}))
+    with pytest.raises(FileFormatError, match=r"old format.*bench/calibrate_thresholds\.py"):
+        ThresholdCalibration.load(path)
     with pytest.raises(FileFormatError, match="cannot read"):
         ThresholdCalibration.load(tmp_path / "missing.json")
 
 
-def test_the_package_calibration_covers_every_detector_and_says_where_it_came_from():
+def test_the_package_calibration_covers_every_detector_over_the_grid_of_k():
     cal = ThresholdCalibration.load()
     assert {name.split("@")[0] for name in cal.curves} == {
         "friction",
@@ -153,29 +209,35 @@ def test_the_package_calibration_covers_every_detector_and_says_where_it_came_fr
         "dropout",
     }
     assert cal.hours >= 8.0 and "bench/calibrate_thresholds.py" in cal.origin
-    assert cal.curves["speed@0"].k == pytest.approx(0.5)  # no tolerance: the textbook k
+    for name in ("friction", "motor", "speed", "lag", "slew", "friction_change"):
+        assert [k for k, _ in cal.family(name)] == pytest.approx(K_GRID)
     for name in cal.curves:
         rates = cal.rates(name)
         assert np.all(np.diff(rates) <= 0)
+    # more tolerance, fewer alarms: at every threshold the rate falls with k
+    for name in ("friction", "motor", "lag"):
+        fam = [cal.curves[key].alarms for _, key in cal.family(name)]
+        first = [a[0] for a in fam]
+        assert all(x >= y for x, y in itertools.pairwise(first)), name
 
 
-def test_a_rate_beyond_the_full_tolerance_is_sought_with_less_of_it():
+def test_a_rate_beyond_the_models_tolerance_is_sought_with_a_smaller_k():
     grid = (0.0, 1.0, 2.0)
     curves = {
-        "speed": Curve("cusum", grid, (0, 0, 0), 12.0, 600),
-        "speed@0.5": Curve("cusum", grid, (16, 8, 0), 6.25, 600, 0.5),
-        "speed@0": Curve("cusum", grid, (400, 200, 100), 0.5, 600, 0.0),
+        "speed@12": Curve("cusum", grid, (0, 0, 0), 12.0, 600),
+        "speed@6.25": Curve("cusum", grid, (16, 8, 0), 6.25, 600),
+        "speed@0.5": Curve("cusum", grid, (400, 200, 100), 0.5, 600),
     }
     cal = ThresholdCalibration(0.5, 8.0, curves)
-    assert cal.setting("speed", 1e-3, analytic=9.0) == (9.0, 1.0, "")  # the default stays
-    h, share, note = cal.setting("speed", 1.0, analytic=9.0)
-    assert (share, note) == (0.5, "") and h == pytest.approx(1.0)  # 8 alarms in 8 h at h = 1
-    h, share, note = cal.setting("speed", 20.0, analytic=9.0)  # 25/h at h = 1, 12.5 at 2
-    assert share == 0.0 and 1.0 < h < 2.0 and note == ""
-    assert cal.setting("speed", 100.0, analytic=9.0) == (0.0, 0.0, "")  # 50/h: within x2
-    h, share, note = cal.setting("speed", 200.0, analytic=9.0)
-    assert (h, share) == (0.0, 0.0) and note.startswith("speed: with 0% of the tolerance")
-    assert "cannot deliver 200/h" in note
+    s = cal.setting("speed", 1e-3, analytic=9.0, k=12.0)
+    assert (s.threshold, s.k, s.note) == (9.0, 12.0, "")  # the default keeps the model's k
+    s = cal.setting("speed", 1.0, analytic=9.0, k=12.0)
+    assert (s.k, s.note) == (6.25, "") and s.threshold == pytest.approx(1.0)  # 8 in 8 h
+    s = cal.setting("speed", 20.0, analytic=9.0, k=12.0)  # 25/h at h = 1, 12.5 at 2
+    assert s.k == 0.5 and 1.0 < s.threshold < 2.0 and s.note == ""
+    assert cal.threshold("speed", 100.0, analytic=9.0, k=12.0) == (0.0, "")  # 50/h: x2
+    s = cal.setting("speed", 200.0, analytic=9.0, k=12.0)
+    assert (s.threshold, s.k) == (0.0, 0.5) and "cannot deliver 200/h" in s.note
 
 
 def test_a_flat_measured_curve_does_not_extrapolate_to_an_endless_threshold():
@@ -185,22 +247,8 @@ def test_a_flat_measured_curve_does_not_extrapolate_to_an_endless_threshold():
     grid = tuple(0.1 * i for i in range(16))
     k = 2.8
     cal = ThresholdCalibration(
-        0.5, 14.0, {"fc": Curve("cusum", grid, (5,) * 15 + (0,), k, 135)}, "x"
+        0.5, 14.0, {"fc@2.8": Curve("cusum", grid, (5,) * 15 + (0,), k, 135)}, "x"
     )
-    h, _ = cal.threshold("fc", 1e-3, analytic=0.0)
+    h, _ = cal.threshold("fc", 1e-3, analytic=0.0, k=k)
     rate_last = 5 / 14.0  # alarms per hour at the last measured threshold, 1.4
     assert 1.4 < h <= 1.4 + math.log(rate_last / 1e-3) / k + 1e-9
-
-
-def test_a_curve_counted_over_several_models_holds_each_models_reference_value(tmp_path):
-    """Models of different units standardise by their own σ, so one detector's k differs
-    between them (friction: 10.3 for unit 300's reference, 11.6 for unit 0's); a curve
-    counted over several models holds every k in their range (10 % beyond it), and the
-    range survives the file."""
-    curve = Curve("cusum", (0.0, 1.0), (3, 1), 11.0, 9, 1.0, (10.3, 11.6))
-    assert curve.holds(10.3) and curve.holds(11.6) and curve.holds(9.4) and curve.holds(12.7)
-    assert not curve.holds(9.3) and not curve.holds(12.8)
-    single = Curve("cusum", (0.0, 1.0), (3, 1), 11.0, 9)
-    assert single.holds(10.1) and not single.holds(9.9)  # one model: 10 % of its k
-    cal = ThresholdCalibration(0.5, 2.0, {"friction": curve, "lag": single}, "x")
-    assert ThresholdCalibration.load(cal.save(tmp_path / "t.json")) == cal

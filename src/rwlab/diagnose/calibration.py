@@ -4,21 +4,33 @@ Siegmund's formula (:mod:`~rwlab.diagnose.detect`) assumes independent N(0, 1)
 block means. The tests' block means are neither Gaussian nor centred on another
 unit (their reference value holds the spread between units on purpose), so the
 analytic thresholds alarm far less often than asked. A
-:class:`ThresholdCalibration` instead holds, per detector, the false alarms per
-hour it raised (restarted after each alarm) over a grid of thresholds, counted
-on hours of healthy records of units other than the identified one. A requested
-rate maps to the threshold whose measured rate it is (log-linear interpolation);
-below the rates the hours resolve (fewer than :data:`RESOLVED` alarms) the tail
-is extrapolated with the measured slope of log(rate), never steeper than the
-Gaussian's 2k, and the threshold is the larger of that and the analytic one: an
-unverified rate errs towards fewer alarms (the default 1e-3/h is such a rate).
+:class:`ThresholdCalibration` instead holds, per detector, the false alarms it
+raised (restarted after each alarm) over a grid of thresholds, counted on hours
+of healthy records of units other than the identified ones.
 
-Where a detector cannot deliver a rate (a healthy unit never leaves its
-tolerance band, or no threshold gives a rate within a factor 2 of the request:
-the run and count tests step between integers), :meth:`ThresholdCalibration.threshold`
-says so and the :class:`~rwlab.diagnose.Diagnoser` warns (:class:`~rwlab.errors.RwlabWarning`).
+A CUSUM's rate depends on its reference value k as much as on its threshold, and
+k is the model's own (0.5 σ plus the tolerance between units over the model's σ:
+4.3 σ for one unit's friction test, 11.6 σ for another's). So each CUSUM is
+counted over a grid of k (:data:`K_GRID`), every model's standardised block
+means run through every k (the block means do not depend on k), and a model's k
+between two grid values gets the curve interpolated log-linearly in k (for
+Gaussian block means log ARL₀ is linear in k at a fixed threshold, up to a log
+term). A requested rate maps to the threshold whose measured rate it is
+(log-linear in the rate); below the rates the hours resolve (fewer than
+:data:`RESOLVED` alarms) the tail is extrapolated with the measured slope of
+log(rate), never steeper than the Gaussian's 2k, and the threshold is the larger
+of that and the analytic one: an unverified rate errs towards fewer alarms (the
+default 1e-3/h is such a rate), and the :class:`Setting` says so in its ``info``.
 
-The package's file ``thresholds.json`` (format ``rwlab.ThresholdCalibration/1``)
+Where a detector cannot deliver a rate at the model's k (a healthy unit never
+leaves its tolerance band), the largest grid k below it that can is used
+(asking for more false alarms buys sensitivity to the spread between units);
+where none can, or no integer threshold gives a rate within a factor 2 (the run
+and count tests), the ``note`` says so and the
+:class:`~rwlab.diagnose.Diagnoser` warns (:class:`~rwlab.errors.RwlabWarning`).
+
+The package's file ``thresholds.json`` (format ``rwlab.ThresholdCalibration/2``;
+format 1, one k per detector, is refused with the command that re-measures it)
 was measured by ``bench/calibrate_thresholds.py`` on the twin's tune units (its
 ``origin`` field says how); it applies to RW90 models identified with the
 defaults at its sample time. The scan is hand-written: no library computes a
@@ -40,15 +52,19 @@ from rwlab.errors import FileFormatError
 
 __all__ = [
     "FORMAT",
+    "K_GRID",
     "RESOLVED",
     "Curve",
+    "Setting",
     "ThresholdCalibration",
     "count_alarms",
     "cusum_alarms",
+    "cusum_alarms_k",
     "run_alarms",
 ]
 
-FORMAT = "rwlab.ThresholdCalibration/1"
+FORMAT = "rwlab.ThresholdCalibration/2"
+OLD_FORMATS = ("rwlab.ThresholdCalibration/1",)
 DEFAULT_FILE = Path(__file__).with_name("thresholds.json")
 RESOLVED = 5  # alarms behind a rate the calibration counts as measured
 H_GRID = tuple(  # CUSUM thresholds scanned, σ: finer where the requested rates fall
@@ -59,9 +75,50 @@ H_GRID = tuple(  # CUSUM thresholds scanned, σ: finer where the requested rates
     )
 )
 N_MAX = 40  # run / count thresholds scanned
-# shares of the tolerance between units kept in a CUSUM's reference value, scanned for
-# rates the full tolerance cannot deliver (curves named "<detector>@<share>")
-SHARES = (0.75, 0.5, 0.35, 0.25, 0.15, 0.1, 0.05, 0.0)
+# CUSUM reference values scanned, σ: 0.5 (no tolerance) to beyond the largest a model of
+# the tune units has (speed: 22.7 σ); about 15 % apart, so log-linear interpolation in k
+# is within a few per cent of the Gaussian's rate
+K_GRID = (
+    0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.3, 2.6, 3.0, 3.5, 4.0,
+    4.6, 5.3, 6.0, 7.0, 8.0, 9.2, 10.6, 12.2, 14.0, 16.0, 18.5, 21.0, 24.0, 28.0,
+)  # fmt: skip
+
+
+def cusum_alarms_k(zs: list[np.ndarray], ks, sides: str, grid=H_GRID) -> np.ndarray:
+    """Alarms of a restarted CUSUM over standardised block means, per reference value
+    and threshold.
+
+    Parameters
+    ----------
+    zs : list of numpy.ndarray
+        One record's block means each (σ units); each record starts at zero.
+    ks : sequence of float
+        Reference values, σ units.
+    sides : {'up', 'down', 'both'}
+    grid : sequence of float
+        Thresholds, σ units.
+
+    Returns
+    -------
+    numpy.ndarray
+        Alarm count per reference value and threshold, shape (len(ks), len(grid)).
+    """
+    h = np.asarray(grid, dtype=float)[None, :]
+    k = np.asarray(ks, dtype=float)[:, None]
+    alarms = np.zeros((k.size, h.size), dtype=int)
+    for z in zs:
+        up = np.zeros(alarms.shape)
+        down = np.zeros(alarms.shape)
+        for x in np.asarray(z, dtype=float):
+            if sides in ("up", "both"):
+                up = np.maximum(0.0, up + (x - k))
+            if sides in ("down", "both"):
+                down = np.maximum(0.0, down - (x + k))
+            fired = np.maximum(up, down) > h
+            alarms += fired
+            up[fired] = 0.0
+            down[fired] = 0.0
+    return alarms
 
 
 def cusum_alarms(zs: list[np.ndarray], k: float, sides: str, grid=H_GRID) -> np.ndarray:
@@ -82,21 +139,7 @@ def cusum_alarms(zs: list[np.ndarray], k: float, sides: str, grid=H_GRID) -> np.
     numpy.ndarray
         Alarm count per threshold, shape (len(grid),).
     """
-    h = np.asarray(grid, dtype=float)
-    alarms = np.zeros(h.size, dtype=int)
-    for z in zs:
-        up = np.zeros(h.size)
-        down = np.zeros(h.size)
-        for x in np.asarray(z, dtype=float):
-            if sides in ("up", "both"):
-                up = np.maximum(0.0, up + x - k)
-            if sides in ("down", "both"):
-                down = np.maximum(0.0, down - x - k)
-            fired = np.maximum(up, down) > h
-            alarms += fired
-            up[fired] = 0.0
-            down[fired] = 0.0
-    return alarms
+    return cusum_alarms_k(zs, (k,), sides, grid)[0]
 
 
 def run_alarms(runs: list[int], n_max: int = N_MAX) -> np.ndarray:
@@ -111,14 +154,9 @@ def count_alarms(counts: list[int], n_max: int = N_MAX) -> np.ndarray:
     return np.array([int((c >= m).sum()) for m in range(1, n_max + 1)], dtype=int)
 
 
-def _pair(x) -> tuple[float, float]:
-    lo, hi = (float(v) for v in x)
-    return lo, hi
-
-
 @dataclass(frozen=True)
 class Curve:
-    """One detector's measured false alarms over its thresholds.
+    """One detector's measured false alarms over its thresholds, at one reference value.
 
     Parameters
     ----------
@@ -129,14 +167,9 @@ class Curve:
     alarms : tuple of int
         Alarms raised over the calibration's hours at each threshold.
     k : float
-        The CUSUM's reference value (σ) it was measured with (0 for counts).
+        The CUSUM's reference value (σ) it was counted with (0 for counts).
     decisions : int
         Decisions (blocks or qualifying samples) behind the curve.
-    share : float
-        The share of the tolerance between units in ``k`` (1: the detector's own).
-    k_range : (float, float) or None
-        The smallest and largest reference value of the models it was counted with
-        (a calibration over several model units: each model's own k); None: ``k`` only.
     """
 
     kind: str
@@ -144,27 +177,45 @@ class Curve:
     alarms: tuple[int, ...]
     k: float = 0.0
     decisions: int = 0
-    share: float = 1.0
-    k_range: tuple[float, float] | None = None
 
-    def holds(self, k: float) -> bool:
-        """Whether a CUSUM with reference value ``k`` (σ) is one this curve measured:
-        within the models' range of k, or 10 % of it."""
-        lo, hi = self.k_range or (self.k, self.k)
-        return lo / 1.1 <= k <= hi * 1.1
+
+@dataclass(frozen=True)
+class Setting:
+    """A detector's calibrated threshold for one requested rate.
+
+    Parameters
+    ----------
+    threshold : float
+        σ for a CUSUM, events for a count.
+    k : float
+        The CUSUM reference value to run with, σ (the model's, or a smaller grid value
+        where the model's cannot deliver the rate; 0 for counts).
+    note : str
+        Empty, or why the request cannot be honoured (within a factor 2): a warning.
+    info : str
+        Empty, or where the threshold comes from when its rate is not measured
+        (extrapolated, analytic, beyond the grid of k): no warning, but said.
+    """
+
+    threshold: float
+    k: float = 0.0
+    note: str = ""
+    info: str = ""
 
 
 @dataclass(frozen=True)
 class ThresholdCalibration:
-    """Measured false-alarm rates per detector and threshold, on healthy hours.
+    """Measured false-alarm rates per detector, reference value and threshold.
 
     Parameters
     ----------
     Ts : float
-        Sample time of the model it was measured with, s.
+        Sample time of the models it was measured with, s.
     hours : float
-        Healthy record hours behind every curve.
+        Healthy record hours behind every curve (records × models).
     curves : dict of str to Curve
+        A count test's curve under its name; a CUSUM's under ``"<name>@<k>"``, one per
+        reference value of :data:`K_GRID`.
     origin : str
         How it was measured (command, units, seeds).
     """
@@ -174,22 +225,63 @@ class ThresholdCalibration:
     curves: dict
     origin: str = ""
 
-    def rates(self, name: str) -> np.ndarray:
-        """Measured alarms per hour of ``name`` at each threshold (non-increasing)."""
-        a = np.asarray(self.curves[name].alarms, dtype=float)
+    # -- one curve --------------------------------------------------------------------------
+    def rates(self, key: str) -> np.ndarray:
+        """Measured alarms per hour of curve ``key`` at each threshold (non-increasing)."""
+        a = np.asarray(self.curves[key].alarms, dtype=float)
         return np.minimum.accumulate(a) / self.hours
 
-    def max_per_hour(self, name: str) -> float:
-        """The most false alarms per hour the detector raised at its lowest threshold."""
-        return float(self.rates(name)[0])
+    def max_per_hour(self, key: str) -> float:
+        """The most false alarms per hour curve ``key`` raised at its lowest threshold."""
+        return float(self.rates(key)[0])
 
-    def setting(self, name: str, per_hour: float, analytic: float) -> tuple[float, float, str]:
-        """Threshold and tolerance share whose measured false-alarm rate is ``per_hour``.
+    def family(self, name: str) -> list[tuple[float, str]]:
+        """A CUSUM detector's curves as (k, key), k increasing (empty: none)."""
+        return sorted((c.k, key) for key, c in self.curves.items() if key.split("@")[0] == name)
 
-        A rate the detector's full tolerance between units cannot deliver is sought
-        with less of that tolerance in the CUSUM's reference value (the largest share
-        that reaches it): asking for more false alarms buys sensitivity to the spread
-        between units.
+    def covers(self, name: str) -> bool:
+        """Whether the calibration measured detector ``name``."""
+        return name in self.curves or bool(self.family(name))
+
+    def at_k(self, name: str, k: float) -> tuple[np.ndarray, np.ndarray, str]:
+        """A CUSUM's curve at reference value ``k``: interpolated log-linearly in k
+        between the two grid curves around it.
+
+        Parameters
+        ----------
+        name : str
+            Detector.
+        k : float
+            Reference value, σ.
+
+        Returns
+        -------
+        thresholds : numpy.ndarray
+        alarms : numpy.ndarray
+            Alarms over the calibration's hours (not integers between grid values).
+        where : str
+            Which grid curves it rests on, in words.
+        """
+        fam = self.family(name)
+        ks = [kk for kk, _ in fam]
+        j = int(np.searchsorted(ks, k))
+        if j < len(ks) and math.isclose(ks[j], k, rel_tol=1e-9):
+            c = self.curves[fam[j][1]]
+            return np.array(c.thresholds), np.array(c.alarms, dtype=float), f"k = {k:.3g} σ"
+        if j == 0 or j == len(ks):
+            raise ValueError(f"{name}: k = {k:g} outside the grid {ks[0]:g}–{ks[-1]:g}")
+        lo, hi = self.curves[fam[j - 1][1]], self.curves[fam[j][1]]
+        n = max(len(lo.thresholds), len(hi.thresholds))
+        h = np.array(lo.thresholds if len(lo.thresholds) == n else hi.thresholds)
+        a_lo, a_hi = (np.pad(np.array(c.alarms, float), (0, n - len(c.alarms))) for c in (lo, hi))
+        w = (k - lo.k) / (hi.k - lo.k)
+        with np.errstate(divide="ignore"):
+            a = np.exp((1 - w) * np.log(a_lo) + w * np.log(a_hi))
+        return h, a, f"k = {k:.3g} σ, between the curves at {lo.k:g} and {hi.k:g} σ"
+
+    # -- a requested rate -------------------------------------------------------------------
+    def setting(self, name: str, per_hour: float, analytic: float, k: float = 0.0) -> Setting:
+        """The threshold (and reference value) whose measured false-alarm rate is ``per_hour``.
 
         Parameters
         ----------
@@ -199,96 +291,132 @@ class ThresholdCalibration:
             Requested false alarms per hour.
         analytic : float
             The analytic threshold, used where the calibration cannot say.
+        k : float
+            The detector's reference value for this model, σ (CUSUMs).
 
         Returns
         -------
-        threshold : float
-        share : float
-            Share of the tolerance to keep in the reference value (1: all).
-        note : str
-            Empty, or why the request cannot be honoured (within a factor 2).
+        Setting
         """
-        h, note = self.threshold(name, per_hour, analytic)
-        if not note or self.curves[name].kind != "cusum" or per_hour < self.max_per_hour(name):
-            return h, 1.0, note
-        scaled = sorted(
-            (c.share, key) for key, c in self.curves.items() if key.startswith(f"{name}@")
-        )
-        for share, key in reversed(scaled):
-            if self.max_per_hour(key) >= per_hour or share == scaled[0][0]:
-                h, note = self.threshold(key, per_hour, 0.0)
-                within = f"{name}: with {share:.0%} of the tolerance between units,"
-                return h, share, note.replace(f"{key}:", within, 1)
-        return h, 1.0, note
+        if name in self.curves and self.curves[name].kind == "count":
+            c = self.curves[name]
+            return self._count(name, np.array(c.thresholds), self.rates(name), per_hour, analytic)
+        ks = [kk for kk, _ in self.family(name)]
+        if k > ks[-1] * 1.0001:  # fewer alarms than at the last k: the rate is a bound
+            s = self.setting(name, per_hour, analytic, ks[-1])
+            info = (
+                f"{name}: this model's k = {k:.3g} σ lies beyond the calibration's largest "
+                f"({ks[-1]:g} σ): the threshold measured there, whose rate ({per_hour:g}/h) is "
+                "an upper bound for this model"
+            )
+            return Setting(s.threshold, k, s.note, "; ".join(filter(None, (info, s.info))))
+        if k < ks[0] * 0.9999:
+            info = (
+                f"{name}: this model's k = {k:.3g} σ lies below the calibration's smallest "
+                f"({ks[0]:g} σ): the analytic threshold, whose rate is not measured"
+            )
+            return Setting(analytic, k, "", info)
+        h, a, where = self.at_k(name, k)
+        rate = np.minimum.accumulate(a) / self.hours
+        unresolvable = per_hour * self.hours < RESOLVED
+        if per_hour <= rate[0] or unresolvable or k <= ks[0] * 1.0001:
+            return self._cusum(name, h, rate, per_hour, analytic, k, where)
+        # the model's tolerance between units cannot deliver the rate at any threshold: the
+        # largest grid k below it that can (or the smallest: the textbook 0.5 σ)
+        below = [kk for kk in ks if kk < k]
+        pick = next((kk for kk in reversed(below) if self._max_at(name, kk) >= per_hour), ks[0])
+        h, a, where = self.at_k(name, pick)
+        rate = np.minimum.accumulate(a) / self.hours
+        return self._cusum(name, h, rate, per_hour, analytic, pick, where)
 
-    def threshold(self, name: str, per_hour: float, analytic: float) -> tuple[float, str]:
-        """The threshold whose measured false-alarm rate is ``per_hour``.
+    def threshold(self, name: str, per_hour: float, analytic: float, k: float = 0.0):
+        """``setting``'s threshold and warning note (see :meth:`setting`).
 
         Parameters
         ----------
         name : str
-            Detector.
         per_hour : float
-            Requested false alarms per hour.
         analytic : float
-            The analytic threshold, used where the calibration cannot say.
+        k : float
 
         Returns
         -------
         threshold : float
         note : str
-            Empty, or why the request cannot be honoured (within a factor 2).
         """
-        c = self.curves[name]
-        h = np.asarray(c.thresholds, dtype=float)
-        rate = self.rates(name)
+        s = self.setting(name, per_hour, analytic, k)
+        return s.threshold, s.note
+
+    def _max_at(self, name: str, k: float) -> float:
+        return float(self.at_k(name, k)[1][0]) / self.hours
+
+    def _cusum(self, name, h, rate, per_hour, analytic, k, where) -> Setting:
         alarms = rate * self.hours
         resolvable = per_hour * self.hours >= RESOLVED
+        base = f"{name} ({where}, {self.hours:.1f} h of healthy records)"
         if rate[0] == 0.0:
             note = (
-                f"{name}: no false alarm at any threshold in {self.hours:.1f} h of healthy "
-                f"records of other units (a healthy unit stays within its tolerance): it "
-                f"cannot deliver {per_hour:g}/h"
+                f"{base}: no false alarm at any threshold (a healthy unit stays within its "
+                f"tolerance): it cannot deliver {per_hour:g}/h"
             )
-            return analytic, note if resolvable else ""
+            info = (
+                f"{base}: no false alarm at any threshold: the analytic one, its rate not measured"
+            )
+            return Setting(analytic, k, note if resolvable else "", "" if resolvable else info)
         if per_hour >= rate[0]:
-            short = per_hour > 2 * rate[0]
             note = (
-                f"{name}: at most {rate[0]:.3g} false alarms per hour at its lowest threshold "
-                f"(measured over {self.hours:.1f} h of healthy records): it cannot deliver "
-                f"{per_hour:g}/h"
+                f"{base}: at most {rate[0]:.3g} false alarms per hour at its lowest threshold: "
+                f"it cannot deliver {per_hour:g}/h"
             )
-            return float(h[0]), note if short else ""
-        if c.kind == "count":
-            return self._count(name, h, rate, per_hour, analytic, resolvable)
+            return Setting(float(h[0]), k, note if per_hour > 2 * rate[0] else "")
         ok = alarms >= RESOLVED
         if not ok.any():  # too few alarms to measure a tail: the analytic threshold
-            return analytic, ""
+            info = (
+                f"{base}: fewer than {RESOLVED} alarms at any threshold: the analytic one, "
+                "its rate not measured"
+            )
+            return Setting(analytic, k, "", info)
         if per_hour >= rate[ok].min():
             j = int(np.nonzero(ok & (rate <= per_hour))[0][0])  # first at or below
             lo, hi = rate[j - 1], rate[j]
             x = (math.log(lo) - math.log(per_hour)) / (math.log(lo) - math.log(hi))
-            return float(h[j - 1] + x * (h[j] - h[j - 1])), ""
+            return Setting(float(h[j - 1] + x * (h[j] - h[j - 1])), k)
         # unmeasured: the larger of the extrapolated and the analytic threshold (a lower
         # one would trade the isolation of other faults for a rate nobody has verified)
-        return max(self._tail(name, h, rate, ok, per_hour), analytic, 0.0), ""
+        tail = self._tail(h, rate, ok, per_hour, k)
+        value = max(tail, analytic, 0.0)
+        last = float(rate[ok].min())
+        how = "extrapolated from the measured tail" if value == tail else "the analytic one"
+        info = (
+            f"{base}: {per_hour:g}/h is below the rates measured (down to {last:.3g}/h): "
+            f"threshold {value:.3g} σ, {how} (the larger of the two), its rate not verified"
+        )
+        return Setting(value, k, "", info)
 
-    def _tail(self, name, h, rate, ok, per_hour) -> float:
+    def _tail(self, h, rate, ok, per_hour, k) -> float:
         """Below the resolved rates: the measured log-rate slope, between half and all of
         Gaussian's 2k. A flatter measured curve is a few records' excursions above every
         threshold measured, which says nothing of the tail; extrapolated, it put
         friction_change's default threshold at 6.6e15 (the detector off)."""
         last = int(np.nonzero(ok)[0][-1])
         fit = ok & (rate * self.hours <= 10 * RESOLVED)
-        slope = 2 * max(self.curves[name].k, 0.5)
+        slope = 2 * max(k, 0.5)
         if fit.sum() >= 3:
             s = -np.polyfit(h[fit], np.log(rate[fit]), 1)[0]
             slope = min(slope, max(float(s), slope / 2))
         return float(h[last] + math.log(rate[last] / per_hour) / slope)
 
-    def _count(self, name, n, rate, per_hour, analytic, resolvable) -> tuple[float, str]:
+    def _count(self, name, n, rate, per_hour, analytic) -> Setting:
         """An integer threshold: the one whose measured rate is nearest the request within a
         factor 2, else the smallest whose rate is at most the request."""
+        resolvable = per_hour * self.hours >= RESOLVED
+        if per_hour >= rate[0] and rate[0] > 0:
+            note = (
+                f"{name}: at most {rate[0]:.3g} false alarms per hour at its lowest threshold "
+                f"(measured over {self.hours:.1f} h of healthy records): it cannot deliver "
+                f"{per_hour:g}/h"
+            )
+            return Setting(float(n[0]), 0.0, note if per_hour > 2 * rate[0] else "")
         near = np.nonzero((rate >= per_hour / 2) & (rate <= 2 * per_hour))[0]
         if near.size:
             j = int(near[np.argmin(np.abs(np.log(rate[near] / per_hour)))])
@@ -297,17 +425,24 @@ class ThresholdCalibration:
         else:
             j = len(n) - 1
         value = float(n[j])
+        info = ""
         if rate[j] * self.hours < RESOLVED:  # not measured: the analytic one if higher
             value = max(value, float(analytic))
+            info = (
+                f"{name}: {per_hour:g}/h is below the rates {self.hours:.1f} h of healthy "
+                f"records resolve: {value:g}, the larger of the first threshold without "
+                f"{RESOLVED} alarms ({n[j]:g}) and the analytic one, its rate not verified"
+            )
         if not resolvable or rate[j] >= per_hour / 2:
-            return value, ""
+            return Setting(value, 0.0, "", info)
+        # the note below says what is delivered: the info would repeat it
         steps = ", ".join(f"{n[i]:g}: {rate[i]:.3g}/h" for i in range(max(j - 1, 0), j + 1))
         note = (
             f"{name}: its thresholds step in whole events ({steps}, measured over "
             f"{self.hours:.1f} h of healthy records): {per_hour:g}/h is not within a factor 2 "
             f"of any; the lower rate is delivered"
         )
-        return value, note
+        return Setting(value, 0.0, note)
 
     # -- file ------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -326,8 +461,6 @@ class ThresholdCalibration:
                     "kind": c.kind,
                     "k": c.k,
                     "decisions": c.decisions,
-                    "share": c.share,
-                    **({} if c.k_range is None else {"k_range": list(c.k_range)}),
                     "thresholds": list(c.thresholds[: end(c)]),
                     "alarms": list(c.alarms[: end(c)]),
                 }
@@ -337,6 +470,21 @@ class ThresholdCalibration:
 
     @classmethod
     def from_dict(cls, d: dict) -> ThresholdCalibration:
+        """A calibration from its file's content (format 2; format 1 is refused).
+
+        Parameters
+        ----------
+        d : dict
+
+        Returns
+        -------
+        ThresholdCalibration
+        """
+        if d.get("format") in OLD_FORMATS:
+            raise FileFormatError(
+                f"threshold calibration in the old format {d['format']!r} (one reference value "
+                f"per detector): re-measure it as {FORMAT} with bench/calibrate_thresholds.py"
+            )
         if d.get("format") != FORMAT:
             raise FileFormatError(f"not a threshold calibration ({FORMAT}): {d.get('format')!r}")
         try:
@@ -347,15 +495,15 @@ class ThresholdCalibration:
                     tuple(int(x) for x in c["alarms"]),
                     float(c["k"]),
                     int(c["decisions"]),
-                    float(c.get("share", 1.0)),
-                    None if c.get("k_range") is None else _pair(c["k_range"]),
                 )
                 for name, c in d["curves"].items()
             }
             out = cls(float(d["Ts"]), float(d["hours"]), curves, str(d.get("origin", "")))
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(f"threshold calibration: bad or missing field ({exc})") from exc
-        if not out.hours > 0 or any(len(c.thresholds) != len(c.alarms) for c in curves.values()):
+        if not out.hours > 0 or any(
+            len(c.thresholds) != len(c.alarms) or not c.alarms for c in curves.values()
+        ):
             raise FileFormatError("threshold calibration: no hours, or curves of unequal length")
         return out
 
@@ -399,3 +547,33 @@ class ThresholdCalibration:
         os.chmod(tmp, 0o644)
         os.replace(tmp, p)
         return p
+
+
+def cusum_curves(
+    name: str, traces: list[np.ndarray], sides: str, ks=K_GRID, grid=H_GRID
+) -> dict[str, Curve]:
+    """One CUSUM detector's curves over the grid of reference values.
+
+    Parameters
+    ----------
+    name : str
+        Detector.
+    traces : list of numpy.ndarray
+        Standardised block means, one array per record and model (each starts the
+        CUSUM at zero).
+    sides : {'up', 'down', 'both'}
+    ks, grid : sequence of float
+        Reference values and thresholds, σ.
+
+    Returns
+    -------
+    dict of str to Curve
+        Keyed ``"<name>@<k>"``.
+    """
+    counts = cusum_alarms_k(traces, ks, sides, grid)
+    n = int(sum(z.size for z in traces))
+    h = tuple(float(x) for x in grid)
+    return {
+        f"{name}@{k:g}": Curve("cusum", h, tuple(int(a) for a in row), float(k), n)
+        for k, row in zip(ks, counts, strict=True)
+    }

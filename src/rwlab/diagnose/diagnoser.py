@@ -83,16 +83,14 @@ import numpy as np
 from scipy.stats import poisson
 
 from rwlab.data import IOData
-from rwlab.diagnose.calibration import H_GRID as _H_GRID
 from rwlab.diagnose.calibration import N_MAX as _N_MAX
 from rwlab.diagnose.calibration import (
     RESOLVED,
     ThresholdCalibration,
     count_alarms,
-    cusum_alarms,
+    cusum_curves,
     run_alarms,
 )
-from rwlab.diagnose.calibration import SHARES as _SHARES
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, isolate
@@ -704,39 +702,41 @@ class Diagnoser:
 
     def _calibrated(self, name: str, analytic: float, det=None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
-        calibration holds this detector at this sample time (and CUSUM reference value);
-        a CUSUM ``det`` gets the tolerance share that rate needs."""
+        calibration holds this detector at this sample time: a CUSUM's interpolated at its
+        reference value, which is lowered where only a smaller one delivers that rate. Where
+        the rate is not measured (extrapolated, analytic) a note says so; where it cannot be
+        delivered, a warning too."""
         cal = self.calibration
-        curve = None if cal is None else cal.curves.get(name)
-        k = 0.0 if det is None else det.k
-        if cal is None or curve is None:
+        if cal is None or not cal.covers(name):
             return analytic
-        same_ts = math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
-        if not same_ts or (curve.kind == "cusum" and not curve.holds(k)):
-            if self.false_alarms_per_hour * cal.hours < RESOLVED:
-                return analytic  # a rate no calibration could resolve: nothing lost
-            value, note = (
-                analytic,
-                (
-                    f"{name}: the calibration was measured at Ts = {cal.Ts:g} s with reference "
-                    f"value k = {curve.k:.3g} σ, this model's are {self.Ts:g} s and {k:.3g} σ: the "
-                    "analytic threshold, whose rate is not measured "
-                    "(bench/calibrate_thresholds.py measures one for this model)"
-                ),
+        per_hour = self.false_alarms_per_hour
+        if not math.isclose(cal.Ts, self.Ts, rel_tol=1e-6):
+            note = (
+                f"{name}: the calibration was measured at Ts = {cal.Ts:g} s, this model's is "
+                f"{self.Ts:g} s: the analytic threshold, whose rate is not measured "
+                "(bench/calibrate_thresholds.py measures one at this sample time)"
             )
-        else:
-            value, share, note = cal.setting(name, self.false_alarms_per_hour, analytic)
-            if share < 1.0 and det is not None:
-                det.k = CUSUM_K + share * (det.k - CUSUM_K)
-                self.notes.append(
-                    f"{name}: {self.false_alarms_per_hour:g}/h needs the tolerance between "
-                    f"units cut to {share:.0%} (k = {det.k:.3g} σ): a healthy unit farther "
-                    "from the reference than that alarms"
-                )
-        if note:
-            self.notes.append(note)
-            warnings.warn(note, RwlabWarning, stacklevel=4)
-        return value
+            self._note(note, warn=per_hour * cal.hours >= RESOLVED)
+            return analytic
+        k = 0.0 if det is None else det.k
+        s = cal.setting(name, per_hour, analytic, k)
+        if det is not None and s.k < k:
+            det.k = s.k
+            self.notes.append(
+                f"{name}: {per_hour:g}/h needs the tolerance between units cut to "
+                f"{(s.k - CUSUM_K) / (k - CUSUM_K):.0%} (k = {det.k:.3g} σ): a healthy unit "
+                "farther from the reference than that alarms"
+            )
+        if s.info:
+            self._note(s.info, warn=False)
+        if s.note:
+            self._note(s.note, warn=True)
+        return s.threshold
+
+    def _note(self, note: str, warn: bool) -> None:
+        self.notes.append(note)
+        if warn:
+            warnings.warn(note, RwlabWarning, stacklevel=5)
 
     # -- one sample ----------------------------------------------------------------------
     def update(
@@ -1219,8 +1219,10 @@ def measure_calibration(
     more_models : sequence of (IdentifiedWheel, HealthyReference)
         Models of other units (same Ts): each runs over every record too, so the
         rates are those of a model from any of these units (the user identifies on
-        one unit and diagnoses others), and each CUSUM's alarms are counted with
-        that model's own reference value (``Curve.k_range`` spans them).
+        one unit and diagnoses others); each CUSUM's standardised block means of
+        every model are counted over the grid of reference values
+        (:data:`~rwlab.diagnose.calibration.K_GRID`), so a model of any unit finds
+        its k between two curves.
 
     Returns
     -------
@@ -1236,22 +1238,11 @@ def measure_calibration(
     per_model = [_model_traces(records, w, ref) for w, ref in models]
     hours = len(models) * sum(data.N * data.Ts for data in records) / 3600
     curves = {}
-    for name, (k0, sides) in per_model[0][1].items():
-        # no tolerance between units in the reference value (offset): nothing to share
-        for share in (1.0, *_SHARES) if k0 > CUSUM_K else (1.0,):
-            ks = [CUSUM_K + share * (m[1][name][0] - CUSUM_K) for m in per_model]
-            alarms = sum(
-                cusum_alarms(m[0][name], k, sides) for m, k in zip(per_model, ks, strict=True)
-            )
-            curves[name if share == 1.0 else f"{name}@{share:g}"] = _Curve(
-                "cusum",
-                tuple(float(h) for h in _H_GRID),
-                tuple(int(a) for a in alarms),
-                float(np.median(ks)),
-                int(sum(z.size for m in per_model for z in m[0][name])),
-                share,
-                (float(min(ks)), float(max(ks))),
-            )
+    for name, (_, sides) in per_model[0][1].items():
+        # every model's block means through every k of the grid: a model of any unit
+        # (any k) finds its rate between two curves
+        traces = [z for m in per_model for z in m[0][name]]
+        curves.update(cusum_curves(name, traces, sides))
     n = tuple(float(x) for x in range(1, _N_MAX + 1))
     runs = [int(r) for m in per_model for rec in m[0]["stuck"] for r in rec]
     moving = sum(m[2] for m in per_model)
