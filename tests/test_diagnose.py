@@ -301,9 +301,9 @@ def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
     k = Diagnoser(wheel, reference, calibration=False)._detectors["friction"].k
     never = Curve("cusum", (0.0, 5.0), (0, 0), k, 560)  # no alarm in 8 h at any threshold
     cal = ThresholdCalibration(wheel.Ts, 8.0, {f"friction@{k}": never})
-    with pytest.warns(RwlabWarning, match="friction .*cannot deliver 100/h"):
+    with pytest.warns(RwlabWarning, match="friction: .*cannot deliver 100/h"):
         d = Diagnoser(wheel, reference, false_alarms_per_hour=100.0, calibration=cal)
-    assert any(n.startswith("friction ") for n in d.notes)
+    assert any(n.startswith("friction:") for n in d.notes)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the default rate is below what hours can resolve:
         # no warning, but each threshold whose rate is not measured says so

@@ -353,26 +353,24 @@ class ThresholdCalibration:
     def _cusum(self, name, h, rate, per_hour, analytic, k, where) -> Setting:
         alarms = rate * self.hours
         resolvable = per_hour * self.hours >= RESOLVED
-        base = f"{name} ({where}, {self.hours:.1f} h of healthy records)"
+        base = f"{name}: at {where}, over {self.hours:.1f} h of healthy records,"
         if rate[0] == 0.0:
             note = (
-                f"{base}: no false alarm at any threshold (a healthy unit stays within its "
+                f"{base} no false alarm at any threshold (a healthy unit stays within its "
                 f"tolerance): it cannot deliver {per_hour:g}/h"
             )
-            info = (
-                f"{base}: no false alarm at any threshold: the analytic one, its rate not measured"
-            )
+            info = f"{base} no false alarm at any threshold: the analytic threshold, not measured"
             return Setting(analytic, k, note if resolvable else "", "" if resolvable else info)
         if per_hour >= rate[0]:
             note = (
-                f"{base}: at most {rate[0]:.3g} false alarms per hour at its lowest threshold: "
+                f"{base} at most {rate[0]:.3g} false alarms per hour at its lowest threshold: "
                 f"it cannot deliver {per_hour:g}/h"
             )
             return Setting(float(h[0]), k, note if per_hour > 2 * rate[0] else "")
         ok = alarms >= RESOLVED
         if not ok.any():  # too few alarms to measure a tail: the analytic threshold
             info = (
-                f"{base}: fewer than {RESOLVED} alarms at any threshold: the analytic one, "
+                f"{base} fewer than {RESOLVED} alarms at any threshold: the analytic threshold, "
                 "its rate not measured"
             )
             return Setting(analytic, k, "", info)
@@ -388,7 +386,7 @@ class ThresholdCalibration:
         last = float(rate[ok].min())
         how = "extrapolated from the measured tail" if value == tail else "the analytic one"
         info = (
-            f"{base}: {per_hour:g}/h is below the rates measured (down to {last:.3g}/h): "
+            f"{base} {per_hour:g}/h is below the rates measured (down to {last:.3g}/h): "
             f"threshold {value:.3g} σ, {how} (the larger of the two), its rate not verified"
         )
         return Setting(value, k, "", info)
