@@ -12,11 +12,12 @@ records are the tune set's
 (``bench_diagnose.records('tune')``: units 1–6 and 101–136, 20 minutes each,
 PRBS, chirp, multisine and steps in turn), never the eval sets' units (21–44, 201–224),
 on which ``bench_diagnose.py --set eval`` judges the thresholds. Each detector
-runs restarted after every alarm over every record; a CUSUM's block means of every
-model are counted over the grid of reference values (``calibration.K_GRID``), so a
-model of any unit is calibrated at its own k; the counts per threshold
+runs restarted after every alarm over every record; each CUSUM with each model's own
+reference value k, over shares of its tolerance between units (``calibration.SHARES``:
+what carries to a model of another unit, whatever its k); the counts per threshold
 go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
-~10 s per record to make (cached in ``--cache``), ~1 s to count.
+~10 s per record to make (cached in ``--cache``); 80 s to count with 5 models
+(records cached).
 ``--offset-sigma`` also prints the σ of the offset test's window intercepts on
 these records (the constant ``OFFSET_SIGMA_RPM`` of rwlab.diagnose.diagnoser).
 """

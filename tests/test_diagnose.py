@@ -300,7 +300,7 @@ def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
     reference = HealthyReference.from_model_file(model_file)
     k = Diagnoser(wheel, reference, calibration=False)._detectors["friction"].k
     never = Curve("cusum", (0.0, 5.0), (0, 0), k, 560)  # no alarm in 8 h at any threshold
-    cal = ThresholdCalibration(wheel.Ts, 8.0, {f"friction@{k}": never})
+    cal = ThresholdCalibration(wheel.Ts, 8.0, {"friction@1": never})
     with pytest.warns(RwlabWarning, match="friction: .*cannot deliver 100/h"):
         d = Diagnoser(wheel, reference, false_alarms_per_hour=100.0, calibration=cal)
     assert any(n.startswith("friction:") for n in d.notes)
@@ -326,13 +326,13 @@ def test_a_calibration_over_two_model_units_counts_each_with_its_own_reference(
     tmp_path, model_file
 ):
     """Two references (the second as from a unit whose friction test scatters 30 % more)
-    over one healthy record: hours count records × models, each CUSUM is counted over the
-    whole grid of k (the two models' own k differ), and every curve's alarms are those of
-    each model counted alone."""
+    over one healthy record: hours count records × models, each CUSUM is counted with each
+    model's own k (they differ) over shares of its tolerance, and every curve's alarms are
+    those of each model counted alone."""
     from dataclasses import replace
 
     from rwlab.diagnose import Diagnoser, measure_calibration
-    from rwlab.diagnose.calibration import K_GRID
+    from rwlab.diagnose.calibration import SHARES
     from rwlab.wheel import IdentifiedWheel
 
     wheel = IdentifiedWheel.from_json(model_file)
@@ -347,8 +347,9 @@ def test_a_calibration_over_two_model_units_counts_each_with_its_own_reference(
     b = measure_calibration([data], wheel, ref_b)
     assert both.hours == pytest.approx(2 * data.N * data.Ts / 3600)
     k = [Diagnoser(wheel, r, calibration=False)._detectors["friction"].k for r in (ref_a, ref_b)]
-    assert min(k) < max(k)  # the second model's k is its own; the curves hold every k
-    assert {c.k for key, c in both.curves.items() if key.startswith("friction@")} == set(K_GRID)
+    assert min(k) < max(k)  # each model counted at its own k, over shares of its tolerance
+    assert both.curves["friction@1"].k == pytest.approx(np.median(k))
+    assert {c.share for key, c in both.curves.items() if key.startswith("friction@")} == set(SHARES)
     for name, curve in both.curves.items():
         total = np.add(a.curves[name].alarms, b.curves[name].alarms)
         assert curve.alarms == tuple(total), name

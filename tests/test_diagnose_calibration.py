@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rwlab.diagnose.calibration import (
-    K_GRID,
     RESOLVED,
+    SHARES,
     Curve,
     ThresholdCalibration,
     count_alarms,
@@ -82,7 +82,7 @@ def test_count_alarms_counts_blocks_at_or_above_each_threshold():
 
 def _gaussian_calibration(rng, blocks_per_hour=100.0, hours=1000.0):
     z = rng.standard_normal(int(blocks_per_hour * hours))
-    return ThresholdCalibration(0.5, hours, cusum_curves("speed", [z], "both", ks=(0.5, 1.0)))
+    return ThresholdCalibration(0.5, hours, cusum_curves("speed", [([z], 0.5)], "both"))
 
 
 def test_on_gaussian_block_means_the_measured_threshold_is_siegmunds():
@@ -113,25 +113,27 @@ def _ar1(rng, n, phi):
 
 
 @pytest.mark.parametrize("phi", [0.0, 0.5])
-def test_a_reference_value_between_the_grids_gets_the_rate_asked_on_held_out_data(phi):
-    """Counted at k = 0.5, 1 and 1.5 only, a model whose k is 1.2 σ (between two curves)
-    gets thresholds whose rate, simulated independently on a held-out stream, is the
-    requested one: on Gaussian block means and on AR(1) ones (φ = 0.5: correlated block
-    means, whose rate no i.i.d. formula gives)."""
+def test_a_model_whose_k_no_calibration_model_had_gets_the_rate_asked(phi):
+    """A model's test compares the other units with its reference's level μ, against an
+    absolute bound B (k = 0.5 + B − μ, as the motor test's datasheet headroom): models
+    whose reference sits elsewhere in the spread have another k. Counted with three
+    models (k = 2.9–3.5), a model whose reference sits low (k = 5, outside) gets
+    thresholds whose rate, simulated independently on held-out units, is the one asked:
+    on Gaussian block means and on AR(1) ones (φ = 0.5, whose rate no i.i.d. formula
+    gives)."""
     rng = np.random.default_rng(11)
-    blocks_per_hour, hours, k = 100.0, 800.0, 1.2
-    train = _ar1(rng, int(blocks_per_hour * hours), phi)
-    cal = ThresholdCalibration(0.5, hours, cusum_curves("motor", [train], "up", ks=(0.5, 1.0, 1.5)))
-    fresh = _ar1(rng, int(blocks_per_hour * hours), phi)
+    per_h, hours, bound = 100.0, 200.0, 0.5
+    n = int(per_h * hours)
+    models = [(0.0, 0.5 + bound), (0.3, 0.5 + bound - 0.3), (0.6, 0.5 + bound - 0.6)]
+    per_model = [([_ar1(rng, n, phi) - mu], k) for mu, k in models]
+    cal = ThresholdCalibration(0.5, 3 * hours, cusum_curves("motor", per_model, "up"))
+    mu, k = -1.5, 0.5 + bound + 1.5
+    fresh = _ar1(rng, 2 * n, phi) - mu  # held-out units, through the new model's reference
     for per_hour in (1.0, 10.0):
         s = cal.setting("motor", per_hour, analytic=99.0, k=k)
-        assert (s.k, s.note, s.info) == (k, "", "")
-        measured = _direct(fresh, k, s.threshold, "up") / hours
+        assert (s.k, s.share, s.note, s.info) == (k, 1.0, "", "")
+        measured = _direct(fresh, k, s.threshold, "up") / (2 * hours)
         assert 0.75 * per_hour <= measured <= 1.33 * per_hour, (per_hour, measured)
-    # the curve nearest below (k = 1) would have given too many alarms: interpolation
-    # in k matters
-    h1 = cal.setting("motor", 1.0, analytic=99.0, k=1.0).threshold
-    assert _direct(fresh, k, h1, "up") / hours < 0.75
 
 
 def test_unresolved_rates_keep_the_higher_threshold_and_say_so():
@@ -149,9 +151,9 @@ def test_unresolved_rates_keep_the_higher_threshold_and_say_so():
 def test_a_rate_a_detector_cannot_deliver_is_said():
     grid = (0.0, 1.0, 2.0)
     curves = {
-        "friction@0.5": Curve("cusum", grid, (0, 0, 0), 0.5, 500),
-        "friction@11.5": Curve("cusum", grid, (0, 0, 0), 11.5, 500),
-        "lag@6": Curve("cusum", grid, (12, 4, 1), 6.0, 800),
+        "friction@0": Curve("cusum", grid, (0, 0, 0), 0.5, 500, 0.0),
+        "friction@1": Curve("cusum", grid, (0, 0, 0), 11.5, 500, 1.0),
+        "lag@1": Curve("cusum", grid, (12, 4, 1), 6.0, 800),
         "dropout": Curve("count", (1.0, 2.0, 3.0), (33, 0, 0), 0.0, 2880),
     }
     cal = ThresholdCalibration(0.5, 8.0, curves)
@@ -167,34 +169,38 @@ def test_a_rate_a_detector_cannot_deliver_is_said():
     assert cal.threshold("dropout", 3.0, analytic=2.0)[0] == 1.0
 
 
-def test_a_model_beyond_the_grid_of_k_is_told_what_its_threshold_rests_on():
-    grid = (0.0, 1.0, 2.0)
-    curves = {f"lag@{k:g}": Curve("cusum", grid, (40, 20, 10), k, 800) for k in (1.0, 2.0)}
-    cal = ThresholdCalibration(0.5, 8.0, curves)
-    s = cal.setting("lag", 2.5, analytic=9.0, k=3.0)  # fewer alarms than at k = 2
-    assert s.k == 3.0 and s.threshold == pytest.approx(1.0) and "upper bound" in s.info
-    s = cal.setting("lag", 2.5, analytic=9.0, k=0.7)  # more alarms than measured
-    assert (s.threshold, s.k) == (9.0, 0.7) and "not measured" in s.info
-
-
-def test_calibration_file_round_trips_and_refuses_other_formats(tmp_path):
-    curve = Curve("cusum", (0.0, 1.0), (3, 1), 6.0, 9)
-    cal = ThresholdCalibration(0.5, 2.0, {"lag@6": curve}, "x")
+def test_calibration_file_round_trips_and_reads_the_first_format(tmp_path):
+    curve = Curve("cusum", (0.0, 1.0), (3, 1), 6.0, 9, 0.5)
+    cal = ThresholdCalibration(0.5, 2.0, {"lag@0.5": curve, "lag@1": Curve("cusum", (0.0,), (1,))})
     path = cal.save(tmp_path / "t.json")
     assert ThresholdCalibration.load(path) == cal
     assert not list(tmp_path.glob("*.partial"))
     path.write_text(json.dumps({**cal.to_dict(), "format": "other/1"}))
     with pytest.raises(FileFormatError, match="not a threshold calibration"):
         ThresholdCalibration.load(path)
-    # the first format held one k per detector: refused, with what re-measures it
-    path.write_text(json.dumps({**cal.to_dict(), "format": "rwlab.ThresholdCalibration/1"}))
-    with pytest.raises(FileFormatError, match=r"old format.*bench/calibrate_thresholds\.py"):
+    # the first format: the whole tolerance's curve under the plain name, a k range
+    old = {
+        "format": "rwlab.ThresholdCalibration/1",
+        "Ts": 0.5,
+        "hours": 2.0,
+        "curves": {
+            "lag": {"kind": "cusum", "k": 6.0, "decisions": 9, "share": 1.0,
+                    "k_range": [5.0, 7.0], "thresholds": [0.0, 1.0], "alarms": [3, 1]},
+            "stuck": {"kind": "count", "k": 0.0, "decisions": 9, "share": 1.0,
+                      "thresholds": [1.0, 2.0], "alarms": [2, 0]},
+        },
+    }  # fmt: skip
+    path.write_text(json.dumps(old))
+    read = ThresholdCalibration.load(path)
+    assert set(read.curves) == {"lag@1", "stuck"} and read.family("lag") == [(1.0, "lag@1")]
+    path.write_text(json.dumps({**old, "curves": {"lag": {"kind": "cusum"}}}))
+    with pytest.raises(FileFormatError, match="bad or missing field"):
         ThresholdCalibration.load(path)
     with pytest.raises(FileFormatError, match="cannot read"):
         ThresholdCalibration.load(tmp_path / "missing.json")
 
 
-def test_the_package_calibration_covers_every_detector_over_the_grid_of_k():
+def test_the_package_calibration_covers_every_detector_over_shares_of_its_tolerance():
     cal = ThresholdCalibration.load()
     assert {name.split("@")[0] for name in cal.curves} == {
         "friction",
@@ -210,31 +216,32 @@ def test_the_package_calibration_covers_every_detector_over_the_grid_of_k():
     }
     assert cal.hours >= 8.0 and "bench/calibrate_thresholds.py" in cal.origin
     for name in ("friction", "motor", "speed", "lag", "slew", "friction_change"):
-        assert [k for k, _ in cal.family(name)] == pytest.approx(K_GRID)
+        assert [s for s, _ in cal.family(name)] == sorted(SHARES)
+        assert cal.curves[f"{name}@0"].k == pytest.approx(0.5)  # no tolerance: textbook k
+    assert [s for s, _ in cal.family("offset")] == [1.0]  # no tolerance to share
     for name in cal.curves:
         rates = cal.rates(name)
         assert np.all(np.diff(rates) <= 0)
-    # more tolerance, fewer alarms: at every threshold the rate falls with k
+    # more tolerance, fewer alarms: at the lowest threshold the rate falls with the share
     for name in ("friction", "motor", "lag"):
-        fam = [cal.curves[key].alarms for _, key in cal.family(name)]
-        first = [a[0] for a in fam]
+        first = [cal.curves[key].alarms[0] for _, key in cal.family(name)]
         assert all(x >= y for x, y in itertools.pairwise(first)), name
 
 
-def test_a_rate_beyond_the_models_tolerance_is_sought_with_a_smaller_k():
+def test_a_rate_beyond_the_models_tolerance_is_sought_with_less_of_it():
     grid = (0.0, 1.0, 2.0)
     curves = {
-        "speed@12": Curve("cusum", grid, (0, 0, 0), 12.0, 600),
-        "speed@6.25": Curve("cusum", grid, (16, 8, 0), 6.25, 600),
-        "speed@0.5": Curve("cusum", grid, (400, 200, 100), 0.5, 600),
+        "speed@1": Curve("cusum", grid, (0, 0, 0), 12.0, 600, 1.0),
+        "speed@0.5": Curve("cusum", grid, (16, 8, 0), 6.25, 600, 0.5),
+        "speed@0": Curve("cusum", grid, (400, 200, 100), 0.5, 600, 0.0),
     }
     cal = ThresholdCalibration(0.5, 8.0, curves)
     s = cal.setting("speed", 1e-3, analytic=9.0, k=12.0)
     assert (s.threshold, s.k, s.note) == (9.0, 12.0, "")  # the default keeps the model's k
-    s = cal.setting("speed", 1.0, analytic=9.0, k=12.0)
-    assert (s.k, s.note) == (6.25, "") and s.threshold == pytest.approx(1.0)  # 8 in 8 h
+    s = cal.setting("speed", 1.0, analytic=9.0, k=10.0)  # this model's half: 5.25 σ
+    assert (s.k, s.share, s.note) == (5.25, 0.5, "") and s.threshold == pytest.approx(1.0)
     s = cal.setting("speed", 20.0, analytic=9.0, k=12.0)  # 25/h at h = 1, 12.5 at 2
-    assert s.k == 0.5 and 1.0 < s.threshold < 2.0 and s.note == ""
+    assert (s.k, s.share) == (0.5, 0.0) and 1.0 < s.threshold < 2.0 and s.note == ""
     assert cal.threshold("speed", 100.0, analytic=9.0, k=12.0) == (0.0, "")  # 50/h: x2
     s = cal.setting("speed", 200.0, analytic=9.0, k=12.0)
     assert (s.threshold, s.k) == (0.0, 0.5) and "cannot deliver 200/h" in s.note
@@ -247,7 +254,7 @@ def test_a_flat_measured_curve_does_not_extrapolate_to_an_endless_threshold():
     grid = tuple(0.1 * i for i in range(16))
     k = 2.8
     cal = ThresholdCalibration(
-        0.5, 14.0, {"fc@2.8": Curve("cusum", grid, (5,) * 15 + (0,), k, 135)}, "x"
+        0.5, 14.0, {"fc@1": Curve("cusum", grid, (5,) * 15 + (0,), k, 135)}, "x"
     )
     h, _ = cal.threshold("fc", 1e-3, analytic=0.0, k=k)
     rate_last = 5 / 14.0  # alarms per hour at the last measured threshold, 1.4

@@ -6,32 +6,39 @@ unit (their reference value holds the spread between units on purpose), so the
 analytic thresholds alarm far less often than asked. A
 :class:`ThresholdCalibration` instead holds, per detector, the false alarms it
 raised (restarted after each alarm) over a grid of thresholds, counted on hours
-of healthy records of units other than the identified ones.
+of healthy records of units other than the identified ones, with the models of
+several units.
 
-A CUSUM's rate depends on its reference value k as much as on its threshold, and
-k is the model's own (0.5 σ plus the tolerance between units over the model's σ:
-4.3 σ for one unit's friction test, 11.6 σ for another's). So each CUSUM is
-counted over a grid of k (:data:`K_GRID`), every model's standardised block
-means run through every k (the block means do not depend on k), and a model's k
-between two grid values gets the curve interpolated log-linearly in k (for
-Gaussian block means log ARL₀ is linear in k at a fixed threshold, up to a log
-term). A requested rate maps to the threshold whose measured rate it is
-(log-linear in the rate); below the rates the hours resolve (fewer than
-:data:`RESOLVED` alarms) the tail is extrapolated with the measured slope of
-log(rate), never steeper than the Gaussian's 2k, and the threshold is the larger
-of that and the analytic one: an unverified rate errs towards fewer alarms (the
-default 1e-3/h is such a rate), and the :class:`Setting` says so in its ``info``.
+A CUSUM's reference value k is the model's own: 0.5 σ plus the tolerance
+between units over the model's σ (4.3 σ for unit 587's friction test, 11.6 σ for
+unit 0's). What carries from one model to another is not k but the share of
+that tolerance kept in it: a reference unit's block means sit off the other
+units' by where it lies in the spread, and the tolerance is sized for that
+spread, so the CUSUM's increment z − k, not z, is alike between models. Each
+model is therefore counted at its own k over a grid of shares of its tolerance
+(:data:`SHARES`), a model of any unit takes the curve of its share (all of it,
+unless the rate asks for less), and no model's k is out of range. Counted
+instead at common values of k (every model's block means through one grid of
+k, interpolated at a new model's k), the rates did not carry: leaving each of
+the five tune models out in turn, 23 of 60 (detector, model, rate) cells came
+within a factor 2 at 1 and 10/h, against 33 of 60 by share (the motor test 2 of
+10 against 8 of 10).
 
-Where a detector cannot deliver a rate at the model's k (a healthy unit never
-leaves its tolerance band), the largest grid k below it that can is used
-(asking for more false alarms buys sensitivity to the spread between units);
-where none can, or no integer threshold gives a rate within a factor 2 (the run
-and count tests), the ``note`` says so and the
+A requested rate maps to the threshold whose measured rate it is (log-linear
+interpolation); below the rates the hours resolve (fewer than :data:`RESOLVED`
+alarms) the tail is extrapolated with the measured slope of log(rate), never
+steeper than the Gaussian's 2k, and the threshold is the larger of that and the
+analytic one: an unverified rate errs towards fewer alarms (the default 1e-3/h
+is such a rate), and the :class:`Setting` says so in its ``info``. Where a
+detector cannot deliver a rate with all of its tolerance, the largest share
+that can is used (asking for more false alarms buys sensitivity to the spread
+between units); where none can, or no integer threshold gives a rate within a
+factor 2 (the run and count tests), the ``note`` says so and the
 :class:`~rwlab.diagnose.Diagnoser` warns (:class:`~rwlab.errors.RwlabWarning`).
 
 The package's file ``thresholds.json`` (format ``rwlab.ThresholdCalibration/2``;
-format 1, one k per detector, is refused with the command that re-measures it)
-was measured by ``bench/calibrate_thresholds.py`` on the twin's tune units (its
+format 1, the same curves on a coarser grid of shares, is still read) was
+measured by ``bench/calibrate_thresholds.py`` on the twin's tune units (its
 ``origin`` field says how); it applies to RW90 models identified with the
 defaults at its sample time. The scan is hand-written: no library computes a
 restarted CUSUM's alarm count over a grid of thresholds.
@@ -52,14 +59,15 @@ from rwlab.errors import FileFormatError
 
 __all__ = [
     "FORMAT",
-    "K_GRID",
     "RESOLVED",
+    "SHARES",
     "Curve",
     "Setting",
     "ThresholdCalibration",
     "count_alarms",
     "cusum_alarms",
     "cusum_alarms_k",
+    "cusum_curves",
     "run_alarms",
 ]
 
@@ -75,13 +83,10 @@ H_GRID = tuple(  # CUSUM thresholds scanned, σ: finer where the requested rates
     )
 )
 N_MAX = 40  # run / count thresholds scanned
-# CUSUM reference values scanned, σ: 0.5 (no tolerance) to beyond the largest a model of
-# the tune units has (speed: 22.7 σ); about 15 % apart, so log-linear interpolation in k
-# is within a few per cent of the Gaussian's rate
-K_GRID = (
-    0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.3, 2.6, 3.0, 3.5, 4.0,
-    4.6, 5.3, 6.0, 7.0, 8.0, 9.2, 10.6, 12.2, 14.0, 16.0, 18.5, 21.0, 24.0, 28.0,
-)  # fmt: skip
+CUSUM_K = 0.5  # σ: a CUSUM's reference value without tolerance (the diagnoser's)
+# shares of the tolerance between units kept in a CUSUM's reference value, scanned for
+# rates the full tolerance cannot deliver (curves named "<detector>@<share>")
+SHARES = (1.0, 0.9, 0.75, 0.6, 0.5, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1, 0.05, 0.0)
 
 
 def cusum_alarms_k(zs: list[np.ndarray], ks, sides: str, grid=H_GRID) -> np.ndarray:
@@ -156,7 +161,7 @@ def count_alarms(counts: list[int], n_max: int = N_MAX) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Curve:
-    """One detector's measured false alarms over its thresholds, at one reference value.
+    """One detector's measured false alarms over its thresholds, at one share of its tolerance.
 
     Parameters
     ----------
@@ -167,9 +172,12 @@ class Curve:
     alarms : tuple of int
         Alarms raised over the calibration's hours at each threshold.
     k : float
-        The CUSUM's reference value (σ) it was counted with (0 for counts).
+        The median over the calibration's models of the CUSUM reference value (σ) it
+        was counted with (each model its own; 0 for counts).
     decisions : int
         Decisions (blocks or qualifying samples) behind the curve.
+    share : float
+        The share of each model's tolerance between units in its k (1: all of it).
     """
 
     kind: str
@@ -177,6 +185,7 @@ class Curve:
     alarms: tuple[int, ...]
     k: float = 0.0
     decisions: int = 0
+    share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -188,8 +197,10 @@ class Setting:
     threshold : float
         σ for a CUSUM, events for a count.
     k : float
-        The CUSUM reference value to run with, σ (the model's, or a smaller grid value
-        where the model's cannot deliver the rate; 0 for counts).
+        The CUSUM reference value to run with, σ (the model's, or less where the model's
+        cannot deliver the rate; 0 for counts).
+    share : float
+        The share of the model's tolerance between units kept in ``k``.
     note : str
         Empty, or why the request cannot be honoured (within a factor 2): a warning.
     info : str
@@ -201,6 +212,7 @@ class Setting:
     k: float = 0.0
     note: str = ""
     info: str = ""
+    share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -214,8 +226,8 @@ class ThresholdCalibration:
     hours : float
         Healthy record hours behind every curve (records × models).
     curves : dict of str to Curve
-        A count test's curve under its name; a CUSUM's under ``"<name>@<k>"``, one per
-        reference value of :data:`K_GRID`.
+        A count test's curve under its name; a CUSUM's under ``"<name>@<share>"``, one
+        per share of :data:`SHARES` (one, ``@1``, for a test without tolerance).
     origin : str
         How it was measured (command, units, seeds).
     """
@@ -236,51 +248,15 @@ class ThresholdCalibration:
         return float(self.rates(key)[0])
 
     def family(self, name: str) -> list[tuple[float, str]]:
-        """A CUSUM detector's curves as (k, key), k increasing (empty: none)."""
-        return sorted((c.k, key) for key, c in self.curves.items() if key.split("@")[0] == name)
+        """A CUSUM detector's curves as (share, key), share increasing (empty: none)."""
+        return sorted((c.share, key) for key, c in self.curves.items() if key.split("@")[0] == name)
 
     def covers(self, name: str) -> bool:
         """Whether the calibration measured detector ``name``."""
         return name in self.curves or bool(self.family(name))
 
-    def at_k(self, name: str, k: float) -> tuple[np.ndarray, np.ndarray, str]:
-        """A CUSUM's curve at reference value ``k``: interpolated log-linearly in k
-        between the two grid curves around it.
-
-        Parameters
-        ----------
-        name : str
-            Detector.
-        k : float
-            Reference value, σ.
-
-        Returns
-        -------
-        thresholds : numpy.ndarray
-        alarms : numpy.ndarray
-            Alarms over the calibration's hours (not integers between grid values).
-        where : str
-            Which grid curves it rests on, in words.
-        """
-        fam = self.family(name)
-        ks = [kk for kk, _ in fam]
-        j = int(np.searchsorted(ks, k))
-        if j < len(ks) and math.isclose(ks[j], k, rel_tol=1e-9):
-            c = self.curves[fam[j][1]]
-            return np.array(c.thresholds), np.array(c.alarms, dtype=float), f"k = {k:.3g} σ"
-        if j == 0 or j == len(ks):
-            raise ValueError(f"{name}: k = {k:g} outside the grid {ks[0]:g}–{ks[-1]:g}")
-        lo, hi = self.curves[fam[j - 1][1]], self.curves[fam[j][1]]
-        n = max(len(lo.thresholds), len(hi.thresholds))
-        h = np.array(lo.thresholds if len(lo.thresholds) == n else hi.thresholds)
-        a_lo, a_hi = (np.pad(np.array(c.alarms, float), (0, n - len(c.alarms))) for c in (lo, hi))
-        w = (k - lo.k) / (hi.k - lo.k)
-        with np.errstate(divide="ignore"):
-            a = np.exp((1 - w) * np.log(a_lo) + w * np.log(a_hi))
-        return h, a, f"k = {k:.3g} σ, between the curves at {lo.k:g} and {hi.k:g} σ"
-
     # -- a requested rate -------------------------------------------------------------------
-    def setting(self, name: str, per_hour: float, analytic: float, k: float = 0.0) -> Setting:
+    def setting(self, name: str, per_hour: float, analytic: float, k: float = 0.5) -> Setting:
         """The threshold (and reference value) whose measured false-alarm rate is ``per_hour``.
 
         Parameters
@@ -292,7 +268,8 @@ class ThresholdCalibration:
         analytic : float
             The analytic threshold, used where the calibration cannot say.
         k : float
-            The detector's reference value for this model, σ (CUSUMs).
+            The detector's reference value for this model, σ (CUSUMs): 0.5 σ plus its
+            whole tolerance between units.
 
         Returns
         -------
@@ -301,35 +278,20 @@ class ThresholdCalibration:
         if name in self.curves and self.curves[name].kind == "count":
             c = self.curves[name]
             return self._count(name, np.array(c.thresholds), self.rates(name), per_hour, analytic)
-        ks = [kk for kk, _ in self.family(name)]
-        if k > ks[-1] * 1.0001:  # fewer alarms than at the last k: the rate is a bound
-            s = self.setting(name, per_hour, analytic, ks[-1])
-            info = (
-                f"{name}: this model's k = {k:.3g} σ lies beyond the calibration's largest "
-                f"({ks[-1]:g} σ): the threshold measured there, whose rate ({per_hour:g}/h) is "
-                "an upper bound for this model"
-            )
-            return Setting(s.threshold, k, s.note, "; ".join(filter(None, (info, s.info))))
-        if k < ks[0] * 0.9999:
-            info = (
-                f"{name}: this model's k = {k:.3g} σ lies below the calibration's smallest "
-                f"({ks[0]:g} σ): the analytic threshold, whose rate is not measured"
-            )
-            return Setting(analytic, k, "", info)
-        h, a, where = self.at_k(name, k)
-        rate = np.minimum.accumulate(a) / self.hours
+        fam = self.family(name)
+        key = fam[-1][1]
+        rate0 = self.max_per_hour(key)
         unresolvable = per_hour * self.hours < RESOLVED
-        if per_hour <= rate[0] or unresolvable or k <= ks[0] * 1.0001:
-            return self._cusum(name, h, rate, per_hour, analytic, k, where)
-        # the model's tolerance between units cannot deliver the rate at any threshold: the
-        # largest grid k below it that can (or the smallest: the textbook 0.5 σ)
-        below = [kk for kk in ks if kk < k]
-        pick = next((kk for kk in reversed(below) if self._max_at(name, kk) >= per_hour), ks[0])
-        h, a, where = self.at_k(name, pick)
-        rate = np.minimum.accumulate(a) / self.hours
-        return self._cusum(name, h, rate, per_hour, analytic, pick, where)
+        if not (per_hour <= rate0 or unresolvable or len(fam) == 1):
+            # all of the tolerance cannot deliver the rate at any threshold: the largest
+            # share that can (or the smallest)
+            key = next(
+                (kk for _, kk in reversed(fam) if self.max_per_hour(kk) >= per_hour), fam[0][1]
+            )
+        share = self.curves[key].share
+        return self._cusum(name, key, per_hour, analytic, CUSUM_K + share * (k - CUSUM_K), share)
 
-    def threshold(self, name: str, per_hour: float, analytic: float, k: float = 0.0):
+    def threshold(self, name: str, per_hour: float, analytic: float, k: float = 0.5):
         """``setting``'s threshold and warning note (see :meth:`setting`).
 
         Parameters
@@ -347,38 +309,42 @@ class ThresholdCalibration:
         s = self.setting(name, per_hour, analytic, k)
         return s.threshold, s.note
 
-    def _max_at(self, name: str, k: float) -> float:
-        return float(self.at_k(name, k)[1][0]) / self.hours
-
-    def _cusum(self, name, h, rate, per_hour, analytic, k, where) -> Setting:
+    def _cusum(self, name, key, per_hour, analytic, k, share) -> Setting:
+        h = np.asarray(self.curves[key].thresholds, dtype=float)
+        rate = self.rates(key)
         alarms = rate * self.hours
         resolvable = per_hour * self.hours >= RESOLVED
-        base = f"{name}: at {where}, over {self.hours:.1f} h of healthy records,"
+        base = (
+            f"{name}: with {share:.0%} of its tolerance between units (k = {k:.3g} σ), over "
+            f"{self.hours:.1f} h of healthy records,"
+        )
         if rate[0] == 0.0:
             note = (
                 f"{base} no false alarm at any threshold (a healthy unit stays within its "
                 f"tolerance): it cannot deliver {per_hour:g}/h"
             )
             info = f"{base} no false alarm at any threshold: the analytic threshold, not measured"
-            return Setting(analytic, k, note if resolvable else "", "" if resolvable else info)
+            return Setting(
+                analytic, k, note if resolvable else "", "" if resolvable else info, share
+            )
         if per_hour >= rate[0]:
             note = (
                 f"{base} at most {rate[0]:.3g} false alarms per hour at its lowest threshold: "
                 f"it cannot deliver {per_hour:g}/h"
             )
-            return Setting(float(h[0]), k, note if per_hour > 2 * rate[0] else "")
+            return Setting(float(h[0]), k, note if per_hour > 2 * rate[0] else "", "", share)
         ok = alarms >= RESOLVED
         if not ok.any():  # too few alarms to measure a tail: the analytic threshold
             info = (
                 f"{base} fewer than {RESOLVED} alarms at any threshold: the analytic threshold, "
                 "its rate not measured"
             )
-            return Setting(analytic, k, "", info)
+            return Setting(analytic, k, "", info, share)
         if per_hour >= rate[ok].min():
             j = int(np.nonzero(ok & (rate <= per_hour))[0][0])  # first at or below
             lo, hi = rate[j - 1], rate[j]
             x = (math.log(lo) - math.log(per_hour)) / (math.log(lo) - math.log(hi))
-            return Setting(float(h[j - 1] + x * (h[j] - h[j - 1])), k)
+            return Setting(float(h[j - 1] + x * (h[j] - h[j - 1])), k, share=share)
         # unmeasured: the larger of the extrapolated and the analytic threshold (a lower
         # one would trade the isolation of other faults for a rate nobody has verified)
         tail = self._tail(h, rate, ok, per_hour, k)
@@ -389,7 +355,7 @@ class ThresholdCalibration:
             f"{base} {per_hour:g}/h is below the rates measured (down to {last:.3g}/h): "
             f"threshold {value:.3g} σ, {how} (the larger of the two), its rate not verified"
         )
-        return Setting(value, k, "", info)
+        return Setting(value, k, "", info, share)
 
     def _tail(self, h, rate, ok, per_hour, k) -> float:
         """Below the resolved rates: the measured log-rate slope, between half and all of
@@ -459,6 +425,7 @@ class ThresholdCalibration:
                     "kind": c.kind,
                     "k": c.k,
                     "decisions": c.decisions,
+                    **({} if c.kind == "count" else {"share": c.share}),
                     "thresholds": list(c.thresholds[: end(c)]),
                     "alarms": list(c.alarms[: end(c)]),
                 }
@@ -468,7 +435,8 @@ class ThresholdCalibration:
 
     @classmethod
     def from_dict(cls, d: dict) -> ThresholdCalibration:
-        """A calibration from its file's content (format 2; format 1 is refused).
+        """A calibration from its file's content (format 2, or 1: the same curves on a
+        coarser grid of shares, a CUSUM's whole-tolerance curve under its plain name).
 
         Parameters
         ----------
@@ -478,26 +446,29 @@ class ThresholdCalibration:
         -------
         ThresholdCalibration
         """
-        if d.get("format") in OLD_FORMATS:
+        if d.get("format") not in (FORMAT, *OLD_FORMATS):
             raise FileFormatError(
-                f"threshold calibration in the old format {d['format']!r} (one reference value "
-                f"per detector): re-measure it as {FORMAT} with bench/calibrate_thresholds.py"
+                f"not a threshold calibration ({FORMAT}): {d.get('format')!r}; "
+                "bench/calibrate_thresholds.py measures one"
             )
-        if d.get("format") != FORMAT:
-            raise FileFormatError(f"not a threshold calibration ({FORMAT}): {d.get('format')!r}")
         try:
-            curves = {
-                name: Curve(
+            curves = {}
+            for name, c in d["curves"].items():
+                curve = Curve(
                     c["kind"],
                     tuple(float(x) for x in c["thresholds"]),
                     tuple(int(x) for x in c["alarms"]),
                     float(c["k"]),
                     int(c["decisions"]),
+                    float(c.get("share", 1.0)),
                 )
-                for name, c in d["curves"].items()
-            }
+                if curve.kind not in ("cusum", "count"):
+                    raise ValueError(f"curve {name!r}: kind {curve.kind!r}")
+                if curve.kind == "cusum" and "@" not in name:  # format 1
+                    name = f"{name}@1"
+                curves[name] = curve
             out = cls(float(d["Ts"]), float(d["hours"]), curves, str(d.get("origin", "")))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise FileFormatError(f"threshold calibration: bad or missing field ({exc})") from exc
         if not out.hours > 0 or any(
             len(c.thresholds) != len(c.alarms) or not c.alarms for c in curves.values()
@@ -548,30 +519,37 @@ class ThresholdCalibration:
 
 
 def cusum_curves(
-    name: str, traces: list[np.ndarray], sides: str, ks=K_GRID, grid=H_GRID
+    name: str, per_model: list[tuple[list[np.ndarray], float]], sides: str, shares=SHARES
 ) -> dict[str, Curve]:
-    """One CUSUM detector's curves over the grid of reference values.
+    """One CUSUM detector's curves over shares of its tolerance, summed over models.
 
     Parameters
     ----------
     name : str
         Detector.
-    traces : list of numpy.ndarray
-        Standardised block means, one array per record and model (each starts the
-        CUSUM at zero).
+    per_model : list of (list of numpy.ndarray, float)
+        Per model: its standardised block means, one array per record (each starts
+        the CUSUM at zero), and its reference value k (σ, all of its tolerance).
     sides : {'up', 'down', 'both'}
-    ks, grid : sequence of float
-        Reference values and thresholds, σ.
+    shares : sequence of float
+        Shares of each model's tolerance kept in its k (k = 0.5 + share (k − 0.5));
+        one (1) where no model has a tolerance.
 
     Returns
     -------
     dict of str to Curve
-        Keyed ``"<name>@<k>"``.
+        Keyed ``"<name>@<share>"``.
     """
-    counts = cusum_alarms_k(traces, ks, sides, grid)
-    n = int(sum(z.size for z in traces))
-    h = tuple(float(x) for x in grid)
-    return {
-        f"{name}@{k:g}": Curve("cusum", h, tuple(int(a) for a in row), float(k), n)
-        for k, row in zip(ks, counts, strict=True)
-    }
+    if all(k <= CUSUM_K for _, k in per_model):
+        shares = (1.0,)
+    alarms = np.zeros((len(shares), len(H_GRID)), dtype=int)
+    for traces, k in per_model:
+        alarms += cusum_alarms_k(traces, [CUSUM_K + s * (k - CUSUM_K) for s in shares], sides)
+    n = int(sum(z.size for traces, _ in per_model for z in traces))
+    h = tuple(float(x) for x in H_GRID)
+    out = {}
+    for share, row in zip(shares, alarms, strict=True):
+        ks = [CUSUM_K + share * (k - CUSUM_K) for _, k in per_model]
+        curve = Curve("cusum", h, tuple(int(a) for a in row), float(np.median(ks)), n, share)
+        out[f"{name}@{share:g}"] = curve
+    return out

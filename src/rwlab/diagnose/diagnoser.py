@@ -702,8 +702,8 @@ class Diagnoser:
 
     def _calibrated(self, name: str, analytic: float, det=None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
-        calibration holds this detector at this sample time: a CUSUM's interpolated at its
-        reference value, which is lowered where only a smaller one delivers that rate. Where
+        calibration holds this detector at this sample time: a CUSUM's with all of its
+        tolerance between units, or the largest share of it that delivers that rate. Where
         the rate is not measured (extrapolated, analytic) a note says so; where it cannot be
         delivered, a warning too."""
         cal = self.calibration
@@ -724,7 +724,7 @@ class Diagnoser:
             det.k = s.k
             self.notes.append(
                 f"{name}: {per_hour:g}/h needs the tolerance between units cut to "
-                f"{(s.k - CUSUM_K) / (k - CUSUM_K):.0%} (k = {det.k:.3g} σ): a healthy unit "
+                f"{s.share:.0%} (k = {det.k:.3g} σ): a healthy unit "
                 "farther from the reference than that alarms"
             )
         if s.info:
@@ -1219,10 +1219,10 @@ def measure_calibration(
     more_models : sequence of (IdentifiedWheel, HealthyReference)
         Models of other units (same Ts): each runs over every record too, so the
         rates are those of a model from any of these units (the user identifies on
-        one unit and diagnoses others); each CUSUM's standardised block means of
-        every model are counted over the grid of reference values
-        (:data:`~rwlab.diagnose.calibration.K_GRID`), so a model of any unit finds
-        its k between two curves.
+        one unit and diagnoses others); each CUSUM is counted with each model's own
+        reference value, over shares of its tolerance between units
+        (:data:`~rwlab.diagnose.calibration.SHARES`), so a model of any unit (any k)
+        takes the curve of its share.
 
     Returns
     -------
@@ -1239,10 +1239,9 @@ def measure_calibration(
     hours = len(models) * sum(data.N * data.Ts for data in records) / 3600
     curves = {}
     for name, (_, sides) in per_model[0][1].items():
-        # every model's block means through every k of the grid: a model of any unit
-        # (any k) finds its rate between two curves
-        traces = [z for m in per_model for z in m[0][name]]
-        curves.update(cusum_curves(name, traces, sides))
+        # each model at its own k, over shares of its tolerance: what carries to a model
+        # of another unit is the share, not k (calibration's docstring)
+        curves.update(cusum_curves(name, [(m[0][name], m[1][name][0]) for m in per_model], sides))
     n = tuple(float(x) for x in range(1, _N_MAX + 1))
     runs = [int(r) for m in per_model for rec in m[0]["stuck"] for r in rec]
     moving = sum(m[2] for m in per_model)
