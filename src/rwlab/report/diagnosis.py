@@ -75,7 +75,7 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         "probability; dropouts: Poisson counts of lost frames)."
     )
     for note in diagnosis.notes:
-        page.html(f'<p class="note">Cannot be honoured: {html.escape(note)}</p>')
+        page.html(f'<p class="note">Threshold: {html.escape(note)}</p>')
     page.heading("Alarms", "alarms-heading")
     if diagnosis.alarms:
         page.table(
