@@ -21,7 +21,13 @@ __all__ = ["write_diagnosis"]
 
 
 def write_diagnosis(
-    diagnosis: Diagnosis, out_dir: str | os.PathLike, *, title: str, force: bool = False
+    diagnosis: Diagnosis,
+    out_dir: str | os.PathLike,
+    *,
+    title: str,
+    force: bool = False,
+    events: list[dict] | None = None,
+    record_note: str | None = None,
 ) -> dict[str, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``.
 
@@ -35,6 +41,11 @@ def write_diagnosis(
         The page's title.
     force : bool
         Replace existing files.
+    events : list of dict, optional
+        The record's events (``{"t", "kind", "message"}``, t in s since the first
+        command): its ``fault_injected`` ones are shown beside the alarms.
+    record_note : str, optional
+        What is wrong with the record (truncated), shown on the page.
 
     Returns
     -------
@@ -50,16 +61,21 @@ def write_diagnosis(
     payload = diagnosis.to_dict()
     text = json.dumps(payload, indent=2)
     atomic_write_bytes(targets["diagnosis.json"], lambda tmp: tmp.write_text(text))
-    _page(diagnosis, payload, title).save(targets["report.html"])
+    injected = [e for e in events or () if e.get("kind") == "fault_injected"]
+    _page(diagnosis, payload, title, injected, record_note).save(targets["report.html"])
     return targets
 
 
-def _mark_alarms(ax, diagnosis: Diagnosis) -> None:
+def _mark_alarms(ax, diagnosis: Diagnosis, injected: list[dict]) -> None:
     for a in diagnosis.alarms:
         ax.axvline(a.t_s, color="r", ls="--", lw=1)
+    for e in injected:
+        ax.axvline(e["t"], color="tab:purple", ls=":", lw=1)
 
 
-def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
+def _page(
+    diagnosis: Diagnosis, payload: dict, title: str, injected: list[dict], record_note
+) -> Page:
     h = diagnosis.history
     t = h["t_s"]
     page = Page(f"Fault diagnosis — {title}")
@@ -74,38 +90,19 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         "approximation of ARL₀; frozen speed: the run-length ARL₀ of the reference's repeat "
         "probability; dropouts: Poisson counts of lost frames)."
     )
+    if record_note:
+        page.html(f'<p class="note">{html.escape(record_note)}.</p>')
+    if not diagnosis.model_tested():
+        page.html(
+            '<p class="note" id="nothing-tested">No model-based test had anything to decide '
+            f"on in this {diagnosis.duration_s:g}-s record: no alarm says nothing of friction, "
+            "the motor, the current limit or a sensor bias.</p>"
+        )
     for note in diagnosis.notes:
         page.html(f'<p class="note">Cannot be honoured: {html.escape(note)}</p>')
     page.heading("Alarms", "alarms-heading")
-    if diagnosis.alarms:
-        page.table(
-            [
-                "t [s]",
-                "likely fault",
-                "size",
-                "95 % CI",
-                "unit",
-                "detector",
-                "statistic",
-                "threshold",
-            ],
-            [
-                [
-                    a.t_s,
-                    a.kind,
-                    "—" if a.magnitude is None else f"{a.magnitude:.4g}",
-                    "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
-                    a.unit,
-                    a.detector,
-                    a.statistic,
-                    a.threshold,
-                ]
-                for a in diagnosis.alarms
-            ],
-            table_id="alarms",
-        )
-    else:
-        page.html('<p class="note" id="alarms">No alarm.</p>')
+    _alarm_table(page, diagnosis, injected)
+    _coverage_table(page, diagnosis)
     page.heading("Residuals", "residuals")
     fig, axes = figure(9, 6.0, 3, 1, sharex=True)
     for ax, (name, unit) in zip(
@@ -113,35 +110,103 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
     ):
         ax.plot(t, h[name], lw=0.8)
         ax.set_ylabel(f"{name} [{unit}]")
-        _mark_alarms(ax, diagnosis)
+        _mark_alarms(ax, diagnosis, injected)
     axes[-1].set_xlabel("time [s]")
     page.figure(
         fig,
         "fig-residuals",
         "Measured minus modelled speed and acceleration (identified model), and measured "
-        "minus the reference's current balance; red dashes: alarms.",
+        "minus the reference's current balance; red dashes: alarms; purple dots: faults "
+        "the record says were injected.",
     )
-    stats = [n for n in ("friction", "motor", "speed", "lag") if n in diagnosis.thresholds]
-    fig, axes = figure(9, 2.4 * len(stats), len(stats), 1, sharex=True, squeeze=False)
+    _statistics_figure(page, diagnosis, injected)
+    page.heading("Residual statistics")
+    rows = []
+    for name, stats_ in payload["residual_statistics"].items():
+        for part, s in stats_.items():
+            if part != "unit" and s is not None:
+                rows.append([name, stats_["unit"], part.replace("_", " "), *s.values()])
+    page.table(["residual", "unit", "part", "mean", "σ", "max |·|"], rows)
+    return page
+
+
+def _alarm_table(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None:
+    """The alarms, and the record's injected faults among them in time order."""
+    rows = [
+        [
+            a.t_s,
+            a.kind,
+            "—" if a.magnitude is None else f"{a.magnitude:.4g}",
+            "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
+            a.unit,
+            a.detector,
+            a.statistic,
+            a.threshold,
+        ]
+        for a in diagnosis.alarms
+    ]
+    rows += [
+        [float(e["t"]), f"injected: {e['message']}", "", "", "", "record event", "", ""]
+        for e in injected
+    ]
+    if not rows:
+        page.html('<p class="note" id="alarms">No alarm.</p>')
+        return
+    if not diagnosis.alarms:
+        page.html('<p class="note">No alarm.</p>')
+    page.table(
+        ["t [s]", "likely fault", "size", "95 % CI", "unit", "detector", "statistic", "threshold"],
+        sorted(rows, key=lambda r: r[0]),
+        table_id="alarms",
+    )
+
+
+def _coverage_table(page: Page, diagnosis: Diagnosis) -> None:
+    """What each test decided on: a test with nothing to decide on says nothing."""
+    page.heading("What each test decided on", "coverage")
+    page.table(
+        ["test", "decided on", "unit", "verdict"],
+        [
+            [
+                name,
+                c["decided"],
+                c["unit"],
+                ("alarm" if any(a.detector == name for a in diagnosis.alarms) else "no alarm")
+                if c["decided"]
+                else f"nothing to decide on{': ' + c['why'] if c.get('why') else ''}",
+            ]
+            for name, c in diagnosis.coverage.items()
+        ],
+        table_id="coverage-table",
+    )
+
+
+def _statistics_figure(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None:
+    """Every CUSUM test that decided on something, against its threshold."""
+    h, t = diagnosis.history, diagnosis.history["t_s"]
+    stats = [
+        name
+        for name in diagnosis.tested()
+        if f"stat_{name}" in h and name in diagnosis.thresholds
+    ]
+    if not stats:
+        page.html('<p class="note" id="fig-statistics">No CUSUM test decided on anything.</p>')
+        return
+    fig, axes = figure(9, 2.0 * len(stats), len(stats), 1, sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], stats, strict=True):
         ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
         ax.axhline(diagnosis.thresholds[name], color="k", ls=":", label="threshold")
         ax.set_yscale("symlog", linthresh=max(diagnosis.thresholds[name], 0.1))
         ax.set_ylim(bottom=0)
-        ax.set_ylabel("statistic [σ]")
+        ax.set_ylabel("[σ]")
         ax.legend(loc="upper left", fontsize=8)
-        _mark_alarms(ax, diagnosis)
+        _mark_alarms(ax, diagnosis, injected)
     axes[-1, 0].set_xlabel("time [s]")
-    page.figure(fig, "fig-statistics", "Block tests' CUSUM statistics against their thresholds.")
-    page.heading("Residual statistics")
-    rows = []
-    for name, stats_ in payload["residual_statistics"].items():
-        for part in ("before_alarm", "after_alarm"):
-            s = stats_[part]
-            if s is not None:
-                rows.append([name, stats_["unit"], part.replace("_", " "), *s.values()])
-    page.table(["residual", "unit", "part", "mean", "σ", "max |·|"], rows)
-    return page
+    page.figure(
+        fig,
+        "fig-statistics",
+        "The CUSUM statistic of every test that decided on something, against its threshold.",
+    )
 
 
 TREND_FORMAT = "rwlab.DiagnosisTrend/1"
