@@ -145,6 +145,12 @@ def identify(
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
+    ref = study.get("healthy_reference") or {}
+    if ref.get("stored"):
+        click.echo(
+            f"healthy reference for fault diagnosis stored in model.json ({ref['samples']} "
+            "samples): rwlab diagnose RECORD --model model.json"
+        )
     click.echo(_wrote(out, paths.values()))
 
 
