@@ -236,7 +236,9 @@ def diagnosis_lines(result, events: list[dict]) -> list[str]:
         lines.append("nothing to decide on: " + ", ".join(result.untested()))
     if result.unseen():
         lines.append("not tested (no test could decide): " + ", ".join(result.unseen()))
-    injected = [f"{e['message']} (at {e['t']:.1f} s)" for e in events if e["kind"] == "fault_injected"]
+    injected = [
+        f"{e['message']} (at {e['t']:.1f} s)" for e in events if e["kind"] == "fault_injected"
+    ]
     if injected:
         lines.append("injected (record's events): " + ", ".join(injected))
     return lines
@@ -272,7 +274,9 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
     events = rec.topic("/event")
     truncated = None if rec.complete else f"the record is truncated ({rec.problem})"
     if truncated:
-        warnings.warn(f"{record}: {truncated}: diagnosed up to where it stops", RwlabWarning)
+        warnings.warn(
+            f"{record}: {truncated}: diagnosed up to where it stops", RwlabWarning, stacklevel=2
+        )
     into.mkdir(parents=True, exist_ok=True)
     write_diagnosis(result, into, title=record.name, events=events, record_note=truncated)
     return result, events

@@ -185,9 +185,7 @@ def _statistics_figure(page: Page, diagnosis: Diagnosis, injected: list[dict]) -
     """Every CUSUM test that decided on something, against its threshold."""
     h, t = diagnosis.history, diagnosis.history["t_s"]
     stats = [
-        name
-        for name in diagnosis.tested()
-        if f"stat_{name}" in h and name in diagnosis.thresholds
+        name for name in diagnosis.tested() if f"stat_{name}" in h and name in diagnosis.thresholds
     ]
     if not stats:
         page.html('<p class="note" id="fig-statistics">No CUSUM test decided on anything.</p>')
