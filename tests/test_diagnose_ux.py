@@ -202,3 +202,30 @@ def test_live_alarms_and_injected_faults_are_printed(tmp_path, model_file):
         if line.startswith("alarm: ")
     ]
     assert printed and all(p in events for p in printed)
+
+
+def test_the_trend_shows_wear_below_the_threshold(tmp_path, model_file):
+    """Records of one wheel, the same test signal, friction ×1, ×1.15, ×1.3 from power-up:
+    each record's friction estimate, alarm or not, and their ratios are the factors."""
+    folder = tmp_path / "wheel"
+    folder.mkdir()
+    factors = (1.0, 1.15, 1.3)
+    for week, factor in enumerate(factors):
+        faults = () if factor == 1.0 else (f"friction={factor}@0",)
+        cfg = ExperimentConfig(duration=900, seed=30, unit=5, faults=faults)
+        run_experiment(cfg, folder / f"week{week}.mcap")
+    result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 0, result.output
+    assert "estimates: " in result.output
+    trend = json.loads((tmp_path / "d" / "trend.json").read_text())
+    records = trend["records"]
+    assert [p["record"] for p in records] == ["week0.mcap", "week1.mcap", "week2.mcap"]
+    friction = [p["estimates"]["friction"] for p in records]
+    assert all(f["ci95"][0] <= f["magnitude"] <= f["ci95"][1] for f in friction)
+    # the same unit and signal: the reference unit's difference cancels in the ratios
+    base = friction[0]["magnitude"]
+    for f, factor in zip(friction[1:], factors[1:], strict=True):
+        assert f["magnitude"] / base == pytest.approx(factor, rel=0.05)
+    # a weak motor it is not: the torque constant stays at the healthy record's
+    kt = [p["estimates"]["torque_constant"]["magnitude"] for p in records]
+    assert max(kt) - min(kt) < 0.03

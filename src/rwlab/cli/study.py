@@ -312,7 +312,11 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
             named = ", ".join(_finding_text(a) for a in result.alarms) or (
                 "no alarm" if result.model_tested() else "no alarm (nothing tested)"
             )
-            lines.append(f"{path.name:<32} {named}")
+            sizes = ", ".join(
+                f"{kind} {e['magnitude']:.3g}{'' if e['unit'] == 'factor' else ' ' + e['unit']}"
+                for kind, e in result.estimates.items()
+            )
+            lines.append(f"{path.name:<32} {named}" + (f"  (estimates: {sizes})" if sizes else ""))
         paths = write_trend(points, stage)
     for line in lines:
         click.echo(line)

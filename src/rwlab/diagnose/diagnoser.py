@@ -1097,6 +1097,60 @@ class Diagnoser:
             out[name] = {"decided": int(n), "unit": DECIDES_ON[name]}
         return out
 
+    def estimates(self) -> dict[str, dict]:
+        """Friction and torque-constant factors and the speed bias from the tests' latest
+        values (the last :data:`HISTORY_S`), alarm or not: a wear trend below threshold.
+
+        The current at constant speed over the reference's friction current is
+        friction/k_t, the current under acceleration over the inertial current is
+        I/k_t; with each excess e taken over the reference's own level on its healthy
+        record, the torque-constant factor is 1/(1 + e_motor), the friction factor
+        (1 + e_friction)/(1 + e_motor); the bias is the held-speed error less the
+        reference's. Each interval is the record's noise (block σ of the reference,
+        one independent value per block) only: the reference unit's own spread from
+        the wheel's (±0.48 in friction, 95 %) is common to every record of one wheel,
+        so it moves a trend as a whole and hides no change within it.
+
+        Returns
+        -------
+        dict of str to dict
+            ``friction``, ``torque_constant`` (factors), ``speed_sensor_bias`` (rpm),
+            each ``{"magnitude", "ci95", "unit", "blocks"}``, where the test had values.
+        """
+        ref = self.reference
+        if ref is None:
+            return {}
+
+        def mean_ci(name: str):
+            det = self._detectors.get(name)
+            stats = ref.tests.get(name)
+            if det is None or stats is None or not det.raw:
+                return None
+            x = np.array([v for _, v in det.raw], dtype=float)
+            blocks = max(len(x) / stats.block, 1.0)
+            return float(x.mean()), _Z95 * stats.sigma / math.sqrt(blocks), blocks
+
+        out: dict[str, dict] = {}
+        motor, friction, speed = mean_ci("motor"), mean_ci("friction"), mean_ci("speed")
+        e_m, h_m = (motor[0], motor[1]) if motor else (0.0, 0.0)
+        # relative to the reference's own level on its healthy record (the tests' zero)
+        e_m, h_m = _relative(e_m, h_m, ref.tests["motor"].mean if motor else 0.0)
+        if motor:
+            lo, hi = 1 / (1 + e_m + h_m), 1 / max(1 + e_m - h_m, 1e-9)
+            out["torque_constant"] = _estimate(1 / (1 + e_m), lo, hi, "factor", motor[2])
+        if friction:
+            e_f, h_f, n = friction
+            e_f, h_f = _relative(e_f, h_f, ref.tests["friction"].mean)
+            factor = (1 + e_f) / (1 + e_m)
+            rel = math.hypot(h_f / (1 + e_f), h_m / (1 + e_m))
+            out["friction"] = _estimate(factor, factor * (1 - rel), factor * (1 + rel), "factor", n)
+        if speed:
+            bias = speed[0] - ref.tests["speed"].mean
+            out["speed_sensor_bias"] = _estimate(
+                bias, bias - speed[1], bias + speed[1], "rpm", speed[2]
+            )
+        return out
+
     def _fire(self, t_s: float, detector: str) -> list[Alarm]:
         det = self._detectors[detector]
         statistic = det.statistic if detector != "dropout" else float(det.last_count)
@@ -1191,6 +1245,16 @@ class Diagnoser:
     @property
     def calibrated(self) -> bool:
         return bool(self._detectors)
+
+
+def _relative(e: float, half: float, mean: float) -> tuple[float, float]:
+    """An excess e (and its half-width) over the reference's level ``mean``, as an excess
+    over 1 + mean."""
+    return (1 + e) / (1 + mean) - 1, half / (1 + mean)
+
+
+def _estimate(value: float, lo: float, hi: float, unit: str, blocks: float) -> dict:
+    return {"magnitude": value, "ci95": [lo, hi], "unit": unit, "blocks": round(blocks, 1)}
 
 
 def healthy_reference(
@@ -1369,6 +1433,9 @@ class Diagnosis:
     coverage : dict of str to dict
         What each test decided on (:meth:`Diagnoser.coverage`; a test the data
         could not feed has ``decided`` 0 and a ``why``).
+    estimates : dict of str to dict
+        Friction and torque-constant factors and the speed bias against the healthy
+        reference, alarm or not (:meth:`Diagnoser.estimates`), for trends.
     """
 
     alarms: list[Alarm]
@@ -1379,6 +1446,7 @@ class Diagnosis:
     duration_s: float = 0.0
     notes: list[str] = field(default_factory=list)
     coverage: dict[str, dict] = field(default_factory=dict)
+    estimates: dict[str, dict] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         found = ", ".join(self.faults()) or "no alarm"
@@ -1449,6 +1517,7 @@ class Diagnosis:
             "untested": self.untested(),
             "unseen_faults": self.unseen(),
             "model_tested": self.model_tested(),
+            "estimates": {kind: dict(e) for kind, e in self.estimates.items()},
             "reference": self.reference.to_dict(),
             "residual_statistics": self.residual_statistics(),
         }
@@ -1566,6 +1635,7 @@ def diagnose(
         data.N * data.Ts,
         notes,
         coverage,
+        d.estimates(),
     )
     if result.unseen():
         warnings.warn(

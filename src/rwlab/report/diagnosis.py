@@ -207,20 +207,43 @@ def _statistics_figure(page: Page, diagnosis: Diagnosis, injected: list[dict]) -
     )
 
 
-TREND_FORMAT = "rwlab.DiagnosisTrend/1"
+TREND_FORMAT = "rwlab.DiagnosisTrend/2"
 
 
 def trend_point(record: str, start_utc: str, diagnosis: Diagnosis) -> dict:
-    """One record's line of the trend: the first size of each fault named in it."""
+    """One record's line of the trend: the first size of each fault named in it, and the
+    friction, torque-constant and bias estimates against the healthy reference, alarm or
+    not (:meth:`rwlab.diagnose.Diagnoser.estimates`)."""
     faults: dict[str, dict] = {}
     for a in diagnosis.alarms:
         if a.kind not in faults and a.magnitude is not None:
             faults[a.kind] = {"magnitude": a.magnitude, "ci95": a.ci, "unit": a.unit, "t_s": a.t_s}
-    return {"record": record, "start_utc": start_utc, "faults": faults}
+    return {
+        "record": record,
+        "start_utc": start_utc,
+        "faults": faults,
+        "estimates": {kind: dict(e) for kind, e in diagnosis.estimates.items()},
+    }
 
 
 def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool = False):
-    """Write ``trend.json`` and ``trend.html``: each fault's size over a wheel's records."""
+    """Write ``trend.json`` and ``trend.html``: each record's friction, torque-constant and
+    bias estimates (alarm or not) and the faults named, over a wheel's records.
+
+    Parameters
+    ----------
+    points : list of dict
+        :func:`trend_point` of each record.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     out = Path(out_dir)
     targets = {name: out / name for name in ("trend.json", "trend.html")}
     existing = [str(p) for p in targets.values() if p.exists()]
@@ -232,29 +255,32 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     atomic_write_bytes(targets["trend.json"], lambda tmp: tmp.write_text(text))
     page = Page("Fault trend")
     page.text(
-        "Each record of the wheel diagnosed against the same healthy reference; the size of "
-        "each fault named (first alarm) with its 95 % interval, in record order."
+        "Each record of the wheel diagnosed against the same healthy reference, in record "
+        "order: its friction and torque-constant factors and speed bias estimated from the "
+        "tests' latest 10 minutes whether or not a test alarmed (slow wear below the "
+        "thresholds shows here first), with 95 % intervals of the record's noise; circled "
+        "red: a record in which that fault was named. The intervals leave out the "
+        "reference unit's own difference from this wheel, which shifts every record alike "
+        "where they run the same test signal (speeds held elsewhere weigh the unit's "
+        "friction law differently)."
     )
-    kinds = sorted({k for p in points for k in p["faults"]})
+    kinds = [k for k in ("friction", "torque_constant", "speed_sensor_bias")
+             if any(k in p["estimates"] for p in points)]  # fmt: skip
     if kinds:
         fig, axes = figure(9, 2.4 * len(kinds), len(kinds), 1, sharex=True, squeeze=False)
-        x = np.arange(len(points))
         for ax, kind in zip(axes[:, 0], kinds, strict=True):
-            rows = [(i, p["faults"][kind]) for i, p in enumerate(points) if kind in p["faults"]]
-            mags = np.array([f["magnitude"] for _, f in rows])
-            lo = np.array([(f["ci95"] or [f["magnitude"]] * 2)[0] for _, f in rows])
-            hi = np.array([(f["ci95"] or [f["magnitude"]] * 2)[1] for _, f in rows])
-            idx = np.array([i for i, _ in rows])
-            ax.errorbar(idx, mags, yerr=[mags - lo, hi - mags], fmt="o-", capsize=3)
-            ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
-        axes[-1, 0].set_xticks(x, [p["record"] for p in points], rotation=30, fontsize=7)
-        page.figure(fig, "fig-trend", "Estimated fault size per record (95 % intervals).")
+            _trend_axis(ax, points, kind)
+        axes[-1, 0].set_xticks(
+            np.arange(len(points)), [p["record"] for p in points], rotation=30, fontsize=7
+        )
+        page.figure(fig, "fig-trend", "Estimated size per record (95 % intervals of its noise).")
     page.table(
-        ["record", "start (UTC)", "faults"],
+        ["record", "start (UTC)", *kinds, "faults named"],
         [
             [
                 p["record"],
                 p["start_utc"],
+                *(_estimate_text(p["estimates"].get(k)) for k in kinds),
                 ", ".join(f"{k} {f['magnitude']:.4g} {f['unit']}" for k, f in p["faults"].items())
                 or "none",
             ]
@@ -264,3 +290,22 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     )
     page.save(targets["trend.html"])
     return targets
+
+
+def _trend_axis(ax, points: list[dict], kind: str) -> None:
+    rows = [(i, p["estimates"][kind]) for i, p in enumerate(points) if kind in p["estimates"]]
+    idx = np.array([i for i, _ in rows])
+    mags = np.array([e["magnitude"] for _, e in rows])
+    lo = np.array([e["ci95"][0] for _, e in rows])
+    hi = np.array([e["ci95"][1] for _, e in rows])
+    ax.errorbar(idx, mags, yerr=[mags - lo, hi - mags], fmt="o-", capsize=3)
+    named = [i for i, _ in rows if kind in points[i]["faults"]]
+    ax.plot(named, [mags[list(idx).index(i)] for i in named], "o", mfc="none", mec="r", ms=12)
+    ax.axhline(0.0 if rows[0][1]["unit"] == "rpm" else 1.0, color="k", ls=":", lw=0.8)
+    ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
+
+
+def _estimate_text(e: dict | None) -> str:
+    if e is None:
+        return "—"
+    return f"{e['magnitude']:.4g} [{e['ci95'][0]:.4g}, {e['ci95'][1]:.4g}] {e['unit']}"
