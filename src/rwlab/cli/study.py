@@ -183,11 +183,14 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     The detectors compare the record, from its first sample, with the healthy
     reference that rwlab identify stored in model.json. Writes
     OUT/diagnosis.json (alarms with fault sizes and 95 % intervals, thresholds,
-    residual statistics) and OUT/report.html.
+    what each test decided on, residual statistics) and OUT/report.html; says
+    which tests had nothing to decide on and warns about faults no test could
+    see (a record too short): "no alarm" means only as much as was tested.
 
     RECORD may be a folder of records of one wheel: each is diagnosed into
     OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
-    fault's size over the records (in the order of their start times).
+    record's friction, torque-constant and bias estimates, alarm or not (in the
+    order of their start times). OUT appears whole or not at all.
     """
     from rwlab.diagnose import HealthyReference
     from rwlab.wheel import IdentifiedWheel

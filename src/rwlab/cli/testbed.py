@@ -105,7 +105,8 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--model",
     type=click.Path(dir_okay=False),
-    help="model.json: run the fault detector live; alarms become record events.",
+    help="model.json: run the fault detector live; each alarm is printed as it comes and "
+    "recorded as an event.",
 )
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(
