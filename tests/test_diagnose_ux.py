@@ -55,6 +55,18 @@ def test_the_speed_alone_is_refused_with_how_to_load_the_current(tmp_path, model
         diagnose(speed_only, wheel, HealthyReference.from_model_file(model_file))
 
 
+def test_without_lost_frames_the_dropout_test_says_it_decided_nothing(tmp_path, model_file, wheel):
+    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
+    data = load_record(tmp_path / "r.mcap", wheel.Ts, outputs=("speed", "current"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RwlabWarning)
+        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+    assert d.coverage["dropout"]["decided"] == 0 and "lost" in d.coverage["dropout"]["why"]
+    assert any(n.startswith("dropout: not tested") for n in d.notes)
+    assert any(n.startswith("stuck:") and "telemetry_age_s" in n for n in d.notes)
+    assert "dropout" in d.untested() and "telemetry_dropout" in d.unseen()
+
+
 def test_another_sample_time_says_how_to_resample(tmp_path, model_file, wheel):
     run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
     other = load_record(tmp_path / "r.mcap", wheel.Ts / 5, outputs=OUTPUTS, max_gap=np.inf)

@@ -219,9 +219,22 @@ def _finding_text(a) -> str:
 
 
 def diagnosis_lines(result, events: list[dict]) -> list[str]:
-    """The console's account of one diagnosis: the alarms, what each test decided on
-    (so "no alarm" can be told from "nothing tested"), and the faults the record says
-    were injected."""
+    """The console's account of one diagnosis.
+
+    Parameters
+    ----------
+    result : Diagnosis
+        What :func:`rwlab.diagnose.diagnose` found.
+    events : list of dict
+        The record's events (``{"t", "kind", "message"}``).
+
+    Returns
+    -------
+    list of str
+        The alarms, what each test decided on (so "no alarm" can be told from
+        "nothing tested"), the faults no test could see, and the faults the record
+        says were injected.
+    """
     lines = [
         f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)" for a in result.alarms
     ]
