@@ -179,6 +179,8 @@ def test_a_truncated_record_is_diagnosed_with_a_warning(tmp_path, model_file):
     result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
     assert result.exit_code == 0, result.output
     assert "truncated" in result.output
+    page = (tmp_path / "d" / "report.html").read_text()
+    assert 'id="coverage-table"' in page and 'id="estimates-table"' in page
 
 
 # -- output folders and the live console --------------------------------------------------

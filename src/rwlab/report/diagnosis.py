@@ -103,6 +103,28 @@ def _page(
     page.heading("Alarms", "alarms-heading")
     _alarm_table(page, diagnosis, injected)
     _coverage_table(page, diagnosis)
+    if diagnosis.estimates:
+        page.heading("Sizes against the healthy reference", "estimates")
+        page.text(
+            "From the tests' latest 10 minutes, alarm or not (a fault below its threshold "
+            "shows here first): 95 % intervals of this record's noise, without the "
+            "reference unit's own difference from this wheel (see rwlab diagnose FOLDER's "
+            "trend)."
+        )
+        page.table(
+            ["quantity", "estimate", "95 % CI", "unit", "blocks"],
+            [
+                [
+                    kind,
+                    f"{e['magnitude']:.4g}",
+                    f"{e['ci95'][0]:.4g} … {e['ci95'][1]:.4g}",
+                    e["unit"],
+                    e["blocks"],
+                ]
+                for kind, e in diagnosis.estimates.items()
+            ],
+            table_id="estimates-table",
+        )
     page.heading("Residuals", "residuals")
     fig, axes = figure(9, 6.0, 3, 1, sharex=True)
     for ax, (name, unit) in zip(
