@@ -218,7 +218,7 @@ def test_live_alarms_and_injected_faults_are_printed(tmp_path, model_file):
     assert printed and all(p in events for p in printed)
 
 
-def test_the_trend_shows_wear_below_the_threshold(tmp_path, model_file):
+def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
     """Records of one wheel, the same test signal, friction ×1, ×1.15, ×1.3 from power-up:
     each record's friction estimate, alarm or not, and their ratios are the factors."""
     folder = tmp_path / "wheel"
@@ -234,6 +234,7 @@ def test_the_trend_shows_wear_below_the_threshold(tmp_path, model_file):
     trend = json.loads((tmp_path / "d" / "trend.json").read_text())
     records = trend["records"]
     assert [p["record"] for p in records] == ["week0.mcap", "week1.mcap", "week2.mcap"]
+    assert records[0]["faults"] == {}  # the healthy record: no alarm, yet a size
     friction = [p["estimates"]["friction"] for p in records]
     assert all(f["ci95"][0] <= f["magnitude"] <= f["ci95"][1] for f in friction)
     # the same unit and signal: the reference unit's difference cancels in the ratios
