@@ -1451,7 +1451,8 @@ class Diagnosis:
     def __repr__(self) -> str:
         found = ", ".join(self.faults()) or "no alarm"
         return (
-            f"Diagnosis({found}; {len(self.alarms)} alarms over {self.duration_s:g} s, "
+            f"Diagnosis({found}; {len(self.alarms)} alarm{'' if len(self.alarms) == 1 else 's'} "
+            f"over {self.duration_s:g} s, "
             f"{len(self.tested())} of {len(self.coverage)} tests decided)"
         )
 
