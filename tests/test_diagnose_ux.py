@@ -6,10 +6,12 @@ from __future__ import annotations
 import json
 import warnings
 
+import jsonschema
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from rwlab import schemas
 from rwlab.cli import main
 from rwlab.diagnose import HealthyReference, diagnose
 from rwlab.errors import ConfigError, DataError, RwlabWarning
@@ -232,6 +234,11 @@ def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
     assert result.exit_code == 0, result.output
     assert "estimates: " in result.output
     trend = json.loads((tmp_path / "d" / "trend.json").read_text())
+    validator = jsonschema.Draft202012Validator
+    jsonschema.validate(trend, schemas.schema("trend"), cls=validator)
+    for name in ("week0", "week1"):
+        report = json.loads((tmp_path / "d" / name / "diagnosis.json").read_text())
+        jsonschema.validate(report, schemas.schema("diagnosis"), cls=validator)
     records = trend["records"]
     assert [p["record"] for p in records] == ["week0.mcap", "week1.mcap", "week2.mcap"]
     assert records[0]["faults"] == {}  # the healthy record: no alarm, yet a size
