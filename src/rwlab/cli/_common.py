@@ -32,8 +32,9 @@ FLAGS = {
     "scheduler=": "--scheduler",
     "epoch_spread_days": "--epoch-spread-days",
 }
+# not a quoted name: a config file's key (['raw_frames', ...]) is no flag
 _PARAMETER = re.compile(
-    r"\b("
+    r"(?<!['\"])\b("
     + "|".join(re.escape(k) + ("(?!\\w)" if k[-1].isalnum() or k[-1] == "_" else "") for k in FLAGS)
     + ")"
 )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import warnings
 from pathlib import Path
 
 import click
@@ -20,7 +21,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
-from rwlab.errors import ConfigError, RwlabError
+from rwlab.errors import ConfigError, RwlabError, RwlabWarning
 
 
 @main.command("identify")
@@ -144,6 +145,12 @@ def identify(
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
+    ref = study.get("healthy_reference") or {}
+    if ref.get("stored"):
+        click.echo(
+            f"healthy reference for fault diagnosis stored in model.json ({ref['samples']} "
+            "samples): rwlab diagnose RECORD --model model.json"
+        )
     click.echo(_wrote(out, paths.values()))
 
 
@@ -176,11 +183,14 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     The detectors compare the record, from its first sample, with the healthy
     reference that rwlab identify stored in model.json. Writes
     OUT/diagnosis.json (alarms with fault sizes and 95 % intervals, thresholds,
-    residual statistics) and OUT/report.html.
+    what each test decided on, residual statistics) and OUT/report.html; says
+    which tests had nothing to decide on and warns about faults no test could
+    see (a record too short): "no alarm" means only as much as was tested.
 
     RECORD may be a folder of records of one wheel: each is diagnosed into
     OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
-    fault's size over the records (in the order of their start times).
+    record's friction, torque-constant and bias estimates, alarm or not (in the
+    order of their start times). OUT appears whole or not at all.
     """
     from rwlab.diagnose import HealthyReference
     from rwlab.wheel import IdentifiedWheel
@@ -191,12 +201,14 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     if Path(record).is_dir():
         _diagnose_folder(Path(record), Path(out), wheel, reference, false_alarms_per_hour, force)
         return
-    result, paths = _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force)
-    for a in result.alarms:
-        click.echo(f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)")
-    if not result.alarms:
-        click.echo("no alarm")
-    click.echo(_wrote(out, paths.values()))
+    with _output(out, _DIAGNOSIS_FILES, force, "diagnosis") as stage:
+        result, events = _diagnose_one(Path(record), stage, wheel, reference, false_alarms_per_hour)
+    for line in diagnosis_lines(result, events):
+        click.echo(line)
+    click.echo(_wrote(out, _DIAGNOSIS_FILES))
+
+
+_DIAGNOSIS_FILES = ("diagnosis.json", "report.html")
 
 
 def _finding_text(a) -> str:
@@ -206,24 +218,97 @@ def _finding_text(a) -> str:
     return f"{a.kind} {a.magnitude:.4g}{ci} {a.unit}"
 
 
-def _diagnose_one(record, out, wheel, reference, false_alarms_per_hour, force):
+def diagnosis_lines(result, events: list[dict]) -> list[str]:
+    """The console's account of one diagnosis.
+
+    Parameters
+    ----------
+    result : Diagnosis
+        What :func:`rwlab.diagnose.diagnose` found.
+    events : list of dict
+        The record's events (``{"t", "kind", "message"}``).
+
+    Returns
+    -------
+    list of str
+        The alarms, what each test decided on (so "no alarm" can be told from
+        "nothing tested"), the faults no test could see, and the faults the record
+        says were injected.
+    """
+    lines = [
+        f"alarm at {a.t_s:.1f} s: {_finding_text(a)} ({a.detector} test)" for a in result.alarms
+    ]
+    if not result.alarms:
+        lines.append(
+            "no alarm"
+            if result.model_tested()
+            else f"no alarm, but no model-based test had anything to decide on in "
+            f"{result.duration_s:g} s: this says nothing of the wheel's health"
+        )
+    decided = [f"{n} {_count(c['decided'], c['unit'])}" for n, c in result.coverage.items()]
+    decided = [d for d, c in zip(decided, result.coverage.values(), strict=True) if c["decided"]]
+    lines.append("decided on: " + (", ".join(decided) or "nothing"))
+    if result.untested():
+        lines.append("nothing to decide on: " + ", ".join(result.untested()))
+    if result.unseen():
+        lines.append("not tested (no test could decide): " + ", ".join(result.unseen()))
+    injected = [
+        f"{e['message']} (at {e['t']:.1f} s)" for e in events if e["kind"] == "fault_injected"
+    ]
+    if injected:
+        lines.append("injected (record's events): " + ", ".join(injected))
+    return lines
+
+
+def _count(n: int, unit: str) -> str:
+    """``1 block``, ``3 blocks``, ``1 10-s block``: the unit's first plural word singular."""
+    if n != 1:
+        return f"{n} {unit}"
+    first, _, rest = unit.partition(" ")
+    return f"1 {first.removesuffix('s')}{' ' + rest if rest else ''}"
+
+
+def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_hour):
+    """Diagnose ``record`` into the folder ``into`` (a staging folder); the result and
+    the record's events. An error names the record."""
     import numpy as np
 
     from rwlab.diagnose import diagnose
     from rwlab.report.diagnosis import write_diagnosis
-    from rwlab.testbed import load_record
+    from rwlab.testbed import load_record, read_record
 
-    with _output(out, ("diagnosis.json", "report.html"), force, "diagnosis") as stage:
+    try:
         data = load_record(
             record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
         )
+        rec = read_record(record)
         result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
-        paths = write_diagnosis(result, stage, title=Path(record).name, force=force)
-    return result, paths
+    except RwlabError as exc:
+        if str(record) in str(exc) or record.name in str(exc):
+            raise
+        raise _named(exc, record) from exc
+    events = rec.topic("/event")
+    truncated = None if rec.complete else f"the record is truncated ({rec.problem})"
+    if truncated:
+        warnings.warn(
+            f"{record}: {truncated}: diagnosed up to where it stops", RwlabWarning, stacklevel=2
+        )
+    into.mkdir(parents=True, exist_ok=True)
+    write_diagnosis(result, into, title=record.name, events=events, record_note=truncated)
+    return result, events
+
+
+def _named(exc: RwlabError, record: Path) -> RwlabError:
+    """The same error, its message naming the record."""
+    try:
+        return type(exc)(f"{record}: {exc}")
+    except TypeError:  # an error class with another signature
+        return RwlabError(f"{record}: {exc}")
 
 
 def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> None:
-    """Every record of ``folder`` diagnosed, and the trend of each fault's size."""
+    """Every record of ``folder`` diagnosed, and the trend of each fault's size; the
+    folder appears whole or not at all (a record that fails leaves nothing, and is named)."""
     from rwlab.report.diagnosis import trend_point, write_trend
     from rwlab.testbed import read_record
 
@@ -232,14 +317,25 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     )
     if not records:
         raise ConfigError(f"{folder}: no records (.mcap) in the folder")
-    points = []
-    for path in records:
-        result, _ = _diagnose_one(path, out / path.stem, wheel, reference, rate, force)
-        start = read_record(path).metadata.get("start_utc", "")
-        points.append(trend_point(path.name, start, result))
-        named = ", ".join(_finding_text(a) for a in result.alarms) or "no alarm"
-        click.echo(f"{path.name:<32} {named}")
-    paths = write_trend(points, out, force=force)
+    names = [p.stem for p in records] + ["trend.json", "trend.html"]
+    lines = []
+    with _output(out, names, force, "diagnosis trend") as stage:
+        points = []
+        for path in records:
+            result, _ = _diagnose_one(path, stage / path.stem, wheel, reference, rate)
+            start = read_record(path).metadata.get("start_utc", "")
+            points.append(trend_point(path.name, start, result))
+            named = ", ".join(_finding_text(a) for a in result.alarms) or (
+                "no alarm" if result.model_tested() else "no alarm (nothing tested)"
+            )
+            sizes = ", ".join(
+                f"{kind} {e['magnitude']:.3g}{'' if e['unit'] == 'factor' else ' ' + e['unit']}"
+                for kind, e in result.estimates.items()
+            )
+            lines.append(f"{path.name:<32} {named}" + (f"  (estimates: {sizes})" if sizes else ""))
+        paths = write_trend(points, stage)
+    for line in lines:
+        click.echo(line)
     click.echo(_wrote(out, paths.values()))
 
 

@@ -105,7 +105,8 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--model",
     type=click.Path(dir_okay=False),
-    help="model.json: run the fault detector live; alarms become record events.",
+    help="model.json: run the fault detector live; each alarm is printed as it comes and "
+    "recorded as an event.",
 )
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(
@@ -157,7 +158,12 @@ def experiment(config_file, out, monitor, port, force, **settings):
                         bars.append(stack.enter_context(bar))
                     bars[0].update(1)
 
-                summary = run_experiment(cfg, out, force=force, progress=progress)
+                def on_alarm(text: str) -> None:  # as it comes, above the progress bar
+                    click.echo(f"\nalarm: {text}", err=True)
+
+                summary = run_experiment(
+                    cfg, out, force=force, progress=progress, on_alarm=on_alarm
+                )
     except KeyboardInterrupt as exc:
         why = exc.args[0] if exc.args else "Ctrl-C"
         click.echo(f"\ninterrupted ({why}): the wheel is idle and {out} is closed", err=True)
@@ -173,6 +179,10 @@ def experiment(config_file, out, monitor, port, force, **settings):
         f"timing: {_timing_line(summary.timing)}"
         + (f"; {summary.bad_frames} damaged frames dropped" if summary.bad_frames else "")
     )
+    if cfg.model is not None:
+        click.echo(f"live diagnosis: {'; '.join(summary.alarms) or 'no alarm'}")
+    if summary.faults_injected:
+        click.echo(f"injected: {', '.join(summary.faults_injected)}")
 
 
 def _timing_line(t: dict) -> str:

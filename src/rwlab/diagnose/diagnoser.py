@@ -150,6 +150,31 @@ STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 1
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
+# every CUSUM test, in the order a report shows them (stat_NAME in the history)
+CUSUM_TESTS = (*BLOCKS, "friction_change", "hold", "offset", "slew")
+# what each test decides on (Diagnoser.coverage); the model-based tests are all but the
+# last three, which read the telemetry alone
+DECIDES_ON = {
+    **{name: "blocks" for name in (*BLOCKS, "friction_change", "hold")},
+    "offset": "60-s windows",
+    "slew": "slews",
+    "rest": "readings near 0 rpm",
+    "stuck": "moving samples",
+    "dropout": "10-s blocks",
+}
+TELEMETRY_TESTS = ("rest", "stuck", "dropout")
+# the tests that can name each fault: where none decided on anything, "no alarm" says
+# nothing of that fault
+FAULT_TESTS = {
+    "friction": ("friction", "friction_change", "hold", "slew"),
+    "torque_constant": ("motor",),
+    "current_limit": ("lag",),
+    "speed_sensor_bias": ("speed", "offset", "rest"),
+    "speed_sensor_stuck": ("stuck",),
+    "telemetry_dropout": ("dropout",),
+}
+# what load_record must give diagnose (its default is the speed alone)
+RECORD_OUTPUTS = ("speed", "current", "age", "lost")
 ROTOR_FAULTS = ("friction", "torque_constant", "current_limit")
 HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
 HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
@@ -225,6 +250,7 @@ class _BlockCusum:
         self.means: deque = deque()  # (t_s, block mean, up, down)
         self.trace: list[float] | None = None  # every block's z, when calibrating
         self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
+        self.decided = 0  # blocks tested (after any baseline): what "no alarm" rests on
 
     @property
     def statistic(self) -> float:
@@ -247,6 +273,7 @@ class _BlockCusum:
             self.mean = float(np.mean(self._baseline))
             return False
         z = (mean - self.mean) / self.stats.sigma
+        self.decided += 1
         if self.trace is not None:
             self.trace.append(z)
         if self.sides in ("up", "both"):
@@ -575,7 +602,13 @@ class Diagnoser:
         self.repeats = [0, 0]  # (repeats, non-zero readings) for a reference
         self.history: dict[str, list[float]] = {
             name: []
-            for name in ("t_s", "speed", "acceleration", "current", *(f"stat_{b}" for b in BLOCKS))
+            for name in (
+                "t_s",
+                "speed",
+                "acceleration",
+                "current",
+                *(f"stat_{b}" for b in CUSUM_TESTS),
+            )
         }
         self._detectors: dict = {}
         self._lag_currents: deque = deque(maxlen=1200)
@@ -1033,9 +1066,90 @@ class Diagnoser:
         h["t_s"].append(t_s)
         for name in ("speed", "acceleration", "current"):
             h[name].append(r[name])
-        for name in BLOCKS:
+        for name in CUSUM_TESTS:
             det = self._detectors.get(name)
             h[f"stat_{name}"].append(det.statistic if det is not None else math.nan)
+
+    def coverage(self) -> dict[str, dict]:
+        """What each test has decided on so far: "no alarm" means only as much.
+
+        Returns
+        -------
+        dict of str to dict
+            Test name → ``{"decided": n, "unit": what n counts}`` (:data:`DECIDES_ON`):
+            blocks of qualifying samples tested (block CUSUMs, after their baseline),
+            60-s windows, slews, readings near zero speed, samples that could show a
+            frozen reading, whole 10-s blocks of lost-frame counts. ``n = 0``: the test
+            had nothing to decide on. Empty when nothing is armed (no reference).
+        """
+        out: dict[str, dict] = {}
+        for name, det in self._detectors.items():
+            if isinstance(det, _BlockCusum):
+                n = det.decided
+            elif name == "rest":
+                n = det.readings
+            elif name == "stuck":
+                n = self.repeats[1]
+            elif name == "dropout":
+                n = len(self.history["t_s"]) // det.block
+            else:
+                continue
+            out[name] = {"decided": int(n), "unit": DECIDES_ON[name]}
+        return out
+
+    def estimates(self) -> dict[str, dict]:
+        """Friction and torque-constant factors and the speed bias from the tests' latest
+        values (the last :data:`HISTORY_S`), alarm or not: a wear trend below threshold.
+
+        The current at constant speed over the reference's friction current is
+        friction/k_t, the current under acceleration over the inertial current is
+        I/k_t; with each excess e taken over the reference's own level on its healthy
+        record, the torque-constant factor is 1/(1 + e_motor), the friction factor
+        (1 + e_friction)/(1 + e_motor); the bias is the held-speed error less the
+        reference's. Each interval is the record's noise (block σ of the reference,
+        one independent value per block) only: the reference unit's own spread from
+        the wheel's (±0.48 in friction, 95 %) is common to every record of one wheel,
+        so it moves a trend as a whole and hides no change within it.
+
+        Returns
+        -------
+        dict of str to dict
+            ``friction``, ``torque_constant`` (factors), ``speed_sensor_bias`` (rpm),
+            each ``{"magnitude", "ci95", "unit", "blocks"}``, where the test had values.
+        """
+        ref = self.reference
+        if ref is None:
+            return {}
+
+        def mean_ci(name: str):
+            det = self._detectors.get(name)
+            stats = ref.tests.get(name)
+            if det is None or stats is None or not det.raw:
+                return None
+            x = np.array([v for _, v in det.raw], dtype=float)
+            blocks = max(len(x) / stats.block, 1.0)
+            return float(x.mean()), _Z95 * stats.sigma / math.sqrt(blocks), blocks
+
+        out: dict[str, dict] = {}
+        motor, friction, speed = mean_ci("motor"), mean_ci("friction"), mean_ci("speed")
+        e_m, h_m = (motor[0], motor[1]) if motor else (0.0, 0.0)
+        # relative to the reference's own level on its healthy record (the tests' zero)
+        e_m, h_m = _relative(e_m, h_m, ref.tests["motor"].mean if motor else 0.0)
+        if motor:
+            lo, hi = 1 / (1 + e_m + h_m), 1 / max(1 + e_m - h_m, 1e-9)
+            out["torque_constant"] = _estimate(1 / (1 + e_m), lo, hi, "factor", motor[2])
+        if friction:
+            e_f, h_f, n = friction
+            e_f, h_f = _relative(e_f, h_f, ref.tests["friction"].mean)
+            factor = (1 + e_f) / (1 + e_m)
+            rel = math.hypot(h_f / (1 + e_f), h_m / (1 + e_m))
+            out["friction"] = _estimate(factor, factor * (1 - rel), factor * (1 + rel), "factor", n)
+        if speed:
+            bias = speed[0] - ref.tests["speed"].mean
+            out["speed_sensor_bias"] = _estimate(
+                bias, bias - speed[1], bias + speed[1], "rpm", speed[2]
+            )
+        return out
 
     def _fire(self, t_s: float, detector: str) -> list[Alarm]:
         det = self._detectors[detector]
@@ -1131,6 +1245,16 @@ class Diagnoser:
     @property
     def calibrated(self) -> bool:
         return bool(self._detectors)
+
+
+def _relative(e: float, half: float, mean: float) -> tuple[float, float]:
+    """An excess e (and its half-width) over the reference's level ``mean``, as an excess
+    over 1 + mean."""
+    return (1 + e) / (1 + mean) - 1, half / (1 + mean)
+
+
+def _estimate(value: float, lo: float, hi: float, unit: str, blocks: float) -> dict:
+    return {"magnitude": value, "ci95": [lo, hi], "unit": unit, "blocks": round(blocks, 1)}
 
 
 def healthy_reference(
@@ -1275,7 +1399,7 @@ def _model_traces(records: list[IOData], wheel, reference: HealthyReference):
     return traces, k, moving
 
 
-@dataclass
+@dataclass(repr=False)
 class Diagnosis:
     """What :func:`diagnose` found in a record.
 
@@ -1285,16 +1409,23 @@ class Diagnosis:
         In time order.
     thresholds : dict
         Each detector's threshold.
-    calibration : dict
-        What the healthy start of the record calibrated (whitening, current model).
+    reference : HealthyReference
+        The healthy reference the detectors compared the record with.
     history : dict of str to numpy.ndarray
-        The residuals and statistics at every sample (``t_s``, ``speed``, ...).
+        The residuals and statistics at every sample (``t_s``, ``speed``, ...,
+        ``stat_NAME`` for each CUSUM test), each shape (N,).
     false_alarms_per_hour : float
         The false-alarm rate the thresholds were set for, per detector.
     duration_s : float
         Length of the record, s.
     notes : list of str
         Detectors that cannot deliver the requested rate, and why.
+    coverage : dict of str to dict
+        What each test decided on (:meth:`Diagnoser.coverage`; a test the data
+        could not feed has ``decided`` 0 and a ``why``).
+    estimates : dict of str to dict
+        Friction and torque-constant factors and the speed bias against the healthy
+        reference, alarm or not (:meth:`Diagnoser.estimates`), for trends.
     """
 
     alarms: list[Alarm]
@@ -1304,19 +1435,54 @@ class Diagnosis:
     false_alarms_per_hour: float
     duration_s: float = 0.0
     notes: list[str] = field(default_factory=list)
+    coverage: dict[str, dict] = field(default_factory=dict)
+    estimates: dict[str, dict] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        found = ", ".join(self.faults()) or "no alarm"
+        return (
+            f"Diagnosis({found}; {len(self.alarms)} alarm{'' if len(self.alarms) == 1 else 's'} "
+            f"over {self.duration_s:g} s, "
+            f"{len(self.tested())} of {len(self.coverage)} tests decided)"
+        )
 
     def faults(self) -> list[str]:
         """The faults named, in the order of their first alarm."""
         return list(dict.fromkeys(a.kind for a in self.alarms))
 
+    def tested(self) -> list[str]:
+        """The tests that decided on at least one block, window, slew or sample."""
+        return [name for name, c in self.coverage.items() if c["decided"] > 0]
+
+    def untested(self) -> list[str]:
+        """The tests that had nothing to decide on: their silence says nothing."""
+        return [name for name, c in self.coverage.items() if c["decided"] == 0]
+
+    def unseen(self) -> list[str]:
+        """The faults (:data:`FAULT_TESTS`) none of whose tests decided on anything: the
+        record could not show them (too short, or without the motions they need)."""
+        tested = set(self.tested())
+        return [kind for kind, tests in FAULT_TESTS.items() if not tested.intersection(tests)]
+
+    def model_tested(self) -> bool:
+        """Whether any model-based test (all but rest, stuck, dropout) decided anything:
+        False, and "no alarm" says nothing of friction, the motor, the current limit or
+        a sensor bias."""
+        return any(name not in TELEMETRY_TESTS for name in self.tested())
+
     def residual_statistics(self) -> dict:
-        """Mean, σ and largest |value| of each residual, before and after the first alarm."""
+        """Mean, σ and largest |value| of each residual: before and after the first
+        alarm, or over the whole record when nothing alarmed."""
         t = self.history["t_s"]
-        first = min((a.t_s for a in self.alarms), default=math.inf)
+        first = min((a.t_s for a in self.alarms), default=None)
+        if first is None:
+            parts = {"whole_record": np.ones(t.shape, dtype=bool)}
+        else:
+            parts = {"before_alarm": t < first, "after_alarm": t >= first}
         out: dict[str, dict] = {}
         for name, unit in (("speed", "rpm"), ("acceleration", "rpm/s"), ("current", "A")):
             x = self.history[name]
-            for part, mask in (("before_alarm", t < first), ("after_alarm", t >= first)):
+            for part, mask in parts.items():
                 v = x[mask & np.isfinite(x)]
                 out.setdefault(name, {"unit": unit})[part] = (
                     {
@@ -1331,13 +1497,18 @@ class Diagnosis:
 
     def to_dict(self) -> dict:
         return {
-            "format": "rwlab.Diagnosis/2",
+            "format": "rwlab.Diagnosis/3",
             "alarms": [a.to_dict() for a in self.alarms],
             "faults": self.faults(),
             "thresholds": self.thresholds,
             "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
             "duration_s": self.duration_s,
             "threshold_notes": list(self.notes),
+            "coverage": {name: dict(c) for name, c in self.coverage.items()},
+            "untested": self.untested(),
+            "unseen_faults": self.unseen(),
+            "model_tested": self.model_tested(),
+            "estimates": {kind: dict(e) for kind, e in self.estimates.items()},
             "reference": self.reference.to_dict(),
             "residual_statistics": self.residual_statistics(),
         }
@@ -1346,7 +1517,11 @@ class Diagnosis:
 def _columns(data: IOData, wheel):
     """Time, held command, speed, current, age and lost frames of a record, checked."""
     if not math.isclose(data.Ts, wheel.Ts, rel_tol=1e-6):
-        raise DataError(f"the data are sampled at {data.Ts} s, the model at {wheel.Ts} s")
+        raise DataError(
+            f"the data are sampled at {data.Ts:g} s, the model at {wheel.Ts:g} s: load the "
+            f"record on the model's grid, load_record(path, {wheel.Ts:g}, outputs=("
+            f"{', '.join(repr(o) for o in RECORD_OUTPUTS)}))"
+        )
     if data.nu != 1:
         raise DataError(f"diagnosis needs one input (the speed command), got {data.nu}")
     if data.input_units and data.input_units[0] == "rpm/s":
@@ -1406,8 +1581,21 @@ def diagnose(
     Raises
     ------
     DataError
-        Another Ts, no speed, an acceleration-mode record.
+        Another Ts, no speed, no motor current, an acceleration-mode record.
+
+    Warns
+    -----
+    RwlabWarning
+        A fault none of whose tests had anything to decide on (a record too
+        short, or without the motions they need): "no alarm" says nothing of it.
+
+    Notes
+    -----
+    Without ``lost_frames`` the dropout test has nothing to decide on, without
+    ``telemetry_age_s`` the stuck test takes every sample as a new reading (both
+    said in ``coverage`` and ``notes``); without ``current_a`` the data are refused.
     """
+    _require_current(data, wheel)
     t, held, speed, current, age, lost = _columns(data, wheel)
     d = Diagnoser(
         wheel,
@@ -1418,12 +1606,48 @@ def diagnose(
     )
     for k in range(data.N):
         d.update(float(t[k]), float(held[k]), speed[k], current[k], age[k], lost[k])
-    return Diagnosis(
+    coverage = d.coverage()
+    notes = list(d.notes)
+    if "lost_frames" not in data.output_names:  # a degraded run, said so
+        why = "the data have no lost_frames output (load_record(..., outputs=(..., 'lost')))"
+        coverage["dropout"] = {"decided": 0, "unit": DECIDES_ON["dropout"], "why": why}
+        notes.append(f"dropout: not tested, {why}")
+    if "telemetry_age_s" not in data.output_names:
+        notes.append(
+            "stuck: the data have no telemetry_age_s output, so a sample without a new "
+            "frame counts as a reading (a held frame may read as a frozen sensor)"
+        )
+    result = Diagnosis(
         d.alarms,
         d.thresholds,
         reference,
         {k: np.asarray(v, dtype=float) for k, v in d.history.items()},
         false_alarms_per_hour,
         data.N * data.Ts,
-        list(d.notes),
+        notes,
+        coverage,
+        d.estimates(),
+    )
+    if result.unseen():
+        warnings.warn(
+            f"the record ({result.duration_s:g} s) gave no test that names "
+            f"{', '.join(result.unseen())} anything to decide on: no alarm says nothing of "
+            + ("them" if len(result.unseen()) > 1 else "it")
+            + "; record at least 20 minutes of a test signal with speeds held at both signs",
+            RwlabWarning,
+            stacklevel=2,
+        )
+    return result
+
+
+def _require_current(data: IOData, wheel) -> None:
+    """Refuse data without the motor current: every rotor test reads it (load_record's
+    default gives the speed alone, and a silent run named k_t × 0.8 a current limit)."""
+    names = list(data.output_names)
+    if "current_a" in names:
+        return
+    outputs = ", ".join(repr(o) for o in RECORD_OUTPUTS)
+    raise DataError(
+        f"diagnosis needs the motor current (a current_a output), got {names}: load the "
+        f"record with load_record(path, {wheel.Ts:g}, outputs=({outputs}))"
     )

@@ -190,9 +190,11 @@ class RestReading:
         self._counts: dict[float, int] = {}
         self.value = 0.0  # the latest counted reading, rpm
         self.statistic = 0.0
+        self.readings = 0  # readings taken: what "no alarm" rests on
 
     def add(self, speed_rpm: float) -> bool:
         """Count one changed reading taken near zero speed; True when it alarms."""
+        self.readings += 1
         if speed_rpm == 0.0:
             self.restart()
             return False

@@ -21,7 +21,13 @@ __all__ = ["write_diagnosis"]
 
 
 def write_diagnosis(
-    diagnosis: Diagnosis, out_dir: str | os.PathLike, *, title: str, force: bool = False
+    diagnosis: Diagnosis,
+    out_dir: str | os.PathLike,
+    *,
+    title: str,
+    force: bool = False,
+    events: list[dict] | None = None,
+    record_note: str | None = None,
 ) -> dict[str, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``.
 
@@ -35,6 +41,11 @@ def write_diagnosis(
         The page's title.
     force : bool
         Replace existing files.
+    events : list of dict, optional
+        The record's events (``{"t", "kind", "message"}``, t in s since the first
+        command): its ``fault_injected`` ones are shown beside the alarms.
+    record_note : str, optional
+        What is wrong with the record (truncated), shown on the page.
 
     Returns
     -------
@@ -50,16 +61,21 @@ def write_diagnosis(
     payload = diagnosis.to_dict()
     text = json.dumps(payload, indent=2)
     atomic_write_bytes(targets["diagnosis.json"], lambda tmp: tmp.write_text(text))
-    _page(diagnosis, payload, title).save(targets["report.html"])
+    injected = [e for e in events or () if e.get("kind") == "fault_injected"]
+    _page(diagnosis, payload, title, injected, record_note).save(targets["report.html"])
     return targets
 
 
-def _mark_alarms(ax, diagnosis: Diagnosis) -> None:
+def _mark_alarms(ax, diagnosis: Diagnosis, injected: list[dict]) -> None:
     for a in diagnosis.alarms:
         ax.axvline(a.t_s, color="r", ls="--", lw=1)
+    for e in injected:
+        ax.axvline(e["t"], color="tab:purple", ls=":", lw=1)
 
 
-def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
+def _page(
+    diagnosis: Diagnosis, payload: dict, title: str, injected: list[dict], record_note
+) -> Page:
     h = diagnosis.history
     t = h["t_s"]
     page = Page(f"Fault diagnosis — {title}")
@@ -74,38 +90,41 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
         "approximation of ARL₀; frozen speed: the run-length ARL₀ of the reference's repeat "
         "probability; dropouts: Poisson counts of lost frames)."
     )
+    if record_note:
+        page.html(f'<p class="note">{html.escape(record_note)}.</p>')
+    if not diagnosis.model_tested():
+        page.html(
+            '<p class="note" id="nothing-tested">No model-based test had anything to decide '
+            f"on in this {diagnosis.duration_s:g}-s record: no alarm says nothing of friction, "
+            "the motor, the current limit or a sensor bias.</p>"
+        )
     for note in diagnosis.notes:
         page.html(f'<p class="note">Threshold: {html.escape(note)}</p>')
     page.heading("Alarms", "alarms-heading")
-    if diagnosis.alarms:
+    _alarm_table(page, diagnosis, injected)
+    _coverage_table(page, diagnosis)
+    if diagnosis.estimates:
+        page.heading("Sizes against the healthy reference", "estimates")
+        page.text(
+            "From the tests' latest 10 minutes, alarm or not (a fault below its threshold "
+            "shows here first): 95 % intervals of this record's noise, without the "
+            "reference unit's own difference from this wheel (see rwlab diagnose FOLDER's "
+            "trend)."
+        )
         page.table(
-            [
-                "t [s]",
-                "likely fault",
-                "size",
-                "95 % CI",
-                "unit",
-                "detector",
-                "statistic",
-                "threshold",
-            ],
+            ["quantity", "estimate", "95 % CI", "unit", "blocks"],
             [
                 [
-                    a.t_s,
-                    a.kind,
-                    "—" if a.magnitude is None else f"{a.magnitude:.4g}",
-                    "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
-                    a.unit,
-                    a.detector,
-                    a.statistic,
-                    a.threshold,
+                    kind,
+                    f"{e['magnitude']:.4g}",
+                    f"{e['ci95'][0]:.4g} … {e['ci95'][1]:.4g}",
+                    e["unit"],
+                    e["blocks"],
                 ]
-                for a in diagnosis.alarms
+                for kind, e in diagnosis.estimates.items()
             ],
-            table_id="alarms",
+            table_id="estimates-table",
         )
-    else:
-        page.html('<p class="note" id="alarms">No alarm.</p>')
     page.heading("Residuals", "residuals")
     fig, axes = figure(9, 6.0, 3, 1, sharex=True)
     for ax, (name, unit) in zip(
@@ -113,51 +132,140 @@ def _page(diagnosis: Diagnosis, payload: dict, title: str) -> Page:
     ):
         ax.plot(t, h[name], lw=0.8)
         ax.set_ylabel(f"{name} [{unit}]")
-        _mark_alarms(ax, diagnosis)
+        _mark_alarms(ax, diagnosis, injected)
     axes[-1].set_xlabel("time [s]")
     page.figure(
         fig,
         "fig-residuals",
         "Measured minus modelled speed and acceleration (identified model), and measured "
-        "minus the reference's current balance; red dashes: alarms.",
+        "minus the reference's current balance; red dashes: alarms; purple dots: faults "
+        "the record says were injected.",
     )
-    stats = [n for n in ("friction", "motor", "speed", "lag") if n in diagnosis.thresholds]
-    fig, axes = figure(9, 2.4 * len(stats), len(stats), 1, sharex=True, squeeze=False)
-    for ax, name in zip(axes[:, 0], stats, strict=True):
-        ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
-        ax.axhline(diagnosis.thresholds[name], color="k", ls=":", label="threshold")
-        ax.set_yscale("symlog", linthresh=max(diagnosis.thresholds[name], 0.1))
-        ax.set_ylim(bottom=0)
-        ax.set_ylabel("statistic [σ]")
-        ax.legend(loc="upper left", fontsize=8)
-        _mark_alarms(ax, diagnosis)
-    axes[-1, 0].set_xlabel("time [s]")
-    page.figure(fig, "fig-statistics", "Block tests' CUSUM statistics against their thresholds.")
+    _statistics_figure(page, diagnosis, injected)
     page.heading("Residual statistics")
     rows = []
     for name, stats_ in payload["residual_statistics"].items():
-        for part in ("before_alarm", "after_alarm"):
-            s = stats_[part]
-            if s is not None:
+        for part, s in stats_.items():
+            if part != "unit" and s is not None:
                 rows.append([name, stats_["unit"], part.replace("_", " "), *s.values()])
     page.table(["residual", "unit", "part", "mean", "σ", "max |·|"], rows)
     return page
 
 
-TREND_FORMAT = "rwlab.DiagnosisTrend/1"
+def _alarm_table(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None:
+    """The alarms, and the record's injected faults among them in time order."""
+    rows = [
+        [
+            a.t_s,
+            a.kind,
+            "—" if a.magnitude is None else f"{a.magnitude:.4g}",
+            "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
+            a.unit,
+            a.detector,
+            a.statistic,
+            a.threshold,
+        ]
+        for a in diagnosis.alarms
+    ]
+    rows += [
+        [float(e["t"]), f"injected: {e['message']}", "", "", "", "record event", "", ""]
+        for e in injected
+    ]
+    if not rows:
+        page.html('<p class="note" id="alarms">No alarm.</p>')
+        return
+    if not diagnosis.alarms:
+        page.html('<p class="note">No alarm.</p>')
+    page.table(
+        ["t [s]", "likely fault", "size", "95 % CI", "unit", "detector", "statistic", "threshold"],
+        sorted(rows, key=lambda r: r[0]),
+        table_id="alarms",
+    )
+
+
+def _coverage_table(page: Page, diagnosis: Diagnosis) -> None:
+    """What each test decided on: a test with nothing to decide on says nothing."""
+    page.heading("What each test decided on", "coverage")
+    page.table(
+        ["test", "decided on", "unit", "verdict"],
+        [
+            [
+                name,
+                c["decided"],
+                c["unit"],
+                ("alarm" if any(a.detector == name for a in diagnosis.alarms) else "no alarm")
+                if c["decided"]
+                else f"nothing to decide on{': ' + c['why'] if c.get('why') else ''}",
+            ]
+            for name, c in diagnosis.coverage.items()
+        ],
+        table_id="coverage-table",
+    )
+
+
+def _statistics_figure(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None:
+    """Every CUSUM test that decided on something, against its threshold."""
+    h, t = diagnosis.history, diagnosis.history["t_s"]
+    stats = [
+        name for name in diagnosis.tested() if f"stat_{name}" in h and name in diagnosis.thresholds
+    ]
+    if not stats:
+        page.html('<p class="note" id="fig-statistics">No CUSUM test decided on anything.</p>')
+        return
+    fig, axes = figure(9, 2.0 * len(stats), len(stats), 1, sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], stats, strict=True):
+        ax.plot(t, h[f"stat_{name}"], lw=0.8, label=f"{name} CUSUM")
+        ax.axhline(diagnosis.thresholds[name], color="k", ls=":", label="threshold")
+        ax.set_yscale("symlog", linthresh=max(diagnosis.thresholds[name], 0.1))
+        ax.set_ylim(bottom=0)
+        ax.set_ylabel("[σ]")
+        ax.legend(loc="upper left", fontsize=8)
+        _mark_alarms(ax, diagnosis, injected)
+    axes[-1, 0].set_xlabel("time [s]")
+    page.figure(
+        fig,
+        "fig-statistics",
+        "The CUSUM statistic of every test that decided on something, against its threshold.",
+    )
+
+
+TREND_FORMAT = "rwlab.DiagnosisTrend/2"
 
 
 def trend_point(record: str, start_utc: str, diagnosis: Diagnosis) -> dict:
-    """One record's line of the trend: the first size of each fault named in it."""
+    """One record's line of the trend: the first size of each fault named in it, and the
+    friction, torque-constant and bias estimates against the healthy reference, alarm or
+    not (:meth:`rwlab.diagnose.Diagnoser.estimates`)."""
     faults: dict[str, dict] = {}
     for a in diagnosis.alarms:
         if a.kind not in faults and a.magnitude is not None:
             faults[a.kind] = {"magnitude": a.magnitude, "ci95": a.ci, "unit": a.unit, "t_s": a.t_s}
-    return {"record": record, "start_utc": start_utc, "faults": faults}
+    return {
+        "record": record,
+        "start_utc": start_utc,
+        "faults": faults,
+        "estimates": {kind: dict(e) for kind, e in diagnosis.estimates.items()},
+    }
 
 
 def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool = False):
-    """Write ``trend.json`` and ``trend.html``: each fault's size over a wheel's records."""
+    """Write ``trend.json`` and ``trend.html``: each record's friction, torque-constant and
+    bias estimates (alarm or not) and the faults named, over a wheel's records.
+
+    Parameters
+    ----------
+    points : list of dict
+        :func:`trend_point` of each record.
+    out_dir : str or os.PathLike
+        The folder.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to Path
+        File name → path written.
+    """
     out = Path(out_dir)
     targets = {name: out / name for name in ("trend.json", "trend.html")}
     existing = [str(p) for p in targets.values() if p.exists()]
@@ -169,29 +277,32 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     atomic_write_bytes(targets["trend.json"], lambda tmp: tmp.write_text(text))
     page = Page("Fault trend")
     page.text(
-        "Each record of the wheel diagnosed against the same healthy reference; the size of "
-        "each fault named (first alarm) with its 95 % interval, in record order."
+        "Each record of the wheel diagnosed against the same healthy reference, in record "
+        "order: its friction and torque-constant factors and speed bias estimated from the "
+        "tests' latest 10 minutes whether or not a test alarmed (slow wear below the "
+        "thresholds shows here first), with 95 % intervals of the record's noise; circled "
+        "red: a record in which that fault was named. The intervals leave out the "
+        "reference unit's own difference from this wheel, which shifts every record alike "
+        "where they run the same test signal (speeds held elsewhere weigh the unit's "
+        "friction law differently)."
     )
-    kinds = sorted({k for p in points for k in p["faults"]})
+    kinds = [k for k in ("friction", "torque_constant", "speed_sensor_bias")
+             if any(k in p["estimates"] for p in points)]  # fmt: skip
     if kinds:
         fig, axes = figure(9, 2.4 * len(kinds), len(kinds), 1, sharex=True, squeeze=False)
-        x = np.arange(len(points))
         for ax, kind in zip(axes[:, 0], kinds, strict=True):
-            rows = [(i, p["faults"][kind]) for i, p in enumerate(points) if kind in p["faults"]]
-            mags = np.array([f["magnitude"] for _, f in rows])
-            lo = np.array([(f["ci95"] or [f["magnitude"]] * 2)[0] for _, f in rows])
-            hi = np.array([(f["ci95"] or [f["magnitude"]] * 2)[1] for _, f in rows])
-            idx = np.array([i for i, _ in rows])
-            ax.errorbar(idx, mags, yerr=[mags - lo, hi - mags], fmt="o-", capsize=3)
-            ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
-        axes[-1, 0].set_xticks(x, [p["record"] for p in points], rotation=30, fontsize=7)
-        page.figure(fig, "fig-trend", "Estimated fault size per record (95 % intervals).")
+            _trend_axis(ax, points, kind)
+        axes[-1, 0].set_xticks(
+            np.arange(len(points)), [p["record"] for p in points], rotation=30, fontsize=7
+        )
+        page.figure(fig, "fig-trend", "Estimated size per record (95 % intervals of its noise).")
     page.table(
-        ["record", "start (UTC)", "faults"],
+        ["record", "start (UTC)", *kinds, "faults named"],
         [
             [
                 p["record"],
                 p["start_utc"],
+                *(_estimate_text(p["estimates"].get(k)) for k in kinds),
                 ", ".join(f"{k} {f['magnitude']:.4g} {f['unit']}" for k, f in p["faults"].items())
                 or "none",
             ]
@@ -201,3 +312,22 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     )
     page.save(targets["trend.html"])
     return targets
+
+
+def _trend_axis(ax, points: list[dict], kind: str) -> None:
+    rows = [(i, p["estimates"][kind]) for i, p in enumerate(points) if kind in p["estimates"]]
+    idx = np.array([i for i, _ in rows])
+    mags = np.array([e["magnitude"] for _, e in rows])
+    lo = np.array([e["ci95"][0] for _, e in rows])
+    hi = np.array([e["ci95"][1] for _, e in rows])
+    ax.errorbar(idx, mags, yerr=[mags - lo, hi - mags], fmt="o-", capsize=3)
+    named = [i for i, _ in rows if kind in points[i]["faults"]]
+    ax.plot(named, [mags[list(idx).index(i)] for i in named], "o", mfc="none", mec="r", ms=12)
+    ax.axhline(0.0 if rows[0][1]["unit"] == "rpm" else 1.0, color="k", ls=":", lw=0.8)
+    ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
+
+
+def _estimate_text(e: dict | None) -> str:
+    if e is None:
+        return "—"
+    return f"{e['magnitude']:.4g} [{e['ci95'][0]:.4g}, {e['ci95'][1]:.4g}] {e['unit']}"

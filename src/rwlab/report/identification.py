@@ -162,6 +162,22 @@ def write_study(
     return targets
 
 
+def _reference_text(model_info: dict) -> str:
+    """Whether model.json carries a healthy reference for ``rwlab diagnose``."""
+    ref = model_info.get("healthy_reference")
+    if not ref:
+        return (
+            "model.json holds no healthy reference: rwlab diagnose cannot use this model "
+            "(it measures one only on a testbed record, .mcap, with motor current)."
+        )
+    return (
+        f"model.json also holds the healthy reference for fault diagnosis, measured on this "
+        f"record ({ref.get('samples', '?')} samples): the current balance, each test's "
+        "healthy statistics and the repeat and frame-loss rates that rwlab diagnose and "
+        "rwlab experiment --model compare records with."
+    )
+
+
 def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     d = study["data"]
     page = Page(f"Identification study — {d['name'] or 'record'}")
@@ -192,6 +208,7 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     note = (study.get("parts") or {}).get("note")
     if note:
         page.text(f"Estimation and validation parts differ: {note}.", note=True)
+    page.text(_reference_text(model_info), note=True)
 
     steady = study.get("steady_state_gain")
     if steady:

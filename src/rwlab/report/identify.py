@@ -183,6 +183,11 @@ def identify_into(
     paths = write_study(result, model, folder, force=options["force"])
     study = result.to_dict()
     study["data"]["output_unit"] = data.output_units[0]  # for the messages only
+    study["healthy_reference"] = (  # for the messages only: model.json holds the reference
+        {"stored": True, "samples": reference["samples"]}
+        if isinstance(reference, dict)
+        else {"stored": False, "why": reference}
+    )
     return study, paths
 
 

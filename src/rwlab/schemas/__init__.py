@@ -35,6 +35,7 @@ NAMES = (
     "budget",
     "fleet",
     "diagnosis",
+    "trend",
     "demo",
     "polymodel",
     "ssmodel",

@@ -419,6 +419,10 @@ class RunSummary(ShortRepr):
     status: str  # "completed", "completed with timing faults", "interrupted", "fault", "error"
     timing: dict = dataclasses.field(default_factory=dict)
     """Command timing (:class:`Timing`): period and lateness p50/p99/max, commands late."""
+    alarms: tuple[str, ...] = ()
+    """The live fault detector's alarms (``--model``), as the record's ``alarm`` events."""
+    faults_injected: tuple[str, ...] = ()
+    """The faults injected into the twin (``NAME=VALUE@SECONDS``), as recorded."""
 
 
 class Timing:
@@ -476,6 +480,7 @@ def run_experiment(
     params: WheelParams | None = None,
     force: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    on_alarm: Callable[[str], None] | None = None,
 ) -> RunSummary:
     """Run ``cfg`` and write the record to ``out`` (an ``.mcap`` file).
 
@@ -497,6 +502,9 @@ def run_experiment(
         Replace an existing record.
     progress : callable, optional
         ``progress(k, n)`` after each command.
+    on_alarm : callable, optional
+        ``on_alarm(text)`` as each alarm of the live detector (``cfg.model``) comes,
+        with the text of its record event.
 
     Returns
     -------
@@ -531,6 +539,8 @@ def run_experiment(
         "time_origin": "s since the first command",
     }
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
+    injected = tuple(str(f) for f in faults)
+    alarms: list[str] = []
     writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
     stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
@@ -609,7 +619,10 @@ def run_experiment(
                     clock.now() - client.latest_time,
                     client.lost_frames,
                 ):
-                    writer.event(clock.now(), "alarm", _alarm_text(alarm))
+                    alarms.append(_alarm_text(alarm))
+                    writer.event(clock.now(), "alarm", alarms[-1])
+                    if on_alarm is not None:
+                        on_alarm(alarms[-1])
             seq = send(float(value))
             sent = clock.now()
             timing.add(t0 + k * cfg.Ts, sent)
@@ -661,6 +674,8 @@ def run_experiment(
         clock.now() - t0,
         status,
         timing.summary(),
+        tuple(alarms),
+        injected,
     )
 
 

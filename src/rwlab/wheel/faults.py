@@ -48,6 +48,8 @@ FAULTS: dict[str, str | None] = {
     "telemetry_dropout": "s",
 }
 _SIGNED = {"speed_sensor_bias"}  # every other value must be > 0 ...
+_EXAMPLE = {"friction": 1.5, "torque_constant": 0.8, "current_limit": 0.45}
+_EXAMPLE |= {"speed_sensor_bias": 15, "telemetry_dropout": 0.3}  # for messages
 _ZERO_OK = {"torque_constant"}  # ... or ≥ 0 for these: torque_constant=0 is a dead motor
 
 _SYNTAX = re.compile(r"^\s*([a-z_]+)\s*(?:=\s*([^@]+?))?\s*@\s*(\S+)\s*$")
@@ -79,7 +81,12 @@ class ScheduledFault:
             raise ConfigError(f"fault {self.name} takes no value (write {self.name}@SECONDS)")
         if unit is not None:
             if self.value is None or not math.isfinite(self.value):
-                raise ConfigError(f"fault {self.name} needs a finite value in {unit}")
+                placeholder = {"factor": "FACTOR", "A": "AMPS", "rpm": "RPM", "s": "SECONDS"}[unit]
+                raise ConfigError(
+                    f"fault {self.name} needs a finite value in {unit}: write "
+                    f"{self.name}={placeholder}@SECONDS (e.g. {self.name}="
+                    f"{_EXAMPLE[self.name]}@{self.t_s:g})"
+                )
             if self.name in _ZERO_OK and self.value < 0:
                 raise ConfigError(f"fault {self.name} needs a value ≥ 0 {unit}, got {self.value}")
             if self.name not in _SIGNED | _ZERO_OK and self.value <= 0:

@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from rwlab.errors import FileFormatError, ModelError
+from rwlab.errors import ConfigError, FileFormatError, ModelError
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_advance
@@ -103,14 +103,19 @@ class IdentifiedWheel:
 
     @classmethod
     def from_file(
-        cls, info: WheelModelFile, model: str | None = None, *, source: str = "model"
+        cls,
+        info: WheelModelFile | str | os.PathLike,
+        model: str | None = None,
+        *,
+        source: str = "model",
     ) -> IdentifiedWheel:
         """The wheel a :class:`~rwlab.ident.model_file.WheelModelFile` describes.
 
         Parameters
         ----------
-        info : WheelModelFile
-            The model file's content.
+        info : WheelModelFile or path-like
+            The model file's content, or the ``model.json`` to read (as
+            :meth:`from_json`).
         model : {'linear', 'nonlinear'}, optional
             Fly the linear or the servo model (default: the file's ``preferred``).
         source : str
@@ -125,7 +130,16 @@ class IdentifiedWheel:
         FileFormatError
             No such model in the file, or a model no wheel can have (unstable,
             non-finite, limits that are not positive).
+        ConfigError
+            ``info`` is neither a model file nor a path.
         """
+        if isinstance(info, (str, os.PathLike)):
+            return cls.from_json(info, model)
+        if not isinstance(info, WheelModelFile):
+            raise ConfigError(
+                f"from_file takes a WheelModelFile or a model.json path, not a "
+                f"{type(info).__name__} (a dict read from model.json: from_info)"
+            )
         kind = model or info.preferred
         if kind not in ("linear", "nonlinear"):
             raise FileFormatError(f"model must be 'linear' or 'nonlinear', got {kind!r}")

@@ -1,0 +1,253 @@
+"""The diagnosis as a user meets it: refusals, what each test decided on, the console,
+the report and the output folders (issue 23's newcomer findings)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import jsonschema
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rwlab import schemas
+from rwlab.cli import main
+from rwlab.diagnose import HealthyReference, diagnose
+from rwlab.errors import ConfigError, DataError, RwlabWarning
+from rwlab.testbed import ExperimentConfig, load_record, run_experiment
+from rwlab.wheel import IdentifiedWheel
+
+OUTPUTS = ("speed", "current", "age", "lost")
+
+
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """``rwlab identify`` on a fault-free 20-minute PRBS (seed 0): its output and model."""
+    out = tmp_path_factory.mktemp("ident")
+    run_experiment(ExperimentConfig(duration=1200, seed=0), out / "prbs.mcap")
+    result = CliRunner().invoke(
+        main, ["identify", str(out / "prbs.mcap"), "--out", str(out / "study")]
+    )
+    assert result.exit_code == 0, result.output
+    return result.output, out / "study" / "model.json"
+
+
+@pytest.fixture(scope="module")
+def model_file(identified):
+    return identified[1]
+
+
+@pytest.fixture(scope="module")
+def wheel(model_file):
+    return IdentifiedWheel.from_json(model_file)
+
+
+def _cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+# -- refusals that say what to do ---------------------------------------------------------
+
+
+def test_the_speed_alone_is_refused_with_how_to_load_the_current(tmp_path, model_file, wheel):
+    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
+    speed_only = load_record(tmp_path / "r.mcap", wheel.Ts)  # load_record's default
+    with pytest.raises(DataError, match=r"current.*outputs=\('speed', 'current', 'age', 'lost'\)"):
+        diagnose(speed_only, wheel, HealthyReference.from_model_file(model_file))
+
+
+def test_without_lost_frames_the_dropout_test_says_it_decided_nothing(tmp_path, model_file, wheel):
+    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
+    data = load_record(tmp_path / "r.mcap", wheel.Ts, outputs=("speed", "current"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RwlabWarning)
+        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+    assert d.coverage["dropout"]["decided"] == 0 and "lost" in d.coverage["dropout"]["why"]
+    assert any(n.startswith("dropout: not tested") for n in d.notes)
+    assert any(n.startswith("stuck:") and "telemetry_age_s" in n for n in d.notes)
+    assert "dropout" in d.untested() and "telemetry_dropout" in d.unseen()
+
+
+def test_another_sample_time_says_how_to_resample(tmp_path, model_file, wheel):
+    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
+    other = load_record(tmp_path / "r.mcap", wheel.Ts / 5, outputs=OUTPUTS, max_gap=np.inf)
+    with pytest.raises(DataError, match=rf"load_record\(path, {wheel.Ts:g}, outputs="):
+        diagnose(other, wheel, HealthyReference.from_model_file(model_file))
+
+
+def test_from_file_takes_a_path_or_says_what_it_takes(model_file, wheel):
+    assert IdentifiedWheel.from_file(model_file).Ts == wheel.Ts
+    assert IdentifiedWheel.from_file(str(model_file)).Ts == wheel.Ts
+    with pytest.raises(ConfigError, match="from_info"):
+        IdentifiedWheel.from_file(json.loads(model_file.read_text()))
+
+
+def test_a_fault_without_its_value_shows_the_syntax(tmp_path):
+    result = _cli("experiment", "--fault", "friction@100", "--out", tmp_path / "r.mcap")
+    assert result.exit_code == 2
+    assert "friction=FACTOR@SECONDS" in result.output
+
+
+def test_identify_says_it_stored_a_healthy_reference(identified):
+    output, model_file = identified
+    samples = json.loads(model_file.read_text())["healthy_reference"]["samples"]
+    assert f"healthy reference for fault diagnosis stored in model.json ({samples}" in output
+    report = (model_file.parent / "report.html").read_text()
+    assert "holds the healthy reference for fault diagnosis" in report
+
+
+# -- "no alarm" against "nothing tested" --------------------------------------------------
+
+
+def test_a_twenty_second_record_says_what_it_could_not_test(tmp_path, model_file):
+    run_experiment(ExperimentConfig(duration=20, seed=4), tmp_path / "short.mcap")
+    result = _cli(
+        "diagnose", tmp_path / "short.mcap", "--model", model_file, "--out", tmp_path / "d"
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    # truth: the speed and hold tests take a command held ≥ 30 s, which 20 s cannot hold;
+    # the change test samples 300 s old; the friction test 20 samples at constant speed
+    # after both signs were held 10 samples each
+    assert report["coverage"]["speed"]["decided"] == 0
+    assert report["coverage"]["hold"]["decided"] == 0
+    assert "friction" in report["unseen_faults"]
+    assert "speed" in report["untested"]
+    assert "warning:" in result.output and "says nothing" in result.output
+    assert "not tested (no test could decide): friction" in result.output
+    assert "nothing to decide on:" in result.output
+
+
+def test_each_test_says_what_it_decided_on(tmp_path, model_file, wheel):
+    path = tmp_path / "r.mcap"
+    run_experiment(ExperimentConfig(duration=600, seed=5), path)
+    data = load_record(path, wheel.Ts, outputs=OUTPUTS, max_gap=np.inf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RwlabWarning)
+        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+    # the dropout test decides on each whole 10-s block of the record
+    assert d.coverage["dropout"] == {
+        "decided": data.N // round(10 / wheel.Ts),
+        "unit": "10-s blocks",
+    }
+    # a block CUSUM decides on at most one block per `block` qualifying samples
+    ref = d.reference.tests
+    for name in ("friction", "motor", "speed", "lag"):
+        assert 0 < d.coverage[name]["decided"] <= data.N // ref[name].block, name
+    assert 0 < d.coverage["stuck"]["decided"] <= data.N
+    assert set(d.tested()) | set(d.untested()) == set(d.coverage)
+    # a short repr, not the histories
+    assert len(repr(d)) < 200 and "tests decided" in repr(d)
+    # nothing alarmed: the residual statistics are the whole record's, not "before alarm"
+    if not d.alarms:
+        assert set(d.residual_statistics()["speed"]) == {"unit", "whole_record"}
+    payload = d.to_dict()
+    assert payload["coverage"] == json.loads(json.dumps(d.coverage))
+
+
+def test_the_report_plots_every_test_that_decided(tmp_path, model_file, wheel):
+    from rwlab.report import diagnosis as report
+
+    path = tmp_path / "r.mcap"
+    run_experiment(ExperimentConfig(duration=600, seed=6), path)
+    data = load_record(path, wheel.Ts, outputs=OUTPUTS, max_gap=np.inf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RwlabWarning)
+        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+
+    class Capture:
+        def __init__(self):
+            self.figures = []
+
+        def figure(self, fig, fig_id, caption):
+            self.figures.append((fig_id, len(fig.axes)))
+
+        def html(self, text):
+            pass
+
+    page = Capture()
+    report._statistics_figure(page, d, [])
+    cusums = [n for n in d.tested() if f"stat_{n}" in d.history]
+    assert len(cusums) > 4  # more than the four the old figure showed (slew, hold, ...)
+    assert page.figures == [("fig-statistics", len(cusums))]
+
+
+def test_a_truncated_record_is_diagnosed_with_a_warning(tmp_path, model_file):
+    path = tmp_path / "r.mcap"
+    run_experiment(ExperimentConfig(duration=120, seed=7), path)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 0, result.output
+    assert "truncated" in result.output
+    page = (tmp_path / "d" / "report.html").read_text()
+    assert 'id="coverage-table"' in page and 'id="estimates-table"' in page
+
+
+# -- output folders and the live console --------------------------------------------------
+
+
+def test_a_folder_with_a_bad_record_leaves_nothing_and_names_it(tmp_path, model_file):
+    folder = tmp_path / "wheel"
+    folder.mkdir()
+    run_experiment(ExperimentConfig(duration=60, seed=8), folder / "a_good.mcap")
+    bad = ExperimentConfig(duration=60, mode="acceleration", amplitude=100)
+    run_experiment(bad, folder / "b_accel.mcap")
+    result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "out")
+    assert result.exit_code == 2
+    assert "b_accel.mcap" in result.output and "acceleration-mode" in result.output
+    assert not (tmp_path / "out").exists()  # not even a_good's diagnosis
+    assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
+
+
+def test_live_alarms_and_injected_faults_are_printed(tmp_path, model_file):
+    args = ["experiment", "--duration", 300, "--seed", 9, "--fault", "speed_sensor_stuck@100"]
+    result = _cli(*args, "--model", model_file, "--out", tmp_path / "r.mcap")
+    assert result.exit_code == 0, result.output
+    assert "alarm: speed_sensor_stuck at" in result.output  # as it came
+    assert "live diagnosis: speed_sensor_stuck at" in result.output
+    assert "injected: speed_sensor_stuck@100" in result.output
+    # the alarms printed are the record's
+    from rwlab.testbed import read_record
+
+    events = [e["message"] for e in read_record(tmp_path / "r.mcap").topic("/event")]
+    printed = [
+        line.removeprefix("alarm: ")
+        for line in result.output.splitlines()
+        if line.startswith("alarm: ")
+    ]
+    assert printed and all(p in events for p in printed)
+
+
+def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
+    """Records of one wheel, the same test signal, friction ×1, ×1.15, ×1.3 from power-up:
+    each record's friction estimate, alarm or not, and their ratios are the factors."""
+    folder = tmp_path / "wheel"
+    folder.mkdir()
+    factors = (1.0, 1.15, 1.3)
+    for week, factor in enumerate(factors):
+        faults = () if factor == 1.0 else (f"friction={factor}@0",)
+        cfg = ExperimentConfig(duration=900, seed=30, unit=5, faults=faults)
+        run_experiment(cfg, folder / f"week{week}.mcap")
+    result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 0, result.output
+    assert "estimates: " in result.output
+    trend = json.loads((tmp_path / "d" / "trend.json").read_text())
+    validator = jsonschema.Draft202012Validator
+    jsonschema.validate(trend, schemas.schema("trend"), cls=validator)
+    for name in ("week0", "week1"):
+        report = json.loads((tmp_path / "d" / name / "diagnosis.json").read_text())
+        jsonschema.validate(report, schemas.schema("diagnosis"), cls=validator)
+    records = trend["records"]
+    assert [p["record"] for p in records] == ["week0.mcap", "week1.mcap", "week2.mcap"]
+    assert records[0]["faults"] == {}  # the healthy record: no alarm, yet a size
+    friction = [p["estimates"]["friction"] for p in records]
+    assert all(f["ci95"][0] <= f["magnitude"] <= f["ci95"][1] for f in friction)
+    # the same unit and signal: the reference unit's difference cancels in the ratios
+    base = friction[0]["magnitude"]
+    for f, factor in zip(friction[1:], factors[1:], strict=True):
+        assert f["magnitude"] / base == pytest.approx(factor, rel=0.05)
+    # a weak motor it is not: the torque constant stays at the healthy record's
+    kt = [p["estimates"]["torque_constant"]["magnitude"] for p in records]
+    assert max(kt) - min(kt) < 0.03
