@@ -751,3 +751,41 @@ def test_friction_after_a_rest_is_seen_against_the_mirror_speed(tmp_path, model_
     assert alarms and all(a.t_s >= 300 for a in alarms), alarms
     assert {a.kind for a in alarms} == {"friction"}, alarms
     assert alarms[0].t_s <= 600 and alarms[0].ci[0] <= 1.5 <= alarms[0].ci[1]
+
+
+# -- issue 23: friction at a hold's start is no bias -----------------------------------------
+
+
+def _unit10_record(tmp_path, fault):
+    """Unit 10's PRBS: its hold at −1941 rpm settles at 299 s, 1.5 s before the fault."""
+    path = tmp_path / "u10.mcap"
+    run_experiment(ExperimentConfig(duration=400, seed=10, unit=10, faults=(fault,)), path)
+    return path
+
+
+def test_a_load_step_as_a_hold_settles_is_not_a_speed_sensor_bias(tmp_path, model_file):
+    """Worn bearings 1.5 s after the wheel settled at a hold leave no earlier current at
+    that hold; the speed error the loop then rejects rises and decays (a transient), where
+    a bias is a step: it was named a 4.5 rpm bias at 308.5 s."""
+    alarms = _diagnose(_unit10_record(tmp_path, "friction=1.5@300"), model_file).alarms
+    assert "speed_sensor_bias" not in {a.kind for a in alarms}, alarms
+
+
+def test_a_bias_at_a_hold_is_still_named_at_once(tmp_path, model_file):
+    """The same hold with a 10-rpm bias: a step that stays, named without the wait."""
+    alarms = _diagnose(_unit10_record(tmp_path, "speed_sensor_bias=10@300"), model_file).alarms
+    bias = [a for a in alarms if a.kind == "speed_sensor_bias"]
+    assert bias and bias[0].t_s <= 300 + 15, alarms
+    assert bias[0].ci[0] <= 10 <= bias[0].ci[1]
+
+
+@pytest.mark.parametrize("level", [0.0, 4.0, -15.0])
+def test_steady_tells_a_step_from_a_transient(level):
+    from rwlab.diagnose.diagnoser import _steady
+
+    rng = np.random.default_rng(3)
+    noise = 0.3 * rng.standard_normal(20)
+    assert _steady(level + noise, 0.7)
+    decay = 6.0 * np.exp(-np.arange(20) / 6.0) + noise  # a PI loop rejecting a load step
+    assert not _steady(decay, 0.7)
+    assert not _steady(level + noise[:7], 0.7)  # too few to tell

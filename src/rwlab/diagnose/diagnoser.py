@@ -274,13 +274,31 @@ class _BlockCusum:
         split that best explains a shift from the healthy mean (the maximum-likelihood
         change point of a Gaussian mean), so a block straddling the onset does not dilute
         the size."""
+        rows, j = self._split()
+        return np.array([x for _, x in rows[j:]])
+
+    def _split(self) -> tuple[list[tuple[float, float]], int]:
         t0 = self.change_time()
-        v = np.array([x for t, x in self.raw if t > t0] or [x for _, x in self.raw][-1:])
-        d = v - self.mean
+        rows = [r for r in self.raw if r[0] > t0] or list(self.raw)[-1:]
+        d = np.array([x for _, x in rows]) - self.mean
         tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
-        n = np.arange(len(v), 0, -1)
-        j = int(np.argmax(tail**2 / n))
-        return v[j:]
+        n = np.arange(len(d), 0, -1)
+        return rows, int(np.argmax(tail**2 / n))
+
+    def change_point(self) -> float:
+        """Time of the first single value of :meth:`since_change`, s."""
+        rows, j = self._split()
+        return rows[j][0]
+
+
+def _steady(values: np.ndarray, sd: float) -> bool:
+    """A step, not a transient: the values' two halves agree (three σ, or a fifth of
+    their mean), from 8 values on. ``sd``: σ of one value."""
+    if values.size < 8:
+        return False
+    first, second = np.array_split(values, 2)
+    diff = abs(float(first.mean() - second.mean()))
+    return diff <= max(3 * sd * math.sqrt(4 / values.size), 0.2 * abs(float(values.mean())))
 
 
 class _FrictionChange(_BlockCusum):
@@ -948,18 +966,22 @@ class Diagnoser:
         t0 = det.change_time()
         if self._detectors["hold"].load_change(t0, self._command[0]) and t_s - t0 < LOAD_SETTLE_S:
             return []
-        # a bias stays; forget an error that no longer holds (a load step at an earlier
-        # hold, an overshoot the loop has since removed): at a hold begun since the change,
-        # on its own values (wait for 4), else on the latest block
+        # a load step that comes as (or just after) the wheel settles at a hold leaves no
+        # earlier current there to compare (friction x1.5 on unit 10, 1.5 s after its hold
+        # settled, read a 4.5 rpm bias; x2 on unit 13 while it slewed to the hold, -15 rpm):
+        # an error that is not a step (it rises, or decays as the loop rejects the load)
+        # waits LOAD_SETTLE_S from its change point too
+        t1 = det.change_point()
+        since = np.array([v for t, v in det.raw if t >= t1])
+        sd = det.stats.sigma * math.sqrt(det.stats.block)  # σ of one value
+        if not _steady(since, sd) and t_s - t1 < LOAD_SETTLE_S:
+            return []
+        # a bias stays; forget an error that no longer holds (the loop has removed a load
+        # step's or an overshoot's): the latest block, and this hold's latest values
         error = det.means[-1][1] - det.mean
-        if self._command[1] > t0:
-            now = [v for t, v in det.raw if t > self._command[1]]
-            if len(now) < 4:
-                return []
-            if abs(float(np.mean(now)) - det.mean) < 0.5 * abs(error):
-                det.restart()
-                return []
-        elif abs(error) / det.stats.sigma <= det.k:
+        now = [v for t, v in det.raw if t > self._command[1]][-8:]
+        latest = float(np.mean(now)) - det.mean if len(now) >= 4 else error
+        if abs(error) / det.stats.sigma <= det.k or abs(latest) < 0.5 * abs(error):
             det.restart()
             return []
         return self._fire(t_s, "speed")
