@@ -789,3 +789,48 @@ def test_steady_tells_a_step_from_a_transient(level):
     decay = 6.0 * np.exp(-np.arange(20) / 6.0) + noise  # a PI loop rejecting a load step
     assert not _steady(decay, 0.7)
     assert not _steady(level + noise[:7], 0.7)  # too few to tell
+
+
+def _worn_slew(factor: float, limit: float = 314.0, top: float = 2500.0):
+    """A rising slew from −top to +top rpm at the acceleration limit of a wheel whose
+    friction (viscous and Coulomb, RW90's datasheet) is ``factor`` × what its controller
+    feeds forward: the excess slows the wheel away from zero and speeds it towards zero.
+    Integrated here in small steps, sampled every 0.5 s."""
+    to_rpm = 60 / (2 * math.pi)
+    rows, t, w, dt = [], 0.0, -top, 1e-3
+    while w < top:
+        if round(t / dt) % 500 == 0:
+            rows.append((t, w, 0.5 if w > 0 else 0.48))  # the feed-forward's step at 0 rpm
+        friction = RW90.viscous_friction * abs(w) / to_rpm + RW90.coulomb_friction
+        w += dt * (limit + math.copysign(1, w) * -(factor - 1) * friction / RW90.inertia * to_rpm)
+        t += dt
+    return rows
+
+
+@pytest.mark.parametrize("factor", [1.5, 2.0, 3.0])
+def test_the_slew_size_holds_the_viscous_friction_at_the_slews_speeds(factor):
+    """Worn bearings scale the viscous friction too, which at 2000 rpm is as large as the
+    Coulomb part: sized on Coulomb alone a ×1.5 read 1.7–2.0 on the twin (×1.5 on unit 32
+    read 3.78 [2.34, 5.22])."""
+    from rwlab.diagnose.isolate import isolate
+    from rwlab.diagnose.motion import slew_asymmetry, slew_friction_gain
+    from rwlab.diagnose.reference import nominal_coulomb_deceleration
+
+    seg = _worn_slew(factor)
+    c = (1.8e-3, 2.5e-6, 9e-3, 0.0)
+    value = slew_asymmetry(seg, c, nominal_coulomb_deceleration())
+    gain = slew_friction_gain(seg)
+    assert gain > 1.5  # the slew's mean speed is over 1000 rpm
+    ev = {
+        "slew": np.array([value]),
+        "slew_gain": np.array([gain]),
+        "slew_before": np.zeros(4),  # the unit's own healthy level: no asymmetry
+        "sigma": {"slew": 0.3},
+        "ref_mean": {"slew": -1.0},  # another unit's, unused where the record has its own
+        "tolerance": {"slew": 0.3},
+        "recent_speed": np.arange(8.0),
+    }
+    (found,) = isolate("slew", ev)
+    assert found.kind == "friction"
+    assert found.magnitude == pytest.approx(factor, rel=0.03)
+    assert found.ci[0] < factor < found.ci[1]

@@ -105,6 +105,7 @@ from rwlab.diagnose.motion import (
     SLEW_SIGMA,
     RestReading,
     slew_asymmetry,
+    slew_friction_gain,
     speed_offset,
 )
 from rwlab.diagnose.reference import (
@@ -612,6 +613,8 @@ class Diagnoser:
         self._offset_command = math.nan
         self._slew: list[tuple[float, float, float]] = []
         self._slew_sign = 0.0
+        self._slew_gain = 1.0
+        self._slew_gains: deque = deque(maxlen=400)  # each slew value's friction gain
         self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
@@ -827,6 +830,7 @@ class Diagnoser:
         slew = self._slew_value(t_s - age_s, r, speed_rpm, current_a, usable)
         if slew is not None:
             values["slew"] = slew
+            self._slew_gains.append(self._slew_gain)
         new: list[Alarm] = []
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
@@ -887,6 +891,8 @@ class Diagnoser:
         if sign != self._slew_sign and self._slew:
             c = self.residuals.current_model
             value = None if c is None else slew_asymmetry(self._slew, c, self._slew_scale)
+            if value is not None:
+                self._slew_gain = slew_friction_gain(self._slew) or 1.0
             self._slew = []
         self._slew_sign = sign
         if slewing:
@@ -1111,6 +1117,11 @@ class Diagnoser:
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
         if "slew" in self._detectors:
             ev["sigma"]["slew"] = self._detectors["slew"].stats.sigma
+        if len(ev.get("slew", ())):  # the slews' friction at their speeds, Coulomb = 1
+            slew = self._detectors["slew"]
+            ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
+            # this unit's own healthy level, where the record has slews before the change
+            ev["slew_before"] = np.array([v for t, v in slew.raw if t < slew.change_point()])
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
