@@ -95,7 +95,7 @@ from rwlab.diagnose.calibration import (
 from rwlab.diagnose.calibration import SHARES as _SHARES
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
-from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, isolate
+from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, combine, isolate
 from rwlab.diagnose.motion import (
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
@@ -1352,6 +1352,29 @@ class Diagnosis:
         """The faults named, in the order of their first alarm."""
         return list(dict.fromkeys(a.kind for a in self.alarms))
 
+    def sizes(self) -> dict:
+        """Each fault's one size: the consistent sizes of its alarms combined
+        (:func:`~rwlab.diagnose.isolate.combine`), with the alarms' own sizes kept.
+
+        Returns
+        -------
+        dict of str to dict
+            Per fault: ``magnitude``, ``ci95``, ``unit``, ``detectors`` (the alarms
+            combined) and ``left_out`` (those whose sizes disagree with them).
+        """
+        out = {}
+        for kind in self.faults():
+            alarms = [a for a in self.alarms if a.kind == kind]
+            found = combine([Finding(a.kind, a.magnitude, a.ci, a.unit) for a in alarms])
+            out[kind] = {
+                "magnitude": found["magnitude"],
+                "ci95": found["ci95"],
+                "unit": found["unit"],
+                "detectors": [alarms[i].detector for i in found["used"]],
+                "left_out": [alarms[i].detector for i in found["left_out"]],
+            }
+        return out
+
     def residual_statistics(self) -> dict:
         """Mean, σ and largest |value| of each residual, before and after the first alarm."""
         t = self.history["t_s"]
@@ -1377,6 +1400,7 @@ class Diagnosis:
             "format": "rwlab.Diagnosis/2",
             "alarms": [a.to_dict() for a in self.alarms],
             "faults": self.faults(),
+            "sizes": self.sizes(),
             "thresholds": self.thresholds,
             "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
             "duration_s": self.duration_s,

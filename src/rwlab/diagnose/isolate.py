@@ -53,11 +53,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from scipy.stats import chi2
+
 import numpy as np
 
 from rwlab.diagnose.motion import REST_BAND_RPM
 
-__all__ = ["Finding", "isolate"]
+__all__ = ["Finding", "combine", "isolate"]
 
 Z95 = 1.959964
 # σ of the friction ratio between two healthy units: viscous and Coulomb each uniform
@@ -281,3 +283,58 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     se = 1.2533 * spread / math.sqrt(max(currents.size / 2, 1))
     half = Z95 * math.hypot(se, CURRENT_OFFSET_SD_A)
     return [Finding("current_limit", mid, (mid - half, mid + half), "A")]
+
+
+def combine(findings: list[Finding]) -> dict:
+    """One size of a fault from the sizes several tests gave it.
+
+    Each test sizes a fault on its own evidence (the slew test on the accelerations at the
+    limit, the friction test on the current at constant speed, ...), so the sizes are
+    independent estimates: their inverse-variance mean (σ from each 95 % interval), over
+    those consistent with it: while the sizes' χ² about the mean exceeds its 95 % point,
+    the one farthest from the mean (in its own σ) is left out (an interval that misses the
+    others is a test whose model does not hold on this record).
+
+    Parameters
+    ----------
+    findings : list of Finding
+        Sizes of one fault, in time order; those without a size or interval are not
+        combined (the first such size stands when no other has one).
+
+    Returns
+    -------
+    dict
+        ``magnitude``, ``ci95`` (95 %, or None), ``unit``, ``used`` and ``left_out`` (the
+        indices into ``findings`` of the sizes combined and of those left out).
+    """
+    sized = [i for i, f in enumerate(findings) if f.magnitude is not None and f.ci is not None]
+    if not sized:
+        first = next((i for i, f in enumerate(findings) if f.magnitude is not None), None)
+        f = findings[first] if first is not None else findings[0]
+        used = [] if first is None else [first]
+        return {
+            "magnitude": f.magnitude,
+            "ci95": None,
+            "unit": f.unit,
+            "used": used,
+            "left_out": [],
+        }
+    x = np.array([findings[i].magnitude for i in sized], dtype=float)
+    sd = np.array([(findings[i].ci[1] - findings[i].ci[0]) / (2 * Z95) for i in sized])
+    sd = np.maximum(sd, 1e-12 * np.maximum(np.abs(x), 1.0))
+    keep = np.ones(len(sized), dtype=bool)
+    while True:
+        w = keep / sd**2
+        mean = float(np.sum(w * x) / np.sum(w))
+        z = np.where(keep, np.abs(x - mean) / sd, -np.inf)
+        if keep.sum() <= 1 or float(np.sum(z[keep] ** 2)) <= chi2.ppf(0.95, keep.sum() - 1):
+            break
+        keep[int(np.argmax(z))] = False
+    half = Z95 / math.sqrt(float(np.sum(w)))
+    return {
+        "magnitude": mean,
+        "ci95": (mean - half, mean + half),
+        "unit": findings[sized[0]].unit,
+        "used": [i for i, k in zip(sized, keep, strict=True) if k],
+        "left_out": [i for i, k in zip(sized, keep, strict=True) if not k],
+    }

@@ -148,11 +148,15 @@ TREND_FORMAT = "rwlab.DiagnosisTrend/1"
 
 
 def trend_point(record: str, start_utc: str, diagnosis: Diagnosis) -> dict:
-    """One record's line of the trend: the first size of each fault named in it."""
+    """One record's line of the trend: each fault's one size (its alarms' consistent sizes
+    combined, :meth:`Diagnosis.sizes`) and the time it was first named."""
     faults: dict[str, dict] = {}
+    first = {}
     for a in diagnosis.alarms:
-        if a.kind not in faults and a.magnitude is not None:
-            faults[a.kind] = {"magnitude": a.magnitude, "ci95": a.ci, "unit": a.unit, "t_s": a.t_s}
+        first.setdefault(a.kind, a.t_s)
+    for kind, size in diagnosis.sizes().items():
+        if size["magnitude"] is not None:
+            faults[kind] = {**size, "t_s": first[kind]}
     return {"record": record, "start_utc": start_utc, "faults": faults}
 
 
@@ -170,7 +174,7 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     page = Page("Fault trend")
     page.text(
         "Each record of the wheel diagnosed against the same healthy reference; the size of "
-        "each fault named (first alarm) with its 95 % interval, in record order."
+        "each fault named (its alarms' consistent sizes combined) with its 95 % interval, in record order."
     )
     kinds = sorted({k for p in points for k in p["faults"]})
     if kinds:
