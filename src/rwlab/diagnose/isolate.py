@@ -53,9 +53,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from scipy.stats import chi2
-
 import numpy as np
+from scipy.stats import chi2
 
 from rwlab.diagnose.motion import REST_BAND_RPM
 

@@ -174,7 +174,8 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     page = Page("Fault trend")
     page.text(
         "Each record of the wheel diagnosed against the same healthy reference; the size of "
-        "each fault named (its alarms' consistent sizes combined) with its 95 % interval, in record order."
+        "each fault named (its alarms' consistent sizes combined) with its 95 % interval, "
+        "in record order."
     )
     kinds = sorted({k for p in points for k in p["faults"]})
     if kinds:
