@@ -319,7 +319,8 @@ def combine(findings: list[Finding]) -> dict:
             "left_out": [],
         }
     x = np.array([findings[i].magnitude for i in sized], dtype=float)
-    sd = np.array([(findings[i].ci[1] - findings[i].ci[0]) / (2 * Z95) for i in sized])
+    cis = [findings[i].ci or (0.0, 0.0) for i in sized]  # every one has an interval
+    sd = np.array([(hi - lo) / (2 * Z95) for lo, hi in cis])
     sd = np.maximum(sd, 1e-12 * np.maximum(np.abs(x), 1.0))
     keep = np.ones(len(sized), dtype=bool)
     while True:
