@@ -985,9 +985,11 @@ class Diagnoser:
         # a bias stays; forget an error that no longer holds (the loop has removed a load
         # step's or an overshoot's): the latest block, and this hold's latest values
         error = det.means[-1][1] - det.mean
-        now = [v for t, v in det.raw if t > self._command[1]][-8:]
-        latest = float(np.mean(now)) - det.mean if len(now) >= 4 else error
-        if abs(error) / det.stats.sigma <= det.k or abs(latest) < 0.5 * abs(error):
+        now = [v for t, v in det.raw if t > self._command[1]]
+        if self._command[1] > t0 and len(now) < 4:
+            return []  # a hold begun since the change: on its own values (wait for 4)
+        held = [float(np.mean(x)) - det.mean for x in (now, now[-8:]) if len(x) >= 4]
+        if abs(error) / det.stats.sigma <= det.k or any(abs(x) < 0.5 * abs(error) for x in held):
             det.restart()
             return []
         return self._fire(t_s, "speed")
