@@ -788,7 +788,10 @@ def test_steady_tells_a_step_from_a_transient(level):
     assert _steady(level + noise, 0.7)
     decay = 6.0 * np.exp(-np.arange(20) / 6.0) + noise  # a PI loop rejecting a load step
     assert not _steady(decay, 0.7)
-    assert not _steady(level + noise[:7], 0.7)  # too few to tell
+    assert not _steady(level + noise[:3], 0.7)  # too few to tell
+    if level:  # a clear step is one from 4 values on, a rising error is not
+        assert _steady(level + 0.1 * noise[:4], 0.7)
+    assert not _steady(np.array([2.6, 4.0, 5.0, 5.9]), 0.7)  # unit 10's load step
 
 
 def _worn_slew(factor: float, limit: float = 314.0, top: float = 2500.0):

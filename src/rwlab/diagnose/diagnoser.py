@@ -293,13 +293,17 @@ class _BlockCusum:
 
 
 def _steady(values: np.ndarray, sd: float) -> bool:
-    """A step, not a transient: the values' two halves agree (three σ, or a fifth of
-    their mean), from 8 values on. ``sd``: σ of one value."""
-    if values.size < 8:
+    """A step, not a transient: the values' two halves agree within a fifth of their mean
+    (from 4 values on: a PI loop's transient moves more than that), or within three σ of
+    their difference from 8 values on. ``sd``: σ of one value."""
+    if values.size < 4:
         return False
     first, second = np.array_split(values, 2)
     diff = abs(float(first.mean() - second.mean()))
-    return diff <= max(3 * sd * math.sqrt(4 / values.size), 0.2 * abs(float(values.mean())))
+    tol = 0.2 * abs(float(values.mean()))
+    if values.size >= 8:
+        tol = max(tol, 3 * sd * math.sqrt(4 / values.size))
+    return diff <= tol
 
 
 class _FrictionChange(_BlockCusum):
