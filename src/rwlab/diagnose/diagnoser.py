@@ -93,7 +93,7 @@ from rwlab.diagnose.calibration import (
 )
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
-from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, isolate
+from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, combine, isolate
 from rwlab.diagnose.motion import (
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
@@ -103,6 +103,7 @@ from rwlab.diagnose.motion import (
     SLEW_SIGMA,
     RestReading,
     slew_asymmetry,
+    slew_friction_gain,
     speed_offset,
 )
 from rwlab.diagnose.reference import (
@@ -299,13 +300,35 @@ class _BlockCusum:
         split that best explains a shift from the healthy mean (the maximum-likelihood
         change point of a Gaussian mean), so a block straddling the onset does not dilute
         the size."""
+        rows, j = self._split()
+        return np.array([x for _, x in rows[j:]])
+
+    def _split(self) -> tuple[list[tuple[float, float]], int]:
         t0 = self.change_time()
-        v = np.array([x for t, x in self.raw if t > t0] or [x for _, x in self.raw][-1:])
-        d = v - self.mean
+        rows = [r for r in self.raw if r[0] > t0] or list(self.raw)[-1:]
+        d = np.array([x for _, x in rows]) - self.mean
         tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
-        n = np.arange(len(v), 0, -1)
-        j = int(np.argmax(tail**2 / n))
-        return v[j:]
+        n = np.arange(len(d), 0, -1)
+        return rows, int(np.argmax(tail**2 / n))
+
+    def change_point(self) -> float:
+        """Time of the first single value of :meth:`since_change`, s."""
+        rows, j = self._split()
+        return rows[j][0]
+
+
+def _steady(values: np.ndarray, sd: float) -> bool:
+    """A step, not a transient: the values' two halves agree within a fifth of their mean
+    (from 4 values on: a PI loop's transient moves more than that), or within three σ of
+    their difference from 8 values on. ``sd``: σ of one value."""
+    if values.size < 4:
+        return False
+    first, second = np.array_split(values, 2)
+    diff = abs(float(first.mean() - second.mean()))
+    tol = 0.2 * abs(float(values.mean()))
+    if values.size >= 8:
+        tol = max(tol, 3 * sd * math.sqrt(4 / values.size))
+    return diff <= tol
 
 
 class _FrictionChange(_BlockCusum):
@@ -625,6 +648,8 @@ class Diagnoser:
         self._offset_command = math.nan
         self._slew: list[tuple[float, float, float]] = []
         self._slew_sign = 0.0
+        self._slew_gain = 1.0
+        self._slew_gains: deque = deque(maxlen=400)  # each slew value's friction gain
         self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
@@ -842,6 +867,7 @@ class Diagnoser:
         slew = self._slew_value(t_s - age_s, r, speed_rpm, current_a, usable)
         if slew is not None:
             values["slew"] = slew
+            self._slew_gains.append(self._slew_gain)
         new: list[Alarm] = []
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
@@ -902,6 +928,8 @@ class Diagnoser:
         if sign != self._slew_sign and self._slew:
             c = self.residuals.current_model
             value = None if c is None else slew_asymmetry(self._slew, c, self._slew_scale)
+            if value is not None:
+                self._slew_gain = slew_friction_gain(self._slew) or 1.0
             self._slew = []
         self._slew_sign = sign
         if slewing:
@@ -981,18 +1009,24 @@ class Diagnoser:
         t0 = det.change_time()
         if self._detectors["hold"].load_change(t0, self._command[0]) and t_s - t0 < LOAD_SETTLE_S:
             return []
-        # a bias stays; forget an error that no longer holds (a load step at an earlier
-        # hold, an overshoot the loop has since removed): at a hold begun since the change,
-        # on its own values (wait for 4), else on the latest block
+        # a load step that comes as (or just after) the wheel settles at a hold leaves no
+        # earlier current there to compare (friction x1.5 on unit 10, 1.5 s after its hold
+        # settled, read a 4.5 rpm bias; x2 on unit 13 while it slewed to the hold, -15 rpm):
+        # an error that is not a step (it rises, or decays as the loop rejects the load)
+        # waits LOAD_SETTLE_S from its change point too
+        t1 = det.change_point()
+        since = np.array([v for t, v in det.raw if t >= t1])
+        sd = det.stats.sigma * math.sqrt(det.stats.block)  # σ of one value
+        if not _steady(since, sd) and t_s - t1 < LOAD_SETTLE_S:
+            return []
+        # a bias stays; forget an error that no longer holds (the loop has removed a load
+        # step's or an overshoot's): the latest block, and this hold's latest values
         error = det.means[-1][1] - det.mean
-        if self._command[1] > t0:
-            now = [v for t, v in det.raw if t > self._command[1]]
-            if len(now) < 4:
-                return []
-            if abs(float(np.mean(now)) - det.mean) < 0.5 * abs(error):
-                det.restart()
-                return []
-        elif abs(error) / det.stats.sigma <= det.k:
+        now = [v for t, v in det.raw if t > self._command[1]]
+        if self._command[1] > t0 and len(now) < 4:
+            return []  # a hold begun since the change: on its own values (wait for 4)
+        held = [float(np.mean(x)) - det.mean for x in (now, now[-8:]) if len(x) >= 4]
+        if abs(error) / det.stats.sigma <= det.k or any(abs(x) < 0.5 * abs(error) for x in held):
             det.restart()
             return []
         return self._fire(t_s, "speed")
@@ -1203,6 +1237,11 @@ class Diagnoser:
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
         if "slew" in self._detectors:
             ev["sigma"]["slew"] = self._detectors["slew"].stats.sigma
+        if len(ev.get("slew", ())):  # the slews' friction at their speeds, Coulomb = 1
+            slew = self._detectors["slew"]
+            ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
+            # this unit's own healthy level, where the record has slews before the change
+            ev["slew_before"] = np.array([v for t, v in slew.raw if t < slew.change_point()])
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
@@ -1470,6 +1509,29 @@ class Diagnosis:
         a sensor bias."""
         return any(name not in TELEMETRY_TESTS for name in self.tested())
 
+    def sizes(self) -> dict:
+        """Each fault's one size: the consistent sizes of its alarms combined
+        (:func:`~rwlab.diagnose.isolate.combine`), with the alarms' own sizes kept.
+
+        Returns
+        -------
+        dict of str to dict
+            Per fault: ``magnitude``, ``ci95``, ``unit``, ``detectors`` (the alarms
+            combined) and ``left_out`` (those whose sizes disagree with them).
+        """
+        out = {}
+        for kind in self.faults():
+            alarms = [a for a in self.alarms if a.kind == kind]
+            found = combine([Finding(a.kind, a.magnitude, a.ci, a.unit) for a in alarms])
+            out[kind] = {
+                "magnitude": found["magnitude"],
+                "ci95": found["ci95"],
+                "unit": found["unit"],
+                "detectors": [alarms[i].detector for i in found["used"]],
+                "left_out": [alarms[i].detector for i in found["left_out"]],
+            }
+        return out
+
     def residual_statistics(self) -> dict:
         """Mean, σ and largest |value| of each residual: before and after the first
         alarm, or over the whole record when nothing alarmed."""
@@ -1500,6 +1562,7 @@ class Diagnosis:
             "format": "rwlab.Diagnosis/3",
             "alarms": [a.to_dict() for a in self.alarms],
             "faults": self.faults(),
+            "sizes": self.sizes(),
             "thresholds": self.thresholds,
             "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
             "duration_s": self.duration_s,

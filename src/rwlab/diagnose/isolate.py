@@ -29,7 +29,7 @@ offset      offset of the speed residual at zero speed,       ``speed_sensor_bia
 rest        one non-zero reading, exactly, where the wheel    ``speed_sensor_bias``,
             passes through zero speed (healthy: 0)            that reading (rpm)
 slew        at the acceleration limit: faster towards zero    ``friction``, factor
-            speed than away (unknown friction)                1 + Δ/2
+            speed than away (unknown friction)                1 + Δ/(2g)
 lag         slower than the model at its acceleration limit   ``current_limit``: the
             with a healthy motor test                         current it flattens at (A);
                                                               with the motor test in
@@ -54,10 +54,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from rwlab.diagnose.motion import REST_BAND_RPM
 
-__all__ = ["Finding", "isolate"]
+__all__ = ["Finding", "combine", "isolate"]
 
 Z95 = 1.959964
 # σ of the friction ratio between two healthy units: viscous and Coulomb each uniform
@@ -77,6 +78,7 @@ SPEED_UNIT_SD = 0.5
 OFFSET_UNIT_SD_RPM = 0.9
 CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # a unit's current-sense offset, ±5 mA uniform
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
+SLEW_OWN_MIN = 4  # slews before a change that give the unit's own healthy level
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
@@ -146,17 +148,28 @@ def _rotor(ev: dict) -> list[Finding]:
 
 def _slew(ev: dict) -> Finding:
     """A slew faster towards zero speed than away from it: friction beyond the
-    feed-forward's, F ≈ 1 + Δ/2 (Δ in Coulomb decelerations over the reference's level);
-    a weak motor (the motor test in excess) slews slower both ways."""
+    feed-forward's, F ≈ 1 + Δ/(2g) (Δ in Coulomb decelerations over the reference's level,
+    g the nominal friction at the slews' speeds over the Coulomb friction: worn bearings
+    scale the viscous part too); a weak motor (the motor test in excess) slews slower
+    both ways."""
     motor = _motor(ev)
     if motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0):
         return _torque_constant(*motor)
     e, half = _mean_ci(ev["slew"], ev["sigma"]["slew"])
-    e -= ev["ref_mean"]["slew"]
-    # model uncertainty: the healthy level's spread between slew profiles, and the
-    # factor's scale (on the twin, ×1.5 reads 1.4–1.6 and ×2 reads up to 2.9)
-    half = math.hypot(half, Z95 * ev["tolerance"].get("slew", 0.0), Z95 * SLEW_SCALE_SD * e)
-    return Finding("friction", 1 + e / 2, (1 + (e - half) / 2, 1 + (e + half) / 2), "factor")
+    before = np.asarray(ev.get("slew_before", ()), dtype=float)
+    if before.size >= SLEW_OWN_MIN:  # the unit's own healthy level on this record's profile
+        level, level_half = _mean_ci(before, ev["sigma"]["slew"])
+    else:  # the reference unit's, which a profile moves by up to the tolerance
+        level, level_half = ev["ref_mean"]["slew"], Z95 * ev["tolerance"].get("slew", 0.0)
+    e -= level
+    gain = float(np.mean(ev.get("slew_gain", [1.0])))
+    # model uncertainty: the healthy level's, and the factor's scale (the unit's friction
+    # against the nominal, its temperature)
+    half = math.hypot(half, level_half, Z95 * SLEW_SCALE_SD * e)
+    scale = 2 * gain
+    return Finding(
+        "friction", 1 + e / scale, (1 + (e - half) / scale, 1 + (e + half) / scale), "factor"
+    )
 
 
 def _hold(ev: dict) -> Finding:
@@ -269,3 +282,59 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     se = 1.2533 * spread / math.sqrt(max(currents.size / 2, 1))
     half = Z95 * math.hypot(se, CURRENT_OFFSET_SD_A)
     return [Finding("current_limit", mid, (mid - half, mid + half), "A")]
+
+
+def combine(findings: list[Finding]) -> dict:
+    """One size of a fault from the sizes several tests gave it.
+
+    Each test sizes a fault on its own evidence (the slew test on the accelerations at the
+    limit, the friction test on the current at constant speed, ...), so the sizes are
+    independent estimates: their inverse-variance mean (σ from each 95 % interval), over
+    those consistent with it: while the sizes' χ² about the mean exceeds its 95 % point,
+    the one farthest from the mean (in its own σ) is left out (an interval that misses the
+    others is a test whose model does not hold on this record).
+
+    Parameters
+    ----------
+    findings : list of Finding
+        Sizes of one fault, in time order; those without a size or interval are not
+        combined (the first such size stands when no other has one).
+
+    Returns
+    -------
+    dict
+        ``magnitude``, ``ci95`` (95 %, or None), ``unit``, ``used`` and ``left_out`` (the
+        indices into ``findings`` of the sizes combined and of those left out).
+    """
+    sized = [i for i, f in enumerate(findings) if f.magnitude is not None and f.ci is not None]
+    if not sized:
+        first = next((i for i, f in enumerate(findings) if f.magnitude is not None), None)
+        f = findings[first] if first is not None else findings[0]
+        used = [] if first is None else [first]
+        return {
+            "magnitude": f.magnitude,
+            "ci95": None,
+            "unit": f.unit,
+            "used": used,
+            "left_out": [],
+        }
+    x = np.array([findings[i].magnitude for i in sized], dtype=float)
+    cis = [findings[i].ci or (0.0, 0.0) for i in sized]  # every one has an interval
+    sd = np.array([(hi - lo) / (2 * Z95) for lo, hi in cis])
+    sd = np.maximum(sd, 1e-12 * np.maximum(np.abs(x), 1.0))
+    keep = np.ones(len(sized), dtype=bool)
+    while True:
+        w = keep / sd**2
+        mean = float(np.sum(w * x) / np.sum(w))
+        z = np.where(keep, np.abs(x - mean) / sd, -np.inf)
+        if keep.sum() <= 1 or float(np.sum(z[keep] ** 2)) <= chi2.ppf(0.95, keep.sum() - 1):
+            break
+        keep[int(np.argmax(z))] = False
+    half = Z95 / math.sqrt(float(np.sum(w)))
+    return {
+        "magnitude": mean,
+        "ci95": (mean - half, mean + half),
+        "unit": findings[sized[0]].unit,
+        "used": [i for i, k in zip(sized, keep, strict=True) if k],
+        "left_out": [i for i, k in zip(sized, keep, strict=True) if not k],
+    }

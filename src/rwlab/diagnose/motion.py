@@ -36,6 +36,7 @@ __all__ = [
     "SLEW_SIGMA",
     "RestReading",
     "slew_asymmetry",
+    "slew_friction_gain",
     "speed_offset",
 ]
 
@@ -156,6 +157,37 @@ def slew_asymmetry(
     toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
     scale = c[2] / c[0] if scale_rpm_s is None else scale_rpm_s
     return float((toward - away) / scale)
+
+
+def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | None:
+    """The friction at a slew's speeds over the Coulomb friction, nominal: 1 + b·|ω̄|/τ_c.
+
+    The slew asymmetry is in Coulomb decelerations, but worn bearings scale the viscous
+    friction too: a factor F raises the asymmetry by 2(F − 1) times the friction at the
+    slew's speeds, which at 2000 rpm is twice the Coulomb part (RW90: viscous equals
+    Coulomb at 1910 rpm). Each half's acceleration is its end points' difference, so its
+    friction is the mean of its end speeds' (the speed runs linearly at the limit).
+
+    Parameters
+    ----------
+    segment : list of (t_s, speed_rpm, current_a)
+        One slew's samples, as :func:`slew_asymmetry` takes them.
+
+    Returns
+    -------
+    float or None
+        The gain (≥ 1); None where :func:`slew_asymmetry` takes no value.
+    """
+    from rwlab.diagnose.reference import nominal_friction_currents
+
+    inner = segment[1:-1]
+    lo, hi = SLEW_SPEED_RPM
+    halves = [[x for x in inner if lo < x[1] < hi], [x for x in inner if -hi < x[1] < -lo]]
+    if min(len(h) for h in halves) < SLEW_MIN:
+        return None
+    viscous, coulomb = nominal_friction_currents()
+    mean_rpm = np.mean([(abs(h[0][1]) + abs(h[-1][1])) / 2 for h in halves])
+    return float(1 + viscous * mean_rpm / coulomb)
 
 
 class RestReading:

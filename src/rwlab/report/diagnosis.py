@@ -233,13 +233,17 @@ TREND_FORMAT = "rwlab.DiagnosisTrend/2"
 
 
 def trend_point(record: str, start_utc: str, diagnosis: Diagnosis) -> dict:
-    """One record's line of the trend: the first size of each fault named in it, and the
-    friction, torque-constant and bias estimates against the healthy reference, alarm or
-    not (:meth:`rwlab.diagnose.Diagnoser.estimates`)."""
+    """One record's line of the trend: each fault named, its one size (its alarms'
+    consistent sizes combined, :meth:`Diagnosis.sizes`) and the time it was first named;
+    and the friction, torque-constant and bias estimates against the healthy reference,
+    alarm or not (:meth:`rwlab.diagnose.Diagnoser.estimates`)."""
     faults: dict[str, dict] = {}
+    first: dict[str, float] = {}
     for a in diagnosis.alarms:
-        if a.kind not in faults and a.magnitude is not None:
-            faults[a.kind] = {"magnitude": a.magnitude, "ci95": a.ci, "unit": a.unit, "t_s": a.t_s}
+        first.setdefault(a.kind, a.t_s)
+    for kind, size in diagnosis.sizes().items():
+        if size["magnitude"] is not None:
+            faults[kind] = {**size, "t_s": first[kind]}
     return {
         "record": record,
         "start_utc": start_utc,
