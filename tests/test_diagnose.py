@@ -745,6 +745,24 @@ def test_the_current_limit_interval_is_on_the_clamp_not_the_currents(offset_a):
     assert found.ci[1] - found.ci[0] < 0.03  # still a useful size
 
 
+def test_a_weak_motor_is_named_at_the_limit_only_when_its_interval_excludes_one():
+    """At a clamp's onset a few current-balance samples can read in excess (the unit
+    held-out review's current limit on a PRBS was named torque_constant 0.88 [0.78,
+    1.00]): an excess whose k_t interval holds 1 is no evidence of a weak motor, so the
+    clamp is named; a clear excess (k_t × 0.8: 0.25) still names the weak motor."""
+    from rwlab.diagnose.isolate import LAG_SPLIT, isolate
+
+    currents = np.full(12, 0.45)
+    base = {"recent_speed": np.arange(8.0), "lag_currents": currents}
+    base |= {"ref_mean": {"motor": 0.0}, "sigma": {"motor": 0.12}}
+    ambiguous = np.full(3, LAG_SPLIT + 0.03)  # k_t would read ~0.88, interval reaching 1
+    (found,) = isolate("lag", {**base, "lag_excess": ambiguous})
+    assert found.kind == "current_limit" and found.magnitude == pytest.approx(0.45)
+    (found,) = isolate("lag", {**base, "lag_excess": np.full(3, 0.25)})
+    assert found.kind == "torque_constant" and found.ci[1] < 1
+    assert found.ci[0] <= 0.8 <= found.ci[1]
+
+
 def test_friction_after_a_rest_is_seen_against_the_mirror_speed(tmp_path, model_file):
     """Worn bearings from a 0-rpm rest on: the next hold (−A) has no earlier hold at that
     speed, but friction is even in speed and the current before the first motion is the

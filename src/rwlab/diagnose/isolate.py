@@ -260,7 +260,9 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
         if e > LAG_SPLIT:
             half = _mean_ci(excess, ev["sigma"]["motor"])[1]
-            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
+            weak = _torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)
+            if weak.ci is not None and weak.ci[1] < 1:  # else a clamp's onset can read so
+                return [weak]
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
     if (
