@@ -56,6 +56,7 @@ from scipy.stats import chi2
 
 from rwlab.cli import main as cli
 from rwlab.diagnose import HealthyReference, diagnose
+from rwlab.diagnose.diagnoser import RECORD_OUTPUTS
 from rwlab.errors import RwlabWarning
 from rwlab.testbed import ExperimentConfig, load_record, run_experiment
 from rwlab.wheel import IdentifiedWheel
@@ -191,6 +192,17 @@ def _record(cache: Path, name: str, spec: tuple) -> Path:
     return path
 
 
+def load(path: Path, Ts: float):
+    """A record as the detectors read it (every output they use, gaps kept)."""
+    return load_record(path, Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+
+
+def healthy_tune(cache: Path, Ts: float) -> list:
+    """The tune set's healthy records (the thresholds' data), loaded."""
+    specs = {k: v for k, v in records("tune").items() if not v[5]}
+    return [load(_record(cache, name, spec), Ts) for name, spec in specs.items()]
+
+
 def _model(cache: Path, out: Path, unit: str = "0") -> Path:
     """Identified with this code every run (the reference is the detector's); record cached.
 
@@ -240,10 +252,7 @@ def main() -> None:
             ref = HealthyReference.from_model_file(model)
 
             def run(path, wheel=wheel, ref=ref, **kw):
-                data = load_record(
-                    path, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
-                )
-                return diagnose(data, wheel, ref, **kw)
+                return diagnose(load(path, wheel.Ts), wheel, ref, **kw)
 
             print(f"set {args.set}; model: unit {unit}, 20-min PRBS (defaults)\n")
             if args.part != "faults":

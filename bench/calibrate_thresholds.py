@@ -30,11 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_diagnose import _model, _record, records
+from bench_diagnose import _model, healthy_tune, records
 from rwlab.diagnose import HealthyReference
 from rwlab.diagnose.diagnoser import Diagnoser, _columns, measure_calibration
 from rwlab.diagnose.motion import OFFSET_SIGMA_RPM
-from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
 OUT = Path(__file__).resolve().parents[1] / "src" / "rwlab" / "diagnose" / "thresholds.json"
@@ -63,15 +62,7 @@ def main() -> None:
         specs = {k: v for k, v in records("tune").items() if not v[5]}
         if {str(v[0]) for v in specs.values()} & set(args.model_units):
             parser.error("a model unit is one of the healthy records' units")
-        data = [
-            load_record(
-                _record(cache, name, spec),
-                wheel.Ts,
-                outputs=("speed", "current", "age", "lost"),
-                max_gap=np.inf,
-            )
-            for name, spec in specs.items()
-        ]
+        data = healthy_tune(cache, wheel.Ts)
         units = sorted(spec[0] for spec in specs.values())
         origin = (
             f"python bench/calibrate_thresholds.py: {len(data)} healthy 20-minute records of "

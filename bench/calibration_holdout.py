@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_diagnose import _model, _record, records
+from bench_diagnose import _model, healthy_tune
 from rwlab.diagnose import HealthyReference
 from rwlab.diagnose.calibration import (
     H_GRID,
@@ -36,7 +36,6 @@ from rwlab.diagnose.calibration import (
     cusum_curves,
 )
 from rwlab.diagnose.diagnoser import _model_traces
-from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
 K_GRID = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.3, 2.6, 3.0, 3.5, 4.0)
@@ -75,21 +74,15 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
         cache.mkdir(parents=True, exist_ok=True)
-        specs = {k: v for k, v in records("tune").items() if not v[5]}
         traces = {}
+        loaded: dict[float, list] = {}  # per sample time: loaded once for every model
         for unit in args.model_units:
             path = _model(cache, Path(tmp) / f"u{unit}", unit)
             wheel = IdentifiedWheel.from_json(path)
             ref = HealthyReference.from_model_file(path)
-            data = [
-                load_record(
-                    _record(cache, name, spec),
-                    wheel.Ts,
-                    outputs=("speed", "current", "age", "lost"),
-                    max_gap=np.inf,
-                )
-                for name, spec in specs.items()
-            ]
+            if wheel.Ts not in loaded:
+                loaded[wheel.Ts] = healthy_tune(cache, wheel.Ts)
+            data = loaded[wheel.Ts]
             traces[unit] = _model_traces(data, wheel, ref)
         hours = sum(d.N * d.Ts for d in data) / 3600
     units = list(traces)
