@@ -47,6 +47,15 @@ def _cli(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
+def _diagnosed(path, seed, model_file, wheel):
+    """A fault-free 600-s PRBS of the nominal wheel, loaded and diagnosed (warnings off)."""
+    run_experiment(ExperimentConfig(duration=600, seed=seed), path)
+    data = load_record(path, wheel.Ts, outputs=OUTPUTS, max_gap=np.inf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RwlabWarning)
+        return data, diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+
+
 # -- refusals that say what to do ---------------------------------------------------------
 
 
@@ -120,12 +129,7 @@ def test_a_twenty_second_record_says_what_it_could_not_test(tmp_path, model_file
 
 
 def test_each_test_says_what_it_decided_on(tmp_path, model_file, wheel):
-    path = tmp_path / "r.mcap"
-    run_experiment(ExperimentConfig(duration=600, seed=5), path)
-    data = load_record(path, wheel.Ts, outputs=OUTPUTS, max_gap=np.inf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RwlabWarning)
-        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+    data, d = _diagnosed(tmp_path / "r.mcap", 5, model_file, wheel)
     # the dropout test decides on each whole 10-s block of the record
     assert d.coverage["dropout"] == {
         "decided": data.N // round(10 / wheel.Ts),
@@ -149,12 +153,7 @@ def test_each_test_says_what_it_decided_on(tmp_path, model_file, wheel):
 def test_the_report_plots_every_test_that_decided(tmp_path, model_file, wheel):
     from rwlab.report import diagnosis as report
 
-    path = tmp_path / "r.mcap"
-    run_experiment(ExperimentConfig(duration=600, seed=6), path)
-    data = load_record(path, wheel.Ts, outputs=OUTPUTS, max_gap=np.inf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RwlabWarning)
-        d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
+    _, d = _diagnosed(tmp_path / "r.mcap", 6, model_file, wheel)
 
     class Capture:
         def __init__(self):
