@@ -155,6 +155,23 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
     assert again == ref
 
 
+def test_a_reference_without_the_optional_change_test_is_still_stored(tmp_path, model_file):
+    # a PRBS of ±1200 rpm never holds the ≥ 1500 rpm the friction-change test takes (the
+    # held-out unit 842's default PRBS gave it 5 of 80 samples, and no reference was stored)
+    from rwlab.diagnose import healthy_reference
+    from rwlab.wheel import IdentifiedWheel
+
+    run_experiment(ExperimentConfig(amplitude=1200, seed=3), tmp_path / "r.mcap")
+    wheel = IdentifiedWheel.from_json(model_file)
+    data = load_record(
+        tmp_path / "r.mcap", wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+    )
+    ref = healthy_reference(data, wheel)
+    assert "friction_change" not in ref.tests and "friction" in ref.tests
+    result = diagnose(data, wheel, ref)  # armed from friction's σ: healthy data, no alarm
+    assert "friction_change" in result.thresholds and result.alarms == []
+
+
 def test_a_fault_present_at_power_up_is_a_fault(tmp_path, model_file):
     # ×2: beyond the friction spread between healthy units (±30 % → up to ×1.86), which
     # no comparison with another unit's reference can tell from wear present at power-up

@@ -179,7 +179,10 @@ def identify_into(
     if isinstance(reference, dict):
         model = dataclasses.replace(model, healthy_reference=reference)
     elif echo is not None:
-        echo(f"no healthy reference for fault diagnosis: {reference}")
+        echo(
+            f"warning: no healthy reference for fault diagnosis ({reference}); rwlab "
+            "diagnose refuses this model: identify a longer or richer healthy record"
+        )
     paths = write_study(result, model, folder, force=options["force"])
     study = result.to_dict()
     study["data"]["output_unit"] = data.output_units[0]  # for the messages only
