@@ -93,7 +93,15 @@ from rwlab.diagnose.calibration import (
 )
 from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
-from rwlab.diagnose.isolate import CURRENT_OFFSET_SD_A, Finding, combine, isolate
+from rwlab.diagnose.isolate import (
+    CURRENT_OFFSET_SD_A,
+    FRICTION_UNIT_SD,
+    MOTOR_UNIT_SD,
+    SPEED_UNIT_SD,
+    Finding,
+    combine,
+    isolate,
+)
 from rwlab.diagnose.motion import (
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
@@ -1143,19 +1151,24 @@ class Diagnoser:
         I/k_t; with each excess e taken over the reference's own level on its healthy
         record, the torque-constant factor is 1/(1 + e_motor), the friction factor
         (1 + e_friction)/(1 + e_motor); the bias is the held-speed error less the
-        reference's. Each interval is the record's noise (block σ of the reference,
-        one independent value per block) only: the reference unit's own spread from
-        the wheel's (±0.48 in friction, 95 %) is common to every record of one wheel,
-        so it moves a trend as a whole and hides no change within it.
+        reference's. Two 95 % intervals: ``ci95``, the record's noise (block σ of the
+        reference, one independent value per block), for a trend of one wheel (the
+        reference unit's own difference from the wheel is common to all its records,
+        so it moves a trend as a whole and hides no change within it); and
+        ``ci95_units``, which adds the spread between healthy units
+        (:data:`~rwlab.diagnose.isolate.FRICTION_UNIT_SD`, ``MOTOR_UNIT_SD``,
+        ``SPEED_UNIT_SD``), for a reading against a healthy unit of the wheel model.
+        After a stuck-sensor alarm no estimate is given: each rests on the speed reading.
 
         Returns
         -------
         dict of str to dict
             ``friction``, ``torque_constant`` (factors), ``speed_sensor_bias`` (rpm),
-            each ``{"magnitude", "ci95", "unit", "blocks"}``, where the test had values.
+            each ``{"magnitude", "ci95", "ci95_units", "unit", "blocks"}``, where the test
+            had values.
         """
         ref = self.reference
-        if ref is None:
+        if ref is None or any(a.kind == "speed_sensor_stuck" for a in self.alarms):
             return {}
 
         def mean_ci(name: str):
@@ -1173,18 +1186,18 @@ class Diagnoser:
         # relative to the reference's own level on its healthy record (the tests' zero)
         e_m, h_m = _relative(e_m, h_m, ref.tests["motor"].mean if motor else 0.0)
         if motor:
-            lo, hi = 1 / (1 + e_m + h_m), 1 / max(1 + e_m - h_m, 1e-9)
-            out["torque_constant"] = _estimate(1 / (1 + e_m), lo, hi, "factor", motor[2])
+            k_t, rel = 1 / (1 + e_m), h_m / (1 + e_m)
+            out["torque_constant"] = _estimate(k_t, rel, _Z95 * MOTOR_UNIT_SD, "factor", motor[2])
         if friction:
             e_f, h_f, n = friction
             e_f, h_f = _relative(e_f, h_f, ref.tests["friction"].mean)
-            factor = (1 + e_f) / (1 + e_m)
             rel = math.hypot(h_f / (1 + e_f), h_m / (1 + e_m))
-            out["friction"] = _estimate(factor, factor * (1 - rel), factor * (1 + rel), "factor", n)
+            unit_rel = _Z95 * FRICTION_UNIT_SD
+            out["friction"] = _estimate((1 + e_f) / (1 + e_m), rel, unit_rel, "factor", n)
         if speed:
             bias = speed[0] - ref.tests["speed"].mean
             out["speed_sensor_bias"] = _estimate(
-                bias, bias - speed[1], bias + speed[1], "rpm", speed[2]
+                bias, speed[1], _Z95 * SPEED_UNIT_SD, "rpm", speed[2], relative=False
             )
         return out
 
@@ -1295,8 +1308,21 @@ def _relative(e: float, half: float, mean: float) -> tuple[float, float]:
     return (1 + e) / (1 + mean) - 1, half / (1 + mean)
 
 
-def _estimate(value: float, lo: float, hi: float, unit: str, blocks: float) -> dict:
-    return {"magnitude": value, "ci95": [lo, hi], "unit": unit, "blocks": round(blocks, 1)}
+def _estimate(
+    value: float, half: float, unit_half: float, unit: str, blocks: float, relative: bool = True
+) -> dict:
+    """An estimate with its record-noise half-width ``half`` and, in quadrature with the
+    spread between units ``unit_half``, its interval against any healthy unit (both
+    relative to ``value`` for a factor, absolute for a bias)."""
+    scale = value if relative else 1.0
+    wide = math.hypot(half, unit_half)
+    return {
+        "magnitude": value,
+        "ci95": [value - scale * half, value + scale * half],
+        "ci95_units": [value - scale * wide, value + scale * wide],
+        "unit": unit,
+        "blocks": round(blocks, 1),
+    }
 
 
 def healthy_reference(

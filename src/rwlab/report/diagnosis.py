@@ -107,17 +107,18 @@ def _page(
         page.heading("Sizes against the healthy reference", "estimates")
         page.text(
             "From the tests' latest 10 minutes, alarm or not (a fault below its threshold "
-            "shows here first): 95 % intervals of this record's noise, without the "
-            "reference unit's own difference from this wheel (see rwlab diagnose FOLDER's "
-            "trend)."
+            "shows here first). Two 95 % intervals: this record's noise alone, for a trend "
+            "of one wheel (rwlab diagnose FOLDER), and with the spread between healthy units "
+            "added, for a reading against any healthy unit of the wheel model."
         )
         page.table(
-            ["quantity", "estimate", "95 % CI", "unit", "blocks"],
+            ["quantity", "estimate", "95 % CI, record", "95 % CI, any unit", "unit", "blocks"],
             [
                 [
                     kind,
                     f"{e['magnitude']:.4g}",
                     f"{e['ci95'][0]:.4g} … {e['ci95'][1]:.4g}",
+                    _interval(e.get("ci95_units")),
                     e["unit"],
                     e["blocks"],
                 ]
@@ -329,6 +330,11 @@ def _trend_axis(ax, points: list[dict], kind: str) -> None:
     ax.plot(named, [mags[list(idx).index(i)] for i in named], "o", mfc="none", mec="r", ms=12)
     ax.axhline(0.0 if rows[0][1]["unit"] == "rpm" else 1.0, color="k", ls=":", lw=0.8)
     ax.set_ylabel(f"{kind} [{rows[0][1]['unit']}]")
+
+
+def _interval(ci) -> str:
+    """An interval's text; reports written before ``ci95_units`` have none."""
+    return "" if ci is None else f"{ci[0]:.4g} … {ci[1]:.4g}"
 
 
 def _estimate_text(e: dict | None) -> str:
