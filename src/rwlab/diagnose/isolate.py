@@ -123,8 +123,13 @@ def _torque_constant(e: float, half: float) -> Finding:
     return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
 
 
-def _rotor(ev: dict) -> list[Finding]:
-    """Friction, weak motor, or both, from the friction and motor tests' excesses."""
+def _rotor(ev: dict, detector: str) -> list[Finding]:
+    """Friction, weak motor, or both, from the friction and motor tests' excesses.
+
+    The motor test's own alarm is the weak motor's signature (the current under
+    acceleration, which friction hardly moves): where its interval does not yet clear the
+    tolerance and no friction excess is there, it names the weak motor, sized, not an
+    unsized friction (held-out unit 769, k_t × 0.9 on a chirp, named both)."""
     motor = _motor(ev)
     weak = motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0)
     findings = []
@@ -135,14 +140,24 @@ def _rotor(ev: dict) -> list[Finding]:
         # model uncertainty: the baseline friction law's (a friction-change alarm)
         half_f = math.hypot(half_f, Z95 * ev.get("friction_model_sd", 0.0))
         e_a, half_a = motor if weak else (0.0, 0.0)  # type: ignore[misc]
+        named = "torque_constant" in ev and not weak
+        if named:  # a weak motor named before raises the constant-speed current by 1/F_k
+            k, (k_lo, k_hi) = ev["torque_constant"]
+            e_a, half_a = 1 / k - 1, (1 / k_lo - 1 / k_hi) / 2
         factor = (1 + e_f) / (1 + e_a)
         rel = math.hypot(half_f / (1 + e_f), half_a / (1 + e_a))
-        if not weak or factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0):
+        beyond = factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0)
+        if named and not beyond:  # the excess is the weak motor's
+            k, ci = ev["torque_constant"]
+            return [Finding("torque_constant", k, ci, "factor")]
+        if not weak or beyond:
             if "friction_model_sd" not in ev:  # sized against the reference's unit
                 rel = math.hypot(rel, Z95 * FRICTION_UNIT_SD)
             findings.append(
                 Finding("friction", factor, (factor * (1 - rel), factor * (1 + rel)), "factor")
             )
+    if not findings and detector == "motor" and motor is not None:
+        return [_torque_constant(*motor)]
     return findings or [Finding("friction", None, None, "factor")]
 
 
@@ -223,7 +238,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
             Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")
         ]
     if detector in ("friction", "friction_change", "motor"):
-        return _rotor(ev)
+        return _rotor(ev, detector)
     if detector == "slew":
         return [_slew(ev)]
     if detector == "hold":
