@@ -15,10 +15,11 @@ stuck       identical speed readings, longer than noise       ``speed_sensor_stu
             allows (also: a repeat while the model moves      the frozen reading (rpm)
             when another test fires)
 friction,   current in excess under acceleration (motor       ``torque_constant``,
-motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 + e_α)
-            1/F the current for everything
-friction    excess only at constant speed                     ``friction``, factor
-                                                              (1 + e_ω)/(1 + e_α)
+motor       test beyond its tolerance, or the motor test's     k_t factor 1/(1 + e_α)
+            own alarm): a weak motor needs 1/F the current
+            for everything
+friction    excess only at constant speed, beyond what a      ``friction``, factor
+            weak motor named before explains                  (1 + e_ω)/(1 + e_α)
 hold        the held current above this record's own at the   ``friction``, 1 + v
             same (or mirror) speed, no motor excess           (``torque_constant``
                                                               with a motor excess)
