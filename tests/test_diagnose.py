@@ -971,3 +971,32 @@ def test_a_frozen_reading_says_which_faults_it_left_unseen(tmp_path, model_file)
     assert set(blind) <= {"friction", "torque_constant", "current_limit", "speed_sensor_bias"}
     assert all(t == stuck[0].t_s for t in blind.values())
     assert result.to_dict()["blind_after_s"] == blind
+
+
+@pytest.mark.parametrize(("k_t", "clamp_a"), [(0.9, None), (0.8, None), (1.0, 0.45)])
+def test_the_units_own_current_at_the_limit_tells_a_clamp_from_a_weak_motor(k_t, clamp_a):
+    """At its acceleration limit the controller sets the current open loop: a weak motor
+    leaves it at the unit's own level before the change (and only slows the wheel, the
+    current balance's excess 1/F − 1), a lowered clamp lowers it. k_t × 0.9's excess (0.11)
+    is within a clamp's onset noise, so only the current level names it."""
+    from rwlab.diagnose.isolate import isolate
+
+    rng = np.random.default_rng(3)
+    own = 0.56  # A, this unit's current at the limit before the change
+    after = own if clamp_a is None else clamp_a
+    excess = (1 / k_t - 1 if clamp_a is None else 0.0) + 0.1 * rng.standard_normal(6)
+    ev = {
+        "recent_speed": np.arange(8.0),
+        "lag_currents": after + 0.003 * rng.standard_normal(40),
+        "lag_currents_before": own + 0.02 * rng.standard_normal(200),
+        "lag_excess": excess,
+        "ref_mean": {"motor": 0.0},
+        "sigma": {"motor": 0.1},
+    }
+    (found,) = isolate("lag", ev)
+    if clamp_a is None:
+        assert found.kind == "torque_constant"
+        assert found.ci[0] <= k_t <= found.ci[1]
+    else:
+        assert found.kind == "current_limit"
+        assert found.ci[0] <= clamp_a <= found.ci[1]

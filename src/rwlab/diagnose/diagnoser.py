@@ -1264,6 +1264,7 @@ class Diagnoser:
         n_lag = len(ev.get("lag", ()))
         t0 = lag.raw[-n_lag][0] if lag is not None and 0 < n_lag <= len(lag.raw) else -math.inf
         ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
+        ev["lag_currents_before"] = np.array([i for t, i in self._lag_currents if t < t0])
         ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
         hold = self._detectors["hold"]

