@@ -116,6 +116,10 @@ MORE = (
     ("friction=1.5+current_limit=0.45", "prbs"),
     ("speed_sensor_bias=15+current_limit=0.45", "multisine"),
     ("friction=1.5+speed_sensor_bias=15", "step"),
+    # the held-out 700s (units 769, 791): a weak motor on a chirp named friction too; a weak
+    # motor with a frozen reading, which the diagnosis must say it could not see
+    ("torque_constant=0.9", "chirp"),
+    ("torque_constant=0.8+speed_sensor_stuck", "step"),
 )
 HEALTHY = {
     "tune": (1, 6, 100),

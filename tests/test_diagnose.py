@@ -933,3 +933,97 @@ def test_the_combined_interval_covers_the_truth_95_percent_of_the_time():
         hits += out["ci95"][0] <= 1.5 <= out["ci95"][1]
     # the consistency cut leaves out a true size now and then: coverage a little below 95 %
     assert 0.90 <= hits / 2000 <= 0.97
+
+
+# -- two faults, or one that looks like two (helper diag-pairs) ----------------------------
+
+
+def _rotor_evidence(rng, motor_excess: float, friction_excess: float, n: int = 60) -> dict:
+    """Evidence of the friction and motor tests around the true relative excesses (the
+    torque balance: a weak motor k_t × F raises both by 1/F − 1, friction × G the
+    constant-speed one by G/F − 1), with the tests' noise σ."""
+    sigma = {"motor": 0.1, "friction": 0.3}
+    return {
+        "motor": motor_excess + sigma["motor"] * rng.standard_normal(n),
+        "friction": friction_excess + sigma["friction"] * rng.standard_normal(n),
+        "sigma": sigma,
+        "tolerance": {"motor": 0.2, "friction": 0.3},
+        "ref_mean": {"motor": 0.0},
+    }
+
+
+def test_a_motor_alarm_below_its_naming_tolerance_names_the_weak_motor_not_friction():
+    """k_t × 0.9 (excess 0.11, inside the 0.2 tolerance, where a CUSUM with enough blocks
+    still alarms): the motor test's own alarm is the current under acceleration, so the
+    weak motor is named and sized, never an unsized friction."""
+    from rwlab.diagnose.isolate import isolate
+
+    ev = _rotor_evidence(np.random.default_rng(1), 1 / 0.9 - 1, 0.0)
+    del ev["friction"]  # a chirp: no constant-speed sample
+    (found,) = isolate("motor", ev)
+    assert found.kind == "torque_constant"
+    assert found.ci[0] <= 0.9 <= found.ci[1]
+
+
+@pytest.mark.parametrize(("k_t", "friction"), [(0.8, 1.0), (0.8, 1.5)])
+def test_a_weak_motor_named_before_explains_its_share_of_the_friction_excess(k_t, friction):
+    """After a weak motor was named (k_t with its interval), a friction alarm whose excess
+    1/F − 1 the weak motor explains names no friction; friction × 1.5 on top (excess
+    G/F − 1) is still named, sized against the weak motor, its interval on the truth."""
+    from rwlab.diagnose.isolate import isolate
+
+    rng = np.random.default_rng(2)
+    ev = _rotor_evidence(rng, 0.0, friction / k_t - 1)
+    del ev["motor"]  # the motor test has no block since the change (a PRBS at its holds)
+    ev["torque_constant"] = (k_t, (k_t - 0.04, k_t + 0.04))
+    kinds = {f.kind: f for f in isolate("friction", ev)}
+    if friction == 1.0:
+        assert set(kinds) == {"torque_constant"}
+    else:
+        assert set(kinds) == {"friction"}
+        lo, hi = kinds["friction"].ci
+        assert lo <= friction <= hi
+
+
+def test_a_frozen_reading_says_which_faults_it_left_unseen(tmp_path, model_file):
+    """k_t × 0.8 and a speed reading stuck at once on steps: every model-based test reads
+    the frozen speed from then on, so the diagnosis names the stuck sensor and says the
+    rotor faults and a bias went unseen after it, not a silent miss."""
+    path = _step_record(tmp_path, "stuck", ("torque_constant=0.8@420", "speed_sensor_stuck@420"))
+    result = _diagnose(path, model_file)
+    stuck = [a for a in result.alarms if a.kind == "speed_sensor_stuck"]
+    assert stuck and stuck[0].t_s >= 420, result.alarms
+    blind = result.blind()
+    assert "torque_constant" in blind or "torque_constant" in result.faults()
+    assert set(blind) <= {"friction", "torque_constant", "current_limit", "speed_sensor_bias"}
+    assert all(t == stuck[0].t_s for t in blind.values())
+    assert result.to_dict()["blind_after_s"] == blind
+
+
+@pytest.mark.parametrize(("k_t", "clamp_a"), [(0.9, None), (0.8, None), (1.0, 0.45)])
+def test_the_units_own_current_at_the_limit_tells_a_clamp_from_a_weak_motor(k_t, clamp_a):
+    """At its acceleration limit the controller sets the current open loop: a weak motor
+    leaves it at the unit's own level before the change (and only slows the wheel, the
+    current balance's excess 1/F − 1), a lowered clamp lowers it. k_t × 0.9's excess (0.11)
+    is within a clamp's onset noise, so only the current level names it."""
+    from rwlab.diagnose.isolate import isolate
+
+    rng = np.random.default_rng(3)
+    own = 0.56  # A, this unit's current at the limit before the change
+    after = own if clamp_a is None else clamp_a
+    excess = (1 / k_t - 1 if clamp_a is None else 0.0) + 0.1 * rng.standard_normal(6)
+    ev = {
+        "recent_speed": np.arange(8.0),
+        "lag_currents": after + 0.003 * rng.standard_normal(40),
+        "lag_currents_before": own + 0.02 * rng.standard_normal(200),
+        "lag_excess": excess,
+        "ref_mean": {"motor": 0.0},
+        "sigma": {"motor": 0.1},
+    }
+    (found,) = isolate("lag", ev)
+    if clamp_a is None:
+        assert found.kind == "torque_constant"
+        assert found.ci[0] <= k_t <= found.ci[1]
+    else:
+        assert found.kind == "current_limit"
+        assert found.ci[0] <= clamp_a <= found.ci[1]

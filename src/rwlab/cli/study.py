@@ -252,6 +252,12 @@ def diagnosis_lines(result, events: list[dict]) -> list[str]:
         lines.append("nothing to decide on: " + ", ".join(result.untested()))
     if result.unseen():
         lines.append("not tested (no test could decide): " + ", ".join(result.unseen()))
+    blind = result.blind()
+    if blind:
+        lines.append(
+            f"blind after {min(blind.values()):.1f} s (the speed reading froze, every "
+            f"model-based test reads it): {', '.join(blind)} not seen from then on"
+        )
     injected = [
         f"{e['message']} (at {e['t']:.1f} s)" for e in events if e["kind"] == "fault_injected"
     ]

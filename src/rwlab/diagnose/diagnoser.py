@@ -1280,6 +1280,7 @@ class Diagnoser:
         n_lag = len(ev.get("lag", ()))
         t0 = lag.raw[-n_lag][0] if lag is not None and 0 < n_lag <= len(lag.raw) else -math.inf
         ev["lag_currents"] = np.array([i for t, i in self._lag_currents if t >= t0][-200:])
+        ev["lag_currents_before"] = np.array([i for t, i in self._lag_currents if t < t0])
         ev["lag_excess"] = np.array([e for t, e in self._lag_excess if t >= t0])
         ev["lost"] = self._detectors["dropout"].last_count
         hold = self._detectors["hold"]
@@ -1537,6 +1538,26 @@ class Diagnosis:
         tested = set(self.tested())
         return [kind for kind, tests in FAULT_TESTS.items() if not tested.intersection(tests)]
 
+    def blind(self) -> dict[str, float]:
+        """The faults not named that no test could see after a frozen speed reading: from
+        the first stuck-sensor alarm on, every model-based test reads a speed that no longer
+        moves (no acceleration, no constant speed, no lag to measure), so a weak motor,
+        worn bearings, a lowered current limit or a bias that comes with the stuck sensor
+        goes unseen: said, not a silent miss.
+
+        Returns
+        -------
+        dict of str to float
+            Per fault (of :data:`ROTOR_FAULTS` and ``speed_sensor_bias``) not named before
+            it: the time of the stuck alarm, s. Empty without one.
+        """
+        stuck = [a.t_s for a in self.alarms if a.kind == "speed_sensor_stuck"]
+        if not stuck:
+            return {}
+        named = {a.kind for a in self.alarms if a.t_s <= stuck[0]}
+        kinds = (*ROTOR_FAULTS, "speed_sensor_bias")
+        return {kind: stuck[0] for kind in kinds if kind not in named}
+
     def model_tested(self) -> bool:
         """Whether any model-based test (all but rest, stuck, dropout) decided anything:
         False, and "no alarm" says nothing of friction, the motor, the current limit or
@@ -1604,6 +1625,7 @@ class Diagnosis:
             "coverage": {name: dict(c) for name, c in self.coverage.items()},
             "untested": self.untested(),
             "unseen_faults": self.unseen(),
+            "blind_after_s": self.blind(),
             "model_tested": self.model_tested(),
             "estimates": {kind: dict(e) for kind, e in self.estimates.items()},
             "reference": self.reference.to_dict(),

