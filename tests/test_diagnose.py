@@ -1000,18 +1000,23 @@ def test_a_frozen_reading_says_which_faults_it_left_unseen(tmp_path, model_file)
     assert result.to_dict()["blind_after_s"] == blind
 
 
-@pytest.mark.parametrize(("k_t", "clamp_a"), [(0.9, None), (0.8, None), (1.0, 0.45)])
-def test_the_units_own_current_at_the_limit_tells_a_clamp_from_a_weak_motor(k_t, clamp_a):
+@pytest.mark.parametrize(
+    ("k_t", "clamp_a", "worn"),
+    [(0.9, None, 0.0), (0.8, None, 0.0), (1.0, 0.45, 0.0), (1.0, 0.45, 0.3)],
+)
+def test_the_units_own_current_at_the_limit_tells_a_clamp_from_a_weak_motor(k_t, clamp_a, worn):
     """At its acceleration limit the controller sets the current open loop: a weak motor
     leaves it at the unit's own level before the change (and only slows the wheel, the
     current balance's excess 1/F − 1), a lowered clamp lowers it. k_t × 0.9's excess (0.11)
-    is within a clamp's onset noise, so only the current level names it."""
+    is within a clamp's onset noise, so only the current level names it; a clamp with worn
+    bearings on top (a current excess ``worn``, the friction the model does not know) is
+    still the clamp, not a weak motor."""
     from rwlab.diagnose.isolate import isolate
 
     rng = np.random.default_rng(3)
     own = 0.56  # A, this unit's current at the limit before the change
     after = own if clamp_a is None else clamp_a
-    excess = (1 / k_t - 1 if clamp_a is None else 0.0) + 0.1 * rng.standard_normal(6)
+    excess = (1 / k_t - 1 if clamp_a is None else worn) + 0.1 * rng.standard_normal(6)
     ev = {
         "recent_speed": np.arange(8.0),
         "lag_currents": after + 0.003 * rng.standard_normal(40),

@@ -282,14 +282,17 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     currents = currents[np.isfinite(currents)]
     before = np.asarray(ev.get("lag_currents_before", ()), dtype=float)
     before = before[np.isfinite(before)]
-    if before.size >= LAG_BEFORE_MIN and currents.size and excess.size >= LAG_EXCESS_MIN:
+    clamped = False
+    if before.size >= LAG_BEFORE_MIN and currents.size:
         # this unit's own current at the limit before the change: a clamp lowers it, a weak
-        # motor leaves it (the controller's open-loop current) and only slows the wheel
-        if np.median(currents) >= CLAMP_RATIO * np.median(before):
+        # motor leaves it (the controller's open-loop current) and only slows the wheel; a
+        # clamp's current excess is then worn bearings on top, not a weak motor
+        clamped = bool(np.median(currents) < CLAMP_RATIO * np.median(before))
+        if not clamped and excess.size >= LAG_EXCESS_MIN:
             e = float(np.median(excess)) - ev["ref_mean"]["motor"]
             half = _mean_ci(excess, ev["sigma"]["motor"])[1]
             return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
-    if excess.size >= LAG_EXCESS_MIN:
+    if excess.size >= LAG_EXCESS_MIN and not clamped:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
         if e > LAG_SPLIT:
             half = _mean_ci(excess, ev["sigma"]["motor"])[1]
@@ -299,7 +302,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
     if (
-        after.size and excess.size < LAG_EXCESS_MIN
+        after.size and excess.size < LAG_EXCESS_MIN and not clamped
     ):  # weak motor (e_α rises by 1/F − 1) or a clamp (e_α unchanged)
         base = float(np.mean(before)) if before.size else ev["ref_mean"]["motor"]
         e, half = float(np.median(after)), _mean_ci(after, ev["sigma"]["motor"])[1]
