@@ -42,7 +42,7 @@ WINDOW_S = 300.0
 def samples(path: Path, wheel, ref, jerk: float, min_rpm: float):
     """(t, residual A, friction A, inertial A) of the qualifying samples of a record."""
     data = load_record(path, wheel.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
-    t, held, speed, current, age, lost = _columns(data, wheel)
+    t, held, speed, current, age, _lost = _columns(data, wheel)
     d = Diagnoser(wheel, ref, calibration=False)
     rows = []
     for k in range(data.N):
@@ -137,7 +137,9 @@ def main() -> None:
         )
     if healthy_z:
         hz = np.abs(healthy_z)
-        print(f"healthy: {len(hz)} windows, |z| 99 % {np.percentile(hz, 99):.1f}, max {hz.max():.1f}")
+        print(
+            f"healthy: {len(hz)} windows, |z| 99 % {np.percentile(hz, 99):.1f}, max {hz.max():.1f}"
+        )
 
 
 if __name__ == "__main__":
