@@ -25,6 +25,8 @@ offset     a 60-s window of a continuously changing        the speed residual's 
            command whose model speed swings through zero   intercept, rpm
 slew       a slew at the acceleration limit through zero   towards-zero minus     increase
            speed                                           away-from-zero rate
+balance    steady acceleration (|Δα| < 20 rpm/s twice),    current residual over  increase
+           |ω| ≥ 300 rpm, one sign; any signal             the record's own law
 =========  ==============================================  =====================  ==========
 
 The offset and slew tests (:func:`~rwlab.diagnose.motion.speed_offset`,
@@ -44,6 +46,13 @@ the first motion): friction ×1.5 on steps, named once the motor test has seen a
 acceleration since (a weak motor raises the held current too). A lag alarm is
 named by the current balance on the lag samples: a weak motor draws 1/F the
 current the achieved acceleration needs, a lowered clamp exactly that current.
+
+``friction_balance`` (:class:`_FrictionBalance`, "balance" above) takes every sample
+whose acceleration is steady, slews included, not only constant-speed ones: the current
+residual regressed on the reference's friction and inertial currents and 1 over the
+record's blocks older than 300 s, each newer block's excess in the friction's direction
+is the CUSUM's value; an alarm names friction only when the change's inertial term lies
+below half a weak motor's (its size: the friction term's change over the unit's own).
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
