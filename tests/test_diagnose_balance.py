@@ -47,7 +47,7 @@ def _run(
             if abs(w) < 300 or (len(path) > 1 and w != target and w == path[0]):
                 continue  # below the stiction band; the slew's first sample is no steady one
             residual = current - (C[0] * accel + f_ref)
-            if det.add_sample(t, residual, f_ref, C[0] * accel):
+            if det.add_sample(t, residual, C[1] * w, C[2] * sign, C[0] * accel):
                 alarms.append(t)
                 findings.append(det.finding())
                 det.restart()
