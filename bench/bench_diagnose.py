@@ -68,6 +68,7 @@ DETECTORS = (
     "slew",
     "friction",
     "friction_change",
+    "friction_balance",
     "hold",
     "motor",
     "speed",
