@@ -56,7 +56,7 @@ from scipy.stats import chi2
 
 from rwlab.cli import main as cli
 from rwlab.diagnose import HealthyReference, diagnose
-from rwlab.diagnose.diagnoser import RECORD_OUTPUTS
+from rwlab.diagnose.diagnosis import RECORD_OUTPUTS
 from rwlab.errors import RwlabWarning
 from rwlab.testbed import ExperimentConfig, load_record, run_experiment
 from rwlab.wheel import IdentifiedWheel

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.diagnose import HealthyReference
-from rwlab.diagnose.diagnoser import RECORD_OUTPUTS, Diagnoser, _columns
+from rwlab.diagnose.diagnoser import Diagnoser
+from rwlab.diagnose.diagnosis import RECORD_OUTPUTS, record_columns
 from rwlab.errors import RwlabWarning
 from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
@@ -42,7 +43,7 @@ WINDOW_S = 300.0
 def samples(path: Path, wheel, ref, jerk: float, min_rpm: float):
     """(t, residual A, friction A, inertial A) of the qualifying samples of a record."""
     data = load_record(path, wheel.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
-    t, held, speed, current, age, _lost = _columns(data, wheel)
+    t, held, speed, current, age, _lost = record_columns(data, wheel)
     d = Diagnoser(wheel, ref, calibration=False)
     rows = []
     for k in range(data.N):

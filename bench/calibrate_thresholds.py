@@ -32,7 +32,8 @@ import numpy as np
 
 from bench_diagnose import _model, healthy_tune, records
 from rwlab.diagnose import HealthyReference
-from rwlab.diagnose.diagnoser import Diagnoser, _columns, measure_calibration
+from rwlab.diagnose.diagnoser import Diagnoser
+from rwlab.diagnose.diagnosis import measure_calibration, record_columns
 from rwlab.diagnose.motion import OFFSET_SIGMA_RPM
 from rwlab.wheel import IdentifiedWheel
 
@@ -89,7 +90,7 @@ def _offset_sigma(data, wheel, ref) -> None:
     values = []
     for d in data:
         diag = Diagnoser(wheel, ref, calibration=False, trace=True)
-        for row in zip(*_columns(d, wheel), strict=True):
+        for row in zip(*record_columns(d, wheel), strict=True):
             diag.update(*(float(x) for x in row))
         values += [z * OFFSET_SIGMA_RPM for z in diag.traces()["offset"]]
     x = np.array(values)

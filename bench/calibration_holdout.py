@@ -35,7 +35,7 @@ from rwlab.diagnose.calibration import (
     cusum_alarms_k,
     cusum_curves,
 )
-from rwlab.diagnose.diagnoser import _model_traces
+from rwlab.diagnose.diagnosis import model_traces
 from rwlab.wheel import IdentifiedWheel
 
 K_GRID = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.3, 2.6, 3.0, 3.5, 4.0)
@@ -83,7 +83,7 @@ def main() -> None:
             if wheel.Ts not in loaded:
                 loaded[wheel.Ts] = healthy_tune(cache, wheel.Ts)
             data = loaded[wheel.Ts]
-            traces[unit] = _model_traces(data, wheel, ref)
+            traces[unit] = model_traces(data, wheel, ref)
         hours = sum(d.N * d.Ts for d in data) / 3600
     units = list(traces)
     print(f"leave one model out: {len(units)} models, {hours:.1f} h of tune records each")

@@ -280,12 +280,12 @@ def test_friction_change_compares_a_unit_with_its_own_law():
     random speeds of both signs: against the reference's law its relative excess changes
     with speed; against its own law fitted on older samples it does not, until its
     friction steps ×1.5 at 1500 s (truth built here, not by the detector)."""
-    from rwlab.diagnose.diagnoser import _FrictionChange
+    from rwlab.diagnose.blocktests import FrictionChange
     from rwlab.diagnose.reference import BlockStats
 
     c = np.array([1.8e-3, 3.6e-6, 7e-3, 0.0])  # the reference's current model (A per unit)
     stats = BlockStats(0.0, 0.05, 20, 0.5, 0, "batch means")
-    det = _FrictionChange(stats, 0.15, cusum_threshold(1e6 / 40), 6, c)
+    det = FrictionChange(stats, 0.15, cusum_threshold(1e6 / 40), 6, c)
     rng = np.random.default_rng(5)
     alarms, sizes, t = [], [], 0.0
     while t < 1800:
@@ -668,7 +668,8 @@ def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, mod
     """Units differ by ±5 mA of current-sense offset, as much as the friction current
     at 500 rpm. The same record with 5 mA added to every current reading gives the
     friction test the same block values (the offset cancels between speed signs)."""
-    from rwlab.diagnose.diagnoser import Diagnoser, _columns
+    from rwlab.diagnose.diagnoser import Diagnoser
+    from rwlab.diagnose.diagnosis import record_columns
     from rwlab.wheel import IdentifiedWheel
 
     path = tmp_path / "prbs.mcap"
@@ -679,7 +680,7 @@ def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, mod
     traces = []
     for shift_a in (0.0, 0.005):
         diag = Diagnoser(wheel, ref, calibration=False, trace=True)
-        columns = list(_columns(data, wheel))
+        columns = list(record_columns(data, wheel))
         columns[3] = columns[3] + shift_a  # a copy: the record's array is not touched
         for row in zip(*columns, strict=True):
             diag.update(*(float(x) for x in row))
@@ -833,17 +834,17 @@ def test_a_bias_at_a_hold_is_still_named_at_once(tmp_path, model_file):
 
 @pytest.mark.parametrize("level", [0.0, 4.0, -15.0])
 def test_steady_tells_a_step_from_a_transient(level):
-    from rwlab.diagnose.diagnoser import _steady
+    from rwlab.diagnose.blocktests import steady
 
     rng = np.random.default_rng(3)
     noise = 0.3 * rng.standard_normal(20)
-    assert _steady(level + noise, 0.7)
+    assert steady(level + noise, 0.7)
     decay = 6.0 * np.exp(-np.arange(20) / 6.0) + noise  # a PI loop rejecting a load step
-    assert not _steady(decay, 0.7)
-    assert not _steady(level + noise[:3], 0.7)  # too few to tell
+    assert not steady(decay, 0.7)
+    assert not steady(level + noise[:3], 0.7)  # too few to tell
     if level:  # a clear step is one from 4 values on, a rising error is not
-        assert _steady(level + 0.1 * noise[:4], 0.7)
-    assert not _steady(np.array([2.6, 4.0, 5.0, 5.9]), 0.7)  # unit 10's load step
+        assert steady(level + 0.1 * noise[:4], 0.7)
+    assert not steady(np.array([2.6, 4.0, 5.0, 5.9]), 0.7)  # unit 10's load step
 
 
 def _worn_slew(factor: float, limit: float = 314.0, top: float = 2500.0):

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
+from rwlab.diagnose.blocktests import BALANCE_BLOCK, FrictionBalance
 from rwlab.diagnose.detect import arl_to_samples, cusum_threshold
-from rwlab.diagnose.diagnoser import BALANCE_BLOCK, _FrictionBalance
 
 C = np.array([1.7e-3, 3.4e-6, 8.3e-3, 0.0])  # the reference's current model (A per unit)
 TS = 0.5
@@ -29,7 +29,7 @@ def _run(
     signal: holds of 20–60 s at ±500–5000 rpm joined by slews at 300 rpm/s; friction ×
     ``friction`` and k_t × ``kt`` from ``onset``. The alarms' times and findings."""
     rng = np.random.default_rng(seed)
-    det = _FrictionBalance(h or cusum_threshold(arl_to_samples(1e-3, TS) / BALANCE_BLOCK))
+    det = FrictionBalance(h or cusum_threshold(arl_to_samples(1e-3, TS) / BALANCE_BLOCK))
     alarms, findings, t, speed = [], [], 0.0, 1000.0
     while t < hours * 3600:
         target = rng.choice([-1, 1]) * rng.uniform(500, 5000)

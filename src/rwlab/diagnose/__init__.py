@@ -11,14 +11,8 @@ or offline over a record (:func:`diagnose`).
 """
 
 from rwlab.diagnose.calibration import ThresholdCalibration
-from rwlab.diagnose.diagnoser import (
-    Alarm,
-    Diagnoser,
-    Diagnosis,
-    diagnose,
-    healthy_reference,
-    measure_calibration,
-)
+from rwlab.diagnose.diagnoser import Alarm, Diagnoser
+from rwlab.diagnose.diagnosis import Diagnosis, diagnose, healthy_reference, measure_calibration
 from rwlab.diagnose.reference import HealthyReference
 
 __all__ = [

@@ -39,7 +39,7 @@ open loop, so friction it does not know shows in the slew's acceleration.
 unit's own friction law (viscous, Coulomb and current offset over the
 reference's; ridge least squares on the record's samples older than 300 s): a
 friction rise smaller than the spread between units, when it starts within the
-record. ``hold`` (:class:`_HoldChange`) compares the current at a held
+record. ``hold`` (:class:`HoldChange`) compares the current at a held
 command with this record's own first settled samples there, or with the mirror
 command's level (friction is even in speed; the sense offset from the rest before
 the first motion): friction ×1.5 on steps, named once the motor test has seen an
@@ -47,7 +47,7 @@ acceleration since (a weak motor raises the held current too). A lag alarm is
 named by the current balance on the lag samples: a weak motor draws 1/F the
 current the achieved acceleration needs, a lowered clamp exactly that current.
 
-``friction_balance`` (:class:`_FrictionBalance`, "balance" above) takes every sample
+``friction_balance`` (:class:`FrictionBalance`, "balance" above) takes every sample
 whose acceleration is steady, slews included, not only constant-speed ones: the current
 residual regressed on the reference's friction and inertial currents and 1 over the
 record's blocks older than 300 s, each newer block's excess in the friction's direction
@@ -76,9 +76,11 @@ reading where the wheel passes through zero speed. Samples without a new frame,
 and the one after them, enter no test. A detector alarms once and stays latched
 (``latch=False`` restarts it, for measuring false-alarm rates).
 
-Why this module is long: one class, :class:`Diagnoser`, whose calibration, per-sample
-tests and verdicts share its state; split, the state would be passed around instead of
-kept.
+The block tests' own state lives in :mod:`~rwlab.diagnose.blocktests`; a record's run
+and its result (:func:`~rwlab.diagnose.diagnosis.diagnose`,
+:class:`~rwlab.diagnose.diagnosis.Diagnosis`) in :mod:`~rwlab.diagnose.diagnosis`. This
+module stays long for one class, :class:`Diagnoser`, whose calibration, per-sample tests
+and verdicts share its state.
 """
 
 from __future__ import annotations
@@ -91,24 +93,29 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import poisson
 
-from rwlab.data import IOData
-from rwlab.diagnose.calibration import N_MAX as _N_MAX
+from rwlab.diagnose.blocktests import (
+    BALANCE_BLOCK,
+    BALANCE_JERK_RPM_S,
+    BALANCE_MIN_RPM,
+    CUSUM_K,
+    BlockCusum,
+    Dropout,
+    FrictionBalance,
+    FrictionChange,
+    HoldChange,
+    steady,
+)
 from rwlab.diagnose.calibration import (
     RESOLVED,
     ThresholdCalibration,
-    count_alarms,
-    cusum_curves,
-    run_alarms,
 )
-from rwlab.diagnose.calibration import Curve as _Curve
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import (
-    CURRENT_OFFSET_SD_A,
     FRICTION_UNIT_SD,
     MOTOR_UNIT_SD,
     SPEED_UNIT_SD,
+    Z95,
     Finding,
-    combine,
     isolate,
 )
 from rwlab.diagnose.motion import (
@@ -127,37 +134,19 @@ from rwlab.diagnose.reference import (
     DEFAULT_TOLERANCE,
     BlockStats,
     HealthyReference,
-    block_stats,
-    nominal_coulomb_deceleration,
     nominal_friction_currents,
     nominal_inertial_current,
 )
-from rwlab.diagnose.residuals import ResidualGenerator, fit_current_model
-from rwlab.errors import ConfigError, DataError, RwlabWarning
+from rwlab.diagnose.residuals import ResidualGenerator
+from rwlab.errors import ConfigError, RwlabWarning
 
-__all__ = [
-    "Alarm",
-    "Diagnoser",
-    "Diagnosis",
-    "diagnose",
-    "healthy_reference",
-    "measure_calibration",
-]
+__all__ = ["Alarm", "Diagnoser"]
 
-CUSUM_K = 0.5
-_Z95 = 1.959964
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
-# σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
-# currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
-# identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
-CHANGE_PRIOR = 0.5
 MOTOR_UPPER = 1.02 / 0.95  # a healthy unit's I/k_t at most this × nominal (TOLERANCES)
 FRICTION_UPPER = 1.3  # a healthy unit's friction at most this × nominal (TOLERANCES: ±30 %)
-GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
-CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
-# friction over the reference's varies with speed beyond its viscous + Coulomb law)
 OFFSET_MIN_SAMPLES = 10  # friction samples of each sign before the current offset counts
 MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
@@ -180,50 +169,9 @@ DECIDES_ON = {
     "stuck": "moving samples",
     "dropout": "10-s blocks",
 }
-TELEMETRY_TESTS = ("rest", "stuck", "dropout")
-# the tests that can name each fault: where none decided on anything, "no alarm" says
-# nothing of that fault
-FAULT_TESTS = {
-    "friction": ("friction", "friction_change", "friction_balance", "hold", "slew"),
-    "torque_constant": ("motor",),
-    "current_limit": ("lag",),
-    "speed_sensor_bias": ("speed", "offset", "rest"),
-    "speed_sensor_stuck": ("stuck",),
-    "telemetry_dropout": ("dropout",),
-}
-# what load_record must give diagnose (its default is the speed alone)
-RECORD_OUTPUTS = ("speed", "current", "age", "lost")
 ROTOR_FAULTS = ("friction", "torque_constant", "current_limit")
-# tests a healthy reference may lack (too few qualifying samples on the identification
-# record: a PRBS that seldom holds ≥ 1500 rpm): friction_change then takes friction's σ
-OPTIONAL_TESTS = ("friction_change",)
-HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
-HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
-# the bearing's warm-up), relative to its own friction current
 LOAD_SETTLE_S = 30.0  # a held-speed error the loop rejects (a load step) is gone by then, s
-HOLD_DRIFT_SD = 0.05  # relative drift of a unit's friction between two holds (the twin's
-# random walk is 5 %/√h; a record's holds are minutes apart)
-HOLD_SIGN_SD = 0.03  # relative σ between a unit's friction at +ω and −ω (tune set's healthy
-# step records, 10 units: |i(+6000) − off| and |i(−6000) − off| within 0.3–3 %)
-REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a 0-rpm
-# command is the sense offset (the loop's integrator has not moved); after a motion the
-# rest holds the integrator's residue (up to ~4 mA on the twin's units)
-HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
 DROPOUT_BLOCK_S = 10.0
-HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
-# the balance test (_FrictionBalance): steady-acceleration samples of any signal
-BALANCE_JERK_RPM_S = 20.0  # |Δα| over each of the last two intervals, rpm/s
-BALANCE_MIN_RPM = 300.0  # above the stiction/Stribeck band, rpm
-BALANCE_BLOCK = 5  # samples per block mean
-BALANCE_MIN_BLOCKS = 20  # baseline blocks before it tests
-BALANCE_TOLERANCE = 0.1  # friction drift within a record, share of the friction current
-# ridge prior σ of the baseline law: viscous, Coulomb and inertial scale (a reference's
-# identified viscous/Coulomb split errs widely: eval3 unit 631 reads 1.9 and 3.2 × model
-# 587's; σ 0.6 held that law down and a healthy PRBS alarmed), current offset (±5 mA per
-# unit), A per A, A
-BALANCE_PRIOR = (3.0, 3.0, 0.15, 0.01)
-BALANCE_INERTIAL_SD = 0.05  # the inertial term's mismatch, share of i_α (twin's chirps)
-BALANCE_NOISE_A = 5e-3  # a block mean's σ that scales the prior (the twin's: 3–8 mA)
 
 
 @dataclass(frozen=True)
@@ -266,449 +214,6 @@ class Alarm:
             "ci95": None if self.ci is None else list(self.ci),
             "unit": self.unit,
         }
-
-
-class _BlockCusum:
-    """Block means of one test's values, standardised, into a one- or two-sided CUSUM."""
-
-    def __init__(
-        self, stats, tolerance: float, h: float, sides: str, baseline_blocks: int = 0
-    ) -> None:
-        self.stats, self.h, self.sides = stats, h, sides
-        self.k = CUSUM_K + tolerance / stats.sigma
-        self.baseline_blocks = baseline_blocks  # > 0: the mean of the record's first blocks
-        self._baseline: list[float] = []
-        self.mean = stats.mean
-        self._values: list[float] = []
-        self.up = self.down = 0.0
-        self.means: deque = deque()  # (t_s, block mean, up, down)
-        self.trace: list[float] | None = None  # every block's z, when calibrating
-        self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
-        self.decided = 0  # blocks tested (after any baseline): what "no alarm" rests on
-
-    @property
-    def statistic(self) -> float:
-        return max(self.up, self.down)
-
-    def add(self, t_s: float, value: float, allowance: float = 0.0) -> bool:
-        """One qualifying value; ``allowance``: tolerance beyond the CUSUM's own at this
-        value (value units), taken off before the block mean (the value kept for sizing
-        is the plain one). True on an alarm."""
-        self._values.append(value - allowance)
-        self.raw.append((t_s, value))
-        while self.raw[0][0] < t_s - HISTORY_S:
-            self.raw.popleft()
-        if len(self._values) < self.stats.block:
-            return False
-        mean = float(np.mean(self._values))
-        self._values.clear()
-        if len(self._baseline) < self.baseline_blocks:
-            self._baseline.append(mean)
-            self.mean = float(np.mean(self._baseline))
-            return False
-        z = (mean - self.mean) / self.stats.sigma
-        self.decided += 1
-        if self.trace is not None:
-            self.trace.append(z)
-        if self.sides in ("up", "both"):
-            self.up = max(0.0, self.up + z - self.k)
-        if self.sides in ("down", "both"):
-            self.down = max(0.0, self.down - z - self.k)
-        self.means.append((t_s, mean, self.up, self.down))
-        while self.means and self.means[0][0] < t_s - HISTORY_S:
-            self.means.popleft()
-        return self.statistic > self.h
-
-    def restart(self) -> None:
-        self.up = self.down = 0.0
-
-    def change_time(self) -> float:
-        """Time of the last block at which the statistic was zero (−inf: none kept)."""
-        side = 2 if self.up >= self.down else 3
-        zeros = [row[0] for row in self.means if row[side] == 0.0]
-        return zeros[-1] if zeros else -math.inf
-
-    def since_change(self) -> np.ndarray:
-        """The single values since the change: the last zero of the statistic, then the
-        split that best explains a shift from the healthy mean (the maximum-likelihood
-        change point of a Gaussian mean), so a block straddling the onset does not dilute
-        the size."""
-        rows, j = self._split()
-        return np.array([x for _, x in rows[j:]])
-
-    def _split(self) -> tuple[list[tuple[float, float]], int]:
-        t0 = self.change_time()
-        rows = [r for r in self.raw if r[0] > t0] or list(self.raw)[-1:]
-        d = np.array([x for _, x in rows]) - self.mean
-        tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
-        n = np.arange(len(d), 0, -1)
-        return rows, int(np.argmax(tail**2 / n))
-
-    def change_point(self) -> float:
-        """Time of the first single value of :meth:`since_change`, s."""
-        rows, j = self._split()
-        return rows[j][0]
-
-
-def _steady(values: np.ndarray, sd: float) -> bool:
-    """A step, not a transient: the values' two halves agree within a fifth of their mean
-    (from 4 values on: a PI loop's transient moves more than that), or within three σ of
-    their difference from 8 values on. ``sd``: σ of one value."""
-    if values.size < 4:
-        return False
-    first, second = np.array_split(values, 2)
-    diff = abs(float(first.mean() - second.mean()))
-    tol = 0.2 * abs(float(values.mean()))
-    if values.size >= 8:
-        tol = max(tol, 3 * sd * math.sqrt(4 / values.size))
-    return diff <= tol
-
-
-class _FrictionChange(_BlockCusum):
-    """Friction against this record's own past: the unit's friction law (its viscous and
-    Coulomb excess over the reference's and its current offset) fitted on the record's
-    samples older than ``GUARD_S``, so holds at other speeds compare like with like (a
-    plain mean of the relative excess does not: a unit whose viscous/Coulomb mix and
-    current offset differ from the reference's has a speed-dependent excess), and a fault
-    enters the baseline only ``GUARD_S`` after its onset."""
-
-    def __init__(self, stats, tolerance: float, h: float, baseline_blocks: int, c) -> None:
-        super().__init__(stats, tolerance, h, "up")
-        self.mean = 0.0
-        self.c = np.asarray(c, dtype=float)  # the reference's current model
-        self._need = baseline_blocks * stats.block
-        self._pending: deque = deque()  # (t_s, regressors, residual) younger than GUARD_S
-        self._xtx = np.zeros((3, 3))
-        self._xtr = np.zeros(3)
-        self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the baseline
-        self._signs = [0, 0]  # baseline samples at positive, negative speed
-        self._law: np.ndarray | None = None
-        self._cov = np.zeros((3, 3))
-        self.law_sd: deque = deque()  # (t_s, σ of the law's prediction, value units)
-
-    def _ridge(self) -> np.ndarray:
-        """The law's least squares, shrunk towards the reference's by the spread between
-        units, so a baseline with few speeds does not extrapolate wildly: prior σ
-        :data:`CHANGE_PRIOR` of the datasheet's nominal viscous and Coulomb currents (the
-        spread is the datasheet's ±30 % around nominal, not around the reference unit: 30 %
-        of a low-friction reference's currents held a high-friction unit's law down, and
-        its holds at new speeds alarmed), 5 mA of offset
-        (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
-        (the samples of a hold are correlated)."""
-        n, s1, s2 = self._r
-        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
-        viscous, coulomb = nominal_friction_currents()
-        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
-        A = self._xtx / noise**2 + np.diag(1 / prior**2)
-        self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
-        return self._cov @ self._xtr / noise**2
-
-    def add_sample(self, t_s: float, residual_a: float, speed_rpm: float, friction_a: float):
-        """One constant-speed sample: current residual (A), speed (rpm), the reference's
-        friction current there (A); True on an alarm."""
-        if abs(speed_rpm) < CHANGE_MIN_RPM:
-            return False
-        sign = math.copysign(1.0, speed_rpm)
-        x = np.array([speed_rpm, sign, 1.0])
-        self._pending.append((t_s, x, residual_a))
-        changed = False
-        while self._pending[0][0] <= t_s - GUARD_S:
-            _, xo, ro = self._pending.popleft()
-            self._xtx += np.outer(xo, xo)
-            self._xtr += xo * ro
-            self._r = [self._r[0] + 1, self._r[1] + ro, self._r[2] + ro * ro]
-            self._signs[int(xo[1] < 0)] += 1
-            changed = True
-        n = self._r[0]
-        if changed and (n >= 4 * self._need or (n >= self._need and min(self._signs) >= 20)):
-            self._law = self._ridge()
-        if self._law is None:
-            return False
-        own = float(self._law @ x)
-        friction_own = float(self._law[:2] @ x[:2])  # the offset is no friction
-        unit_friction = max(abs(friction_a) + sign * friction_own, 0.3 * abs(friction_a))
-        # the baseline law's own uncertainty at this speed, in the value's unit: the same
-        # for every sample of a hold, so averaging does not shrink it (sizing's interval)
-        self.law_sd.append((t_s, math.sqrt(float(x @ self._cov @ x)) / unit_friction))
-        while self.law_sd[0][0] < t_s - HISTORY_S:
-            self.law_sd.popleft()
-        return self.add(t_s, sign * (residual_a - own) / unit_friction)
-
-    def law_uncertainty(self, n: int) -> float:
-        """Mean σ of the baseline law's prediction over the last ``n`` values."""
-        sd = [v for _, v in list(self.law_sd)[-n:]]
-        return float(np.mean(sd)) if sd else 0.0
-
-
-def _balance_prior() -> np.ndarray:
-    """The ridge prior of the balance law as pseudo-data (in the blocks' own units: a
-    block's σ over the prior's σ, squared), shape (3, 3)."""
-    return np.diag((BALANCE_NOISE_A / np.array(BALANCE_PRIOR)) ** 2)
-
-
-class _FrictionBalance(_BlockCusum):
-    """Friction in the current balance of every steady sample, against this record's past.
-
-    A sample qualifies where the acceleration is steady (:data:`BALANCE_JERK_RPM_S` over
-    the last two intervals: the 2 Hz current snapshot and the interval's mean acceleration
-    agree only then, at constant speed or along a slew) at |ω| ≥
-    :data:`BALANCE_MIN_RPM` (above the stiction band). Its current residual r (the
-    reference's current model's) is ≈ (F − 1) i_f + (1/F_k − 1)(i_f + i_α) + offset for
-    friction × F and k_t × F_k, with i_f, i_α the reference's friction and inertial
-    currents. Block means of :data:`BALANCE_BLOCK` samples (neighbours are correlated)
-    older than ``GUARD_S`` fit r on [i_f, i_α, 1] (ridge towards zero: a baseline with
-    little acceleration leaves the inertial term to the prior); each newer block's
-    prediction error, in the friction's direction less :data:`BALANCE_TOLERANCE` of
-    i_f (a unit's drift within a record) and over its σ (the blocks' scatter and the
-    law's uncertainty there), is the CUSUM's value. An alarm names friction only where the
-    change since its onset is not a weak motor's (which moves the inertial term by as
-    much as the friction term): :meth:`finding`."""
-
-    def __init__(self, h: float) -> None:
-        super().__init__(BlockStats(0.0, 1.0, 1, 0.0, 0, "own baseline"), 0.0, h, "up")
-        self._block: list[tuple[float, float, float]] = []
-        self._pending: deque = deque()  # (t_s, x, y) blocks younger than GUARD_S
-        self._xtx = _balance_prior()
-        self._xty = np.zeros(4)
-        self._yy = [0, 0.0]  # baseline blocks, Σ y²
-        self._beta = np.zeros(4)
-        self._cov = np.zeros((4, 4))
-        self._sd = math.inf
-        self.blocks: deque = deque()  # (t_s, x, prediction error): since-change sizing
-
-    def add_sample(
-        self, t_s: float, residual_a: float, viscous_a: float, coulomb_a: float, inertial_a: float
-    ):
-        """One steady sample: current residual, the reference's viscous, Coulomb and
-        inertial currents there (A); True on an alarm. The baseline scales viscous and
-        Coulomb apart (a unit's mix differs from the reference's: one scale read a
-        healthy PRBS's later speeds as friction × 1.4)."""
-        self._block.append((viscous_a, coulomb_a, inertial_a, residual_a))
-        if len(self._block) < BALANCE_BLOCK:
-            return False
-        v, cl, a, r = np.mean(self._block, axis=0)
-        f = v + cl
-        self._block.clear()
-        x = np.array([v, cl, a, 1.0])
-        self._pending.append((t_s, x, r))
-        moved = False
-        while self._pending[0][0] <= t_s - GUARD_S:
-            _, xo, ro = self._pending.popleft()
-            self._xtx += np.outer(xo, xo)
-            self._xty += xo * ro
-            self._yy = [self._yy[0] + 1, self._yy[1] + ro * ro]
-            moved = True
-        n = self._yy[0]
-        if moved and n >= BALANCE_MIN_BLOCKS:
-            self._fit()
-        if n < BALANCE_MIN_BLOCKS:
-            return False
-        e = float(r - self._beta @ x)
-        self.blocks.append((t_s, x, e))
-        while self.blocks[0][0] < t_s - HISTORY_S:
-            self.blocks.popleft()
-        sd = math.sqrt(self._block_var(a) + float(x @ self._cov @ x))
-        sign = math.copysign(1.0, f)
-        return self.add(t_s, (e * sign - BALANCE_TOLERANCE * abs(f)) / sd)
-
-    def _fit(self) -> None:
-        """The baseline's law and its block σ (the prior's pseudo-data left out of σ)."""
-        cov = np.linalg.inv(self._xtx)
-        beta = cov @ self._xty
-        n, yy = self._yy
-        prior = _balance_prior()
-        sse = yy - 2 * beta @ self._xty + beta @ (self._xtx - prior) @ beta
-        self._sd = math.sqrt(max(sse, 0.0) / max(n - 4, 1)) + 1e-6
-        self._beta, self._cov = beta, cov * self._sd**2
-
-    def _block_var(self, inertial_a) -> float:
-        """Variance of a block's prediction error: the baseline's scatter and the inertial
-        term's mismatch (a chirp's fast part moves it by a few % of i_α), A²."""
-        return self._sd**2 + (BALANCE_INERTIAL_SD * inertial_a) ** 2
-
-    def finding(self) -> Finding | None:
-        """Friction × F since the change (its 95 % interval), or None until the blocks
-        since the change tell it from a weak motor (k_t × F_k moves the inertial term by
-        as much as the friction term, 1/F_k − 1; friction leaves it): the inertial
-        change must lie below half a weak motor's by 2 σ."""
-        t0 = self.change_point()
-        rows = [(x, e) for t, x, e in self.blocks if t >= t0]
-        if len(rows) < 4:
-            return None
-        X = np.array([(x[0] + x[1], x[2]) for x, _ in rows])
-        y = np.array([e for _, e in rows])
-        w = 1 / np.array([self._block_var(x[2]) for x, _ in rows])
-        # weakly held: ±1 in both (a change is whatever the data say)
-        A = (X.T * w) @ X + np.eye(2)
-        cov = np.linalg.inv(A)
-        d = cov @ (X.T * w) @ y
-        chi = float(np.sum(w * (y - X @ d) ** 2)) / max(len(y) - 2, 1)
-        cov = cov * max(chi, 1.0)
-        # a weak motor's inertial change, given the friction term's: each term scales by
-        # 1/F_k − 1 of the unit's own current (the baseline's 1 + β over the reference's)
-        # the unit's friction over the reference's on these blocks, and its variance
-        g = np.array([x[:2] for x, _ in rows]).sum(axis=0) / X[:, 0].sum()
-        base = 1.0 + float(g @ self._beta[:2])
-        base_var = float(g @ self._cov[:2, :2] @ g)
-        weak = d[0] * (1 + self._beta[2]) / base
-        if d[0] <= 0 or d[1] + 2 * math.sqrt(cov[1, 1]) >= 0.5 * weak:
-            return None
-        half = _Z95 * math.sqrt(cov[0, 0] + (d[0] / base) ** 2 * base_var) / base
-        factor = 1.0 + float(d[0]) / base
-        return Finding("friction", factor, (factor - half, factor + half), "factor")
-
-    def change_point(self) -> float:
-        """Start of the change: the first block after the statistic's last zero, s."""
-        t0 = self.change_time()
-        later = [row[0] for row in self.means if row[0] > t0]
-        return later[0] if later else (self.means[-1][0] if self.means else -math.inf)
-
-
-class _HoldChange(_BlockCusum):
-    """Friction at a held speed against this record's own current at that speed.
-
-    The wheel's loop holds the true speed at the command, so at a command held before
-    (the same value: a step's or a PRBS's levels come back) the motor current is the
-    unit's own friction there plus its current-sense offset, whatever the unit: the
-    first :data:`HOLD_BASE` settled samples at each command are its baseline (their
-    mean and σ), and each later block of settled samples there gives v, the current's
-    rise relative to the baseline's (≈ F − 1 for friction × F, 1/F_k − 1 for a weak
-    motor: the motor test tells them apart). The block's v beyond
-    :data:`HOLD_TOLERANCE`, standardised by its noise (the baseline's σ per sample),
-    feeds a one-sided CUSUM. Within a record only: a fault present from the first hold
-    at a speed is its baseline (the absolute tests see those)."""
-
-    def __init__(self, h: float, block: int, Ts: float) -> None:
-        stats = BlockStats(0.0, 1.0, 1, 0.05, 0, "the record's own first settled samples")
-        super().__init__(stats, 0.0, h, "up")
-        self.block, self.Ts = block, Ts
-        self._base: dict[float, list[float]] = {}  # command (rpm) → baseline currents (A)
-        self._values: list[float] = []  # the block in progress: currents at one command
-        self._key = math.nan
-        self.sizes: deque = deque()  # (t_s, v, σ of v, relative σ of the baseline level)
-        self.recent: deque = deque(maxlen=400)  # (t_s, command rpm, current A)
-        self._rest = [0, 0.0, 0.0]  # count, Σi, Σi² of the currents at rest (0 rpm)
-
-    def load_change(self, t0: float, command_rpm: float) -> bool:
-        """The current at this held command (its latest 8 samples) rose beyond the
-        tolerance over the one before ``t0`` (three σ): the wheel's load changed."""
-        rows = [(t, i) for t, c, i in self.recent if c == command_rpm]
-        before = np.array([i for t, i in rows if t <= t0])
-        after = np.array([i for t, i in rows if t > t0][-8:])
-        if min(before.size, after.size) < 4:
-            return False
-        scale = max(abs(float(before.mean())), 2 * HOLD_MIN_SD_A)
-        e = math.copysign(1.0, command_rpm) * float(after.mean() - before.mean()) / scale
-        sd = max(float(np.std(before, ddof=1)), HOLD_MIN_SD_A)
-        return e - HOLD_TOLERANCE > 3 * sd * math.sqrt(1 / before.size + 1 / after.size) / scale
-
-    def add_rest(self, current_a: float) -> None:
-        """One settled sample of the wheel resting at a 0-rpm command (reading 0)."""
-        n, s1, s2 = self._rest
-        self._rest = [n + 1, s1 + current_a, s2 + current_a * current_a]
-
-    def _offset(self) -> tuple[float, float] | None:
-        """The current-sense offset from the rest samples and its σ, A (None: too few)."""
-        n, s1, s2 = self._rest
-        if n < HOLD_BASE:
-            return None
-        sd = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * n / (n - 1))
-        return s1 / n, math.hypot(sd / math.sqrt(n), REST_CURRENT_SD_A)
-
-    def add_sample(self, t_s: float, command_rpm: float, current_a: float) -> bool:
-        """One settled sample at a held speed; True when the CUSUM exceeds its threshold."""
-        self.recent.append((t_s, command_rpm, current_a))
-        base = self._base.setdefault(command_rpm, [])
-        mirror = self._base.get(-command_rpm, [])
-        offset = self._offset()
-        cross = len(mirror) >= HOLD_BASE and offset is not None
-        if len(base) < HOLD_BASE:
-            base.append(current_a)
-            if not cross:
-                return False
-        if command_rpm != self._key:
-            self._values, self._key = [], command_rpm
-        self._values.append(current_a)
-        if len(self._values) < self.block:
-            return False
-        values, self._values = np.array(self._values), []
-        tests = []  # (v, σ of v, σ common to every block) of each comparison
-        if len(base) >= HOLD_BASE and values.size:
-            tests.append(self._compare(values, np.array(base), command_rpm, 0.0, 0.0))
-        if cross:
-            off, off_sd = offset  # type: ignore[misc]
-            level = -(np.array(mirror) - off) + off  # the mirror speed's current, sign turned
-            tests.append(self._compare(values, level, command_rpm, off, off_sd))
-        v, sd_v, level_sd = max(tests, key=lambda x: (x[0] - HOLD_TOLERANCE) / x[1])
-        self.sizes.append((t_s, v, sd_v, level_sd))
-        while self.sizes[0][0] < t_s - HISTORY_S:
-            self.sizes.popleft()
-        return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
-
-    @staticmethod
-    def _compare(values, base, command_rpm: float, off: float, off_sd: float):
-        """A block against a baseline: the relative rise v of the friction current, its σ
-        and the σ that every block shares (the baseline's). Against the same command the offset
-        cancels (``off_sd`` 0); against the mirror speed (friction is even in speed: the
-        healthy units' ± levels agree within ~3 %) the rest's offset estimate enters
-        twice, and the unit's asymmetry."""
-        sign = math.copysign(1.0, command_rpm)
-        level = sign * (float(np.mean(base)) - off)
-        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
-        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
-        v = (sign * (float(np.mean(values)) - off) - level) / scale
-        noise = sd * math.sqrt(1 / values.size + 1 / base.size) / scale
-        # what averaging blocks does not shrink: the drift between the holds and, against
-        # the same command, the level's offset (relative), against the mirror speed the
-        # offset estimate and the unit's asymmetry (additive)
-        if off_sd == 0.0:
-            return v, noise, math.hypot(HOLD_DRIFT_SD, v * CURRENT_OFFSET_SD_A / scale)
-        sd_v = math.hypot(noise, 2 * off_sd / scale, HOLD_SIGN_SD)
-        return v, sd_v, math.hypot(2 * off_sd / scale, HOLD_SIGN_SD, HOLD_DRIFT_SD)
-
-    def onset(self) -> float:
-        """Start of the first block after the statistic last was zero, s (the blocks
-        between may be minutes apart: other speeds, accelerations)."""
-        t0 = self.change_time()
-        after = [row[0] for row in self.means if row[0] > t0]
-        return after[0] - self.block * self.Ts if after else t0
-
-    def since_change_sizes(self) -> np.ndarray:
-        """(v, σ of v, σ common to all blocks) of the blocks since the statistic last
-        left zero, shape (n, 3)."""
-        t0 = self.change_time()
-        rows = [row[1:] for row in self.sizes if row[0] > t0] or [row[1:] for row in self.sizes][
-            -1:
-        ]
-        return np.array(rows, dtype=float).reshape(-1, 3)
-
-
-class _Dropout:
-    """Lost telemetry frames per block, against the reference's Poisson loss rate."""
-
-    def __init__(self, block: int, n: int) -> None:
-        self.block, self.n = block, n
-        self.count = self.samples = 0
-        self.last_count = 0
-        self.trace: list[int] | None = None  # every block's count, when calibrating
-
-    @property
-    def statistic(self) -> float:
-        return float(self.count)
-
-    def add(self, lost: int) -> bool:
-        self.count += lost
-        self.samples += 1
-        fired = self.count >= self.n
-        if self.samples >= self.block or fired:
-            if self.trace is not None:
-                self.trace.append(self.count)
-            self.last_count = self.count
-            self.count = self.samples = 0
-        return fired
-
-    def restart(self) -> None:
-        self.count = self.samples = 0
 
 
 @dataclass
@@ -820,7 +325,7 @@ class Diagnoser:
         self._still_speeds: deque = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
         if reference is None:  # measuring a reference: collect the change test's values
             probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
-            self._change_probe = _FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
+            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
             self._change_probe.add = lambda t, v: self.collected["friction_change"].append(v)  # type: ignore[method-assign]
         else:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
@@ -831,7 +336,7 @@ class Diagnoser:
             self._arm(reference)
             if trace:
                 for det in self._detectors.values():
-                    if isinstance(det, (_BlockCusum, _Dropout)):
+                    if isinstance(det, (BlockCusum, Dropout)):
                         det.trace = []
 
     # -- thresholds ----------------------------------------------------------------------
@@ -845,7 +350,7 @@ class Diagnoser:
             tol = ref.tolerance.get(name, DEFAULT_TOLERANCE[name])
             if name == "motor":
                 tol = min(tol, self._motor_headroom(ref))
-            self._detectors[name] = _BlockCusum(stats, tol, h_analytic, sides)
+            self._detectors[name] = BlockCusum(stats, tol, h_analytic, sides)
             h = self._calibrated(name, h_analytic, self._detectors[name])
             self._detectors[name].h = self.thresholds[name] = h
             if name == "friction":  # onsets smaller than the spread between units
@@ -854,7 +359,7 @@ class Diagnoser:
                 # change values, which the plain friction test's σ does not hold)
                 change = ref.tests.get("friction_change", stats)
                 change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
-                det = _FrictionChange(change, tol, h_analytic, 6, ref.current_model)
+                det = FrictionChange(change, tol, h_analytic, 6, ref.current_model)
                 det.h = self._calibrated("friction_change", h_analytic, det)
                 self._detectors["friction_change"] = det
                 self.thresholds["friction_change"] = det.h
@@ -862,7 +367,7 @@ class Diagnoser:
         # (the identification record, a stepped PRBS, has no window that qualifies)
         stats = BlockStats(0.0, OFFSET_SIGMA_RPM, 1, 1 / OFFSET_WINDOW, 0, "tune set")
         h_analytic = cusum_threshold(max(self.arl0 / stats.block_s * 2, 1.5), CUSUM_K)
-        det = _BlockCusum(stats, 0.0, h_analytic, "both")
+        det = BlockCusum(stats, 0.0, h_analytic, "both")
         det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
         self._detectors["offset"] = det
         if "slew" in ref.tests:  # older references lack it
@@ -870,19 +375,19 @@ class Diagnoser:
             h_analytic = cusum_threshold(max(self.arl0 / stats.block_s, 1.5), CUSUM_K)
             tol = ref.tolerance.get("slew", DEFAULT_TOLERANCE["slew"])
             if ref.slew_scale_rpm_s is not None:  # the reference's level rests on ~10 slews
-                tol = math.hypot(tol, _Z95 * stats.sigma / math.sqrt(stats.samples))
-            det = _BlockCusum(stats, tol, h_analytic, "up")
+                tol = math.hypot(tol, Z95 * stats.sigma / math.sqrt(stats.samples))
+            det = BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
         # as if every sample qualified: the analytic threshold errs on the safe side
         h_analytic = cusum_threshold(max(self.arl0 / BALANCE_BLOCK, 1.5), CUSUM_K)
-        det = _FrictionBalance(h_analytic)
+        det = FrictionBalance(h_analytic)
         det.h = self.thresholds["friction_balance"] = self._calibrated(
             "friction_balance", h_analytic, det
         )
         self._detectors["friction_balance"] = det
         h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
-        det = _HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
+        det = HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
         self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
@@ -897,7 +402,7 @@ class Diagnoser:
         while poisson.sf(n - 1, mean) > p_block:
             n += 1
         n = int(self._calibrated("dropout", n))
-        self._detectors["dropout"] = _Dropout(block, n)
+        self._detectors["dropout"] = Dropout(block, n)
         self.thresholds["dropout"] = n
 
     @staticmethod
@@ -1139,7 +644,7 @@ class Diagnoser:
         out: dict = {
             name: list(det.trace)
             for name, det in self._detectors.items()
-            if isinstance(det, (_BlockCusum, _Dropout)) and det.trace is not None
+            if isinstance(det, (BlockCusum, Dropout)) and det.trace is not None
         }
         out["stuck"] = list(self.stuck_runs)
         return out
@@ -1206,7 +711,7 @@ class Diagnoser:
         t1 = det.change_point()
         since = np.array([v for t, v in det.raw if t >= t1])
         sd = det.stats.sigma * math.sqrt(det.stats.block)  # σ of one value
-        if not _steady(since, sd) and t_s - t1 < LOAD_SETTLE_S:
+        if not steady(since, sd) and t_s - t1 < LOAD_SETTLE_S:
             return []
         # a bias stays; forget an error that no longer holds (the loop has removed a load
         # step's or an overshoot's): the latest block, and this hold's latest values
@@ -1307,7 +812,7 @@ class Diagnoser:
         """
         out: dict[str, dict] = {}
         for name, det in self._detectors.items():
-            if isinstance(det, _BlockCusum):
+            if isinstance(det, BlockCusum):
                 n = det.decided
             elif name == "rest":
                 n = det.readings
@@ -1356,7 +861,7 @@ class Diagnoser:
                 return None
             x = np.array([v for _, v in det.raw], dtype=float)
             blocks = max(len(x) / stats.block, 1.0)
-            return float(x.mean()), _Z95 * stats.sigma / math.sqrt(blocks), blocks
+            return float(x.mean()), Z95 * stats.sigma / math.sqrt(blocks), blocks
 
         out: dict[str, dict] = {}
         motor, friction, speed = mean_ci("motor"), mean_ci("friction"), mean_ci("speed")
@@ -1365,17 +870,17 @@ class Diagnoser:
         e_m, h_m = _relative(e_m, h_m, ref.tests["motor"].mean if motor else 0.0)
         if motor:
             k_t, rel = 1 / (1 + e_m), h_m / (1 + e_m)
-            out["torque_constant"] = _estimate(k_t, rel, _Z95 * MOTOR_UNIT_SD, "factor", motor[2])
+            out["torque_constant"] = _estimate(k_t, rel, Z95 * MOTOR_UNIT_SD, "factor", motor[2])
         if friction:
             e_f, h_f, n = friction
             e_f, h_f = _relative(e_f, h_f, ref.tests["friction"].mean)
             rel = math.hypot(h_f / (1 + e_f), h_m / (1 + e_m))
-            unit_rel = _Z95 * FRICTION_UNIT_SD
+            unit_rel = Z95 * FRICTION_UNIT_SD
             out["friction"] = _estimate((1 + e_f) / (1 + e_m), rel, unit_rel, "factor", n)
         if speed:
             bias = speed[0] - ref.tests["speed"].mean
             out["speed_sensor_bias"] = _estimate(
-                bias, speed[1], _Z95 * SPEED_UNIT_SD, "rpm", speed[2], relative=False
+                bias, speed[1], Z95 * SPEED_UNIT_SD, "rpm", speed[2], relative=False
             )
         return out
 
@@ -1508,449 +1013,3 @@ def _estimate(
         "unit": unit,
         "blocks": round(blocks, 1),
     }
-
-
-def healthy_reference(
-    data: IOData, wheel, *, tolerance: dict | None = None, source: str = ""
-) -> HealthyReference:
-    """Measure the healthy reference on a fault-free record (the identification record).
-
-    Parameters
-    ----------
-    data : IOData
-        As :func:`diagnose` takes it (speed, current, age and lost frames), speed mode.
-    wheel : IdentifiedWheel
-        The model identified on it.
-    tolerance : dict, optional
-        Tolerance between healthy units per test (default
-        :data:`~rwlab.diagnose.reference.DEFAULT_TOLERANCE`).
-    source : str
-        Where the record came from.
-
-    Returns
-    -------
-    HealthyReference
-        Block statistics per test, for ``model.json``.
-
-    Raises
-    ------
-    DataError
-        No motor current, too few samples for a test, or not a speed-mode record.
-    """
-    t, u, speed, current, age, lost = _columns(data, wheel)
-    if not np.isfinite(current).all():
-        raise DataError("the healthy reference needs the motor current on every sample")
-    accel = np.concatenate([[0.0], np.diff(speed) / data.Ts])
-    fresh = age < data.Ts
-    keep = fresh & np.concatenate([[False], fresh[:-1]])  # as the tests take samples
-    coef = fit_current_model(accel[keep], speed[keep], current[keep])
-    second = Diagnoser(wheel, None)
-    second.residuals.current_model = coef
-    second._change_probe.c = coef
-    second._slew_scale = scale = nominal_coulomb_deceleration()
-    for k in range(data.N):
-        second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
-    tests = {}
-    for name, values in second.collected.items():
-        if name in ("offset", "slew"):  # no window of a stepped PRBS qualifies: σ is a constant
-            continue
-        try:
-            tests[name] = block_stats(
-                np.array(values), BLOCKS.get(name, BLOCKS["friction"]), data.N
-            )
-        except DataError as exc:
-            if name not in OPTIONAL_TESTS:
-                raise DataError(f"the {name} test: {exc}") from exc
-    if len(second.collected["slew"]) >= 4:  # slews through zero speed: few in a record
-        tests["slew"] = block_stats(np.array(second.collected["slew"]), 1, data.N)
-    reps, readings = second.repeats
-    return HealthyReference(
-        Ts=float(data.Ts),
-        current_model=tuple(float(x) for x in coef),  # type: ignore[arg-type]
-        tests=tests,
-        repeat_probability=(reps + 1) / (readings + 2),  # Laplace's rule: never 0 or 1
-        repeat_samples=int(readings),
-        lost_per_sample=(float(lost[-1] - lost[0]) + 0.5) / data.N,  # Jeffreys: never 0
-        samples=int(data.N),
-        tolerance=dict(DEFAULT_TOLERANCE if tolerance is None else tolerance),
-        source=source,
-        slew_scale_rpm_s=scale,
-    )
-
-
-def measure_calibration(
-    records: list[IOData],
-    wheel,
-    reference: HealthyReference,
-    *,
-    origin: str = "",
-    more_models: tuple = (),
-) -> ThresholdCalibration:
-    """Count each detector's false alarms over its thresholds on healthy records.
-
-    Parameters
-    ----------
-    records : list of IOData
-        Healthy records of units other than the references', as :func:`diagnose`
-        takes them.
-    wheel : IdentifiedWheel
-    reference : HealthyReference
-        The identified unit's, as the detectors will use it.
-    origin : str
-        How the records were made (stored with the calibration).
-    more_models : sequence of (IdentifiedWheel, HealthyReference)
-        Models of other units (same Ts): each runs over every record too, so the
-        rates are those of a model from any of these units (the user identifies on
-        one unit and diagnoses others); each CUSUM is counted with each model's own
-        reference value, over shares of its tolerance between units
-        (:data:`~rwlab.diagnose.calibration.SHARES`), so a model of any unit (any k)
-        takes the curve of its share.
-
-    Returns
-    -------
-    ThresholdCalibration
-        Alarms per threshold (detectors restarted after each alarm) and the hours
-        (record hours times models).
-    """
-    if not records:
-        raise ConfigError("a calibration needs at least one healthy record")
-    models = [(wheel, reference), *more_models]
-    if any(not math.isclose(w.Ts, wheel.Ts, rel_tol=1e-6) for w, _ in models):
-        raise ConfigError("a calibration's models must share one sample time")
-    per_model = [_model_traces(records, w, ref) for w, ref in models]
-    hours = len(models) * sum(data.N * data.Ts for data in records) / 3600
-    curves = {}
-    for name, (_, sides) in per_model[0][1].items():
-        # each model at its own k, over shares of its tolerance: what carries to a model
-        # of another unit is the share, not k (calibration's docstring)
-        curves.update(cusum_curves(name, [(m[0][name], m[1][name][0]) for m in per_model], sides))
-    n = tuple(float(x) for x in range(1, _N_MAX + 1))
-    runs = [int(r) for m in per_model for rec in m[0]["stuck"] for r in rec]
-    moving = sum(m[2] for m in per_model)
-    curves["stuck"] = _Curve("count", n, tuple(int(a) for a in run_alarms(runs)), 0.0, moving)
-    blocks = [int(c) for m in per_model for rec in m[0]["dropout"] for c in rec]
-    curves["dropout"] = _Curve(
-        "count", n, tuple(int(a) for a in count_alarms(blocks)), 0.0, len(blocks)
-    )
-    return ThresholdCalibration(float(wheel.Ts), float(hours), curves, origin)
-
-
-def _model_traces(records: list[IOData], wheel, reference: HealthyReference):
-    """One model over every record: each test's traces per record, each CUSUM's (k,
-    sides), and the moving samples."""
-    traces: dict[str, list] = {}
-    k: dict[str, tuple[float, str]] = {}
-    moving = 0
-    for data in records:
-        t, held, speed, current, age, lost = _columns(data, wheel)
-        d = Diagnoser(
-            wheel, reference, false_alarms_per_hour=1e-9, latch=False, calibration=False, trace=True
-        )
-        for i in range(data.N):
-            d.update(float(t[i]), float(held[i]), speed[i], current[i], age[i], lost[i])
-        for name, values in d.traces().items():
-            traces.setdefault(name, []).append(np.array(values))
-        for name, det in d._detectors.items():
-            if isinstance(det, _BlockCusum):
-                k[name] = (det.k, det.sides)
-        moving += d.repeats[1]
-    return traces, k, moving
-
-
-@dataclass(repr=False)
-class Diagnosis:
-    """What :func:`diagnose` found in a record.
-
-    Parameters
-    ----------
-    alarms : list of Alarm
-        In time order.
-    thresholds : dict
-        Each detector's threshold.
-    reference : HealthyReference
-        The healthy reference the detectors compared the record with.
-    history : dict of str to numpy.ndarray
-        The residuals and statistics at every sample (``t_s``, ``speed``, ...,
-        ``stat_NAME`` for each CUSUM test), each shape (N,).
-    false_alarms_per_hour : float
-        The false-alarm rate the thresholds were set for, per detector.
-    duration_s : float
-        Length of the record, s.
-    notes : list of str
-        Detectors that cannot deliver the requested rate, and why.
-    coverage : dict of str to dict
-        What each test decided on (:meth:`Diagnoser.coverage`; a test the data
-        could not feed has ``decided`` 0 and a ``why``).
-    estimates : dict of str to dict
-        Friction and torque-constant factors and the speed bias against the healthy
-        reference, alarm or not (:meth:`Diagnoser.estimates`), for trends.
-    """
-
-    alarms: list[Alarm]
-    thresholds: dict
-    reference: HealthyReference
-    history: dict[str, np.ndarray]
-    false_alarms_per_hour: float
-    duration_s: float = 0.0
-    notes: list[str] = field(default_factory=list)
-    coverage: dict[str, dict] = field(default_factory=dict)
-    estimates: dict[str, dict] = field(default_factory=dict)
-
-    def __repr__(self) -> str:
-        found = ", ".join(self.faults()) or "no alarm"
-        return (
-            f"Diagnosis({found}; {len(self.alarms)} alarm{'' if len(self.alarms) == 1 else 's'} "
-            f"over {self.duration_s:g} s, "
-            f"{len(self.tested())} of {len(self.coverage)} tests decided)"
-        )
-
-    def faults(self) -> list[str]:
-        """The faults named, in the order of their first alarm."""
-        return list(dict.fromkeys(a.kind for a in self.alarms))
-
-    def tested(self) -> list[str]:
-        """The tests that decided on at least one block, window, slew or sample."""
-        return [name for name, c in self.coverage.items() if c["decided"] > 0]
-
-    def untested(self) -> list[str]:
-        """The tests that had nothing to decide on: their silence says nothing."""
-        return [name for name, c in self.coverage.items() if c["decided"] == 0]
-
-    def unseen(self) -> list[str]:
-        """The faults (:data:`FAULT_TESTS`) none of whose tests decided on anything: the
-        record could not show them (too short, or without the motions they need)."""
-        tested = set(self.tested())
-        return [kind for kind, tests in FAULT_TESTS.items() if not tested.intersection(tests)]
-
-    def blind(self) -> dict[str, float]:
-        """The faults not named that no test could see after a frozen speed reading: from
-        the first stuck-sensor alarm on, every model-based test reads a speed that no longer
-        moves (no acceleration, no constant speed, no lag to measure), so a weak motor,
-        worn bearings, a lowered current limit or a bias that comes with the stuck sensor
-        goes unseen: said, not a silent miss.
-
-        Returns
-        -------
-        dict of str to float
-            Per fault (of :data:`ROTOR_FAULTS` and ``speed_sensor_bias``) not named before
-            it: the time of the stuck alarm, s. Empty without one.
-        """
-        stuck = [a.t_s for a in self.alarms if a.kind == "speed_sensor_stuck"]
-        if not stuck:
-            return {}
-        named = {a.kind for a in self.alarms if a.t_s <= stuck[0]}
-        kinds = (*ROTOR_FAULTS, "speed_sensor_bias")
-        return {kind: stuck[0] for kind in kinds if kind not in named}
-
-    def model_tested(self) -> bool:
-        """Whether any model-based test (all but rest, stuck, dropout) decided anything:
-        False, and "no alarm" says nothing of friction, the motor, the current limit or
-        a sensor bias."""
-        return any(name not in TELEMETRY_TESTS for name in self.tested())
-
-    def sizes(self) -> dict:
-        """Each fault's one size: the consistent sizes of its alarms combined
-        (:func:`~rwlab.diagnose.isolate.combine`), with the alarms' own sizes kept.
-
-        Returns
-        -------
-        dict of str to dict
-            Per fault: ``magnitude``, ``ci95``, ``unit``, ``detectors`` (the alarms
-            combined) and ``left_out`` (those whose sizes disagree with them).
-        """
-        out = {}
-        for kind in self.faults():
-            alarms = [a for a in self.alarms if a.kind == kind]
-            found = combine([Finding(a.kind, a.magnitude, a.ci, a.unit) for a in alarms])
-            out[kind] = {
-                "magnitude": found["magnitude"],
-                "ci95": found["ci95"],
-                "unit": found["unit"],
-                "detectors": [alarms[i].detector for i in found["used"]],
-                "left_out": [alarms[i].detector for i in found["left_out"]],
-            }
-        return out
-
-    def residual_statistics(self) -> dict:
-        """Mean, σ and largest |value| of each residual: before and after the first
-        alarm, or over the whole record when nothing alarmed."""
-        t = self.history["t_s"]
-        first = min((a.t_s for a in self.alarms), default=None)
-        if first is None:
-            parts = {"whole_record": np.ones(t.shape, dtype=bool)}
-        else:
-            parts = {"before_alarm": t < first, "after_alarm": t >= first}
-        out: dict[str, dict] = {}
-        for name, unit in (("speed", "rpm"), ("acceleration", "rpm/s"), ("current", "A")):
-            x = self.history[name]
-            for part, mask in parts.items():
-                v = x[mask & np.isfinite(x)]
-                out.setdefault(name, {"unit": unit})[part] = (
-                    {
-                        "mean": float(v.mean()),
-                        "std": float(v.std()),
-                        "max_abs": float(np.abs(v).max()),
-                    }
-                    if v.size
-                    else None
-                )
-        return out
-
-    def to_dict(self) -> dict:
-        return {
-            "format": "rwlab.Diagnosis/3",
-            "alarms": [a.to_dict() for a in self.alarms],
-            "faults": self.faults(),
-            "sizes": self.sizes(),
-            "thresholds": self.thresholds,
-            "false_alarms_per_hour_per_detector": self.false_alarms_per_hour,
-            "duration_s": self.duration_s,
-            "threshold_notes": list(self.notes),
-            "coverage": {name: dict(c) for name, c in self.coverage.items()},
-            "untested": self.untested(),
-            "unseen_faults": self.unseen(),
-            "blind_after_s": self.blind(),
-            "model_tested": self.model_tested(),
-            "estimates": {kind: dict(e) for kind, e in self.estimates.items()},
-            "reference": self.reference.to_dict(),
-            "residual_statistics": self.residual_statistics(),
-        }
-
-
-def _columns(data: IOData, wheel):
-    """Time, held command, speed, current, age and lost frames of a record, checked."""
-    if not math.isclose(data.Ts, wheel.Ts, rel_tol=1e-6):
-        raise DataError(
-            f"the data are sampled at {data.Ts:g} s, the model at {wheel.Ts:g} s: load the "
-            f"record on the model's grid, load_record(path, {wheel.Ts:g}, outputs=("
-            f"{', '.join(repr(o) for o in RECORD_OUTPUTS)}))"
-        )
-    if data.nu != 1:
-        raise DataError(f"diagnosis needs one input (the speed command), got {data.nu}")
-    if data.input_units and data.input_units[0] == "rpm/s":
-        raise DataError(
-            "an acceleration-mode record cannot be diagnosed: the identified model maps a "
-            "speed command to speed; record the test in speed mode"
-        )
-    names = list(data.output_names)
-    if "speed_rpm" not in names:
-        raise DataError(f"diagnosis needs a speed_rpm output, got {names}")
-
-    def column(name, default):
-        return data.y[:, names.index(name)] if name in names else np.full(data.N, default)
-
-    u = data.u[:, 0]
-    held = np.concatenate([u[:1], u[:-1]])  # the command in force over the last interval
-    t = data.tstart + data.Ts * np.arange(data.N)
-    return (
-        t,
-        held,
-        column("speed_rpm", 0.0),
-        column("current_a", math.nan),
-        column("telemetry_age_s", 0.0),
-        column("lost_frames", 0.0),
-    )
-
-
-def diagnose(
-    data: IOData,
-    wheel,
-    reference: HealthyReference,
-    *,
-    false_alarms_per_hour: float = 1e-3,
-    latch: bool = True,
-    calibration: ThresholdCalibration | bool = True,
-) -> Diagnosis:
-    """Run the detector over a record's samples.
-
-    Parameters
-    ----------
-    data : IOData
-        u = speed command (rpm) issued at each sample; outputs ``speed_rpm`` and
-        optionally ``current_a``, ``telemetry_age_s`` and ``lost_frames`` (as
-        ``load_record(..., outputs=('speed', 'current', 'age', 'lost'))`` gives),
-        sampled at the model's Ts.
-    wheel : IdentifiedWheel
-    reference : HealthyReference
-        From the model file (:meth:`HealthyReference.from_model_file`).
-    false_alarms_per_hour, latch, calibration :
-        See :class:`Diagnoser`.
-
-    Returns
-    -------
-    Diagnosis
-        The alarms, thresholds and residual histories.
-
-    Raises
-    ------
-    DataError
-        Another Ts, no speed, no motor current, an acceleration-mode record.
-
-    Warns
-    -----
-    RwlabWarning
-        A fault none of whose tests had anything to decide on (a record too
-        short, or without the motions they need): "no alarm" says nothing of it.
-
-    Notes
-    -----
-    Without ``lost_frames`` the dropout test has nothing to decide on, without
-    ``telemetry_age_s`` the stuck test takes every sample as a new reading (both
-    said in ``coverage`` and ``notes``); without ``current_a`` the data are refused.
-    """
-    _require_current(data, wheel)
-    t, held, speed, current, age, lost = _columns(data, wheel)
-    d = Diagnoser(
-        wheel,
-        reference,
-        false_alarms_per_hour=false_alarms_per_hour,
-        latch=latch,
-        calibration=calibration,
-    )
-    for k in range(data.N):
-        d.update(float(t[k]), float(held[k]), speed[k], current[k], age[k], lost[k])
-    coverage = d.coverage()
-    notes = list(d.notes)
-    if "lost_frames" not in data.output_names:  # a degraded run, said so
-        why = "the data have no lost_frames output (load_record(..., outputs=(..., 'lost')))"
-        coverage["dropout"] = {"decided": 0, "unit": DECIDES_ON["dropout"], "why": why}
-        notes.append(f"dropout: not tested, {why}")
-    if "telemetry_age_s" not in data.output_names:
-        notes.append(
-            "stuck: the data have no telemetry_age_s output, so a sample without a new "
-            "frame counts as a reading (a held frame may read as a frozen sensor)"
-        )
-    result = Diagnosis(
-        d.alarms,
-        d.thresholds,
-        reference,
-        {k: np.asarray(v, dtype=float) for k, v in d.history.items()},
-        false_alarms_per_hour,
-        data.N * data.Ts,
-        notes,
-        coverage,
-        d.estimates(),
-    )
-    if result.unseen():
-        warnings.warn(
-            f"the record ({result.duration_s:g} s) gave no test that names "
-            f"{', '.join(result.unseen())} anything to decide on: no alarm says nothing of "
-            + ("them" if len(result.unseen()) > 1 else "it")
-            + "; record at least 20 minutes of a test signal with speeds held at both signs",
-            RwlabWarning,
-            stacklevel=2,
-        )
-    return result
-
-
-def _require_current(data: IOData, wheel) -> None:
-    """Refuse data without the motor current: every rotor test reads it (load_record's
-    default gives the speed alone, and a silent run named k_t × 0.8 a current limit)."""
-    names = list(data.output_names)
-    if "current_a" in names:
-        return
-    outputs = ", ".join(repr(o) for o in RECORD_OUTPUTS)
-    raise DataError(
-        f"diagnosis needs the motor current (a current_a output), got {names}: load the "
-        f"record with load_record(path, {wheel.Ts:g}, outputs=({outputs}))"
-    )

@@ -266,8 +266,7 @@ class _WheelWatch:
 
     def update(self, t: float, accel_rpm_s: float, speed: float, current: float, age: float):
         from rwlab.data import IOData
-        from rwlab.diagnose import Diagnoser
-        from rwlab.diagnose.diagnoser import healthy_reference
+        from rwlab.diagnose import Diagnoser, healthy_reference
 
         command = (speed if self._last is None else self._last) + accel_rpm_s * self.Ts
         self._last = speed

@@ -1,0 +1,499 @@
+"""The block tests of the diagnosis: one test's qualifying values into block means and a
+CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own past
+(:class:`FrictionChange`, :class:`FrictionBalance`, :class:`HoldChange`) or count lost
+frames (:class:`Dropout`). :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each
+sample; its module docstring says what each test takes and alarms on."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from rwlab.diagnose.isolate import (
+    CURRENT_OFFSET_SD_A,
+    Z95,
+    Finding,
+)
+from rwlab.diagnose.reference import (
+    BlockStats,
+    nominal_friction_currents,
+)
+
+CUSUM_K = 0.5
+# σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
+# currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
+# identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
+CHANGE_PRIOR = 0.5
+GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
+CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
+# friction over the reference's varies with speed beyond its viscous + Coulomb law)
+HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
+HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
+# the bearing's warm-up), relative to its own friction current
+HOLD_DRIFT_SD = 0.05  # relative drift of a unit's friction between two holds (the twin's
+# random walk is 5 %/√h; a record's holds are minutes apart)
+HOLD_SIGN_SD = 0.03  # relative σ between a unit's friction at +ω and −ω (tune set's healthy
+# step records, 10 units: |i(+6000) − off| and |i(−6000) − off| within 0.3–3 %)
+REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a 0-rpm
+# command is the sense offset (the loop's integrator has not moved); after a motion the
+# rest holds the integrator's residue (up to ~4 mA on the twin's units)
+HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
+HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
+# the balance test (FrictionBalance): steady-acceleration samples of any signal
+BALANCE_JERK_RPM_S = 20.0  # |Δα| over each of the last two intervals, rpm/s
+BALANCE_MIN_RPM = 300.0  # above the stiction/Stribeck band, rpm
+BALANCE_BLOCK = 5  # samples per block mean
+BALANCE_MIN_BLOCKS = 20  # baseline blocks before it tests
+BALANCE_TOLERANCE = 0.1  # friction drift within a record, share of the friction current
+# ridge prior σ of the baseline law: viscous, Coulomb and inertial scale (a reference's
+# identified viscous/Coulomb split errs widely: eval3 unit 631 reads 1.9 and 3.2 × model
+# 587's; σ 0.6 held that law down and a healthy PRBS alarmed), current offset (±5 mA per
+# unit), A per A, A
+BALANCE_PRIOR = (3.0, 3.0, 0.15, 0.01)
+BALANCE_INERTIAL_SD = 0.05  # the inertial term's mismatch, share of i_α (twin's chirps)
+BALANCE_NOISE_A = 5e-3  # a block mean's σ that scales the prior (the twin's: 3–8 mA)
+
+
+class BlockCusum:
+    """Block means of one test's values, standardised, into a one- or two-sided CUSUM."""
+
+    def __init__(
+        self, stats, tolerance: float, h: float, sides: str, baseline_blocks: int = 0
+    ) -> None:
+        self.stats, self.h, self.sides = stats, h, sides
+        self.k = CUSUM_K + tolerance / stats.sigma
+        self.baseline_blocks = baseline_blocks  # > 0: the mean of the record's first blocks
+        self._baseline: list[float] = []
+        self.mean = stats.mean
+        self._values: list[float] = []
+        self.up = self.down = 0.0
+        self.means: deque = deque()  # (t_s, block mean, up, down)
+        self.trace: list[float] | None = None  # every block's z, when calibrating
+        self.raw: deque = deque()  # (t_s, value): the single values, for sizing a fault
+        self.decided = 0  # blocks tested (after any baseline): what "no alarm" rests on
+
+    @property
+    def statistic(self) -> float:
+        return max(self.up, self.down)
+
+    def add(self, t_s: float, value: float, allowance: float = 0.0) -> bool:
+        """One qualifying value; ``allowance``: tolerance beyond the CUSUM's own at this
+        value (value units), taken off before the block mean (the value kept for sizing
+        is the plain one). True on an alarm."""
+        self._values.append(value - allowance)
+        self.raw.append((t_s, value))
+        while self.raw[0][0] < t_s - HISTORY_S:
+            self.raw.popleft()
+        if len(self._values) < self.stats.block:
+            return False
+        mean = float(np.mean(self._values))
+        self._values.clear()
+        if len(self._baseline) < self.baseline_blocks:
+            self._baseline.append(mean)
+            self.mean = float(np.mean(self._baseline))
+            return False
+        z = (mean - self.mean) / self.stats.sigma
+        self.decided += 1
+        if self.trace is not None:
+            self.trace.append(z)
+        if self.sides in ("up", "both"):
+            self.up = max(0.0, self.up + z - self.k)
+        if self.sides in ("down", "both"):
+            self.down = max(0.0, self.down - z - self.k)
+        self.means.append((t_s, mean, self.up, self.down))
+        while self.means and self.means[0][0] < t_s - HISTORY_S:
+            self.means.popleft()
+        return self.statistic > self.h
+
+    def restart(self) -> None:
+        self.up = self.down = 0.0
+
+    def change_time(self) -> float:
+        """Time of the last block at which the statistic was zero (−inf: none kept)."""
+        side = 2 if self.up >= self.down else 3
+        zeros = [row[0] for row in self.means if row[side] == 0.0]
+        return zeros[-1] if zeros else -math.inf
+
+    def since_change(self) -> np.ndarray:
+        """The single values since the change: the last zero of the statistic, then the
+        split that best explains a shift from the healthy mean (the maximum-likelihood
+        change point of a Gaussian mean), so a block straddling the onset does not dilute
+        the size."""
+        rows, j = self._split()
+        return np.array([x for _, x in rows[j:]])
+
+    def _split(self) -> tuple[list[tuple[float, float]], int]:
+        t0 = self.change_time()
+        rows = [r for r in self.raw if r[0] > t0] or list(self.raw)[-1:]
+        d = np.array([x for _, x in rows]) - self.mean
+        tail = np.cumsum(d[::-1])[::-1]  # Σ d[j:]
+        n = np.arange(len(d), 0, -1)
+        return rows, int(np.argmax(tail**2 / n))
+
+    def change_point(self) -> float:
+        """Time of the first single value of :meth:`since_change`, s."""
+        rows, j = self._split()
+        return rows[j][0]
+
+
+def steady(values: np.ndarray, sd: float) -> bool:
+    """A step, not a transient: the values' two halves agree within a fifth of their mean
+    (from 4 values on: a PI loop's transient moves more than that), or within three σ of
+    their difference from 8 values on. ``sd``: σ of one value."""
+    if values.size < 4:
+        return False
+    first, second = np.array_split(values, 2)
+    diff = abs(float(first.mean() - second.mean()))
+    tol = 0.2 * abs(float(values.mean()))
+    if values.size >= 8:
+        tol = max(tol, 3 * sd * math.sqrt(4 / values.size))
+    return diff <= tol
+
+
+class FrictionChange(BlockCusum):
+    """Friction against this record's own past: the unit's friction law (its viscous and
+    Coulomb excess over the reference's and its current offset) fitted on the record's
+    samples older than ``GUARD_S``, so holds at other speeds compare like with like (a
+    plain mean of the relative excess does not: a unit whose viscous/Coulomb mix and
+    current offset differ from the reference's has a speed-dependent excess), and a fault
+    enters the baseline only ``GUARD_S`` after its onset."""
+
+    def __init__(self, stats, tolerance: float, h: float, baseline_blocks: int, c) -> None:
+        super().__init__(stats, tolerance, h, "up")
+        self.mean = 0.0
+        self.c = np.asarray(c, dtype=float)  # the reference's current model
+        self._need = baseline_blocks * stats.block
+        self._pending: deque = deque()  # (t_s, regressors, residual) younger than GUARD_S
+        self._xtx = np.zeros((3, 3))
+        self._xtr = np.zeros(3)
+        self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the baseline
+        self._signs = [0, 0]  # baseline samples at positive, negative speed
+        self._law: np.ndarray | None = None
+        self._cov: np.ndarray = np.zeros((3, 3))
+        self.law_sd: deque = deque()  # (t_s, σ of the law's prediction, value units)
+
+    def _ridge(self) -> np.ndarray:
+        """The law's least squares, shrunk towards the reference's by the spread between
+        units, so a baseline with few speeds does not extrapolate wildly: prior σ
+        :data:`CHANGE_PRIOR` of the datasheet's nominal viscous and Coulomb currents (the
+        spread is the datasheet's ±30 % around nominal, not around the reference unit: 30 %
+        of a low-friction reference's currents held a high-friction unit's law down, and
+        its holds at new speeds alarmed), 5 mA of offset
+        (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
+        (the samples of a hold are correlated)."""
+        n, s1, s2 = self._r
+        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
+        viscous, coulomb = nominal_friction_currents()
+        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+        A = self._xtx / noise**2 + np.diag(1 / prior**2)
+        self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
+        return self._cov @ self._xtr / noise**2
+
+    def add_sample(self, t_s: float, residual_a: float, speed_rpm: float, friction_a: float):
+        """One constant-speed sample: current residual (A), speed (rpm), the reference's
+        friction current there (A); True on an alarm."""
+        if abs(speed_rpm) < CHANGE_MIN_RPM:
+            return False
+        sign = math.copysign(1.0, speed_rpm)
+        x = np.array([speed_rpm, sign, 1.0])
+        self._pending.append((t_s, x, residual_a))
+        changed = False
+        while self._pending[0][0] <= t_s - GUARD_S:
+            _, xo, ro = self._pending.popleft()
+            self._xtx += np.outer(xo, xo)
+            self._xtr += xo * ro
+            self._r = [self._r[0] + 1, self._r[1] + ro, self._r[2] + ro * ro]
+            self._signs[int(xo[1] < 0)] += 1
+            changed = True
+        n = self._r[0]
+        if changed and (n >= 4 * self._need or (n >= self._need and min(self._signs) >= 20)):
+            self._law = self._ridge()
+        if self._law is None:
+            return False
+        own = float(self._law @ x)
+        friction_own = float(self._law[:2] @ x[:2])  # the offset is no friction
+        unit_friction = max(abs(friction_a) + sign * friction_own, 0.3 * abs(friction_a))
+        # the baseline law's own uncertainty at this speed, in the value's unit: the same
+        # for every sample of a hold, so averaging does not shrink it (sizing's interval)
+        self.law_sd.append((t_s, math.sqrt(float(x @ self._cov @ x)) / unit_friction))
+        while self.law_sd[0][0] < t_s - HISTORY_S:
+            self.law_sd.popleft()
+        return self.add(t_s, sign * (residual_a - own) / unit_friction)
+
+    def law_uncertainty(self, n: int) -> float:
+        """Mean σ of the baseline law's prediction over the last ``n`` values."""
+        sd = [v for _, v in list(self.law_sd)[-n:]]
+        return float(np.mean(sd)) if sd else 0.0
+
+
+def _balance_prior() -> np.ndarray:
+    """The ridge prior of the balance law as pseudo-data (in the blocks' own units: a
+    block's σ over the prior's σ, squared), shape (3, 3)."""
+    return np.diag((BALANCE_NOISE_A / np.array(BALANCE_PRIOR)) ** 2)
+
+
+class FrictionBalance(BlockCusum):
+    """Friction in the current balance of every steady sample, against this record's past.
+
+    A sample qualifies where the acceleration is steady (:data:`BALANCE_JERK_RPM_S` over
+    the last two intervals: the 2 Hz current snapshot and the interval's mean acceleration
+    agree only then, at constant speed or along a slew) at |ω| ≥
+    :data:`BALANCE_MIN_RPM` (above the stiction band). Its current residual r (the
+    reference's current model's) is ≈ (F − 1) i_f + (1/F_k − 1)(i_f + i_α) + offset for
+    friction × F and k_t × F_k, with i_f, i_α the reference's friction and inertial
+    currents. Block means of :data:`BALANCE_BLOCK` samples (neighbours are correlated)
+    older than ``GUARD_S`` fit r on [i_f, i_α, 1] (ridge towards zero: a baseline with
+    little acceleration leaves the inertial term to the prior); each newer block's
+    prediction error, in the friction's direction less :data:`BALANCE_TOLERANCE` of
+    i_f (a unit's drift within a record) and over its σ (the blocks' scatter and the
+    law's uncertainty there), is the CUSUM's value. An alarm names friction only where the
+    change since its onset is not a weak motor's (which moves the inertial term by as
+    much as the friction term): :meth:`finding`."""
+
+    def __init__(self, h: float) -> None:
+        super().__init__(BlockStats(0.0, 1.0, 1, 0.0, 0, "own baseline"), 0.0, h, "up")
+        self._block: list[tuple[float, float, float, float]] = []
+        self._pending: deque = deque()  # (t_s, x, y) blocks younger than GUARD_S
+        self._xtx = _balance_prior()
+        self._xty = np.zeros(4)
+        self._yy = [0, 0.0]  # baseline blocks, Σ y²
+        self._beta = np.zeros(4)
+        self._cov: np.ndarray = np.zeros((4, 4))
+        self._sd = math.inf
+        self.blocks: deque = deque()  # (t_s, x, prediction error): since-change sizing
+
+    def add_sample(
+        self, t_s: float, residual_a: float, viscous_a: float, coulomb_a: float, inertial_a: float
+    ):
+        """One steady sample: current residual, the reference's viscous, Coulomb and
+        inertial currents there (A); True on an alarm. The baseline scales viscous and
+        Coulomb apart (a unit's mix differs from the reference's: one scale read a
+        healthy PRBS's later speeds as friction × 1.4)."""
+        self._block.append((viscous_a, coulomb_a, inertial_a, residual_a))
+        if len(self._block) < BALANCE_BLOCK:
+            return False
+        v, cl, a, r = np.mean(self._block, axis=0)
+        f = v + cl
+        self._block.clear()
+        x = np.array([v, cl, a, 1.0])
+        self._pending.append((t_s, x, r))
+        moved = False
+        while self._pending[0][0] <= t_s - GUARD_S:
+            _, xo, ro = self._pending.popleft()
+            self._xtx += np.outer(xo, xo)
+            self._xty += xo * ro
+            self._yy = [self._yy[0] + 1, self._yy[1] + ro * ro]
+            moved = True
+        n = self._yy[0]
+        if moved and n >= BALANCE_MIN_BLOCKS:
+            self._fit()
+        if n < BALANCE_MIN_BLOCKS:
+            return False
+        e = float(r - self._beta @ x)
+        self.blocks.append((t_s, x, e))
+        while self.blocks[0][0] < t_s - HISTORY_S:
+            self.blocks.popleft()
+        sd = math.sqrt(self._block_var(a) + float(x @ self._cov @ x))
+        sign = math.copysign(1.0, f)
+        return self.add(t_s, (e * sign - BALANCE_TOLERANCE * abs(f)) / sd)
+
+    def _fit(self) -> None:
+        """The baseline's law and its block σ (the prior's pseudo-data left out of σ)."""
+        cov = np.linalg.inv(self._xtx)
+        beta = cov @ self._xty
+        n, yy = self._yy
+        prior = _balance_prior()
+        sse = yy - 2 * beta @ self._xty + beta @ (self._xtx - prior) @ beta
+        self._sd = math.sqrt(max(sse, 0.0) / max(n - 4, 1)) + 1e-6
+        self._beta, self._cov = beta, cov * self._sd**2
+
+    def _block_var(self, inertial_a) -> float:
+        """Variance of a block's prediction error: the baseline's scatter and the inertial
+        term's mismatch (a chirp's fast part moves it by a few % of i_α), A²."""
+        return self._sd**2 + (BALANCE_INERTIAL_SD * inertial_a) ** 2
+
+    def finding(self) -> Finding | None:
+        """Friction × F since the change (its 95 % interval), or None until the blocks
+        since the change tell it from a weak motor (k_t × F_k moves the inertial term by
+        as much as the friction term, 1/F_k − 1; friction leaves it): the inertial
+        change must lie below half a weak motor's by 2 σ."""
+        t0 = self.change_point()
+        rows = [(x, e) for t, x, e in self.blocks if t >= t0]
+        if len(rows) < 4:
+            return None
+        X = np.array([(x[0] + x[1], x[2]) for x, _ in rows])
+        y = np.array([e for _, e in rows])
+        w = 1 / np.array([self._block_var(x[2]) for x, _ in rows])
+        # weakly held: ±1 in both (a change is whatever the data say)
+        A = (X.T * w) @ X + np.eye(2)
+        cov = np.linalg.inv(A)
+        d = cov @ (X.T * w) @ y
+        chi = float(np.sum(w * (y - X @ d) ** 2)) / max(len(y) - 2, 1)
+        cov = cov * max(chi, 1.0)
+        # a weak motor's inertial change, given the friction term's: each term scales by
+        # 1/F_k − 1 of the unit's own current (the baseline's 1 + β over the reference's)
+        # the unit's friction over the reference's on these blocks, and its variance
+        g = np.array([x[:2] for x, _ in rows]).sum(axis=0) / X[:, 0].sum()
+        base = 1.0 + float(g @ self._beta[:2])
+        base_var = float(g @ self._cov[:2, :2] @ g)
+        weak = d[0] * (1 + self._beta[2]) / base
+        if d[0] <= 0 or d[1] + 2 * math.sqrt(cov[1, 1]) >= 0.5 * weak:
+            return None
+        half = Z95 * math.sqrt(cov[0, 0] + (d[0] / base) ** 2 * base_var) / base
+        factor = 1.0 + float(d[0]) / base
+        return Finding("friction", factor, (factor - half, factor + half), "factor")
+
+    def change_point(self) -> float:
+        """Start of the change: the first block after the statistic's last zero, s."""
+        t0 = self.change_time()
+        later = [row[0] for row in self.means if row[0] > t0]
+        return later[0] if later else (self.means[-1][0] if self.means else -math.inf)
+
+
+class HoldChange(BlockCusum):
+    """Friction at a held speed against this record's own current at that speed.
+
+    The wheel's loop holds the true speed at the command, so at a command held before
+    (the same value: a step's or a PRBS's levels come back) the motor current is the
+    unit's own friction there plus its current-sense offset, whatever the unit: the
+    first :data:`HOLD_BASE` settled samples at each command are its baseline (their
+    mean and σ), and each later block of settled samples there gives v, the current's
+    rise relative to the baseline's (≈ F − 1 for friction × F, 1/F_k − 1 for a weak
+    motor: the motor test tells them apart). The block's v beyond
+    :data:`HOLD_TOLERANCE`, standardised by its noise (the baseline's σ per sample),
+    feeds a one-sided CUSUM. Within a record only: a fault present from the first hold
+    at a speed is its baseline (the absolute tests see those)."""
+
+    def __init__(self, h: float, block: int, Ts: float) -> None:
+        stats = BlockStats(0.0, 1.0, 1, 0.05, 0, "the record's own first settled samples")
+        super().__init__(stats, 0.0, h, "up")
+        self.block, self.Ts = block, Ts
+        self._base: dict[float, list[float]] = {}  # command (rpm) → baseline currents (A)
+        self._values: list[float] = []  # the block in progress: currents at one command
+        self._key = math.nan
+        self.sizes: deque = deque()  # (t_s, v, σ of v, relative σ of the baseline level)
+        self.recent: deque = deque(maxlen=400)  # (t_s, command rpm, current A)
+        self._rest = [0, 0.0, 0.0]  # count, Σi, Σi² of the currents at rest (0 rpm)
+
+    def load_change(self, t0: float, command_rpm: float) -> bool:
+        """The current at this held command (its latest 8 samples) rose beyond the
+        tolerance over the one before ``t0`` (three σ): the wheel's load changed."""
+        rows = [(t, i) for t, c, i in self.recent if c == command_rpm]
+        before = np.array([i for t, i in rows if t <= t0])
+        after = np.array([i for t, i in rows if t > t0][-8:])
+        if min(before.size, after.size) < 4:
+            return False
+        scale = max(abs(float(before.mean())), 2 * HOLD_MIN_SD_A)
+        e = math.copysign(1.0, command_rpm) * float(after.mean() - before.mean()) / scale
+        sd = max(float(np.std(before, ddof=1)), HOLD_MIN_SD_A)
+        return e - HOLD_TOLERANCE > 3 * sd * math.sqrt(1 / before.size + 1 / after.size) / scale
+
+    def add_rest(self, current_a: float) -> None:
+        """One settled sample of the wheel resting at a 0-rpm command (reading 0)."""
+        n, s1, s2 = self._rest
+        self._rest = [n + 1, s1 + current_a, s2 + current_a * current_a]
+
+    def _offset(self) -> tuple[float, float] | None:
+        """The current-sense offset from the rest samples and its σ, A (None: too few)."""
+        n, s1, s2 = self._rest
+        if n < HOLD_BASE:
+            return None
+        sd = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * n / (n - 1))
+        return s1 / n, math.hypot(sd / math.sqrt(n), REST_CURRENT_SD_A)
+
+    def add_sample(self, t_s: float, command_rpm: float, current_a: float) -> bool:
+        """One settled sample at a held speed; True when the CUSUM exceeds its threshold."""
+        self.recent.append((t_s, command_rpm, current_a))
+        base = self._base.setdefault(command_rpm, [])
+        mirror = self._base.get(-command_rpm, [])
+        offset = self._offset()
+        cross = len(mirror) >= HOLD_BASE and offset is not None
+        if len(base) < HOLD_BASE:
+            base.append(current_a)
+            if not cross:
+                return False
+        if command_rpm != self._key:
+            self._values, self._key = [], command_rpm
+        self._values.append(current_a)
+        if len(self._values) < self.block:
+            return False
+        values, self._values = np.array(self._values), []
+        tests = []  # (v, σ of v, σ common to every block) of each comparison
+        if len(base) >= HOLD_BASE and values.size:
+            tests.append(self._compare(values, np.array(base), command_rpm, 0.0, 0.0))
+        if cross:
+            off, off_sd = offset  # type: ignore[misc]
+            level = -(np.array(mirror) - off) + off  # the mirror speed's current, sign turned
+            tests.append(self._compare(values, level, command_rpm, off, off_sd))
+        v, sd_v, level_sd = max(tests, key=lambda x: (x[0] - HOLD_TOLERANCE) / x[1])
+        self.sizes.append((t_s, v, sd_v, level_sd))
+        while self.sizes[0][0] < t_s - HISTORY_S:
+            self.sizes.popleft()
+        return self.add(t_s, (v - HOLD_TOLERANCE) / sd_v)
+
+    @staticmethod
+    def _compare(values, base, command_rpm: float, off: float, off_sd: float):
+        """A block against a baseline: the relative rise v of the friction current, its σ
+        and the σ that every block shares (the baseline's). Against the same command the offset
+        cancels (``off_sd`` 0); against the mirror speed (friction is even in speed: the
+        healthy units' ± levels agree within ~3 %) the rest's offset estimate enters
+        twice, and the unit's asymmetry."""
+        sign = math.copysign(1.0, command_rpm)
+        level = sign * (float(np.mean(base)) - off)
+        scale = max(abs(level), 2 * HOLD_MIN_SD_A)
+        sd = max(float(np.std(base, ddof=1)), HOLD_MIN_SD_A)
+        v = (sign * (float(np.mean(values)) - off) - level) / scale
+        noise = sd * math.sqrt(1 / values.size + 1 / base.size) / scale
+        # what averaging blocks does not shrink: the drift between the holds and, against
+        # the same command, the level's offset (relative), against the mirror speed the
+        # offset estimate and the unit's asymmetry (additive)
+        if off_sd == 0.0:
+            return v, noise, math.hypot(HOLD_DRIFT_SD, v * CURRENT_OFFSET_SD_A / scale)
+        sd_v = math.hypot(noise, 2 * off_sd / scale, HOLD_SIGN_SD)
+        return v, sd_v, math.hypot(2 * off_sd / scale, HOLD_SIGN_SD, HOLD_DRIFT_SD)
+
+    def onset(self) -> float:
+        """Start of the first block after the statistic last was zero, s (the blocks
+        between may be minutes apart: other speeds, accelerations)."""
+        t0 = self.change_time()
+        after = [row[0] for row in self.means if row[0] > t0]
+        return after[0] - self.block * self.Ts if after else t0
+
+    def since_change_sizes(self) -> np.ndarray:
+        """(v, σ of v, σ common to all blocks) of the blocks since the statistic last
+        left zero, shape (n, 3)."""
+        t0 = self.change_time()
+        rows = [row[1:] for row in self.sizes if row[0] > t0] or [row[1:] for row in self.sizes][
+            -1:
+        ]
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+
+class Dropout:
+    """Lost telemetry frames per block, against the reference's Poisson loss rate."""
+
+    def __init__(self, block: int, n: int) -> None:
+        self.block, self.n = block, n
+        self.count = self.samples = 0
+        self.last_count = 0
+        self.trace: list[int] | None = None  # every block's count, when calibrating
+
+    @property
+    def statistic(self) -> float:
+        return float(self.count)
+
+    def add(self, lost: int) -> bool:
+        self.count += lost
+        self.samples += 1
+        fired = self.count >= self.n
+        if self.samples >= self.block or fired:
+            if self.trace is not None:
+                self.trace.append(self.count)
+            self.last_count = self.count
+            self.count = self.samples = 0
+        return fired
+
+    def restart(self) -> None:
+        self.count = self.samples = 0
