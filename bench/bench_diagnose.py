@@ -68,7 +68,6 @@ DETECTORS = (
     "slew",
     "friction",
     "friction_change",
-    "friction_balance",
     "hold",
     "motor",
     "speed",

@@ -205,7 +205,6 @@ def test_the_package_calibration_covers_every_detector_over_shares_of_its_tolera
     assert {name.split("@")[0] for name in cal.curves} == {
         "friction",
         "friction_change",
-        "friction_balance",
         "hold",
         "motor",
         "speed",
@@ -219,8 +218,7 @@ def test_the_package_calibration_covers_every_detector_over_shares_of_its_tolera
     for name in ("friction", "motor", "speed", "lag", "slew", "friction_change"):
         assert [s for s, _ in cal.family(name)] == sorted(SHARES)
         assert cal.curves[f"{name}@0"].k == pytest.approx(0.5)  # no tolerance: textbook k
-    for name in ("offset", "friction_balance"):  # no tolerance to share
-        assert [s for s, _ in cal.family(name)] == [1.0]
+    assert [s for s, _ in cal.family("offset")] == [1.0]  # no tolerance to share
     for name in cal.curves:
         rates = cal.rates(name)
         assert np.all(np.diff(rates) <= 0)

@@ -1,6 +1,6 @@
 """The block tests of the diagnosis: one test's qualifying values into block means and a
 CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own past
-(:class:`FrictionChange`, :class:`FrictionBalance`, :class:`HoldChange`) or count lost
+(:class:`FrictionChange`, :class:`HoldChange`) or count lost
 frames (:class:`Dropout`). :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each
 sample; its module docstring says what each test takes and alarms on."""
 
@@ -13,8 +13,6 @@ import numpy as np
 
 from rwlab.diagnose.isolate import (
     CURRENT_OFFSET_SD_A,
-    Z95,
-    Finding,
 )
 from rwlab.diagnose.reference import (
     BlockStats,
@@ -41,19 +39,6 @@ REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a
 # rest holds the integrator's residue (up to ~4 mA on the twin's units)
 HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
-# the balance test (FrictionBalance): steady-acceleration samples of any signal
-BALANCE_JERK_RPM_S = 20.0  # |Δα| over each of the last two intervals, rpm/s
-BALANCE_MIN_RPM = 300.0  # above the stiction/Stribeck band, rpm
-BALANCE_BLOCK = 5  # samples per block mean
-BALANCE_MIN_BLOCKS = 20  # baseline blocks before it tests
-BALANCE_TOLERANCE = 0.1  # friction drift within a record, share of the friction current
-# ridge prior σ of the baseline law: viscous, Coulomb and inertial scale (a reference's
-# identified viscous/Coulomb split errs widely: eval3 unit 631 reads 1.9 and 3.2 × model
-# 587's; σ 0.6 held that law down and a healthy PRBS alarmed), current offset (±5 mA per
-# unit), A per A, A
-BALANCE_PRIOR = (3.0, 3.0, 0.15, 0.01)
-BALANCE_INERTIAL_SD = 0.05  # the inertial term's mismatch, share of i_α (twin's chirps)
-BALANCE_NOISE_A = 5e-3  # a block mean's σ that scales the prior (the twin's: 3–8 mA)
 
 
 class BlockCusum:
@@ -226,130 +211,6 @@ class FrictionChange(BlockCusum):
         """Mean σ of the baseline law's prediction over the last ``n`` values."""
         sd = [v for _, v in list(self.law_sd)[-n:]]
         return float(np.mean(sd)) if sd else 0.0
-
-
-def _balance_prior() -> np.ndarray:
-    """The ridge prior of the balance law as pseudo-data (in the blocks' own units: a
-    block's σ over the prior's σ, squared), shape (3, 3)."""
-    return np.diag((BALANCE_NOISE_A / np.array(BALANCE_PRIOR)) ** 2)
-
-
-class FrictionBalance(BlockCusum):
-    """Friction in the current balance of every steady sample, against this record's past.
-
-    A sample qualifies where the acceleration is steady (:data:`BALANCE_JERK_RPM_S` over
-    the last two intervals: the 2 Hz current snapshot and the interval's mean acceleration
-    agree only then, at constant speed or along a slew) at |ω| ≥
-    :data:`BALANCE_MIN_RPM` (above the stiction band). Its current residual r (the
-    reference's current model's) is ≈ (F − 1) i_f + (1/F_k − 1)(i_f + i_α) + offset for
-    friction × F and k_t × F_k, with i_f, i_α the reference's friction and inertial
-    currents. Block means of :data:`BALANCE_BLOCK` samples (neighbours are correlated)
-    older than ``GUARD_S`` fit r on [i_f, i_α, 1] (ridge towards zero: a baseline with
-    little acceleration leaves the inertial term to the prior); each newer block's
-    prediction error, in the friction's direction less :data:`BALANCE_TOLERANCE` of
-    i_f (a unit's drift within a record) and over its σ (the blocks' scatter and the
-    law's uncertainty there), is the CUSUM's value. An alarm names friction only where the
-    change since its onset is not a weak motor's (which moves the inertial term by as
-    much as the friction term): :meth:`finding`."""
-
-    def __init__(self, h: float) -> None:
-        super().__init__(BlockStats(0.0, 1.0, 1, 0.0, 0, "own baseline"), 0.0, h, "up")
-        self._block: list[tuple[float, float, float, float]] = []
-        self._pending: deque = deque()  # (t_s, x, y) blocks younger than GUARD_S
-        self._xtx = _balance_prior()
-        self._xty = np.zeros(4)
-        self._yy = [0, 0.0]  # baseline blocks, Σ y²
-        self._beta = np.zeros(4)
-        self._cov: np.ndarray = np.zeros((4, 4))
-        self._sd = math.inf
-        self.blocks: deque = deque()  # (t_s, x, prediction error): since-change sizing
-
-    def add_sample(
-        self, t_s: float, residual_a: float, viscous_a: float, coulomb_a: float, inertial_a: float
-    ):
-        """One steady sample: current residual, the reference's viscous, Coulomb and
-        inertial currents there (A); True on an alarm. The baseline scales viscous and
-        Coulomb apart (a unit's mix differs from the reference's: one scale read a
-        healthy PRBS's later speeds as friction × 1.4)."""
-        self._block.append((viscous_a, coulomb_a, inertial_a, residual_a))
-        if len(self._block) < BALANCE_BLOCK:
-            return False
-        v, cl, a, r = np.mean(self._block, axis=0)
-        f = v + cl
-        self._block.clear()
-        x = np.array([v, cl, a, 1.0])
-        self._pending.append((t_s, x, r))
-        moved = False
-        while self._pending[0][0] <= t_s - GUARD_S:
-            _, xo, ro = self._pending.popleft()
-            self._xtx += np.outer(xo, xo)
-            self._xty += xo * ro
-            self._yy = [self._yy[0] + 1, self._yy[1] + ro * ro]
-            moved = True
-        n = self._yy[0]
-        if moved and n >= BALANCE_MIN_BLOCKS:
-            self._fit()
-        if n < BALANCE_MIN_BLOCKS:
-            return False
-        e = float(r - self._beta @ x)
-        self.blocks.append((t_s, x, e))
-        while self.blocks[0][0] < t_s - HISTORY_S:
-            self.blocks.popleft()
-        sd = math.sqrt(self._block_var(a) + float(x @ self._cov @ x))
-        sign = math.copysign(1.0, f)
-        return self.add(t_s, (e * sign - BALANCE_TOLERANCE * abs(f)) / sd)
-
-    def _fit(self) -> None:
-        """The baseline's law and its block σ (the prior's pseudo-data left out of σ)."""
-        cov = np.linalg.inv(self._xtx)
-        beta = cov @ self._xty
-        n, yy = self._yy
-        prior = _balance_prior()
-        sse = yy - 2 * beta @ self._xty + beta @ (self._xtx - prior) @ beta
-        self._sd = math.sqrt(max(sse, 0.0) / max(n - 4, 1)) + 1e-6
-        self._beta, self._cov = beta, cov * self._sd**2
-
-    def _block_var(self, inertial_a) -> float:
-        """Variance of a block's prediction error: the baseline's scatter and the inertial
-        term's mismatch (a chirp's fast part moves it by a few % of i_α), A²."""
-        return self._sd**2 + (BALANCE_INERTIAL_SD * inertial_a) ** 2
-
-    def finding(self) -> Finding | None:
-        """Friction × F since the change (its 95 % interval), or None until the blocks
-        since the change tell it from a weak motor (k_t × F_k moves the inertial term by
-        as much as the friction term, 1/F_k − 1; friction leaves it): the inertial
-        change must lie below half a weak motor's by 2 σ."""
-        t0 = self.change_point()
-        rows = [(x, e) for t, x, e in self.blocks if t >= t0]
-        if len(rows) < 4:
-            return None
-        X = np.array([(x[0] + x[1], x[2]) for x, _ in rows])
-        y = np.array([e for _, e in rows])
-        w = 1 / np.array([self._block_var(x[2]) for x, _ in rows])
-        # weakly held: ±1 in both (a change is whatever the data say)
-        A = (X.T * w) @ X + np.eye(2)
-        cov = np.linalg.inv(A)
-        d = cov @ (X.T * w) @ y
-        chi = float(np.sum(w * (y - X @ d) ** 2)) / max(len(y) - 2, 1)
-        cov = cov * max(chi, 1.0)
-        # a weak motor's inertial change, given the friction term's: each term scales by
-        # 1/F_k − 1 of the unit's own current (the baseline's 1 + β over the reference's)
-        # the unit's friction over the reference's on these blocks, and its variance
-        g = np.array([x[:2] for x, _ in rows]).sum(axis=0) / X[:, 0].sum()
-        base = 1.0 + float(g @ self._beta[:2])
-        base_var = float(g @ self._cov[:2, :2] @ g)
-        weak = d[0] * (1 + self._beta[2]) / base
-        if d[0] <= 0 or d[1] + 2 * math.sqrt(cov[1, 1]) >= 0.5 * weak:
-            return None
-        half = Z95 * math.sqrt(cov[0, 0] + (d[0] / base) ** 2 * base_var) / base
-        factor = 1.0 + float(d[0]) / base
-        return Finding("friction", factor, (factor - half, factor + half), "factor")
-
-    def change_point(self) -> float:
-        """Start of the change: the first block after the statistic's last zero, s."""
-        t0 = self.change_time()
-        later = [row[0] for row in self.means if row[0] > t0]
-        return later[0] if later else (self.means[-1][0] if self.means else -math.inf)
 
 
 class HoldChange(BlockCusum):

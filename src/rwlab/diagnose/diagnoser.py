@@ -25,8 +25,6 @@ offset     a 60-s window of a continuously changing        the speed residual's 
            command whose model speed swings through zero   intercept, rpm
 slew       a slew at the acceleration limit through zero   towards-zero minus     increase
            speed                                           away-from-zero rate
-balance    steady acceleration (|Δα| < 20 rpm/s twice),    current residual over  increase
-           |ω| ≥ 300 rpm, one sign; any signal             the record's own law
 =========  ==============================================  =====================  ==========
 
 The offset and slew tests (:func:`~rwlab.diagnose.motion.speed_offset`,
@@ -46,13 +44,6 @@ the first motion): friction ×1.5 on steps, named once the motor test has seen a
 acceleration since (a weak motor raises the held current too). A lag alarm is
 named by the current balance on the lag samples: a weak motor draws 1/F the
 current the achieved acceleration needs, a lowered clamp exactly that current.
-
-``friction_balance`` (:class:`FrictionBalance`, "balance" above) takes every sample
-whose acceleration is steady, slews included, not only constant-speed ones: the current
-residual regressed on the reference's friction and inertial currents and 1 over the
-record's blocks older than 300 s, each newer block's excess in the friction's direction
-is the CUSUM's value; an alarm names friction only when the change's inertial term lies
-below half a weak motor's (its size: the friction term's change over the unit's own).
 
 Friction raises the current at constant speed and not under acceleration; a
 weak motor (k_t × F) raises both by 1/F (so ``motor`` separates them); a
@@ -94,13 +85,9 @@ import numpy as np
 from scipy.stats import poisson
 
 from rwlab.diagnose.blocktests import (
-    BALANCE_BLOCK,
-    BALANCE_JERK_RPM_S,
-    BALANCE_MIN_RPM,
     CUSUM_K,
     BlockCusum,
     Dropout,
-    FrictionBalance,
     FrictionChange,
     HoldChange,
     steady,
@@ -115,7 +102,6 @@ from rwlab.diagnose.isolate import (
     MOTOR_UNIT_SD,
     SPEED_UNIT_SD,
     Z95,
-    Finding,
     isolate,
 )
 from rwlab.diagnose.motion import (
@@ -158,11 +144,11 @@ STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model tu
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 # every CUSUM test, in the order a report shows them (stat_NAME in the history)
-CUSUM_TESTS = (*BLOCKS, "friction_change", "friction_balance", "hold", "offset", "slew")
+CUSUM_TESTS = (*BLOCKS, "friction_change", "hold", "offset", "slew")
 # what each test decides on (Diagnoser.coverage); the model-based tests are all but the
 # last three, which read the telemetry alone
 DECIDES_ON = {
-    **{name: "blocks" for name in (*BLOCKS, "friction_change", "friction_balance", "hold")},
+    **{name: "blocks" for name in (*BLOCKS, "friction_change", "hold")},
     "offset": "60-s windows",
     "slew": "slews",
     "rest": "readings near 0 rpm",
@@ -306,8 +292,6 @@ class Diagnoser:
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
         self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
         self._recent_speed: deque = deque(maxlen=8)
-        self._balance_accel: deque = deque(maxlen=3)  # the last usable accelerations, rpm/s
-        self._balance_sign = 0.0
         self._offset_window: list[tuple[float, float, float, float]] = []
         self._offset_command = math.nan
         self._slew: list[tuple[float, float, float]] = []
@@ -379,13 +363,6 @@ class Diagnoser:
             det = BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
-        # as if every sample qualified: the analytic threshold errs on the safe side
-        h_analytic = cusum_threshold(max(self.arl0 / BALANCE_BLOCK, 1.5), CUSUM_K)
-        det = FrictionBalance(h_analytic)
-        det.h = self.thresholds["friction_balance"] = self._calibrated(
-            "friction_balance", h_analytic, det
-        )
-        self._detectors["friction_balance"] = det
         h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
         det = HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
@@ -556,11 +533,6 @@ class Diagnoser:
                 hold.add_sample(t_s, *self._hold_sample)
             if hold.statistic > hold.h and self._motor_seen_since(hold.onset()):
                 new += self._fire(t_s, "hold")
-            balance = self._balance_sample(r, speed_rpm, usable)
-            if balance is not None and self._detectors["friction_balance"].add_sample(
-                t_s, *balance
-            ):
-                new += self._fire(t_s, "friction_balance")
             sample = self._friction_sample
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
@@ -576,24 +548,6 @@ class Diagnoser:
                 self._change_probe.add_sample(t_s, *self._friction_sample)
         self._record(t_s, r, values)
         return new
-
-    def _balance_sample(
-        self, r: dict, speed_rpm: float, usable: bool
-    ) -> tuple[float, float, float, float] | None:
-        """The balance test's sample: (current residual, viscous, Coulomb and inertial
-        currents), A, where the acceleration is steady and the speed above the stiction
-        band at one sign."""
-        self._balance_accel.append(r["accel_rpm_s"] if usable else math.nan)
-        sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
-        same, self._balance_sign = sign == self._balance_sign, sign
-        c = self.residuals.current_model
-        a = np.array(self._balance_accel)
-        if c is None or len(a) < 3 or not (same and math.isfinite(r["current"])):
-            return None
-        jerk = np.abs(np.diff(a))
-        if not (jerk < BALANCE_JERK_RPM_S).all() or abs(speed_rpm) < BALANCE_MIN_RPM:
-            return None
-        return r["current"], c[1] * speed_rpm, c[2] * sign, c[0] * a[-1]
 
     def _offset(self, r: dict, command_rpm: float, usable: bool) -> float | None:
         """Collect a window of usable samples; its speed offset when it is full."""
@@ -900,13 +854,7 @@ class Diagnoser:
             # (latch off): there each detector's own alarms count
             det.restart()
             return []
-        if detector == "friction_balance":  # named by its own two coefficients
-            if any(a.kind == "speed_sensor_stuck" for a in self.alarms):
-                return []  # a frozen reading is no speed or acceleration to regress on
-            found = self._detectors[detector].finding()
-            findings: list[Finding] = [] if found is None else [found]
-        else:
-            findings = isolate(detector, self._evidence(detector))
+        findings = isolate(detector, self._evidence(detector))
         alarms = [
             Alarm(
                 t_s,
