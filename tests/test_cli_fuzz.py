@@ -229,14 +229,18 @@ def invocations(draw, path, cmd, files, root):
 
 
 class _Budget:
-    """Interrupt the command (as Ctrl-C does) when it runs past ``BUDGET_S``."""
+    """Press Ctrl-C (SIGINT to this process) when the command runs past ``BUDGET_S``.
+
+    A KeyboardInterrupt raised straight from the alarm's handler lands anywhere, also
+    inside python-can's queue, whose lock it can leave taken (the run's clean-up then
+    hung for ever); SIGINT goes through the command's own handler, as Ctrl-C does."""
 
     def __enter__(self):
         self.fired = False
 
         def interrupt(signum, frame):
             self.fired = True
-            raise KeyboardInterrupt
+            os.kill(os.getpid(), signal.SIGINT)
 
         self.previous = signal.signal(signal.SIGALRM, interrupt)
         signal.setitimer(signal.ITIMER_REAL, BUDGET_S)

@@ -21,7 +21,8 @@ SRC = Path(__file__).resolve().parent.parent / "src"
 # Lowest first. A module may import its own layer and those below, never above.
 # testbed sits above diagnose (the runner diagnoses live), both above wheel.
 LAYERS: list[set[str]] = [
-    {"__init__", "errors", "_toml", "_io", "_display", "_optional", "schemas"},  # __init__: root
+    # __init__: root
+    {"__init__", "errors", "interrupts", "_toml", "_io", "_display", "_optional", "schemas"},
     {"data", "signals", "datafiles", "datasets"},
     {"ident"},
     {"wheel"},

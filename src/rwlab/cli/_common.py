@@ -15,6 +15,7 @@ import click
 
 from rwlab import __version__
 from rwlab.errors import ConfigError, RwlabError
+from rwlab.interrupts import check_stop, clear, stop, uninterrupted
 
 #: How the library names a parameter in a message → the flag the command line has for it.
 FLAGS = {
@@ -122,15 +123,6 @@ def _one_line_warnings():
         yield
 
 
-#: The signal that stopped the run. Its KeyboardInterrupt, raised wherever the program
-#: was, can be swallowed there (measured: inside the loop's imports the run then went on
-#: to the end); ``_check_stop`` raises it again at the command's checkpoints.
-_STOPPED: list[str] = []
-
-
-_HELD: list[bool] = []
-
-
 @contextlib.contextmanager
 def _imports_uninterrupted():
     """A stop signal waits for the block's imports to end, then takes effect.
@@ -139,39 +131,39 @@ def _imports_uninterrupted():
     (measured: numpy's lazy f2py, an encodings module), after which the run went
     on, or the interpreter ended by SIGINT instead of exit status 130.
     """
-    _HELD.append(True)
-    try:
+    with uninterrupted():
         yield
-    finally:
-        _HELD.pop()
     _check_stop()
 
 
 def _check_stop() -> None:
-    """Raise KeyboardInterrupt again if a stop signal came and its exception was lost."""
-    if _STOPPED:
-        raise KeyboardInterrupt(_STOPPED[0])
+    """Raise KeyboardInterrupt again if a stop signal came and its exception was lost
+    (raised wherever the program was, it can be swallowed there; measured: inside the
+    loop's imports the run then went on to the end)."""
+    check_stop()
 
 
 @contextlib.contextmanager
 def _stop_signals():
-    """SIGTERM and SIGHUP stop a run the way Ctrl-C does (KeyboardInterrupt).
+    """Ctrl-C, SIGTERM and SIGHUP stop a run alike (KeyboardInterrupt), never inside a
+    bus read or write, an import or the publishing of outputs
+    (:func:`rwlab.interrupts.uninterrupted`).
 
     So ``kill`` or a closed terminal also idles the wheel, closes the record and
-    stops the monitor. Only the first signal interrupts; later ones are ignored
-    so that the clean-up they would cut short can finish.
+    stops the monitor. Only the first signal stops; a later SIGTERM or SIGHUP is
+    ignored so that the clean-up it would cut short can finish, a later Ctrl-C
+    interrupts at once (a user's way out of a clean-up that hangs).
     """
     import signal
 
-    stops = (signal.SIGTERM, signal.SIGHUP)
-    _STOPPED.clear()
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    clear()
 
     def interrupt(signum, frame):
         for s in stops:
-            signal.signal(s, signal.SIG_IGN)
-        _STOPPED.append(signal.Signals(signum).name)
-        if not _HELD:
-            raise KeyboardInterrupt(_STOPPED[0])
+            later = signal.default_int_handler if s == signal.SIGINT else signal.SIG_IGN
+            signal.signal(s, later)
+        stop(signal.Signals(signum).name)
 
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only be set from the main thread

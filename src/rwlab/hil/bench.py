@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from rwlab.errors import ConfigError, WheelFault, WheelTimeout
+from rwlab.interrupts import uninterrupted
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.bus import open_bus
 from rwlab.wheel.client import WheelClient
@@ -41,12 +42,14 @@ class _Only:
         self.bus, self.ids = bus, frozenset(ids)
 
     def send(self, msg, timeout=None) -> None:
-        self.bus.send(msg, timeout)
+        with uninterrupted():  # a stop inside python-can's queue can leave its lock taken
+            self.bus.send(msg, timeout)
 
     def recv(self, timeout: float | None = None):
-        msg = self.bus.recv(timeout)
-        while msg is not None and (msg.is_extended_id or msg.arbitration_id not in self.ids):
-            msg = self.bus.recv(0)
+        with uninterrupted():
+            msg = self.bus.recv(timeout)
+            while msg is not None and (msg.is_extended_id or msg.arbitration_id not in self.ids):
+                msg = self.bus.recv(0)
         return msg
 
     def shutdown(self) -> None:

@@ -49,6 +49,7 @@ import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary
 
+from rwlab.interrupts import uninterrupted
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.dbc_link import read_frames
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
@@ -111,7 +112,8 @@ def canopen_id(node_id: int) -> int:
 def _send(bus: can.BusABC, cob_id: int, data: bytes, t: float) -> None:
     msg = can.Message(arbitration_id=cob_id, data=bytes(data), is_extended_id=False)
     msg.timestamp = t
-    bus.send(msg)
+    with uninterrupted():  # a stop inside python-can's queue can leave its lock taken
+        bus.send(msg)
 
 
 class _BusNetwork(canopen.Network):
@@ -131,7 +133,7 @@ class _BusNetwork(canopen.Network):
             arbitration_id=can_id, data=bytes(data), is_extended_id=False, is_remote_frame=remote
         )
         msg.timestamp = self.stamp
-        with self.send_lock:
+        with uninterrupted(), self.send_lock:
             self._bus.send(msg)
 
 

@@ -6,6 +6,7 @@ from typing import Any
 
 import can
 
+from rwlab.interrupts import uninterrupted
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
 
@@ -30,14 +31,15 @@ def read_frames(bus: can.BusABC) -> list[can.Message]:
     list of can.Message
     """
     frames = []
-    for _ in range(MAX_FRAMES_PER_READ):
-        try:
-            msg = bus.recv(timeout=0)
-        except (can.CanError, ValueError):
-            continue  # an undecodable datagram on python-can's own udp bus: dropped
-        if msg is None:
-            break
-        frames.append(msg)
+    with uninterrupted():  # a stop inside python-can's queue can leave its lock taken
+        for _ in range(MAX_FRAMES_PER_READ):
+            try:
+                msg = bus.recv(timeout=0)
+            except (can.CanError, ValueError):
+                continue  # an undecodable datagram on python-can's own udp bus: dropped
+            if msg is None:
+                break
+            frames.append(msg)
     return frames
 
 
@@ -51,7 +53,8 @@ class RwlabHostLink(HostLink):
     def send(self, cmd: proto.Command, now: float) -> None:
         msg = proto.encode_command(cmd)
         msg.timestamp = now
-        self.bus.send(msg)
+        with uninterrupted():
+            self.bus.send(msg)
         if self.raw_listener:
             self.raw_listener(now, msg.arbitration_id, bytes(msg.data), "tx")
 
@@ -115,7 +118,8 @@ class RwlabNodeLink(NodeLink):
             data[corrupt % 7] ^= 0xA5
             msg = can.Message(arbitration_id=msg.arbitration_id, data=data, is_extended_id=False)
         msg.timestamp = t
-        self.bus.send(msg)
+        with uninterrupted():
+            self.bus.send(msg)
 
     def heard_twin(self) -> str | None:
         return self._twin
