@@ -21,27 +21,21 @@ A, B = "239.74.163.2", "239.74.163.3"
 py = sys.executable
 
 
-def serve(group: str, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [
-            py,
-            "-m",
-            "rwlab.cli",
-            "wheel",
-            "serve",
-            "--interface",
-            "udp_multicast",
-            "--channel",
-            group,
-            "--telemetry-rate",
-            "50",
-            "--duration",
-            "60",
-            *extra,
-        ],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+SERVE = ("wheel", "serve", "--interface", "udp_multicast", "--telemetry-rate", "50")
+# a wheel serve that imports the CLI, says so (a file GO.PID), then starts when the file
+# GO (argv[1]) appears
+AT_GO = (
+    "import os, sys, time; from rwlab.cli import main; go = sys.argv.pop(1)\n"
+    "open(f'{go}.{os.getpid()}', 'w').close()\n"
+    "while not os.path.exists(go): time.sleep(0.005)\n"
+    "sys.argv[0] = 'rwlab'; sys.exit(main())"
+)
+
+
+def serve(group: str, *extra: str, go: str | None = None) -> subprocess.Popen:
+    args = [*SERVE, "--channel", group, "--duration", "60", *extra]
+    start = [py, "-m", "rwlab.cli"] if go is None else [py, "-c", AT_GO, go]
+    return subprocess.Popen([*start, *args], stderr=subprocess.PIPE, text=True)
 
 
 def wait_for_wheel(bus: LoopbackMulticastBus, timeout: float = 30) -> None:
@@ -61,11 +55,19 @@ def stop(proc: subprocess.Popen) -> str:
 def serve_together(listen: LoopbackMulticastBus) -> tuple[subprocess.Popen, subprocess.Popen]:
     """Two wheels on one id, started together so neither hears the other first.
 
-    On a loaded machine the two starts can be more than serve's 1.5 s listen apart,
-    and the later one is then refused (as it should be): start the pair again.
+    On a loaded machine two starts can be more than serve's 1.5 s listen apart (their
+    imports alone), and the later one is then refused (as it should be): both import
+    first and start on one signal (a file appearing), and the pair starts again if
+    one was refused all the same.
     """
     for _ in range(3):
-        pair = serve(A), serve(A)
+        folder = tempfile.mkdtemp()
+        go = os.path.join(folder, "go")
+        pair = serve(A, go=go), serve(A, go=go)
+        end = time.monotonic() + 60
+        while len(os.listdir(folder)) < 2 and time.monotonic() < end:
+            time.sleep(0.05)  # both import the CLI
+        open(go, "w").close()
         wait_for_wheel(listen)
         time.sleep(2.0)
         if all(p.poll() is None for p in pair):

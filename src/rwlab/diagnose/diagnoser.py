@@ -70,8 +70,8 @@ and the one after them, enter no test. A detector alarms once and stays latched
 The block tests' own state lives in :mod:`~rwlab.diagnose.blocktests`; a record's run
 and its result (:func:`~rwlab.diagnose.diagnosis.diagnose`,
 :class:`~rwlab.diagnose.diagnosis.Diagnosis`) in :mod:`~rwlab.diagnose.diagnosis`. This
-module stays long for one class, :class:`Diagnoser`, whose calibration, per-sample tests
-and verdicts share its state.
+Why this module is long: one class, :class:`Diagnoser`, whose calibration, per-sample
+tests and verdicts share its state.
 """
 
 from __future__ import annotations
