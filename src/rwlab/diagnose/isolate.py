@@ -280,25 +280,21 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     excess = excess[np.isfinite(excess)]
     currents = np.asarray(ev.get("lag_currents", ()), dtype=float)
     currents = currents[np.isfinite(currents)]
-    before = np.asarray(ev.get("lag_currents_before", ()), dtype=float)
-    before = before[np.isfinite(before)]
-    clamped = False
-    if before.size >= LAG_BEFORE_MIN and currents.size:
-        # this unit's own current at the limit before the change: a clamp lowers it, a weak
-        # motor leaves it (the controller's open-loop current) and only slows the wheel; a
-        # clamp's current excess is then worn bearings on top, not a weak motor
-        clamped = bool(np.median(currents) < CLAMP_RATIO * np.median(before))
-        if not clamped and excess.size >= LAG_EXCESS_MIN:
-            e = float(np.median(excess)) - ev["ref_mean"]["motor"]
-            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
-            return [_torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)]
+    own = np.asarray(ev.get("lag_currents_before", ()), dtype=float)
+    own = own[np.isfinite(own)]
+    # this unit's own current at the limit before the change: a clamp lowers it, a weak
+    # motor leaves it (the controller's open-loop current) and only slows the wheel; a
+    # clamp's current excess is then worn bearings on top, not a weak motor
+    known = own.size >= LAG_BEFORE_MIN and currents.size > 0
+    clamped = known and bool(np.median(currents) < CLAMP_RATIO * np.median(own))
     if excess.size >= LAG_EXCESS_MIN and not clamped:
         e = float(np.median(excess)) - ev["ref_mean"]["motor"]
-        if e > LAG_SPLIT:
-            half = _mean_ci(excess, ev["sigma"]["motor"])[1]
-            weak = _torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)
-            if weak.ci is not None and weak.ci[1] < 1:  # else a clamp's onset can read so
-                return [weak]
+        half = _mean_ci(excess, ev["sigma"]["motor"])[1]
+        weak = _torque_constant(e / (1 + ev["ref_mean"]["motor"]), half)
+        # without the unit's own level, only an excess whose interval excludes 1: a
+        # clamp's onset can read one
+        if known or (e > LAG_SPLIT and weak.ci is not None and weak.ci[1] < 1):
+            return [weak]
     after = np.asarray(ev.get("motor_after", ()), dtype=float)
     before = np.asarray(ev.get("motor_before", ()), dtype=float)
     if (
