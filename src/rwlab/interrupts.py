@@ -59,7 +59,8 @@ def clear() -> None:
 
 def check_stop() -> None:
     """Raise KeyboardInterrupt if a stop signal came: at a command's checkpoints, where
-    the exception may have been lost (swallowed where it was raised).
+    the exception may have been lost (swallowed where it was raised; measured: inside a
+    run loop's imports the run then went on to the end).
 
     Raises
     ------

@@ -133,13 +133,6 @@ def _imports_uninterrupted():
     """
     with uninterrupted():
         yield
-    _check_stop()
-
-
-def _check_stop() -> None:
-    """Raise KeyboardInterrupt again if a stop signal came and its exception was lost
-    (raised wherever the program was, it can be swallowed there; measured: inside the
-    loop's imports the run then went on to the end)."""
     check_stop()
 
 
@@ -229,7 +222,7 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
             done = [0]
 
             def update(k):
-                _check_stop()
+                check_stop()
                 bar.update(k - done[0])
                 done[0] = k
 
@@ -238,7 +231,7 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
     shown = [0]
 
     def report(k):
-        _check_stop()
+        check_stop()
         tenth = 10 * k // max(steps, 1)
         if tenth > shown[0]:
             shown[0] = tenth
@@ -290,7 +283,7 @@ def _output(
         keep_failed=keep_failed,
     ) as stage:
         yield stage
-        _check_stop()  # a stop whose exception was lost: the outputs are not published
+        check_stop()  # a stop whose exception was lost: the outputs are not published
 
 
 def _wrote(out, paths) -> str:

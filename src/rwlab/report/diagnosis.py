@@ -15,6 +15,7 @@ import numpy as np
 
 from rwlab._io import atomic_write_bytes
 from rwlab.diagnose import Diagnosis
+from rwlab.report.attitude import check_outputs
 from rwlab.report.html import Page, figure
 
 __all__ = ["write_diagnosis"]
@@ -52,12 +53,8 @@ def write_diagnosis(
     dict of str to Path
         File name → path written.
     """
-    out = Path(out_dir)
-    targets = {name: out / name for name in ("diagnosis.json", "report.html")}
-    existing = [str(p) for p in targets.values() if p.exists()]
-    if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
-    out.mkdir(parents=True, exist_ok=True)
+    targets = check_outputs(out_dir, ["diagnosis.json", "report.html"], force)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     payload = diagnosis.to_dict()
     text = json.dumps(payload, indent=2)
     atomic_write_bytes(targets["diagnosis.json"], lambda tmp: tmp.write_text(text))
@@ -271,12 +268,8 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     dict of str to Path
         File name → path written.
     """
-    out = Path(out_dir)
-    targets = {name: out / name for name in ("trend.json", "trend.html")}
-    existing = [str(p) for p in targets.values() if p.exists()]
-    if existing and not force:
-        raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
-    out.mkdir(parents=True, exist_ok=True)
+    targets = check_outputs(out_dir, ["trend.json", "trend.html"], force)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     points = sorted(points, key=lambda p: (p["start_utc"], p["record"]))
     text = json.dumps({"format": TREND_FORMAT, "records": points}, indent=2)
     atomic_write_bytes(targets["trend.json"], lambda tmp: tmp.write_text(text))
