@@ -647,6 +647,24 @@ def test_rest_reading_names_the_value_a_bias_reads_at_zero_speed(bias, noise):
 
 
 @pytest.mark.slow
+def test_a_clamp_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, model_file):
+    """A 0.45 A clamp and a −15 rpm bias from 480 s of a 15-minute chirp of another unit:
+    the clamped wheel passes through zero when the model does not, and the bias is still
+    read there, to its value: within 200 s (165 s; with the model's crossings alone 254 s,
+    and 385 s on the bench's unit 370)."""
+    path = tmp_path / "two.mcap"
+    faults = ("current_limit=0.45@480", "speed_sensor_bias=-15@480")
+    run_experiment(
+        ExperimentConfig(signal="chirp", duration=900, seed=504, unit=504, faults=faults), path
+    )
+    alarms = _diagnose(path, model_file).alarms
+    assert alarms and all(480 <= a.t_s <= 680 for a in alarms), alarms
+    assert {a.kind for a in alarms} == {"current_limit", "speed_sensor_bias"}, alarms
+    bias = next(a for a in alarms if a.kind == "speed_sensor_bias")
+    assert bias.ci is not None and bias.ci[0] <= -15 <= bias.ci[1], bias
+
+
+@pytest.mark.slow
 def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, model_file):
     """k_t × 0.8 and a 20 rpm bias from 600 s of a 15-minute chirp of another unit (the
     wheel cannot follow the model's acceleration): both named within 300 s, with the

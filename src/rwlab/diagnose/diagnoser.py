@@ -109,6 +109,7 @@ from rwlab.diagnose.motion import (
     OFFSET_WINDOW,
     REST_BAND_RPM,
     REST_MODEL_RPM,
+    REST_STEP_RPM,
     SLEW_SHARE,
     SLEW_SIGMA,
     RestReading,
@@ -501,8 +502,12 @@ class Diagnoser:
         # near zero speed and passing through it (a healthy reading held at a low speed
         # may repeat one value)
         model_accel = r["accel_rpm_s"] - r["acceleration"]
-        near_zero = abs(speed_rpm) < REST_BAND_RPM and abs(r["model_rpm"]) < REST_MODEL_RPM
-        near_zero = near_zero and abs(model_accel) >= QUIET_RPM_S
+        # (or where the reading itself moves fast: a wheel slowed by a clamp passes zero
+        # when the model does not)
+        passing = abs(r["model_rpm"]) < REST_MODEL_RPM and abs(model_accel) >= QUIET_RPM_S
+        if self._last_speed is not None and abs(speed_rpm - self._last_speed) >= REST_STEP_RPM:
+            passing = True
+        near_zero = abs(speed_rpm) < REST_BAND_RPM and passing
         rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)

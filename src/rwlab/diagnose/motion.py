@@ -51,6 +51,8 @@ OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no hol
 OFFSET_SIGMA_RPM = 3.5
 REST_BAND_RPM = 30.0  # a reading within this of zero may be the no-edge reading, rpm
 REST_MODEL_RPM = 60.0  # ... taken where the model passes this close to zero speed, rpm
+REST_STEP_RPM = 50.0  # ... or where the reading moved this much since the last sample, rpm
+# (≥ 100 rpm/s at 0.5 s: a third of the acceleration limit, so not a wheel held at a low speed)
 REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (healthy units:
 # at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
 # σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations) on the
@@ -201,8 +203,11 @@ class RestReading:
     (changed readings only: a frozen sensor is the stuck test's) and alarms when one
     value comes :data:`REST_COUNT` times with no 0 between. The diagnoser gives it
     readings within :data:`REST_BAND_RPM` where the model passes through zero (within
-    :data:`REST_MODEL_RPM`, accelerating): a wheel held at a low speed may repeat one
-    reading by itself.
+    :data:`REST_MODEL_RPM`, accelerating) or where the reading moved by
+    :data:`REST_STEP_RPM` since the last sample (a wheel whose current is clamped passes
+    through zero when the model does not: with the model's crossings alone, a bias with a
+    0.45 A clamp on a chirp was named 385 s after its onset, with these 165–255 s): a wheel
+    held at a low speed may repeat one reading by itself.
 
     What it needs of a real wheel: firmware that reports a fixed 0 for "no edge" (the
     twin's Hall sensor does, as Hall-period firmware does) and a bias added after that
