@@ -22,10 +22,13 @@ py = sys.executable
 
 
 SERVE = ("wheel", "serve", "--interface", "udp_multicast", "--telemetry-rate", "50")
-# a wheel serve that imports the CLI, says so (a file GO.PID), then starts when the file
-# GO (argv[1]) appears
+# a wheel serve that imports the CLI and what `wheel serve` imports before it listens (under
+# load those imports alone took longer than the listen), says so (a file GO.PID), then
+# starts when the file GO (argv[1]) appears
 AT_GO = (
     "import os, sys, time; from rwlab.cli import main; go = sys.argv.pop(1)\n"
+    "from rwlab.wheel import WheelNode; from rwlab.wheel.bus import open_transport\n"
+    "from rwlab.wheel.link import get_protocol; get_protocol('rwlab')\n"
     "open(f'{go}.{os.getpid()}', 'w').close()\n"
     "while not os.path.exists(go): time.sleep(0.005)\n"
     "sys.argv[0] = 'rwlab'; sys.exit(main())"
