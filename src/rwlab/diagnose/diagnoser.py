@@ -502,12 +502,11 @@ class Diagnoser:
         # near zero speed and passing through it (a healthy reading held at a low speed
         # may repeat one value)
         model_accel = r["accel_rpm_s"] - r["acceleration"]
-        # (or where the reading itself moves fast: a wheel slowed by a clamp passes zero
-        # when the model does not)
-        passing = abs(r["model_rpm"]) < REST_MODEL_RPM and abs(model_accel) >= QUIET_RPM_S
-        if self._last_speed is not None and abs(speed_rpm - self._last_speed) >= REST_STEP_RPM:
-            passing = True
-        near_zero = abs(speed_rpm) < REST_BAND_RPM and passing
+        # (or where the reading itself moves fast: a clamped wheel passes zero when the
+        # model does not)
+        moved = self._last_speed is not None and abs(speed_rpm - self._last_speed) >= REST_STEP_RPM
+        crossing = abs(r["model_rpm"]) < REST_MODEL_RPM and abs(model_accel) >= QUIET_RPM_S
+        near_zero = abs(speed_rpm) < REST_BAND_RPM and (moved or crossing)
         rest = usable and near_zero and speed_rpm != self._last_speed
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
