@@ -646,18 +646,22 @@ def test_rest_reading_names_the_value_a_bias_reads_at_zero_speed(bias, noise):
     assert fired.index(True) == 7 and biased.value == bias
 
 
+def _chirp_alarms(tmp_path, model_file, unit: int, faults: tuple[str, ...]) -> list:
+    """The alarms on a 15-minute chirp of another unit (seed = unit) with ``faults``."""
+    path = tmp_path / "chirp.mcap"
+    cfg = ExperimentConfig(signal="chirp", duration=900, seed=unit, unit=unit, faults=faults)
+    run_experiment(cfg, path)
+    return _diagnose(path, model_file).alarms
+
+
 @pytest.mark.slow
 def test_a_clamp_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, model_file):
     """A 0.45 A clamp and a −15 rpm bias from 480 s of a 15-minute chirp of another unit:
     the clamped wheel passes through zero when the model does not, and the bias is still
     read there, to its value: within 200 s (165 s; with the model's crossings alone 254 s,
     and 385 s on the bench's unit 370)."""
-    path = tmp_path / "two.mcap"
     faults = ("current_limit=0.45@480", "speed_sensor_bias=-15@480")
-    run_experiment(
-        ExperimentConfig(signal="chirp", duration=900, seed=504, unit=504, faults=faults), path
-    )
-    alarms = _diagnose(path, model_file).alarms
+    alarms = _chirp_alarms(tmp_path, model_file, 504, faults)
     assert alarms and all(480 <= a.t_s <= 680 for a in alarms), alarms
     assert {a.kind for a in alarms} == {"current_limit", "speed_sensor_bias"}, alarms
     bias = next(a for a in alarms if a.kind == "speed_sensor_bias")
@@ -669,12 +673,8 @@ def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path
     """k_t × 0.8 and a 20 rpm bias from 600 s of a 15-minute chirp of another unit (the
     wheel cannot follow the model's acceleration): both named within 300 s, with the
     nominal model, the bias to its reading's quantum."""
-    path = tmp_path / "two.mcap"
     faults = ("torque_constant=0.8@600", "speed_sensor_bias=20@600")
-    run_experiment(
-        ExperimentConfig(signal="chirp", duration=900, seed=502, unit=502, faults=faults), path
-    )
-    alarms = _diagnose(path, model_file).alarms
+    alarms = _chirp_alarms(tmp_path, model_file, 502, faults)
     assert alarms and all(600 <= a.t_s <= 900 for a in alarms), alarms
     found = {a.kind: a for a in alarms}
     assert set(found) == {"torque_constant", "speed_sensor_bias"}, alarms

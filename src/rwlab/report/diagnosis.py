@@ -114,7 +114,7 @@ def _page(
                 [
                     kind,
                     f"{e['magnitude']:.4g}",
-                    f"{e['ci95'][0]:.4g} … {e['ci95'][1]:.4g}",
+                    _interval(e["ci95"]),
                     _interval(e.get("ci95_units")),
                     e["unit"],
                     e["blocks"],
@@ -157,7 +157,7 @@ def _alarm_table(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None
             a.t_s,
             a.kind,
             "—" if a.magnitude is None else f"{a.magnitude:.4g}",
-            "—" if a.ci is None else f"{a.ci[0]:.4g} … {a.ci[1]:.4g}",
+            "—" if a.ci is None else _interval(a.ci),
             a.unit,
             a.detector,
             a.statistic,
