@@ -1,6 +1,6 @@
 """The block tests of the diagnosis: one test's qualifying values into block means and a
 CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own past
-(:class:`FrictionChange`, :class:`HoldChange`) or count lost
+(:class:`FrictionChange`, :class:`HoldChange`, :class:`ClampedFriction`) or count lost
 frames (:class:`Dropout`). :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each
 sample; its module docstring says what each test takes and alarms on."""
 
@@ -27,6 +27,7 @@ CHANGE_PRIOR = 0.5
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
+BLOCK_OWN = 20  # samples per independent value of the own friction samples (as a block)
 HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
 HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
 # the bearing's warm-up), relative to its own friction current
@@ -38,6 +39,15 @@ REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a
 # command is the sense offset (the loop's integrator has not moved); after a motion the
 # rest holds the integrator's residue (up to ~4 mA on the twin's units)
 HOLD_MIN_SD_A = 1e-3  # floor of a hold's current σ (the current's LSB is 2 mA)
+CLAMP_QUIET_RPM_S = 15.0  # the unit's own friction samples: its mean acceleration below
+# this (the inertial current there differs between units by ≤ 1.2 mA of ~10 mA friction)
+CLAMP_OWN_RPM = 200.0  # ... and at least this fast, rpm
+CLAMP_OWN_MIN = 40  # own samples before a clamped slew is compared with them
+CLAMP_COUNT = 2  # clamped slews before the test decides
+CLAMP_RECENT = 6  # it decides on the median of the latest this many
+CLAMP_EXCESS = 0.2  # ... and alarms where it exceeds this
+CLAMP_SLEW_RPM = 500.0  # a slew's halves at least this fast on average: slower ones (a
+# fast chirp's) are a few samples long, and a 15-rpm sensor bias moved them by +0.2–0.6
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
 
@@ -358,3 +368,95 @@ class Dropout:
 
     def restart(self) -> None:
         self.count = self.samples = 0
+
+
+class ClampedFriction:
+    """Friction read through a clamped current, against the unit's own friction before.
+
+    A clamped slew (:func:`~rwlab.diagnose.motion.clamped_deceleration`) carries the
+    whole friction, not its excess over the controller's feed-forward, so it is compared
+    with this unit's friction current before the first clamped slew: the current
+    residual at its slow samples (mean acceleration below :data:`CLAMP_QUIET_RPM_S`, a
+    chirp's slow start included) fitted as a viscous and Coulomb excess over the
+    reference's and a sense offset, ridge-shrunk as :class:`FrictionChange`'s law. Each
+    slew's value is its friction deceleration times the reference's I/k_t over that
+    own friction current at the slew's speed, less 1 (a weak motor moves neither); the
+    test alarms when the median of the latest :data:`CLAMP_RECENT` values exceeds ``h``
+    (after :data:`CLAMP_COUNT`). Why the whole friction: worn bearings behind a clamp
+    leave the feed-forward's asymmetry (the slew test) nothing to read, and against the
+    reference's unit ×1.5 lies inside the spread between units.
+
+    Parameters
+    ----------
+    c : array_like, shape (4,)
+        The reference's current model [A per rpm/s, A per rpm, A, A].
+    h : float
+        Threshold on the median relative excess.
+    """
+
+    def __init__(self, c, h: float) -> None:
+        self.c = np.asarray(c, dtype=float)
+        self.h = h
+        self._xtx = np.zeros((3, 3))
+        self._xtr = np.zeros(3)
+        self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the own samples
+        self.frozen = False  # a clamped slew came: the own samples end there
+        self.values: list[tuple[float, float, float]] = []  # (t_s, value, σ of the own law)
+        self.statistic = 0.0
+        self.speeds: list = []
+        self.decided = 0
+        self._start = 0  # the first value since the last restart
+
+    def add_own(self, residual_a: float, speed_rpm: float) -> None:
+        """One slow sample: the current residual (A) at ``speed_rpm``."""
+        if self.frozen or abs(speed_rpm) < CLAMP_OWN_RPM or not math.isfinite(residual_a):
+            return
+        sign = math.copysign(1.0, speed_rpm)
+        x = np.array([abs(speed_rpm), 1.0, sign])
+        # the current less the reference's inertial current: the unit's friction and offset
+        friction_a = sign * residual_a + self.c[1] * abs(speed_rpm) + self.c[2] + sign * self.c[3]
+        self._xtx += np.outer(x, x)
+        self._xtr += x * friction_a
+        self._r = [self._r[0] + 1, self._r[1] + residual_a, self._r[2] + residual_a**2]
+
+    def _own(self, speed_rpm: float) -> tuple[float, float]:
+        """The unit's own friction current at ``speed_rpm`` (A) and its σ (A)."""
+        n, s1, s2 = self._r
+        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * BLOCK_OWN) + 1e-6
+        # prior: the datasheet's friction (not the reference's law: its identified
+        # Coulomb/viscous split is poor, and a chirp's slow samples leave it standing)
+        viscous, coulomb = nominal_friction_currents()
+        mean = np.array([viscous, coulomb, 0.0])
+        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+        precision = np.diag(1 / prior**2)
+        cov = np.linalg.inv(self._xtx / noise**2 + precision)
+        law = cov @ (self._xtr / noise**2 + precision @ mean)
+        x = np.array([speed_rpm, 1.0])
+        return float(law[:2] @ x), math.sqrt(float(x @ cov[:2, :2] @ x))
+
+    def add_slew(self, t_s: float, decel_rpm_s: float, speed_rpm: float) -> bool:
+        """One clamped slew's friction deceleration (rpm/s) at its mean speed (rpm); True
+        on an alarm."""
+        self.frozen = True
+        if self._r[0] < CLAMP_OWN_MIN or speed_rpm < CLAMP_SLEW_RPM:
+            return False
+        own, sd = self._own(speed_rpm)
+        if own <= 0:
+            return False
+        self.values.append((t_s, decel_rpm_s * self.c[0] / own - 1.0, sd / own))
+        self.speeds.append(speed_rpm)
+        if len(self.values) - self._start < CLAMP_COUNT:
+            return False
+        self.decided += 1
+        recent = self.values[max(self._start, len(self.values) - CLAMP_RECENT) :]
+        self.statistic = float(np.median([v for _, v, _ in recent]))
+        return self.statistic > self.h
+
+    def restart(self) -> None:
+        self._start = len(self.values)
+        self.statistic = 0.0
+
+    def recent(self) -> tuple[np.ndarray, float]:
+        """The latest values decided on and the own law's mean relative σ."""
+        rows = self.values[-CLAMP_RECENT:]
+        return np.array([v for _, v, _ in rows]), float(np.mean([s for _, _, s in rows]))

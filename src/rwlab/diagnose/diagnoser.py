@@ -85,8 +85,11 @@ import numpy as np
 from scipy.stats import poisson
 
 from rwlab.diagnose.blocktests import (
+    CLAMP_EXCESS,
+    CLAMP_QUIET_RPM_S,
     CUSUM_K,
     BlockCusum,
+    ClampedFriction,
     Dropout,
     FrictionChange,
     HoldChange,
@@ -105,6 +108,7 @@ from rwlab.diagnose.isolate import (
     isolate,
 )
 from rwlab.diagnose.motion import (
+    CLAMP_SHARE,
     OFFSET_SIGMA_RPM,
     OFFSET_WINDOW,
     REST_BAND_RPM,
@@ -113,6 +117,8 @@ from rwlab.diagnose.motion import (
     SLEW_SHARE,
     SLEW_SIGMA,
     RestReading,
+    Slews,
+    clamped_deceleration,
     slew_asymmetry,
     slew_friction_gain,
     speed_offset,
@@ -153,6 +159,7 @@ DECIDES_ON = {
     "offset": "60-s windows",
     "slew": "slews",
     "rest": "readings near 0 rpm",
+    "clamped": "clamped slews",
     "stuck": "moving samples",
     "dropout": "10-s blocks",
 }
@@ -295,8 +302,8 @@ class Diagnoser:
         self._recent_speed: deque = deque(maxlen=8)
         self._offset_window: list[tuple[float, float, float, float]] = []
         self._offset_command = math.nan
-        self._slew: list[tuple[float, float, float]] = []
-        self._slew_sign = 0.0
+        self._slews = Slews(self.accel_limit, SLEW_SHARE)
+        self._clamped_slews = Slews(self.accel_limit, CLAMP_SHARE)
         self._slew_gain = 1.0
         self._slew_gains: deque = deque(maxlen=400)  # each slew value's friction gain
         self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
@@ -369,6 +376,8 @@ class Diagnoser:
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
         self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
+        self._detectors["clamped"] = ClampedFriction(ref.current_model, CLAMP_EXCESS)
+        self.thresholds["clamped"] = CLAMP_EXCESS
         self.thresholds["rest"] = self._detectors["rest"].n
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
         self._detectors["stuck"] = RunTest(int(n_stuck))
@@ -530,6 +539,15 @@ class Diagnoser:
                 new += self._fire(t_s, "stuck")
             if usable and self._trace:
                 self._trace_run(repeat and self._moving)
+            clamped = self._detectors["clamped"]
+            if usable and abs(span) < CLAMP_QUIET_RPM_S:
+                clamped.add_own(r["current"], speed_rpm)
+            slew_samples = self._clamped_slews.add(
+                t_s - age_s, r["accel_rpm_s"], speed_rpm, current_a, usable
+            )
+            found = slew_samples and clamped_deceleration(slew_samples)
+            if found and clamped.add_slew(t_s, *found):
+                new += self._fire(t_s, "clamped")
             hold = self._detectors["hold"]
             if self._rest_current is not None:
                 hold.add_rest(self._rest_current)
@@ -572,20 +590,13 @@ class Diagnoser:
     ) -> float | None:
         """Collect one slew's samples (at the telemetry's own time); its asymmetry when
         it ends."""
-        accel = r["accel_rpm_s"]
-        slewing = usable and abs(accel) >= SLEW_SHARE * self.accel_limit
-        slewing = slewing and math.isfinite(current_a)
-        sign = math.copysign(1.0, accel) if slewing else 0.0
-        value = None
-        if sign != self._slew_sign and self._slew:
-            c = self.residuals.current_model
-            value = None if c is None else slew_asymmetry(self._slew, c, self._slew_scale)
-            if value is not None:
-                self._slew_gain = slew_friction_gain(self._slew) or 1.0
-            self._slew = []
-        self._slew_sign = sign
-        if slewing:
-            self._slew.append((t_s, speed_rpm, current_a))
+        slew = self._slews.add(t_s, r["accel_rpm_s"], speed_rpm, current_a, usable)
+        c = self.residuals.current_model
+        if slew is None or c is None:
+            return None
+        value = slew_asymmetry(slew, c, self._slew_scale)
+        if value is not None:
+            self._slew_gain = slew_friction_gain(slew) or 1.0
         return value
 
     def _trace_run(self, event: bool) -> None:
@@ -774,6 +785,8 @@ class Diagnoser:
                 n = det.decided
             elif name == "rest":
                 n = det.readings
+            elif name == "clamped":
+                n = det.decided
             elif name == "stuck":
                 n = self.repeats[1]
             elif name == "dropout":
@@ -932,6 +945,7 @@ class Diagnoser:
         if weak:  # a weak motor named before: its share of a held current's rise
             ev["torque_constant"] = (weak[-1].magnitude, weak[-1].ci)
         ev["rest_value"] = self._detectors["rest"].value
+        ev["clamped"] = self._detectors["clamped"].recent()
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)

@@ -50,7 +50,7 @@ TELEMETRY_TESTS = ("rest", "stuck", "dropout")
 # the tests that can name each fault: where none decided on anything, "no alarm" says
 # nothing of that fault
 FAULT_TESTS = {
-    "friction": ("friction", "friction_change", "hold", "slew"),
+    "friction": ("friction", "friction_change", "hold", "slew", "clamped"),
     "torque_constant": ("motor",),
     "current_limit": ("lag",),
     "speed_sensor_bias": ("speed", "offset", "rest"),

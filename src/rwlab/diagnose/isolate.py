@@ -194,6 +194,16 @@ def _slew(ev: dict) -> Finding:
     )
 
 
+def _clamped(values: np.ndarray, law_sd: float) -> Finding:
+    """Friction from clamped slews: 1 + the median excess over the unit's own friction;
+    the interval holds the median's noise, the own law's σ and the unit's I/k_t (the
+    reference's converts the deceleration into a current)."""
+    mid = float(np.median(values))
+    se = 1.2533 * float(np.std(values, ddof=1)) / math.sqrt(len(values))
+    half = Z95 * math.hypot(se, (1 + mid) * law_sd, (1 + mid) * MOTOR_UNIT_SD)
+    return Finding("friction", 1 + mid, (1 + mid - half, 1 + mid + half), "factor")
+
+
 def _hold(ev: dict) -> Finding:
     """The current's rise at a held speed over this record's own earlier current there:
     a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
@@ -248,6 +258,8 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         return _rotor(ev, detector)
     if detector == "slew":
         return [_slew(ev)]
+    if detector == "clamped":
+        return [_clamped(*ev["clamped"])]
     if detector == "hold":
         return [_hold(ev)]
     if detector == "offset":  # the speed residual's offset on a continuous command

@@ -14,6 +14,10 @@ take no sample there. Two statistics use what such a record does have:
   friction the feed-forward does not know changes the acceleration: a slew runs
   faster towards zero speed than away from it.
 
+- :func:`clamped_deceleration`: where the motor current is clamped below what the
+  acceleration limit needs, the current is the same on both sides of zero speed, so
+  the difference between a slew's rates towards and away from zero is the whole
+  friction (not its excess over a feed-forward);
 - :class:`RestReading`: the reading the firmware gives when no Hall edge came
   within its timeout (the wheel passing through zero speed) is exactly 0 on a
   healthy wheel; with a telemetry bias it is exactly the bias, over and over.
@@ -35,6 +39,8 @@ __all__ = [
     "SLEW_SHARE",
     "SLEW_SIGMA",
     "RestReading",
+    "Slews",
+    "clamped_deceleration",
     "slew_asymmetry",
     "slew_friction_gain",
     "speed_offset",
@@ -65,6 +71,11 @@ SLEW_SIGMA = 0.3
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit
+CLAMP_SHARE = 0.5  # a clamped slew: |measured α| ≥ this share of the acceleration limit
+# (a 0.45 A clamp holds the RW90 at ≈ 0.8 of its limit, right at SLEW_SHARE)
+CLAMP_PLATEAU_A = 0.02  # samples this far below the slew's median current have left it, A
+CLAMP_FLAT_A = 0.008  # the current's step across zero below this: clamped, A (a slew at
+# the acceleration limit steps by twice its Coulomb current, ≈ 18 mA on the RW90)
 SLEW_MIN = 4  # samples in each half of a slew (over ≥ 1.5 s: the Hall reading's noise
 # over a shorter half moves its acceleration by about the Coulomb deceleration)
 
@@ -159,6 +170,77 @@ def slew_asymmetry(
     toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
     scale = c[2] / c[0] if scale_rpm_s is None else scale_rpm_s
     return float((toward - away) / scale)
+
+
+class Slews:
+    """A wheel's slews, sample by sample: runs of one sign of acceleration at ≥ ``share``
+    of the acceleration limit ``limit_rpm_s`` (rpm/s)."""
+
+    def __init__(self, limit_rpm_s: float, share: float) -> None:
+        self.limit = share * limit_rpm_s
+        self._sign = 0.0
+        self._samples: list[tuple[float, float, float]] = []
+
+    def add(
+        self, t_s: float, accel_rpm_s: float, speed_rpm: float, current_a: float, usable: bool
+    ) -> list[tuple[float, float, float]] | None:
+        """One sample (``t_s`` the telemetry's own time); the slew it ends, if any, as
+        (t_s, speed_rpm, current_a) samples."""
+        slewing = usable and abs(accel_rpm_s) >= self.limit and math.isfinite(current_a)
+        sign = math.copysign(1.0, accel_rpm_s) if slewing else 0.0
+        ended = None
+        if sign != self._sign and self._samples:
+            ended, self._samples = self._samples, []
+        self._sign = sign
+        if slewing:
+            self._samples.append((t_s, speed_rpm, current_a))
+        return ended
+
+
+def clamped_deceleration(segment: list[tuple[float, float, float]]) -> tuple[float, float] | None:
+    """The friction deceleration in a slew through zero speed at a clamped current.
+
+    With the current clamped (the same on both halves: no feed-forward step at the
+    zero crossing), I·α = k_t·i ∓ friction, so half the difference between the rates
+    towards and away from zero speed is the friction over the inertia, whatever k_t
+    is. Each half's rate is taken from its first and last sample (as in
+    :func:`slew_asymmetry`), over the samples at the clamp (within
+    :data:`CLAMP_PLATEAU_A` of the slew's median current: not where the loop leaves it).
+
+    Parameters
+    ----------
+    segment : list of (t_s, speed_rpm, current_a)
+        Consecutive samples of one slew (one sign of acceleration).
+
+    Returns
+    -------
+    (float, float) or None
+        The friction deceleration (rpm/s) and the halves' mean speed (rpm, ≥ 0); None
+        where either half has fewer than :data:`SLEW_MIN` samples in
+        :data:`SLEW_SPEED_RPM` or the current is not flat across zero speed
+        (:data:`CLAMP_FLAT_A`: a healthy slew at the limit steps by twice its Coulomb
+        current there).
+    """
+    inner = segment[1:-1]
+    if len(inner) < 2 * SLEW_MIN:
+        return None
+    level = float(np.median([abs(x[2]) for x in inner]))
+    inner = [x for x in inner if abs(x[2]) >= level - CLAMP_PLATEAU_A]
+    lo, hi = SLEW_SPEED_RPM
+    pos = [x for x in inner if lo < x[1] < hi]
+    neg = [x for x in inner if -hi < x[1] < -lo]
+    if min(len(pos), len(neg)) < SLEW_MIN:
+        return None
+    if abs(np.mean([x[2] for x in pos]) - np.mean([x[2] for x in neg])) >= CLAMP_FLAT_A:
+        return None
+
+    def rate(half):
+        return abs(half[-1][1] - half[0][1]) / (half[-1][0] - half[0][0])
+
+    rising = inner[-1][1] > inner[0][1]
+    toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
+    speed = float(np.mean([abs(x[1]) for x in pos + neg]))
+    return float((toward - away) / 2), speed
 
 
 def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | None:
