@@ -471,6 +471,50 @@ def test_slew_asymmetry_reads_friction_the_feed_forward_does_not_know():
     assert slew_asymmetry(_slew(319, 309)[:10], c) is None  # too short a half
 
 
+def test_a_clamped_slew_reads_the_whole_friction_whatever_the_motor():
+    """At a clamped current I·α = k_t·i ∓ friction on the two halves, so half the rates'
+    difference is the friction deceleration; a slew whose current steps at zero speed
+    (the feed-forward at the acceleration limit) is no clamped slew."""
+    from rwlab.diagnose.motion import clamped_deceleration
+
+    for rising in (True, False):
+        decel, speed = clamped_deceleration(_slew(260, 240, rising, step=0.0))
+        assert decel == pytest.approx(10.0)
+        # the inner samples in the band: 7 of the half towards zero, 7 of the one away
+        towards = [2000 - 260 * 0.5 * k for k in range(1, 8)]
+        away = [150 + 240 * 0.5 * k for k in range(7)]
+        assert speed == pytest.approx(np.mean(towards + away))
+    assert clamped_deceleration(_slew(319, 309)) is None  # a feed-forward step of 20 mA
+    assert clamped_deceleration(_slew(260, 240, step=0.0)[:10]) is None  # too short a half
+
+
+def _own_friction_a(speed_rpm: float) -> float:
+    """A unit's friction current (A) unlike the reference's: 3e-6 A/rpm and 8 mA."""
+    return 3e-6 * abs(speed_rpm) + 8e-3
+
+
+@pytest.mark.parametrize("factor", [1.0, 1.5])
+def test_the_clamped_test_compares_a_slew_with_the_units_own_friction(factor):
+    """Own slow samples of a unit whose friction and sense offset differ from the
+    reference's, then clamped slews whose deceleration is ``factor`` × that friction:
+    each value is factor − 1 exactly (noise-free), the test decides from the second slew
+    on, alarms only on worn bearings, and samples after the first slew do not move it."""
+    from rwlab.diagnose.blocktests import CLAMP_EXCESS, ClampedFriction
+
+    c = np.array([1.8e-3, 2.5e-6, 9e-3, -1e-3])
+    test = ClampedFriction(c, CLAMP_EXCESS)
+    for w in np.r_[np.linspace(300, 5000, 200), -np.linspace(300, 5000, 200)]:
+        current = np.sign(w) * _own_friction_a(w) + 2e-3  # its own offset: 2 mA
+        test.add_own(current - c @ [0.0, w, np.sign(w), 1.0], w)
+    decel = [factor * _own_friction_a(w) / c[0] for w in (1500.0, 900.0)]
+    assert not test.add_slew(10.0, decel[0], 1500.0)  # one slew decides nothing
+    test.add_own(1.0, 3000.0)  # after the first slew: not the unit's own friction
+    assert test.add_slew(20.0, decel[1], 900.0) == (factor > 1 + CLAMP_EXCESS)
+    assert [v for _, v, _ in test.values] == pytest.approx([factor - 1] * 2, abs=1e-6)
+    assert not test.add_slew(30.0, 2 * decel[1], 400.0)  # a slow slew is not compared
+    assert len(test.values) == 2
+
+
 def test_slew_asymmetry_in_nominal_units_does_not_depend_on_the_reference_split():
     """Two references whose current models split friction differently (unit 300's
     identified c2/c0 was 3.2 rpm/s, unit 0's 5.1) read one slew alike in the datasheet's
@@ -666,6 +710,21 @@ def test_a_clamp_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path, mod
     assert {a.kind for a in alarms} == {"current_limit", "speed_sensor_bias"}, alarms
     bias = next(a for a in alarms if a.kind == "speed_sensor_bias")
     assert bias.ci is not None and bias.ci[0] <= -15 <= bias.ci[1], bias
+
+
+@pytest.mark.slow
+def test_worn_bearings_behind_a_clamp_are_both_named_during_a_chirp(tmp_path, model_file):
+    """Friction × 1.5 and a 0.45 A clamp from 480 s of a 15-minute chirp of another unit:
+    the clamped slews carry the whole friction, against the unit's own before (the slew
+    test reads only a feed-forward's excess, which a clamp removes): both named within
+    300 s, the friction's interval holding 1.5."""
+    faults = ("friction=1.5@480", "current_limit=0.45@480")
+    alarms = _chirp_alarms(tmp_path, model_file, 505, faults)
+    assert alarms and all(480 <= a.t_s <= 780 for a in alarms), alarms
+    found = {a.kind: a for a in alarms}
+    assert set(found) == {"current_limit", "friction"}, alarms
+    friction = found["friction"]
+    assert friction.detector == "clamped" and friction.ci[0] <= 1.5 <= friction.ci[1], friction
 
 
 @pytest.mark.slow

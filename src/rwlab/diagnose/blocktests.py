@@ -399,7 +399,7 @@ class ClampedFriction:
         self.h = h
         self._xtx = np.zeros((3, 3))
         self._xtr = np.zeros(3)
-        self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the own samples
+        self._r = [0, 0.0]  # count and Σy² of the own samples' friction currents
         self.frozen = False  # a clamped slew came: the own samples end there
         self.values: list[tuple[float, float, float]] = []  # (t_s, value, σ of the own law)
         self.statistic = 0.0
@@ -417,12 +417,14 @@ class ClampedFriction:
         friction_a = sign * residual_a + self.c[1] * abs(speed_rpm) + self.c[2] + sign * self.c[3]
         self._xtx += np.outer(x, x)
         self._xtr += x * friction_a
-        self._r = [self._r[0] + 1, self._r[1] + residual_a, self._r[2] + residual_a**2]
+        self._r = [self._r[0] + 1, self._r[1] + friction_a**2]
 
     def _own(self, speed_rpm: float) -> tuple[float, float]:
         """The unit's own friction current at ``speed_rpm`` (A) and its σ (A)."""
-        n, s1, s2 = self._r
-        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * BLOCK_OWN) + 1e-6
+        n, yy = self._r
+        fit = np.linalg.lstsq(self._xtx, self._xtr, rcond=None)[0]
+        rss = yy - 2 * fit @ self._xtr + fit @ self._xtx @ fit  # the plain fit's residuals
+        noise = math.sqrt(max(rss / max(n - 3, 1), 0.0) * BLOCK_OWN) + 1e-6
         # prior: the datasheet's friction (not the reference's law: its identified
         # Coulomb/viscous split is poor, and a chirp's slow samples leave it standing)
         viscous, coulomb = nominal_friction_currents()

@@ -945,7 +945,8 @@ class Diagnoser:
         if weak:  # a weak motor named before: its share of a held current's rise
             ev["torque_constant"] = (weak[-1].magnitude, weak[-1].ci)
         ev["rest_value"] = self._detectors["rest"].value
-        ev["clamped"] = self._detectors["clamped"].recent()
+        if detector == "clamped":
+            ev["clamped"] = self._detectors["clamped"].recent()
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)
