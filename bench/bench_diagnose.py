@@ -72,6 +72,7 @@ DETECTORS = (
     "motor",
     "speed",
     "lag",
+    "clamped",
     "stuck",
     "dropout",
 )

@@ -766,6 +766,19 @@ def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, mod
     np.testing.assert_allclose(traces[1], traces[0], atol=1e-6)
 
 
+def test_the_clamped_size_interval_holds_the_spread_between_units():
+    """Two clamped slews reading +0.40 and +0.41 over the unit's own friction: the size
+    is 1.405; its interval is not their scatter (0.007) but at least the healthy level's
+    spread between units (σ 0.12): half-width ≥ 1.96 × 0.12."""
+    from rwlab.diagnose.isolate import CLAMP_LEVEL_SD, Z95, isolate
+
+    (found,) = isolate("clamped", {"clamped": (np.array([0.40, 0.41]), 0.0)})
+    assert found.kind == "friction" and found.magnitude == pytest.approx(1.405)
+    lo, hi = found.ci
+    assert hi - found.magnitude == pytest.approx(found.magnitude - lo)
+    assert hi - found.magnitude >= Z95 * CLAMP_LEVEL_SD
+
+
 def _held_speed_evidence(held_error_rpm: float, command_rpm: float) -> dict:
     """What isolation reads after a held-speed alarm: the same reading, block after block."""
     return {

@@ -27,6 +27,12 @@ slew       a slew at the acceleration limit through zero   towards-zero minus   
            speed                                           away-from-zero rate
 =========  ==============================================  =====================  ==========
 
+``clamped`` (:class:`~rwlab.diagnose.blocktests.ClampedFriction`) reads worn bearings
+behind a lowered current clamp: there the current is the same on both halves of a slew
+through zero, so the rates' difference is the whole friction, which it compares with
+the unit's own friction current before the first clamped slew (the slew test reads only
+the excess over the controller's feed-forward, which a clamp removes).
+
 The offset and slew tests (:func:`~rwlab.diagnose.motion.speed_offset`,
 :func:`~rwlab.diagnose.motion.slew_asymmetry`) see a biased sensor and worn bearings
 where the wheel never holds a speed (a chirp): the speed residual's offset at zero

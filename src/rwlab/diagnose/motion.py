@@ -174,7 +174,15 @@ def slew_asymmetry(
 
 class Slews:
     """A wheel's slews, sample by sample: runs of one sign of acceleration at ≥ ``share``
-    of the acceleration limit ``limit_rpm_s`` (rpm/s)."""
+    of the acceleration limit.
+
+    Parameters
+    ----------
+    limit_rpm_s : float
+        The acceleration limit, rpm/s.
+    share : float
+        The share of it a slew's samples reach (:data:`SLEW_SHARE`, :data:`CLAMP_SHARE`).
+    """
 
     def __init__(self, limit_rpm_s: float, share: float) -> None:
         self.limit = share * limit_rpm_s
@@ -184,8 +192,22 @@ class Slews:
     def add(
         self, t_s: float, accel_rpm_s: float, speed_rpm: float, current_a: float, usable: bool
     ) -> list[tuple[float, float, float]] | None:
-        """One sample (``t_s`` the telemetry's own time); the slew it ends, if any, as
-        (t_s, speed_rpm, current_a) samples."""
+        """One sample; the slew it ends, if any.
+
+        Parameters
+        ----------
+        t_s : float
+            The telemetry's own time, s.
+        accel_rpm_s, speed_rpm, current_a : float
+            Measured acceleration (rpm/s), speed (rpm) and current (A).
+        usable : bool
+            A new frame (a stale one ends a slew).
+
+        Returns
+        -------
+        list of (t_s, speed_rpm, current_a) or None
+            The samples of the slew this sample ends.
+        """
         slewing = usable and abs(accel_rpm_s) >= self.limit and math.isfinite(current_a)
         sign = math.copysign(1.0, accel_rpm_s) if slewing else 0.0
         ended = None
