@@ -47,7 +47,7 @@ CLAMP_COUNT = 2  # clamped slews before the test decides
 CLAMP_RECENT = 6  # it decides on the median of the latest this many
 CLAMP_EXCESS = 0.2  # ... and alarms where it exceeds this
 CLAMP_SLEW_RPM = 500.0  # a slew's halves at least this fast on average: slower ones (a
-# fast chirp's) are a few samples long, and a 15-rpm sensor bias moved them by +0.2–0.6
+# fast chirp's) are a few samples a half, and read up to +0.3–0.6 on healthy bearings
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
 
@@ -375,10 +375,10 @@ class ClampedFriction:
 
     A clamped slew (:func:`~rwlab.diagnose.motion.clamped_deceleration`) carries the
     whole friction, not its excess over the controller's feed-forward, so it is compared
-    with this unit's friction current before the first clamped slew: the current
-    residual at its slow samples (mean acceleration below :data:`CLAMP_QUIET_RPM_S`, a
-    chirp's slow start included) fitted as a viscous and Coulomb excess over the
-    reference's and a sense offset, ridge-shrunk as :class:`FrictionChange`'s law. Each
+    with this unit's friction current before the first clamped slew: the current less
+    the reference's inertial current at its slow samples (mean acceleration below
+    :data:`CLAMP_QUIET_RPM_S`, a chirp's slow start included) fitted as a viscous and
+    Coulomb law and a sense offset, ridge-shrunk towards the datasheet's friction. Each
     slew's value is its friction deceleration times the reference's I/k_t over that
     own friction current at the slew's speed, less 1 (a weak motor moves neither); the
     test alarms when the median of the latest :data:`CLAMP_RECENT` values exceeds ``h``
@@ -399,11 +399,10 @@ class ClampedFriction:
         self.h = h
         self._xtx = np.zeros((3, 3))
         self._xtr = np.zeros(3)
-        self._r = [0, 0.0]  # count and Σy² of the own samples' friction currents
+        self._n, self._yy = 0, 0.0  # own samples: count, Σ of their friction currents², A²
         self.frozen = False  # a clamped slew came: the own samples end there
         self.values: list[tuple[float, float, float]] = []  # (t_s, value, σ of the own law)
         self.statistic = 0.0
-        self.speeds: list = []
         self.decided = 0
         self._start = 0  # the first value since the last restart
 
@@ -417,14 +416,14 @@ class ClampedFriction:
         friction_a = sign * residual_a + self.c[1] * abs(speed_rpm) + self.c[2] + sign * self.c[3]
         self._xtx += np.outer(x, x)
         self._xtr += x * friction_a
-        self._r = [self._r[0] + 1, self._r[1] + friction_a**2]
+        self._n += 1
+        self._yy += friction_a**2
 
     def _own(self, speed_rpm: float) -> tuple[float, float]:
         """The unit's own friction current at ``speed_rpm`` (A) and its σ (A)."""
-        n, yy = self._r
         fit = np.linalg.lstsq(self._xtx, self._xtr, rcond=None)[0]
-        rss = yy - 2 * fit @ self._xtr + fit @ self._xtx @ fit  # the plain fit's residuals
-        noise = math.sqrt(max(rss / max(n - 3, 1), 0.0) * BLOCK_OWN) + 1e-6
+        rss = float(self._yy - 2 * fit @ self._xtr + fit @ self._xtx @ fit)  # plain fit's
+        noise = math.sqrt(max(rss / max(self._n - 3, 1), 0.0) * BLOCK_OWN) + 1e-6
         # prior: the datasheet's friction (not the reference's law: its identified
         # Coulomb/viscous split is poor, and a chirp's slow samples leave it standing)
         viscous, coulomb = nominal_friction_currents()
@@ -440,13 +439,12 @@ class ClampedFriction:
         """One clamped slew's friction deceleration (rpm/s) at its mean speed (rpm); True
         on an alarm."""
         self.frozen = True
-        if self._r[0] < CLAMP_OWN_MIN or speed_rpm < CLAMP_SLEW_RPM:
+        if self._n < CLAMP_OWN_MIN or speed_rpm < CLAMP_SLEW_RPM:
             return False
         own, sd = self._own(speed_rpm)
         if own <= 0:
             return False
         self.values.append((t_s, decel_rpm_s * self.c[0] / own - 1.0, sd / own))
-        self.speeds.append(speed_rpm)
         if len(self.values) - self._start < CLAMP_COUNT:
             return False
         self.decided += 1
