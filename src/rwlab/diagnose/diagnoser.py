@@ -546,7 +546,10 @@ class Diagnoser:
             if usable and self._trace:
                 self._trace_run(repeat and self._moving)
             clamped = self._detectors["clamped"]
-            if usable and abs(span) < CLAMP_QUIET_RPM_S:
+            # the unit's own friction: until the first alarm (a clamp's comes seconds
+            # after its onset; a PRBS's first clamped slew may come minutes later, and
+            # worn bearings' samples in between made ×1.5 read as healthy)
+            if usable and abs(span) < CLAMP_QUIET_RPM_S and not self.alarms:
                 clamped.add_own(r["current"], speed_rpm)
             slew_samples = self._clamped_slews.add(
                 t_s - age_s, r["accel_rpm_s"], speed_rpm, current_a, usable
