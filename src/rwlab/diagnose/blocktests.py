@@ -51,6 +51,15 @@ CLAMP_SLEW_RPM = 500.0  # a slew's halves at least this fast on average: slower 
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
 
+def _law_prior() -> tuple[np.ndarray, np.ndarray]:
+    """The datasheet's friction law as current [viscous A/rpm, Coulomb A, offset A] and
+    the σ of a unit's law about it: :data:`CHANGE_PRIOR` of each friction part, 5 mA of
+    sense offset (:data:`rwlab.wheel.imperfections.TOLERANCES`)."""
+    viscous, coulomb = nominal_friction_currents()
+    sd = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+    return np.array([viscous, coulomb, 0.0]), sd
+
+
 class BlockCusum:
     """Block means of one test's values, standardised, into a one- or two-sided CUSUM."""
 
@@ -180,8 +189,7 @@ class FrictionChange(BlockCusum):
         (the samples of a hold are correlated)."""
         n, s1, s2 = self._r
         noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
-        viscous, coulomb = nominal_friction_currents()
-        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+        _, prior = _law_prior()
         A = self._xtx / noise**2 + np.diag(1 / prior**2)
         self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
         return self._cov @ self._xtr / noise**2
@@ -426,9 +434,7 @@ class ClampedFriction:
         noise = math.sqrt(max(rss / max(self._n - 3, 1), 0.0) * BLOCK_OWN) + 1e-6
         # prior: the datasheet's friction (not the reference's law: its identified
         # Coulomb/viscous split is poor, and a chirp's slow samples leave it standing)
-        viscous, coulomb = nominal_friction_currents()
-        mean = np.array([viscous, coulomb, 0.0])
-        prior = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+        mean, prior = _law_prior()
         precision = np.diag(1 / prior**2)
         cov = np.linalg.inv(self._xtx / noise**2 + precision)
         law = cov @ (self._xtr / noise**2 + precision @ mean)

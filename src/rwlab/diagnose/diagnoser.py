@@ -790,12 +790,10 @@ class Diagnoser:
         """
         out: dict[str, dict] = {}
         for name, det in self._detectors.items():
-            if isinstance(det, BlockCusum):
+            if isinstance(det, (BlockCusum, ClampedFriction)):
                 n = det.decided
             elif name == "rest":
                 n = det.readings
-            elif name == "clamped":
-                n = det.decided
             elif name == "stuck":
                 n = self.repeats[1]
             elif name == "dropout":

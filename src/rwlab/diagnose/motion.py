@@ -154,22 +154,32 @@ def slew_asymmetry(
         in :data:`SLEW_SPEED_RPM` or the current does not step at the zero crossing.
     """
     inner = segment[1:-1]  # the first and last samples enter and leave the limit
-    lo, hi = SLEW_SPEED_RPM
-    pos = [x for x in inner if lo < x[1] < hi]
-    neg = [x for x in inner if -hi < x[1] < -lo]
+    pos, neg = _halves(inner)
     if min(len(pos), len(neg)) < SLEW_MIN or not c[0] > 0 or not c[2] > 0:
         return None
     step = np.mean([x[2] for x in pos]) - np.mean([x[2] for x in neg])
     if step < c[2]:  # half the reference's feed-forward step: a clamped current
         return None
+    toward, away = _rates(inner, pos, neg)
+    scale = c[2] / c[0] if scale_rpm_s is None else scale_rpm_s
+    return float((toward - away) / scale)
+
+
+def _halves(inner: list) -> tuple[list, list]:
+    """A slew's samples in :data:`SLEW_SPEED_RPM` at positive and at negative speed."""
+    lo, hi = SLEW_SPEED_RPM
+    return [x for x in inner if lo < x[1] < hi], [x for x in inner if -hi < x[1] < -lo]
+
+
+def _rates(inner: list, pos: list, neg: list) -> tuple[float, float]:
+    """The rates (rpm/s) of a slew's half towards zero speed and of its half away, each
+    from its first and last sample (the samples' own differences are Hall noise)."""
 
     def rate(half):
         return abs(half[-1][1] - half[0][1]) / (half[-1][0] - half[0][0])
 
     rising = inner[-1][1] > inner[0][1]
-    toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
-    scale = c[2] / c[0] if scale_rpm_s is None else scale_rpm_s
-    return float((toward - away) / scale)
+    return (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
 
 
 class Slews:
@@ -248,19 +258,12 @@ def clamped_deceleration(segment: list[tuple[float, float, float]]) -> tuple[flo
         return None
     level = float(np.median([abs(x[2]) for x in inner]))
     inner = [x for x in inner if abs(x[2]) >= level - CLAMP_PLATEAU_A]
-    lo, hi = SLEW_SPEED_RPM
-    pos = [x for x in inner if lo < x[1] < hi]
-    neg = [x for x in inner if -hi < x[1] < -lo]
+    pos, neg = _halves(inner)
     if min(len(pos), len(neg)) < SLEW_MIN:
         return None
     if abs(np.mean([x[2] for x in pos]) - np.mean([x[2] for x in neg])) >= CLAMP_FLAT_A:
         return None
-
-    def rate(half):
-        return abs(half[-1][1] - half[0][1]) / (half[-1][0] - half[0][0])
-
-    rising = inner[-1][1] > inner[0][1]
-    toward, away = (rate(neg), rate(pos)) if rising else (rate(pos), rate(neg))
+    toward, away = _rates(inner, pos, neg)
     speed = float(np.mean([abs(x[1]) for x in pos + neg]))
     return float((toward - away) / 2), speed
 
@@ -286,9 +289,7 @@ def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | Non
     """
     from rwlab.diagnose.reference import nominal_friction_currents
 
-    inner = segment[1:-1]
-    lo, hi = SLEW_SPEED_RPM
-    halves = [[x for x in inner if lo < x[1] < hi], [x for x in inner if -hi < x[1] < -lo]]
+    halves = _halves(segment[1:-1])
     if min(len(h) for h in halves) < SLEW_MIN:
         return None
     viscous, coulomb = nominal_friction_currents()
