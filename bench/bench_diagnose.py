@@ -73,6 +73,7 @@ DETECTORS = (
     "speed",
     "lag",
     "clamped",
+    "charge",
     "stuck",
     "dropout",
 )

@@ -779,6 +779,107 @@ def test_the_clamped_size_interval_holds_the_spread_between_units():
     assert hi - found.magnitude >= Z95 * CLAMP_LEVEL_SD
 
 
+def _step_charge_values(factor: float, path_rpm: tuple[float, ...]) -> list[float]:
+    """StepCharge's values for a model that moves at 300 rpm/s through ``path_rpm`` (each
+    level held 60 s) and a wheel of k_t × ``factor`` behind it: at the limit the
+    controller's current (the reference's I/k_t × 300 rpm/s) for 1/factor as long (the
+    last, partial sample's share of it), then the unit's own friction (3e-6 A/rpm, 8 mA,
+    and a 2 mA offset: not the reference's) at the wheel's speed."""
+    from rwlab.diagnose.motion import StepCharge
+
+    c = np.array([1.8e-3, 2.5e-6, 9e-3, -1e-3])
+    Ts, rate = 0.5, 300.0
+    test = StepCharge(c, Ts, quiet_rpm_s=10.0)
+    model = wheel = path_rpm[0]
+    values, t = [], 0.0
+    for target in path_rpm:
+        for _ in range(round(60 / Ts)):
+            t += Ts
+            step_model = float(np.clip(target - model, -rate * Ts, rate * Ts))
+            step_wheel = float(np.clip(target - wheel, -factor * rate * Ts, factor * rate * Ts))
+            model, wheel = model + step_model, wheel + step_wheel
+            inertial = c[0] * step_wheel / Ts / factor  # what moved the wheel so
+            current = inertial + np.sign(wheel) * (3e-6 * abs(wheel) + 8e-3) + 2e-3
+            value = test.add(t, model, step_model / Ts, current)
+            if value is not None:
+                values.append(value)
+    return values
+
+
+@pytest.mark.parametrize("factor", [1.0, 0.8, 0.6])
+def test_a_speed_changes_charge_is_the_inertial_charge_over_the_motor_factor(factor):
+    """From settled level to settled level the current beyond friction carries
+    I·Δω/k_t whatever the path: a motor of k_t × F draws 1/F of the reference's, taking
+    1/F as long at the controller's current; the unit's own friction and offset cancel
+    between the two settled ends, exactly where the wheel follows the model and keeps
+    one sign (through zero the unit's Coulomb current, 1 mA from the reference's, leaves
+    0.05 %: the shift between the ends is linear in speed, the difference is not). A weak
+    wheel lags the model, so its friction (at its own speed, not the model's: the Coulomb
+    sign turns later) takes up to 1 % of the charge, always making it read low."""
+    values = np.array(_step_charge_values(factor, (1000.0, 4000.0, 1500.0, -2500.0)))
+    assert len(values) == 3
+    if factor == 1:
+        assert values[:2] == pytest.approx(1.0, rel=1e-9)
+        assert values[2] == pytest.approx(1.0, rel=1e-3)
+    else:
+        assert np.all(values < 1 / factor) and values == pytest.approx(1 / factor, rel=0.01)
+
+
+def test_a_small_or_reversing_speed_change_gives_no_charge():
+    """Below 1000 rpm, or where the model's path between two settled levels is longer
+    than the net change (an overshoot), the friction law's error is no longer small."""
+    from rwlab.diagnose.motion import StepCharge
+
+    assert _step_charge_values(1.0, (1000.0, 1800.0)) == []
+    test = StepCharge(np.array([1.8e-3, 2.5e-6, 9e-3, -1e-3]), 0.5, quiet_rpm_s=10.0)
+    speeds = np.r_[[0.0] * 40, np.linspace(0, 4000, 30), np.linspace(4000, 2000, 15), [2000.0] * 60]
+    accels = np.r_[0.0, np.diff(speeds) / 0.5]
+    samples = enumerate(zip(speeds, accels, strict=True))
+    assert all(test.add(0.5 * k, w, a, 0.01) is None for k, (w, a) in samples)
+
+
+def test_a_weak_motor_behind_a_frozen_reading_is_compared_with_the_units_own_level():
+    """Values of changes begun before the freeze set the unit's level; each one after it
+    alarms beyond that level × (1 + CHARGE_EXCESS), or without a level beyond the
+    reference's headroom and CHARGE_MARGIN."""
+    from rwlab.diagnose.blocktests import CHARGE_EXCESS, CHARGE_MARGIN, FrozenMotor
+
+    test = FrozenMotor(headroom=0.07)
+    assert test.h == pytest.approx(0.07 + CHARGE_MARGIN)
+    assert not test.add(1.30, start_s=50.0, frozen_s=None)  # not frozen: the own level
+    assert not test.add(0.94, start_s=50.0, frozen_s=100.0)  # begun before the freeze
+    assert test.own == [1.30, 0.94] and test.decided == 0 and test.h == CHARGE_EXCESS
+    level = np.median([1.30, 0.94])
+    assert not test.add(level * (1 + CHARGE_EXCESS) * 0.999, start_s=120.0, frozen_s=100.0)
+    assert test.add(level * 1.25, start_s=300.0, frozen_s=100.0)
+    assert test.values == pytest.approx([(1 + CHARGE_EXCESS) * 0.999, 1.25])
+    assert test.decided == 2
+
+
+@pytest.mark.parametrize("factor", [1.0, 0.8])
+def test_a_weak_motor_is_named_behind_a_frozen_reading(tmp_path, model_file, factor):
+    """Steps of another unit, the reading frozen at a 0-rpm hold at 300 s (with k_t × F):
+    the stuck sensor is named when the next step begins, and a weak motor (only then) from
+    that step's charge, its interval holding 0.8; the diagnosis no longer lists the motor
+    among the faults it could not see after the freeze."""
+    faults = ("speed_sensor_stuck@300",) + ((f"torque_constant={factor}@300",) * (factor != 1))
+    path = tmp_path / "steps.mcap"
+    run_experiment(
+        ExperimentConfig(signal="step", duration=600, seed=506, unit=506, faults=faults), path
+    )
+    result = _diagnose(path, model_file)
+    found = {a.kind: a for a in result.alarms}
+    assert all(a.t_s >= 300 for a in result.alarms), result.alarms
+    if factor == 1:
+        assert set(found) == {"speed_sensor_stuck"}, result.alarms
+    else:
+        assert set(found) == {"speed_sensor_stuck", "torque_constant"}, result.alarms
+        kt = found["torque_constant"]
+        assert kt.detector == "charge" and kt.ci[0] <= factor <= kt.ci[1], kt
+    assert result.coverage["charge"]["decided"] >= 1
+    assert "torque_constant" not in result.blind()
+
+
 def _held_speed_evidence(held_error_rpm: float, command_rpm: float) -> dict:
     """What isolation reads after a held-speed alarm: the same reading, block after block."""
     return {

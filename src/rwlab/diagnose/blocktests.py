@@ -1,8 +1,9 @@
 """The block tests of the diagnosis: one test's qualifying values into block means and a
 CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own past
-(:class:`FrictionChange`, :class:`HoldChange`, :class:`ClampedFriction`) or count lost
-frames (:class:`Dropout`). :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each
-sample; its module docstring says what each test takes and alarms on."""
+(:class:`FrictionChange`, :class:`HoldChange`, :class:`ClampedFriction`,
+:class:`FrozenMotor`) or count lost frames (:class:`Dropout`).
+:class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each sample; its module docstring
+says what each test takes and alarms on."""
 
 from __future__ import annotations
 
@@ -48,6 +49,11 @@ CLAMP_RECENT = 6  # it decides on the median of the latest this many
 CLAMP_EXCESS = 0.2  # ... and alarms where it exceeds this
 CLAMP_SLEW_RPM = 500.0  # a slew's halves at least this fast on average: slower ones (a
 # fast chirp's) are a few samples a half, and read up to +0.3–0.6 on healthy bearings
+CHARGE_EXCESS = 0.08  # a step's charge over the unit's own level before the freeze: healthy
+# step and PRBS records' later values over their earlier ones read 0.955–1.027 (σ 0.012;
+# 114 records of tune, eval, eval2, eval3, models of units 0 and 587)
+CHARGE_MARGIN = 0.04  # ... over the reference's, beyond the datasheet's I/k_t headroom (the
+# same records: at most 0.023 below that bound with either model)
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 
 
@@ -466,3 +472,54 @@ class ClampedFriction:
         """The latest values decided on and the own law's mean relative σ."""
         rows = self.values[-CLAMP_RECENT:]
         return np.array([v for _, v, _ in rows]), float(np.mean([s for _, _, s in rows]))
+
+
+class FrozenMotor:
+    """A weak motor behind a frozen speed reading: a speed change's charge.
+
+    Once the reading is frozen no test can read an acceleration, but the wheel's loop
+    still closes on its true speed, so each settled speed change draws the charge
+    :class:`~rwlab.diagnose.motion.StepCharge` measures: 1/F of the reference's for
+    k_t × F. The values of speed changes that began before the freeze are the unit's
+    own level; each one after it is compared with their median (tolerance
+    :data:`CHARGE_EXCESS`) or, without any, with the reference's (the datasheet's
+    headroom of I/k_t and :data:`CHARGE_MARGIN`). A stronger charge is the only
+    reading: a lowered clamp or worn bearings leave it (the clamp slows the change,
+    the friction is measured at both settled ends).
+
+    Parameters
+    ----------
+    headroom : float
+        How far above the reference's I/k_t a healthy unit's may sit (relative).
+    """
+
+    def __init__(self, headroom: float) -> None:
+        self.headroom = headroom
+        self.own: list[float] = []
+        self.values: list[float] = []  # relative to the level, after the freeze
+        self.statistic = 0.0
+        self.decided = 0
+
+    @property
+    def h(self) -> float:
+        """The tolerance on a value's excess over its level."""
+        return CHARGE_EXCESS if self.own else self.headroom + CHARGE_MARGIN
+
+    def add(self, value: float, start_s: float, frozen_s: float | None) -> bool:
+        """One speed change's value (begun at ``start_s``, s) with the reading frozen
+        since ``frozen_s`` (s; None: not frozen); True on an alarm."""
+        if frozen_s is None or start_s < frozen_s:
+            self.own.append(value)
+            return False
+        level = float(np.median(self.own)) if self.own else 1.0
+        self.values.append(value / level)
+        self.decided += 1
+        self.statistic = self.values[-1] - 1.0
+        return self.statistic > self.h
+
+    def restart(self) -> None:
+        self.statistic = 0.0
+
+    def recent(self) -> tuple[np.ndarray, int]:
+        """The values decided on (relative to the level) and how many own values set it."""
+        return np.array(self.values), len(self.own)

@@ -98,6 +98,7 @@ from rwlab.diagnose.blocktests import (
     ClampedFriction,
     Dropout,
     FrictionChange,
+    FrozenMotor,
     HoldChange,
     steady,
 )
@@ -124,6 +125,7 @@ from rwlab.diagnose.motion import (
     SLEW_SIGMA,
     RestReading,
     Slews,
+    StepCharge,
     clamped_deceleration,
     slew_asymmetry,
     slew_friction_gain,
@@ -166,6 +168,7 @@ DECIDES_ON = {
     "slew": "slews",
     "rest": "readings near 0 rpm",
     "clamped": "clamped slews",
+    "charge": "speed changes after a frozen reading",
     "stuck": "moving samples",
     "dropout": "10-s blocks",
 }
@@ -315,6 +318,9 @@ class Diagnoser:
         self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
+        self._reading_since = 0.0  # when the speed reading last changed, s
+        self._frozen_s: float | None = None  # a stuck alarm's reading froze then, s
+        self._charge: StepCharge | None = None
         self._moving = False
         self._was_stale = True
         self._lost: float | None = None
@@ -384,6 +390,9 @@ class Diagnoser:
         self._detectors["rest"] = RestReading()
         self._detectors["clamped"] = ClampedFriction(ref.current_model, CLAMP_EXCESS)
         self.thresholds["clamped"] = CLAMP_EXCESS
+        self._charge = StepCharge(ref.current_model, self.Ts, QUIET_RPM_S)
+        self._detectors["charge"] = FrozenMotor(self._motor_headroom(ref))
+        self.thresholds["charge"] = self._detectors["charge"].h
         self.thresholds["rest"] = self._detectors["rest"].n
         n_stuck = self._calibrated("stuck", run_length(self.arl0, ref.repeat_probability))
         self._detectors["stuck"] = RunTest(int(n_stuck))
@@ -523,6 +532,8 @@ class Diagnoser:
         crossing = abs(r["model_rpm"]) < REST_MODEL_RPM and abs(model_accel) >= QUIET_RPM_S
         near_zero = abs(speed_rpm) < REST_BAND_RPM and (moved or crossing)
         rest = usable and near_zero and speed_rpm != self._last_speed
+        if speed_rpm != self._last_speed:
+            self._reading_since = t_s
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
         self._hold_sample = None
@@ -557,6 +568,7 @@ class Diagnoser:
             found = slew_samples and clamped_deceleration(slew_samples)
             if found and clamped.add_slew(t_s, *found):
                 new += self._fire(t_s, "clamped")
+            new += self._frozen_motor(t_s, r, current_a)
             hold = self._detectors["hold"]
             if self._rest_current is not None:
                 hold.add_rest(self._rest_current)
@@ -579,6 +591,19 @@ class Diagnoser:
                 self._change_probe.add_sample(t_s, *self._friction_sample)
         self._record(t_s, r, values)
         return new
+
+    def _frozen_motor(self, t_s: float, r: dict, current_a: float) -> list[Alarm]:
+        """A settled speed change's charge (:class:`FrozenMotor`): the unit's own level
+        until a stuck alarm, a weak motor's test on the changes begun after its reading
+        froze."""
+        assert self._charge is not None
+        model_accel = r["accel_rpm_s"] - r["acceleration"]
+        value = self._charge.add(t_s, r["model_rpm"], model_accel, current_a)
+        test = self._detectors["charge"]
+        if value is None or not test.add(value, self._charge.start_s, self._frozen_s):
+            return []
+        self.thresholds["charge"] = test.h
+        return self._fire(t_s, "charge")
 
     def _offset(self, r: dict, command_rpm: float, usable: bool) -> float | None:
         """Collect a window of usable samples; its speed offset when it is full."""
@@ -790,7 +815,7 @@ class Diagnoser:
         """
         out: dict[str, dict] = {}
         for name, det in self._detectors.items():
-            if isinstance(det, (BlockCusum, ClampedFriction)):
+            if isinstance(det, (BlockCusum, ClampedFriction, FrozenMotor)):
                 n = det.decided
             elif name == "rest":
                 n = det.readings
@@ -893,6 +918,8 @@ class Diagnoser:
             for f in findings
         ]
         self.alarms += alarms
+        if self._frozen_s is None and any(a.kind == "speed_sensor_stuck" for a in alarms):
+            self._frozen_s = self._reading_since
         return alarms
 
     def _evidence(self, detector: str) -> dict:
@@ -954,6 +981,8 @@ class Diagnoser:
         ev["rest_value"] = self._detectors["rest"].value
         if detector == "clamped":
             ev["clamped"] = self._detectors["clamped"].recent()
+        if detector == "charge":
+            ev["charge"] = self._detectors["charge"].recent()
         if detector in ("motor", "friction"):
             for name in ("friction", "motor"):  # the other test's latest blocks too
                 det = self._detectors.get(name)

@@ -51,7 +51,7 @@ TELEMETRY_TESTS = ("rest", "stuck", "dropout")
 # nothing of that fault
 FAULT_TESTS = {
     "friction": ("friction", "friction_change", "hold", "slew", "clamped"),
-    "torque_constant": ("motor",),
+    "torque_constant": ("motor", "charge"),
     "current_limit": ("lag",),
     "speed_sensor_bias": ("speed", "offset", "rest"),
     "speed_sensor_stuck": ("stuck",),
@@ -279,9 +279,10 @@ class Diagnosis:
     def blind(self) -> dict[str, float]:
         """The faults not named that no test could see after a frozen speed reading: from
         the first stuck-sensor alarm on, every model-based test reads a speed that no longer
-        moves (no acceleration, no constant speed, no lag to measure), so a weak motor,
-        worn bearings, a lowered current limit or a bias that comes with the stuck sensor
-        goes unseen: said, not a silent miss.
+        moves (no acceleration, no constant speed, no lag to measure), so worn bearings,
+        a lowered current limit or a bias that comes with the stuck sensor goes unseen:
+        said, not a silent miss. A weak motor is seen where the record has a settled
+        speed change after the freeze (the ``charge`` test, whose coverage counts them).
 
         Returns
         -------
@@ -292,9 +293,11 @@ class Diagnosis:
         stuck = [a.t_s for a in self.alarms if a.kind == "speed_sensor_stuck"]
         if not stuck:
             return {}
-        named = {a.kind for a in self.alarms if a.t_s <= stuck[0]}
+        seen = {a.kind for a in self.alarms if a.t_s <= stuck[0]}
+        if self.coverage.get("charge", {}).get("decided"):
+            seen.add("torque_constant")
         kinds = (*ROTOR_FAULTS, "speed_sensor_bias")
-        return {kind: stuck[0] for kind in kinds if kind not in named}
+        return {kind: stuck[0] for kind in kinds if kind not in seen}
 
     def model_tested(self) -> bool:
         """Whether any model-based test (all but rest, stuck, dropout) decided anything:

@@ -97,6 +97,8 @@ CLAMP_RATIO = 0.9
 # between units (why is not measured; the twin's viscous friction falls as it warms)
 CLAMP_SLEW_SD = 0.1
 CLAMP_LEVEL_SD = 0.12
+CHARGE_SD = 0.015  # σ of one speed change's charge relative to the unit's own level (healthy
+# step and PRBS records: 0.012, 119 values of 114 records)
 LAG_BEFORE_MIN = 20  # samples at the limit before the change that give the unit's own current
 
 
@@ -216,6 +218,17 @@ def _clamped(values: np.ndarray, law_sd: float) -> Finding:
     return Finding("friction", 1 + mid, (1 + mid - half, 1 + mid + half), "factor")
 
 
+def _charge(values: np.ndarray, own: int) -> Finding:
+    """A weak motor from speed changes' charge after a frozen reading: 1/F over the
+    unit's own level before (σ :data:`CHARGE_SD` a value; the median of ``own`` values),
+    or over the reference's (then the spread of I/k_t between units instead)."""
+    mid = float(np.median(values))
+    level_sd = CHARGE_SD * 1.2533 / math.sqrt(own) if own else MOTOR_UNIT_SD
+    half = Z95 * math.hypot(CHARGE_SD * 1.2533 / math.sqrt(len(values)), level_sd)
+    ci = (1 / (mid * (1 + half)), 1 / (mid * (1 - half)))
+    return Finding("torque_constant", 1 / mid, ci, "factor")
+
+
 def _hold(ev: dict) -> Finding:
     """The current's rise at a held speed over this record's own earlier current there:
     a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
@@ -254,6 +267,8 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         One, or two when two faults act.
     """
     speed = np.asarray(ev.get("recent_speed", ()), dtype=float)
+    if detector == "charge":  # read with the reading frozen: no stuck finding again
+        return [_charge(*ev["charge"])]
     if detector == "dropout":
         return [Finding("telemetry_dropout", float(ev.get("lost", 0)), None, "frames")]
     if detector == "rest":  # the no-edge reading at zero speed: the bias itself

@@ -18,6 +18,9 @@ take no sample there. Two statistics use what such a record does have:
   acceleration limit needs, the current is the same on both sides of zero speed, so
   the difference between a slew's rates towards and away from zero is the whole
   friction (not its excess over a feed-forward);
+- :class:`StepCharge`: the charge (∫ current dt) a speed change draws beyond friction is
+  I·Δω/k_t wherever the wheel's loop closes on its true speed, whatever the reading
+  does: a weak motor's step draws 1/F of it, seen with a frozen reading too;
 - :class:`RestReading`: the reading the firmware gives when no Hall edge came
   within its timeout (the wheel passing through zero speed) is exactly 0 on a
   healthy wheel; with a telemetry bias it is exactly the bias, over and over.
@@ -40,6 +43,7 @@ __all__ = [
     "SLEW_SIGMA",
     "RestReading",
     "Slews",
+    "StepCharge",
     "clamped_deceleration",
     "slew_asymmetry",
     "slew_friction_gain",
@@ -76,6 +80,12 @@ CLAMP_SHARE = 0.5  # a clamped slew: |measured α| ≥ this share of the acceler
 CLAMP_PLATEAU_A = 0.02  # samples this far below the slew's median current have left it, A
 CLAMP_FLAT_A = 0.008  # the current's step across zero below this: clamped, A (a slew at
 # the acceleration limit steps by twice its Coulomb current, ≈ 18 mA on the RW90)
+CHARGE_WINDOW_S = 5.0  # a settled level: the current's mean over this, s
+CHARGE_MIN_RPM = 1000.0  # a speed change this large draws ≥ 1.6 A·s on the RW90: the
+# friction law's shape error between the two settled levels stays below 1 % of it
+CHARGE_MONOTONE = 0.9  # ... in one direction: its net change at least this share of the
+# model's whole path (a PRBS's several holds between two settled levels add the law's
+# error on each leg to a small net change)
 SLEW_MIN = 4  # samples in each half of a slew (over ≥ 1.5 s: the Hall reading's noise
 # over a shorter half moves its acceleration by about the Coulomb deceleration)
 
@@ -349,3 +359,94 @@ class RestReading:
         """Forget the counts (after an alarm, or a 0 reading)."""
         self._counts.clear()
         self.statistic = 0.0
+
+
+class StepCharge:
+    """The charge a speed change draws, from settled level to settled level.
+
+    Where the wheel's loop closes on its true speed (the reading may be frozen or
+    biased), a change of the model's speed from ω_a to ω_b, settled at both ends,
+    takes the rotor from ω_a to ω_b too, so the current's integral beyond friction
+    is I·(ω_b − ω_a)/k_t whatever the path: at the acceleration limit the current
+    is the controller's and a weak motor takes 1/F as long, below it the loop draws
+    1/F the current. Friction along the way is the reference's law at the model's
+    speed, shifted to the currents measured at both settled ends (so the unit's own
+    friction and sense offset cancel). The value is that charge over the reference's
+    (I/k_t × Δω): 1 on the reference's unit, 1/F for a motor of k_t × F.
+
+    "Settled": the model quiet (|α| below ``quiet_rpm_s``) for :data:`CHARGE_WINDOW_S`
+    plus the longer of that and its last motion's duration (a motor as weak as
+    k_t × 0.5 takes twice as long as the model). Speed changes below
+    :data:`CHARGE_MIN_RPM`, or less than :data:`CHARGE_MONOTONE` of the model's path
+    between the two levels, give no value.
+
+    Parameters
+    ----------
+    c : array_like, shape (4,)
+        The reference's current model [A per rpm/s, A per rpm, A, A].
+    Ts : float
+        Sample time, s.
+    quiet_rpm_s : float
+        The model's acceleration below which it is quiet, rpm/s.
+    """
+
+    def __init__(self, c, Ts: float, quiet_rpm_s: float) -> None:
+        self.c = np.asarray(c, dtype=float)
+        self.Ts = float(Ts)
+        self.quiet = float(quiet_rpm_s)
+        self._window: list[tuple[float, float]] = []  # the last CHARGE_WINDOW_S: (ω, i)
+        self._segment: list[tuple[float, float]] = []  # since the last settled sample
+        self._anchor: tuple[float, float] | None = None  # settled (ω rpm, i A)
+        self._quiet_since: float | None = None
+        self._moving_since: float | None = None
+        self._motion_s = 0.0
+        self._current = math.nan
+        self.start_s = math.nan  # when the segment of the latest value began, s
+
+    def add(self, t_s: float, model_rpm: float, model_accel_rpm_s: float, current_a: float):
+        """One sample (the model's speed and acceleration, the measured current); the
+        value of the speed change it completes, if any (float, else None)."""
+        if math.isfinite(current_a):
+            self._current = current_a  # a lost frame: the latest current holds
+        elif not math.isfinite(self._current):
+            return None
+        if abs(model_accel_rpm_s) < self.quiet:
+            if self._quiet_since is None:
+                self._quiet_since = t_s
+                if self._moving_since is not None:
+                    self._motion_s = t_s - self._moving_since
+                self._moving_since = None
+        else:
+            self._quiet_since = None
+            if self._moving_since is None:
+                self._moving_since = t_s
+        sample = (model_rpm, self._current)
+        n = max(1, round(CHARGE_WINDOW_S / self.Ts))
+        self._window = [*self._window[-(n - 1) :], sample] if n > 1 else [sample]
+        wait = CHARGE_WINDOW_S + max(CHARGE_WINDOW_S, self._motion_s)
+        if self._quiet_since is None or t_s - self._quiet_since < wait:
+            if not self._segment:
+                self.start_s = t_s
+            self._segment.append(sample)
+            return None
+        speed, current = (float(x) for x in np.mean(self._window, axis=0))
+        value = None
+        if self._anchor is not None and abs(speed - self._anchor[0]) >= CHARGE_MIN_RPM:
+            value = self._value(self._anchor, (speed, current))
+        self._anchor, self._segment, self._motion_s = (speed, current), [], 0.0
+        return value
+
+    def _law(self, speed_rpm: np.ndarray) -> np.ndarray:
+        return self.c[1] * speed_rpm + self.c[2] * np.sign(speed_rpm)
+
+    def _value(self, a: tuple[float, float], b: tuple[float, float]) -> float | None:
+        speed, current = np.array(self._segment).T
+        (w_a, i_a), (w_b, i_b) = a, b
+        path = float(np.sum(np.abs(np.diff(speed)))) + abs(speed[0] - w_a)
+        if abs(w_b - w_a) < CHARGE_MONOTONE * path:
+            return None
+        # the law shifted to the measured settled currents at both ends
+        d_a, d_b = i_a - self._law(np.array(w_a)), i_b - self._law(np.array(w_b))
+        friction = self._law(speed) + d_a + (d_b - d_a) * (speed - w_a) / (w_b - w_a)
+        charge = float(np.sum(current - friction)) * self.Ts
+        return charge / (self.c[0] * (w_b - w_a))
