@@ -31,7 +31,11 @@ slew       a slew at the acceleration limit through zero   towards-zero minus   
 behind a lowered current clamp: there the current is the same on both halves of a slew
 through zero, so the rates' difference is the whole friction, which it compares with
 the unit's own friction current before the first clamped slew (the slew test reads only
-the excess over the controller's feed-forward, which a clamp removes).
+the excess over the controller's feed-forward, which a clamp removes). ``charge``
+(:class:`~rwlab.diagnose.blocktests.FrozenMotor`) reads a weak motor after a stuck
+alarm: the wheel's loop still closes on its true speed, so a settled speed change draws
+the charge I·Δω/k_t (:class:`~rwlab.diagnose.motion.StepCharge`), 1/F of the unit's own
+before the freeze for k_t × F.
 
 The offset and slew tests (:func:`~rwlab.diagnose.motion.speed_offset`,
 :func:`~rwlab.diagnose.motion.slew_asymmetry`) see a biased sensor and worn bearings
