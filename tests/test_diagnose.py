@@ -839,21 +839,29 @@ def test_a_small_or_reversing_speed_change_gives_no_charge():
 
 
 def test_a_weak_motor_behind_a_frozen_reading_is_compared_with_the_units_own_level():
-    """Values of changes begun before the freeze set the unit's level; each one after it
-    alarms beyond that level × (1 + CHARGE_EXCESS), or without a level beyond the
-    reference's headroom and CHARGE_MARGIN."""
+    """Changes that settled before the freeze set the unit's level; one under way at it
+    (a weak motor that came with the freeze is in part of it) counts for nothing; each
+    one begun after it alarms beyond that level × (1 + CHARGE_EXCESS), or without a
+    level beyond the reference's headroom and CHARGE_MARGIN."""
     from rwlab.diagnose.blocktests import CHARGE_EXCESS, CHARGE_MARGIN, FrozenMotor
 
     test = FrozenMotor(headroom=0.07)
     assert test.h == pytest.approx(0.07 + CHARGE_MARGIN)
-    assert not test.add(1.30, start_s=50.0, frozen_s=None)  # not frozen: the own level
-    assert not test.add(0.94, start_s=50.0, frozen_s=100.0)  # begun before the freeze
-    assert test.own == [1.30, 0.94] and test.decided == 0 and test.h == CHARGE_EXCESS
+    for start, end, value in ((10, 40, 1.30), (60, 90, 0.94), (95, 130, 1.50)):
+        assert not test.add(value, start, end, frozen_s=None)  # no stuck alarm yet
+    # the reading froze at 100 s (the alarm came later): the third change straddles it
+    assert not test.add(2.0, start_s=99.0, end_s=140.0, frozen_s=100.0)
     level = np.median([1.30, 0.94])
-    assert not test.add(level * (1 + CHARGE_EXCESS) * 0.999, start_s=120.0, frozen_s=100.0)
-    assert test.add(level * 1.25, start_s=300.0, frozen_s=100.0)
+    assert not test.add(level * (1 + CHARGE_EXCESS) * 0.999, 150.0, 180.0, frozen_s=100.0)
+    assert test.h == CHARGE_EXCESS
+    assert test.add(level * 1.25, 300.0, 330.0, frozen_s=100.0)
     assert test.values == pytest.approx([(1 + CHARGE_EXCESS) * 0.999, 1.25])
     assert test.decided == 2
+    values, own = test.recent()
+    assert own == 2 and values == pytest.approx(test.values)
+    alone = FrozenMotor(headroom=0.07)  # frozen from power-up: the reference's level
+    assert not alone.add(1.10, 20.0, 50.0, frozen_s=0.0)
+    assert alone.add(1.12, 60.0, 90.0, frozen_s=0.0) and alone.recent()[1] == 0
 
 
 @pytest.mark.parametrize("factor", [1.0, 0.8])

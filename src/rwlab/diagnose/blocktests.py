@@ -480,12 +480,13 @@ class FrozenMotor:
     Once the reading is frozen no test can read an acceleration, but the wheel's loop
     still closes on its true speed, so each settled speed change draws the charge
     :class:`~rwlab.diagnose.motion.StepCharge` measures: 1/F of the reference's for
-    k_t × F. The values of speed changes that began before the freeze are the unit's
-    own level; each one after it is compared with their median (tolerance
+    k_t × F. The values of speed changes that settled before the freeze are the unit's
+    own level; each one begun after it is compared with their median (tolerance
     :data:`CHARGE_EXCESS`) or, without any, with the reference's (the datasheet's
-    headroom of I/k_t and :data:`CHARGE_MARGIN`). A stronger charge is the only
-    reading: a lowered clamp or worn bearings leave it (the clamp slows the change,
-    the friction is measured at both settled ends).
+    headroom of I/k_t and :data:`CHARGE_MARGIN`). A change under way at the freeze is
+    neither (a weak motor that came with the freeze is in part of it). A stronger
+    charge is the only reading: a lowered clamp or worn bearings leave it (the clamp
+    slows the change, the friction is measured at both settled ends).
 
     Parameters
     ----------
@@ -495,24 +496,26 @@ class FrozenMotor:
 
     def __init__(self, headroom: float) -> None:
         self.headroom = headroom
-        self.own: list[float] = []
+        self.own: list[tuple[float, float]] = []  # (settled at s, value) before the alarm
         self.values: list[float] = []  # relative to the level, after the freeze
         self.statistic = 0.0
         self.decided = 0
+        self.h = headroom + CHARGE_MARGIN  # the tolerance on a value's excess over its level
+        self._level = (1.0, 0)  # (level, own values behind it)
 
-    @property
-    def h(self) -> float:
-        """The tolerance on a value's excess over its level."""
-        return CHARGE_EXCESS if self.own else self.headroom + CHARGE_MARGIN
-
-    def add(self, value: float, start_s: float, frozen_s: float | None) -> bool:
-        """One speed change's value (begun at ``start_s``, s) with the reading frozen
-        since ``frozen_s`` (s; None: not frozen); True on an alarm."""
-        if frozen_s is None or start_s < frozen_s:
-            self.own.append(value)
+    def add(self, value: float, start_s: float, end_s: float, frozen_s: float | None) -> bool:
+        """One speed change's value (begun at ``start_s``, settled at ``end_s``, s) with
+        the reading frozen since ``frozen_s`` (s; None: no stuck alarm yet); True on an
+        alarm."""
+        if frozen_s is None:
+            self.own.append((end_s, value))
             return False
-        level = float(np.median(self.own)) if self.own else 1.0
-        self.values.append(value / level)
+        if start_s < frozen_s:
+            return False  # settled before the freeze (own, kept above) or straddling it
+        own = [v for end, v in self.own if end < frozen_s]
+        self._level = (float(np.median(own)), len(own)) if own else (1.0, 0)
+        self.h = CHARGE_EXCESS if own else self.headroom + CHARGE_MARGIN
+        self.values.append(value / self._level[0])
         self.decided += 1
         self.statistic = self.values[-1] - 1.0
         return self.statistic > self.h
@@ -522,4 +525,4 @@ class FrozenMotor:
 
     def recent(self) -> tuple[np.ndarray, int]:
         """The values decided on (relative to the level) and how many own values set it."""
-        return np.array(self.values), len(self.own)
+        return np.array(self.values), self._level[1]

@@ -604,7 +604,7 @@ class Diagnoser:
         model_accel = r["accel_rpm_s"] - r["acceleration"]
         value = self._charge.add(t_s, r["model_rpm"], model_accel, current_a)
         test = self._detectors["charge"]
-        if value is None or not test.add(value, self._charge.start_s, self._frozen_s):
+        if value is None or not test.add(value, self._charge.start_s, t_s, self._frozen_s):
             return []
         self.thresholds["charge"] = test.h
         return self._fire(t_s, "charge")
