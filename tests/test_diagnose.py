@@ -631,6 +631,9 @@ def test_a_sensor_frozen_at_rest_from_power_up_is_not_a_current_limit(tmp_path, 
     result = _diagnose(path, model_file)
     assert result.alarms and {a.kind for a in result.alarms} == {"speed_sensor_stuck"}
     assert result.estimates == {}  # every estimate rests on the frozen reading
+    # the stuck test had no moving non-zero reading to decide on, but the fault was seen
+    assert result.coverage["stuck"]["decided"] == 0
+    assert "speed_sensor_stuck" not in result.unseen()
 
 
 @pytest.mark.slow

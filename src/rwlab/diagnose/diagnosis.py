@@ -271,10 +271,16 @@ class Diagnosis:
         return [name for name, c in self.coverage.items() if c["decided"] == 0]
 
     def unseen(self) -> list[str]:
-        """The faults (:data:`FAULT_TESTS`) none of whose tests decided on anything: the
-        record could not show them (too short, or without the motions they need)."""
-        tested = set(self.tested())
-        return [kind for kind, tests in FAULT_TESTS.items() if not tested.intersection(tests)]
+        """The faults (:data:`FAULT_TESTS`) none of whose tests decided on anything and
+        that no alarm named: the record could not show them (too short, or without the
+        motions they need). A fault another test named was seen (a reading frozen at
+        0 rpm from power-up gives the stuck test nothing; the lag test names it)."""
+        tested, named = set(self.tested()), set(self.faults())
+        return [
+            kind
+            for kind, tests in FAULT_TESTS.items()
+            if not tested.intersection(tests) and kind not in named
+        ]
 
     def blind(self) -> dict[str, float]:
         """The faults not named that no test could see after a frozen speed reading: from
