@@ -124,6 +124,12 @@ class Finding:
     unit: str
 
 
+def _median_se(sd: float, n: float) -> float:
+    """Standard error of the median of ``n`` values of σ ``sd`` (√(π/2) that of the mean,
+    for normal values)."""
+    return 1.2533 * sd / math.sqrt(n)
+
+
 def _mean_ci(x: np.ndarray, sigma: float) -> tuple[float, float]:
     """Mean of block means and its half-width at 95 %."""
     return float(np.mean(x)), Z95 * sigma / math.sqrt(len(x))
@@ -213,7 +219,7 @@ def _clamped(values: np.ndarray, law_sd: float) -> Finding:
     (the reference's converts the deceleration into a current)."""
     mid = float(np.median(values))
     sd = max(float(np.std(values, ddof=1)) if len(values) > 1 else 0.0, CLAMP_SLEW_SD)
-    se = 1.2533 * sd / math.sqrt(len(values))
+    se = _median_se(sd, len(values))
     half = Z95 * math.hypot(se, CLAMP_LEVEL_SD, (1 + mid) * law_sd, (1 + mid) * MOTOR_UNIT_SD)
     return Finding("friction", 1 + mid, (1 + mid - half, 1 + mid + half), "factor")
 
@@ -223,8 +229,8 @@ def _charge(values: np.ndarray, own: int) -> Finding:
     unit's own level before (σ :data:`CHARGE_SD` a value; the median of ``own`` values),
     or over the reference's (then the spread of I/k_t between units instead)."""
     mid = float(np.median(values))
-    level_sd = CHARGE_SD * 1.2533 / math.sqrt(own) if own else MOTOR_UNIT_SD
-    half = Z95 * math.hypot(CHARGE_SD * 1.2533 / math.sqrt(len(values)), level_sd)
+    level_sd = _median_se(CHARGE_SD, own) if own else MOTOR_UNIT_SD
+    half = Z95 * math.hypot(_median_se(CHARGE_SD, len(values)), level_sd)
     ci = (1 / (mid * (1 + half)), 1 / (mid * (1 - half)))
     return Finding("torque_constant", 1 / mid, ci, "factor")
 
@@ -350,7 +356,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
     # unit's current-sense offset, which every measured current carries
     mid = float(np.median(currents))
     spread = 1.4826 * float(np.median(np.abs(currents - mid)))
-    se = 1.2533 * spread / math.sqrt(max(currents.size / 2, 1))
+    se = _median_se(spread, max(currents.size / 2, 1))
     half = Z95 * math.hypot(se, CURRENT_OFFSET_SD_A)
     return [Finding("current_limit", mid, (mid - half, mid + half), "A")]
 

@@ -31,6 +31,7 @@ Hand-written (no library computes these).
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -394,7 +395,8 @@ class StepCharge:
         self.c = np.asarray(c, dtype=float)
         self.Ts = float(Ts)
         self.quiet = float(quiet_rpm_s)
-        self._window: list[tuple[float, float]] = []  # the last CHARGE_WINDOW_S: (ω, i)
+        # the last CHARGE_WINDOW_S: (ω rpm, i A)
+        self._window: deque = deque(maxlen=max(1, round(CHARGE_WINDOW_S / self.Ts)))
         self._segment: list[tuple[float, float]] = []  # since the last settled sample
         self._anchor: tuple[float, float] | None = None  # settled (ω rpm, i A)
         self._quiet_since: float | None = None
@@ -403,7 +405,9 @@ class StepCharge:
         self._current = math.nan
         self.start_s = math.nan  # when the segment of the latest value began, s
 
-    def add(self, t_s: float, model_rpm: float, model_accel_rpm_s: float, current_a: float):
+    def add(
+        self, t_s: float, model_rpm: float, model_accel_rpm_s: float, current_a: float
+    ) -> float | None:
         """One sample (the model's speed and acceleration, the measured current); the
         value of the speed change it completes, if any (float, else None)."""
         if math.isfinite(current_a):
@@ -421,8 +425,7 @@ class StepCharge:
             if self._moving_since is None:
                 self._moving_since = t_s
         sample = (model_rpm, self._current)
-        n = max(1, round(CHARGE_WINDOW_S / self.Ts))
-        self._window = [*self._window[-(n - 1) :], sample] if n > 1 else [sample]
+        self._window.append(sample)
         wait = CHARGE_WINDOW_S + max(CHARGE_WINDOW_S, self._motion_s)
         if self._quiet_since is None or t_s - self._quiet_since < wait:
             if not self._segment:
@@ -436,7 +439,8 @@ class StepCharge:
         self._anchor, self._segment, self._motion_s = (speed, current), [], 0.0
         return value
 
-    def _law(self, speed_rpm: np.ndarray) -> np.ndarray:
+    def _law(self, speed_rpm):
+        """The reference's friction current (A) at ``speed_rpm`` (float or array)."""
         return self.c[1] * speed_rpm + self.c[2] * np.sign(speed_rpm)
 
     def _value(self, a: tuple[float, float], b: tuple[float, float]) -> float | None:
@@ -446,7 +450,7 @@ class StepCharge:
         if abs(w_b - w_a) < CHARGE_MONOTONE * path:
             return None
         # the law shifted to the measured settled currents at both ends
-        d_a, d_b = i_a - self._law(np.array(w_a)), i_b - self._law(np.array(w_b))
+        d_a, d_b = i_a - self._law(w_a), i_b - self._law(w_b)
         friction = self._law(speed) + d_a + (d_b - d_a) * (speed - w_a) / (w_b - w_a)
         charge = float(np.sum(current - friction)) * self.Ts
         return charge / (self.c[0] * (w_b - w_a))
