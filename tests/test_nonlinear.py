@@ -1,5 +1,6 @@
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from rwlab.cli import main
 from rwlab.data import IOData
 from rwlab.errors import DataError, FileFormatError, ModelError
 from rwlab.ident import arx, compare, fit_percent
+from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.signals import prbs, rate_limit
 from rwlab.testbed import ExperimentConfig, run_experiment
@@ -33,6 +35,20 @@ def test_servo_fit_recovers_a_noise_free_servo_from_the_linear_start():
     # the delay is resolved to a fraction of a sub-step (h = 5 ms): the sub-step blend has a
     # kink at whole sub-steps, where the truth sits
     assert m.delay == pytest.approx(TRUTH.delay, abs=0.25 * TRUTH.Ts / TRUTH.substeps)
+
+
+def test_servo_fit_is_not_caught_by_a_local_minimum_of_the_delay():
+    # twin unit 187's identification record, from the linear start rwlab identify chose for
+    # it (OE221+K, in rpm): a single start of the delay at 0.25 Ts settled at 0.17 s with a
+    # +2.9 rpm offset and a 315.5 rpm/s rate limit, at 16x the best cost. The unit's sensor
+    # has no offset and every other unit's model has a delay near 0.05 s and 313.3 rpm/s.
+    uy = np.loadtxt(Path(__file__).parent / "data" / "twin_unit187_prbs_est.csv", delimiter=",")
+    linear = PolyModel(B=[0, 0.02700512, -0.0195788], F=[1, -1.84160463, 0.84903095], Ts=0.5)
+    data = IOData(uy[:, 0], uy[:, 1], 0.5)
+    m = servo_fit(data, linear, input_limits=(-7800, 7800), output_limits=(-7800, 7800))
+    assert abs(m.offset) < 0.5  # rpm
+    assert m.delay < 0.1  # s
+    assert m.rate_limit == pytest.approx(313.3, abs=0.5)  # rpm/s
 
 
 def test_without_rate_limit_the_servo_is_its_linear_part():
