@@ -1,6 +1,6 @@
 """Does a threshold calibration carry to a model of a unit it was not counted with?
 
-Run:  python bench/calibration_holdout.py [--cache DIR] [--model-units 0 7 89 94 100]
+Run:  python bench/calibration_holdout.py [--cache DIR] [--model-units UNIT ...]
 
 Leaves each model unit out in turn: the calibration is counted with the other
 models over the tune set's healthy records (``bench_diagnose.records('tune')``,
@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_diagnose import _model, healthy_tune
+from calibrate_thresholds import MODEL_UNITS
 from rwlab.diagnose import HealthyReference
 from rwlab.diagnose.calibration import (
     H_GRID,
@@ -69,7 +70,7 @@ def _k_grid_setting(zs, sides, hours, k, per_hour):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cache", type=Path, help="folder keeping the records (default: temp)")
-    parser.add_argument("--model-units", nargs="+", default=["0", "7", "89", "94", "100"])
+    parser.add_argument("--model-units", nargs="+", default=list(MODEL_UNITS))
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or Path(tmp)
