@@ -303,7 +303,8 @@ def servo_fit(
     # the delay makes the cost multimodal (it trades against the rate limit and the
     # offset): a single start at 0.25·Ts settled on twin unit 187 at 16× the best cost
     # (delay 0.17 s, offset +2.9 rpm, rate limit 315.5 rpm/s), a model that then raised
-    # false speed-bias alarms on every healthy chirp; the best of several starts is kept
+    # false speed-bias alarms on 10 of the tune set's 11 healthy chirps; the best of
+    # several starts is kept
     fits = []
     for share in DELAY_STARTS:
         x0[5] = share * Ts
