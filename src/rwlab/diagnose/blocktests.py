@@ -28,6 +28,14 @@ CHANGE_PRIOR = 0.5
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
+# The change test compares a sample only where its baseline law interpolates: the law's
+# excess over the reference is fitted mostly on the other sign's or other speeds' samples
+# elsewhere, and the reference's own Coulomb/viscous/offset split errs (unit 1534's
+# reference: +4.3 mA offset, viscous ×1.28): a PRBS baseline that held −5500 rpm alone
+# at its negative sign read unit 1372's healthy −2000 rpm holds 7 σ high (a false
+# friction alarm at the default rate, eval4), and the tune set's tail reached 28 σ
+SIGN_MIN = 20  # baseline samples at the sample's sign of speed
+SPAN_MARGIN_RPM = 300.0  # ... whose |ω| span reaches the sample's within this
 BLOCK_OWN = 20  # samples per independent value of the own friction samples (as a block)
 HOLD_BASE = 20  # settled samples at a held speed that give this record's own current there
 HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drift 5 %/√h,
@@ -180,6 +188,7 @@ class FrictionChange(BlockCusum):
         self._xtr = np.zeros(3)
         self._r = [0, 0.0, 0.0]  # count, Σr, Σr² of the baseline
         self._signs = [0, 0]  # baseline samples at positive, negative speed
+        self._spans = [[math.inf, 0.0], [math.inf, 0.0]]  # their |ω| range per sign, rpm
         self._law: np.ndarray | None = None
         self._cov: np.ndarray = np.zeros((3, 3))
         self.law_sd: deque = deque()  # (t_s, σ of the law's prediction, value units)
@@ -192,13 +201,21 @@ class FrictionChange(BlockCusum):
         of a low-friction reference's currents held a high-friction unit's law down, and
         its holds at new speeds alarmed), 5 mA of offset
         (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
-        (the samples of a hold are correlated)."""
+        (the samples of a hold are correlated). The noise is the samples' scatter about
+        the law (a second pass), not about their mean: that counted the law's own change
+        with speed and sign as noise (a unit 10 mA off its reference in sense offset
+        scatters ±10 mA between its holds), the prior then outweighed the data, and the
+        law missed its own baseline by 7 mA (unit 1604's healthy PRBS with unit 1832's
+        model: +1700 rpm held at 18.6 mA, the law 11.5 at +1950: a friction alarm)."""
         n, s1, s2 = self._r
-        noise = math.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0) * self.stats.block) + 1e-6
+        var = max(s2 / n - (s1 / n) ** 2, 0.0)
         _, prior = _law_prior()
-        A = self._xtx / noise**2 + np.diag(1 / prior**2)
-        self._cov = np.linalg.inv(A)  # the law's posterior covariance, A²
-        return self._cov @ self._xtr / noise**2
+        for _ in range(2):
+            noise_sq = max(var, HOLD_MIN_SD_A**2) * self.stats.block
+            self._cov = np.linalg.inv(self._xtx / noise_sq + np.diag(1 / prior**2))  # A²
+            law = self._cov @ self._xtr / noise_sq
+            var = (s2 - 2 * law @ self._xtr + law @ self._xtx @ law) / n  # about the law
+        return law
 
     def add_sample(self, t_s: float, residual_a: float, speed_rpm: float, friction_a: float):
         """One constant-speed sample: current residual (A), speed (rpm), the reference's
@@ -214,12 +231,15 @@ class FrictionChange(BlockCusum):
             self._xtx += np.outer(xo, xo)
             self._xtr += xo * ro
             self._r = [self._r[0] + 1, self._r[1] + ro, self._r[2] + ro * ro]
-            self._signs[int(xo[1] < 0)] += 1
+            side = int(xo[1] < 0)
+            self._signs[side] += 1
+            span = self._spans[side]
+            span[:] = [min(span[0], abs(xo[0])), max(span[1], abs(xo[0]))]
             changed = True
         n = self._r[0]
-        if changed and (n >= 4 * self._need or (n >= self._need and min(self._signs) >= 20)):
+        if changed and (n >= 4 * self._need or (n >= self._need and min(self._signs) >= SIGN_MIN)):
             self._law = self._ridge()
-        if self._law is None:
+        if self._law is None or not self._covered(speed_rpm):
             return False
         own = float(self._law @ x)
         friction_own = float(self._law[:2] @ x[:2])  # the offset is no friction
@@ -230,6 +250,16 @@ class FrictionChange(BlockCusum):
         while self.law_sd[0][0] < t_s - HISTORY_S:
             self.law_sd.popleft()
         return self.add(t_s, sign * (residual_a - own) / unit_friction)
+
+    def _covered(self, speed_rpm: float) -> bool:
+        """The baseline holds this sign of speed (:data:`SIGN_MIN` samples) over a span of
+        |ω| that reaches this speed, within :data:`SPAN_MARGIN_RPM`: the law interpolates."""
+        side = int(speed_rpm < 0)
+        lo, hi = self._spans[side]
+        return (
+            self._signs[side] >= SIGN_MIN
+            and lo - SPAN_MARGIN_RPM <= abs(speed_rpm) <= hi + SPAN_MARGIN_RPM
+        )
 
     def law_uncertainty(self, n: int) -> float:
         """Mean σ of the baseline law's prediction over the last ``n`` values."""

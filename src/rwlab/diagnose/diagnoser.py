@@ -45,8 +45,9 @@ open loop, so friction it does not know shows in the slew's acceleration.
 
 ``friction_change`` compares the friction test's samples at ≥ 1500 rpm with the
 unit's own friction law (viscous, Coulomb and current offset over the
-reference's; ridge least squares on the record's samples older than 300 s): a
-friction rise smaller than the spread between units, when it starts within the
+reference's; ridge least squares on the record's samples older than 300 s), at
+speeds those samples span at that sign (the law interpolates, never extrapolates):
+a friction rise smaller than the spread between units, when it starts within the
 record. ``hold`` (:class:`HoldChange`) compares the current at a held
 command with this record's own first settled samples there, or with the mirror
 command's level (friction is even in speed; the sense offset from the rest before

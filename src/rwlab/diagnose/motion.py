@@ -40,6 +40,7 @@ __all__ = [
     "OFFSET_WINDOW",
     "REST_BAND_RPM",
     "REST_MODEL_RPM",
+    "REST_NEAR_RPM",
     "SLEW_SHARE",
     "SLEW_SIGMA",
     "RestReading",
@@ -66,6 +67,14 @@ REST_STEP_RPM = 50.0  # ... or where the reading moved this much since the last 
 # (≥ 100 rpm/s at 0.5 s: a third of the acceleration limit, so not a wheel held at a low speed)
 REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (healthy units:
 # at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
+# A reading this close to a counted value, but not equal, restarts that value's count: a
+# motion that repeats (a chirp's fast end rocking the wheel through zero at one amplitude)
+# reads nearly the same low speed at each pass, now and then exactly (unit 1305's healthy
+# chirp, eval4: −11.8 rpm five times among −11.7 to −12.2, a false bias alarm with unit
+# 1502's model). Next to a bias b, the other readings near zero are b plus a speed the Hall
+# edges measured, at least the firmware's lowest (the twin's min_measurable_rpm, 5 rpm),
+# never within this of b: the bias cases' readings never came closer than 5 rpm after onset
+REST_NEAR_RPM = 2.0
 # σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations) on the
 # identification's signal, a stepped PRBS: pooled over the tune set's healthy PRBS records
 # (units 1–6, 101–136 with unit 0's model: 125 slews, within-record σ 0.29; chirps 0.40,
@@ -317,7 +326,8 @@ class RestReading:
     bias itself, exactly, every time; a healthy reading near zero repeats a non-zero
     value only by chance. The test counts the non-zero values read near zero speed
     (changed readings only: a frozen sensor is the stuck test's) and alarms when one
-    value comes :data:`REST_COUNT` times with no 0 between. The diagnoser gives it
+    value comes :data:`REST_COUNT` times with no 0 between and no other reading within
+    :data:`REST_NEAR_RPM` of it (a repeating motion's near-equal readings). The diagnoser gives it
     readings within :data:`REST_BAND_RPM` where the model passes through zero (within
     :data:`REST_MODEL_RPM`, accelerating) or where the reading moved by
     :data:`REST_STEP_RPM` since the last sample (a wheel whose current is clamped passes
@@ -351,6 +361,8 @@ class RestReading:
         if speed_rpm == 0.0:
             self.restart()
             return False
+        for near in [v for v in self._counts if 0 < abs(v - speed_rpm) <= REST_NEAR_RPM]:
+            del self._counts[near]  # a repeating motion's cluster, not one exact value
         self._counts[speed_rpm] = self._counts.get(speed_rpm, 0) + 1
         self.value = speed_rpm
         self.statistic = float(self._counts[speed_rpm])
