@@ -21,7 +21,7 @@ runs restarted after every alarm over every record; each CUSUM with each model's
 reference value k, over shares of its tolerance between units (``calibration.SHARES``:
 what carries to a model of another unit, whatever its k); the counts per threshold
 go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
-~10 s per record to make (cached in ``--cache``); about 12 min to count with 16 models
+~10 s per record to make (cached in ``--cache``); about 10 min to count with 16 models
 (records cached, two cores).
 ``--offset-sigma`` also prints the σ of the offset test's window intercepts on
 these records (the constant ``OFFSET_SIGMA_RPM`` of rwlab.diagnose.diagnoser).
