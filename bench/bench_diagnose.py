@@ -154,10 +154,10 @@ HEALTHY = {
 # that 42 units hold too few of the spread's edge: 12 % of the tune units have I/k_t ≥
 # 1.045 × nominal, 0 % of eval3's, 8 % of the population's
 CALIBRATION = ((101, 36, 3000, "x"), (2000, 78, 52000, "y"))
-FIRST_FAULTY_UNIT = {"tune": 41, "eval": 61, "eval2": 231, "eval3": 631, "eval4": 1401}
-FIRST_FAULTY_UNIT.update(eval5=1701, eval6=2301)
-FAULT_SEED = {"tune": 200, "eval": 2000, "eval2": 8000, "eval3": 12000, "eval4": 14000}
-FAULT_SEED.update(eval5=16000, eval6=18000)
+FIRST_FAULTY_UNIT = dict(tune=41, eval=61, eval2=231, eval3=631, eval4=1401, eval5=1701, eval6=2301)
+FAULT_SEED = dict(
+    tune=200, eval=2000, eval2=8000, eval3=12000, eval4=14000, eval5=16000, eval6=18000
+)
 
 
 def _faults(text: str, onset: float) -> tuple[str, ...]:
