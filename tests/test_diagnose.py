@@ -217,6 +217,40 @@ def test_diagnose_refuses_an_acceleration_mode_record(tmp_path, model_file):
     assert result.exit_code == 2 and "acceleration-mode" in result.output
 
 
+def test_diagnose_refuses_a_record_commanded_faster_than_the_model(tmp_path, model_file):
+    """A healthy chirp commanded every 0.1 s, sampled at the model's 0.5 s, is not the
+    command the wheel was given: diagnosed, it raised a current-limit alarm (a new user's
+    trial, round 3). Refused as live diagnosis refuses it, saying what to do."""
+    path = tmp_path / "fast.mcap"
+    run_experiment(ExperimentConfig(signal="chirp", duration=60, Ts=0.1, seed=2), path)
+    args = ["diagnose", str(path), "--model", str(model_file), "--out", str(tmp_path / "d")]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2 and "--Ts 0.5" in result.output, result.output
+    assert not (tmp_path / "d").exists()
+
+
+def test_dropout_count_takes_the_bus_rate_unless_the_reference_lost_more(model_file):
+    """A 20-minute identification record's few lost frames are a poor loss rate: 3 lost
+    (1.3 expected on the calibration's 640 h of the same bus) set the count at 4 frames a
+    block, and a 0.3-s dropout (3 frames) went unseen with that model (units 1812, 2744).
+    Such a reference takes the calibration's rate; one that lost far more than chance
+    (a lossier bus) keeps its own, and a higher count."""
+    import dataclasses
+
+    from rwlab.diagnose import Diagnoser
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model_file)
+    ref = HealthyReference.from_model_file(model_file)
+
+    def count(lost: int) -> int:
+        own = dataclasses.replace(ref, lost_per_sample=(lost + 0.5) / ref.samples)
+        return Diagnoser(wheel, own).thresholds["dropout"]
+
+    assert count(0) == count(3) == 3
+    assert count(40) > 3
+
+
 def test_diagnose_refuses_a_model_without_reference(tmp_path, model_file):
     info = json.loads(model_file.read_text())
     del info["healthy_reference"]

@@ -71,8 +71,9 @@ delivers is a warning), Siegmund's approximation (:mod:`detect`) where the
 calibration cannot say. Two
 sample tests complete the set: ``stuck`` (a run of identical non-zero speed
 readings, length from the reference's repeat probability) and ``dropout``
-(telemetry frames lost in a 10 s block beyond what the reference's loss rate
-allows, Poisson); a third, ``rest``
+(telemetry frames lost in a 10 s block beyond what the bus's loss rate allows,
+Poisson: the reference record's rate where it lost more than chance, else the
+calibration's); a third, ``rest``
 (:class:`~rwlab.diagnose.motion.RestReading`), reads a telemetry bias in the
 reading where the wheel passes through zero speed. Samples without a new frame,
 and the one after them, enter no test. A detector alarms once and stays latched
@@ -403,7 +404,7 @@ class Diagnoser:
         self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
         block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
-        mean = ref.lost_per_sample * block
+        mean = self._loss_rate(ref) * block
         p_block = block / self.arl0  # a block's share of the false-alarm budget
         n = 1
         while poisson.sf(n - 1, mean) > p_block:
@@ -411,6 +412,26 @@ class Diagnoser:
         n = int(self._calibrated("dropout", n))
         self._detectors["dropout"] = Dropout(block, n)
         self.thresholds["dropout"] = n
+
+    def _loss_rate(self, ref: HealthyReference) -> float:
+        """Telemetry frames a healthy bus loses per sample: the reference record's rate
+        where its losses are more than the calibration's hours of the bus would give it by
+        chance (p < 0.01), else the calibration's rate (its blocks with a lost frame). A
+        20-minute record's few losses are a poor rate: one that lost 3 frames (unit 1812's
+        and 2744's, against 1.3 expected) set the count at 4 frames a block, and a 0.3-s
+        dropout loses 3, so the model never saw one."""
+        curve = self.calibration.curves.get("dropout") if self.calibration else None
+        if curve is None or not curve.decisions or curve.thresholds[0] != 1:
+            return ref.lost_per_sample
+        assert self.calibration is not None
+        if not math.isclose(self.calibration.Ts, self.Ts, rel_tol=1e-6):
+            return ref.lost_per_sample
+        block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
+        bus = -math.log1p(-curve.alarms[0] / curve.decisions) / block
+        lost = round(ref.lost_per_sample * ref.samples - 0.5)  # the Jeffreys estimate's count
+        if lost > 0 and poisson.sf(lost - 1, bus * ref.samples) < 0.01:
+            return ref.lost_per_sample
+        return bus
 
     @staticmethod
     def _motor_headroom(ref: HealthyReference) -> float:

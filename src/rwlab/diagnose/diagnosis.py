@@ -388,6 +388,15 @@ def record_columns(data: IOData, wheel):
             f"record on the model's grid, load_record(path, {wheel.Ts:g}, outputs=("
             f"{', '.join(repr(o) for o in RECORD_OUTPUTS)}))"
         )
+    issued = data.source.get("Ts")  # a testbed record's command period, s
+    if isinstance(issued, (int, float)) and not math.isclose(issued, wheel.Ts, rel_tol=1e-6):
+        # a chirp commanded every 0.1 s, sampled at the model's 0.5 s, is not what the wheel
+        # was given: the model lags it, and healthy chirps raised a current-limit alarm
+        raise DataError(
+            f"the record's commands came every {issued:g} s and the model runs at "
+            f"{wheel.Ts:g} s: the model cannot follow the command the wheel was given; "
+            f"record the test at --Ts {wheel.Ts:g}, or identify a model at {issued:g} s"
+        )
     if data.nu != 1:
         raise DataError(f"diagnosis needs one input (the speed command), got {data.nu}")
     if data.input_units and data.input_units[0] == "rpm/s":
