@@ -228,18 +228,20 @@ def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
     for week, factor in enumerate(factors):
         faults = () if factor == 1.0 else (f"friction={factor}@0",)
         cfg = ExperimentConfig(duration=900, seed=30, unit=5, faults=faults)
-        run_experiment(cfg, folder / f"week{week}.mcap")
+        run_experiment(cfg, folder / f"{'cba'[week]}_week{week}.mcap")  # names against time
     result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d")
     assert result.exit_code == 0, result.output
     assert "estimates: " in result.output
+    shown = [line.split()[0] for line in result.output.splitlines() if "_week" in line[:8]]
+    assert shown == ["c_week0.mcap", "b_week1.mcap", "a_week2.mcap"]  # start-time order
     trend = json.loads((tmp_path / "d" / "trend.json").read_text())
     validator = jsonschema.Draft202012Validator
     jsonschema.validate(trend, schemas.schema("trend"), cls=validator)
-    for name in ("week0", "week1"):
+    for name in ("c_week0", "b_week1"):
         report = json.loads((tmp_path / "d" / name / "diagnosis.json").read_text())
         jsonschema.validate(report, schemas.schema("diagnosis"), cls=validator)
     records = trend["records"]
-    assert [p["record"] for p in records] == ["week0.mcap", "week1.mcap", "week2.mcap"]
+    assert [p["record"] for p in records] == ["c_week0.mcap", "b_week1.mcap", "a_week2.mcap"]
     assert records[0]["faults"] == {}  # the healthy record: no alarm, yet a size
     friction = [p["estimates"]["friction"] for p in records]
     assert all(f["ci95"][0] <= f["magnitude"] <= f["ci95"][1] for f in friction)

@@ -324,23 +324,24 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     if not records:
         raise ConfigError(f"{folder}: no records (.mcap) in the folder")
     names = [p.stem for p in records] + ["trend.json", "trend.html"]
-    lines = []
+    lines: list[tuple[str, str]] = []  # (start time, console line)
     with _output(out, names, force, "diagnosis trend") as stage:
         points = []
         for path in records:
             result, _ = _diagnose_one(path, stage / path.stem, wheel, reference, rate)
             start = read_record(path).metadata.get("start_utc", "")
             points.append(trend_point(path.name, start, result))
-            named = ", ".join(_finding_text(a) for a in result.alarms) or (
+            named = ", ".join(f"{_finding_text(a)} ({a.detector})" for a in result.alarms) or (
                 "no alarm" if result.model_tested() else "no alarm (nothing tested)"
             )
             sizes = ", ".join(
                 f"{kind} {e['magnitude']:.3g}{'' if e['unit'] == 'factor' else ' ' + e['unit']}"
                 for kind, e in result.estimates.items()
             )
-            lines.append(f"{path.name:<32} {named}" + (f"  (estimates: {sizes})" if sizes else ""))
+            line = f"{path.name:<32} {named}" + (f"  (estimates: {sizes})" if sizes else "")
+            lines.append((start, line))
         paths = write_trend(points, stage)
-    for line in lines:
+    for _, line in sorted(lines, key=lambda row: row[0]):  # start-time order, as the trend
         click.echo(line)
     click.echo(_wrote(out, paths.values()))
 
