@@ -184,6 +184,22 @@ def test_a_truncated_record_is_diagnosed_with_a_warning(tmp_path, model_file):
     assert 'id="coverage-table"' in page and 'id="estimates-table"' in page
 
 
+def test_a_record_cut_to_one_sample_is_diagnosed_without_numpy_warnings(tmp_path, model_file):
+    """A new user's 5-kB cut of a record: one sample. The report's sample time came
+    from the samples' spacing, and numpy warned of an empty mean; it is the model's."""
+    path = tmp_path / "r.mcap"
+    run_experiment(ExperimentConfig(duration=60, seed=7), path)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:5000])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 0, result.output
+    assert "Mean of empty slice" not in result.output
+    page = (tmp_path / "d" / "report.html").read_text()
+    assert "at Ts = 0.5 s" in page
+
+
 # -- output folders and the live console --------------------------------------------------
 
 

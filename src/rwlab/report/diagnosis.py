@@ -77,7 +77,7 @@ def _page(
     t = h["t_s"]
     page = Page(f"Fault diagnosis — {title}")
     page.text(
-        f"The identified model ran beside the telemetry at Ts = {np.median(np.diff(t)):g} s. "
+        f"The identified model ran beside the telemetry at Ts = {diagnosis.reference.Ts:g} s. "
         f"The detectors compare it with the healthy reference measured on the identification "
         f"record ({diagnosis.reference.source or 'see model.json'}), from the first sample on; "
         f"the thresholds were asked for {diagnosis.false_alarms_per_hour:g} false alarms "
