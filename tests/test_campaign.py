@@ -44,6 +44,17 @@ def _rwlab(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
+def _same_to_round_off(a, b) -> bool:
+    """Two JSON values alike, floats within 1e-6 relative (1e-12 absolute)."""
+    if isinstance(a, float) or isinstance(b, float):
+        return isinstance(a, (int, float)) and math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-12)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_to_round_off(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(map(_same_to_round_off, a, b))
+    return a == b
+
+
 def _file(tmp_path, text):
     path = tmp_path / "d.toml"
     path.write_text(text)
@@ -395,9 +406,13 @@ def test_identify_a_folder_is_the_single_record_study_for_each(tmp_path):
     single = tmp_path / "single"
     r = _rwlab("identify", fleet / "unit_a.csv", "--preprocess", "detrend", "--out", single)
     assert r.exit_code == 0, r.output
+    # a CSV holds no testbed record's current: the advice is the record, not a longer one
+    assert "identify the testbed record (.mcap)" in r.output and "longer" not in r.output
     one = json.loads((single / "study.json").read_text())
     in_fleet = json.loads((tmp_path / "out" / "unit_a" / "study.json").read_text())
-    assert in_fleet == one
+    # to round-off: Dask's workers run BLAS on one thread, this process on several, and an
+    # iterative fit among the others then differs in its last digits
+    assert _same_to_round_off(in_fleet, one)
     b = json.loads((tmp_path / "out" / "unit_b" / "study.json").read_text())
     assert b["chosen"]["structure"] == one["chosen"]["structure"]  # an affine copy: same fit
     assert b["chosen"]["fit_percent"] == pytest.approx(one["chosen"]["fit_percent"], abs=1e-3)

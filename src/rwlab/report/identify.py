@@ -179,9 +179,14 @@ def identify_into(
     if isinstance(reference, dict):
         model = dataclasses.replace(model, healthy_reference=reference)
     elif echo is not None:
+        advice = (
+            "identify the testbed record (.mcap) this data came from"
+            if reference == NOT_A_RECORD
+            else "identify a longer or richer healthy record"
+        )
         echo(
             f"warning: no healthy reference for fault diagnosis ({reference}); rwlab "
-            "diagnose refuses this model: identify a longer or richer healthy record"
+            f"diagnose refuses this model: {advice}"
         )
     paths = write_study(result, model, folder, force=options["force"])
     study = result.to_dict()
@@ -208,6 +213,9 @@ def _after_first(progress, first: Callable[[], None]):
     return report
 
 
+NOT_A_RECORD = "not a testbed record (.mcap with motor current)"
+
+
 def _healthy_reference(file, model) -> dict | str:
     """The healthy reference measured on a testbed record, or why there is none."""
     import numpy as np
@@ -217,7 +225,7 @@ def _healthy_reference(file, model) -> dict | str:
     from rwlab.wheel import IdentifiedWheel
 
     if Path(file).suffix.lower() != ".mcap":
-        return "not a testbed record (.mcap with motor current)"
+        return NOT_A_RECORD
     try:
         wheel = IdentifiedWheel.from_file(model)
         data = load_record(
