@@ -404,7 +404,7 @@ class Diagnoser:
         self._detectors["stuck"] = RunTest(int(n_stuck))
         self.thresholds["stuck"] = self._detectors["stuck"].n
         block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
-        mean = self._loss_rate(ref) * block
+        mean = self._loss_rate(ref, block) * block
         p_block = block / self.arl0  # a block's share of the false-alarm budget
         n = 1
         while poisson.sf(n - 1, mean) > p_block:
@@ -413,21 +413,19 @@ class Diagnoser:
         self._detectors["dropout"] = Dropout(block, n)
         self.thresholds["dropout"] = n
 
-    def _loss_rate(self, ref: HealthyReference) -> float:
+    def _loss_rate(self, ref: HealthyReference, block: int) -> float:
         """Telemetry frames a healthy bus loses per sample: the reference record's rate
         where its losses are more than the calibration's hours of the bus would give it by
         chance (p < 0.01), else the calibration's rate (its blocks with a lost frame). A
         20-minute record's few losses are a poor rate: one that lost 3 frames (unit 1812's
         and 2744's, against 1.3 expected) set the count at 4 frames a block, and a 0.3-s
         dropout loses 3, so the model never saw one."""
-        curve = self.calibration.curves.get("dropout") if self.calibration else None
+        cal = self.calibration
+        same_ts = cal is not None and math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
+        curve = cal.curves.get("dropout") if cal is not None and same_ts else None
         if curve is None or not curve.decisions or curve.thresholds[0] != 1:
             return ref.lost_per_sample
-        assert self.calibration is not None
-        if not math.isclose(self.calibration.Ts, self.Ts, rel_tol=1e-6):
-            return ref.lost_per_sample
-        block = max(1, round(DROPOUT_BLOCK_S / self.Ts))
-        bus = -math.log1p(-curve.alarms[0] / curve.decisions) / block
+        bus = -math.log1p(-curve.alarms[0] / curve.decisions) / block  # per sample
         lost = round(ref.lost_per_sample * ref.samples - 0.5)  # the Jeffreys estimate's count
         if lost > 0 and poisson.sf(lost - 1, bus * ref.samples) < 0.01:
             return ref.lost_per_sample
