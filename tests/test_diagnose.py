@@ -277,7 +277,7 @@ def test_diagnose_over_a_folder_writes_the_trend(tmp_path, model_file):
         run_experiment(cfg, folder / f"week{week}.mcap")
     args = ["diagnose", str(folder), "--model", str(model_file), "--out", str(tmp_path / "d")]
     result = CliRunner().invoke(main, args)
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 1, result.output  # friction ×2 alarms: a script can tell
     trend = json.loads((tmp_path / "d" / "trend.json").read_text())
     sizes = [p["faults"]["friction"]["magnitude"] for p in trend["records"]]
     assert sizes[0] < sizes[1]  # the wear grows

@@ -4,6 +4,7 @@ the report and the output folders (issue 23's newcomer findings)."""
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import jsonschema
@@ -128,6 +129,30 @@ def test_a_twenty_second_record_says_what_it_could_not_test(tmp_path, model_file
     assert "nothing to decide on:" in result.output
 
 
+def _printed_estimate(output: str, kind: str) -> tuple[float, float, float]:
+    """``kind``'s size and 95 % interval on the console's estimates line."""
+    line = next(x for x in output.splitlines() if x.startswith("estimates against"))
+    m = re.search(rf"{kind} (\S+) \[(\S+), (\S+)\]", line)
+    assert m, line
+    return float(m[1]), float(m[2]), float(m[3])
+
+
+@pytest.mark.parametrize(("factor", "status"), [(1.0, 0), (2.0, 1)])
+def test_the_exit_status_says_whether_a_fault_was_found_and_the_sizes_are_printed(
+    tmp_path, model_file, factor, status
+):
+    """A script tells a fault from health by the exit status (1 and 0), as ``diff``; the
+    console gives the sizes alarm or not, and the interval holds the injected factor."""
+    faults = () if factor == 1.0 else (f"friction={factor}@0",)
+    run_experiment(ExperimentConfig(duration=600, seed=21, faults=faults), tmp_path / "r.mcap")
+    result = _cli("diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == status, result.output
+    assert ("alarm at" in result.output) == bool(status)
+    assert (tmp_path / "d" / "diagnosis.json").exists()  # written either way
+    size, low, high = _printed_estimate(result.output, "friction")
+    assert low <= factor <= high and low < size < high
+
+
 def test_each_test_says_what_it_decided_on(tmp_path, model_file, wheel):
     data, d = _diagnosed(tmp_path / "r.mcap", 5, model_file, wheel)
     # the dropout test decides on each whole 10-s block of the record
@@ -246,9 +271,11 @@ def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
         cfg = ExperimentConfig(duration=900, seed=30, unit=5, faults=faults)
         run_experiment(cfg, folder / f"{'cba'[week]}_week{week}.mcap")  # names against time
     result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d")
-    assert result.exit_code == 0, result.output
+    rows = [line for line in result.output.splitlines() if "_week" in line[:8]]
+    alarmed = any("no alarm" not in row for row in rows)
+    assert result.exit_code == int(alarmed), result.output  # 1 when any record alarmed
     assert "estimates: " in result.output
-    shown = [line.split()[0] for line in result.output.splitlines() if "_week" in line[:8]]
+    shown = [row.split()[0] for row in rows]
     assert shown == ["c_week0.mcap", "b_week1.mcap", "a_week2.mcap"]  # start-time order
     trend = json.loads((tmp_path / "d" / "trend.json").read_text())
     validator = jsonschema.Draft202012Validator

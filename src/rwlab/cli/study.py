@@ -186,6 +186,7 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     what each test decided on, residual statistics) and OUT/report.html; says
     which tests had nothing to decide on and warns about faults no test could
     see (a record too short): "no alarm" means only as much as was tested.
+    Exit status 1 when any record raised an alarm, 0 when none did, 2 on an error.
 
     RECORD may be a folder of records of one wheel: each is diagnosed into
     OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
@@ -199,13 +200,25 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     wheel = IdentifiedWheel.from_json(model_file)
     reference = HealthyReference.from_model_file(model_file)
     if Path(record).is_dir():
-        _diagnose_folder(Path(record), Path(out), wheel, reference, false_alarms_per_hour, force)
-        return
-    with _output(out, _DIAGNOSIS_FILES, force, "diagnosis") as stage:
-        result, events = _diagnose_one(Path(record), stage, wheel, reference, false_alarms_per_hour)
-    for line in diagnosis_lines(result, events):
-        click.echo(line)
-    click.echo(_wrote(out, _DIAGNOSIS_FILES))
+        results = _diagnose_folder(
+            Path(record), Path(out), wheel, reference, false_alarms_per_hour, force
+        )
+    else:
+        with _output(out, _DIAGNOSIS_FILES, force, "diagnosis") as stage:
+            result, events = _diagnose_one(
+                Path(record), stage, wheel, reference, false_alarms_per_hour
+            )
+        for line in diagnosis_lines(result, events):
+            click.echo(line)
+        click.echo(_wrote(out, _DIAGNOSIS_FILES))
+        results = [result]
+    if any(r.alarms for r in results):
+        sys.exit(EXIT_ALARM)
+
+
+EXIT_ALARM = 1
+"""``rwlab diagnose``'s exit status when a record raised an alarm (0: none; 2: an error),
+as ``diff`` and ``grep`` tell a script what they found; the outputs are written either way."""
 
 
 _DIAGNOSIS_FILES = ("diagnosis.json", "report.html")
@@ -258,12 +271,29 @@ def diagnosis_lines(result, events: list[dict]) -> list[str]:
             f"blind after {min(blind.values()):.1f} s (the speed reading froze, every "
             f"model-based test reads it): {', '.join(blind)} not seen from then on"
         )
+    if result.estimates:
+        lines.append(
+            "estimates against a healthy unit (95 % interval with the spread between units): "
+            + _estimates_text(result.estimates, "ci95_units")
+        )
     injected = [
         f"{e['message']} (at {e['t']:.1f} s)" for e in events if e["kind"] == "fault_injected"
     ]
     if injected:
         lines.append("injected (record's events): " + ", ".join(injected))
     return lines
+
+
+def _estimates_text(estimates: dict[str, dict], interval: str | None = None) -> str:
+    """``friction 1.02 [0.9, 1.15], speed_sensor_bias 0.3 [-2, 2.6] rpm``: each estimate,
+    with its ``interval`` (a key of the estimate) when one is named."""
+
+    def text(kind: str, e: dict) -> str:
+        ci = f" [{e[interval][0]:.3g}, {e[interval][1]:.3g}]" if interval else ""
+        unit = "" if e["unit"] == "factor" else " " + e["unit"]
+        return f"{kind} {e['magnitude']:.3g}{ci}{unit}"
+
+    return ", ".join(text(kind, e) for kind, e in estimates.items())
 
 
 def _count(n: int, unit: str) -> str:
@@ -312,9 +342,10 @@ def _named(exc: RwlabError, record: Path) -> RwlabError:
         return RwlabError(f"{record}: {exc}")
 
 
-def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> None:
+def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> list:
     """Every record of ``folder`` diagnosed, and the trend of each fault's size; the
-    folder appears whole or not at all (a record that fails leaves nothing, and is named)."""
+    folder appears whole or not at all (a record that fails leaves nothing, and is named).
+    Returns each record's diagnosis."""
     from rwlab.report.diagnosis import trend_point, write_trend
     from rwlab.testbed import read_record
 
@@ -326,24 +357,23 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     names = [p.stem for p in records] + ["trend.json", "trend.html"]
     lines: list[tuple[str, str]] = []  # (start time, console line)
     with _output(out, names, force, "diagnosis trend") as stage:
-        points = []
+        points, results = [], []
         for path in records:
             result, _ = _diagnose_one(path, stage / path.stem, wheel, reference, rate)
+            results.append(result)
             start = read_record(path).metadata.get("start_utc", "")
             points.append(trend_point(path.name, start, result))
             named = ", ".join(f"{_finding_text(a)} ({a.detector})" for a in result.alarms) or (
                 "no alarm" if result.model_tested() else "no alarm (nothing tested)"
             )
-            sizes = ", ".join(
-                f"{kind} {e['magnitude']:.3g}{'' if e['unit'] == 'factor' else ' ' + e['unit']}"
-                for kind, e in result.estimates.items()
-            )
+            sizes = _estimates_text(result.estimates)
             line = f"{path.name:<32} {named}" + (f"  (estimates: {sizes})" if sizes else "")
             lines.append((start, line))
         paths = write_trend(points, stage)
     for _, line in sorted(lines, key=lambda row: row[0]):  # start-time order, as the trend
         click.echo(line)
     click.echo(_wrote(out, paths.values()))
+    return results
 
 
 def _identify_fleet(folder: Path, out: Path, options, workers, scheduler, force) -> None:
