@@ -80,6 +80,7 @@ DETECTORS = (
     "rest",
     "offset",
     "slew",
+    "slew_change",
     "friction",
     "friction_change",
     "hold",

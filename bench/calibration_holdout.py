@@ -41,7 +41,7 @@ from rwlab.wheel import IdentifiedWheel
 
 K_GRID = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.3, 2.6, 3.0, 3.5, 4.0)
 K_GRID += (4.6, 5.3, 6.0, 7.0, 8.0, 9.2, 10.6, 12.2, 14.0, 16.0, 18.5, 21.0, 24.0, 28.0)
-DETECTORS = ("friction", "friction_change", "motor", "speed", "lag", "slew")
+DETECTORS = ("friction", "friction_change", "motor", "speed", "lag", "slew", "slew_change")
 RATES = (1.0, 10.0, 100.0)
 
 

@@ -1346,3 +1346,51 @@ def test_the_units_own_current_at_the_limit_tells_a_clamp_from_a_weak_motor(k_t,
     else:
         assert found.kind == "current_limit"
         assert found.ci[0] <= clamp_a <= found.ci[1]
+
+
+def test_slew_change_compares_a_slew_with_the_records_own_earlier_slews():
+    """Slews every 10 s at the healthy −0.9 ± 0.2, then friction ×1.5 adds +1 (a default
+    chirp's short slews, nominal Coulomb decelerations): the change alarms within five
+    slews; the same record going on healthy, or lower (a chirp's later slews read −1.1),
+    never does; the baseline holds only slews a guard older."""
+    from rwlab.diagnose.blocktests import SLEW_GUARD_S, SlewChange
+
+    times = np.arange(480.0, 700.0, 10.0)
+    wobble = 0.2 * np.where(np.arange(times.size) % 2, 1.0, -1.0)
+
+    def run(after: float) -> tuple[SlewChange, list[float]]:
+        det = SlewChange(0.3, 1 / 20, cusum_threshold(1e5))
+        values = np.where(times < 600, -0.9, after) + wobble
+        alarms = []
+        for t, v in zip(times, values, strict=True):
+            if det.add_slew(t, v):
+                alarms.append(t)
+                det.restart()
+        return det, alarms
+
+    _, alarms = run(after=+0.1)
+    assert alarms and 600 <= alarms[0] <= 640
+    for healthy in (-0.9, -1.1):
+        assert run(after=healthy)[1] == []
+    det, _ = run(after=-0.9)
+    # at the last slew the baseline is the latest ten slews a guard older
+    base = (-0.9 + wobble)[times <= times[-1] - SLEW_GUARD_S][-10:]
+    assert det.mean == pytest.approx(base.mean())
+
+
+@pytest.mark.slow
+def test_friction_on_a_chirp_the_reference_level_missed_is_found_against_its_own_slews(
+    tmp_path, unit_model_file
+):
+    """Unit 2813's friction ×1.5 from 600 s of a chirp: its slews after the onset read
+    about +1 over its own before, but stayed within the reference test's tolerance
+    between units (no alarm before the change test); found within 300 s, named, sized."""
+    path = tmp_path / "chirp.mcap"
+    cfg = ExperimentConfig(
+        signal="chirp", duration=900, seed=94813, unit=2813, faults=("friction=1.5@600",)
+    )
+    run_experiment(cfg, path)
+    alarms = _diagnose(path, unit_model_file).alarms
+    assert alarms and alarms[0].detector == "slew_change", alarms
+    assert alarms[0].kind == "friction" and 600 <= alarms[0].t_s <= 900
+    assert alarms[0].ci[0] <= 1.5 <= alarms[0].ci[1]

@@ -1,7 +1,7 @@
 """The block tests of the diagnosis: one test's qualifying values into block means and a
 CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own past
-(:class:`FrictionChange`, :class:`HoldChange`, :class:`ClampedFriction`,
-:class:`FrozenMotor`) or count lost frames (:class:`Dropout`).
+(:class:`FrictionChange`, :class:`SlewChange`, :class:`HoldChange`,
+:class:`ClampedFriction`, :class:`FrozenMotor`) or count lost frames (:class:`Dropout`).
 :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each sample; its module docstring
 says what each test takes and alarms on."""
 
@@ -63,6 +63,13 @@ CHARGE_EXCESS = 0.08  # a step's charge over the unit's own level before the fre
 CHARGE_MARGIN = 0.04  # ... over the reference's, beyond the datasheet's I/k_t headroom (the
 # same records: at most 0.023 below that bound with either model)
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
+# The slew-change test's baseline: the record's slews at least SLEW_GUARD_S old, the
+# latest SLEW_BASE_MAX of them, at least SLEW_BASE_MIN. A chirp's slews through zero
+# qualify only while its swing is ±500–3000 rpm (the default chirp: 480–680 s, every
+# 10–40 s), so a guard of minutes leaves no baseline before they end
+SLEW_GUARD_S = 60.0
+SLEW_BASE_MIN = 3
+SLEW_BASE_MAX = 10
 
 
 def _law_prior() -> tuple[np.ndarray, np.ndarray]:
@@ -265,6 +272,31 @@ class FrictionChange(BlockCusum):
         """Mean σ of the baseline law's prediction over the last ``n`` values."""
         sd = [v for _, v in list(self.law_sd)[-n:]]
         return float(np.mean(sd)) if sd else 0.0
+
+
+class SlewChange(BlockCusum):
+    """The slew asymmetry against this record's own earlier slews (:data:`SLEW_GUARD_S`
+    old or more): friction smaller than the spread between units, on a profile the
+    reference's level does not describe. A chirp's short slews read lower than a PRBS's
+    (−1.1 against −0.9 nominal Coulomb decelerations on healthy units), so the reference
+    test needs about 14 slews after a ×1.5 onset where a chirp gives 7; against its own
+    slews the step is about +1 (3 σ) each."""
+
+    def __init__(self, sigma: float, fraction: float, h: float) -> None:
+        """``sigma``: one slew's σ within a record; ``fraction``: slews per sample."""
+        super().__init__(BlockStats(0.0, sigma, 1, fraction, 0, "tune set"), 0.0, h, "up")
+        self._pending: deque = deque()  # (t_s, value) younger than SLEW_GUARD_S
+        self._base: deque = deque(maxlen=SLEW_BASE_MAX)
+
+    def add_slew(self, t_s: float, value: float) -> bool:
+        """One slew's asymmetry at ``t_s``; True on an alarm."""
+        self._pending.append((t_s, value))
+        while self._pending[0][0] <= t_s - SLEW_GUARD_S:
+            self._base.append(self._pending.popleft()[1])
+        if len(self._base) < SLEW_BASE_MIN:
+            return False
+        self.mean = float(np.mean(self._base))
+        return self.add(t_s, value)
 
 
 class HoldChange(BlockCusum):

@@ -48,7 +48,10 @@ unit's own friction law (viscous, Coulomb and current offset over the
 reference's; ridge least squares on the record's samples older than 300 s), at
 speeds those samples span at that sign (the law interpolates, never extrapolates):
 a friction rise smaller than the spread between units, when it starts within the
-record. ``hold`` (:class:`HoldChange`) compares the current at a held
+record. ``slew_change`` (:class:`~rwlab.diagnose.blocktests.SlewChange`) compares
+each slew's asymmetry with the record's own slews a minute old or more: friction ×1.5
+on a chirp, whose short slews read below the reference's PRBS level and come only
+for about three minutes. ``hold`` (:class:`HoldChange`) compares the current at a held
 command with this record's own first settled samples there, or with the mirror
 command's level (friction is even in speed; the sense offset from the rest before
 the first motion): friction ×1.5 on steps, named once the motor test has seen an
@@ -106,6 +109,7 @@ from rwlab.diagnose.blocktests import (
     FrictionChange,
     FrozenMotor,
     HoldChange,
+    SlewChange,
     steady,
 )
 from rwlab.diagnose.calibration import (
@@ -165,13 +169,14 @@ STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model tu
 HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 # every CUSUM test, in the order a report shows them (stat_NAME in the history)
-CUSUM_TESTS = (*BLOCKS, "friction_change", "hold", "offset", "slew")
+CUSUM_TESTS = (*BLOCKS, "friction_change", "hold", "offset", "slew", "slew_change")
 # what each test decides on (Diagnoser.coverage); the model-based tests are all but the
 # last three, which read the telemetry alone
 DECIDES_ON = {
     **{name: "blocks" for name in (*BLOCKS, "friction_change", "hold")},
     "offset": "60-s windows",
     "slew": "slews",
+    "slew_change": "slews",
     "rest": "readings near 0 rpm",
     "clamped": "clamped slews",
     "charge": "speed changes after a frozen reading",
@@ -389,6 +394,10 @@ class Diagnoser:
             det = BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
+            change = SlewChange(SLEW_SIGMA, stats.fraction, h_analytic)
+            change.h = self._calibrated("slew_change", h_analytic, change)
+            self.thresholds["slew_change"] = change.h
+            self._detectors["slew_change"] = change
         h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
         det = HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
@@ -571,6 +580,9 @@ class Diagnoser:
             values["slew"] = slew
             self._slew_gains.append(self._slew_gain)
         new: list[Alarm] = []
+        change = self._detectors.get("slew_change")
+        if slew is not None and change is not None and change.add_slew(t_s, slew):
+            new += self._fire(t_s, "slew_change")
         if self._detectors:
             if self._detectors["dropout"].add(round(lost)):
                 new += self._fire(t_s, "dropout")
@@ -970,6 +982,12 @@ class Diagnoser:
             ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
             # this unit's own healthy level, where the record has slews before the change
             ev["slew_before"] = np.array([v for t, v in slew.raw if t < slew.change_point()])
+        change = self._detectors.get("slew_change")
+        if detector == "slew_change" and change is not None and change.raw:
+            # the size against the record's own slews before the change
+            ev["slew"] = change.since_change()
+            ev["slew_before"] = np.array([v for t, v in change.raw if t < change.change_point()])
+            ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")

@@ -50,7 +50,7 @@ TELEMETRY_TESTS = ("rest", "stuck", "dropout")
 # the tests that can name each fault: where none decided on anything, "no alarm" says
 # nothing of that fault
 FAULT_TESTS = {
-    "friction": ("friction", "friction_change", "hold", "slew", "clamped"),
+    "friction": ("friction", "friction_change", "hold", "slew", "slew_change", "clamped"),
     "torque_constant": ("motor", "charge"),
     "current_limit": ("lag",),
     "speed_sensor_bias": ("speed", "offset", "rest"),

@@ -82,6 +82,10 @@ OFFSET_UNIT_SD_RPM = 0.9
 CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # a unit's current-sense offset, ±5 mA uniform
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 SLEW_OWN_MIN = 4  # slews before a change that give the unit's own healthy level
+# ... which moves along one profile: a default chirp's healthy slews at 610–680 s read
+# 0.3 below its 480–600 s ones (units 2810–2829, unit 2800's model: −1.15 against −0.85),
+# so a level from the earlier slews sizes a later change up to that much low
+SLEW_PROFILE_SD = 0.15
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
@@ -198,6 +202,7 @@ def _slew(ev: dict) -> Finding:
     before = np.asarray(ev.get("slew_before", ()), dtype=float)
     if before.size >= SLEW_OWN_MIN:  # the unit's own healthy level on this record's profile
         level, level_half = _mean_ci(before, ev["sigma"]["slew"])
+        level_half = math.hypot(level_half, Z95 * SLEW_PROFILE_SD)
     else:  # the reference unit's, which a profile moves by up to the tolerance
         level, level_half = ev["ref_mean"]["slew"], Z95 * ev["tolerance"].get("slew", 0.0)
     e -= level
@@ -289,7 +294,7 @@ def isolate(detector: str, ev: dict) -> list[Finding]:
         ]
     if detector in ("friction", "friction_change", "motor"):
         return _rotor(ev, detector)
-    if detector == "slew":
+    if detector in ("slew", "slew_change"):
         return [_slew(ev)]
     if detector == "clamped":
         return [_clamped(*ev["clamped"])]
