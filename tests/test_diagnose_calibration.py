@@ -210,6 +210,7 @@ def test_the_package_calibration_covers_every_detector_over_shares_of_its_tolera
         "speed",
         "offset",
         "slew",
+        "slew_change",
         "lag",
         "stuck",
         "dropout",
