@@ -277,10 +277,12 @@ class FrictionChange(BlockCusum):
 class SlewChange(BlockCusum):
     """The slew asymmetry against this record's own earlier slews (:data:`SLEW_GUARD_S`
     old or more): friction smaller than the spread between units, on a profile the
-    reference's level does not describe. A chirp's short slews read lower than a PRBS's
-    (−1.1 against −0.9 nominal Coulomb decelerations on healthy units), so the reference
-    test needs about 14 slews after a ×1.5 onset where a chirp gives 7; against its own
-    slews the step is about +1 (3 σ) each."""
+    reference's level does not describe. A default chirp's later, shorter slews read about
+    −1.1 nominal Coulomb decelerations on healthy units, its earlier ones −0.85, the
+    references' PRBS −0.64 to −0.81 (units 2810–2829; models of units 2800, 2801, 2950,
+    2951), so the reference test, with the tolerance between units, found friction ×1.5
+    from 600 s on 16 of 20 of those chirps, in the 7 slews after the onset; against its
+    own slews the step is about +1 (3 σ) each."""
 
     def __init__(self, sigma: float, fraction: float, h: float) -> None:
         """``sigma``: one slew's σ within a record; ``fraction``: slews per sample."""

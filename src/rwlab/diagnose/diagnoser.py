@@ -977,17 +977,14 @@ class Diagnoser:
         ev["sigma"] = {name: s.sigma * math.sqrt(s.block) for name, s in ref.tests.items()}
         if "slew" in self._detectors:
             ev["sigma"]["slew"] = self._detectors["slew"].stats.sigma
+        slew_test = "slew_change" if detector == "slew_change" else "slew"
+        if detector == "slew_change":  # sized on its own change, against the record's own slews
+            ev["slew"] = self._detectors[slew_test].since_change()
         if len(ev.get("slew", ())):  # the slews' friction at their speeds, Coulomb = 1
-            slew = self._detectors["slew"]
+            slew = self._detectors[slew_test]
             ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
             # this unit's own healthy level, where the record has slews before the change
             ev["slew_before"] = np.array([v for t, v in slew.raw if t < slew.change_point()])
-        change = self._detectors.get("slew_change")
-        if detector == "slew_change" and change is not None and change.raw:
-            # the size against the record's own slews before the change
-            ev["slew"] = change.since_change()
-            ev["slew_before"] = np.array([v for t, v in change.raw if t < change.change_point()])
-            ev["slew_gain"] = np.array(list(self._slew_gains)[-len(ev["slew"]) :])
         ev["sigma"]["offset"] = OFFSET_SIGMA_RPM
         ev["ref_mean"] = {name: s.mean for name, s in ref.tests.items()}
         motor, lag = self._detectors.get("motor"), self._detectors.get("lag")
