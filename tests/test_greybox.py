@@ -26,7 +26,10 @@ def _record(params, seed: int, minutes: float = 8.0) -> tuple[IOData, np.ndarray
     """A rate-limited PRBS into the twin (no bus): speed (rpm) and current (A) measured
     before each command, as a testbed record has them."""
     u = prbs(minutes * 60, TS, 6000.0, 5.0, seed=seed)
-    u = rate_limit(u, 314.0, TS, initial=0.0)
+    return _run(params, seed, rate_limit(u, 314.0, TS, initial=0.0))
+
+
+def _run(params, seed: int, u: np.ndarray) -> tuple[IOData, np.ndarray]:
     wheel = WheelPhysics(params, seed)
     y, current = np.empty(u.size), np.empty(u.size)
     for k, c in enumerate(u):
@@ -73,6 +76,23 @@ def test_greybox_recovers_the_units_physics_and_its_loop(grey, unit_a):
     # the ideal twin has no stiction (breakaway = Coulomb): nothing in the record shows it
     assert model.unidentified == ("breakaway",) and model.breakaway == model.coulomb
     assert all(v > 0 and math.isfinite(v) for v in model.std.values())
+
+
+@pytest.mark.parametrize("stiction", [False, True])
+def test_slow_reversals_show_an_apparent_breakaway_whose_sigma_covers_the_unit(stiction):
+    # a ±600 rpm square wave at 20 rpm/s dwells at rest on every reversal: breakaway is
+    # identified, and reads high (the Hall speed's dwell at rest looks like stiction,
+    # bench/greybox_breakaway.py); its σ (structure term calibrated on units 3, 7, 11)
+    # covers a unit it was not tuned on, with and without the stiction band
+    unit = replace(RW90, stiction=stiction, breakaway_friction=4e-4).for_unit(20)
+    t = np.arange(0.0, 1200.0, TS)
+    u = rate_limit(600.0 * np.sign(np.sin(2 * np.pi * t / 120.0)), 20.0, TS, initial=0.0)
+    data, current = _run(unit, 2, u)
+    model = greybox_fit(data, kp=0.4, ki=0.08, current=current, **DATASHEET)
+    truth = unit.breakaway_friction if stiction else unit.coulomb_friction
+    assert "breakaway" not in model.unidentified and model.breakaway > model.coulomb
+    assert model.breakaway > truth  # high, not low
+    assert abs(model.breakaway - truth) < 3 * model.std["breakaway"]
 
 
 def test_greybox_takes_another_wheels_current_limit_where_a_linear_model_cannot(grey):

@@ -170,11 +170,11 @@ class WheelGreyBox:
         a parameter the record did not inform is left out (see ``unidentified``).
     unidentified : tuple of str
         Estimated parameters the record did not inform: the simulation error
-        does not change with them at the optimum (e.g. ``breakaway`` when the
-        wheel only crosses zero at its acceleration limit, where it dwells
-        milliseconds in a 0.5-s sample, and the fit leaves it at ``coulomb``).
-        Their values are not estimates; a λ(JᵀJ)⁻¹ standard deviation would be
-        a meaningless ~0.
+        does not change with them at the optimum, or (``breakaway``) the fit's
+        excess over ``coulomb`` is within 2 statistical σ, and it is set to
+        ``coulomb``. The default PRBS crosses zero only at the acceleration
+        limit, where the wheel dwells milliseconds in a 0.5-s sample: its
+        breakaway is unidentified. Their values are not estimates.
     ratios : dict
         ``"torque_constant/inertia"`` … → ``{"value", "std"}``: the combinations the
         record identifies without J (σ: statistical and structure terms).
@@ -487,6 +487,15 @@ def greybox_fit(
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
     blind[names.index("breakaway")] |= fitted["breakaway"] <= fitted["coulomb"]
     cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
+    # stiction the record cannot tell from Coulomb (excess within 2 σ) is not identified:
+    # where the loss is flat in breakaway the optimizer stops anywhere above Coulomb,
+    # so only a significant excess is reported (breakaway falls back to Coulomb)
+    b = names.index("breakaway")
+    excess = fitted["breakaway"] - fitted["coulomb"]
+    if not blind[b] and excess <= 2.0 * math.sqrt(max(cov[b, b], 0.0)) * scale[b]:
+        blind[b] = True
+        fitted["breakaway"] = fitted["coulomb"]
+        cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
     cov /= np.outer(1 / scale, 1 / scale)
     fit_std = {
         k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(names) if not blind[i]
