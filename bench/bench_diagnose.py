@@ -32,7 +32,10 @@ is). Every other record comes from other units, in disjoint sets:
 - ``eval6``: healthy units 2200–2295 (32 h), faulty units 2301–2334, once more:
   eval5's three default-rate false alarms (the friction-change law's prior
   outweighing its own baseline) were fixed on its records, so that fix is judged
-  here, with models of units 2400–2499.
+  here, with models of units 2400–2499;
+- ``eval7``: healthy units 3000–3095 (32 h), faulty units 3101–3134, once more
+  after the slew_change test (friction on a chirp, against the record's own
+  slews) and the grey box's breakaway rule, with models of units 3200–3299.
 
 1. false alarms: the healthy 20-minute records (PRBS, chirp, multisine, steps
    in turn) diagnosed at the default rate (latched) and with restarting
@@ -117,7 +120,9 @@ FAULTS = {
         "torque_constant=0.8+speed_sensor_bias=20",
     ),
 }
-FAULTS.update({name: FAULTS["eval"] for name in ("eval2", "eval3", "eval4", "eval5", "eval6")})
+FAULTS.update(
+    {name: FAULTS["eval"] for name in ("eval2", "eval3", "eval4", "eval5", "eval6", "eval7")}
+)
 POWER_UP = (
     "friction=1.5",
     "torque_constant=0.8",
@@ -149,15 +154,25 @@ HEALTHY = {
     "eval4": (1300, 96, 13000),
     "eval5": (1600, 96, 15000),
     "eval6": (2200, 96, 17000),
+    "eval7": (3000, 96, 19000),
 }
 # (first unit, records, first seed, name): more healthy tune records, the thresholds' data.
 # The 2000s were added when the motor test's rates on eval3 (0.16/h for 1 asked) showed
 # that 42 units hold too few of the spread's edge: 12 % of the tune units have I/k_t ≥
 # 1.045 × nominal, 0 % of eval3's, 8 % of the population's
 CALIBRATION = ((101, 36, 3000, "x"), (2000, 78, 52000, "y"))
-FIRST_FAULTY_UNIT = dict(tune=41, eval=61, eval2=231, eval3=631, eval4=1401, eval5=1701, eval6=2301)
+FIRST_FAULTY_UNIT = dict(
+    tune=41,
+    eval=61,
+    eval2=231,
+    eval3=631,
+    eval4=1401,
+    eval5=1701,
+    eval6=2301,
+    eval7=3101,
+)
 FAULT_SEED = dict(
-    tune=200, eval=2000, eval2=8000, eval3=12000, eval4=14000, eval5=16000, eval6=18000
+    tune=200, eval=2000, eval2=8000, eval3=12000, eval4=14000, eval5=16000, eval6=18000, eval7=20000
 )
 
 
