@@ -169,12 +169,11 @@ class WheelGreyBox:
         Standard deviation of each estimated parameter (same units), or empty;
         a parameter the record did not inform is left out (see ``unidentified``).
     unidentified : tuple of str
-        Estimated parameters the record did not inform: the simulation error
-        does not change with them at the optimum, or (``breakaway``) the fit's
-        excess over ``coulomb`` is within 2 statistical σ, and it is set to
-        ``coulomb``. The default PRBS crosses zero only at the acceleration
-        limit, where the wheel dwells milliseconds in a 0.5-s sample: its
-        breakaway is unidentified. Their values are not estimates.
+        Estimated parameters the record did not inform (their values are not
+        estimates): the simulation error does not change with them at the
+        optimum, or ``breakaway`` is within 2 statistical σ of ``coulomb`` (then
+        set to it), as on the default PRBS, which crosses zero only at the
+        acceleration limit (milliseconds at rest in a 0.5-s sample).
     ratios : dict
         ``"torque_constant/inertia"`` … → ``{"value", "std"}``: the combinations the
         record identifies without J (σ: statistical and structure terms).
@@ -481,15 +480,12 @@ def greybox_fit(
         )
     values = sol.x * scale
     fitted = dict(zip(names, (float(v) for v in values), strict=True))
-    # a parameter the loss does not see at the optimum (zero Jacobian column, or breakaway
-    # clipped to Coulomb) has no standard deviation: it is reported as unidentified
+    # a parameter the loss does not see at the optimum (zero Jacobian column) has no σ: it
+    # is reported unidentified, as is a breakaway within 2 statistical σ of Coulomb (where
+    # the loss is that flat the optimizer stops anywhere above it: machines disagreed)
     norms = np.linalg.norm(sol.jac, axis=0)
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
-    blind[names.index("breakaway")] |= fitted["breakaway"] <= fitted["coulomb"]
     cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
-    # stiction the record cannot tell from Coulomb (excess within 2 σ) is not identified:
-    # where the loss is flat in breakaway the optimizer stops anywhere above Coulomb,
-    # so only a significant excess is reported (breakaway falls back to Coulomb)
     b = names.index("breakaway")
     excess = fitted["breakaway"] - fitted["coulomb"]
     if not blind[b] and excess <= 2.0 * math.sqrt(max(cov[b, b], 0.0)) * scale[b]:
