@@ -153,6 +153,19 @@ def test_the_exit_status_says_whether_a_fault_was_found_and_the_sizes_are_printe
     assert low <= factor <= high and low < size < high
 
 
+def test_the_estimates_are_the_records_latest_minutes_not_a_quiet_tests(tmp_path, model_file):
+    """A 30 rpm bias from 600 s of a 20-minute PRBS (another unit): the held-speed test
+    last decided minutes before the end, and its latest 10 minutes of values reached back
+    before the onset, sizing the bias 21.3 [21.26, 21.42] (a new user's record). The
+    estimate takes the record's latest 10 minutes: all after the onset."""
+    cfg = ExperimentConfig(duration=1200, seed=2, unit=6, faults=("speed_sensor_bias=30@600",))
+    run_experiment(cfg, tmp_path / "r.mcap")
+    result = _cli("diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 1, result.output
+    size, low, high = _printed_estimate(result.output, "speed_sensor_bias")
+    assert low <= 30.0 <= high and size == pytest.approx(30.0, abs=1.5)
+
+
 def test_each_test_says_what_it_decided_on(tmp_path, model_file, wheel):
     data, d = _diagnosed(tmp_path / "r.mcap", 5, model_file, wheel)
     # the dropout test decides on each whole 10-s block of the record

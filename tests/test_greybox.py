@@ -79,20 +79,23 @@ def test_greybox_recovers_the_units_physics_and_its_loop(grey, unit_a):
 
 
 @pytest.mark.parametrize("stiction", [False, True])
-def test_slow_reversals_show_an_apparent_breakaway_whose_sigma_covers_the_unit(stiction):
-    # a ±600 rpm square wave at 20 rpm/s dwells at rest on every reversal: breakaway is
-    # identified, and reads high (the Hall speed's dwell at rest looks like stiction,
-    # bench/greybox_breakaway.py); its σ (structure term calibrated on units 3, 7, 11)
-    # covers a unit it was not tuned on, with and without the stiction band
+def test_slow_reversals_cannot_tell_stiction_from_its_absence(stiction):
+    # a ±600 rpm square wave at 20 rpm/s dwells at rest on every reversal. The raw fit
+    # (no structure term on breakaway) reads a breakaway above the unit's truth with and
+    # without the stiction band (the Hall speed's dwell at rest looks like stiction:
+    # bench/greybox_breakaway.py), so with its measured structure term the default fit
+    # cannot tell it from Coulomb and reports it unidentified, held at Coulomb
     unit = replace(RW90, stiction=stiction, breakaway_friction=4e-4).for_unit(20)
     t = np.arange(0.0, 1200.0, TS)
     u = rate_limit(600.0 * np.sign(np.sin(2 * np.pi * t / 120.0)), 20.0, TS, initial=0.0)
     data, current = _run(unit, 2, u)
-    model = greybox_fit(data, kp=0.4, ki=0.08, current=current, **DATASHEET)
+    fit = dict(kp=0.4, ki=0.08, current=current, **DATASHEET)
+    raw = greybox_fit(data, uncertainty=Uncertainty(structure_error={}), **fit)
     truth = unit.breakaway_friction if stiction else unit.coulomb_friction
-    assert "breakaway" not in model.unidentified and model.breakaway > model.coulomb
-    assert model.breakaway > truth  # high, not low
-    assert abs(model.breakaway - truth) < 3 * model.std["breakaway"]
+    assert "breakaway" not in raw.unidentified and raw.breakaway > 1.3 * truth
+    model = greybox_fit(data, **fit)
+    assert "breakaway" in model.unidentified and model.breakaway == model.coulomb
+    assert "breakaway" not in model.std
 
 
 def test_greybox_takes_another_wheels_current_limit_where_a_linear_model_cannot(grey):

@@ -149,7 +149,7 @@ def identify(
     if ref.get("stored"):
         click.echo(
             f"healthy reference for fault diagnosis stored in model.json ({ref['samples']} "
-            "samples): rwlab diagnose RECORD --model model.json"
+            f"samples): rwlab diagnose RECORD --model {Path(out) / 'model.json'} --out FOLDER"
         )
     click.echo(_wrote(out, paths.values()))
 

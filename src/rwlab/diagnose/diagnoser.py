@@ -103,6 +103,7 @@ from rwlab.diagnose.blocktests import (
     CLAMP_EXCESS,
     CLAMP_QUIET_RPM_S,
     CUSUM_K,
+    HISTORY_S,
     BlockCusum,
     ClampedFriction,
     Dropout,
@@ -865,8 +866,8 @@ class Diagnoser:
         return out
 
     def estimates(self) -> dict[str, dict]:
-        """Friction and torque-constant factors and the speed bias from the tests' latest
-        values (the last :data:`HISTORY_S`), alarm or not: a wear trend below threshold.
+        """Friction and torque-constant factors and the speed bias from the tests' values
+        in the record's last :data:`HISTORY_S`, alarm or not: a wear trend below threshold.
 
         The current at constant speed over the reference's friction current is
         friction/k_t, the current under acceleration over the inertial current is
@@ -893,12 +894,17 @@ class Diagnoser:
         if ref is None or any(a.kind == "speed_sensor_stuck" for a in self.alarms):
             return {}
 
+        times = self.history["t_s"]
+        since = times[-1] - HISTORY_S if times else -math.inf
+
         def mean_ci(name: str):
+            # the record's latest HISTORY_S, not the test's: a test that last decided
+            # long ago would mix the values before a fault's onset in
             det = self._detectors.get(name)
             stats = ref.tests.get(name)
-            if det is None or stats is None or not det.raw:
+            x = np.array([v for t, v in (det.raw if det else ()) if t >= since], dtype=float)
+            if stats is None or not x.size:
                 return None
-            x = np.array([v for _, v in det.raw], dtype=float)
             blocks = max(len(x) / stats.block, 1.0)
             return float(x.mean()), Z95 * stats.sigma / math.sqrt(blocks), blocks
 

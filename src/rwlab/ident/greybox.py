@@ -75,9 +75,9 @@ from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.greybox_std import (
     CLAMP,
     ESTIMATED,
-    NEEDS_J,
     STRUCTURE_ERROR,
     Uncertainty,
+    _budget,
     _sandwich,
 )
 
@@ -171,9 +171,9 @@ class WheelGreyBox:
     unidentified : tuple of str
         Estimated parameters the record did not inform (their values are not
         estimates): the simulation error does not change with them at the
-        optimum, or ``breakaway`` is within 2 statistical σ of ``coulomb`` (then
-        set to it), as on the default PRBS, which crosses zero only at the
-        acceleration limit (milliseconds at rest in a 0.5-s sample).
+        optimum, or ``breakaway`` is within 2 σ of ``coulomb`` (then set to it):
+        with the twin's structure term always, as the dwell at rest reads as
+        stiction on units without it (``greybox_std.STRUCTURE_ERROR``).
     ratios : dict
         ``"torque_constant/inertia"`` … → ``{"value", "std"}``: the combinations the
         record identifies without J (σ: statistical and structure terms).
@@ -481,40 +481,28 @@ def greybox_fit(
     values = sol.x * scale
     fitted = dict(zip(names, (float(v) for v in values), strict=True))
     # a parameter the loss does not see at the optimum (zero Jacobian column) has no σ: it
-    # is reported unidentified, as is a breakaway within 2 statistical σ of Coulomb (where
-    # the loss is that flat the optimizer stops anywhere above it: machines disagreed)
+    # is unidentified, as is a breakaway whose excess over Coulomb is within 2 σ of the
+    # difference (everything in σ: the statistical σ alone is degenerate at the kink)
     norms = np.linalg.norm(sol.jac, axis=0)
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
-    cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
-    b = names.index("breakaway")
-    excess = fitted["breakaway"] - fitted["coulomb"]
-    if not blind[b] and excess <= 2.0 * math.sqrt(max(cov[b, b], 0.0)) * scale[b]:
+    b, c = names.index("breakaway"), names.index("coulomb")
+    while True:
+        cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
+        cov /= np.outer(1 / scale, 1 / scale)
+        fit_std = {k: math.sqrt(max(cov[i, i], 0.0)) for i, k in enumerate(names) if not blind[i]}
+        clamp = None  # with the limit held: its tolerance carried through the fit
+        if not estimate_current_limit:
+            clamp = _clamp_sensitivity(residuals, sol, p, current_limit, ~blind, names)
+            clamp = {k: abs(v) * current_limit * tol_c / math.sqrt(3.0) for k, v in clamp.items()}
+        std, ratios, budget = _budget(fit_std, fitted, clamp, unc, inertia)
+        if blind[b]:
+            break
+        diff_var = std["breakaway"] ** 2 + std["coulomb"] ** 2 - 2.0 * cov[b, c]
+        if fitted["breakaway"] - fitted["coulomb"] > 2.0 * math.sqrt(max(diff_var, 0.0)):
+            break
         blind[b] = True
         fitted["breakaway"] = fitted["coulomb"]
-        cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
-    cov /= np.outer(1 / scale, 1 / scale)
-    fit_std = {
-        k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(names) if not blind[i]
-    }
-    clamp = {}  # the fixed limit's tolerance carried through the fit, per parameter
-    if not estimate_current_limit:
-        clamp = _clamp_sensitivity(residuals, sol, p, current_limit, ~blind, names)
-        clamp = {k: abs(v) * current_limit * tol_c / math.sqrt(3.0) for k, v in clamp.items()}
-    rel_j = inertia_tolerance / math.sqrt(3.0)
-    shape = STRUCTURE_ERROR if unc.structure_error is None else unc.structure_error
-    std, ratios, budget = {}, {}, {}
-    for k, s_fit in fit_std.items():
-        parts = {"statistical": s_fit, "structure": abs(fitted[k]) * shape.get(k, 0.0)}
-        if not estimate_current_limit:
-            parts["current_limit"] = clamp.get(k, 0.0)
-        if k in NEEDS_J:  # value = (value/J)·J: the record fixes the ratio, J its datasheet
-            ratio = math.sqrt(sum(v**2 for v in parts.values())) / inertia
-            ratios[f"{k}/inertia"] = {"value": fitted[k] / inertia, "std": ratio}
-            parts["inertia"] = abs(fitted[k]) * rel_j
-        budget[k] = parts
-        std[k] = math.sqrt(sum(v**2 for v in parts.values()))
     unidentified = tuple(k for i, k in enumerate(names) if blind[i])
-    fitted["breakaway"] = max(fitted["breakaway"], fitted["coulomb"])
     limit = (
         "current_limit: estimated (the record shows the clamp binding)"
         if estimate_current_limit

@@ -100,10 +100,32 @@ whose parameters are measured.
 
 ``breakaway`` is calibrated on its own records: the PRBS leaves it unidentified, and on
 slow reversals through zero (``python bench/greybox_breakaway.py --units 3 7 11 --seed
-1``) it reads high by up to +0.87 (RMS 0.56), with or without stiction in the unit: at
-rest the Hall speed and the drive's zero-speed behaviour dwell like stiction, which the
-grey box can only take as breakaway. Judged on units 20, 25, 30 (``--seed 2``): RMS 0.83,
-up to +1.31. Read it as an apparent low-speed friction, not the unit's stiction."""
+1``) its raw estimate reads high by up to +0.87 (RMS 0.56), with or without stiction in
+the unit: at rest the Hall speed and the drive's zero-speed behaviour dwell like
+stiction. On units 20, 25, 30 (``--seed 2``): RMS 0.83, up to +1.31. With this term no
+record shows a breakaway beyond 2 σ of Coulomb: it is reported unidentified."""
+
+
+def _budget(
+    fit_std: dict, fitted: dict, clamp: dict | None, unc: Uncertainty, inertia: float
+) -> tuple[dict, dict, dict]:
+    """σ of each parameter with a statistical σ, as the root sum of squares of its budget
+    (module docstring); also the x/J ratios' σ. ``clamp``: the held current limit's term
+    per parameter (None: the limit was estimated). Returns (std, ratios, budget)."""
+    shape = STRUCTURE_ERROR if unc.structure_error is None else unc.structure_error
+    rel_j = unc.inertia_tolerance / math.sqrt(3.0)
+    std, ratios, budget = {}, {}, {}
+    for k, s_fit in fit_std.items():
+        parts = {"statistical": s_fit, "structure": abs(fitted[k]) * shape.get(k, 0.0)}
+        if clamp is not None:
+            parts["current_limit"] = clamp.get(k, 0.0)
+        if k in NEEDS_J:  # value = (value/J)·J: the record fixes the ratio, J its datasheet
+            ratio = math.sqrt(sum(v**2 for v in parts.values())) / inertia
+            ratios[f"{k}/inertia"] = {"value": fitted[k] / inertia, "std": ratio}
+            parts["inertia"] = abs(fitted[k]) * rel_j
+        budget[k] = parts
+        std[k] = math.sqrt(sum(v**2 for v in parts.values()))
+    return std, ratios, budget
 
 
 def _sandwich(fun, jac, n_y: int, seen, lags: int | None) -> tuple[np.ndarray, int]:

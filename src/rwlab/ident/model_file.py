@@ -223,7 +223,10 @@ class WheelModelFile:
         """
         if not isinstance(d, dict) or "format" not in d:  # model.json always carried it
             expected = format_tag(KIND, VERSION)
-            raise FileFormatError(f"{source}: not an rwlab wheel model (no format {expected!r})")
+            raise FileFormatError(
+                f"{source}: not an rwlab wheel model (no format {expected!r}); pass the "
+                "model.json that `rwlab identify` wrote"
+            )
         d = read_versioned(d, KIND, VERSION, source=source)
         _check_top_level(d, source)
         try:
