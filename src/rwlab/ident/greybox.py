@@ -485,22 +485,25 @@ def greybox_fit(
     # difference (everything in σ: the statistical σ alone is degenerate at the kink)
     norms = np.linalg.norm(sol.jac, axis=0)
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
-    b, c = names.index("breakaway"), names.index("coulomb")
-    while True:
-        cov, lags = _sandwich(sol.fun, sol.jac, y.size, ~blind, hac_lags)
+
+    def spread(seen):
+        cov, lags = _sandwich(sol.fun, sol.jac, y.size, seen, hac_lags)
         cov /= np.outer(1 / scale, 1 / scale)
-        fit_std = {k: math.sqrt(max(cov[i, i], 0.0)) for i, k in enumerate(names) if not blind[i]}
+        fit_std = {k: math.sqrt(max(cov[i, i], 0.0)) for i, k in enumerate(names) if seen[i]}
         clamp = None  # with the limit held: its tolerance carried through the fit
         if not estimate_current_limit:
-            clamp = _clamp_sensitivity(residuals, sol, p, current_limit, ~blind, names)
+            clamp = _clamp_sensitivity(residuals, sol, p, current_limit, seen, names)
             clamp = {k: abs(v) * current_limit * tol_c / math.sqrt(3.0) for k, v in clamp.items()}
-        std, ratios, budget = _budget(fit_std, fitted, clamp, unc, inertia)
-        if blind[b]:
-            break
+        return cov, lags, *_budget(fit_std, fitted, clamp, unc, inertia)
+
+    b, c = names.index("breakaway"), names.index("coulomb")
+    cov, lags, std, ratios, budget = spread(~blind)
+    if not blind[b]:
         diff_var = std["breakaway"] ** 2 + std["coulomb"] ** 2 - 2.0 * cov[b, c]
-        if fitted["breakaway"] - fitted["coulomb"] > 2.0 * math.sqrt(max(diff_var, 0.0)):
-            break
-        blind[b] = True
+        if fitted["breakaway"] - fitted["coulomb"] <= 2.0 * math.sqrt(max(diff_var, 0.0)):
+            blind[b] = True
+            cov, lags, std, ratios, budget = spread(~blind)
+    if blind[b]:
         fitted["breakaway"] = fitted["coulomb"]
     unidentified = tuple(k for i, k in enumerate(names) if blind[i])
     limit = (
