@@ -23,7 +23,7 @@ SRC = Path(__file__).resolve().parent.parent / "src"
 LAYERS: list[set[str]] = [
     # __init__: root
     {"__init__", "errors", "interrupts", "_toml", "_io", "_display", "_optional", "schemas"},
-    {"data", "signals", "datafiles", "datasets"},
+    {"data", "signals", "datafiles", "datasets", "wheelspec"},
     {"ident"},
     {"wheel"},
     {"diagnose"},

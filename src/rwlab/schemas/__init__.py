@@ -41,6 +41,7 @@ NAMES = (
     "ssmodel",
     "frequency_response",
     "fir",
+    "wheelspec",
 )
 
 
