@@ -51,7 +51,12 @@ class _ExperimentCommand(click.Command):
 )
 @click.option("--signal", type=click.Choice(["prbs", "chirp", "step", "multisine", "file"]))
 @click.option("--mode", type=click.Choice(["speed", "acceleration"]))
-@click.option("--amplitude", type=float, help="rpm in speed mode, rpm/s in acceleration mode.")
+@click.option(
+    "--amplitude",
+    type=float,
+    help="rpm in speed mode, rpm/s in acceleration mode (default: the wheel's nominal speed "
+    "or its acceleration limit).",
+)
 @click.option("--duration", type=float, help="Seconds of signal.")
 @click.option("--Ts", "Ts", type=float, help="Command period, s.")
 @click.option("--out", type=click.Path(dir_okay=False), required=True, help="Record file (.mcap).")
@@ -61,13 +66,14 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--unit",
     type=click.IntRange(0),
-    help="Simulated wheel unit: another RW90 with parameters drawn within its tolerances.",
+    help="Simulated wheel unit: another wheel of the model, drawn within its tolerances.",
 )
 @click.option(
     "--wheel",
-    metavar="PRESET|FILE.toml",
-    help="Simulated wheel: the preset rw90 (realistic, default) or ideal (no imperfections), "
-    "or a wheel TOML file (docs/wheels/rw90.toml lists every parameter).",
+    metavar="NAME|FILE.toml",
+    help="Simulated wheel: a wheel model (rw90, default; nrwa-t6; rw-0.01; `rwlab wheel "
+    "models`), ideal (the RW90 without imperfections), a wheel spec file, or a wheel TOML "
+    "file (docs/wheels/rw90.toml lists every parameter).",
 )
 @click.option(
     "--file",

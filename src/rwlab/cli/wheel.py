@@ -74,10 +74,16 @@ def wheel() -> None:
     help="Wheel parameters as TOML (default RW90).",
 )
 @click.option(
+    "--wheel",
+    "wheel_model",
+    metavar="NAME|FILE",
+    help="Wheel model: a preset (`rwlab wheel models`) or a wheel spec file (default rw90).",
+)
+@click.option(
     "--unit",
     type=click.IntRange(0),
     default=None,
-    help="Wheel unit: parameters drawn within their tolerances around --params.",
+    help="Wheel unit: parameters drawn within their model's tolerances.",
 )
 @click.option("--duration", type=SECONDS, default=None, help="Stop after this many seconds.")
 @_friendly_errors
@@ -90,6 +96,7 @@ def wheel_serve(
     latency_ms,
     watchdog,
     params,
+    wheel_model,
     unit,
     duration,
 ):
@@ -105,7 +112,9 @@ def wheel_serve(
     from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport, transport_names
     from rwlab.wheel.link import get_protocol
 
-    wheel_params = WheelParams.from_toml(params) if params else RW90
+    if params and wheel_model:
+        raise ConfigError("give the wheel once: --params FILE or --wheel NAME|FILE")
+    wheel_params = WheelParams.load(params or wheel_model) if params or wheel_model else RW90
     if unit is not None:
         wheel_params = wheel_params.for_unit(unit)
     get_protocol(protocol)  # an unknown name fails before the bus opens
@@ -289,3 +298,32 @@ def wheel_protocols():
     click.echo("interfaces:")
     for name, target in transport_names().items():
         click.echo(f"  {name:<14} {target}")
+
+
+@wheel.command("models")
+@click.option("--json", "as_json", is_flag=True, help="A JSON list of objects, one per model.")
+@_friendly_errors
+def wheel_models(as_json):
+    """List the shipped wheel models (presets) with their limits.
+
+    Each is a wheel spec file (rwlab/wheelspec/presets/NAME.toml) whose every number
+    says where it comes from; pass NAME or your own spec file to --wheel.
+    """
+    import json
+
+    from rwlab.wheelspec import WheelSpec, preset_names
+
+    rows = [WheelSpec.load(name).limits() for name in preset_names()]
+    if as_json:
+        click.echo(json.dumps(rows, indent=2, ensure_ascii=False))
+        return
+    click.echo(
+        f"{'name':<9} {'inertia kg·m²':>13} {'speed rpm':>9} {'torque N·m':>10} "
+        f"{'current A':>9} {'momentum N·m·s':>14}  mode    title"
+    )
+    for r in rows:
+        click.echo(
+            f"{r['name']:<9} {r['inertia_kg_m2']:>13.4g} {r['max_speed_rpm']:>9.0f} "
+            f"{r['max_torque_nm']:>10.4g} {r['current_limit_a']:>9.3g} "
+            f"{r['momentum_capacity_nms']:>14.4g}  {r['controller_mode']:<7} {r['title']}"
+        )

@@ -38,7 +38,6 @@ from rwlab.wheel.bus import open_bus, open_transport, transport_names
 from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
-from rwlab.wheel.physics import PRESETS
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 from rwlab.wheel.serial import open_pty
 
@@ -57,8 +56,9 @@ class ExperimentConfig:
     ----------
     signal : {'prbs', 'chirp', 'step', 'multisine', 'file'}
     mode : {'speed', 'acceleration'}
-    amplitude : float
-        rpm in speed mode, rpm/s in acceleration mode.
+    amplitude : float, optional
+        rpm in speed mode, rpm/s in acceleration mode; default the wheel model's
+        nominal speed (speed mode) or its acceleration limit (acceleration mode).
     duration : float
         Seconds of signal.
     Ts : float
@@ -78,7 +78,7 @@ class ExperimentConfig:
         PRBS hold times, s (paper A: ≥ 5 s).
     rate_limit : bool
         Limit a speed-mode PRBS's slope to the wheel's maximum acceleration
-        (RW90: 314 rpm/s): the command then ramps instead of stepping, and a
+        (its spec's ``max_accel_rpm_s``): the command then ramps instead of stepping, and a
         linear model identified from it never sees the acceleration limit bind.
         Default False: paper A's PRBS steps between random levels, the wheel
         follows each step at its acceleration limit, and the record shows that
@@ -98,8 +98,10 @@ class ExperimentConfig:
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
     wheel : str
-        The simulated wheel: a preset, ``'rw90'`` (the realistic twin, default) or
-        ``'ideal'`` (no imperfections, :data:`rwlab.wheel.physics.IDEAL`), or a
+        The simulated wheel: a wheel model, ``'rw90'`` (the realistic twin, default),
+        ``'nrwa-t6'``, ``'rw-0.01'`` (:func:`rwlab.wheelspec.preset_names`) or
+        ``'ideal'`` (the RW90 without imperfections, :data:`rwlab.wheel.physics.IDEAL`),
+        a wheel spec file (``format = "rwlab.WheelSpec/1"``), or a
         wheel TOML file (``*.toml``, :meth:`rwlab.wheel.WheelParams.from_toml`,
         e.g. a unit whose driver limits the current to 0.35 A); ``unit`` then
         draws around it (leave ``unit`` out of the TOML).
@@ -118,7 +120,7 @@ class ExperimentConfig:
 
     signal: str = "prbs"
     mode: str = "speed"
-    amplitude: float = 6000.0
+    amplitude: float | None = None
     duration: float = 1200.0
     Ts: float = 0.5
     seed: int = 0
@@ -144,6 +146,10 @@ class ExperimentConfig:
     late_tolerance: float | None = None
 
     def __post_init__(self) -> None:
+        if self.amplitude is None and isinstance(self.wheel, str):  # the wheel model's own
+            p = self.nominal_wheel()
+            default = p.nominal_speed_rpm if self.mode == "speed" else p.max_accel_rpm_s
+            object.__setattr__(self, "amplitude", default)
         if self.signal not in SIGNALS:
             raise ConfigError(f"unknown signal {self.signal!r}; choose from {', '.join(SIGNALS)}")
         if self.mode not in MODES:
@@ -170,7 +176,7 @@ class ExperimentConfig:
             "model": ((str, type(None)), "a path to model.json"),
             "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
-            "wheel": (str, "a wheel preset name or a wheel TOML file"),
+            "wheel": (str, "a wheel model name, a wheel spec or a wheel TOML file"),
             "unit": ((int, type(None)), "an integer ≥ 0"),
         }
         for name, (kind, text) in expected.items():
@@ -259,7 +265,7 @@ class ExperimentConfig:
                     f"{self.wheel} draws unit {own} and unit = {self.unit} would draw a second "
                     "time around it (a wheel that is neither): give the unit in one place"
                 )
-            params = WheelParams.from_toml(self.wheel)  # with the file's own unit, if any
+            params = WheelParams.load(self.wheel)  # with the file's own unit, if any
         else:
             params = self.nominal_wheel(base)
         return params if self.unit is None else params.for_unit(self.unit)
@@ -278,14 +284,7 @@ class ExperimentConfig:
         """
         if base is not None:
             return base
-        if self.wheel.lower().endswith(".toml"):
-            return WheelParams.from_toml(self.wheel, draw_unit=False)
-        if self.wheel in PRESETS:
-            return WheelParams.preset(self.wheel)
-        raise ConfigError(
-            f"wheel must be a preset ({', '.join(sorted(PRESETS))}) or a wheel TOML file "
-            f"(*.toml), got {self.wheel!r}"
-        )
+        return WheelParams.load(self.wheel, draw_unit=False)
 
     def tolerance(self) -> float:
         """How late a command may go out, s: ``late_tolerance``, else 10 % of Ts (≥ 1 ms,
@@ -353,21 +352,22 @@ def make_signal(cfg: ExperimentConfig, params: WheelParams = RW90) -> np.ndarray
     numpy.ndarray, shape (round(duration / Ts),)
         The commands.
     """
+    amplitude = cfg.amplitude
+    if amplitude is None:  # resolved by ExperimentConfig; a hand-made object may lack it
+        raise ConfigError("the experiment has no amplitude")
     if cfg.signal == "prbs":
-        x = signals.prbs(
-            cfg.duration, cfg.Ts, cfg.amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed
-        )
+        x = signals.prbs(cfg.duration, cfg.Ts, amplitude, cfg.min_hold, cfg.max_hold, seed=cfg.seed)
     elif cfg.signal == "chirp":
         f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
-        x = signals.chirp(cfg.duration, cfg.Ts, cfg.f0, f1, cfg.amplitude)
+        x = signals.chirp(cfg.duration, cfg.Ts, cfg.f0, f1, amplitude)
     elif cfg.signal == "multisine":
         f1 = cfg.f1 if cfg.f1 is not None else 0.4 / cfg.Ts
         x = signals.multisine(
-            cfg.duration, cfg.Ts, max(cfg.f0, 1.0 / cfg.duration), f1, cfg.amplitude, seed=cfg.seed
+            cfg.duration, cfg.Ts, max(cfg.f0, 1.0 / cfg.duration), f1, amplitude, seed=cfg.seed
         )
     elif cfg.signal == "step":
         hold = cfg.duration / len(cfg.step_levels)
-        x = signals.steps(np.asarray(cfg.step_levels) * cfg.amplitude, hold, cfg.Ts)
+        x = signals.steps(np.asarray(cfg.step_levels) * amplitude, hold, cfg.Ts)
     else:
         x = _signal_from_file(cfg)
     if cfg.rate_limit and cfg.mode == "speed" and cfg.signal == "prbs":
@@ -528,12 +528,15 @@ def run_experiment(
         "mode": cfg.mode,
         "experiment": cfg.to_dict(),
         "wheel": params.to_dict(),
+        "wheel_spec": nominal.spec().to_dict(),  # the model's datasheet, as configured
         "driver_settings": {  # what a lab knows of its wheel: configured, not drawn
             "current_limit": nominal.current_limit,
             "max_speed_rpm": nominal.max_speed_rpm,
             "max_accel_rpm_s": nominal.max_accel_rpm_s,
         },
-        "wheel_source": "simulated RW90 twin" if simulated else f"{cfg.interface}:{cfg.channel}",
+        "wheel_source": (
+            f"simulated {nominal.model} twin" if simulated else f"{cfg.interface}:{cfg.channel}"
+        ),
         "clock": "wall" if realtime else "simulated",
         "start_utc": datetime.now(UTC).isoformat(timespec="milliseconds"),
         "time_origin": "s since the first command",

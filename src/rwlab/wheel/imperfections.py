@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rwlab.errors import ConfigError
+from rwlab.wheelspec import Tolerance, WheelSpec
 
 if TYPE_CHECKING:
     from rwlab.wheel.physics import WheelParams
@@ -63,47 +65,17 @@ def stribeck_friction(
     return math.copysign(coulomb + drop, speed) + viscous * speed
 
 
-@dataclass(frozen=True)
-class Tolerance:
-    """How far one parameter of a wheel of the same model may differ from nominal.
-
-    Attributes
-    ----------
-    relative : float
-        Half-width of the uniform spread as a fraction of nominal (0.05: ±5 %);
-        0 when ``absolute`` is used.
-    absolute : float
-        Half-width of an additive uniform spread, in the parameter's unit.
-    source : str
-        Where the tolerance comes from.
-    """
-
-    relative: float
-    absolute: float
-    source: str
-
-
-TOLERANCES: dict[str, Tolerance] = {
-    "inertia": Tolerance(0.02, 0.0, "rotor machining and balancing, ±2 %"),
-    "torque_constant": Tolerance(0.05, 0.0, "BLDC motor datasheets: k_t ±5 %"),
-    "winding_resistance": Tolerance(0.07, 0.0, "BLDC motor datasheets: R ±7 % at 20 °C"),
-    "coulomb_friction": Tolerance(0.30, 0.0, "bearing preload and lubricant fill, ±30 %"),
-    "breakaway_friction": Tolerance(0.30, 0.0, "bearing preload and lubricant fill, ±30 %"),
-    "viscous_friction": Tolerance(0.30, 0.0, "lubricant quantity and viscosity, ±30 %"),
-    "cogging_torque": Tolerance(0.30, 0.0, "magnet and slot tolerances, ±30 %"),
-    "torque_ripple": Tolerance(0.30, 0.0, "winding and Hall placement, ±30 %"),
-    "current_limit": Tolerance(0.02, 0.0, "current-sense shunt 1 % + reference 1 %"),
-    "current_offset_a": Tolerance(0.0, 0.005, "current-sense amplifier offset, ±5 mA"),
-    "thermal_resistance": Tolerance(0.10, 0.0, "mounting and potting, ±10 %"),
-    "thermal_time_constant": Tolerance(0.10, 0.0, "mounting and potting, ±10 %"),
-}
-"""Unit-to-unit tolerances (uniform within ±). Parameters not listed are the same on
+TOLERANCES: dict[str, Tolerance] = WheelSpec.load("rw90").twin_tolerances()
+"""The RW90's unit-to-unit tolerances (uniform within ±), from its spec file; each wheel
+model's are in its spec (``[tolerances]``). Parameters not listed are the same on
 every unit: the firmware's (loop gains, limits, fault thresholds), the supply's
 and the sensor electronics'. The Hall sensors' placement pattern is drawn per unit
 too (``hall_pattern_seed``)."""
 
 
-def draw_unit(params: WheelParams, unit: int) -> WheelParams:
+def draw_unit(
+    params: WheelParams, unit: int, tolerances: Mapping[str, Tolerance] | None = None
+) -> WheelParams:
     """Another wheel of the same model: every toleranced parameter drawn around ``params``.
 
     Parameters
@@ -112,6 +84,9 @@ def draw_unit(params: WheelParams, unit: int) -> WheelParams:
         The nominal wheel.
     unit : int
         Unit seed ≥ 0; the same seed always gives the same wheel.
+    tolerances : mapping of str to Tolerance, optional
+        The wheel model's tolerances by twin field name
+        (:meth:`rwlab.wheelspec.WheelSpec.twin_tolerances`); default the RW90's.
 
     Returns
     -------
@@ -122,11 +97,15 @@ def draw_unit(params: WheelParams, unit: int) -> WheelParams:
         raise ConfigError(f"wheel unit must be an integer ≥ 0, got {unit!r}")
     rng = np.random.default_rng([unit, 0x52573930])  # "RW90": a stream of its own
     drawn: dict = {}  # field name → value; mixed types, checked by WheelParams
-    for name, tol in TOLERANCES.items():
+    for name, tol in (TOLERANCES if tolerances is None else tolerances).items():
         nominal = getattr(params, name)
         u = rng.uniform(-1.0, 1.0)
         drawn[name] = nominal * (1 + tol.relative * u) + tol.absolute * u
-    drawn["breakaway_friction"] = max(drawn["breakaway_friction"], drawn["coulomb_friction"])
+    if "breakaway_friction" in drawn or "coulomb_friction" in drawn:
+        coulomb = drawn.get("coulomb_friction", params.coulomb_friction)
+        drawn["breakaway_friction"] = max(
+            drawn.get("breakaway_friction", params.breakaway_friction), coulomb
+        )
     drawn["hall_pattern_seed"] = int(rng.integers(0, 2**31))
     return replace(params, **drawn)
 

@@ -7,7 +7,7 @@ The model (SI inside; rpm only in names that say so):
 The wheel's own controller turns the command into a current:
 
 - speed mode: a PI loop on speed gives an acceleration request, clipped to
-  ±α_max (the 314 rpm/s limit that makes a 0 → 6000 rpm step take ~20 s);
+  ±α_max (the RW90's makes a 0 → 6000 rpm step take ~20 s);
 - acceleration mode: the acceleration request is the command, clipped the same;
 - in both, the current is I·α_req/k_t plus friction feed-forward, clipped to
   ±i_max, and cut when it would push past the speed limit.
@@ -28,11 +28,13 @@ import enum
 import math
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rwlab.errors import ConfigError
 from rwlab.wheel.imperfections import stribeck_friction
+from rwlab.wheelspec import TWIN_NAMES, WheelSpec, preset_names
 
 __all__ = [
     "IDEAL",
@@ -47,6 +49,10 @@ __all__ = [
 ]
 
 RPM = 2 * math.pi / 60  # rad/s per rpm
+# the RW90's numbers live in its spec file (rwlab/wheelspec/presets/rw90.toml) and only
+# there: WheelParams' defaults are read from it
+_RW90_SPEC = WheelSpec.load("rw90")
+_NOMINAL: dict[str, Any] = _RW90_SPEC.twin_fields()
 
 
 def rpm_to_rad_s(rpm):
@@ -102,7 +108,11 @@ class Fault(enum.IntFlag):
 
 @dataclass(frozen=True)
 class WheelParams:
-    """Reaction-wheel parameters (RW90 defaults from paper A, Table 1).
+    """Reaction-wheel parameters: the twin's configuration of one wheel model.
+
+    Build one from a wheel model's datasheet with :meth:`from_spec` (or
+    :meth:`preset`); the defaults are the RW90's spec
+    (``rwlab/wheelspec/presets/rw90.toml``, paper A's Table 1), read from that file.
 
     Attributes
     ----------
@@ -212,62 +222,69 @@ class WheelParams:
     frame_loss_rate : float
         Fraction of the wheel's frames lost (default 1e-4: adapter overruns and
         error frames beyond retransmission).
+    model : str
+        The wheel model's spec: a preset name (``"rw90"``) or a spec file; its
+        tolerances draw a unit (:meth:`for_unit`).
     """
 
-    inertia: float = 4.2e-4
-    nominal_speed_rpm: float = 6000.0
-    max_speed_rpm: float = 7800.0
-    nominal_torque: float = 0.015
-    max_accel_rpm_s: float = 314.0
-    current_limit: float = 0.7
-    torque_constant: float = 0.0245
-    viscous_friction: float = 1.0e-6
-    coulomb_friction: float = 2.0e-4
-    speed_kp: float = 0.485
-    speed_ki: float = 0.123
-    speed_resolution_rpm: float = 0.1
-    speed_noise_rpm: float = 0.0
-    min_measurable_rpm: float = 5.0
-    overspeed_fault_rpm: float = 8500.0
-    overcurrent_fault: float = 1.5
-    thermal_resistance: float = 8.0
-    thermal_time_constant: float = 600.0
-    overtemp_fault_c: float = 85.0
-    ambient_c: float = 20.0
-    winding_resistance: float = 4.0
+    inertia: float = _NOMINAL["inertia"]
+    nominal_speed_rpm: float = _NOMINAL["nominal_speed_rpm"]
+    max_speed_rpm: float = _NOMINAL["max_speed_rpm"]
+    nominal_torque: float = _NOMINAL["nominal_torque"]
+    max_accel_rpm_s: float = _NOMINAL["max_accel_rpm_s"]
+    current_limit: float = _NOMINAL["current_limit"]
+    torque_constant: float = _NOMINAL["torque_constant"]
+    viscous_friction: float = _NOMINAL["viscous_friction"]
+    coulomb_friction: float = _NOMINAL["coulomb_friction"]
+    speed_kp: float = _NOMINAL["speed_kp"]
+    speed_ki: float = _NOMINAL["speed_ki"]
+    speed_resolution_rpm: float = _NOMINAL["speed_resolution_rpm"]
+    speed_noise_rpm: float = _NOMINAL["speed_noise_rpm"]
+    min_measurable_rpm: float = _NOMINAL["min_measurable_rpm"]
+    overspeed_fault_rpm: float = _NOMINAL["overspeed_fault_rpm"]
+    overcurrent_fault: float = _NOMINAL["overcurrent_fault"]
+    thermal_resistance: float = _NOMINAL["thermal_resistance"]
+    thermal_time_constant: float = _NOMINAL["thermal_time_constant"]
+    overtemp_fault_c: float = _NOMINAL["overtemp_fault_c"]
+    ambient_c: float = _NOMINAL["ambient_c"]
+    winding_resistance: float = _NOMINAL["winding_resistance"]
     # -- imperfections (issue 22): the defaults misbehave like a real wheel; IDEAL turns
     # each one off. Source and typical value of each in the class docstring.
-    stiction: bool = True
-    breakaway_friction: float = 3.0e-4
-    stribeck_speed_rpm: float = 10.0
-    viscous_temp_coeff: float = 0.02
-    friction_drift: float = 0.05
-    cogging_torque: float = 1.0e-4
-    cogging_periods: int = 24
-    torque_ripple: float = 0.05
-    pole_pairs: int = 4
-    torque_constant_temp_coeff: float = 0.0012
-    resistance_temp_coeff: float = 0.0039
-    back_emf: bool = True
-    bus_voltage: float = 24.0
-    bus_source_resistance: float = 0.3
-    driver_max_duty: float = 0.95
-    bus_voltage_noise_v: float = 0.05
-    current_noise_a: float = 0.004
-    current_lsb_a: float = 0.002
-    current_offset_a: float = 0.0
-    hall_speed: bool = True
-    hall_misalignment_deg: float = 3.0
-    hall_jitter_s: float = 5.0e-7
-    hall_timer_hz: float = 1.0e6
-    hall_window_s: float = 0.1
+    stiction: bool = _NOMINAL["stiction"]
+    breakaway_friction: float = _NOMINAL["breakaway_friction"]
+    stribeck_speed_rpm: float = _NOMINAL["stribeck_speed_rpm"]
+    viscous_temp_coeff: float = _NOMINAL["viscous_temp_coeff"]
+    friction_drift: float = _NOMINAL["friction_drift"]
+    cogging_torque: float = _NOMINAL["cogging_torque"]
+    cogging_periods: int = _NOMINAL["cogging_periods"]
+    torque_ripple: float = _NOMINAL["torque_ripple"]
+    pole_pairs: int = _NOMINAL["pole_pairs"]
+    torque_constant_temp_coeff: float = _NOMINAL["torque_constant_temp_coeff"]
+    resistance_temp_coeff: float = _NOMINAL["resistance_temp_coeff"]
+    back_emf: bool = _NOMINAL["back_emf"]
+    bus_voltage: float = _NOMINAL["bus_voltage"]
+    bus_source_resistance: float = _NOMINAL["bus_source_resistance"]
+    driver_max_duty: float = _NOMINAL["driver_max_duty"]
+    bus_voltage_noise_v: float = _NOMINAL["bus_voltage_noise_v"]
+    current_noise_a: float = _NOMINAL["current_noise_a"]
+    current_lsb_a: float = _NOMINAL["current_lsb_a"]
+    current_offset_a: float = _NOMINAL["current_offset_a"]
+    hall_speed: bool = _NOMINAL["hall_speed"]
+    hall_misalignment_deg: float = _NOMINAL["hall_misalignment_deg"]
+    hall_jitter_s: float = _NOMINAL["hall_jitter_s"]
+    hall_timer_hz: float = _NOMINAL["hall_timer_hz"]
+    hall_window_s: float = _NOMINAL["hall_window_s"]
     hall_pattern_seed: int = 0
-    telemetry_jitter_s: float = 5.0e-4
-    frame_loss_rate: float = 1.0e-4
+    telemetry_jitter_s: float = _NOMINAL["telemetry_jitter_s"]
+    frame_loss_rate: float = _NOMINAL["frame_loss_rate"]
+    model: str = _RW90_SPEC.name
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            _check_field(f.name, f.type, getattr(self, f.name))
+            if f.name != "model":
+                _check_field(f.name, f.type, getattr(self, f.name))
+        if not isinstance(self.model, str) or not self.model:
+            raise ConfigError(f"wheel parameter model must name a wheel spec, got {self.model!r}")
         if self.max_speed_rpm >= self.overspeed_fault_rpm:
             raise ConfigError("overspeed_fault_rpm must be above max_speed_rpm")
         if self.current_limit >= self.overcurrent_fault:
@@ -316,15 +333,57 @@ class WheelParams:
         Returns
         -------
         WheelParams
-            See :func:`rwlab.wheel.imperfections.draw_unit`.
+            See :func:`rwlab.wheel.imperfections.draw_unit`; the tolerances are those
+            of the wheel model's spec (``model``).
         """
         from rwlab.wheel.imperfections import draw_unit
 
-        return draw_unit(self, unit)
+        return draw_unit(self, unit, WheelSpec.load(self.model).twin_tolerances())
+
+    def spec(self) -> WheelSpec:
+        """The wheel model's spec with this wheel's numbers: the ``model``'s spec, each
+        field that differs here changed (its source says from what).
+
+        Returns
+        -------
+        WheelSpec
+        """
+        base = WheelSpec.load(self.model)
+        changes = {
+            name: getattr(self, twin)
+            for name, twin in TWIN_NAMES.items()
+            if getattr(self, twin) != getattr(base, name)
+        }
+        motor = self.torque_constant * self.current_limit
+        if self.nominal_torque > motor:  # a driver set below the rated current: its torque
+            changes["max_torque_nm"] = motor
+        return base.with_(**changes) if changes else base
+
+    @classmethod
+    def from_spec(cls, spec: WheelSpec, *, unit: int | None = None) -> WheelParams:
+        """The twin of a wheel model: every field from its datasheet.
+
+        Parameters
+        ----------
+        spec : WheelSpec
+            The wheel model (:meth:`rwlab.wheelspec.WheelSpec.load`).
+        unit : int, optional
+            Draw this unit within the spec's tolerances; None: the nominal wheel.
+
+        Returns
+        -------
+        WheelParams
+        """
+        from rwlab.wheel.imperfections import draw_unit
+
+        params = cls(**spec.twin_fields(), model=spec.origin or spec.name)
+        return params if unit is None else draw_unit(params, unit, spec.twin_tolerances())
 
     @classmethod
     def preset(cls, name: str) -> WheelParams:
-        """A named parameter set: ``'rw90'`` (the realistic default) or ``'ideal'``.
+        """A named wheel model's twin: a spec preset (``'rw90'``, ``'nrwa-t6'``,
+        ``'rw-0.01'``, :func:`rwlab.wheelspec.preset_names`) or ``'ideal'`` (the RW90
+        without imperfections).
 
         Parameters
         ----------
@@ -334,16 +393,49 @@ class WheelParams:
         -------
         WheelParams
         """
-        if not isinstance(name, str) or name not in PRESETS:
-            raise ConfigError(f"unknown wheel preset {name!r}; choose from {sorted(PRESETS)}")
-        return PRESETS[name]
+        if isinstance(name, str) and name == "ideal":
+            return IDEAL
+        if not isinstance(name, str) or name not in preset_names():
+            raise ConfigError(
+                f"unknown wheel preset {name!r}; choose from {sorted(PRESET_NAMES)} "
+                "or give a wheel spec file"
+            )
+        return cls.from_spec(WheelSpec.load(name))
+
+    @classmethod
+    def load(cls, name_or_path: str | Path, *, draw_unit: bool = True) -> WheelParams:
+        """A wheel by preset name, a wheel spec file (``format = "rwlab.WheelSpec/1"``)
+        or a wheel parameter file (:meth:`from_toml`).
+
+        Parameters
+        ----------
+        name_or_path : str or Path
+        draw_unit : bool
+            For a parameter file with ``unit = N``: draw that unit.
+
+        Returns
+        -------
+        WheelParams
+        """
+        text = str(name_or_path)
+        if text == "ideal" or text in preset_names():
+            return cls.preset(text)
+        if is_spec_file(name_or_path):
+            return cls.from_spec(WheelSpec.load(name_or_path))
+        if text.lower().endswith(".toml"):
+            return cls.from_toml(name_or_path, draw_unit=draw_unit)
+        raise ConfigError(
+            f"wheel must be a preset ({', '.join(sorted(PRESET_NAMES))}), a wheel spec "
+            f"or a wheel TOML file (*.toml), got {text!r}"
+        )
 
     @classmethod
     def from_toml(cls, path: str | Path, *, draw_unit: bool = True) -> WheelParams:
         """Load parameters from a TOML file (a ``[wheel]`` table or top-level keys).
 
-        Unknown keys are an error; missing keys keep the defaults of ``preset``
-        (``'rw90'``, the realistic twin, or ``'ideal'``). ``unit = N`` then draws
+        Unknown keys are an error; missing keys keep the values of ``preset``
+        (a wheel model: ``'rw90'`` by default, ``'nrwa-t6'``, ``'rw-0.01'`` or ``'ideal'``;
+        or a wheel spec file). ``unit = N`` then draws
         unit N around them (:meth:`for_unit`) unless ``draw_unit`` is False (the
         nominal wheel: the settings a lab configured, before unit tolerances).
         """
@@ -359,7 +451,12 @@ class WheelParams:
                 f"{path}: unknown wheel parameter(s) {unknown}; known: "
                 f"{sorted(known | {'preset', 'unit'})}"
             )
-        params = replace(cls.preset(preset), **table)
+        base = (
+            cls.from_spec(WheelSpec.load(preset))
+            if isinstance(preset, str) and is_spec_file(preset)
+            else cls.preset(preset)
+        )
+        params = replace(base, **table)
         return params if unit is None or not draw_unit else params.for_unit(unit)
 
     def to_dict(self) -> dict:
@@ -401,8 +498,8 @@ def _check_field(name: str, kind, value) -> None:
         raise ConfigError(f"wheel parameter {name} must be > 0, got {value}")
 
 
-RW90 = WheelParams()
-"""The RW90 wheel of paper A (Table 1), with a real wheel's imperfections."""
+RW90 = WheelParams.from_spec(_RW90_SPEC)
+"""The RW90 wheel of paper A (Table 1), with a real wheel's imperfections (its spec)."""
 
 IDEAL = replace(
     RW90,
@@ -429,7 +526,33 @@ IDEAL = replace(
 truth: dynamics exactly ``I ω̇ = k_t i − b ω − τ_c sign ω``, current reported exactly,
 speed with 0.5 rpm white noise and a 0.5 rpm quantum, no timing jitter or frame loss."""
 
+PRESET_NAMES = (*preset_names(), "ideal")
+"""The names :meth:`WheelParams.preset` knows: the wheel-spec presets and ``'ideal'``."""
 PRESETS = {"rw90": RW90, "ideal": IDEAL}
+"""The RW90 and its ideal twin, built at import (other models: :meth:`WheelParams.preset`)."""
+
+
+def is_spec_file(path: str | Path) -> bool:
+    """Whether ``path`` is a wheel spec (a TOML file with ``format = "rwlab.WheelSpec/…"``).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    bool
+    """
+    import tomllib
+
+    p = Path(path)
+    if not p.is_file() or p.suffix.lower() != ".toml":
+        return False
+    try:
+        raw = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False
+    return str(raw.get("format", "")).startswith("rwlab.WheelSpec/")
 
 
 def _clip(x: float, limit: float) -> float:

@@ -34,6 +34,7 @@ import math
 import os
 import tomllib
 from dataclasses import dataclass, field, fields, replace
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -282,6 +283,9 @@ class WheelSpec:
         Unit-to-unit spread of the manufacturing-dependent fields (by spec field name).
     sources : mapping of str to str
         Where each number comes from (every field above has one).
+    origin : str
+        What :meth:`load` read: the preset's name or the file's path ("" when built
+        otherwise); not part of the spec's content (nor of its hash).
     """
 
     name: str
@@ -343,6 +347,7 @@ class WheelSpec:
         default_factory=lambda: MappingProxyType({})
     )
     sources: MappingProxyType[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    origin: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         # a plain dict given by a caller becomes read-only, like the rest
@@ -388,7 +393,7 @@ class WheelSpec:
         return f"{self.name} spec: {self.sources.get(name, 'no source given')}"
 
     # -- the twin ----------------------------------------------------------------------
-    def twin_fields(self) -> dict[str, float | int | bool]:
+    def twin_fields(self) -> dict[str, Any]:
         """The twin's (:class:`rwlab.wheel.WheelParams`) fields, by their names there.
 
         Returns
@@ -422,10 +427,7 @@ class WheelSpec:
         WheelSpec
         """
         if isinstance(name_or_path, str) and name_or_path in preset_names():
-            text = (resources.files(__package__) / "presets" / f"{name_or_path}.toml").read_text(
-                encoding="utf-8"
-            )
-            return cls.from_toml_text(text, f"wheel preset {name_or_path!r}")
+            return _preset(name_or_path)
         path = Path(name_or_path)
         if not path.is_file():
             raise ConfigError(
@@ -436,10 +438,12 @@ class WheelSpec:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"{path}: cannot read the wheel spec ({exc})") from None
-        return cls.from_toml_text(text, str(path))
+        return replace(cls.from_toml_text(text, str(path)), origin=str(path))
 
     @classmethod
-    def from_toml_text(cls, text: str, where: str = "the wheel spec") -> WheelSpec:
+    def from_toml_text(
+        cls, text: str, where: str = "the wheel spec", *, validate: bool = True
+    ) -> WheelSpec:
         """Parse and check a spec file's text.
 
         Parameters
@@ -448,6 +452,9 @@ class WheelSpec:
             The TOML.
         where : str
             The file's name, for messages.
+        validate : bool
+            Check the structure against the JSON Schema (the shipped presets are
+            checked by the tests instead, to keep ``import rwlab.wheel`` fast).
 
         Returns
         -------
@@ -457,10 +464,12 @@ class WheelSpec:
             raw = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"{where}: not valid TOML ({exc})") from None
-        return cls.from_dict(raw, where)
+        return cls.from_dict(raw, where, validate=validate)
 
     @classmethod
-    def from_dict(cls, raw: Any, where: str = "the wheel spec") -> WheelSpec:
+    def from_dict(
+        cls, raw: Any, where: str = "the wheel spec", *, validate: bool = True
+    ) -> WheelSpec:
         """A spec from its file's parsed form (or :meth:`to_dict`'s output).
 
         Parameters
@@ -469,12 +478,15 @@ class WheelSpec:
             ``format``, ``name``, ``title``, ``documents``, the sections, ``tolerances``.
         where : str
             The file's name, for messages.
+        validate : bool
+            Check the structure against the JSON Schema first.
 
         Returns
         -------
         WheelSpec
         """
-        _validate_schema(raw, where)
+        if validate:
+            _validate_schema(raw, where)
         values: dict[str, Any] = {}
         sources: dict[str, str] = {}
         for section, items in SECTIONS.items():
@@ -578,6 +590,14 @@ class WheelSpec:
         return replace(self, sources=MappingProxyType(sources), **changes)
 
 
+@cache
+def _preset(name: str) -> WheelSpec:
+    text = (resources.files(__package__) / "presets" / f"{name}.toml").read_text(encoding="utf-8")
+    spec = WheelSpec.from_toml_text(text, f"wheel preset {name!r}", validate=False)
+    return replace(spec, origin=name)
+
+
+@cache
 def preset_names() -> tuple[str, ...]:
     """The shipped wheel models, sorted.
 
@@ -589,17 +609,22 @@ def preset_names() -> tuple[str, ...]:
     return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
 
 
-def _validate_schema(raw: Any, where: str) -> None:
+@cache
+def _validator() -> Any:
     import jsonschema
 
     from rwlab.schemas import schema
 
+    return jsonschema.Draft202012Validator(schema("wheelspec"))
+
+
+def _validate_schema(raw: Any, where: str) -> None:
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: a wheel spec is a TOML table")
     tag = raw.get("format")
     if isinstance(tag, str) and tag.startswith(f"rwlab.{KIND}/") and tag != FORMAT:
         raise ConfigError(f"{where}: {tag} is not {FORMAT}, the version this rwlab reads")
-    validator = jsonschema.Draft202012Validator(schema("wheelspec"))
+    validator = _validator()
     errors = sorted(validator.iter_errors(raw), key=lambda e: list(e.absolute_path))
     if errors:
         first = errors[0]
