@@ -119,7 +119,7 @@ def test_nonlinear_model_beats_the_chosen_linear_one_on_the_twin(prbs_study):
 @pytest.mark.slow
 def test_model_json_flies_either_model_and_old_files_still_load(prbs_study, tmp_path):
     info = json.loads((prbs_study / "model.json").read_text())
-    assert info["format"] == "rwlab.WheelModel/1" and info["preferred"] == "nonlinear"
+    assert info["format"] == "rwlab.WheelModel/2" and info["preferred"] == "nonlinear"
     best = IdentifiedWheel.from_json(prbs_study / "model.json")
     linear = IdentifiedWheel.from_json(prbs_study / "model.json", model="linear")
     assert (best.kind, linear.kind) == ("nonlinear", "linear")

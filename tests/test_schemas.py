@@ -128,7 +128,7 @@ def test_reading_rule_upgrades_older_refuses_newer_and_other_kinds():
 
 def test_a_newer_model_file_is_refused_with_what_to_do(study_out, tmp_path):
     d = json.loads((study_out / "out" / "model.json").read_text())
-    (tmp_path / "m.json").write_text(json.dumps({**d, "format": "rwlab.WheelModel/2"}))
+    (tmp_path / "m.json").write_text(json.dumps({**d, "format": "rwlab.WheelModel/3"}))
     with pytest.raises(FileFormatError, match="update rwlab"):
         IdentifiedWheel.from_json(tmp_path / "m.json")
     (tmp_path / "n.json").write_text(json.dumps({k: v for k, v in d.items() if k != "format"}))

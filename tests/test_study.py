@@ -364,4 +364,4 @@ def test_rwlab_compare_refuses_what_is_not_a_model(tmp_path, study_dir):
     record = study_dir.parent / "prbs.mcap"
     result = CliRunner().invoke(main, ["compare", str(bad), str(record), "--json"])
     assert result.exit_code == 2
-    assert result.output.startswith("error:") and "rwlab.WheelModel/1" in result.output
+    assert result.output.startswith("error:") and "rwlab.WheelModel/2" in result.output

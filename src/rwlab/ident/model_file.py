@@ -12,7 +12,10 @@ version 1 as optional keys (older files simply lack them): the physical grey box
 (``greybox``), the nonlinear ARX (``nlarx``), which of the nonlinear models the
 study chose and why (``nonlinear_chosen``, ``nonlinear_choice``), the driver's
 current limit (``saturation.current_limit_a``) and the diagnosis's healthy
-reference (``healthy_reference``).
+reference (``healthy_reference``). 2 — the wheel model's spec travels with the
+identified model (``wheel``: its name, hash, headline limits and the whole
+:class:`rwlab.wheelspec.WheelSpec`); a version-1 file reads with no spec (``wheel_spec``
+None: the wheel it came from is unknown).
 """
 
 from __future__ import annotations
@@ -30,11 +33,13 @@ from rwlab.ident.gain_constraint import study_name
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
 from rwlab.schemas import format_tag, read_versioned
+from rwlab.wheelspec import WheelSpec
 
 __all__ = ["KIND", "VERSION", "Channel", "WheelModelFile"]
 
 KIND = "WheelModel"
-VERSION = 1
+VERSION = 2
+_RW90 = WheelSpec.load("rw90")  # the saturations of a model made without a spec
 NONLINEAR_MODELS = ("greybox", "nlarx")  # beside the servo model (``nonlinear``)
 NOTE = (
     "y − output.offset = B/(A F)·(u − input.offset); apply the speed-command "
@@ -82,9 +87,9 @@ class WheelModelFile:
     input, output : Channel
         The command and speed signals with their operating points (rpm).
     speed_limit_rpm : float
-        Speed-command saturation applied before the model, rpm (paper A: 7800).
+        Speed-command saturation applied before the model, rpm (default: the RW90 spec's).
     accel_limit_rpm_s : float
-        Acceleration limit applied to the model's output, rpm/s (paper A: 314).
+        Acceleration limit applied to the model's output, rpm/s (default: the RW90 spec's).
     saturation_source : str
         Where the saturations come from (the record's driver settings, defaults).
     validation_fit_percent : float
@@ -108,14 +113,17 @@ class WheelModelFile:
     data_segments : tuple of (float, float), optional
         The gap-free parts ``(t_start, t_end)`` (s) of a record split at its telemetry
         gaps and identified as separate experiments (``identify --gaps split``).
+    wheel_spec : WheelSpec, optional
+        The wheel model the record came from (its datasheet, as configured); None for a
+        record or a version-1 file without one.
     """
 
     model: PolyModel
     input: Channel
     output: Channel
-    speed_limit_rpm: float = 7800.0
-    accel_limit_rpm_s: float = 314.0
-    saturation_source: str = "RW90 defaults"
+    speed_limit_rpm: float = _RW90.max_speed_rpm
+    accel_limit_rpm_s: float = _RW90.max_accel_rpm_s
+    saturation_source: str = "RW90 spec (rw90.toml)"
     validation_fit_percent: float = math.nan
     servo: ServoModel | None = None
     servo_fit_percent: float | None = None
@@ -126,6 +134,7 @@ class WheelModelFile:
     nonlinear_choice: str | None = None
     healthy_reference: dict | None = None
     data_segments: tuple[tuple[float, float], ...] | None = None
+    wheel_spec: WheelSpec | None = None
 
     def __post_init__(self) -> None:
         if self.model.nu != 1:
@@ -199,6 +208,8 @@ class WheelModelFile:
             d["healthy_reference"] = self.healthy_reference
         if self.data_segments is not None:
             d["data_segments"] = [[float(a), float(b)] for a, b in self.data_segments]
+        if self.wheel_spec is not None:
+            d["wheel"] = {**self.wheel_spec.limits(), "spec": self.wheel_spec.to_dict()}
         return d
 
     @classmethod
@@ -227,7 +238,7 @@ class WheelModelFile:
                 f"{source}: not an rwlab wheel model (no format {expected!r}); pass the "
                 "model.json that `rwlab identify` wrote"
             )
-        d = read_versioned(d, KIND, VERSION, source=source)
+        d = read_versioned(d, KIND, VERSION, {1: _upgrade_1_to_2}, source=source)
         _check_top_level(d, source)
         try:
             sat, nl = d["saturation"], d.get("nonlinear")
@@ -253,6 +264,7 @@ class WheelModelFile:
                 nonlinear_choice=d.get("nonlinear_choice"),
                 healthy_reference=d.get("healthy_reference"),
                 data_segments=_segments(d.get("data_segments")),
+                wheel_spec=_wheel_spec(d.get("wheel"), source),
             )
         except (ModelError, FileFormatError) as exc:
             raise FileFormatError(f"{source}: {exc}") from None
@@ -299,6 +311,29 @@ class WheelModelFile:
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
         return cls.from_dict(d, source=str(path))
+
+
+def _upgrade_1_to_2(d: dict) -> dict:
+    """Version 1 → 2: no field changes; a version-1 model has no wheel spec."""
+    return dict(d)
+
+
+def _wheel_spec(d: Any, source: str) -> WheelSpec | None:
+    """The wheel spec a model carries, its hash checked (an edited number is refused)."""
+    if d is None:
+        return None
+    from rwlab.errors import ConfigError
+
+    try:
+        spec = WheelSpec.from_dict(d["spec"], "wheel.spec")
+    except ConfigError as exc:
+        raise FileFormatError(str(exc)) from None
+    if d.get("hash") != spec.hash:
+        raise FileFormatError(
+            f"{source}: wheel.hash {d.get('hash')!r} is not the hash of wheel.spec "
+            f"({spec.hash}): the wheel's numbers were edited after identification"
+        )
+    return spec
 
 
 def _channel(d: dict) -> dict:

@@ -73,6 +73,7 @@ from rwlab.ident.nonlinear import ServoModel, servo_fit
 from rwlab.ident.pem import armax, bj, oe
 from rwlab.ident.structure import delay_scan
 from rwlab.ident.validation import compare, fit_percent, resid
+from rwlab.wheelspec import WheelSpec
 
 __all__ = [
     "StudyResult",
@@ -770,16 +771,35 @@ def _estimation_gain(data: IOData, split: float, pieces) -> dict | None:
     return out
 
 
-DATASHEET = {
-    "inertia": 4.2e-4,
-    "torque_constant": 0.0245,
-    "current_limit": 0.7,
-    "coulomb": 2.0e-4,
-    "viscous": 1.0e-6,
-    "accel_limit_rpm_s": 314.0,
-    "max_speed_rpm": 7800.0,
-}
-"""RW90 datasheet values (paper A, Table 1; SPEC.md): the grey box's fixed and start values."""
+def wheel_datasheet(spec: WheelSpec) -> dict:
+    """A wheel model's datasheet values the grey box fixes or starts from.
+
+    Parameters
+    ----------
+    spec : WheelSpec
+        The wheel model.
+
+    Returns
+    -------
+    dict
+        inertia, torque_constant, current_limit, coulomb, viscous, accel_limit_rpm_s,
+        max_speed_rpm (SI, rpm).
+    """
+    return {
+        "inertia": spec.inertia_kg_m2,
+        "torque_constant": spec.torque_constant_nm_a,
+        "current_limit": spec.current_limit_a,
+        "coulomb": spec.coulomb_friction_nm,
+        "viscous": spec.viscous_friction_nm_s,
+        "accel_limit_rpm_s": spec.max_accel_rpm_s,
+        "max_speed_rpm": spec.max_speed_rpm,
+    }
+
+
+_RW90 = WheelSpec.load("rw90")
+DATASHEET = wheel_datasheet(_RW90)
+"""The RW90's datasheet values (its spec, rw90.toml): the grey box's values for a record
+that names no wheel model."""
 
 
 def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
@@ -944,9 +964,10 @@ def acceleration_pair(model: PolyModel, val: IOData) -> tuple[np.ndarray, np.nda
 def physical_model(
     result: StudyResult,
     *,
-    speed_limit_rpm: float = 7800.0,
-    accel_limit_rpm_s: float = 314.0,
-    saturation_source: str = "RW90 defaults",
+    speed_limit_rpm: float = _RW90.max_speed_rpm,
+    accel_limit_rpm_s: float = _RW90.max_accel_rpm_s,
+    saturation_source: str = "RW90 spec (rw90.toml)",
+    wheel_spec: WheelSpec | None = None,
 ) -> dict:
     """The JSON form of :func:`wheel_model` (``model.json``), same arguments.
 
@@ -958,6 +979,8 @@ def physical_model(
         The wheel's saturations, rpm and rpm/s.
     saturation_source : str
         Where they come from.
+    wheel_spec : WheelSpec, optional
+        The wheel model the record came from (travels with the model).
 
     Returns
     -------
@@ -969,15 +992,17 @@ def physical_model(
         speed_limit_rpm=speed_limit_rpm,
         accel_limit_rpm_s=accel_limit_rpm_s,
         saturation_source=saturation_source,
+        wheel_spec=wheel_spec,
     ).to_dict()
 
 
 def wheel_model(
     result: StudyResult,
     *,
-    speed_limit_rpm: float = 7800.0,
-    accel_limit_rpm_s: float = 314.0,
-    saturation_source: str = "RW90 defaults",
+    speed_limit_rpm: float = _RW90.max_speed_rpm,
+    accel_limit_rpm_s: float = _RW90.max_accel_rpm_s,
+    saturation_source: str = "RW90 spec (rw90.toml)",
+    wheel_spec: WheelSpec | None = None,
 ) -> WheelModelFile:
     """The chosen model in physical units, with the saturations any control use needs.
 
@@ -996,6 +1021,8 @@ def wheel_model(
         The wheel's saturations, rpm and rpm/s.
     saturation_source : str
         Where they come from.
+    wheel_spec : WheelSpec, optional
+        The wheel model the record came from (travels with the model).
 
     Returns
     -------
@@ -1032,6 +1059,7 @@ def wheel_model(
         data_segments=None
         if result.segments is None
         else tuple((float(a), float(b)) for a, b in result.segments),
+        wheel_spec=wheel_spec,
     )
 
 
@@ -1131,9 +1159,9 @@ def load_study_data(
     from rwlab.data import load
 
     saturation = {
-        "speed_limit_rpm": 7800.0,
-        "accel_limit_rpm_s": 314.0,
-        "saturation_source": "RW90 defaults (paper A)",
+        "speed_limit_rpm": _RW90.max_speed_rpm,
+        "accel_limit_rpm_s": _RW90.max_accel_rpm_s,
+        "saturation_source": "the RW90 spec (rw90.toml): the file names no wheel",
     }
     columns = {"input_columns": input_col, "output_columns": output_col}
     if Path(path).suffix.lower() == ".mcap":
@@ -1164,6 +1192,10 @@ def load_study_data(
             }
         if "current_limit" in wheel:
             saturation["current_limit_a"] = float(wheel["current_limit"])
+        if isinstance(data.source.get("wheel_spec"), dict):  # the wheel model, as configured
+            saturation["wheel_spec"] = WheelSpec.from_dict(
+                data.source["wheel_spec"], f"{path}: wheel_spec"
+            )
         return data, saturation
     if not Path(path).exists() and path in datasets.NAMES:
         if input_col or output_col:

@@ -151,8 +151,12 @@ def identify_into(
     if echo is not None:  # the data are shown once the study accepts them (a refusal: one line)
         progress = _after_first(progress, lambda: echo(f"data: {data!r}"))
     datasheet = None
+    spec = saturation.get("wheel_spec")
     if "current_limit_a" in saturation:
-        datasheet = {
+        from rwlab.ident.study import wheel_datasheet
+
+        datasheet = {  # the record's wheel model, else the RW90's (records before specs)
+            **(wheel_datasheet(spec) if spec is not None else {}),
             "current_limit": saturation["current_limit_a"],
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
@@ -174,6 +178,7 @@ def identify_into(
         speed_limit_rpm=saturation["speed_limit_rpm"],
         accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
         saturation_source=saturation["saturation_source"],
+        wheel_spec=spec,
     )
     reference = _healthy_reference(file, model)
     if isinstance(reference, dict):
