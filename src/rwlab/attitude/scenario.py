@@ -3,12 +3,18 @@
 Three built-ins:
 
 - ``geo-smallsat`` — a 150 kg GEO smallsat (J ≈ diag(14, 12, 10) kg·m²) with
-  three orthogonal RW90 wheels (the wheel on our testbed: 0.34 N·m·s,
-  7800 rpm, 0.015 N·m), 1.5 m² of arrays;
+  three orthogonal RW90 wheels (the wheel on our testbed, its spec ``rw90``),
+  1.5 m² of arrays;
 - ``geo-smallsat-pyramid`` — the same with four RW90 in a pyramid (54.74° from z);
 - ``geo-comsat`` — a comsat (J = diag(1200, 1000, 1500) kg·m², as in the
-  Basilisk peer scenario) with three HR16-class wheels (50 N·m·s, 0.2 N·m,
-  6000 rpm) and 30 m² of arrays.
+  Basilisk peer scenario) with four NRWA-T6-class wheels in a pyramid (spec
+  ``nrwa-t6``: ~6 N·m·s, 0.31 N·m, 5000 rpm) and 30 m² of arrays;
+- ``geo-cubesat`` — a 12U CubeSat (J = diag(0.25, 0.22, 0.12) kg·m²) with three
+  orthogonal RW-0.01 wheels (spec ``rw-0.01``: 18 mN·m·s, 1 mN·m) and 0.3 m² of arrays.
+
+Each wheel section names its wheel model (``wheels.spec``) and what the mission
+needs of it (``wheels.required_torque_nm``, ``wheels.required_momentum_nms``); a
+wheel model that cannot deliver that is refused (:mod:`rwlab.attitude.wheel_fit`).
 
 Sensors: sun sensor 0.02°, earth sensor 0.05° (1σ, typical units); the filter
 assumes 30 % more (paper B). Two more built-ins fly the sensors real GEO comsats
@@ -19,14 +25,15 @@ carry through the eclipses (``rwlab.attitude.sensors``): ``geo-comsat-gyro``
 A :class:`Scenario` is a name and eight sections — :class:`Spacecraft`,
 :class:`Wheels`, :class:`Sensors`, :class:`Sky`, :class:`FilterDesign`,
 :class:`ControlDesign`, :class:`Momentum`, :class:`RunSettings` — reached as
-``sc.wheels.max_torque``; ``sc.with_(**{"wheels.max_torque": 0.1})`` changes
+``sc.wheels.max_torque``; ``sc.with_(**{"wheels.spec": "rw90"})`` changes
 fields by their dotted names. A scenario file is TOML with one table per section::
 
     [scenario]
     base = "geo-comsat"          # the built-in to start from
     name = "my-comsat"
     [wheels]
-    max_torque = 0.1
+    spec = "my-wheel.toml"       # a wheel model: a preset or a wheel spec file
+    axes = "pyramid"
     [spacecraft.disturbances]
     constant_torque = [1e-3, 0.0, 0.0]
     [sensors.gyro]               # gyros fly (their keys over GyroModel's defaults)
@@ -207,10 +214,46 @@ def _set_path(obj: Any, path: str, value: Any, full: str) -> Any:
     if not is_dataclass(obj) or head not in {f.name for f in fields(obj)}:
         raise ConfigError(f"unknown scenario field {full!r}; {_FIELD_HINT}")
     new = _set_path(getattr(obj, head), rest, value, full) if rest else value
+    if isinstance(obj, Wheels) and head == "spec" and new != obj.spec:
+        # another wheel model: its own limits, not the last one's
+        limits = dict.fromkeys(("inertia", "max_torque", "max_momentum", "max_speed_rpm"))
+        return replace(obj, spec=new, **limits)
     return replace(obj, **{head: new})  # type: ignore[type-var]
 
 
-_RW90_MOMENTUM = 4.2e-4 * 7800 * 2 * math.pi / 60
+# What each mission needs of its wheels about any axis (the wheel models are checked
+# against it: rwlab.attitude.wheel_fit). Momentum: the worst solar-pressure torque,
+# 4.56e-6 N/m² × area × reflectivity 1.3 × |centre-of-pressure offset|, held for a
+# quarter of a day (21600 s) between unloads.
+_COMSAT_WHEELS = Wheels(
+    spec="nrwa-t6",
+    axes="pyramid",
+    required_torque_nm=0.1,
+    required_momentum_nms=2.4,
+    required_torque_source=(
+        "geo-comsat: assumed, because paper B gives none: a 3-t comsat's station-keeping burn "
+        "misaligned by ~0.1 N·m"
+    ),
+    required_momentum_source="geo-comsat: SRP 4.56e-6 × 30 m² × 1.3 × 0.62 m for 21600 s",
+)
+_SMALLSAT_WHEELS = Wheels(
+    spec="rw90",
+    axes="orthogonal",
+    required_torque_nm=0.005,
+    required_momentum_nms=0.02,
+    required_torque_source="geo-smallsat: assumed: a 20-mN cold-gas burn misaligned by 0.25 m",
+    required_momentum_source="geo-smallsat: SRP 4.56e-6 × 1.5 m² × 1.3 × 0.1 m for 21600 s",
+)
+_CUBESAT_WHEELS = Wheels(
+    spec="rw-0.01",
+    axes="orthogonal",
+    required_torque_nm=2e-4,
+    required_momentum_nms=2e-3,
+    required_torque_source="geo-cubesat: assumed: a 1-mN thruster misaligned by 0.2 m",
+    required_momentum_source=(
+        "geo-cubesat: SRP 4.56e-6 × 0.3 m² × 1.3 × 0.037 m for 21600 s, 40 % margin"
+    ),
+)
 SCENARIOS = {
     "geo-smallsat": Scenario(
         name="geo-smallsat",
@@ -219,21 +262,36 @@ SCENARIOS = {
             process_noise_torque=2e-7,
             disturbances=DisturbanceModel(srp_area=1.5, srp_offset=(0.05, -0.03, 0.08)),
         ),
-        wheels=Wheels(
-            inertia=4.2e-4, max_torque=0.015, max_momentum=_RW90_MOMENTUM, max_speed_rpm=7800.0
-        ),
+        wheels=_SMALLSAT_WHEELS,
         # the RW90's torque is ample for 12 kg·m²: the bandwidth is held to ~0.25 rad/s so
         # that the 2 Hz sensors' noise is averaged (0.1 would cross at 0.48 rad/s)
         control=ControlDesign(lqr_torque_fraction=0.03),
         momentum=Momentum(thruster_torque=0.02),  # 50 mN cold gas at 0.4 m
     ),
-    "geo-comsat": Scenario(name="geo-comsat"),
+    # four NRWA-T6-class wheels in a pyramid (any three still span the body)
+    "geo-comsat": Scenario(name="geo-comsat", wheels=_COMSAT_WHEELS),
     # geo-comsat with the sensors GEO comsats fly for the eclipses: gyros driving the filter
     # (sun and earth sensors as before); and with a star tracker besides
-    "geo-comsat-gyro": Scenario(name="geo-comsat-gyro", sensors=Sensors(gyro=GyroModel())),
+    "geo-comsat-gyro": Scenario(
+        name="geo-comsat-gyro", wheels=_COMSAT_WHEELS, sensors=Sensors(gyro=GyroModel())
+    ),
     "geo-comsat-star": Scenario(
         name="geo-comsat-star",
+        wheels=_COMSAT_WHEELS,
         sensors=Sensors(gyro=GyroModel(), star_tracker=StarTrackerModel()),
+    ),
+    # a 12U CubeSat (~20 kg) in GEO on three RW-0.01 wheels, its arrays 0.3 m²
+    "geo-cubesat": Scenario(
+        name="geo-cubesat",
+        spacecraft=Spacecraft(
+            inertia=(0.25, 0.22, 0.12),
+            process_noise_torque=3e-9,
+            disturbances=DisturbanceModel(srp_area=0.3, srp_offset=(0.02, -0.01, 0.03)),
+        ),
+        wheels=_CUBESAT_WHEELS,
+        # the same ~0.25 rad/s bandwidth as the smallsat's for the 2 Hz sensors
+        control=ControlDesign(lqr_torque_fraction=0.03),
+        momentum=Momentum(thruster_torque=2e-4),  # a 1 mN cold-gas thruster at 0.2 m
     ),
 }
 # the smallsat with four RW90 in a pyramid: any three still span the body (a wheel may fail)
@@ -353,6 +411,9 @@ def _flat_warning(path: Path, sections: dict) -> str:
     )
 
 
+_WHEEL_LIMITS = ("inertia", "max_torque", "max_momentum", "max_speed_rpm")
+
+
 def _section_changes(table: dict, section: str, base: Scenario, path: Path) -> dict:
     """One section table of a file → ``with_`` changes; anything unknown is an error."""
     if not isinstance(table, dict):
@@ -362,14 +423,24 @@ def _section_changes(table: dict, section: str, base: Scenario, path: Path) -> d
     if unknown:
         raise ConfigError(f"{path}: unknown key(s) {unknown}")
     changes: dict[str, Any] = {}
+    own = sorted(set(table) & set(_WHEEL_LIMITS)) if section == "wheels" else []
+    if own:
+        warnings.warn(
+            f"{path}: [wheels] {', '.join(own)} are the wheel model's numbers: name the model "
+            "(wheels.spec = a preset from `rwlab wheel models`, or a wheel spec file) and "
+            "leave them out; the values given here override the spec's",
+            FormatWarning,
+            stacklevel=3,
+        )
     for key, value in table.items():
         name = f"{section}.{key}"
         if name in _SUBTABLES:
             changes[name] = _subtable(value, name, base, path)
         elif name == "sky.epoch" and isinstance(value, datetime):  # TOML's date-time type
             changes[name] = value.isoformat()
-        elif name == "wheels.model_file" and isinstance(value, str):
-            changes[name] = str(path.parent / value)  # relative to the file (or absolute)
+        elif name in ("wheels.model_file", "wheels.spec") and isinstance(value, str):
+            relative = path.parent / value  # a file relative to the scenario (or absolute)
+            changes[name] = str(relative) if relative.is_file() else value
         else:
             changes[name] = tuple(value) if isinstance(value, list) else value
     return changes

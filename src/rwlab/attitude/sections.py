@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 from rwlab.attitude.plant import DisturbanceModel
 from rwlab.attitude.sensors import GyroModel, StarTrackerModel
+from rwlab.wheelspec import WheelSpec
 
 __all__ = [
     "LEGACY_NAMES",
@@ -50,14 +51,26 @@ class Spacecraft:
 
 @dataclass(frozen=True)
 class Wheels:
-    """The reaction wheels.
+    """The reaction wheels: which wheel model, how many, in what geometry.
 
     Attributes
     ----------
+    spec : str
+        The wheel model: a preset (``rwlab wheel models``: ``"nrwa-t6"``, ``"rw90"``,
+        ``"rw-0.01"``), a wheel spec file, or a ``model.json`` that carries its spec.
+        Its datasheet gives each wheel's inertia, torque, momentum and speed limits.
     axes : {'orthogonal', 'pyramid'}
         3 wheels on the body axes, or 4 at 54.74° from z.
-    inertia, max_torque, max_momentum, max_speed_rpm : float
-        Rotor inertia (kg·m²), torque (N·m), momentum (N·m·s) and speed limits.
+    inertia, max_torque, max_momentum, max_speed_rpm : float, optional
+        Rotor inertia (kg·m²), torque (N·m), momentum (N·m·s) and speed (rpm) limits:
+        the spec's (None: read from it). Set only to disperse them around the spec
+        (Monte Carlo); a scenario file that gives them is read with a warning.
+    required_torque_nm, required_momentum_nms : float, optional
+        What the mission needs of the wheel set about any body axis: torque (N·m) and
+        stored momentum (N·m·s). A wheel model that cannot deliver them is refused
+        (``rwlab.attitude.wheel_fit``) unless forced. None: no requirement.
+    required_torque_source, required_momentum_source : str
+        Where each requirement comes from.
     model : {'ideal', 'physics', 'identified'}
         The wheel model flown.
     model_file : str or None
@@ -76,17 +89,66 @@ class Wheels:
         bearing; ``"physics"`` wheels).
     """
 
-    axes: str = "orthogonal"
-    inertia: float = 0.08
-    max_torque: float = 0.2
-    max_momentum: float = 50.0
-    max_speed_rpm: float = 6000.0
+    spec: str = "nrwa-t6"
+    axes: str = "pyramid"
+    inertia: float = None  # type: ignore[assignment]  # None until __post_init__ reads the spec
+    max_torque: float = None  # type: ignore[assignment]
+    max_momentum: float = None  # type: ignore[assignment]
+    max_speed_rpm: float = None  # type: ignore[assignment]
+    required_torque_nm: float | None = None
+    required_momentum_nms: float | None = None
+    required_torque_source: str = ""
+    required_momentum_source: str = ""
     model: str = "ideal"
     model_file: str | None = None
     faults: tuple = ()
     torque_scale: float = 1.0
     stiction: bool = True
     friction_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        spec = self.wheel_spec
+        for name, value in (
+            ("inertia", spec.inertia_kg_m2),
+            ("max_torque", spec.max_torque_nm),
+            ("max_momentum", spec.momentum_capacity_nms),
+            ("max_speed_rpm", spec.max_speed_rpm),
+        ):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+
+    @property
+    def wheel_spec(self) -> WheelSpec:
+        """The wheel model's spec (:class:`rwlab.wheelspec.WheelSpec`)."""
+        return load_wheel_spec(self.spec)
+
+
+def load_wheel_spec(name_or_path: str) -> WheelSpec:
+    """A wheel model's spec: a preset name, a spec TOML file, or a ``model.json`` (its spec).
+
+    Parameters
+    ----------
+    name_or_path : str
+
+    Returns
+    -------
+    WheelSpec
+    """
+    from rwlab.errors import ConfigError
+
+    if not isinstance(name_or_path, str):
+        raise ConfigError(f"wheels.spec must name a wheel model, got {name_or_path!r}")
+    if name_or_path.lower().endswith(".json"):
+        from rwlab.ident.model_file import WheelModelFile
+
+        spec = WheelModelFile.load(name_or_path).wheel_spec
+        if spec is None:
+            raise ConfigError(
+                f"{name_or_path} carries no wheel spec (a version-1 model.json): give the "
+                "wheel model it was identified on (wheels.spec = NAME or a spec file)"
+            )
+        return spec
+    return WheelSpec.load(name_or_path)
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ from numba import njit
 from rwlab.ident.nonlinear import servo_advance
 from rwlab.wheel.imperfections import stribeck_friction
 from rwlab.wheel.physics import IDEAL as IDEAL_PARAMS
-from rwlab.wheel.physics import RW90, WheelParams, rad_s_to_rpm
+from rwlab.wheel.physics import WheelParams, rad_s_to_rpm
 
 __all__ = ["IDEAL", "IDENTIFIED", "PHYSICS", "WheelArrays", "realise", "wheel_setup"]
 
@@ -102,36 +102,36 @@ class WheelArrays:
 
 
 def physics_params(sc) -> WheelParams:
-    """The RW physics scaled to the scenario's wheel (RW90's friction and electrical model).
+    """The RW physics of the scenario's wheel model (its spec), as the compiled kernel flies it.
 
-    The ideal twin (:data:`rwlab.wheel.physics.IDEAL`: no drift, cogging, ripple or
-    temperature effects) with the RW90's friction law (:data:`rwlab.wheel.physics.RW90`:
-    Coulomb 2e-4 N·m, breakaway 3e-4 N·m, Stribeck speed 10 rpm, viscous 1e-6 N·m·s/rad —
-    paper A's wheel with issue 22's datasheet-class imperfections) when
-    ``sc.wheels.stiction``, each friction torque scaled by the wheel's rated torque over
-    the RW90's (0.015 N·m): a bigger wheel's bearings and seals drag in proportion (no
-    datasheet of the comsat class is in the project; for its 0.2 N·m wheel this gives
-    Coulomb 2.7 mN·m, breakaway 4 mN·m, 8.4 mN·m viscous drag at 6000 rpm, ≈ 7 W of loss
-    at full speed). The compiled kernel here is that law, exactly (tested against
+    The wheel model's motor (k_t, current limit) and friction law (Coulomb, viscous,
+    breakaway, Stribeck speed: ``sc.wheels.wheel_spec``) on the ideal twin
+    (:data:`rwlab.wheel.physics.IDEAL`: no drift, cogging, ripple or temperature
+    effects); ``wheels.stiction = false`` gives the plain Coulomb + viscous law.
+    Inertia, speed and torque limits are ``sc.wheels``' (the spec's unless a
+    dispersion moved them: the current limit then scales with the torque). The
+    compiled kernel here is that law, exactly (tested against
     :class:`rwlab.wheel.physics.WheelPhysics`).
     """
-    scale = sc.wheels.max_torque / RW90.nominal_torque
+    spec = sc.wheels.wheel_spec
+    w = sc.wheels
+    current = spec.current_limit_a * w.max_torque / spec.max_torque_nm
     return replace(
         IDEAL_PARAMS,
-        inertia=sc.wheels.inertia,
-        max_speed_rpm=sc.wheels.max_speed_rpm,
-        overspeed_fault_rpm=sc.wheels.max_speed_rpm * 1.1,
-        max_accel_rpm_s=rad_s_to_rpm(sc.wheels.max_torque / sc.wheels.inertia),
-        # the current limit then allows 5 % more than the rated torque
-        torque_constant=sc.wheels.max_torque / RW90.current_limit * 1.05,
-        viscous_friction=RW90.viscous_friction * scale,
-        coulomb_friction=RW90.coulomb_friction * scale,
-        stiction=sc.wheels.stiction,
-        breakaway_friction=(
-            RW90.breakaway_friction if sc.wheels.stiction else RW90.coulomb_friction
-        )
-        * scale,
-        stribeck_speed_rpm=RW90.stribeck_speed_rpm,
+        model=spec.origin or spec.name,
+        inertia=w.inertia,
+        max_speed_rpm=w.max_speed_rpm,
+        overspeed_fault_rpm=w.max_speed_rpm * spec.overspeed_fault_rpm / spec.max_speed_rpm,
+        max_accel_rpm_s=rad_s_to_rpm(w.max_torque / w.inertia),
+        nominal_torque=w.max_torque,
+        torque_constant=spec.torque_constant_nm_a,
+        current_limit=current,
+        overcurrent_fault=current * spec.overcurrent_fault_a / spec.current_limit_a,
+        viscous_friction=spec.viscous_friction_nm_s,
+        coulomb_friction=spec.coulomb_friction_nm,
+        stiction=w.stiction,
+        breakaway_friction=spec.breakaway_friction_nm if w.stiction else spec.coulomb_friction_nm,
+        stribeck_speed_rpm=spec.stribeck_speed_rpm,
     )
 
 

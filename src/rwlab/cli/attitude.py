@@ -71,7 +71,12 @@ _EPOCH = click.option(
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
 @_EPOCH
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
+    "torque, momentum or speed (the report says so first).",
+)
 @_friendly_errors
 def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force):
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
@@ -94,6 +99,8 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
             )
         if wheel_model:
             IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
+            sc = sc.with_(**{"wheels.spec": _with_wheel_model(sc, wheel_model).wheels.spec})
+        forced = _wheel_check(_with_wheel_model(sc, wheel_model), force)
         click.echo(
             f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
             f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
@@ -109,6 +116,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
             update_period=relinearize,
             progress=lambda name: click.echo(f"  flying {name}", err=True),
         )
+        comp.config["wheel_forced"] = forced
         paths = write_comparison(comp, stage, force=force, ltr_result=ltr_study(sc))
     click.echo(
         f"{'controller':<22} {'max err [°]':>11} {'rms [°]':>9} {'settle [s]':>10} "
@@ -191,6 +199,29 @@ def _check_run(duration: float, relinearize: float | None) -> None:
         )
 
 
+def _with_wheel_model(sc, wheel_model: str | None):
+    """The scenario flying ``model.json`` as its wheels: the model's own spec (inertia and
+    limits) when it carries one."""
+    if not wheel_model:
+        return sc
+    from rwlab.ident.model_file import WheelModelFile
+
+    changes = {"wheels.model": "identified", "wheels.model_file": str(wheel_model)}
+    if WheelModelFile.load(wheel_model).wheel_spec is not None:
+        changes["wheels.spec"] = str(wheel_model)
+    return sc.with_(**changes)
+
+
+def _wheel_check(sc, force: bool) -> list[str]:
+    """Refuse (exit 2) wheels that cannot deliver the scenario's needs; forced: the lines."""
+    from rwlab.attitude.wheel_fit import check_wheel_fit
+
+    forced = check_wheel_fit(sc, force=force)
+    for line in forced:
+        click.echo(line, err=True)
+    return forced
+
+
 def _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize) -> dict:
     """The ``config`` of a simulation's metrics.json: what was flown, as flown."""
     from rwlab.attitude.sim import disturbance_state
@@ -208,6 +239,7 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
         "filter_disturbance_state": disturbance_state(sc) if controller.startswith("lqg") else None,
         "momentum_unloading": sc.momentum.unloading,
         "wheel_model": sc.wheels.model,
+        "wheel_spec": {"name": sc.wheels.wheel_spec.name, "hash": sc.wheels.wheel_spec.hash},
         "wheel_faults": list(sc.wheels.faults),
         "epoch": sc.sky.epoch,
         "station_longitude_deg": sc.sky.station_longitude_deg,
@@ -249,8 +281,18 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     help="Seconds after which the steady-state metrics start [default: half the run, at "
     "most its first hour].",
 )
+@click.option(
+    "--wheel-model",
+    type=click.Path(exists=True, dir_okay=False),
+    help="model.json from `rwlab identify`: fly it as the actuator (with its wheel spec).",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
+    "torque, momentum or speed (the report says so first).",
+)
 @_friendly_errors
 def attitude_simulate(
     scenario,
@@ -263,6 +305,7 @@ def attitude_simulate(
     relinearize,
     epoch,
     steady_after,
+    wheel_model,
     out,
     force,
 ):
@@ -289,8 +332,11 @@ def attitude_simulate(
 
         overrides = {"run.dt": dt} if dt is not None else {}
         sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
+        sc = _with_wheel_model(sc, wheel_model)
+        forced = _wheel_check(sc, force)
         steps = _check_steps(duration, sc)
         config = _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize)
+        config["wheel_forced"] = forced
         with _steps_progress(steps, f"{controller} on {sc.name}") as progress:
             run, metrics = fly(
                 sc,

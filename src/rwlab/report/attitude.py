@@ -120,13 +120,26 @@ def write_comparison(
     return targets
 
 
+def _forced_note(page: Page, forced) -> None:
+    """First on the page: the wheels were flown although they cannot deliver what the
+    scenario needs (``--force``)."""
+    if forced:
+        page.text(
+            "The wheel model cannot deliver what this scenario needs; it was flown "
+            "anyway (--force). " + " ".join(forced),
+            note=True,
+        )
+
+
 def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
     sc = comp.scenario
     req = sc.control.pointing_requirement_deg
     page = Page(f"Attitude control — LQR vs LQG vs LQG/LTR ({sc.name})")
+    _forced_note(page, comp.config.get("wheel_forced"))
     page.text(
         f"Scenario {sc.name}: inertia {sc.spacecraft.inertia} kg·m², {sc.n_wheels} wheels "
-        f"({sc.wheels.model}, ±{sc.wheels.max_torque:g} N·m, {sc.wheels.max_momentum:.3g} N·m·s), "
+        f"({sc.wheels.wheel_spec.name}, {sc.wheels.model}, ±{sc.wheels.max_torque:g} N·m, "
+        f"{sc.wheels.max_momentum:.3g} N·m·s), "
         f"sun sensor {sc.sensors.sun_noise_deg:g}°, earth sensor "
         f"{sc.sensors.earth_noise_deg:g}° (1σ; the filter assumes ×{sc.filter.noise_margin:g}), "
         f"initial error {sc.run.initial_error_deg:g}°, "
@@ -460,6 +473,7 @@ def write_simulation(
     table = _trace_table(run)
     atomic_write_bytes(targets["trace.parquet"], lambda tmp: pq.write_table(table, tmp))
     page = Page(f"Attitude simulation — {config['controller']} on {scenario.name}")
+    _forced_note(page, config.get("wheel_forced"))
     req = scenario.control.pointing_requirement_deg
     sky = (
         f"Sky: the ephemerides from {scenario.sky.epoch} (UTC), station at "

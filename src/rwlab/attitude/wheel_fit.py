@@ -1,0 +1,154 @@
+"""Can the scenario's wheels deliver what its mission needs? A mismatch is refused, not flown.
+
+A scenario's wheel section names the torque and stored momentum the mission needs
+about any body axis (``wheels.required_torque_nm``, ``wheels.required_momentum_nms``,
+with their sources). The wheel set delivers, about its weakest body
+axis (the G⁺ allocation: ``1 / max_i ‖row_i(G⁺)‖`` of one wheel's limit):
+
+- torque: each wheel's rated torque (its spec), or for an identified model the
+  torque its acceleration limit allows on its rotor (``I·α_max`` from model.json);
+- momentum: each wheel's momentum capacity ``I·ω_max``;
+- speed: the wheel speed the needed momentum takes, against the speed limit
+  (model.json's for an identified model, else the spec's).
+
+:func:`check_wheel_fit` raises one :class:`~rwlab.errors.ConfigError` line naming
+both numbers and their sources, or, forced, returns the lines to print on the
+report's first screen.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rwlab.errors import ConfigError
+
+__all__ = ["Shortfall", "check_wheel_fit", "shortfalls"]
+
+RPM = math.pi / 30  # rad/s per rpm
+
+
+@dataclass(frozen=True)
+class Shortfall:
+    """One thing the wheels cannot deliver.
+
+    Attributes
+    ----------
+    quantity : str
+        ``"torque"``, ``"momentum"`` or ``"speed"``.
+    needed, available : float
+        The scenario's need and the wheels' capacity (N·m, N·m·s or rpm).
+    unit : str
+        Their unit.
+    needed_source, available_source : str
+        Where each number comes from.
+    """
+
+    quantity: str
+    needed: float
+    available: float
+    unit: str
+    needed_source: str
+    available_source: str
+
+    def line(self, scenario: str, wheels: str) -> str:
+        """The refusal, one line.
+
+        Parameters
+        ----------
+        scenario, wheels : str
+            The scenario's name and a description of its wheels.
+
+        Returns
+        -------
+        str
+        """
+        about = "a wheel's speed" if self.quantity == "speed" else f"{self.quantity} about any axis"
+        return (
+            f"{scenario} needs {self.needed:.4g} {self.unit} of {about} "
+            f"({self.needed_source}), but {wheels} give {self.available:.4g} {self.unit} "
+            f"({self.available_source})"
+        )
+
+
+def _allocation(sc) -> float:
+    """max_i ‖row_i(G⁺)‖: one wheel's share of a unit body torque about the worst axis."""
+    return float(np.linalg.norm(np.linalg.pinv(sc.wheel_matrix), axis=1).max())
+
+
+def shortfalls(sc) -> list[Shortfall]:
+    """What the scenario's wheels cannot deliver of its requirements (empty: they fit).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its wheels and their requirements.
+
+    Returns
+    -------
+    list of Shortfall
+    """
+    w = sc.wheels
+    spec = w.wheel_spec
+    share = _allocation(sc)
+    torque, torque_src = w.max_torque, spec.source("max_torque_nm")
+    speed, speed_src = w.max_speed_rpm, spec.source("max_speed_rpm")
+    if w.model == "identified" and w.model_file:
+        from rwlab.wheel.identified import IdentifiedWheel
+
+        unit = IdentifiedWheel.from_json(w.model_file)
+        by_accel = w.inertia * unit.accel_limit_rpm_s * RPM
+        if by_accel < torque:
+            torque = by_accel
+            torque_src = (
+                f"model.json's acceleration limit {unit.accel_limit_rpm_s:g} rpm/s × "
+                f"inertia {w.inertia:g} kg·m²"
+            )
+        if unit.speed_limit_rpm < speed:
+            speed, speed_src = unit.speed_limit_rpm, "model.json's speed limit"
+    momentum = min(w.max_momentum, w.inertia * speed * RPM)
+    out = []
+    need_t, need_h = w.required_torque_nm, w.required_momentum_nms
+    t_source = w.required_torque_source or f"{sc.name}'s requirement"
+    h_source = w.required_momentum_source or f"{sc.name}'s requirement"
+    if need_t is not None and torque / share < need_t * (1 - 1e-9):
+        out.append(Shortfall("torque", need_t, torque / share, "N·m", t_source, torque_src))
+    if need_h is not None and momentum / share < need_h * (1 - 1e-9):
+        momentum_src = f"inertia × speed limit ({speed_src})"
+        out.append(
+            Shortfall("momentum", need_h, momentum / share, "N·m·s", h_source, momentum_src)
+        )
+        need_rpm = need_h * share / w.inertia / RPM
+        out.append(Shortfall("speed", need_rpm, speed, "rpm", h_source, speed_src))
+    return out
+
+
+def check_wheel_fit(sc, *, force: bool = False) -> list[str]:
+    """Refuse wheels that cannot deliver the scenario's requirements, unless forced.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+    force : bool
+        Fly them anyway: the shortfalls are returned for the report instead.
+
+    Returns
+    -------
+    list of str
+        One line per shortfall when forced (empty when the wheels fit).
+
+    Raises
+    ------
+    ConfigError
+        The first shortfall, one line, when not forced.
+    """
+    w = sc.wheels
+    what = f"model.json ({w.model_file})" if w.model == "identified" else w.wheel_spec.name
+    wheels = f"{sc.n_wheels} × {what} ({w.axes})"
+    lines = [s.line(sc.name, wheels) for s in shortfalls(sc)]
+    if lines and not force:
+        raise ConfigError(f"{lines[0]}; pick a wheel model that fits, or fly it with --force")
+    return [f"FORCED: {line}" for line in lines]
