@@ -117,9 +117,7 @@ def shortfalls(sc) -> list[Shortfall]:
         out.append(Shortfall("torque", need_t, torque / share, "N·m", t_source, torque_src))
     if need_h is not None and momentum / share < need_h * (1 - 1e-9):
         momentum_src = f"inertia × speed limit ({speed_src})"
-        out.append(
-            Shortfall("momentum", need_h, momentum / share, "N·m·s", h_source, momentum_src)
-        )
+        out.append(Shortfall("momentum", need_h, momentum / share, "N·m·s", h_source, momentum_src))
         need_rpm = need_h * share / w.inertia / RPM
         out.append(Shortfall("speed", need_rpm, speed, "rpm", h_source, speed_src))
     return out

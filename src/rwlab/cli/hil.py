@@ -42,6 +42,13 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     help="geo-smallsat, geo-comsat, or a scenario TOML file.",
 )
 @click.option(
+    "--wheel",
+    metavar="NAME|FILE",
+    default=None,
+    help="The wheel model the twin nodes fly: a preset (`rwlab wheel models`) or a unit's "
+    "own wheel spec file [default: the scenario's wheels.spec].",
+)
+@click.option(
     "--controller",
     type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
     default="lqg",
@@ -117,7 +124,12 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option("--no-reference", is_flag=True, help="Do not fly the simulation beside it.")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
+    "torque, momentum or speed (the report says so first).",
+)
 @_friendly_errors
 def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **settings):
     """Fly the satellite on the host with its wheels on a bus: record.mcap, metrics.json,
@@ -143,6 +155,7 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
         twins=False if wheels_running else None,
         calibration_s=calibration,
         reference=not no_reference,
+        force_wheel=force,
         **settings,
     )
     scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller

@@ -99,6 +99,12 @@ class HilConfig:
     ----------
     scenario : str
         Built-in name or scenario TOML.
+    wheel : str, optional
+        The wheel model the twin nodes fly (a preset or a unit's own wheel spec file;
+        ``wheels.spec`` of the scenario by default).
+    force_wheel : bool
+        Fly a wheel model that cannot deliver the scenario's needs
+        (:mod:`rwlab.attitude.wheel_fit`); otherwise it is refused.
     controller : str
         ``pd``, ``lqr``, ``lqg`` or ``lqg_ltr`` (as ``attitude simulate``).
     interface, channel : the bus.
@@ -155,6 +161,8 @@ class HilConfig:
     """
 
     scenario: str = "geo-smallsat"
+    wheel: str | None = None
+    force_wheel: bool = False
     controller: str = "lqg"
     interface: str = "virtual"
     channel: str | None = None
@@ -439,8 +447,13 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     from rwlab.data import atomic_write_bytes
     from rwlab.testbed.record import RecordWriter
 
-    overrides = {"sky.epoch": cfg.epoch} if cfg.epoch else {}
+    overrides: dict = {"sky.epoch": cfg.epoch} if cfg.epoch else {}
+    if cfg.wheel is not None:  # the twin nodes fly this wheel model (a unit's own file)
+        overrides["wheels.spec"] = cfg.wheel
     sc = load_scenario(cfg.scenario, **overrides)
+    from rwlab.attitude.wheel_fit import check_wheel_fit
+
+    wheel_forced = check_wheel_fit(sc, force=cfg.force_wheel)
     nodes = _check(cfg, sc)
     redundant = null_vector(sc.wheel_matrix) is not None
     if cfg.wheel_bias_rpm is None:
@@ -483,6 +496,8 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "wheel_bias_rpm": cfg.wheel_bias_rpm,
         "faults": [f"{n}:{f}" for n, f in cfg.faults],
         "wheel_params": params.to_dict(),
+        "wheel_spec": {"name": sc.wheels.wheel_spec.name, "hash": sc.wheels.wheel_spec.hash},
+        "wheel_forced": wheel_forced,
         "epoch": sc.sky.epoch,
         "diagnosis": diagnosis,
         "health_check": (

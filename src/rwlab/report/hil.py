@@ -55,6 +55,12 @@ def _page(result) -> Page:
     cfg = m["config"]
     req = sc.control.pointing_requirement_deg
     page = Page(f"Hardware in the loop — {cfg['controller']} on {sc.name}")
+    if cfg.get("wheel_forced"):
+        page.text(
+            "The wheel model cannot deliver what this scenario needs; it was flown anyway "
+            "(--force). " + " ".join(cfg["wheel_forced"]),
+            note=True,
+        )
     clock = "the wall clock" if cfg["clock"] == "wall" else "the simulated clock"
     page.text(
         f"{cfg['controller']} ({cfg['estimator']}) flew {cfg['duration_s']:g} s on {clock}, "
