@@ -14,8 +14,8 @@ speed command, rpm/s for an acceleration command).
 - :func:`multisine` — Schroeder-phased sum of sines on the period's frequency grid.
 - :func:`rate_limit` — limit the slope of any of the above. The testbed can
   apply it to a speed-mode PRBS (``ExperimentConfig.rate_limit``, ``rwlab
-  experiment --rate-limit``: the wheel's acceleration limit, 314 rpm/s for the
-  RW90), so the command ramps rather than steps. Off by default: paper A's PRBS
+  experiment --rate-limit``: the wheel's acceleration limit, its spec's
+  ``max_accel_rpm_s``), so the command ramps rather than steps. Off by default: paper A's PRBS
   steps, and the wheel follows each step at its acceleration limit.
 """
 

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rwlab.errors import DataError, FileFormatError
+from rwlab.wheelspec import WheelSpec
 
 __all__ = [
     "FORMAT",
@@ -69,26 +70,39 @@ DEFAULT_TOLERANCE = {
 }
 
 
-def nominal_coulomb_deceleration() -> float:
+def _spec(spec: WheelSpec | None) -> WheelSpec:
+    """The wheel model's spec; the RW90's for a model that carries none."""
+    return spec if spec is not None else WheelSpec.load("rw90")
+
+
+def nominal_coulomb_deceleration(spec: WheelSpec | None = None) -> float:
     """The wheel model's datasheet Coulomb deceleration τ_c/I, rpm/s.
 
     The unit in which the slew test reads friction: the same for every reference, so
     a slew's healthy level and its size do not inherit the identified reference unit's
     Coulomb/viscous split.
 
+    Parameters
+    ----------
+    spec : WheelSpec, optional
+        The wheel model (``model.json``'s ``wheel_spec``); default the RW90's.
+
     Returns
     -------
     float
-        τ_c/I of the nominal RW90 (:class:`rwlab.wheel.WheelParams`), rpm/s.
+        τ_c/I of the nominal wheel, rpm/s.
     """
-    from rwlab.wheel.physics import WheelParams
-
-    p = WheelParams()
-    return p.coulomb_friction / p.inertia * 60.0 / (2.0 * math.pi)
+    s = _spec(spec)
+    return s.coulomb_friction_nm / s.inertia_kg_m2 * 60.0 / (2.0 * math.pi)
 
 
-def nominal_friction_currents() -> tuple[float, float]:
+def nominal_friction_currents(spec: WheelSpec | None = None) -> tuple[float, float]:
     """The wheel model's datasheet friction as motor current: viscous and Coulomb.
+
+    Parameters
+    ----------
+    spec : WheelSpec, optional
+        The wheel model (``model.json``'s ``wheel_spec``); default the RW90's.
 
     Returns
     -------
@@ -97,21 +111,17 @@ def nominal_friction_currents() -> tuple[float, float]:
     coulomb : float
         τ_c/k_t, A.
     """
-    from rwlab.wheel.physics import WheelParams
-
-    p = WheelParams()
-    return p.viscous_friction / p.torque_constant * 2.0 * math.pi / 60.0, (
-        p.coulomb_friction / p.torque_constant
+    s = _spec(spec)
+    return s.viscous_friction_nm_s / s.torque_constant_nm_a * 2.0 * math.pi / 60.0, (
+        s.coulomb_friction_nm / s.torque_constant_nm_a
     )
 
 
-def nominal_inertial_current() -> float:
+def nominal_inertial_current(spec: WheelSpec | None = None) -> float:
     """The wheel model's datasheet inertial current I/k_t per rpm/s, A (the current
-    model's c₀ of a nominal unit)."""
-    from rwlab.wheel.physics import WheelParams
-
-    p = WheelParams()
-    return p.inertia / p.torque_constant * 2.0 * math.pi / 60.0
+    model's c₀ of a nominal unit; ``spec`` default the RW90's)."""
+    s = _spec(spec)
+    return s.inertia_kg_m2 / s.torque_constant_nm_a * 2.0 * math.pi / 60.0
 
 
 @dataclass(frozen=True)

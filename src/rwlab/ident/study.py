@@ -1146,7 +1146,7 @@ def load_study_data(
     record whose telemetry has a gap longer than one sample time, or a ``Ts`` shorter than
     its telemetry period, is refused (``DataError``): its samples there would repeat a
     stale frame, and the estimates take that hold for wheel dynamics (a 2-s dropout in
-    a 600-s PRBS turned ARX221 into ARX222 and the rate limit from 314 to 8499 rpm/s).
+    a 600-s PRBS turned ARX221 into ARX222 and the RW90's rate limit into 8499 rpm/s).
     With ``gaps="split"`` such a record is read whole, stale samples included: the caller
     identifies its gap-free parts as separate experiments (``identification_study``'s
     ``segments``, from :func:`rwlab.testbed.load.gap_free_segments`).

@@ -22,8 +22,11 @@ from rwlab.errors import ConfigError, FileFormatError, ModelError
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel, servo_advance
+from rwlab.wheelspec import WheelSpec
 
 __all__ = ["IdentifiedWheel"]
+
+_RW90 = WheelSpec.load("rw90")  # the saturations of a model given without its own
 
 
 class IdentifiedWheel:
@@ -36,7 +39,7 @@ class IdentifiedWheel:
     input_offset, output_offset : float
         Operating point: ``y − output_offset = G·(u − input_offset)``, rpm.
     speed_limit_rpm, accel_limit_rpm_s : float
-        The saturations (paper A: ±7800 rpm, ±314 rpm/s).
+        The saturations (default: the RW90 spec's).
     servo : ServoModel, optional
         Fly this nonlinear model (rpm, rpm/s) instead of ``model``, which then
         only gives the equilibrium for ``reset``.
@@ -48,8 +51,8 @@ class IdentifiedWheel:
         *,
         input_offset: float = 0.0,
         output_offset: float = 0.0,
-        speed_limit_rpm: float = 7800.0,
-        accel_limit_rpm_s: float = 314.0,
+        speed_limit_rpm: float = _RW90.max_speed_rpm,
+        accel_limit_rpm_s: float = _RW90.max_accel_rpm_s,
         servo: ServoModel | None = None,
     ) -> None:
         if model.nu != 1:

@@ -10,10 +10,10 @@ from::
     documents = ["paper A: ..., Table 1"]
 
     [rotor]
-    inertia_kg_m2 = { value = 4.2e-4, source = "paper A, Table 1" }
+    inertia_kg_m2 = { value = 1.0e-3, source = "the data sheet, table 2" }
 
     [tolerances]
-    inertia_kg_m2 = { relative = 0.02, absolute = 0.0, source = "rotor machining, ±2 %" }
+    inertia_kg_m2 = { relative = 0.02, source = "rotor machining, ±2 %" }
 
 A ``source`` is a datasheet or ICD page, or ``"assumed, because …"``. The file's
 structure is the JSON Schema ``rwlab/schemas/wheelspec.schema.json`` (checked with
