@@ -32,6 +32,7 @@ LAYERS: list[set[str]] = [
     {"hil"},
     {"campaign"},
     {"report"},
+    {"workflows"},
     {"cli", "demo"},
 ]
 

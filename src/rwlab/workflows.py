@@ -1,0 +1,195 @@
+"""The workflows a Python user calls, each one function (``rwlab.identify`` …).
+
+They are the command line's workflows without the command line: the same checks,
+the same files. ``import rwlab`` loads none of them until first use.
+
+- :func:`identify` — paper A's identification study on a record (``rwlab identify``).
+- :func:`diagnose` — fault detection on a record with an identified model.
+- :func:`simulate` — one controller on a scenario, the wheels from a spec or a model.json.
+- :func:`montecarlo` — a Monte Carlo pointing campaign (``rwlab attitude montecarlo``).
+- :func:`hil` — the satellite on the host, its wheels on a bus (``rwlab hil``).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+__all__ = ["diagnose", "hil", "identify", "montecarlo", "simulate"]
+
+
+def identify(file: str | os.PathLike, out: str | os.PathLike, **options: Any):
+    """Paper A's identification study on a record, written into the folder ``out``.
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        A testbed record (``.mcap``) or a data file.
+    out : str or os.PathLike
+        The output folder: ``model.json`` (with the record's wheel spec), ``study.json``,
+        ``report.html``.
+    **options
+        As :func:`rwlab.report.identify.identify` (``Ts``, ``preprocess``, ``force`` …).
+
+    Returns
+    -------
+    study : dict
+        ``study.json``'s content.
+    paths : dict of str to Path
+        The files written.
+    """
+    from rwlab.report.identify import identify as run
+
+    return run(file, out, **options)
+
+
+def diagnose(record: str | os.PathLike, model: str | os.PathLike, **options: Any):
+    """Detect, name and size wheel faults in a record with an identified model.
+
+    Parameters
+    ----------
+    record : str or os.PathLike
+        A testbed record (``.mcap``).
+    model : str or os.PathLike
+        The ``model.json`` ``rwlab identify`` wrote (with its healthy reference).
+    **options
+        As :func:`rwlab.diagnose.diagnose` (``false_alarms_per_hour`` …).
+
+    Returns
+    -------
+    Diagnosis
+        The alarms, fault sizes and what each test decided on.
+    """
+    import numpy as np
+
+    from rwlab.diagnose import HealthyReference
+    from rwlab.diagnose import diagnose as run
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
+
+    wheel = IdentifiedWheel.from_json(model)
+    reference = HealthyReference.from_model_file(model)
+    outputs = ("speed", "current", "age", "lost")
+    data = load_record(record, wheel.Ts, outputs=outputs, max_gap=np.inf)
+    return run(data, wheel, reference, **options)
+
+
+def simulate(
+    scenario: str = "geo-comsat",
+    controller: str = "lqg",
+    *,
+    duration: float,
+    wheel: str | None = None,
+    wheel_model: str | os.PathLike | None = None,
+    seed: int | None = None,
+    force: bool = False,
+    **overrides: Any,
+):
+    """Fly one controller on a scenario with its wheel model.
+
+    Parameters
+    ----------
+    scenario : str
+        A built-in scenario (``geo-comsat``, ``geo-smallsat``, ``geo-cubesat`` …) or a file.
+    controller : {"pd", "lqr", "lqg", "lqg_ltr"}
+    duration : float
+        Seconds.
+    wheel : str, optional
+        Fly this wheel model (a preset or a spec file) instead of the scenario's.
+    wheel_model : str or os.PathLike, optional
+        Fly this ``model.json`` as the actuator (with the wheel spec it carries).
+    seed : int, optional
+        Noise seed (the scenario's by default).
+    force : bool
+        Fly wheels that cannot deliver the scenario's needs (else ``ConfigError``);
+        the metrics' ``wheel_forced`` says what they lack.
+    **overrides
+        Scenario fields by dotted name (``**{"run.dt": 0.2}``).
+
+    Returns
+    -------
+    run : SimResult
+        The trajectories.
+    metrics : dict
+        Pointing and wheel metrics, and ``wheel_forced`` (list of str).
+    """
+    from rwlab.attitude.control import fly
+    from rwlab.attitude.scenario import load_scenario
+    from rwlab.attitude.wheel_fit import check_wheel_fit
+
+    changes = dict(overrides)
+    if wheel is not None:
+        changes["wheels.spec"] = str(wheel)
+    if wheel_model is not None:
+        from rwlab.ident.model_file import WheelModelFile
+
+        changes |= {"wheels.model": "identified", "wheels.model_file": str(wheel_model)}
+        if WheelModelFile.load(wheel_model).wheel_spec is not None:
+            changes["wheels.spec"] = str(wheel_model)
+    sc = load_scenario(scenario, **changes)
+    forced = check_wheel_fit(sc, force=force)
+    run, metrics = fly(sc, controller, duration=duration, seed=seed)
+    return run, {**metrics, "wheel_forced": forced}
+
+
+def montecarlo(out: str | os.PathLike, **options: Any):
+    """A Monte Carlo pointing campaign, written into the folder ``out``.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+    **options
+        As :func:`rwlab.report.montecarlo.montecarlo` (``scenario``, ``runs``,
+        ``duration`` …).
+
+    Returns
+    -------
+    summary : dict
+    paths : dict of str to Path
+    """
+    from rwlab.report.montecarlo import montecarlo as run
+
+    return run(out, **options)
+
+
+def hil(
+    out: str | os.PathLike,
+    *,
+    scenario: str = "geo-smallsat",
+    duration: float,
+    wheel: str | None = None,
+    force: bool = False,
+    **settings: Any,
+):
+    """Fly the satellite on the host with its wheels on a (virtual) bus.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder: ``record.mcap``, ``metrics.json``, ``report.html``.
+    scenario : str
+        A built-in scenario or a file.
+    duration : float
+        Seconds of flight.
+    wheel : str, optional
+        The wheel model the twin nodes fly: a preset or a unit's own spec file.
+    force : bool
+        Overwrite ``out``'s files and fly wheels that cannot deliver the scenario's needs.
+    **settings
+        Other :class:`rwlab.hil.run.HilConfig` fields (``controller``, ``seed`` …).
+
+    Returns
+    -------
+    HilResult
+        The run, its metrics and the files written.
+    """
+    from rwlab.hil.run import HilConfig, run_hil
+    from rwlab.report.hil import write_hil_report
+
+    cfg = HilConfig(
+        scenario=scenario, duration=duration, wheel=wheel, force_wheel=force, **settings
+    )
+    result = run_hil(cfg, out, force=force)
+    write_hil_report(result, out)
+    return result

@@ -1,0 +1,36 @@
+"""The workflows at the top: importable from ``rwlab``, lazily, and they run."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+import rwlab
+from rwlab.errors import ConfigError
+
+NAMES = ("WheelSpec", "identify", "diagnose", "simulate", "montecarlo", "hil")
+
+
+def test_every_workflow_is_reached_from_rwlab():
+    for name in NAMES:
+        assert callable(getattr(rwlab, name)) and name in rwlab.__all__
+    with pytest.raises(AttributeError):
+        rwlab.simulatee  # noqa: B018
+
+
+def test_import_rwlab_loads_no_workflow():
+    code = "import sys, rwlab; print(any(m.startswith('rwlab.workflows') for m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_simulate_flies_the_scenarios_wheel_and_refuses_a_misfit():
+    run, metrics = rwlab.simulate("geo-cubesat", "lqr", duration=60.0, seed=1)
+    assert metrics["wheel_forced"] == [] and run.t[-1] == pytest.approx(60.0)
+    with pytest.raises(ConfigError, match="needs 0.1 N·m"):
+        rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90")
+    _, forced = rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90", force=True)
+    assert forced["wheel_forced"][0].startswith("FORCED: geo-comsat needs 0.1 N·m")
+    assert rwlab.WheelSpec.load("rw-0.01").max_torque_nm == 0.001
