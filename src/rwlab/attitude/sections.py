@@ -10,6 +10,8 @@ together when a scenario is built (``rwlab.attitude.scenario_checks``).
 
 from __future__ import annotations
 
+import functools
+import os
 from dataclasses import dataclass, field
 
 from rwlab.attitude.plant import DisturbanceModel
@@ -138,6 +140,17 @@ def load_wheel_spec(name_or_path: str) -> WheelSpec:
 
     if not isinstance(name_or_path, str):
         raise ConfigError(f"wheels.spec must name a wheel model, got {name_or_path!r}")
+    try:  # a file is read again only when it changed (a scenario is rebuilt often)
+        stat = os.stat(name_or_path)
+    except OSError:
+        return WheelSpec.load(name_or_path)  # a preset, or the error naming the presets
+    return _load_file_spec(name_or_path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_file_spec(name_or_path: str, mtime_ns: int, size: int) -> WheelSpec:
+    from rwlab.errors import ConfigError
+
     if name_or_path.lower().endswith(".json"):
         from rwlab.ident.model_file import WheelModelFile
 
