@@ -20,6 +20,16 @@ def test_every_workflow_is_reached_from_rwlab():
         rwlab.simulatee  # noqa: B018
 
 
+def test_diagnose_and_hil_are_the_workflows_and_still_their_packages():
+    import rwlab.diagnose
+    import rwlab.hil.run  # binds the packages on rwlab
+
+    assert callable(rwlab.diagnose) and callable(rwlab.hil)
+    assert rwlab.diagnose.Diagnoser.__name__ == "Diagnoser"
+    assert rwlab.hil.run.HilConfig.__name__ == "HilConfig"
+    assert "fault" in rwlab.diagnose.__doc__
+
+
 def test_import_rwlab_loads_no_workflow():
     code = "import sys, rwlab; print(any(m.startswith('rwlab.workflows') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -29,7 +39,7 @@ def test_import_rwlab_loads_no_workflow():
 def test_simulate_flies_the_scenarios_wheel_and_refuses_a_misfit():
     run, metrics = rwlab.simulate("geo-cubesat", "lqr", duration=60.0, seed=1)
     assert metrics["wheel_forced"] == [] and run.t[-1] == pytest.approx(60.0)
-    with pytest.raises(ConfigError, match="needs 0.1 N·m"):
+    with pytest.raises(ConfigError, match=r"needs 0\.1 N·m"):
         rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90")
     _, forced = rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90", force=True)
     assert forced["wheel_forced"][0].startswith("FORCED: geo-comsat needs 0.1 N·m")

@@ -12,6 +12,8 @@ The workflows, from a Python session (each loads its modules on first use)::
 """
 
 import importlib
+import sys
+import types
 
 from rwlab.errors import (
     ConfigError,
@@ -27,15 +29,63 @@ __version__ = "0.1.0"
 _LAZY = {
     "WheelSpec": "rwlab.wheelspec",
     "identify": "rwlab.workflows",
-    "diagnose": "rwlab.workflows",
     "simulate": "rwlab.workflows",
     "montecarlo": "rwlab.workflows",
-    "hil": "rwlab.workflows",
 }
+
+
+_PACKAGES = ("diagnose", "hil")  # workflows named like the packages that hold them
+
+
+class _Workflow:
+    """``rwlab.diagnose`` and ``rwlab.hil``: the workflow when called, the package otherwise.
+
+    Importing ``rwlab.diagnose`` binds the package to that name on ``rwlab``; this
+    wrapper keeps both meanings: ``rwlab.diagnose(record, model)`` runs the workflow
+    (:mod:`rwlab.workflows`), ``rwlab.diagnose.Diagnoser`` is the package's name, and
+    setting a name (a test's monkeypatch) sets it on the package.
+    """
+
+    def __init__(self, name: str, package: types.ModuleType) -> None:
+        object.__setattr__(self, "_name", name)
+        object.__setattr__(self, "_package", package)
+        workflow = getattr(importlib.import_module("rwlab.workflows"), name)
+        object.__setattr__(self, "__doc__", workflow.__doc__)
+
+    def __call__(self, *args, **kwargs):
+        return getattr(importlib.import_module("rwlab.workflows"), self._name)(*args, **kwargs)
+
+    def __getattr__(self, attr: str):
+        return getattr(self._package, attr)
+
+    def __setattr__(self, attr: str, value) -> None:
+        setattr(self._package, attr, value)
+
+    def __delattr__(self, attr: str) -> None:
+        delattr(self._package, attr)
+
+    def __dir__(self):
+        return dir(self._package)
+
+    def __repr__(self) -> str:
+        return f"<rwlab.{self._name}: the workflow (call it) and the package {self._package!r}>"
+
+
+class _Rwlab(types.ModuleType):
+    def __setattr__(self, name: str, value) -> None:
+        if name in _PACKAGES and isinstance(value, types.ModuleType):
+            value = _Workflow(name, value)  # the import system binding the subpackage
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Rwlab
 
 
 def __getattr__(name: str):
     """Import on first use (PEP 562): ``import rwlab`` stays light."""
+    if name in _PACKAGES:
+        importlib.import_module(f"rwlab.{name}")  # binds the wrapper (_Rwlab.__setattr__)
+        return globals()[name]
     if name not in _LAZY:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     value = getattr(importlib.import_module(_LAZY[name]), name)
