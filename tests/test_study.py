@@ -365,3 +365,24 @@ def test_rwlab_compare_refuses_what_is_not_a_model(tmp_path, study_dir):
     result = CliRunner().invoke(main, ["compare", str(bad), str(record), "--json"])
     assert result.exit_code == 2
     assert result.output.startswith("error:") and "rwlab.WheelModel/1" in result.output
+
+
+def test_the_choice_looks_beyond_the_fit_window_for_a_passing_gain_before_falling_back():
+    # a held-out review record: ARMAX2211 best at -7.6 % gain, ARX221+K exact 3.5 points lower
+    rows = [
+        {"structure": "ARMAX2211", "n_params": 5, "fit_percent": 80.0, "dc_gain": 0.924,
+         "dc_gain_error_percent": -7.6},
+        {"structure": "ARX221", "n_params": 4, "fit_percent": 77.5, "dc_gain": 0.93,
+         "dc_gain_error_percent": -7.0},
+        {"structure": "ARX221+K", "n_params": 4, "fit_percent": 76.5, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0, "gain_constrained": True},
+        {"structure": "OE221+K", "n_params": 4, "fit_percent": 40.0, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0, "gain_constrained": True},
+    ]  # fmt: skip
+    steady = {"gain": 1.0, "holds": 12}
+    pick, why = _choose(rows, 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221+K"
+    assert "3.50 points below the best" in why and "ARMAX2211 (0.9240, -7.6 %)" in why
+    # a passing gain only at a poor fit (< POOR_FIT) is no better: the nearest gain, as before
+    pick, why = _choose([rows[0], rows[1], rows[3]], 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221" and "the one nearest it is chosen" in why

@@ -553,11 +553,27 @@ def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, model
 def _choose(
     candidates: list[dict], tolerance: float, gain_tolerance: float, steady, anchor=None
 ) -> tuple:
-    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why."""
+    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why.
+
+    When no row within that window passes the gain check, the window moves down to
+    the best-fitting row that does (the simplest within ``tolerance`` of it is chosen,
+    and the reason states the fit given up); only when no row fitting at least
+    :data:`POOR_FIT` passes is the choice the nearest gain within the first window."""
     best = max(r["fit_percent"] for r in candidates)
     near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
     limit = 100 * gain_tolerance
     ok = [r for r in near if _gain_error(r) <= limit]
+    top = best
+    if steady is not None and not ok:  # beyond the window: the best that passes, if any
+        passing = [
+            r for r in candidates if _gain_error(r) <= limit and r["fit_percent"] >= POOR_FIT
+        ]
+        if passing:
+            top = max(r["fit_percent"] for r in passing)
+            ok = sorted(
+                (r for r in passing if r["fit_percent"] >= top - tolerance), key=_simplicity
+            )
+            near = ok
     if steady is None:
         pick = near[0]
     elif ok:
@@ -571,6 +587,24 @@ def _choose(
         f"whose validation fit ({pick['fit_percent']:.2f} %) "
         f"is within {tolerance:g} points of the best ({best:.2f} %)"
     )
+    if top < best:
+        reason = (
+            f"no model within {tolerance:g} points of the best validation fit ({best:.2f} %) "
+            f"has a DC gain within {limit:g} % of the measured steady-state gain "
+            f"{steady['gain']:.4f}; the best-fitting model whose gain does fits {top:.2f} % "
+            f"({best - top:.2f} points below the best), and {pick['structure']} is the "
+            f"simplest within {tolerance:g} points of it (fit {pick['fit_percent']:.2f} %, "
+            f"DC gain {_dc_text(pick)}; passed over for their gain: "
+            + ", ".join(
+                f"{r['structure']} ({_dc_text(r)})"
+                for r in candidates
+                if r["fit_percent"] >= best - tolerance
+            )
+            + ")"
+        )
+        if pick.get("gain_constrained") and anchor is not None:
+            reason += "; " + _constraint_text(pick, anchor, candidates)
+        return pick, reason + _paper_text(pick, candidates, best)
     if steady is None:
         reason += "; the record has too few settled holds to check the DC gain"
         return pick, reason + _paper_text(pick, candidates, best)
