@@ -122,6 +122,10 @@ class StudyResult(ShortRepr):
     segments : list of [t_start, t_end] or None
         The gap-free parts the record was split into (s from its start), each an
         experiment of its own; None for one record without gaps.
+    wheel_stages : dict or None
+        ``run`` (whether the servo and grey-box wheel models were fitted) and ``why``.
+    best_fit_percent : float or None
+        The best validation fit of every linear model, %; ``no_model_fits`` when negative.
     """
 
     data: IOData
@@ -149,6 +153,13 @@ class StudyResult(ShortRepr):
     gain_constraint: dict | None = None
     chosen_name: str = ""
     parts: dict | None = None
+    wheel_stages: dict | None = None
+    best_fit_percent: float | None = None
+
+    @property
+    def no_model_fits(self) -> bool:
+        """True when even the best model's validation fit is negative (below the mean's)."""
+        return self.best_fit_percent is not None and self.best_fit_percent < 0
 
     def __post_init__(self) -> None:
         self.chosen_name = self.chosen_name or self.chosen.structure
@@ -210,6 +221,9 @@ class StudyResult(ShortRepr):
             "acceleration": self.acceleration,
             "nonlinear": self.nonlinear,
             "segments": self.segments,
+            "wheel_stages": self.wheel_stages,
+            "best_fit_percent": self.best_fit_percent,
+            "no_model_fits": self.no_model_fits,
         }
 
 
@@ -261,6 +275,7 @@ def identification_study(
     datasheet: dict | None = None,
     current=None,
     segments: Sequence[tuple[int, int]] | None = None,
+    wheel: bool | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -319,11 +334,20 @@ def identification_study(
         (the criteria summed, no regressor across a boundary); the delay scan, the
         validation and the nonlinear stage use the longest piece of their part, and
         the preprocessing takes its statistics from every estimation piece.
+    wheel : bool, optional
+        Whether the record is a reaction wheel's (speed command → speed): only a wheel's
+        record gets the wheel-specific stages, the servo model (a rate-limited speed
+        loop) and the grey box (a wheel's physics). None (default): a wheel when the
+        output's unit is a rotation speed (:data:`SPEED_UNITS`: a testbed record's
+        ``speed_rpm``); a hair dryer, a furnace or a unitless file is not, and gets the
+        linear study and the NLARX only. ``study.json``'s ``wheel_stages`` says which.
 
     Returns
     -------
     StudyResult
-        Every number of the report; ``to_dict()`` is ``study.json``.
+        Every number of the report; ``to_dict()`` is ``study.json``. Its ``no_model_fits``
+        is True when even the best validation fit is negative (every model is worse
+        than the validation output's mean): ``rwlab identify`` then exits 1.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -418,9 +442,13 @@ def identification_study(
     continuous = _continuous(chosen, new_u)
     step("validation")
     servo, nl, grey, black = None, None, None, None
+    stages = _wheel_stages(data, wheel)
     if nonlinear:
-        servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
-        sheet = None if datasheet is None else {**DATASHEET, **datasheet}
+        if stages["run"]:
+            servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
+        else:
+            nl = {"structure": "servo", "skipped": stages["why"]}
+        sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
         grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
         step("nonlinear")
     return StudyResult(
@@ -449,7 +477,29 @@ def identification_study(
         gain_constraint=anchor,
         chosen_name=pick["structure"],
         parts=_parts(chosen, scan, val),
+        wheel_stages=stages,
+        best_fit_percent=max(r["fit_percent"] for r in candidates),
     )
+
+
+SPEED_UNITS = ("rpm", "rad/s", "deg/s", "rps")
+"""Output units that make a record a wheel's (``identification_study``'s ``wheel=None``)."""
+
+
+def _wheel_stages(data: IOData, wheel: bool | None) -> dict:
+    """Whether the wheel-specific stages run on ``data``, and why (``study.json``)."""
+    unit = data.output_units[0]
+    if wheel is None:
+        wheel = unit.strip().lower() in SPEED_UNITS
+        why = (
+            f"the output's unit {unit!r} is a rotation speed: a wheel record"
+            if wheel
+            else f"not a wheel record: the output's unit {unit!r} is not a rotation speed "
+            f"({', '.join(SPEED_UNITS)}); the servo and grey-box wheel models are not fitted"
+        )
+    else:
+        why = "a wheel record, as the caller said" if wheel else "not a wheel, as the caller said"
+    return {"run": bool(wheel), "why": why, "stages": ["servo", "greybox"]}
 
 
 def _parts(chosen: PolyModel, est: IOData, val: IOData) -> dict:
@@ -839,27 +889,61 @@ def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
     except (EstimationError, ModelError, DataError) as exc:
         out["nlarx"] = {"error": str(exc)}
     scored = {k: v["fit_percent"] for k, v in out.items() if v.get("fit_percent") is not None}
+    failed = [f"{k} failed ({v['failed']})" for k, v in out.items() if v.get("failed")]
+    if failed:
+        out["failed"] = failed
     if scored:
         best = max(scored, key=lambda k: scored[k])
         out["chosen"] = best
-        out["choice"] = f"{best}: the better simulation fit on the validation part " + ", ".join(
-            f"{k} {v:.2f} %" for k, v in scored.items()
+        out["choice"] = (
+            f"{best}: the better simulation fit on the validation part "
+            + ", ".join(f"{k} {v:.2f} %" for k, v in scored.items())
+            + "".join(f"; {f}" for f in failed)
         )
     nl.update(out)
     return grey, black
 
 
 def _nonlinear_row(model, val: IOData) -> dict:
+    """A nonlinear model's validation row; ``failed`` (and no fit, so it is neither ranked
+    nor chosen) when its simulation diverged (:func:`_divergence`)."""
     yhat = model.predict(val, np.inf, initial="steady")
     y = val.y[:, 0]
-    ok = bool(np.all(np.isfinite(yhat)))
-    return {
+    row = {
         "structure": model.structure,
-        "fit_percent": fit_percent(y, yhat) if ok else None,
+        "fit_percent": None,
         "n_params": model.n_params,
         "parameters": model.to_dict(),
         "initial_conditions": "the validation part's first measured speed, loop integral 0",
     }
+    failed = _divergence(y, yhat)
+    if failed is not None:
+        return {**row, "failed": failed}
+    return {**row, "fit_percent": fit_percent(y, yhat)}
+
+
+DIVERGED_SPANS = 1.0
+"""A simulation that leaves the measured output's range by more than this many times its
+span has diverged: no bounded system it models does that on an input within the
+estimation data's range. A wheel's speed beyond twice the span it was seen to cover is
+not a prediction of it."""
+
+
+def _divergence(y: np.ndarray, yhat: np.ndarray) -> str | None:
+    """Why the simulation ``yhat`` of the measured ``y`` diverged, or None when it did not."""
+    if not np.all(np.isfinite(yhat)):
+        k = int(np.flatnonzero(~np.isfinite(yhat))[0])
+        return f"diverged: the simulation is not finite from sample {k} of the validation part"
+    lo, hi = float(np.min(y)), float(np.max(y))
+    span = max(hi - lo, float(np.max(np.abs(y))), np.finfo(float).tiny)
+    beyond = float(max(np.max(yhat) - hi, lo - np.min(yhat), 0.0))
+    if beyond <= DIVERGED_SPANS * span:
+        return None
+    return (
+        f"diverged: the simulation reaches {beyond / span:.3g} times the measured span "
+        f"({span:.4g}) beyond the measured range [{lo:.4g}, {hi:.4g}] (fit "
+        f"{fit_percent(y, yhat):.3g} %); not ranked, not chosen"
+    )
 
 
 def _preprocessed(data: IOData, preprocess: str, split: float, pieces=None) -> IOData:
