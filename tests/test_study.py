@@ -436,6 +436,8 @@ def test_non_wheel_data_gets_no_wheel_stages_and_says_so(tmp_path):
     y = lfilter([0, 0.2], [1, -0.8], u) + rng.normal(0, 5, u.size)
     rpm = IOData(u, y, 0.5, input_units="rpm", output_units="rpm")
     assert identification_study(rpm, orders=(2,), nk_max=2).wheel_stages["run"] is True
+    named = IOData(u, y, 0.5, input_names="command", output_names="speed_rpm")  # exported CSV
+    assert identification_study(named, orders=(2,), nk_max=2, nonlinear=False).wheel_stages["run"]
     off = identification_study(rpm, orders=(2,), nk_max=2, wheel=False)
     assert off.servo is None and "skipped" in off.nonlinear
 

@@ -338,9 +338,10 @@ def identification_study(
         Whether the record is a reaction wheel's (speed command → speed): only a wheel's
         record gets the wheel-specific stages, the servo model (a rate-limited speed
         loop) and the grey box (a wheel's physics). None (default): a wheel when the
-        output's unit is a rotation speed (:data:`SPEED_UNITS`: a testbed record's
-        ``speed_rpm``); a hair dryer, a furnace or a unitless file is not, and gets the
-        linear study and the NLARX only. ``study.json``'s ``wheel_stages`` says which.
+        output's unit is a rotation speed (:data:`SPEED_UNITS`, or a name that says
+        it: a testbed record's or its exported CSV's ``speed_rpm``); a hair dryer, a
+        furnace or a unitless file is not, and gets the linear study and the NLARX only.
+        ``study.json``'s ``wheel_stages`` says which.
 
     Returns
     -------
@@ -486,9 +487,16 @@ SPEED_UNITS = ("rpm", "rad/s", "deg/s", "rps")
 """Output units that make a record a wheel's (``identification_study``'s ``wheel=None``)."""
 
 
+def _unit_in_name(name: str) -> str:
+    """The unit a channel's name carries by the project's convention (``speed_rpm``:
+    rpm; an exported record's CSV has no other), or ''."""
+    suffixes = {"_rpm": "rpm", "_rad_s": "rad/s", "_deg_s": "deg/s", "_rps": "rps"}
+    return next((u for sfx, u in suffixes.items() if name.lower().endswith(sfx)), "")
+
+
 def _wheel_stages(data: IOData, wheel: bool | None) -> dict:
     """Whether the wheel-specific stages run on ``data``, and why (``study.json``)."""
-    unit = data.output_units[0]
+    unit = data.output_units[0] or _unit_in_name(data.output_names[0])
     if wheel is None:
         wheel = unit.strip().lower() in SPEED_UNITS
         why = (
