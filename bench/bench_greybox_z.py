@@ -16,8 +16,10 @@ steps, and the grey box estimates it (column ``imax``) when the current telemetr
 shows it. ``--fixed-limit`` holds it at the configured value instead (its tolerance
 then in σ).
 
-``--calibrate`` prints the structure error (``rwlab.ident.greybox.STRUCTURE_ERROR``) from
-the records given: run it on tuning records, judge on others.
+``--calibrate`` prints the structure error from the records given, as the
+``relative_error`` of a wheel model's entry in ``src/rwlab/ident/greybox_structure.json``
+(put it there with this command line as its ``measurement``): run it on tuning records,
+judge on others.
 
 ``--lags`` compares covariance choices: ``auto`` (Newey–West, Andrews' bandwidth: the
 default), ``0`` (residuals taken as white: the sandwich alone) or a number of lags.
@@ -184,7 +186,8 @@ def calibration(errors: dict, clamp: bool = False) -> None:
     rms["breakaway"] = rms["coulomb"]  # the same bearing, the same drift
     if clamp:
         rms["current_limit"] = float(np.sqrt(np.mean(np.square(errors["imax"]))))
-    print("\nSTRUCTURE_ERROR = {" + ", ".join(f'"{k}": {v:.4f}' for k, v in rms.items()) + "}")
+    body = ", ".join(f'"{k}": {v:.4f}' for k, v in rms.items())
+    print('\ngreybox_structure.json, this wheel model\'s "relative_error": {' + body + "}")
 
 
 if __name__ == "__main__":

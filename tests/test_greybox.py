@@ -249,3 +249,25 @@ def test_greybox_carries_a_fixed_current_limits_tolerance_into_sigma(clamped, gr
     model, _ = grey
     assert not model.current_limit_estimated
     assert all(p["current_limit"] == 0 for p in model.std_budget.values())
+
+
+def test_the_structure_envelope_is_measured_data_per_wheel_model(tmp_path, monkeypatch):
+    import json
+
+    from rwlab.ident import greybox_std
+
+    entry = json.loads(greybox_std.STRUCTURE_FILE.read_text())["models"]["rw90"]
+    assert entry["measurement"]["command"].startswith("python bench/bench_greybox_z.py")
+    assert greybox_std.structure_error("rw90")[0] == entry["relative_error"]
+    # the σ budget reads the file, not a constant in the code
+    edited = {"format": "x", "models": {"rw90": {**entry, "relative_error": {"kp": 0.5}}}}
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(edited))
+    monkeypatch.setattr(greybox_std, "STRUCTURE_FILE", path)
+    std, _, budget = greybox_std._budget(
+        {"kp": 0.0}, {"kp": 2.0}, None, greybox_std.Uncertainty(), 4.2e-4
+    )
+    assert budget["kp"]["structure"] == pytest.approx(1.0) and std["kp"] == pytest.approx(1.0)
+    # a wheel model without its own measurement: the widest measured envelope, said so
+    shape, source = greybox_std.structure_error("t6")
+    assert shape == {"kp": 0.5} and "no measured envelope" in source

@@ -365,3 +365,98 @@ def test_rwlab_compare_refuses_what_is_not_a_model(tmp_path, study_dir):
     result = CliRunner().invoke(main, ["compare", str(bad), str(record), "--json"])
     assert result.exit_code == 2
     assert result.output.startswith("error:") and "rwlab.WheelModel/2" in result.output
+
+
+def test_the_choice_looks_beyond_the_fit_window_for_a_passing_gain_before_falling_back():
+    # a held-out review record: ARMAX2211 best at -7.6 % gain, ARX221+K exact 3.5 points lower
+    rows = [
+        {"structure": "ARMAX2211", "n_params": 5, "fit_percent": 80.0, "dc_gain": 0.924,
+         "dc_gain_error_percent": -7.6},
+        {"structure": "ARX221", "n_params": 4, "fit_percent": 77.5, "dc_gain": 0.93,
+         "dc_gain_error_percent": -7.0},
+        {"structure": "ARX221+K", "n_params": 4, "fit_percent": 76.5, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0, "gain_constrained": True},
+        {"structure": "OE221+K", "n_params": 4, "fit_percent": 40.0, "dc_gain": 1.0,
+         "dc_gain_error_percent": 0.0, "gain_constrained": True},
+    ]  # fmt: skip
+    steady = {"gain": 1.0, "holds": 12}
+    pick, why = _choose(rows, 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221+K"
+    assert "3.50 points below the best" in why and "ARMAX2211 (0.9240, -7.6 %)" in why
+    # a passing gain only at a poor fit (< POOR_FIT) is no better: the nearest gain, as before
+    pick, why = _choose([rows[0], rows[1], rows[3]], 3.0, 0.02, steady)
+    assert pick["structure"] == "ARX221" and "the one nearest it is chosen" in why
+
+
+class _Diverging:
+    """A fitted model whose simulation blows up (as an NLARX's did: fit −3.3e8 %)."""
+
+    structure, n_params = "nlarx", 3
+
+    def predict(self, val, horizon, initial):
+        return 1.5 ** np.minimum(np.arange(val.N), 500.0)
+
+    def to_dict(self):
+        return {}
+
+
+def test_a_diverged_nonlinear_model_is_flagged_failed_not_ranked_nor_chosen(monkeypatch):
+    from rwlab.ident import study as study_module
+
+    monkeypatch.setattr(study_module, "nlarx", lambda est: _Diverging())
+    rng = np.random.default_rng(1)
+    u = np.repeat(rng.uniform(-1, 1, 40), 25)
+    data = IOData(u, lfilter([0, 0.2], [1, -0.8], u) + rng.normal(0, 0.01, u.size), 1.0)
+    nl: dict = {}
+    study_module._wheel_models(data, 0.7, None, nl, None, None)
+    assert nl["nlarx"]["fit_percent"] is None and "diverged" in nl["nlarx"]["failed"]
+    assert "chosen" not in nl and "nlarx failed (diverged" in nl["failed"][0]
+    # a bounded simulation that stays near the data is scored as before
+    row = study_module._nonlinear_row(
+        type("Near", (_Diverging,), {"predict": lambda s, v, h, initial: v.y[:, 0] * 0.9})(),
+        data,
+    )
+    assert row["fit_percent"] == pytest.approx(90.0, abs=0.1) and "failed" not in row
+
+
+def test_non_wheel_data_gets_no_wheel_stages_and_says_so(tmp_path):
+    r = CliRunner().invoke(main, ["identify", "dryer", "--out", str(tmp_path / "d")])
+    assert r.exit_code == 0, r.output
+    assert "wheel models: none (not a wheel record" in r.output
+    study = json.loads((tmp_path / "d" / "study.json").read_text())
+    assert study["wheel_stages"]["run"] is False and "'V'" in study["wheel_stages"]["why"]
+    nl = study["nonlinear"]
+    assert "skipped" in nl and "greybox" not in nl and "accel_limit_rpm_s" not in nl
+    assert nl["nlarx"]["fit_percent"] is not None  # the NLARX is no wheel model: it runs
+    html = (tmp_path / "d" / "report.html").read_text()
+    assert "Wheel models (servo, grey box): none, not a wheel record" in html
+    # a speed in rpm is a wheel's, unless the caller says otherwise
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-3000, 3000, 30), 40)
+    y = lfilter([0, 0.2], [1, -0.8], u) + rng.normal(0, 5, u.size)
+    rpm = IOData(u, y, 0.5, input_units="rpm", output_units="rpm")
+    assert identification_study(rpm, orders=(2,), nk_max=2).wheel_stages["run"] is True
+    named = IOData(u, y, 0.5, input_names="command", output_names="speed_rpm")  # exported CSV
+    assert identification_study(named, orders=(2,), nk_max=2, nonlinear=False).wheel_stages["run"]
+    off = identification_study(rpm, orders=(2,), nk_max=2, wheel=False)
+    assert off.servo is None and "skipped" in off.nonlinear
+
+
+def test_a_study_whose_best_fit_is_negative_says_so_and_exits_1(tmp_path):
+    from rwlab.errors import NoModelFitsError
+    from rwlab.report.identify import identify
+
+    rng = np.random.default_rng(3)
+    n = 1000
+    y = rng.normal(0, 1, n) + np.where(np.arange(n) >= 0.7 * n, 4.0, 0.0)  # not u's doing
+    path = tmp_path / "noise.csv"
+    np.savetxt(path, np.column_stack([rng.normal(0, 1, n), y]), delimiter=",")
+    r = CliRunner().invoke(main, ["identify", str(path), "--Ts", "1", "--out", str(tmp_path / "o")])
+    assert r.exit_code == 1, r.output
+    assert "no model fits: the best validation fit is -" in r.output
+    study = json.loads((tmp_path / "o" / "study.json").read_text())
+    assert study["no_model_fits"] is True and study["best_fit_percent"] < 0
+    assert "No model fits" in (tmp_path / "o" / "report.html").read_text()
+    with pytest.raises(NoModelFitsError) as info:
+        identify(path, tmp_path / "p", Ts=1.0)
+    assert info.value.study["best_fit_percent"] < 0 and info.value.paths["model.json"].exists()

@@ -119,3 +119,20 @@ def test_parameters_load_from_toml_and_bad_values_are_refused(tmp_path):
         WheelParams(inertia=-1)
     with pytest.raises(ConfigError):
         WheelParams(max_speed_rpm=9000)  # above the overspeed fault threshold
+
+
+def test_the_setpoint_weight_sets_the_proportional_kick_of_a_command_step():
+    """kp·(β·ω_cmd − ω): β = 1 is a PI on the error (a kick kp·Δ at the step), β = 0 an
+    I-P loop (no kick: the integral alone starts the wheel); β between scales it."""
+    from dataclasses import replace
+
+    from rwlab.wheel.physics import IDEAL, Mode, WheelPhysics, rpm_to_rad_s
+
+    step = rpm_to_rad_s(100.0)  # small: the request stays below the acceleration limit
+    for beta in (1.0, 0.15, 0.0):
+        wheel = WheelPhysics(replace(IDEAL, speed_setpoint_weight=beta), seed=0)
+        wheel.command(Mode.SPEED, 100.0)
+        request = wheel._accel_request(1e-3, 0.0)
+        assert request == pytest.approx(beta * IDEAL.speed_kp * step, abs=1e-12)
+    with pytest.raises(ConfigError):
+        replace(IDEAL, speed_setpoint_weight=-0.5)

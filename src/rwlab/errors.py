@@ -101,3 +101,14 @@ class LostWorkerError(RwlabError):
 
 class FormatWarning(RwlabWarning):
     """A file in an older format was read; the message says how to convert it."""
+
+
+class NoModelFitsError(EstimationError):
+    """An identification study ran, but even its best model fits the validation data worse
+    than their mean (a negative fit %). The study's files were written; ``study`` holds
+    its numbers and ``paths`` its files (``rwlab identify`` exits 1)."""
+
+    def __init__(self, message: str, *, study: dict | None = None, paths: dict | None = None):
+        super().__init__(message)
+        self.study = study
+        self.paths = paths

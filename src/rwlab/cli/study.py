@@ -21,7 +21,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
-from rwlab.errors import ConfigError, RwlabError, RwlabWarning
+from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
 
 
 @main.command("identify")
@@ -94,6 +94,10 @@ def identify(
     FILE may be a folder of records (a wheel fleet's acceptance tests): each is
     studied in parallel on a Dask cluster (--workers, --scheduler), into
     OUT/<record name>/, with OUT/fleet.json and OUT/fleet.html summarising them.
+
+    Exit status 0 when a model was chosen, 1 when the study was written but no
+    model fits (even the best validation fit is negative: the report says what was
+    tried), 2 on an error (nothing written).
     """
     from rwlab.report.identify import identify as run_study
 
@@ -124,7 +128,13 @@ def identify(
             bars[0].update(1)
 
         echo = lambda t: click.echo(t, err=True)  # noqa: E731
-        study, paths = run_study(file, out, force=force, progress=progress, echo=echo, **options)
+        try:
+            study, paths = run_study(
+                file, out, force=force, progress=progress, echo=echo, **options
+            )
+            unfit = None
+        except NoModelFitsError as exc:  # the study is written: show it, then exit 1
+            study, paths, unfit = exc.study or {}, exc.paths or {}, exc
     if study.get("segments"):
         parts = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in study["segments"])
         click.echo(f"split at telemetry gaps into {len(study['segments'])} experiments: {parts}")
@@ -138,13 +148,21 @@ def identify(
     if (study.get("parts") or {}).get("note"):
         click.echo(f"estimation vs validation part: {study['parts']['note']}")
     nl = study["nonlinear"]
-    if nl and "error" not in nl:
+    if nl and "skipped" in nl:
+        click.echo(f"wheel models: none ({nl['skipped']})")
+    elif nl and "error" not in nl:
         click.echo(
             f"nonlinear servo: fit {nl['fit_percent']:.2f} %, rate limit "
             f"{nl['accel_limit_rpm_s']:.4g} {_rate_unit(study)}"
         )
     elif nl:
         click.echo(f"nonlinear servo: not fitted ({nl['error']})")
+    for name in ("greybox", "nlarx"):
+        row = (nl or {}).get(name) or {}
+        if row.get("fit_percent") is not None:
+            click.echo(f"{name}: validation fit {row['fit_percent']:.2f} %")
+        elif row.get("failed") or row.get("error"):
+            click.echo(f"{name}: failed ({row.get('failed') or row.get('error')})")
     ref = study.get("healthy_reference") or {}
     if ref.get("stored"):
         click.echo(
@@ -152,6 +170,9 @@ def identify(
             f"samples): rwlab diagnose RECORD --model {Path(out) / 'model.json'} --out FOLDER"
         )
     click.echo(_wrote(out, paths.values()))
+    if unfit is not None:
+        click.echo(f"error: {' '.join(str(unfit).split())}", err=True)
+        sys.exit(1)
 
 
 def _rate_unit(study: dict) -> str:

@@ -79,6 +79,7 @@ from rwlab.ident.greybox_std import (
     Uncertainty,
     _budget,
     _sandwich,
+    structure_error,
 )
 
 __all__ = [
@@ -515,7 +516,7 @@ def greybox_fit(
     method = (
         f"statistical: sandwich H⁻¹SH⁻¹ of the simulation error, S by Newey–West with {lags} "
         f"lags ({'Andrews AR(1) plug-in' if hac_lags is None else 'given'}); structure: the "
-        "bias envelope the model's structure leaves (calibrated on the twin); "
+        f"bias envelope the model's structure leaves ({_structure_source(unc)}); "
         f"{limit}; inertia: J's "
         f"datasheet tolerance ±{100 * inertia_tolerance:g} % (uniform) for the parameters "
         "that need J; std is their root sum of squares; ratios (x/J, the combinations the "
@@ -532,6 +533,13 @@ def greybox_fit(
         current_limit_estimated=bool(estimate_current_limit),
         accel_limit_estimated="accel_limit" in names,
     )
+
+
+def _structure_source(unc: Uncertainty) -> str:
+    """Where the structure term's envelope comes from, for ``std_method``."""
+    if unc.structure_error is not None:
+        return "given"
+    return structure_error(unc.wheel_model)[1]
 
 
 def _without(names: tuple[str, ...], name: str) -> tuple[str, ...]:

@@ -8,19 +8,22 @@ forms them, and the terms beyond the fit's own statistics.
 - ``inertia``: J's datasheet tolerance, for the parameters the record identifies only
   divided by J (:data:`NEEDS_J`);
 - ``current_limit``: the configured current limit's tolerance where it is held;
-- ``structure``: :data:`STRUCTURE_ERROR`, a bias envelope calibrated on the twin.
+- ``structure``: a bias envelope measured per wheel model against units of known truth,
+  kept with its measurement in ``greybox_structure.json`` (:func:`structure_error`).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from rwlab.errors import DataError
 
-__all__ = ["NEEDS_J", "STRUCTURE_ERROR", "Uncertainty"]
+__all__ = ["NEEDS_J", "STRUCTURE_ERROR", "STRUCTURE_FILE", "Uncertainty", "structure_error"]
 
 ESTIMATED = ("torque_constant", "coulomb", "breakaway", "viscous", "accel_limit", "kp", "ki")
 CLAMP = "current_limit"  # estimated too when the record shows the clamp binding
@@ -49,14 +52,18 @@ class Uncertainty:
         Relative bias envelope of each estimated parameter that the model's structure
         leaves (what it does not model: the firmware's Hall-speed feedback, k_t's
         fall with temperature, friction drift, torque ripple); None:
-        :data:`STRUCTURE_ERROR`, calibrated on the twin (it holds on a real wheel
-        only as far as the twin is right); ``{}`` for none.
+        ``wheel_model``'s envelope measured on the twin (:func:`structure_error`; it
+        holds on a real wheel only as far as the twin is right); ``{}`` for none.
+    wheel_model : str
+        Whose measured envelope ``structure_error=None`` means (:func:`structure_error`;
+        default ``'rw90'``); a model without one gets the widest measured, said so.
     """
 
     inertia_tolerance: float = 0.02
     hac_lags: int | None = None
     structure_error: dict | None = None
     current_limit_tolerance: float = 0.02
+    wheel_model: str = "rw90"
 
     def __post_init__(self) -> None:
         for name in ("inertia_tolerance", "current_limit_tolerance"):
@@ -78,20 +85,49 @@ class Uncertainty:
 
 NEEDS_J = ("torque_constant", "coulomb", "breakaway", "viscous")  # identified only as x/J
 
-STRUCTURE_ERROR = {
-    "torque_constant": 0.0039,
-    "coulomb": 0.1389,
-    "breakaway": 0.56,
-    "viscous": 0.0849,
-    "accel_limit": 0.0042,
-    "kp": 0.0089,
-    "ki": 0.0177,
-}
-"""A bias envelope, calibrated on the twin: the relative error the model's structure left
-on each estimate (``python bench/bench_greybox_z.py --pairs n:0 1:7 2:3 --calibrate``: the
-RMS relative error of the J-free quantities against the units' truth, three records;
-judged on other units). It is not noise: on every nominal twin unit α and kt/J come out
-low by about this much (z −0.6 to −1.1), and it is most of their σ. What the grey box
+STRUCTURE_FILE = Path(__file__).with_name("greybox_structure.json")
+"""The measured structure-error envelopes, one per wheel model, each with its measurement."""
+
+
+def structure_error(wheel_model: str = "rw90") -> tuple[dict, str]:
+    """The structure-error envelope of ``wheel_model`` from :data:`STRUCTURE_FILE`.
+
+    Parameters
+    ----------
+    wheel_model : str
+        A wheel model's name (a preset's, lower case).
+
+    Returns
+    -------
+    envelope : dict
+        Relative bias of each estimated parameter.
+    source : str
+        Where it comes from: the model's own measurement, or, for a wheel model
+        without one, the widest envelope of every calibrated model (each parameter's
+        largest), said so.
+    """
+    models = json.loads(STRUCTURE_FILE.read_text())["models"]
+    entry = models.get(str(wheel_model).lower())
+    if entry is not None:
+        return dict(entry["relative_error"]), (
+            f"the {wheel_model} envelope measured by `{entry['measurement']['command']}`"
+        )
+    widest: dict = {}
+    for other in models.values():
+        for k, v in other["relative_error"].items():
+            widest[k] = max(widest.get(k, 0.0), v)
+    return widest, (
+        f"{wheel_model} has no measured envelope in {STRUCTURE_FILE.name}: the widest of "
+        f"{', '.join(sorted(models))} (calibrate it: bench/bench_greybox_z.py --calibrate)"
+    )
+
+
+STRUCTURE_ERROR = structure_error("rw90")[0]
+"""The RW90's bias envelope, read from :data:`STRUCTURE_FILE` (its measurement is there):
+the relative error the model's structure left on each estimate (the RMS relative error of
+the J-free quantities against the units' truth, three records; judged on other units).
+It is not noise: on every nominal twin unit α and kt/J come out low by about this much
+(z −0.6 to −1.1), and it is most of their σ. What the grey box
 leaves out: the firmware's loop runs on the Hall speed (late and coarse), k_t falls with
 the magnet's temperature, friction drifts over a record, torque ripple and cogging. On a
 real wheel it holds only as far as the twin is right about these effects; a wheel with
@@ -112,7 +148,9 @@ def _budget(
     """σ of each parameter with a statistical σ, as the root sum of squares of its budget
     (module docstring); also the x/J ratios' σ. ``clamp``: the held current limit's term
     per parameter (None: the limit was estimated). Returns (std, ratios, budget)."""
-    shape = STRUCTURE_ERROR if unc.structure_error is None else unc.structure_error
+    shape = (
+        structure_error(unc.wheel_model)[0] if unc.structure_error is None else unc.structure_error
+    )
     rel_j = unc.inertia_tolerance / math.sqrt(3.0)
     std, ratios, budget = {}, {}, {}
     for k, s_fit in fit_std.items():

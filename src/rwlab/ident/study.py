@@ -123,6 +123,10 @@ class StudyResult(ShortRepr):
     segments : list of [t_start, t_end] or None
         The gap-free parts the record was split into (s from its start), each an
         experiment of its own; None for one record without gaps.
+    wheel_stages : dict or None
+        ``run`` (whether the servo and grey-box wheel models were fitted) and ``why``.
+    best_fit_percent : float or None
+        The best validation fit of every linear model, %; ``no_model_fits`` when negative.
     """
 
     data: IOData
@@ -150,6 +154,13 @@ class StudyResult(ShortRepr):
     gain_constraint: dict | None = None
     chosen_name: str = ""
     parts: dict | None = None
+    wheel_stages: dict | None = None
+    best_fit_percent: float | None = None
+
+    @property
+    def no_model_fits(self) -> bool:
+        """True when even the best model's validation fit is negative (below the mean's)."""
+        return self.best_fit_percent is not None and self.best_fit_percent < 0
 
     def __post_init__(self) -> None:
         self.chosen_name = self.chosen_name or self.chosen.structure
@@ -211,6 +222,9 @@ class StudyResult(ShortRepr):
             "acceleration": self.acceleration,
             "nonlinear": self.nonlinear,
             "segments": self.segments,
+            "wheel_stages": self.wheel_stages,
+            "best_fit_percent": self.best_fit_percent,
+            "no_model_fits": self.no_model_fits,
         }
 
 
@@ -262,6 +276,7 @@ def identification_study(
     datasheet: dict | None = None,
     current=None,
     segments: Sequence[tuple[int, int]] | None = None,
+    wheel: bool | None = None,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -320,11 +335,21 @@ def identification_study(
         (the criteria summed, no regressor across a boundary); the delay scan, the
         validation and the nonlinear stage use the longest piece of their part, and
         the preprocessing takes its statistics from every estimation piece.
+    wheel : bool, optional
+        Whether the record is a reaction wheel's (speed command → speed): only a wheel's
+        record gets the wheel-specific stages, the servo model (a rate-limited speed
+        loop) and the grey box (a wheel's physics). None (default): a wheel when the
+        output's unit is a rotation speed (:data:`SPEED_UNITS`, or a name that says
+        it: a testbed record's or its exported CSV's ``speed_rpm``); a hair dryer, a
+        furnace or a unitless file is not, and gets the linear study and the NLARX only.
+        ``study.json``'s ``wheel_stages`` says which.
 
     Returns
     -------
     StudyResult
-        Every number of the report; ``to_dict()`` is ``study.json``.
+        Every number of the report; ``to_dict()`` is ``study.json``. Its ``no_model_fits``
+        is True when even the best validation fit is negative (every model is worse
+        than the validation output's mean): ``rwlab identify`` then exits 1.
     """
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the identification study needs a single-input single-output IOData")
@@ -419,9 +444,13 @@ def identification_study(
     continuous = _continuous(chosen, new_u)
     step("validation")
     servo, nl, grey, black = None, None, None, None
+    stages = _wheel_stages(data, wheel)
     if nonlinear:
-        servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
-        sheet = None if datasheet is None else {**DATASHEET, **datasheet}
+        if stages["run"]:
+            servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
+        else:
+            nl = {"structure": "servo", "skipped": stages["why"]}
+        sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
         grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
         step("nonlinear")
     return StudyResult(
@@ -450,7 +479,36 @@ def identification_study(
         gain_constraint=anchor,
         chosen_name=pick["structure"],
         parts=_parts(chosen, scan, val),
+        wheel_stages=stages,
+        best_fit_percent=max(r["fit_percent"] for r in candidates),
     )
+
+
+SPEED_UNITS = ("rpm", "rad/s", "deg/s", "rps")
+"""Output units that make a record a wheel's (``identification_study``'s ``wheel=None``)."""
+
+
+def _unit_in_name(name: str) -> str:
+    """The unit a channel's name carries by the project's convention (``speed_rpm``:
+    rpm; an exported record's CSV has no other), or ''."""
+    suffixes = {"_rpm": "rpm", "_rad_s": "rad/s", "_deg_s": "deg/s", "_rps": "rps"}
+    return next((u for sfx, u in suffixes.items() if name.lower().endswith(sfx)), "")
+
+
+def _wheel_stages(data: IOData, wheel: bool | None) -> dict:
+    """Whether the wheel-specific stages run on ``data``, and why (``study.json``)."""
+    unit = data.output_units[0] or _unit_in_name(data.output_names[0])
+    if wheel is None:
+        wheel = unit.strip().lower() in SPEED_UNITS
+        why = (
+            f"the output's unit {unit!r} is a rotation speed: a wheel record"
+            if wheel
+            else f"not a wheel record: the output's unit {unit!r} is not a rotation speed "
+            f"({', '.join(SPEED_UNITS)}); the servo and grey-box wheel models are not fitted"
+        )
+    else:
+        why = "a wheel record, as the caller said" if wheel else "not a wheel, as the caller said"
+    return {"run": bool(wheel), "why": why, "stages": ["servo", "greybox"]}
 
 
 def _parts(chosen: PolyModel, est: IOData, val: IOData) -> dict:
@@ -554,11 +612,27 @@ def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, model
 def _choose(
     candidates: list[dict], tolerance: float, gain_tolerance: float, steady, anchor=None
 ) -> tuple:
-    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why."""
+    """The simplest row within ``tolerance`` of the best fit whose DC gain passes; why.
+
+    When no row within that window passes the gain check, the window moves down to
+    the best-fitting row that does (the simplest within ``tolerance`` of it is chosen,
+    and the reason states the fit given up); only when no row fitting at least
+    :data:`POOR_FIT` passes is the choice the nearest gain within the first window."""
     best = max(r["fit_percent"] for r in candidates)
     near = sorted((r for r in candidates if r["fit_percent"] >= best - tolerance), key=_simplicity)
     limit = 100 * gain_tolerance
     ok = [r for r in near if _gain_error(r) <= limit]
+    top = best
+    if steady is not None and not ok:  # beyond the window: the best that passes, if any
+        passing = [
+            r for r in candidates if _gain_error(r) <= limit and r["fit_percent"] >= POOR_FIT
+        ]
+        if passing:
+            top = max(r["fit_percent"] for r in passing)
+            ok = sorted(
+                (r for r in passing if r["fit_percent"] >= top - tolerance), key=_simplicity
+            )
+            near = ok
     if steady is None:
         pick = near[0]
     elif ok:
@@ -572,6 +646,24 @@ def _choose(
         f"whose validation fit ({pick['fit_percent']:.2f} %) "
         f"is within {tolerance:g} points of the best ({best:.2f} %)"
     )
+    if top < best:
+        reason = (
+            f"no model within {tolerance:g} points of the best validation fit ({best:.2f} %) "
+            f"has a DC gain within {limit:g} % of the measured steady-state gain "
+            f"{steady['gain']:.4f}; the best-fitting model whose gain does fits {top:.2f} % "
+            f"({best - top:.2f} points below the best), and {pick['structure']} is the "
+            f"simplest within {tolerance:g} points of it (fit {pick['fit_percent']:.2f} %, "
+            f"DC gain {_dc_text(pick)}; passed over for their gain: "
+            + ", ".join(
+                f"{r['structure']} ({_dc_text(r)})"
+                for r in candidates
+                if r["fit_percent"] >= best - tolerance
+            )
+            + ")"
+        )
+        if pick.get("gain_constrained") and anchor is not None:
+            reason += "; " + _constraint_text(pick, anchor, candidates)
+        return pick, reason + _paper_text(pick, candidates, best)
     if steady is None:
         reason += "; the record has too few settled holds to check the DC gain"
         return pick, reason + _paper_text(pick, candidates, best)
@@ -825,27 +917,61 @@ def _wheel_models(data, split, servo, nl, datasheet, current) -> tuple:
     except (EstimationError, ModelError, DataError) as exc:
         out["nlarx"] = {"error": str(exc)}
     scored = {k: v["fit_percent"] for k, v in out.items() if v.get("fit_percent") is not None}
+    failed = [f"{k} failed ({v['failed']})" for k, v in out.items() if v.get("failed")]
+    if failed:
+        out["failed"] = failed
     if scored:
         best = max(scored, key=lambda k: scored[k])
         out["chosen"] = best
-        out["choice"] = f"{best}: the better simulation fit on the validation part " + ", ".join(
-            f"{k} {v:.2f} %" for k, v in scored.items()
+        out["choice"] = (
+            f"{best}: the better simulation fit on the validation part "
+            + ", ".join(f"{k} {v:.2f} %" for k, v in scored.items())
+            + "".join(f"; {f}" for f in failed)
         )
     nl.update(out)
     return grey, black
 
 
 def _nonlinear_row(model, val: IOData) -> dict:
+    """A nonlinear model's validation row; ``failed`` (and no fit, so it is neither ranked
+    nor chosen) when its simulation diverged (:func:`_divergence`)."""
     yhat = model.predict(val, np.inf, initial="steady")
     y = val.y[:, 0]
-    ok = bool(np.all(np.isfinite(yhat)))
-    return {
+    row = {
         "structure": model.structure,
-        "fit_percent": fit_percent(y, yhat) if ok else None,
+        "fit_percent": None,
         "n_params": model.n_params,
         "parameters": model.to_dict(),
         "initial_conditions": "the validation part's first measured speed, loop integral 0",
     }
+    failed = _divergence(y, yhat)
+    if failed is not None:
+        return {**row, "failed": failed}
+    return {**row, "fit_percent": fit_percent(y, yhat)}
+
+
+DIVERGED_SPANS = 1.0
+"""A simulation that leaves the measured output's range by more than this many times its
+span has diverged: no bounded system it models does that on an input within the
+estimation data's range. A wheel's speed beyond twice the span it was seen to cover is
+not a prediction of it."""
+
+
+def _divergence(y: np.ndarray, yhat: np.ndarray) -> str | None:
+    """Why the simulation ``yhat`` of the measured ``y`` diverged, or None when it did not."""
+    if not np.all(np.isfinite(yhat)):
+        k = int(np.flatnonzero(~np.isfinite(yhat))[0])
+        return f"diverged: the simulation is not finite from sample {k} of the validation part"
+    lo, hi = float(np.min(y)), float(np.max(y))
+    span = max(hi - lo, float(np.max(np.abs(y))), np.finfo(float).tiny)
+    beyond = float(max(np.max(yhat) - hi, lo - np.min(yhat), 0.0))
+    if beyond <= DIVERGED_SPANS * span:
+        return None
+    return (
+        f"diverged: the simulation reaches {beyond / span:.3g} times the measured span "
+        f"({span:.4g}) beyond the measured range [{lo:.4g}, {hi:.4g}] (fit "
+        f"{fit_percent(y, yhat):.3g} %); not ranked, not chosen"
+    )
 
 
 def _preprocessed(data: IOData, preprocess: str, split: float, pieces=None) -> IOData:

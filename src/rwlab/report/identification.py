@@ -205,9 +205,18 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
         f"{ch['fit_percent']:.2f} %. {html.escape(ch['reason'])}.</p>"
     )
+    if study.get("no_model_fits"):
+        page.text(
+            f"No model fits: the best validation fit is {study['best_fit_percent']:.2f} %, "
+            "worse than the validation output's mean (rwlab identify exits 1). The tables "
+            "below show what was tried.",
+            note=True,
+        )
     note = (study.get("parts") or {}).get("note")
     if note:
         page.text(f"Estimation and validation parts differ: {note}.", note=True)
+    for line in _nonlinear_notes(study.get("nonlinear") or {}, study.get("wheel_stages")):
+        page.text(line, note=True)
     page.text(_reference_text(model_info), note=True)
 
     steady = study.get("steady_state_gain")
@@ -462,6 +471,21 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         "estimated rate limit and settles.",
     )
     _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
+
+
+def _nonlinear_notes(nl: dict, stages: dict | None) -> list[str]:
+    """One line per nonlinear model beyond the servo: its fit, or why it failed; and the
+    wheel-specific stages left out of a record that is not a wheel's."""
+    lines = []
+    if stages is not None and not stages["run"]:
+        lines.append(f"Wheel models (servo, grey box): none, {stages['why']}.")
+    for name in ("greybox", "nlarx"):
+        row = nl.get(name) or {}
+        if row.get("fit_percent") is not None:
+            lines.append(f"Nonlinear {name}: validation fit {row['fit_percent']:.2f} %.")
+        elif row.get("failed") or row.get("error"):
+            lines.append(f"Nonlinear {name}: failed, {row.get('failed') or row.get('error')}.")
+    return lines
 
 
 def _constrained_section(page: Page, study: dict) -> None:

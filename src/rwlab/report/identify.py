@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from rwlab._io import output_folder
-from rwlab.errors import ConfigError, RwlabError
+from rwlab.errors import ConfigError, NoModelFitsError, RwlabError
 
 __all__ = [
     "RECORD_SUFFIXES",
@@ -88,6 +88,12 @@ def identify(
         Every number of ``study.json``.
     paths : dict of str to Path
         The files written, by name (in ``out``).
+
+    Raises
+    ------
+    NoModelFitsError
+        When even the best model's validation fit is negative: the folder is written
+        all the same, and the error carries ``study`` and ``paths``.
     """
     options = dict(
         Ts=Ts,
@@ -102,7 +108,17 @@ def identify(
     )
     with output_folder(out, STUDY_FILES, force=force, what="identification study") as stage:
         study, paths = identify_into(file, stage, progress=progress, echo=echo, **options)
-    return study, {name: Path(out) / Path(p).name for name, p in paths.items()}
+    paths = {name: Path(out) / Path(p).name for name, p in paths.items()}
+    if study.get("no_model_fits"):
+        raise NoModelFitsError(
+            f"{file}: no model fits: the best validation fit is "
+            f"{study['best_fit_percent']:.2f} %, worse than the validation output's mean; the "
+            f"study is in {out} (report.html says what was tried). Record an experiment that "
+            "excites the system within its linear range, or check the input and output columns",
+            study=study,
+            paths=paths,
+        )
+    return study, paths
 
 
 def identify_into(
@@ -294,6 +310,8 @@ def _identify_batch(jobs: list[tuple[str, str]], options: dict) -> list[dict]:
                 "structure": chosen["structure"],
                 "fit_percent": chosen["fit_percent"],
             }
+            if study.get("no_model_fits"):
+                line["error"] = f"no model fits: best fit {study['best_fit_percent']:.2f} %"
         lines.append(line)
     return lines
 

@@ -134,6 +134,10 @@ class WheelParams:
         τ_c, N·m.
     speed_kp, speed_ki : float
         Inner PI speed loop: acceleration request per speed error (1/s, 1/s²).
+    speed_setpoint_weight : float
+        Weight β of the command in the proportional term, kp·(β·ω_cmd − ω) (default 1:
+        a plain PI on the error; 0: an I-P loop, no proportional kick on a command
+        step). Åström & Hägglund, *Advanced PID Control* (2006), §3.4.
     speed_resolution_rpm, speed_noise_rpm, min_measurable_rpm : float
         Reported speed: quantum (default 0.1), added white noise σ (default 0: the
         Hall model makes the noise) and the slowest speed read as non-zero (default 5),
@@ -238,6 +242,7 @@ class WheelParams:
     coulomb_friction: float = _NOMINAL["coulomb_friction"]
     speed_kp: float = _NOMINAL["speed_kp"]
     speed_ki: float = _NOMINAL["speed_ki"]
+    speed_setpoint_weight: float = 1.0
     speed_resolution_rpm: float = _NOMINAL["speed_resolution_rpm"]
     speed_noise_rpm: float = _NOMINAL["speed_noise_rpm"]
     min_measurable_rpm: float = _NOMINAL["min_measurable_rpm"]
@@ -632,7 +637,7 @@ class WheelPhysics:
         if self.mode == Mode.SPEED:
             target = _clip(self.setpoint, p.max_speed)
             error = target - speed
-            request = p.speed_kp * error + self._integral
+            request = p.speed_kp * (p.speed_setpoint_weight * target - speed) + self._integral
             if abs(request) < p.max_accel:  # anti-windup: integrate only when unsaturated
                 self._integral += p.speed_ki * error * dt
             return _clip(request, p.max_accel)
