@@ -36,6 +36,11 @@ def _meta(data: IOData) -> str:
     return json.dumps(data.to_dict(), separators=(",", ":"))
 
 
+def _salvaged(data: IOData) -> bool:
+    """Data read from a damaged record up to its damage: even a plain file says so."""
+    return isinstance(data.source, dict) and "salvaged" in data.source
+
+
 def _as_list(cols) -> list | None:
     """A column choice as a list: None, one name or index, "a,b", or a sequence."""
     if cols is None:
@@ -216,7 +221,7 @@ def _check_plain_trend(trend: Trend, path) -> None:
 def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     names, table = _columns(data)
     with open(tmp, "w", newline="") as fh:
-        if not plain:
+        if not plain or _salvaged(data):  # the metadata line: its name says salvaged
             fh.write(_META_PREFIX + _meta(data) + "\n")
         writer = csv.writer(fh, lineterminator="\n")  # LF: what every tool reads
         writer.writerow(names)
@@ -271,7 +276,7 @@ def _write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
 
     names, table = _columns(data)
     arrow = pa.table({n: table[:, i] for i, n in enumerate(names)})
-    if not plain:
+    if not plain or _salvaged(data):
         arrow = arrow.replace_schema_metadata({b"rwlab": _meta(data).encode()})
     pq.write_table(arrow, tmp)
 
@@ -300,6 +305,8 @@ def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
             raise DataError(f"channel names {bad} are not MATLAB variable names")
         variables: dict[str, Any] = {n: table[:, [i]] for i, n in enumerate(names)}
         variables["Ts"] = data.Ts
+        if _salvaged(data):  # a text variable: no channel, read by a person
+            variables["salvaged"] = data.name
     else:
         variables = {
             "u": data.u,

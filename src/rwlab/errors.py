@@ -101,3 +101,22 @@ class LostWorkerError(RwlabError):
 
 class FormatWarning(RwlabWarning):
     """A file in an older format was read; the message says how to convert it."""
+
+
+class RecordDamagedError(FileFormatError):
+    """A record's bytes are damaged (a CRC mismatch, an unreadable record, a cut copy).
+
+    Parameters
+    ----------
+    message : str
+        Where the damage is and what is still readable.
+    offset : int
+        Byte offset of the first damaged record in the file.
+    readable_s : float
+        Seconds of the experiment before the damage (0 when none).
+    """
+
+    def __init__(self, message: str, offset: int = 0, readable_s: float = 0.0) -> None:
+        super().__init__(message)
+        self.offset = offset
+        self.readable_s = readable_s

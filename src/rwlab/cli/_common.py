@@ -291,6 +291,27 @@ def _wrote(out, paths) -> str:
     return "wrote " + ", ".join(str(Path(out) / Path(p).name) for p in paths)
 
 
+def _salvage_option(func):
+    """--salvage: a damaged record is read up to its damage instead of refused
+    (:func:`rwlab.testbed.record.salvaging`, for every record the command reads)."""
+
+    def turn_on(ctx: click.Context, _param, value: bool) -> bool:
+        if value:
+            from rwlab.testbed.record import salvaging
+
+            ctx.with_resource(salvaging())
+        return value
+
+    return click.option(
+        "--salvage",
+        is_flag=True,
+        expose_value=False,
+        callback=turn_on,
+        help="Read a damaged record up to its damage instead of refusing it "
+        "(every output then says it was salvaged).",
+    )(func)
+
+
 def _columns_option(func):
     for option in reversed(
         [
@@ -339,6 +360,7 @@ def _data_options(func):
             help="Remove means or lines before estimation (MATLAB habit).",
         ),
         click.option("--normalize", is_flag=True, help="Scale every channel to [0, 1] (paper A)."),
+        _salvage_option,
     ]
     for option in reversed(options):
         func = option(func)

@@ -17,6 +17,7 @@ from rwlab.cli._common import (
     _engine_options,
     _friendly_errors,
     _output,
+    _salvage_option,
     _steps_progress,
     _wrote,
     main,
@@ -69,6 +70,7 @@ from rwlab.errors import ConfigError, RwlabError, RwlabWarning
 )
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_salvage_option
 @_friendly_errors
 def identify(
     file,
@@ -176,6 +178,7 @@ def _rate_unit(study: dict) -> str:
     "healthy records of other units; a rate a detector cannot deliver is a warning.",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_salvage_option
 @_friendly_errors
 def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     """Detect, name and size wheel faults in a record with an identified model.
