@@ -32,7 +32,7 @@ LAYERS: list[set[str]] = [
     {"hil"},
     {"campaign"},
     {"report"},
-    {"cli", "demo"},
+    {"cli", "demo", "__main__"},
 ]
 
 

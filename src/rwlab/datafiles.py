@@ -17,11 +17,19 @@ from typing import Any
 
 import numpy as np
 
-from rwlab.data import IOData, Trend, check_Ts, register_reader, register_writer
+from rwlab.data import (
+    TIME_MS_NAMES,
+    TIME_NAMES,
+    IOData,
+    Trend,
+    check_Ts,
+    register_reader,
+    register_writer,
+    warn_implausible_Ts,
+)
 from rwlab.errors import DataError, FileFormatError
 
 _META_PREFIX = "# rwlab "
-_TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
 
 
 # -- shared helpers -----------------------------------------------------------------
@@ -158,7 +166,9 @@ def from_table(
     chosen_by_meta = meta is not None and inputs is None and outputs is None
     if chosen_by_meta:
         inputs, outputs = list(meta["input_names"]), list(meta["output_names"])
-    time_col = next((i for i, n in enumerate(names) if n.lower() in _TIME_NAMES), None)
+    time_col = next(
+        (i for i, n in enumerate(names) if n.lower() in TIME_NAMES + TIME_MS_NAMES), None
+    )
     data_cols = [i for i in range(len(names)) if i != time_col]
     if not data_cols:
         raise FileFormatError(f"{path}: no data columns")
@@ -168,7 +178,8 @@ def from_table(
     tstart = 0.0
     if time_col is not None and table.shape[0] >= 2:
         _check_finite(table, [time_col], names, path, lines)
-        t = table[:, time_col]
+        in_ms = names[time_col].lower() in TIME_MS_NAMES
+        t = table[:, time_col] * (1e-3 if in_ms else 1.0)
         steps = np.diff(t)
         file_Ts = float(f"{(t[-1] - t[0]) / (len(t) - 1):.12g}")  # drop float noise of the stamps
         if meta is not None:
@@ -182,6 +193,8 @@ def from_table(
             raise DataError(
                 f"{path}: Ts={Ts} s disagrees with the file's time column ({file_Ts} s)"
             )
+        if meta is None:  # rwlab's own files carry their Ts: only others' are guessed at
+            warn_implausible_Ts(file_Ts, len(t), f"{path}: column {names[time_col]!r}")
         Ts, tstart = file_Ts, float(t[0])
     units = dict(units or {})
     kwargs = {}

@@ -17,7 +17,6 @@ reference (``healthy_reference``).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -29,7 +28,7 @@ from rwlab.ident.base import save_model_json
 from rwlab.ident.gain_constraint import study_name
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
-from rwlab.schemas import format_tag, read_versioned
+from rwlab.schemas import format_tag, read_json, read_versioned, validate
 
 __all__ = ["KIND", "VERSION", "Channel", "WheelModelFile"]
 
@@ -228,6 +227,7 @@ class WheelModelFile:
                 "model.json that `rwlab identify` wrote"
             )
         d = read_versioned(d, KIND, VERSION, source=source)
+        validate(d, "model", source=source)  # types and required fields, by the schema
         _check_top_level(d, source)
         try:
             sat, nl = d["saturation"], d.get("nonlinear")
@@ -295,8 +295,8 @@ class WheelModelFile:
             Not readable, not JSON, not a wheel model, or a newer version.
         """
         try:
-            d = json.loads(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            d = read_json(path, what="model file")
+        except OSError as exc:
             raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
         return cls.from_dict(d, source=str(path))
 

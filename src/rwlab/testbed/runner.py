@@ -572,6 +572,12 @@ def run_experiment(
                 seed=cfg.seed,
                 protocol=cfg.protocol,
             )
+            if node.watchdog and cfg.Ts >= node.watchdog:  # it would idle between commands
+                raise ConfigError(
+                    f"Ts = {cfg.Ts:g} s is not shorter than the simulated wheel's command "
+                    f"watchdog ({node.watchdog:g} s): the wheel would idle between commands; "
+                    f"choose Ts < {node.watchdog:g} s"
+                )
             if realtime:
                 node.start()
         client = WheelClient(
