@@ -45,6 +45,7 @@ from mcap.records import Channel, Chunk, Footer, Message, Metadata, Statistics
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from rwlab._io import naming
 from rwlab.errors import FileFormatError, RecordBusyError, RecordDamagedError, RwlabWarning
 
 __all__ = [
@@ -188,6 +189,26 @@ class RecordWriter:
             raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(self.path.parent))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = _open_locked(self.partial, self.path)
+        try:
+            with self._naming_the_record():
+                self._start(metadata, channels)
+        except BaseException:  # nothing recorded yet: leave no partial file, hold no lock
+            self.partial.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                self._fh.close()
+            raise
+
+    @contextlib.contextmanager
+    def _naming_the_record(self) -> Iterator[None]:
+        """An OS error writing (a full disk) names the record asked for, not its partial file."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.filename in (None, str(self.partial)):
+                raise naming(exc, self.path) from exc
+            raise
+
+    def _start(self, metadata: dict, channels: dict[str, dict] | None) -> None:
         self._writer = Writer(
             self._fh,
             chunk_size=CHUNK_BYTES,
@@ -220,6 +241,10 @@ class RecordWriter:
         """Append one message; ``message['t']`` is its clock time in seconds."""
         if self.closed:
             raise FileFormatError(f"{self.path} is closed")
+        with self._naming_the_record():
+            self._write(topic, message)
+
+    def _write(self, topic: str, message: dict) -> None:
         message = {**message, "t": message["t"] - self.time_origin}
         stamp = max(0, round(message["t"] * 1e9))
         self._writer.add_message(
@@ -244,12 +269,14 @@ class RecordWriter:
             return
         self.closed = True
         try:
-            self._writer.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-            os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
+            with self._naming_the_record():
+                self._writer.finish()
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+                os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
         finally:  # a failed finish (a full disk) leaves the old record and this partial one
-            self._fh.close()
+            with contextlib.suppress(OSError):  # its buffer cannot be flushed either
+                self._fh.close()
 
     def discard(self) -> None:
         """Close and delete the partial record, leaving any old record at ``path`` as it was."""
