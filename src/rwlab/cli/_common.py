@@ -34,6 +34,7 @@ FLAGS = {
     "epoch_spread_days": "--epoch-spread-days",
     # the wheel client's advice, in the command line's words
     "call clear_fault()": "clear it (rwlab wheel cmd clear)",
+    ", or (in Python) study lower orders (orders=, nk_max=)": "",  # no such flag
 }
 # not a quoted name: a config file's key (['raw_frames', ...]) is no flag
 _PARAMETER = re.compile(

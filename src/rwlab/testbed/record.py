@@ -169,6 +169,11 @@ class RecordWriter:
     channels : dict, optional
         More topics beside :data:`CHANNELS` (topic → JSON-schema properties), for
         records that carry more than one wheel (``rwlab hil``).
+    wall_clock : bool
+        Close a chunk at least every :data:`FLUSH_PERIOD` s of wall time (the
+        default, for a run on the wall clock). A run on a simulated clock passes
+        False: its chunks then close by size alone, so the same run writes the
+        same bytes on any machine, and a kill loses at most one chunk.
     """
 
     def __init__(
@@ -178,8 +183,10 @@ class RecordWriter:
         *,
         force: bool = False,
         channels: dict[str, dict] | None = None,
+        wall_clock: bool = True,
     ) -> None:
         self.path = Path(path)
+        self.wall_clock = wall_clock
         self.partial = partial_path(self.path)
         if self.path.exists() and not force:
             raise FileExistsError(f"{self.path} exists; pass force=True to replace it")
@@ -255,7 +262,7 @@ class RecordWriter:
         )
         self.counts[topic] += 1
         now = time.monotonic()
-        if now - self._last_flush >= FLUSH_PERIOD:
+        if self.wall_clock and now - self._last_flush >= FLUSH_PERIOD:
             self._writer.flush()  # closes the chunk (its CRC) and flushes the file
             self._last_flush = now
 

@@ -541,7 +541,8 @@ def run_experiment(
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     injected = tuple(str(f) for f in faults)
     alarms: list[str] = []
-    writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    # first: a bad --out opens no bus
+    writer = RecordWriter(out, metadata, force=force, wall_clock=realtime)
     stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
