@@ -328,7 +328,9 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
         raise _named(exc, record) from exc
     events = rec.topic("/event")
     truncated = None if rec.complete else f"the record is truncated ({rec.problem})"
-    if truncated:
+    if rec.damage is not None:  # read_record said so already, on the console
+        truncated = f"the record was salvaged: {rec.damage.text()}; diagnosed up to the damage"
+    elif truncated:
         warnings.warn(
             f"{record}: {truncated}: diagnosed up to where it stops", RwlabWarning, stacklevel=2
         )

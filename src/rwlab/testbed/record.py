@@ -536,7 +536,7 @@ def read_record(path: str | os.PathLike, *, salvage: bool | None = None) -> Reco
     warnings.warn(
         f"{path}: salvaged: {damage.text()}; read up to the damage: {readable}",
         RwlabWarning,
-        stacklevel=2,
+        stacklevel=1,  # one place: a command that reads the record twice warns once
     )
     return record
 
