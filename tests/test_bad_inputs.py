@@ -140,16 +140,32 @@ FILES = {
     "empty.mcap": "",
     "binary.mat": bytes(range(256)) * 4,
     "setpoints.txt": "1\n2\n",
+    # at the door (issue 45): JSON nested past any rwlab file, a number written as a string
+    "deep.json": _model(**{"model.A": "DEEP"}).replace('"DEEP"', "[" * 100_000 + "]" * 100_000),
+    "strts.json": _model(**{"model.Ts": "0.5"}),
 }
 
+# implausible but possible: answered with a warning that gives the number, and run
 
-@pytest.fixture(scope="module")
-def where(tmp_path_factory):
-    """A folder with every file above, a small valid record, and an output folder name."""
+
+def _ms_csv() -> str:
+    """A 2 Hz first-order response to a PRBS whose time_s column holds milliseconds."""
+    u = np.sign(np.sin(0.7 * np.arange(400) ** 1.3))
+    y = np.zeros(400)
+    for k in range(1, 400):
+        y[k] = 0.8 * y[k - 1] + 0.2 * u[k - 1] + 0.01 * np.cos(1.7 * k)
+    rows = "".join(f"{500 * k},{float(u[k])!r},{float(y[k])!r}\n" for k in range(400))
+    return "time_s,u,y\n" + rows
+
+
+WARNING_FILES = {"ms.csv": _ms_csv()}
+
+
+def _write_files(root: Path) -> None:
+    """Every file above, a small valid record, and one with 64 bytes zeroed mid-file."""
     from rwlab.testbed import ExperimentConfig, run_experiment
 
-    root = tmp_path_factory.mktemp("bad")
-    for name, content in FILES.items():
+    for name, content in {**FILES, **WARNING_FILES}.items():
         path = root / name
         if isinstance(content, bytes):
             path.write_bytes(content)
@@ -159,6 +175,16 @@ def where(tmp_path_factory):
     (root / "model.json").write_text(_model())
     (root / "afile").write_text("x")
     (root / "kept.partial.mcap").write_bytes((root / "rec.mcap").read_bytes())
+    damaged = bytearray((root / "rec.mcap").read_bytes())  # a bad sector, a failed copy
+    damaged[len(damaged) // 2 : len(damaged) // 2 + 64] = bytes(64)
+    (root / "damaged.mcap").write_bytes(damaged)
+
+
+@pytest.fixture(scope="module")
+def where(tmp_path_factory):
+    """A folder with every file above, a small valid record, and an output folder name."""
+    root = tmp_path_factory.mktemp("bad")
+    _write_files(root)
     return root
 
 
@@ -490,7 +516,47 @@ def cases() -> list[tuple[str, list[str]]]:
         ),
         ("identify a record too short for the study", ["identify", "{D}/rec.mcap", *out]),
     ]
+    # at the door (issue 45): damaged records, nested or mistyped JSON, empty names
+    dmg = ["{D}/damaged.mcap"]
+    c += [
+        (
+            "export a record with 64 bytes zeroed mid-file",
+            ["export", *dmg, *out[:1], "{O}.csv", "--format", "csv"],
+        ),
+        ("identify a record with 64 bytes zeroed mid-file", ["identify", *dmg, *out]),
+        (
+            "diagnose a record with 64 bytes zeroed mid-file",
+            ["diagnose", *dmg, "--model", "{D}/refmodel.json", *out],
+        ),
+        ("compare on a record with 64 bytes zeroed mid-file", ["compare", "{D}/model.json", *dmg]),
+        ("diagnose --model nested 100000 deep", [*dia[:3], "{D}/deep.json", *dia[4:]]),
+        (
+            "attitude compare --wheel-model nested 100000 deep",
+            [*cmp_, "--wheel-model", "{D}/deep.json"],
+        ),
+        ("compare a model nested 100000 deep", ["compare", "{D}/deep.json", "{D}/rec.mcap"]),
+        ('diagnose --model with "Ts": "0.5"', [*dia[:3], "{D}/strts.json", *dia[4:]]),
+        ('compare a model with "Ts": "0.5"', ["compare", "{D}/strts.json", "{D}/rec.mcap"]),
+        ("export --out ''", ["export", "{D}/rec.mcap", "--format", "csv", "--out", ""]),
+        ("identify --out ''", ["identify", "dryer", "--out", ""]),
+        ("ident arx --save ''", ["ident", "arx", "dryer", "2", "2", "1", "--save", ""]),
+        ("experiment --Ts 500", ["experiment", "--Ts", "500", "--out", "{O}.mcap"]),
+    ]
     return c
+
+
+def warning_cases() -> list[tuple[str, list[str], str]]:
+    """(description, argv, the number the warning must give): run, and warned."""
+    return [
+        (
+            "ident arx on a CSV whose time_s is in milliseconds",
+            ["ident", "arx", "{D}/ms.csv", "2", "2", "1"],
+            "Ts = 500 s",
+        ),
+    ]
+
+
+WARNING_CASES = warning_cases()
 
 
 CASES = cases()
@@ -533,8 +599,10 @@ def test_there_are_at_least_150_cases_across_every_command():
 
 def test_contradictions_and_short_records_say_what_to_do(where):
     """The messages name the flags (not the library's parameters) and the way out."""
+    first = [what for what, _ in CASES].index("attitude simulate --rho with --controller pd")
     answers = {
-        what: refuse(args, where, CASES.index((what, args)))[1] for what, args in CASES[-11:]
+        what: refuse(args, where, CASES.index((what, args)))[1]
+        for what, args in CASES[first : first + 11]
     }
     assert (
         "--rho applies only with --controller lqg_ltr"
@@ -598,6 +666,28 @@ def test_a_bad_input_is_refused_with_one_error_line(where, what, args):
     assert shown == _documented()[what.replace("|", "\\|")], "regenerate docs/bad-inputs.md"
 
 
+@pytest.mark.parametrize(
+    ("what", "args", "number"), WARNING_CASES, ids=[d for d, _, _ in WARNING_CASES]
+)
+def test_an_implausible_input_runs_with_one_warning_giving_the_number(where, what, args, number):
+    code, output, exc = refuse(args, where, 1000 + WARNING_CASES.index((what, args, number)))
+    assert code == 0 and exc is None, (what, output, exc)
+    warned = [line for line in output.splitlines() if line.startswith("warning: ")]
+    assert len(warned) == 1 and number in warned[0], output
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "bad-inputs.md").read_text()
+    assert warned[0].replace(str(where), "D") in doc, "regenerate docs/bad-inputs.md"
+
+
+# a Python name in a message: a call, a keyword argument, an exception class, a traceback
+PYTHON_NAME = re.compile(r"\b\w+\(\)|\b[a-z]+_[a-z_]+=|\b[A-Z]\w+Error\b|Traceback|\bself\b")
+
+
+def test_no_answer_names_python():
+    """Every answer speaks the command line's language: flags, not parameters or methods."""
+    named = {what: a for what, a in _documented().items() if PYTHON_NAME.search(a)}
+    assert not named
+
+
 @functools.cache
 def _documented() -> dict[str, str]:
     """docs/bad-inputs.md's answer to each case."""
@@ -614,24 +704,23 @@ def _table() -> str:
     """docs/bad-inputs.md: every case and the line rwlab answers with."""
     import tempfile
 
-    from rwlab.testbed import ExperimentConfig, run_experiment
-
-    rows = []
+    rows, warned = [], []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        for name, content in FILES.items():
-            p = root / name
-            p.write_bytes(content) if isinstance(content, bytes) else p.write_text(content)
-        run_experiment(ExperimentConfig(duration=30, Ts=0.5, seed=1), root / "rec.mcap")
-        (root / "model.json").write_text(_model())
-        (root / "afile").write_text("x")
-        (root / "kept.partial.mcap").write_bytes((root / "rec.mcap").read_bytes())
+        _write_files(root)
         for k, (what, args) in enumerate(CASES):
             code, output, _ = refuse(args, root, k)
             line = output.strip().splitlines()[-1] if output.strip() else ""
             line = line.replace(str(root), "D").replace("|", "\\|")
-            shown = " ".join(_argv(args, Path("D"), k)).replace("D/out/", "").replace("|", "\\|")
+            shown = " ".join(a or "''" for a in _argv(args, Path("D"), k))
+            shown = shown.replace("D/out/", "").replace("|", "\\|")
             rows.append(f"| {k + 1} | {what} | `rwlab {shown}` | {code} | {line} |")
+        for k, (what, args, _) in enumerate(WARNING_CASES):
+            code, output, _ = refuse(args, root, 1000 + k)
+            line = next((x for x in output.splitlines() if x.startswith("warning: ")), "")
+            line = line.replace(str(root), "D").replace("|", "\\|")
+            shown = " ".join(_argv(args, Path("D"), k)).replace("|", "\\|")
+            warned.append(f"| W{k + 1} | {what} | `rwlab {shown}` | {code} | {line} |")
     head = [
         "# Bad inputs and how rwlab refuses them",
         "",
@@ -645,7 +734,14 @@ def _table() -> str:
         "| # | what | command line | exit | answer |",
         "|---|---|---|---|---|",
     ]
-    return "\n".join([*head, *rows]) + "\n"
+    tail = [
+        "",
+        "## Implausible, not impossible: run, with a warning that gives the number",
+        "",
+        "| # | what | command line | exit | warning |",
+        "|---|---|---|---|---|",
+    ]
+    return "\n".join([*head, *rows, *tail, *warned]) + "\n"
 
 
 if __name__ == "__main__":

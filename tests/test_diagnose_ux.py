@@ -215,20 +215,21 @@ def test_a_truncated_record_is_diagnosed_with_a_warning(tmp_path, model_file):
     run_experiment(ExperimentConfig(duration=120, seed=7), path)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+    refused = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+    assert refused.exit_code == 2 and "ends in the middle of a record" in refused.output
+    result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d", "--salvage")
     assert result.exit_code == 0, result.output
-    assert "truncated" in result.output
+    assert "salvaged" in result.output
     page = (tmp_path / "d" / "report.html").read_text()
     assert 'id="coverage-table"' in page and 'id="estimates-table"' in page
 
 
 def test_a_record_cut_to_one_sample_is_diagnosed_without_numpy_warnings(tmp_path, model_file):
-    """A new user's 5-kB cut of a record: one sample. The report's sample time came
-    from the samples' spacing, and numpy warned of an empty mean; it is the model's."""
-    path = tmp_path / "r.mcap"
-    run_experiment(ExperimentConfig(duration=60, seed=7), path)
+    """A new user's record of one command (a 5-kB cut was one, before records were
+    chunked with CRCs: a cut copy is now refused as damaged). The report's sample time
+    came from the samples' spacing, and numpy warned of an empty mean; it is the model's."""
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(path.read_bytes()[:5000])
+    run_experiment(ExperimentConfig(duration=0.5, seed=7), cut)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")

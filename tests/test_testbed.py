@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from rwlab.cli import main
 from rwlab.data import load
-from rwlab.errors import ConfigError, DataError, FileFormatError, RecordGapError
+from rwlab.errors import ConfigError, DataError, FileFormatError, RecordDamagedError, RecordGapError
 from rwlab.ident import arx, delayest
 from rwlab.testbed import ExperimentConfig, RecordWriter, load_record, read_record, run_experiment
 from rwlab.testbed.record import partial_path
@@ -150,9 +150,13 @@ def test_truncated_and_foreign_files(tmp_path, prbs_record):
     path, _ = prbs_record
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    rec = read_record(cut)
+    with pytest.raises(RecordDamagedError, match="ends in the middle of a record"):
+        read_record(cut)  # a copy cut short is no killed run's partial record
+    killed = tmp_path / "cut.partial.mcap"  # the file a killed recorder leaves ends early
+    killed.write_bytes(cut.read_bytes())
+    rec = read_record(killed)
     assert not rec.complete and rec.problem and len(rec.topic("/telemetry")) > 1000
-    assert load_record(cut).name.endswith("(truncated)")
+    assert load_record(killed).name.endswith("(truncated)")
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"this is not a record")
     with pytest.raises(FileFormatError, match="not an MCAP"):

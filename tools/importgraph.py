@@ -33,7 +33,7 @@ LAYERS: list[set[str]] = [
     {"campaign"},
     {"report"},
     {"workflows"},
-    {"cli", "demo"},
+    {"cli", "demo", "__main__"},
 ]
 
 

@@ -31,6 +31,10 @@ _LAZY = {
     "identify": "rwlab.workflows",
     "simulate": "rwlab.workflows",
     "montecarlo": "rwlab.workflows",
+    # what a MATLAB user reaches for first
+    "IOData": "rwlab.data",
+    "load": "rwlab.data",
+    "compare": "rwlab.ident.validation",
 }
 
 
@@ -98,13 +102,16 @@ __all__ = [
     "DataError",
     "EstimationError",
     "FileFormatError",
+    "IOData",
     "ModelError",
     "RwlabError",
     "WheelSpec",
     "__version__",
+    "compare",
     "diagnose",
     "hil",
     "identify",
+    "load",
     "montecarlo",
     "simulate",
 ]

@@ -16,12 +16,13 @@ import json
 import os
 import shutil
 import tempfile
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from rwlab.errors import OutputBusyError
+from rwlab.errors import OutputBusyError, RwlabWarning
 
-__all__ = ["atomic_write_bytes", "output_folder", "write_json"]
+__all__ = ["atomic_write_bytes", "naming", "output_folder", "write_json"]
 
 
 # -- single files ---------------------------------------------------------------------
@@ -30,6 +31,24 @@ def _umask_mode() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
+
+
+def naming(exc: OSError, path: str | os.PathLike) -> OSError:
+    """``exc`` again, naming ``path`` (the file asked for) instead of a temporary one.
+
+    Parameters
+    ----------
+    exc : OSError
+        The error (a full disk, a lost mount ...), naming no file or a temporary one.
+    path : str or os.PathLike
+        The file the caller asked for.
+
+    Returns
+    -------
+    OSError
+        Same errno and reason, ``filename`` = ``path``.
+    """
+    return _named(exc, Path(path))
 
 
 def _named(exc: OSError, path: Path) -> OSError:
@@ -228,9 +247,8 @@ def output_folder(
         raise OSError(exc.errno, f"cannot write here ({exc.strerror})", str(out)) from None
     stage = parent / f".{out.name}.partial-{os.getpid()}"
     try:
+        _clear_stale(out)  # first: even a run refused below leaves nothing of a killed one
         _check_existing(out, set(names), force, replace_previous, what)
-        for stale in parent.glob(f".{out.name}.partial-*"):  # left by a killed run
-            shutil.rmtree(stale, ignore_errors=True)
         stage.mkdir()
         try:
             yield stage
@@ -249,6 +267,34 @@ def output_folder(
         _unlock(fd, lock_path)
 
 
+def _clear_stale(out: Path) -> None:
+    """Clear what killed runs left beside ``out``; the caller holds its lock.
+
+    Under the lock no other run can be writing, so every staging folder
+    (``.OUT.partial-PID``) is a killed run's: it is removed. A run killed while it
+    published moved the previous output to ``.OUT.old-PID`` and may not have put
+    its own in place: that previous output is restored to ``out``. Each is named
+    in a warning.
+    """
+    cleared = []
+    for old in sorted(out.parent.glob(f".{out.name}.old-*")):
+        if not out.exists():
+            os.rename(old, out)
+            cleared.append(f"restored {out} from {old.name}")
+        else:
+            shutil.rmtree(old, ignore_errors=True)
+            cleared.append(f"removed {old.name}")
+    for stale in sorted(out.parent.glob(f".{out.name}.partial-*")):
+        shutil.rmtree(stale, ignore_errors=True)
+        cleared.append(f"removed {stale.name}")
+    if cleared:
+        warnings.warn(
+            f"{out}: a killed run left files beside it: {'; '.join(cleared)}",
+            RwlabWarning,
+            stacklevel=4,
+        )
+
+
 def _keep_failed(exc: BaseException, stage: Path, out: Path) -> None:
     """Rename a failed run's ``stage`` to ``OUT.failed-<UTC time>`` and say so in ``exc``."""
     import time
@@ -260,9 +306,11 @@ def _keep_failed(exc: BaseException, stage: Path, out: Path) -> None:
         os.rename(stage, failed)
     except OSError:
         return  # the staging folder is then removed: the error itself still stands
-    if exc.args and isinstance(exc.args[0], str):
+    note = f" (the failed run's outputs are kept in {failed}; {out} was not written)"
+    if isinstance(exc, OSError) and exc.strerror:  # shown as "file: reason"
+        exc.strerror += note
+    elif exc.args and isinstance(exc.args[0], str):
         text = exc.args[0].replace(str(stage), str(failed))
-        note = f" (the failed run's outputs are kept in {failed}; {out} was not written)"
         exc.args = (text + note, *exc.args[1:])
 
 

@@ -29,7 +29,7 @@ import numpy as np
 from scipy import signal as sps
 
 from rwlab._io import atomic_write_bytes  # re-exported: it lived here before rwlab._io
-from rwlab.errors import DataError, FileFormatError, RwlabError
+from rwlab.errors import DataError, FileFormatError, RwlabError, RwlabWarning
 
 __all__ = [
     "IOData",
@@ -132,6 +132,82 @@ def _names(names, n: int, prefix: str) -> tuple[str, ...]:
     if len(names) != n:
         raise DataError(f"{len(names)} {prefix}-names given for {n} channels")
     return names
+
+
+#: Time columns read in seconds, and in milliseconds (converted), by name.
+TIME_NAMES = ("time_s", "time", "t", "ts_s", "timestamp_s")
+TIME_MS_NAMES = ("time_ms", "t_ms", "timestamp_ms")
+
+# A wheel's speed loop is sampled at 1 Hz-1 kHz (paper A: 2 Hz commands, 10 Hz
+# telemetry) and a test lasts minutes to hours; the bundled process sets reach Ts = 9 s
+# (gas furnace) and 1.2 h. Beyond these the time column is likely in other units.
+PLAUSIBLE_TS_MAX_S = 10.0
+PLAUSIBLE_SPAN_MAX_S = 86400.0
+
+
+def warn_implausible_Ts(Ts: float, n: int, where: str) -> None:
+    """Warn, with the numbers, when a time base read from a file is implausible.
+
+    Parameters
+    ----------
+    Ts : float
+        The sample time read, s.
+    n : int
+        Samples.
+    where : str
+        Where it was read (``"column 'time_s' of x.csv"``).
+    """
+    import warnings
+
+    span = Ts * max(n - 1, 0)
+    if Ts <= PLAUSIBLE_TS_MAX_S and span <= PLAUSIBLE_SPAN_MAX_S:
+        return
+    why = (
+        f"Ts = {Ts:g} s"
+        if Ts > PLAUSIBLE_TS_MAX_S
+        else f"{n} samples spanning {span / 86400:.3g} days"
+    )
+    warnings.warn(
+        f"{where} reads as seconds and gives {why}, implausible for a wheel test; if it is "
+        f"in milliseconds, Ts is {Ts / 1000:g} s: divide it by 1000 or name the column time_ms",
+        RwlabWarning,
+        stacklevel=3,
+    )
+
+
+def _column_list(cols) -> list:
+    if cols is None:
+        return []
+    return [cols] if isinstance(cols, str) else list(cols)
+
+
+def _frame_time(frame, time: str | None) -> tuple[np.ndarray | None, str]:
+    """A DataFrame's time stamps in seconds, and where they came from."""
+    names = (
+        [time]
+        if time is not None
+        else [c for c in frame.columns if str(c).lower() in TIME_NAMES + TIME_MS_NAMES]
+    )
+    if names:
+        col = names[0]
+        scale = 1e-3 if str(col).lower() in TIME_MS_NAMES or str(col).endswith("_ms") else 1.0
+        try:
+            return frame[col].to_numpy(dtype=float) * scale, f"column {col!r}"
+        except (TypeError, ValueError):
+            raise DataError(f"the time column {col!r} must be numeric") from None
+    index = frame.index
+    kind = getattr(getattr(index, "dtype", None), "kind", "")
+    if kind in "Mm" and kind:  # datetimes or time deltas, at whatever resolution pandas keeps
+        import pandas as pd
+
+        since = index - index[0] if kind == "M" else index
+        where = "the DatetimeIndex" if kind == "M" else "the TimedeltaIndex"
+        return np.asarray(since / pd.Timedelta(seconds=1), dtype=float), where
+    label = str(index.name or "").lower()
+    if label in TIME_NAMES + TIME_MS_NAMES:
+        scale = 1e-3 if label in TIME_MS_NAMES else 1.0
+        return np.asarray(index, dtype=float) * scale, f"the index {index.name!r}"
+    return None, ""
 
 
 def check_Ts(Ts) -> float:
@@ -288,6 +364,85 @@ class IOData:
         frame = pd.DataFrame(np.hstack([self.u, self.y]), columns=names)
         frame.index = pd.Index(self.time, name="time_s")
         return frame
+
+    @classmethod
+    def from_pandas(
+        cls,
+        frame,
+        u=None,
+        y=None,
+        Ts: float | None = None,
+        *,
+        time: str | None = None,
+        name: str = "",
+    ) -> IOData:
+        """A record from a ``pandas.DataFrame`` (MATLAB's ``iddata`` from a table).
+
+        Parameters
+        ----------
+        frame : pandas.DataFrame
+            One row per sample. It is not modified.
+        u : str or sequence of str, optional
+            The input column(s); none for a time series.
+        y : str or sequence of str
+            The output column(s).
+        Ts : float, optional
+            Sample time, s. Default: from the time, which is the ``time`` column,
+            else a column named ``time_s``/``time``/``t`` (or ``time_ms``, in ms),
+            else the index when it holds times (a ``DatetimeIndex``, a
+            ``TimedeltaIndex`` or an index named like those columns, as
+            :meth:`to_pandas` writes it). Given with a time, the two must agree.
+        time : str, optional
+            The column of time stamps, s (``*_ms``: ms).
+        name : str, optional
+            A label for reports.
+
+        Returns
+        -------
+        IOData
+            ``tstart`` is the first time stamp (0 without one); channel names are
+            the column names.
+
+        Raises
+        ------
+        DataError
+            No ``y``, an unknown or non-numeric column, time stamps that are not
+            uniform or disagree with ``Ts``, no time and no ``Ts``.
+        """
+        outputs, inputs = _column_list(y), _column_list(u)
+        if not outputs:
+            raise DataError("from_pandas needs the output column(s): y='speed_rpm' or y=[...]")
+        for col in [*inputs, *outputs, *([time] if time is not None else [])]:
+            if col not in frame.columns:
+                raise DataError(f"no column {col!r}; the frame's columns are {list(frame.columns)}")
+        stamps, where = _frame_time(frame, time)
+        tstart = 0.0
+        if stamps is not None and len(stamps) >= 2:
+            step = float(f"{(stamps[-1] - stamps[0]) / (len(stamps) - 1):.12g}")
+            if step <= 0 or np.max(np.abs(np.diff(stamps) - step)) > 1e-6 * step + 1e-9:
+                raise DataError(f"the time in {where} is not uniformly sampled; resample it first")
+            if Ts is not None and not math.isclose(check_Ts(Ts), step, rel_tol=1e-6):
+                raise DataError(f"Ts = {Ts} s disagrees with the time in {where} ({step:g} s)")
+            warn_implausible_Ts(step, len(stamps), f"the time in {where}")
+            Ts, tstart = step, float(stamps[0])
+
+        def numbers(cols) -> np.ndarray | None:
+            if not cols:
+                return None
+            try:
+                return frame[list(cols)].to_numpy(dtype=float, copy=True)
+            except (TypeError, ValueError):
+                raise DataError(f"columns {list(cols)} must be numeric") from None
+
+        return cls(
+            numbers(inputs),
+            numbers(outputs),
+            Ts,
+            input_names=[str(c) for c in inputs] or None,
+            output_names=[str(c) for c in outputs],
+            tstart=tstart,
+            name=name,
+        )
 
     def _with(self, u, y, **changes) -> IOData:
         kwargs: dict[str, Any] = dict(

@@ -17,11 +17,19 @@ from typing import Any
 
 import numpy as np
 
-from rwlab.data import IOData, Trend, check_Ts, register_reader, register_writer
+from rwlab.data import (
+    TIME_MS_NAMES,
+    TIME_NAMES,
+    IOData,
+    Trend,
+    check_Ts,
+    register_reader,
+    register_writer,
+    warn_implausible_Ts,
+)
 from rwlab.errors import DataError, FileFormatError
 
 _META_PREFIX = "# rwlab "
-_TIME_NAMES = {"time", "time_s", "t", "ts_s", "timestamp_s"}
 
 
 # -- shared helpers -----------------------------------------------------------------
@@ -34,6 +42,11 @@ def _columns(data: IOData) -> tuple[list[str], np.ndarray]:
 
 def _meta(data: IOData) -> str:
     return json.dumps(data.to_dict(), separators=(",", ":"))
+
+
+def _salvaged(data: IOData) -> bool:
+    """Data read from a damaged record up to its damage: even a plain file says so."""
+    return isinstance(data.source, dict) and "salvaged" in data.source
 
 
 def _as_list(cols) -> list | None:
@@ -153,7 +166,9 @@ def from_table(
     chosen_by_meta = meta is not None and inputs is None and outputs is None
     if chosen_by_meta:
         inputs, outputs = list(meta["input_names"]), list(meta["output_names"])
-    time_col = next((i for i, n in enumerate(names) if n.lower() in _TIME_NAMES), None)
+    time_col = next(
+        (i for i, n in enumerate(names) if n.lower() in TIME_NAMES + TIME_MS_NAMES), None
+    )
     data_cols = [i for i in range(len(names)) if i != time_col]
     if not data_cols:
         raise FileFormatError(f"{path}: no data columns")
@@ -163,7 +178,8 @@ def from_table(
     tstart = 0.0
     if time_col is not None and table.shape[0] >= 2:
         _check_finite(table, [time_col], names, path, lines)
-        t = table[:, time_col]
+        in_ms = names[time_col].lower() in TIME_MS_NAMES
+        t = table[:, time_col] * (1e-3 if in_ms else 1.0)
         steps = np.diff(t)
         file_Ts = float(f"{(t[-1] - t[0]) / (len(t) - 1):.12g}")  # drop float noise of the stamps
         if meta is not None:
@@ -177,6 +193,8 @@ def from_table(
             raise DataError(
                 f"{path}: Ts={Ts} s disagrees with the file's time column ({file_Ts} s)"
             )
+        if meta is None:  # rwlab's own files carry their Ts: only others' are guessed at
+            warn_implausible_Ts(file_Ts, len(t), f"{path}: column {names[time_col]!r}")
         Ts, tstart = file_Ts, float(t[0])
     units = dict(units or {})
     kwargs = {}
@@ -216,7 +234,7 @@ def _check_plain_trend(trend: Trend, path) -> None:
 def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     names, table = _columns(data)
     with open(tmp, "w", newline="") as fh:
-        if not plain:
+        if not plain or _salvaged(data):  # the metadata line: its name says salvaged
             fh.write(_META_PREFIX + _meta(data) + "\n")
         writer = csv.writer(fh, lineterminator="\n")  # LF: what every tool reads
         writer.writerow(names)
@@ -271,7 +289,7 @@ def _write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
 
     names, table = _columns(data)
     arrow = pa.table({n: table[:, i] for i, n in enumerate(names)})
-    if not plain:
+    if not plain or _salvaged(data):
         arrow = arrow.replace_schema_metadata({b"rwlab": _meta(data).encode()})
     pq.write_table(arrow, tmp)
 
@@ -300,6 +318,8 @@ def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
             raise DataError(f"channel names {bad} are not MATLAB variable names")
         variables: dict[str, Any] = {n: table[:, [i]] for i, n in enumerate(names)}
         variables["Ts"] = data.Ts
+        if _salvaged(data):  # a text variable: no channel, read by a person
+            variables["salvaged"] = data.name
     else:
         variables = {
             "u": data.u,

@@ -112,3 +112,22 @@ class NoModelFitsError(EstimationError):
         super().__init__(message)
         self.study = study
         self.paths = paths
+
+
+class RecordDamagedError(FileFormatError):
+    """A record's bytes are damaged (a CRC mismatch, an unreadable record, a cut copy).
+
+    Parameters
+    ----------
+    message : str
+        Where the damage is and what is still readable.
+    offset : int
+        Byte offset of the first damaged record in the file.
+    readable_s : float
+        Seconds of the experiment before the damage (0 when none).
+    """
+
+    def __init__(self, message: str, offset: int = 0, readable_s: float = 0.0) -> None:
+        super().__init__(message)
+        self.offset = offset
+        self.readable_s = readable_s

@@ -32,6 +32,9 @@ FLAGS = {
     "workers=": "--workers",
     "scheduler=": "--scheduler",
     "epoch_spread_days": "--epoch-spread-days",
+    # the wheel client's advice, in the command line's words
+    "call clear_fault()": "clear it (rwlab wheel cmd clear)",
+    ", or (in Python) study lower orders (orders=, nk_max=)": "",  # no such flag
 }
 # not a quoted name: a config file's key (['raw_frames', ...]) is no flag
 _PARAMETER = re.compile(
@@ -91,6 +94,7 @@ class _Cli(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
+            _refuse_empty_paths(sys.argv[1:] if args is None else list(args))
             with _stop_signals(), _one_line_warnings():
                 return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
@@ -106,6 +110,34 @@ class _Cli(click.Group):
             why = cause.args[0] if isinstance(cause, KeyboardInterrupt) and cause.args else ""
             click.echo(f"interrupted{f' ({why})' if why else ''}", err=True)
             sys.exit(130)
+
+
+#: Options that name a file or folder: an empty value would mean the current folder.
+PATH_OPTIONS = (
+    "--out",
+    "--save",
+    "--file",
+    "--model",
+    "--wheel-model",
+    "--scenario",
+    "--config",
+    "--dispersions",
+    "--params",
+)
+
+
+def _refuse_empty_paths(args: list[str]) -> None:
+    """``--out ''`` (or ``--out=``): refused before any work, naming the option."""
+    for k, arg in enumerate(args):
+        name, eq, value = arg.partition("=")
+        if name not in PATH_OPTIONS:
+            continue
+        if eq:
+            empty = not value.strip()
+        else:
+            empty = k + 1 < len(args) and not args[k + 1].strip()
+        if empty:
+            raise ConfigError(f"{name} is empty: give it a file or folder name")
 
 
 def _one_line_warning(message, category, *_args, **_kwargs) -> None:
@@ -291,6 +323,27 @@ def _wrote(out, paths) -> str:
     return "wrote " + ", ".join(str(Path(out) / Path(p).name) for p in paths)
 
 
+def _salvage_option(func):
+    """--salvage: a damaged record is read up to its damage instead of refused
+    (:func:`rwlab.testbed.record.salvaging`, for every record the command reads)."""
+
+    def turn_on(ctx: click.Context, _param, value: bool) -> bool:
+        if value:
+            from rwlab.testbed.record import salvaging
+
+            ctx.with_resource(salvaging())
+        return value
+
+    return click.option(
+        "--salvage",
+        is_flag=True,
+        expose_value=False,
+        callback=turn_on,
+        help="Read a damaged record up to its damage instead of refusing it "
+        "(every output then says it was salvaged).",
+    )(func)
+
+
 def _columns_option(func):
     for option in reversed(
         [
@@ -339,6 +392,7 @@ def _data_options(func):
             help="Remove means or lines before estimation (MATLAB habit).",
         ),
         click.option("--normalize", is_flag=True, help="Scale every channel to [0, 1] (paper A)."),
+        _salvage_option,
     ]
     for option in reversed(options):
         func = option(func)

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import click
 
-from rwlab.cli._common import POSITIVE, _columns_option, _echo_json, _friendly_errors, main
+from rwlab.cli._common import (
+    POSITIVE,
+    _columns_option,
+    _echo_json,
+    _friendly_errors,
+    _salvage_option,
+    main,
+)
 
 
 @main.command("compare")
@@ -32,6 +39,7 @@ from rwlab.cli._common import POSITIVE, _columns_option, _echo_json, _friendly_e
 @click.option(
     "--json", "as_json", is_flag=True, help="Print {model name: {fit_percent, saturation, ...}}."
 )
+@_salvage_option
 @_friendly_errors
 def compare_cmd(
     model_json, record, Ts, input_col, output_col, current_limit, speed_limit, accel_limit, as_json

@@ -17,6 +17,7 @@ from rwlab.cli._common import (
     _engine_options,
     _friendly_errors,
     _output,
+    _salvage_option,
     _steps_progress,
     _wrote,
     main,
@@ -69,6 +70,7 @@ from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
 )
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_salvage_option
 @_friendly_errors
 def identify(
     file,
@@ -197,6 +199,7 @@ def _rate_unit(study: dict) -> str:
     "healthy records of other units; a rate a detector cannot deliver is a warning.",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
+@_salvage_option
 @_friendly_errors
 def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     """Detect, name and size wheel faults in a record with an identified model.
@@ -346,7 +349,9 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
         raise _named(exc, record) from exc
     events = rec.topic("/event")
     truncated = None if rec.complete else f"the record is truncated ({rec.problem})"
-    if truncated:
+    if rec.damage is not None:  # read_record said so already, on the console
+        truncated = f"the record was salvaged: {rec.damage.text()}; diagnosed up to the damage"
+    elif truncated:
         warnings.warn(
             f"{record}: {truncated}: diagnosed up to where it stops", RwlabWarning, stacklevel=2
         )

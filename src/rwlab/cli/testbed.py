@@ -14,6 +14,7 @@ from rwlab.cli._common import (
     _check_folder,
     _friendly_errors,
     _only_with,
+    _salvage_option,
     _stop_signals,
     main,
 )
@@ -227,6 +228,7 @@ def _timing_line(t: dict) -> str:
     "torques, wheel momenta, sun/Earth sensor, gyro and star-tracker readings) as logged.",
 )
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
+@_salvage_option
 @_friendly_errors
 def export(record, fmt, out, Ts, max_gap, node, satellite, force):
     """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
@@ -287,6 +289,7 @@ def export(record, fmt, out, Ts, max_gap, node, satellite, force):
     show_default=True,
     help="Replay speed factor.",
 )
+@_salvage_option
 @_friendly_errors
 def monitor_cmd(record, host, port, replay, speed):
     """Serve the live monitor page for a record that is being written (or replay one)."""

@@ -17,7 +17,8 @@ import numpy as np
 
 from rwlab._io import atomic_write_bytes
 from rwlab.data import IOData
-from rwlab.errors import DataError, FileFormatError
+from rwlab.errors import DataError
+from rwlab.schemas import read_json
 
 __all__ = ["IdentifiedModel", "load_model_json", "save_model_json"]
 
@@ -190,12 +191,9 @@ def load_model_json(path: str | os.PathLike) -> dict:
     Raises
     ------
     FileFormatError
-        The file is not JSON.
+        The file is not JSON, or nests deeper than any model file.
     """
-    try:
-        return json.loads(Path(path).read_text())
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"{path}: not JSON ({exc})") from None
+    return read_json(path, what="model file")
 
 
 def _json_default(obj):

@@ -20,7 +20,6 @@ None: the wheel it came from is unknown).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -32,7 +31,7 @@ from rwlab.ident.base import save_model_json
 from rwlab.ident.gain_constraint import study_name
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
-from rwlab.schemas import format_tag, read_versioned
+from rwlab.schemas import format_tag, read_json, read_versioned, validate
 from rwlab.wheelspec import WheelSpec
 
 __all__ = ["KIND", "VERSION", "Channel", "WheelModelFile"]
@@ -239,6 +238,7 @@ class WheelModelFile:
                 "model.json that `rwlab identify` wrote"
             )
         d = read_versioned(d, KIND, VERSION, {1: _upgrade_1_to_2}, source=source)
+        validate(d, "model", source=source)  # types and required fields, by the schema
         _check_top_level(d, source)
         try:
             sat, nl = d["saturation"], d.get("nonlinear")
@@ -307,8 +307,8 @@ class WheelModelFile:
             Not readable, not JSON, not a wheel model, or a newer version.
         """
         try:
-            d = json.loads(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            d = read_json(path, what="model file")
+        except OSError as exc:
             raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
         return cls.from_dict(d, source=str(path))
 

@@ -175,10 +175,53 @@ class CompareResult:
     horizon: float
 
 
+def _from_control(model, data: IOData):
+    """A python-control model as the rwlab state-space model that compare simulates.
+
+    A discrete model must be sampled at the data's Ts (``dt=True``, "discrete,
+    unspecified", takes it); a continuous one is discretised by zero-order hold at
+    the data's Ts, as MATLAB's ``compare`` does for data sampled with a ZOH, with a
+    warning saying so. A model without noise model: its prediction is its simulation.
+    """
+    import warnings
+
+    import control
+
+    from rwlab.errors import ModelError, RwlabWarning
+    from rwlab.ident.ssmodel import SSModel
+
+    if not isinstance(model, control.LTI):
+        return model
+    if control.isctime(model, strict=True):
+        warnings.warn(
+            f"a continuous-time model: discretised by zero-order hold at the data's "
+            f"Ts = {data.Ts:g} s (MATLAB's compare does the same)",
+            RwlabWarning,
+            stacklevel=3,
+        )
+        model = control.sample_system(model, data.Ts, method="zoh")
+    elif model.dt is not True and not math.isclose(model.dt, data.Ts, rel_tol=1e-9):
+        raise ModelError(
+            f"the model is sampled at dt = {model.dt:g} s and the data at Ts = {data.Ts:g} s; "
+            "resample one of them (control.sample_system, IOData.resample)"
+        )
+    ss = control.ss(model)
+    D = np.asarray(ss.D, dtype=float)
+    return SSModel(ss.A, ss.B, ss.C, D, Ts=data.Ts, feedthrough=bool(np.any(D != 0)))
+
+
 def _model_output(model, data: IOData, horizon: float, initial) -> np.ndarray:
     """Any model's k-step prediction on ``data`` as an (N, ny) array."""
     if not isinstance(data, IOData):
         raise DataError("compare and resid need an IOData with measured inputs and outputs")
+    model = _from_control(model, data)
+    if not callable(getattr(model, "predict", None)):
+        from rwlab.errors import ModelError
+
+        raise ModelError(
+            f"compare takes an rwlab model or a python-control TransferFunction or StateSpace, "
+            f"not {type(model).__name__}"
+        )
     nu, ny = getattr(model, "nu", data.nu), getattr(model, "ny", 1)
     if (nu, ny) != (data.nu, data.ny):
         raise DataError(
@@ -195,11 +238,14 @@ def compare(
     """Simulate (default) or predict ``horizon`` steps ahead and score against ``data``.
 
     Works on every model with MATLAB's ``predict`` semantics: ``PolyModel``,
-    ``SSModel`` (any number of outputs), ``FIRModel`` and the nonlinear models.
+    ``SSModel`` (any number of outputs), ``FIRModel`` and the nonlinear models,
+    and on python-control's ``TransferFunction`` and ``StateSpace``: a discrete
+    one at the data's Ts, a continuous one discretised by zero-order hold at it
+    (with a warning, as MATLAB's ``compare`` does for ZOH data).
 
     Parameters
     ----------
-    model : PolyModel, SSModel, FIRModel, ServoModel, WheelGreyBox or NLARXModel
+    model : PolyModel, SSModel, FIRModel, ServoModel, WheelGreyBox, NLARXModel, or control.LTI
     data : IOData
         Usually the validation record, with the model's inputs and outputs.
     horizon : int or numpy.inf, optional
@@ -216,7 +262,8 @@ def compare(
         Measured and model outputs, fit % and MSE.
     """
     if horizon is None:
-        horizon = np.inf if getattr(model, "nu", data.nu) else 1
+        nu = getattr(model, "ninputs", None) or getattr(model, "nu", data.nu)
+        horizon = np.inf if nu else 1
     yhat = _model_output(model, data, horizon, initial)
     y = data.y.copy()
     fits = np.array([fit_percent(y[:, i], yhat[:, i]) for i in range(data.ny)])

@@ -252,7 +252,8 @@ def _healthy_reference(file, model) -> dict | str:
         data = load_record(
             file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
         )
-        return healthy_reference(data, wheel, source=Path(file).name).to_dict()
+        # the data's name: the file's, and says so where the record was salvaged
+        return healthy_reference(data, wheel, source=data.name).to_dict()
     except RwlabError as exc:
         return _message(exc)
 

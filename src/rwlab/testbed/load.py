@@ -10,9 +10,9 @@ import numpy as np
 from rwlab.data import IOData, check_Ts, register_reader
 from rwlab.datafiles import from_table
 from rwlab.errors import DataError, RecordGapError
-from rwlab.testbed.record import read_record
+from rwlab.testbed.record import read_record, readable_seconds
 
-__all__ = ["gap_free_segments", "load_record", "telemetry_gaps"]
+__all__ = ["gap_free_segments", "load_record", "salvage_note", "telemetry_gaps"]
 
 OUTPUTS = {
     "speed": ("speed_rpm", "rpm"),
@@ -57,6 +57,7 @@ def load_record(
     max_gap: float | None = None,
     max_gap_samples: int | None = None,
     node: int | None = None,
+    salvage: bool | None = None,
 ) -> IOData:
     """Sample a record at ``Ts``: command as zero-order hold, measured speed and derived values.
 
@@ -84,6 +85,10 @@ def load_record(
     node : int, optional
         The wheel to read from a record of several (``rwlab hil``: topics
         ``/wheelN/command`` and ``/wheelN/telemetry``).
+    salvage : bool, optional
+        Read a damaged record up to its damage instead of refusing it
+        (:func:`rwlab.testbed.read_record`); the data's name and ``source``
+        (``"salvaged"``) then say so.
 
     Returns
     -------
@@ -96,7 +101,7 @@ def load_record(
         (``rwlab hil``: flight time, the spin-up at negative times), so every
         channel of such a record reads on one clock.
     """
-    record = read_record(path)
+    record = read_record(path, salvage=salvage)
     meta = record.metadata
     if Ts is None:
         Ts = meta.get("Ts")
@@ -164,13 +169,37 @@ def load_record(
         output_units=[OUTPUTS[o][1] for o in outputs],
         tstart=float(grid[0] - _origin(meta, t0)),
         name=f"{os.path.basename(path)}{_cut_short(record)}",
-        source=meta,
+        source=meta if record.damage is None else {**meta, "salvaged": salvage_note(record)},
     )
+
+
+def salvage_note(record) -> dict:
+    """What outputs carry of a record read up to its damage (``source["salvaged"]``).
+
+    Parameters
+    ----------
+    record : rwlab.testbed.record.Record
+        A record read with ``salvage=True`` and found damaged.
+
+    Returns
+    -------
+    dict
+        ``damaged_at_byte``, ``file_bytes``, ``why`` and ``readable_s`` (s).
+    """
+    damage = record.damage
+    return {
+        "damaged_at_byte": damage.offset,
+        "file_bytes": damage.size,
+        "why": damage.why,
+        "readable_s": round(readable_seconds(record), 3),
+    }
 
 
 def _cut_short(record) -> str:
     """What the data's name says of a record that did not run to its end: a file cut off
     mid-write, or a run stopped by Ctrl-C, a wheel fault or an error (its ``stop`` event)."""
+    if record.damage is not None:
+        return f" (salvaged: {record.damage.text()}; read up to the damage)"
     if not record.complete:
         return " (truncated)"
     stops = [e["message"] for e in record.topic("/event") if e["kind"] == "stop"]
@@ -186,7 +215,11 @@ def _origin(meta: dict, first_command_t: float) -> float:
 
 
 def gap_free_segments(
-    path: str | os.PathLike, Ts: float | None = None, *, node: int | None = None
+    path: str | os.PathLike,
+    Ts: float | None = None,
+    *,
+    node: int | None = None,
+    salvage: bool | None = None,
 ) -> list[tuple[int, int]]:
     """The parts of a record between its telemetry gaps, as sample ranges.
 
@@ -203,6 +236,8 @@ def gap_free_segments(
         Sample time, s (the record's by default), as for :func:`load_record`.
     node : int, optional
         The wheel, in a record of several.
+    salvage : bool, optional
+        As for :func:`load_record`.
 
     Returns
     -------
@@ -210,8 +245,8 @@ def gap_free_segments(
         ``[i0, i1)`` ranges of the samples of ``load_record(path, Ts, max_gap=numpy.inf)``,
         in time order; one range covering every sample when the record has no gap.
     """
-    data = load_record(path, Ts, outputs=("age",), max_gap=np.inf, node=node)
-    record = read_record(path)
+    data = load_record(path, Ts, outputs=("age",), max_gap=np.inf, node=node, salvage=salvage)
+    record = read_record(path, salvage=salvage)
     prefix = "" if node is None else f"/wheel{node}"
     t0 = record.topic(f"{prefix}/command")[0]["t"]
     tt = np.array([m["t"] for m in record.topic(f"{prefix}/telemetry")])
@@ -240,6 +275,7 @@ def read_mcap(
     output_columns=None,
     max_gap: float | None = None,
     max_gap_samples: int | None = None,
+    salvage: bool | None = None,
 ) -> IOData:
     """A testbed record as :func:`rwlab.data.load` reads it (registered for ``.mcap``).
 
@@ -252,7 +288,7 @@ def read_mcap(
     input_columns, output_columns : str or list, optional
         Channels (default ``command`` → ``speed_rpm``; every output of
         :data:`OUTPUTS` can be chosen).
-    max_gap, max_gap_samples : optional
+    max_gap, max_gap_samples, salvage : optional
         See :func:`load_record`.
 
     Returns
@@ -261,7 +297,12 @@ def read_mcap(
         With the record's metadata in ``source``.
     """
     rec = load_record(
-        path, Ts, outputs=tuple(OUTPUTS), max_gap=max_gap, max_gap_samples=max_gap_samples
+        path,
+        Ts,
+        outputs=tuple(OUTPUTS),
+        max_gap=max_gap,
+        max_gap_samples=max_gap_samples,
+        salvage=salvage,
     )
     names = ["time_s", *rec.input_names, *rec.output_names]
     units = dict(zip(names[1:], [*rec.input_units, *rec.output_units], strict=True))

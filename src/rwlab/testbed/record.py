@@ -1,12 +1,14 @@
 """Experiment records: one append-only MCAP file per experiment.
 
 Why MCAP: it is an open, self-describing log format that common tools read
-(Foxglove, the ``mcap`` CLI, Python/C++/Rust/Go readers), and written
-*unchunked* every message lands in the file as soon as it is written. The
-writer flushes to the operating system at least every ``FLUSH_PERIOD`` s of
-wall time, so a recorder killed with SIGKILL loses at most the last 100 ms,
-and the partial file still opens (without its closing index). ``close()``
-writes the summary and footer.
+(Foxglove, the ``mcap`` CLI, Python/C++/Rust/Go readers). Messages are written
+in small uncompressed chunks, each with its CRC, and a chunk is closed and
+flushed to the operating system at least every ``FLUSH_PERIOD`` s of wall time,
+so a recorder killed with SIGKILL loses at most the last 100 ms, and the partial
+file still opens (without its closing index). ``close()`` writes the summary
+(message counts, chunk index, its own CRC) and the footer; the data section has
+a CRC too. A reader therefore finds damage (a bad sector, a copy cut short) and
+where it starts, instead of reading a record cut in half as if it were whole.
 
 Channels (JSON messages, JSON-schema described):
 
@@ -23,25 +25,43 @@ Ts, the rwlab version and the DBC's SHA-256.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import json
 import os
 import struct
 import time
+import warnings
+import zlib
+from collections.abc import Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile, McapError
-from mcap.records import Channel, Footer, Message, Metadata
-from mcap.stream_reader import StreamReader
-from mcap.writer import Writer
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Statistics
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
 
-from rwlab.errors import FileFormatError, RecordBusyError
+from rwlab._io import naming
+from rwlab.errors import FileFormatError, RecordBusyError, RecordDamagedError, RwlabWarning
 
-__all__ = ["CHANNELS", "Record", "RecordWriter", "partial_path", "read_record"]
+__all__ = [
+    "CHANNELS",
+    "Record",
+    "RecordDamage",
+    "RecordWriter",
+    "partial_path",
+    "read_record",
+    "readable_seconds",
+    "salvaging",
+]
 
 FLUSH_PERIOD = 0.05  # s of wall time between flushes to the OS (the promise is 100 ms)
+# a chunk is closed at this size even sooner: damage then costs at most this much data
+CHUNK_BYTES = 32 * 1024
 MAGIC = b"\x89MCAP0\r\n"
 
 _NUM = {"type": "number"}
@@ -149,6 +169,11 @@ class RecordWriter:
     channels : dict, optional
         More topics beside :data:`CHANNELS` (topic → JSON-schema properties), for
         records that carry more than one wheel (``rwlab hil``).
+    wall_clock : bool
+        Close a chunk at least every :data:`FLUSH_PERIOD` s of wall time (the
+        default, for a run on the wall clock). A run on a simulated clock passes
+        False: its chunks then close by size alone, so the same run writes the
+        same bytes on any machine, and a kill loses at most one chunk.
     """
 
     def __init__(
@@ -158,8 +183,10 @@ class RecordWriter:
         *,
         force: bool = False,
         channels: dict[str, dict] | None = None,
+        wall_clock: bool = True,
     ) -> None:
         self.path = Path(path)
+        self.wall_clock = wall_clock
         self.partial = partial_path(self.path)
         if self.path.exists() and not force:
             raise FileExistsError(f"{self.path} exists; pass force=True to replace it")
@@ -169,7 +196,34 @@ class RecordWriter:
             raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(self.path.parent))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = _open_locked(self.partial, self.path)
-        self._writer = Writer(self._fh, use_chunking=False, use_statistics=True)
+        try:
+            with self._naming_the_record():
+                self._start(metadata, channels)
+        except BaseException:  # nothing recorded yet: leave no partial file, hold no lock
+            self.partial.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                self._fh.close()
+            raise
+
+    @contextlib.contextmanager
+    def _naming_the_record(self) -> Iterator[None]:
+        """An OS error writing (a full disk) names the record asked for, not its partial file."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.filename in (None, str(self.partial)):
+                raise naming(exc, self.path) from exc
+            raise
+
+    def _start(self, metadata: dict, channels: dict[str, dict] | None) -> None:
+        self._writer = Writer(
+            self._fh,
+            chunk_size=CHUNK_BYTES,
+            compression=CompressionType.NONE,
+            use_chunking=True,
+            use_statistics=True,
+            enable_data_crcs=True,
+        )
         self._writer.start(profile="rwlab", library="rwlab")
         self._channels = {}
         topics = {**CHANNELS, **(channels or {})}
@@ -194,6 +248,10 @@ class RecordWriter:
         """Append one message; ``message['t']`` is its clock time in seconds."""
         if self.closed:
             raise FileFormatError(f"{self.path} is closed")
+        with self._naming_the_record():
+            self._write(topic, message)
+
+    def _write(self, topic: str, message: dict) -> None:
         message = {**message, "t": message["t"] - self.time_origin}
         stamp = max(0, round(message["t"] * 1e9))
         self._writer.add_message(
@@ -204,8 +262,8 @@ class RecordWriter:
         )
         self.counts[topic] += 1
         now = time.monotonic()
-        if now - self._last_flush >= FLUSH_PERIOD:
-            self._fh.flush()
+        if self.wall_clock and now - self._last_flush >= FLUSH_PERIOD:
+            self._writer.flush()  # closes the chunk (its CRC) and flushes the file
             self._last_flush = now
 
     def event(self, t: float, kind: str, message: str = "") -> None:
@@ -218,12 +276,14 @@ class RecordWriter:
             return
         self.closed = True
         try:
-            self._writer.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-            os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
+            with self._naming_the_record():
+                self._writer.finish()
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+                os.replace(self.partial, self.path)  # under the lock: no other run sees a gap
         finally:  # a failed finish (a full disk) leaves the old record and this partial one
-            self._fh.close()
+            with contextlib.suppress(OSError):  # its buffer cannot be flushed either
+                self._fh.close()
 
     def discard(self) -> None:
         """Close and delete the partial record, leaving any old record at ``path`` as it was."""
@@ -254,6 +314,9 @@ class Record:
         True when the file was closed properly (it has its footer).
     problem : str
         Why reading stopped early, when it did.
+    damage : RecordDamage or None
+        Where the file is damaged, for a record read with ``salvage=True``: its
+        messages are those before the damage.
     """
 
     path: Path
@@ -261,39 +324,182 @@ class Record:
     messages: dict = field(default_factory=lambda: {t: [] for t in CHANNELS})
     complete: bool = False
     problem: str = ""
+    damage: RecordDamage | None = None
 
     def topic(self, name: str) -> list[dict]:
         return self.messages.get(name, [])
 
 
+@dataclass(frozen=True)
+class RecordDamage:
+    """Where a record is damaged.
+
+    Attributes
+    ----------
+    offset : int
+        Byte offset of the first damaged record (or of the data's end, for a
+        data-section CRC that does not match).
+    size : int
+        The file's size, bytes.
+    why : str
+        What is wrong there.
+    """
+
+    offset: int
+    size: int
+    why: str
+
+    def text(self) -> str:
+        """``damaged at byte N of M (why)``."""
+        return f"damaged at byte {self.offset} of {self.size} ({self.why})"
+
+
+# Salvaging is a choice of the reader's caller; the command line's --salvage sets it for
+# every record a command reads, however deep in a workflow (see :func:`salvaging`).
+_SALVAGE: ContextVar[bool] = ContextVar("rwlab_salvage_records", default=False)
+
+
+@contextlib.contextmanager
+def salvaging(on: bool = True) -> Iterator[None]:
+    """Within the block, records read without an explicit ``salvage=`` are salvaged.
+
+    Parameters
+    ----------
+    on : bool
+        Salvage (True) or refuse (False) damaged records in the block.
+
+    Yields
+    ------
+    None
+    """
+    token = _SALVAGE.set(on)
+    try:
+        yield
+    finally:
+        _SALVAGE.reset(token)
+
+
+_OPCODES = frozenset(int(o) for o in Opcode)
+_PARSE_ERRORS = (McapError, struct.error, EOFError, ValueError, UnicodeDecodeError, TypeError)
+
+
+def _take(r, record: Record, topics: dict[int, str]) -> None:
+    """One record of the file (a chunk broken up already) into ``record``."""
+    if isinstance(r, Channel):
+        topics[r.id] = r.topic
+    elif isinstance(r, Message):
+        topic = topics.get(r.channel_id)
+        if topic is not None:  # the testbed's topics, and any a record added
+            record.messages.setdefault(topic, []).append(json.loads(r.data))
+    elif isinstance(r, Metadata) and r.name == "rwlab":
+        record.metadata = json.loads(r.metadata.get("json", "{}"))
+    elif isinstance(r, Footer):
+        record.complete = True
+
+
 def _parse(stream, record: Record, topics: dict[int, str]) -> None:
     for r in StreamReader(stream, skip_magic=False).records:
-        if isinstance(r, Channel):
-            topics[r.id] = r.topic
-        elif isinstance(r, Message):
-            topic = topics.get(r.channel_id)
-            if topic is not None:  # the testbed's topics, and any a record added
-                record.messages.setdefault(topic, []).append(json.loads(r.data))
-        elif isinstance(r, Metadata) and r.name == "rwlab":
-            record.metadata = json.loads(r.metadata.get("json", "{}"))
-        elif isinstance(r, Footer):
-            record.complete = True
+        _take(r, record, topics)
 
 
-def read_record(path: str | os.PathLike) -> Record:
-    """Read a record, tolerating a truncated end (a crashed recorder).
+def _scan(data: bytes, record: Record) -> RecordDamage | None:
+    """Read ``data`` into ``record`` up to its first damage, checking every CRC it holds.
 
-    Raises ``FileFormatError`` for a file that is not an MCAP record at all.
+    The ``mcap`` library checks each chunk's CRC (before any of the chunk's messages
+    is taken) and the data section's; the summary is checked against what was read
+    (its CRC, its message counts). Returns where reading stopped, or None for a
+    sound file; a file that just ends (a killed recorder's) stops with ``why``
+    starting ``"the file ends"``.
+    """
+    size = len(data)
+    stream = io.BytesIO(data)
+    records = StreamReader(stream, skip_magic=False, emit_chunks=True, validate_crcs=True).records
+    topics: dict[int, str] = {}
+    counts: dict[int, int] = {}
+    start = 0
+    while True:
+        start = stream.tell()
+        if start >= len(MAGIC) and start < size and data[start] not in _OPCODES:
+            return RecordDamage(
+                start, size, f"no MCAP record starts there (byte 0x{data[start]:02x})"
+            )
+        try:
+            r = next(records)
+        except StopIteration:
+            break
+        except CRCValidationError:
+            return RecordDamage(start, size, "the data section's CRC does not match")
+        except _PARSE_ERRORS as exc:
+            if start >= len(MAGIC) and start + 9 <= size:
+                length = struct.unpack_from("<Q", data, start + 1)[0]
+                if start + 9 + length <= size:  # the record is all there, and unreadable
+                    return RecordDamage(start, size, f"an unreadable record: {_why(exc)}")
+            return RecordDamage(start, size, "the file ends in the middle of a record")
+        try:
+            inner = breakup_chunk(r, validate_crc=True) if isinstance(r, Chunk) else [r]
+            for x in inner:
+                if isinstance(x, Message):
+                    if x.channel_id not in topics:  # every writer registers its channels first
+                        return RecordDamage(start, size, "a message on a channel never declared")
+                    counts[x.channel_id] = counts.get(x.channel_id, 0) + 1
+                _take(x, record, topics)
+        except CRCValidationError:
+            return RecordDamage(start, size, "a chunk's CRC does not match its data")
+        except _PARSE_ERRORS as exc:
+            return RecordDamage(start, size, f"an unreadable record: {_why(exc)}")
+        if isinstance(r, Statistics) and dict(r.channel_message_counts) != counts:
+            return RecordDamage(start, size, "its summary counts other messages than it holds")
+        if isinstance(r, Footer):
+            return _check_summary(data, r, start)
+    if not record.complete:
+        return RecordDamage(start, size, "the file ends before its summary")
+    return None
+
+
+def _check_summary(data: bytes, footer: Footer, footer_at: int) -> RecordDamage | None:
+    """The footer's summary CRC (the ``mcap`` reader does not check it): the CRC of the
+    summary section and of the footer's fields before the CRC, as the MCAP spec defines."""
+    if footer.summary_crc == 0 or footer.summary_start == 0:
+        return None
+    covered = data[footer.summary_start : footer_at + 1 + 8 + 8 + 8]
+    if zlib.crc32(covered) != footer.summary_crc:
+        return RecordDamage(footer.summary_start, len(data), "its summary's CRC does not match")
+    return None
+
+
+def _why(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def read_record(path: str | os.PathLike, *, salvage: bool | None = None) -> Record:
+    """Read a record, checking its CRCs and summary.
+
+    A killed recorder's partial file (``NAME.partial.mcap``) ends early by
+    nature and is read up to its end. Any other damage (a CRC that does not
+    match, an unreadable record in the middle, a file that ends before its
+    summary) is refused, or read up to the damage with ``salvage=True``.
 
     Parameters
     ----------
     path : str or os.PathLike
         The ``.mcap`` file.
+    salvage : bool, optional
+        Read a damaged record up to its damage instead of refusing it (its
+        :attr:`Record.damage` says where). Default: as :func:`salvaging` says
+        (off).
 
     Returns
     -------
     Record
         Its metadata and topics.
+
+    Raises
+    ------
+    RecordDamagedError
+        A damaged record, without ``salvage``: the message gives the byte
+        offset of the damage and how much of the experiment is readable.
+    FileFormatError
+        A file that is not an MCAP record at all.
     """
     path = Path(path)
     if not path.is_file():
@@ -308,13 +514,66 @@ def read_record(path: str | os.PathLike) -> Record:
     if not data.startswith(MAGIC):
         raise FileFormatError(f"{path}: not an MCAP record (bad magic bytes)")
     record = Record(path)
-    try:
-        _parse(io.BytesIO(data), record, {})
-    except (McapError, struct.error, EOFError, ValueError, json.JSONDecodeError) as exc:
-        record.problem = f"file ends early or is damaged ({type(exc).__name__}: {exc})"
+    damage = _scan(data, record)
     if not record.metadata:
         raise FileFormatError(f"{path}: an MCAP file, but not an rwlab record (no rwlab metadata)")
+    if damage is None:
+        return record
+    killed = path.name.endswith(".partial.mcap") and damage.why.startswith("the file ends")
+    if killed:  # a recorder killed mid-write: its file ends where it stopped
+        record.problem = f"file ends early (at byte {damage.offset})"
+        return record
+    readable = _readable(record)
+    if not (_SALVAGE.get() if salvage is None else salvage):
+        raise RecordDamagedError(
+            f"{path}: {damage.text()}; before it, {readable}: pass --salvage to read "
+            "up to the damage (every output then says it was salvaged), or copy the record again",
+            offset=damage.offset,
+            readable_s=readable_seconds(record),
+        )
+    record.problem = damage.text()
+    record.damage = damage
+    warnings.warn(
+        f"{path}: salvaged: {damage.text()}; read up to the damage: {readable}",
+        RwlabWarning,
+        stacklevel=1,  # one place: a command that reads the record twice warns once
+    )
     return record
+
+
+def readable_seconds(record: Record) -> float:
+    """Seconds of experiment a (cut) record holds.
+
+    Parameters
+    ----------
+    record : Record
+        A record as read.
+
+    Returns
+    -------
+    float
+        From its first command to its last telemetry frame, s, over every wheel
+        of a record of several (0 without either).
+    """
+    commands = [t for t in record.messages if t.endswith("/command") and record.messages[t]]
+    frames = [t for t in record.messages if t.endswith("/telemetry") and record.messages[t]]
+    if not commands or not frames:
+        return 0.0
+    t0 = min(record.messages[t][0]["t"] for t in commands)
+    return max(0.0, max(record.messages[t][-1]["t"] for t in frames) - t0)
+
+
+def _readable(record: Record) -> str:
+    """What a damaged record still holds, in words: seconds, samples at its Ts, frames."""
+    seconds = readable_seconds(record)
+    frames = sum(len(m) for t, m in record.messages.items() if t.endswith("/telemetry"))
+    if not frames:
+        return "no telemetry is readable"
+    Ts = record.metadata.get("Ts")
+    samples = ""
+    if isinstance(Ts, (int, float)) and Ts > 0:
+        samples = f"{int(seconds / Ts + 1e-9) + 1} samples at Ts = {Ts:g} s, "
+    return f"the first {seconds:.1f} s are readable ({samples}{frames} telemetry frames)"
 
 
 class RecordFollower:

@@ -544,7 +544,8 @@ def run_experiment(
     faults = sorted(cfg.scheduled_faults(), key=lambda f: f.t_s)
     injected = tuple(str(f) for f in faults)
     alarms: list[str] = []
-    writer = RecordWriter(out, metadata, force=force)  # first: a bad --out opens no bus
+    # first: a bad --out opens no bus
+    writer = RecordWriter(out, metadata, force=force, wall_clock=realtime)
     stream_twin = simulated and "can" not in get_protocol(cfg.protocol).transports
     try:
         channel = cfg.channel or (f"rwlab-{os.getpid()}-{id(cfg)}" if simulated else None)
@@ -575,6 +576,12 @@ def run_experiment(
                 seed=cfg.seed,
                 protocol=cfg.protocol,
             )
+            if node.watchdog and cfg.Ts >= node.watchdog:  # it would idle between commands
+                raise ConfigError(
+                    f"Ts = {cfg.Ts:g} s is not shorter than the simulated wheel's command "
+                    f"watchdog ({node.watchdog:g} s): the wheel would idle between commands; "
+                    f"choose Ts < {node.watchdog:g} s"
+                )
             if realtime:
                 node.start()
         client = WheelClient(

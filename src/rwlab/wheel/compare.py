@@ -32,7 +32,6 @@ at rest); the same for every model.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
@@ -45,6 +44,7 @@ from rwlab.ident.greybox import RPM, WheelGreyBox
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.nlarx import NLARXModel
 from rwlab.ident.validation import fit_percent, mse
+from rwlab.schemas import read_json
 from rwlab.wheel.identified import IdentifiedWheel
 
 __all__ = ["SATURATIONS", "compare_record", "compare_wheel_models", "resolve_saturation"]
@@ -60,8 +60,8 @@ APPLIED = {  # the saturations each model takes from the record
 
 def _read(path: str | os.PathLike) -> dict:
     try:
-        info = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        info = read_json(path, what="model file")  # no nesting deeper than a model's
+    except OSError as exc:
         raise FileFormatError(f"{path}: not a readable model file ({exc})") from None
     WheelModelFile.from_dict(info, source=str(path))  # the whole file checked by its owner
     return info
