@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import re
+import struct
 import warnings
 
 import pytest
@@ -145,3 +146,15 @@ def test_identify_refuses_a_damaged_record(record, tmp_path):
     r = _cli("identify", bad, "--out", tmp_path / "id")
     assert r.exit_code == 2 and "damaged at byte" in r.output and "--salvage" in r.output
     assert not (tmp_path / "id").exists()
+
+
+def test_zeros_in_a_message_index_between_chunks_are_found_there(record, tmp_path):
+    # message index records carry no CRC; each is checked against the chunk before it
+    data = record.read_bytes()
+    at = 8
+    while data[at] != 0x07:  # the first message index record
+        at += 9 + struct.unpack_from("<Q", data, at + 1)[0]
+    bad = _zeroed(record, tmp_path / "bad.mcap", at + 9 + 6 + 8, n=16)  # its first entry
+    with pytest.raises(RecordDamagedError, match="message index") as info:
+        read_record(bad)
+    assert info.value.offset == at

@@ -41,7 +41,7 @@ from pathlib import Path
 
 from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Footer, Message, Metadata, Statistics
+from mcap.records import Channel, Chunk, Footer, Message, MessageIndex, Metadata, Statistics
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
@@ -416,6 +416,7 @@ def _scan(data: bytes, record: Record) -> RecordDamage | None:
     records = StreamReader(stream, skip_magic=False, emit_chunks=True, validate_crcs=True).records
     topics: dict[int, str] = {}
     counts: dict[int, int] = {}
+    index: dict[int, list[tuple[int, int]]] = {}  # the last chunk's messages, by channel
     start = 0
     while True:
         start = stream.tell()
@@ -435,7 +436,11 @@ def _scan(data: bytes, record: Record) -> RecordDamage | None:
                 if start + 9 + length <= size:  # the record is all there, and unreadable
                     return RecordDamage(start, size, f"an unreadable record: {_why(exc)}")
             return RecordDamage(start, size, "the file ends in the middle of a record")
+        if isinstance(r, MessageIndex) and index.get(r.channel_id, []) != list(r.records):
+            return RecordDamage(start, size, "a message index that does not match its chunk")
         try:
+            if isinstance(r, Chunk):
+                index = _chunk_index(r)
             inner = breakup_chunk(r, validate_crc=True) if isinstance(r, Chunk) else [r]
             for x in inner:
                 if isinstance(x, Message):
@@ -454,6 +459,23 @@ def _scan(data: bytes, record: Record) -> RecordDamage | None:
     if not record.complete:
         return RecordDamage(start, size, "the file ends before its summary")
     return None
+
+
+def _chunk_index(chunk: Chunk) -> dict[int, list[tuple[int, int]]]:
+    """(log time, offset) of each message of an uncompressed chunk, by channel: what the
+    message index records after it must hold (the MCAP spec's layout, walked by hand
+    because the ``mcap`` reader skips those records without checking them)."""
+    index: dict[int, list[tuple[int, int]]] = {}
+    if chunk.compression:
+        return index
+    data, at = chunk.data, 0
+    while at + 9 <= len(data):
+        length = struct.unpack_from("<Q", data, at + 1)[0]
+        if data[at] == Opcode.MESSAGE and at + 9 + 14 <= len(data):
+            channel, _, log_time = struct.unpack_from("<HIQ", data, at + 9)
+            index.setdefault(channel, []).append((log_time, at))
+        at += 9 + length
+    return index
 
 
 def _check_summary(data: bytes, footer: Footer, footer_at: int) -> RecordDamage | None:
