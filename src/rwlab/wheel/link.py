@@ -54,6 +54,8 @@ BUILTIN_PROTOCOLS = {
     "rwlab": "rwlab.wheel.dbc_link:RwlabProtocol",
     "canopen": "rwlab.wheel.canopen_wheel:CanopenProtocol",
     "nsp": "rwlab.wheel.nsp:NspProtocol",
+    "nsp/nrwa-t6": "rwlab.wheel.nsp_t6:NrwaT6Protocol",
+    "nsp/rw4-12": "rwlab.wheel.nsp_rw4:Rw412Protocol",
 }
 
 RawListener = Callable[[float, int, bytes, str], None]
@@ -146,6 +148,7 @@ class WheelProtocol(abc.ABC):
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
     transports: ClassVar[tuple[str, ...]] = ("can",)
+    baudrate: ClassVar[int] = 115_200  # a serial line's speed, bit/s, unless the user sets one
 
     @abc.abstractmethod
     def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
@@ -169,6 +172,19 @@ class WheelProtocol(abc.ABC):
     @abc.abstractmethod
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
         """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
+
+    def answers_as(self, node_id: int) -> str:
+        """Where the twin of wheel ``node_id`` answers, in the protocol's own terms ("" if by id).
+
+        Parameters
+        ----------
+        node_id : int
+
+        Returns
+        -------
+        str
+        """
+        return ""
 
     def identity(self) -> str:
         """A text naming the protocol's definition exactly (a file hash), for records."""
