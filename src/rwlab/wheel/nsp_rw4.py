@@ -138,8 +138,8 @@ class Rw412NodeLink(NspNodeLinkBase):
         if isinstance(frame, proto.Telemetry):
             self.speed_rad_s = rpm_to_rad_s(frame.speed_rpm)
             self.current_a, self.speed_limited = frame.current, frame.speed_limited
-            if frame.mode == Mode.IDLE:
-                self.mode_byte = IDLE  # a latched fault idled the wheel
+            if frame.fault_active:
+                self.mode_byte = IDLE  # a latched fault idles the wheel
         else:
             self.faults, self.temperature = frame.faults, frame.temperature
             self.bus_voltage = frame.bus_voltage

@@ -200,7 +200,7 @@ def wheel_address(node_id: int) -> int:
     """
     if not isinstance(node_id, int) or not 0 <= node_id <= 7:
         raise proto.ProtocolError(
-            f"an NRWA-T6 address is set by three pins: node id 0..7, got {node_id!r}"
+            f"an NRWA-T6 address is set by three pins: use node id 0..7, not {node_id!r}"
         )
     return node_id
 
@@ -335,8 +335,8 @@ class NrwaT6NodeLink(NspNodeLinkBase):
             status |= ST_DRIVE_ON if frame.mode != Mode.IDLE else 0
             self.status = status
             self.faults |= FT_OVERSPEED_LIMITED if frame.speed_limited else 0
-            if frame.mode == Mode.IDLE and self.control_register & 0x0F:
-                self.control_register &= 0xF0  # a latched fault idled the wheel
+            if frame.fault_active:  # a latched fault idles the wheel: the register says so
+                self.control_register &= 0xF0
                 self.setpoint_word = 0
         else:
             for fault, bit in _FAULT_BITS.items():
