@@ -73,7 +73,17 @@ def wheel_address(node_id: int) -> int:
 
 
 class Rw412NodeLink(NspNodeLinkBase):
-    """The twin's end: an RW4-12 answering PING, INIT, READ-FILE, WRITE-FILE, CLEAR-FAULT."""
+    """The twin's end: an RW4-12 answering PING, INIT, READ-FILE, WRITE-FILE, CLEAR-FAULT.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The twin's clock.
+    """
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
         super().__init__(port, node_id, clock)
@@ -147,7 +157,19 @@ class Rw412NodeLink(NspNodeLinkBase):
 
 
 class Rw412HostLink(NspHostLinkBase):
-    """The driver's end: WRITE-FILE for modes, READ-FILE of speed and current polled."""
+    """The driver's end: WRITE-FILE for modes, READ-FILE of speed and current polled.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The driver's clock (on a SimClock the link polls as the clock advances).
+    poll_rate : float
+        Telemetry polls per second, Hz.
+    """
 
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__(port, node_id, clock, poll_rate)

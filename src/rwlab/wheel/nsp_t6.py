@@ -206,7 +206,17 @@ def wheel_address(node_id: int) -> int:
 
 
 class NrwaT6NodeLink(NspNodeLinkBase):
-    """The twin's end: an NRWA-T6 answering on ``node_id`` and ``node_id + 0x80``."""
+    """The twin's end: an NRWA-T6 answering on ``node_id`` and ``node_id + 0x80``.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The twin's clock.
+    """
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
         super().__init__(port, node_id, clock)
@@ -351,7 +361,19 @@ def _signed(word: int, bits: int = 32) -> int:
 
 
 class NrwaT6HostLink(NspHostLinkBase):
-    """The driver's end: APPLICATION-COMMAND for modes, APPLICATION-TELEMETRY polled."""
+    """The driver's end: APPLICATION-COMMAND for modes, APPLICATION-TELEMETRY polled.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The driver's clock (on a SimClock the link polls as the clock advances).
+    poll_rate : float
+        Telemetry polls per second, Hz.
+    """
 
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__(port, node_id, clock, poll_rate)

@@ -278,6 +278,15 @@ class NspNodeLinkBase(NodeLink):
     :attr:`bad_frames` (the ICD's rule); a valid one for another address, or a
     reply, in :attr:`foreign_frames`; a request that cannot be carried out is
     NACKed and counted in :attr:`nacked`. Subclasses answer the commands.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The twin's clock.
     """
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
@@ -354,6 +363,17 @@ class NspHostLinkBase(HostLink):
 
     Subclasses encode a command (:meth:`encode_command`) and read the wheel's
     state (:meth:`read_telemetry`, :meth:`read_heartbeat`) with :meth:`transact`.
+
+    Parameters
+    ----------
+    port : serial port
+        A pyserial-like port (``in_waiting``, ``read``, ``write``).
+    node_id : int
+        The wheel.
+    clock : WallClock or SimClock
+        The driver's clock (on a SimClock the link polls as the clock advances).
+    poll_rate : float
+        Telemetry polls per second, Hz.
     """
 
     host_address = 0x11  # "by convention … the primary computer" (NRWA-T6 ICD §11.2.2)
