@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rwlab.errors import ProtocolError
-from rwlab.testbed import read_record
+from rwlab.testbed import ExperimentConfig, read_record, run_experiment
 from rwlab.wheel import WheelNode
 from rwlab.wheel.clock import WallClock
 from rwlab.wheel.link import get_protocol
@@ -417,3 +417,24 @@ def test_the_nrwa_t6_twin_answers_the_open_nss_host_driver_unchanged(monkeypatch
         node.stop()
         twin_port.close()
         host_port.close()
+
+
+def test_the_same_wheel_answers_through_every_nsp_profile(tmp_path):
+    speeds = {}
+    for name in ("rwlab", "nsp/nrwa-t6", "nsp/rw4-12"):
+        path = tmp_path / f"{name.replace('/', '_')}.mcap"
+        cfg = ExperimentConfig(
+            signal="step", amplitude=1500, duration=60, Ts=0.5, seed=4, protocol=name, wheel="ideal"
+        )
+        summary = run_experiment(cfg, path)
+        assert summary.status == "completed" and summary.lost_frames == 0
+        speeds[name] = {
+            round(t["t"], 6): t["speed_rpm"] for t in read_record(path).topic("/telemetry")
+        }
+    ref = speeds["rwlab"]
+    assert max(ref.values()) > 1000  # it moved
+    for name in ("nsp/nrwa-t6", "nsp/rw4-12"):
+        common = sorted(t for t in set(speeds[name]) & set(ref) if t < 60.0)
+        assert len(common) >= 600  # sampled at the same instants
+        # one physics, one seed: within the DBC's 0.01 rpm, Q24.8 and float32
+        assert max(abs(speeds[name][t] - ref[t]) for t in common) < 0.02

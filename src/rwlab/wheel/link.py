@@ -14,8 +14,9 @@ so one client and one twin serve every protocol. Anything on the transport
 that is not a valid message for this end is dropped and counted by the link
 (``bad_frames``: damaged; ``foreign_frames``: valid but not ours), never raised.
 
-Protocols are found by name, as python-can finds its interfaces: the three
-built in (``rwlab``, ``canopen``, ``nsp``) and any a package declares under
+Protocols are found by name, as python-can finds its interfaces: those built
+in (``rwlab``, ``canopen``, ``nsp``, and the NSP wheel families' profiles
+``nsp/nrwa-t6`` and ``nsp/rw4-12``) and any a package declares under
 the entry-point group ``rwlab.wheel_protocols`` (``name = "module:Class"``).
 Transports likewise under ``rwlab.wheel_transports``.
 """
@@ -215,8 +216,8 @@ def get_protocol(name: str) -> WheelProtocol:
     Parameters
     ----------
     name : str
-        ``rwlab``, ``canopen``, ``nsp`` or a name a package registered under the
-        entry-point group ``rwlab.wheel_protocols``.
+        ``rwlab``, ``canopen``, ``nsp``, ``nsp/nrwa-t6``, ``nsp/rw4-12`` or a name a
+        package registered under the entry-point group ``rwlab.wheel_protocols``.
 
     Returns
     -------

@@ -367,7 +367,7 @@ class NspProtocol(WheelProtocol):
     """NSP over a serial port (pyserial): SLIP framing, CRC-16/CCITT, polled telemetry."""
 
     name = "nsp"
-    description = "NSP (Sinclair / Rocket Lab wheels): SLIP + CRC-16/CCITT on a serial port"
+    description = "NSP, rwlab's own outline: SLIP + MSB-first CRC (no real wheel answers it)"
     transports = ("stream",)
     poll_rate = 10.0
 
