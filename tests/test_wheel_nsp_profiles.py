@@ -25,7 +25,14 @@ from rwlab.wheel import WheelNode
 from rwlab.wheel.clock import WallClock
 from rwlab.wheel.link import get_protocol
 from rwlab.wheel.nsp_t6 import q_decode, q_encode
-from rwlab.wheel.nsp_wire import NspPacket, SlipReader, crc16_nsp, decode_packet, encode_packet
+from rwlab.wheel.nsp_wire import (
+    NspPacket,
+    SlipReader,
+    crc16_nsp,
+    decode_packet,
+    encode_packet,
+    setpoint_allowed,
+)
 from rwlab.wheel.physics import Mode
 from rwlab.wheel.protocol import Command, Heartbeat, Telemetry
 from rwlab.wheel.serial import open_pty
@@ -438,3 +445,53 @@ def test_the_same_wheel_answers_through_every_nsp_profile(tmp_path):
         assert len(common) >= 600  # sampled at the same instants
         # one physics, one seed: within the DBC's 0.01 rpm, Q24.8 and float32
         assert max(abs(speeds[name][t] - ref[t]) for t in common) < 0.02
+
+
+class _Port:
+    """A pyserial-like port fed by the test: what the twin reads, what it writes."""
+
+    def __init__(self) -> None:
+        self.inbox, self.outbox = bytearray(), bytearray()
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.inbox)
+
+    def read(self, size: int) -> bytes:
+        data, self.inbox = bytes(self.inbox[:size]), self.inbox[size:]
+        return data
+
+    def write(self, data: bytes) -> int:
+        self.outbox += data
+        return len(data)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    protocol=st.sampled_from(["nsp/nrwa-t6", "nsp/rw4-12"]),
+    poll=st.booleans(),
+    command=st.integers(0, 31),
+    data=st.one_of(
+        st.binary(max_size=12),
+        st.tuples(st.integers(0, 255), st.floats(width=32)).map(
+            lambda m: b"\x00" + struct.pack("<Bf", *m)
+        ),
+    ),
+)
+def test_any_well_framed_request_is_answered_never_raised(protocol, poll, command, data):
+    from rwlab.wheel import RW90
+
+    port = _Port()
+    link = get_protocol(protocol).node_link(port, 1, clock=WallClock())
+    link.configure(RW90)
+    address = 0x01 if protocol == "nsp/nrwa-t6" else 0x21
+    port.inbox += request(port, address, (0x80 if poll else 0) | command, data)
+    commands = link.receive(0.0)
+    if not poll:
+        assert port.outbox == b""  # no Poll bit, no reply (ICD §11.4)
+    else:
+        reply = decode_packet(bytes(port.outbox[1:-1]))
+        assert (reply.dst, reply.src, reply.command) == (0x11, address, command)
+        assert reply.acked != (link.nacked == 1)
+    if link.nacked == 0:  # what the twin ACKs, the wheel may obey (a NACKed one it refuses)
+        assert all(setpoint_allowed(RW90, c.mode, c.setpoint) for _, c in commands)

@@ -175,6 +175,7 @@ class Rw412HostLink(NspHostLinkBase):
         super().__init__(port, node_id, clock, poll_rate)
         self._address = wheel_address(node_id)
         self._status = 0
+        self._status_file = True  # rwlab's extension file 0x40, until the wheel NACKs it
         self._opened = clock.now()
 
     @property
@@ -214,8 +215,9 @@ class Rw412HostLink(NspHostLinkBase):
         speed, current = self.read_file(SPEED_FILE), self.read_file(CURRENT_FILE)
         if speed is None or current is None:
             return None
-        status = self.read_file(STATUS_FILE)  # None from a real RW4-12
-        self._status = 0 if status is None or not math.isfinite(status) else int(status)
+        status = self.read_file(STATUS_FILE) if self._status_file else None
+        self._status_file = status is not None  # a real RW4-12 NACKs it: ask once
+        self._status = int(status) if status is not None and math.isfinite(status) else 0
         mode = _FROM_RW4.get(self._status >> 8 & 0xFF, Mode.IDLE)
         return self.telemetry(
             rad_s_to_rpm(speed), current, mode, bool(self._status & 0xF), bool(self._status & 16)
