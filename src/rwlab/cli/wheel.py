@@ -144,8 +144,10 @@ def wheel_serve(
             watchdog=watchdog,
             protocol=protocol,
         ).start()
+        answers_as = get_protocol(protocol).answers_as(node_id)
         click.echo(
-            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop",
+            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop"
+            + (f"\nit answers as {answers_as}" if answers_as else ""),
             err=True,
         )
         start = time.monotonic()

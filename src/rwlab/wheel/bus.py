@@ -137,7 +137,7 @@ def open_transport(
     channel: str | None = None,
     *,
     simulated_clock: bool = False,
-    baudrate: int = 115200,
+    baudrate: int | None = None,
 ) -> Any:
     """The transport ``protocol`` needs on ``interface``: a python-can bus or a serial port.
 
@@ -151,8 +151,8 @@ def open_transport(
         The interface's channel (its default when None).
     simulated_clock : bool
         Keep senders' time stamps (virtual buses on a SimClock).
-    baudrate : int
-        Serial line speed, bit/s.
+    baudrate : int, optional
+        Serial line speed, bit/s (default: the protocol's, e.g. 460800 for ``nsp/nrwa-t6``).
 
     Returns
     -------
@@ -161,6 +161,7 @@ def open_transport(
     from rwlab.wheel.link import get_protocol
 
     kinds = get_protocol(protocol).transports
+    baudrate = baudrate or get_protocol(protocol).baudrate
     if "can" in kinds and interface != "serial":
         return open_bus(interface, channel, simulated_clock=simulated_clock, baudrate=baudrate)
     if "stream" in kinds and interface == "serial":

@@ -14,8 +14,9 @@ so one client and one twin serve every protocol. Anything on the transport
 that is not a valid message for this end is dropped and counted by the link
 (``bad_frames``: damaged; ``foreign_frames``: valid but not ours), never raised.
 
-Protocols are found by name, as python-can finds its interfaces: the three
-built in (``rwlab``, ``canopen``, ``nsp``) and any a package declares under
+Protocols are found by name, as python-can finds its interfaces: those built
+in (``rwlab``, ``canopen``, ``nsp``, and the NSP wheel families' profiles
+``nsp/nrwa-t6`` and ``nsp/rw4-12``) and any a package declares under
 the entry-point group ``rwlab.wheel_protocols`` (``name = "module:Class"``).
 Transports likewise under ``rwlab.wheel_transports``.
 """
@@ -54,6 +55,8 @@ BUILTIN_PROTOCOLS = {
     "rwlab": "rwlab.wheel.dbc_link:RwlabProtocol",
     "canopen": "rwlab.wheel.canopen_wheel:CanopenProtocol",
     "nsp": "rwlab.wheel.nsp:NspProtocol",
+    "nsp/nrwa-t6": "rwlab.wheel.nsp_t6:NrwaT6Protocol",
+    "nsp/rw4-12": "rwlab.wheel.nsp_rw4:Rw412Protocol",
 }
 
 RawListener = Callable[[float, int, bytes, str], None]
@@ -146,6 +149,7 @@ class WheelProtocol(abc.ABC):
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
     transports: ClassVar[tuple[str, ...]] = ("can",)
+    baudrate: ClassVar[int] = 115_200  # a serial line's speed, bit/s, unless the user sets one
 
     @abc.abstractmethod
     def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
@@ -169,6 +173,19 @@ class WheelProtocol(abc.ABC):
     @abc.abstractmethod
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
         """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
+
+    def answers_as(self, node_id: int) -> str:
+        """Where the twin of wheel ``node_id`` answers, in the protocol's own terms ("" if by id).
+
+        Parameters
+        ----------
+        node_id : int
+
+        Returns
+        -------
+        str
+        """
+        return ""
 
     def identity(self) -> str:
         """A text naming the protocol's definition exactly (a file hash), for records."""
@@ -199,8 +216,8 @@ def get_protocol(name: str) -> WheelProtocol:
     Parameters
     ----------
     name : str
-        ``rwlab``, ``canopen``, ``nsp`` or a name a package registered under the
-        entry-point group ``rwlab.wheel_protocols``.
+        ``rwlab``, ``canopen``, ``nsp``, ``nsp/nrwa-t6``, ``nsp/rw4-12`` or a name a
+        package registered under the entry-point group ``rwlab.wheel_protocols``.
 
     Returns
     -------

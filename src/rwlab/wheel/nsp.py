@@ -1,10 +1,17 @@
-"""NSP: the serial protocol of Sinclair Interplanetary / Rocket Lab wheels, on a byte stream.
+"""NSP, rwlab's own profile (``nsp``): NSP framing with rwlab's CRC, mode writes and registers.
+
+This is the outline rwlab completed with its own choices before the wheel
+families' profiles existed; a real wheel speaks ``nsp/nrwa-t6``
+(:mod:`rwlab.wheel.nsp_t6`) or ``nsp/rw4-12`` (:mod:`rwlab.wheel.nsp_rw4`),
+whose CRC is the reflected one of :mod:`rwlab.wheel.nsp_wire`. It is kept so
+that records and scripts made with it still run; framing and packets are
+shared with the families (:mod:`rwlab.wheel.nsp_wire`).
 
 A packet travels in SLIP framing (FEND 0xC0, FESC 0xDB, TFEND 0xDC, TFESC 0xDD)
 as ``[dst][src][MCF][payload…][CRC lo][CRC hi]``; the CRC is CRC-16/CCITT
-(polynomial 0x1021, initial value 0xFFFF, MSB first) over dst..payload. MCF bit 7
-asks for a reply ("poll"), bit 5 marks a reply ACK (set) or NACK (clear), bits
-4..0 name the command (PING 0x00, INIT 0x01, PEEK 0x02, POKE 0x03, DIAGNOSTIC
+(polynomial 0x1021, initial value 0xFFFF, MSB first: not the families' CRC) over
+dst..payload. MCF bit 7 asks for a reply ("poll"), bit 5 marks a reply ACK (set)
+or NACK (clear), bits 4..0 name the command (PING 0x00, INIT 0x01, PEEK 0x02, POKE 0x03, DIAGNOSTIC
 0x04, CRC 0x06, READ-FILE 0x07, WRITE-FILE 0x08, CLEAR-FAULT 0x09).
 
 What the public outline leaves open is fixed here, for the twin and its driver
@@ -28,13 +35,14 @@ from __future__ import annotations
 
 import struct
 import time
-from dataclasses import dataclass
 from typing import Any
 
+from rwlab.wheel import nsp_wire
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.nsp_wire import NspPacket, SlipReader
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
-from rwlab.wheel.serial import END, crc16_ccitt, slip_decode, slip_encode
+from rwlab.wheel.serial import crc16_ccitt, slip_encode
 
 __all__ = [
     "HOST_ADDRESS",
@@ -59,7 +67,6 @@ BLOCK = struct.Struct("<BffBBfIHB")
 PING_TEXT = b"rwlab NSP twin"
 _TO_NSP = {Mode.IDLE: NSP_IDLE, Mode.SPEED: NSP_SPEED, Mode.ACCELERATION: NSP_TORQUE}
 _FROM_NSP = {v: k for k, v in _TO_NSP.items()}
-MAX_BYTES_PER_READ = 1 << 16  # a flood is read in bounded bites
 
 
 def wheel_address(node_id: int) -> int:
@@ -77,32 +84,8 @@ def wheel_address(node_id: int) -> int:
     return 0x20 + proto._check_node(node_id)
 
 
-@dataclass(frozen=True)
-class NspPacket:
-    """One NSP packet, CRC checked.
-
-    Attributes
-    ----------
-    dst, src : int
-        Addresses, 0..255.
-    mcf : int
-        Message control field: bit 7 poll, bit 5 ACK (replies), bits 4..0 the command.
-    payload : bytes
-    """
-
-    dst: int
-    src: int
-    mcf: int
-    payload: bytes = b""
-
-    @property
-    def command(self) -> int:
-        """Bits 4..0 of the MCF."""
-        return self.mcf & 0x1F
-
-
 def encode_packet(packet: NspPacket) -> bytes:
-    """The packet with its CRC, in SLIP framing, ready for the wire.
+    """The packet with rwlab's MSB-first CRC, in SLIP framing, ready for the wire.
 
     Parameters
     ----------
@@ -113,15 +96,11 @@ def encode_packet(packet: NspPacket) -> bytes:
     bytes
         ``FEND … FEND``.
     """
-    for name in ("dst", "src", "mcf"):
-        if not 0 <= getattr(packet, name) <= 0xFF:
-            raise proto.ProtocolError(f"NSP {name} must be a byte, got {getattr(packet, name)}")
-    body = bytes([packet.dst, packet.src, packet.mcf]) + bytes(packet.payload)
-    return slip_encode(body + crc16_ccitt(body).to_bytes(2, "little"))
+    return nsp_wire.encode_packet(packet, crc16_ccitt)
 
 
 def decode_packet(body: bytes) -> NspPacket:
-    """A packet from one SLIP frame's body (between FENDs).
+    """A packet from one SLIP frame's body (between FENDs), rwlab's MSB-first CRC checked.
 
     Parameters
     ----------
@@ -137,48 +116,10 @@ def decode_packet(body: bytes) -> NspPacket:
     ProtocolError
         Bad escape, too short, or the CRC fails.
     """
-    try:
-        raw = slip_decode(body)
-    except ValueError as exc:
-        raise proto.ProtocolError(f"NSP frame: {exc}") from None
-    if len(raw) < 5:
-        raise proto.ProtocolError(f"NSP frame of {len(raw)} bytes; at least 5 expected")
-    if crc16_ccitt(raw[:-2]) != int.from_bytes(raw[-2:], "little"):
-        raise proto.ProtocolError("NSP frame fails its CRC")
-    return NspPacket(raw[0], raw[1], raw[2], bytes(raw[3:-2]))
+    return nsp_wire.decode_packet(body, crc16_ccitt)
 
 
-class SlipReader:
-    """Cuts a byte stream into SLIP frame bodies; junk between frames is counted, not kept."""
-
-    def __init__(self) -> None:
-        self._buffer = bytearray()
-
-    def feed(self, data: bytes) -> list[bytes]:
-        """Add bytes; return the bodies of the frames they completed (empty ones skipped)."""
-        self._buffer += data
-        bodies = []
-        while True:
-            start = self._buffer.find(END)
-            if start < 0:
-                self._buffer.clear()
-                break
-            end = self._buffer.find(END, start + 1)
-            if end < 0:
-                del self._buffer[:start]
-                break
-            body = bytes(self._buffer[start + 1 : end])
-            del self._buffer[:end]  # the closing END may open the next frame
-            if body:
-                bodies.append(body)
-        if len(self._buffer) > MAX_BYTES_PER_READ:  # a frame that never ends: drop it
-            self._buffer.clear()
-        return bodies
-
-
-def _read(port: Any) -> bytes:
-    waiting = port.in_waiting
-    return bytes(port.read(min(waiting, MAX_BYTES_PER_READ))) if waiting else b""
+_read = nsp_wire.read_port
 
 
 class NspNodeLink(NodeLink):
@@ -426,7 +367,7 @@ class NspProtocol(WheelProtocol):
     """NSP over a serial port (pyserial): SLIP framing, CRC-16/CCITT, polled telemetry."""
 
     name = "nsp"
-    description = "NSP (Sinclair / Rocket Lab wheels): SLIP + CRC-16/CCITT on a serial port"
+    description = "NSP, rwlab's own outline: SLIP + MSB-first CRC (no real wheel answers it)"
     transports = ("stream",)
     poll_rate = 10.0
 
