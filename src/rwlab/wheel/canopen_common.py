@@ -243,7 +243,7 @@ class TpdoSchedule:
 
     def __init__(self, node: canopen.LocalNode) -> None:
         self.node = node
-        self._due: dict[int, float] = {}
+        self._booked: dict[int, tuple[float, float, float]] = {}  # last sent, period, next
 
     def timer_s(self, number: int) -> float:
         """The event timer of TPDO ``number`` (1-based), s (0: sent on every sample)."""
@@ -255,8 +255,11 @@ class TpdoSchedule:
         period = self.timer_s(number)
         if period <= 0:
             return True
-        due = self._due.get(number, t)
+        last, booked_period, due = self._booked.get(number, (t - period, period, t))
+        if period != booked_period:  # the timer was written: count from the last send
+            due = last + period
         if t < due - min(1e-3, 0.1 * period):  # a sample early by rounding still counts
+            self._booked[number] = (last, period, due)
             return False
-        self._due[number] = due + period if due + period > t else t + period
+        self._booked[number] = (t, period, due + period if due + period > t else t + period)
         return True
