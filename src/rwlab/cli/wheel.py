@@ -144,10 +144,10 @@ def wheel_serve(
             protocol=protocol,
         ).start()
         click.echo(
-            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}, answering as "
-            f"{get_protocol(protocol).addresses(node_id)}; Ctrl-C to stop",
+            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop",
             err=True,
         )
+        click.echo(f"answering as {get_protocol(protocol).addresses(node_id)}", err=True)
         start = time.monotonic()
         with _stop_signals():
             while duration is None or time.monotonic() - start < duration:

@@ -73,11 +73,15 @@ client that sets a target once and waits (``BaseNode402``) wants
 ``--watchdog 0``.
 
 Node ids: wheel ``n`` (0..15) is CANopen node ``n + 1``.
+
+Why this module is long: a quarter of it is this description (the drive's
+objects and the choices CiA 402 leaves to a drive), and the rest is the two
+ends of one profile, the twin's drive and rwlab's driver of it, which change
+together (the state machine itself is :mod:`rwlab.wheel.cia402_state`).
 """
 
 from __future__ import annotations
 
-import enum
 import hashlib
 import struct
 from functools import cache
@@ -101,6 +105,7 @@ from rwlab.wheel.canopen_common import (
     send_frame,
     setpoint_abort,
 )
+from rwlab.wheel.cia402_state import DriveState, S, next_state, statusword
 from rwlab.wheel.dbc_link import read_frames
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
@@ -128,72 +133,6 @@ ERROR_CODES = {  # CiA 301 error code classes, as in the ``canopen`` profile
     Fault.WATCHDOG: 0x8130,
     Fault.OVERTEMP: 0x4200,
 }
-
-
-class DriveState(enum.Enum):
-    """CiA 402 states, each with its statusword bits (mask 0x6F, as ``BaseNode402`` reads)."""
-
-    SWITCH_ON_DISABLED = 0x40
-    READY_TO_SWITCH_ON = 0x21
-    SWITCHED_ON = 0x23
-    OPERATION_ENABLED = 0x27
-    QUICK_STOP_ACTIVE = 0x07
-    FAULT = 0x08
-
-
-S = DriveState
-
-
-def next_state(state: DriveState, controlword: int, previous: int) -> DriveState:
-    """The state after the controlword ``controlword`` (the one before was ``previous``).
-
-    Parameters
-    ----------
-    state : DriveState
-    controlword, previous : int
-        0..0xFFFF.
-
-    Returns
-    -------
-    DriveState
-    """
-    if state is S.FAULT:  # only a fault reset (bit 7 rising) leaves it: transition 15
-        return S.SWITCH_ON_DISABLED if controlword & 0x80 and not previous & 0x80 else S.FAULT
-    if not controlword & 0x02:  # disable voltage: 7, 9, 10, 12
-        return S.SWITCH_ON_DISABLED
-    if not controlword & 0x04:  # quick stop: 11 from operation enabled, else 7 / 10
-        active = state in (S.OPERATION_ENABLED, S.QUICK_STOP_ACTIVE)
-        return S.QUICK_STOP_ACTIVE if active else S.SWITCH_ON_DISABLED
-    if not controlword & 0x01:  # shutdown: 2, 6, 8 (none from quick stop active)
-        return state if state is S.QUICK_STOP_ACTIVE else S.READY_TO_SWITCH_ON
-    if state is S.SWITCH_ON_DISABLED:  # switch on needs ready to switch on first
-        return state
-    if controlword & 0x08:  # enable operation: 3 + 4, 4, 16
-        return S.OPERATION_ENABLED
-    return state if state is S.QUICK_STOP_ACTIVE else S.SWITCHED_ON  # switch on: 3, 5
-
-
-def statusword(state: DriveState, *, limited: bool, at_target: bool, stopped: bool) -> int:
-    """The statusword of ``state`` with its flag bits.
-
-    Parameters
-    ----------
-    state : DriveState
-    limited : bool
-        Bit 11, internal limit active (a speed limit or a refused setpoint).
-    at_target : bool
-        Bit 10, target reached.
-    stopped : bool
-        Bit 12 in profile velocity: speed is zero.
-
-    Returns
-    -------
-    int
-    """
-    word = state.value | 0x0200  # bit 9 remote: the drive takes the bus's commands
-    if state not in (S.SWITCH_ON_DISABLED, S.FAULT):
-        word |= 0x10  # voltage enabled
-    return word | (0x800 if limited else 0) | (0x400 if at_target else 0) | (0x1000 * stopped)
 
 
 def eds_path() -> str:
@@ -232,7 +171,15 @@ def canopen_id(node_id: int) -> int:
 
 
 class Cia402NodeLink(NodeLink):
-    """The twin as a CiA 402 drive (``canopen.LocalNode`` with the drive state machine)."""
+    """The twin as a CiA 402 drive (``canopen.LocalNode`` with the drive state machine).
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    node_id : int
+        The wheel's node id, 0..15.
+    clock : WallClock or SimClock
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
@@ -506,6 +453,13 @@ class Cia402HostLink(HostLink):
     enabled in that mode, the mode (0x6060) and the controlwords shutdown,
     switch on, enable operation. Idle is shutdown (0x06), clear fault is fault
     reset (0x80). A command whose writes are not all confirmed is lost.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    node_id : int
+        The wheel's node id, 0..15.
+    clock : WallClock or SimClock
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:

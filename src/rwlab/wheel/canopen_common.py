@@ -85,6 +85,11 @@ class BusNetwork(canopen.Network):
 
     Frames the ``canopen`` package sends itself (SDO answers, EMCY) carry the time
     the link last saw, so simulated records stay on simulated time.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The bus the network sends on (the caller reads it).
     """
 
     def __init__(self, bus: can.BusABC) -> None:

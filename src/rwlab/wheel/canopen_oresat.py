@@ -193,7 +193,15 @@ def faults_of(errors: int) -> Fault:
 
 
 class OresatNodeLink(NodeLink):
-    """The twin as OreSat's reaction-wheel card (``canopen.LocalNode``)."""
+    """The twin as OreSat's reaction-wheel card (``canopen.LocalNode``).
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    node_id : int
+        The wheel's node id, 0..15.
+    clock : WallClock or SimClock
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
@@ -208,7 +216,7 @@ class OresatNodeLink(NodeLink):
         self.local.nmt.state = "OPERATIONAL"
         self.schedule = TpdoSchedule(self.local)
         self._params = RW90
-        self._values: dict[tuple[int, int], float | int] = {}
+        self._values: dict[tuple[int, int], float | int] = {(0x4000, 1): IDLE}
         self._commands: list[tuple[float, proto.Command]] = []
         self._arrival = 0.0
         self._sequence = 0
@@ -317,7 +325,7 @@ class OresatNodeLink(NodeLink):
         self.network.stamp = t
         v = self._values
         if isinstance(frame, proto.Telemetry):
-            if frame.fault_active:
+            if frame.fault_active or self._faults:
                 state = CONTROLLER_ERROR
             else:
                 state = {Mode.SPEED: VEL_CONTROL, Mode.ACCELERATION: TORQUE_CONTROL}.get(
@@ -377,6 +385,13 @@ class OresatHostLink(HostLink):
     requested state; each write is confirmed by the card or aborted, and a
     command not confirmed is lost. Telemetry is built at TPDO2 from the last
     TPDO1; a heartbeat at TPDO4 from the last TPDO3.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    node_id : int
+        The wheel's node id, 0..15.
+    clock : WallClock or SimClock
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
