@@ -490,6 +490,26 @@ def cases() -> list[tuple[str, list[str]]]:
         ),
         ("identify a record too short for the study", ["identify", "{D}/rec.mcap", *out]),
     ]
+    # protocol profiles and CAN logs (issue 43)
+    c += [
+        (
+            "export --format blf of a record without raw frames",
+            ["export", "{D}/rec.mcap", "--format", "blf", "--out", "{O}.blf"],
+        ),
+        (
+            "export --format asc with --Ts",
+            ["export", "{D}/rec.mcap", "--format", "asc", "--Ts", "1", "--out", "{O}.asc"],
+        ),
+        ("experiment --profile bogus", [*exp, "--protocol", "canopen", "--profile", "bogus"]),
+        (
+            "experiment --profile of a profiled protocol",
+            [*exp, "--protocol", "canopen/cia402", "--profile", "oresat"],
+        ),
+        (
+            "wheel serve --profile bogus",
+            ["wheel", "serve", "--protocol", "canopen", "--profile", "x"],
+        ),
+    ]
     return c
 
 

@@ -242,6 +242,42 @@ def test_a_short_sdo_request_is_answered_with_an_abort_and_counted_never_a_trace
             bus.shutdown()
 
 
+@settings(max_examples=25, deadline=None)
+@given(
+    name=st.sampled_from(["canopen", "canopen/cia402", "canopen/oresat"]),
+    requests=st.lists(st.binary(max_size=8), min_size=1, max_size=40),
+)
+def test_any_sdo_request_bytes_get_answers_never_an_error_or_a_log(name, requests):
+    channel = f"fuzz{next(_channels)}"
+    buses = [can.Bus(interface="virtual", channel=channel, preserve_timestamps=True) for _ in "ab"]
+    clock = SimClock()
+    node = WheelNode(buses[0], 2, clock=clock, watchdog=0, protocol=name)
+    cid = {"canopen": 3, "canopen/cia402": 3, "canopen/oresat": 0x3C + 8}[name]
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler(logging.DEBUG)
+    handler.emit = records.append  # type: ignore[method-assign]
+    logging.getLogger("canopen").addHandler(handler)
+    try:
+        for data in requests:
+            msg = can.Message(arbitration_id=0x600 + cid, data=data, is_extended_id=False)
+            buses[1].send(msg)
+            clock.sleep(0.001)
+        answers = []
+        while (msg := buses[1].recv(timeout=0)) is not None:
+            if msg.arbitration_id == 0x580 + cid:
+                answers.append(bytes(msg.data))
+        assert node.errors == 0
+        assert all(len(a) == 8 for a in answers)
+        assert not [r for r in records if r.levelno >= logging.WARNING]
+        short = sum(len(d) != 8 for d in requests)
+        assert node.bad_frames >= short  # each one counted
+    finally:
+        logging.getLogger("canopen").removeHandler(handler)
+        node.stop()
+        for bus in buses:
+            bus.shutdown()
+
+
 @pytest.mark.parametrize("bad", [math.nan, 1e30])
 def test_the_rwlab_canopen_profile_aborts_a_nan_or_huge_setpoint(bad):
     channel = f"rw{next(_channels)}"

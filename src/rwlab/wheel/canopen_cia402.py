@@ -212,6 +212,7 @@ class Cia402NodeLink(NodeLink):
         self._speed_rpm = 0.0
         self._twin: str | None = None
         self._ids = {0x000, 0x200 + self.cid, 0x300 + self.cid, 0x600 + self.cid}
+        self._rpdo_bytes = {0x200 + self.cid: 7, 0x300 + self.cid: 4}  # RPDO1, RPDO2 maps
         self._own = {0x180 + self.cid, 0x280 + self.cid, 0x380 + self.cid, 0x480 + self.cid}
 
     def configure(self, params: WheelParams) -> None:
@@ -250,7 +251,7 @@ class Cia402NodeLink(NodeLink):
             if cob == 0x600 + self.cid and not checked_sdo_request(self.network, cob, msg.data):
                 self.bad_frames += 1
                 continue
-            if cob in (0x200 + self.cid, 0x300 + self.cid) and len(msg.data) not in (6, 7, 4):
+            if cob in self._rpdo_bytes and len(msg.data) != self._rpdo_bytes[cob]:
                 self.bad_frames += 1
                 continue
             try:

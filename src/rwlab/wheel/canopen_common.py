@@ -11,7 +11,8 @@ package leaves to its user:
   have 8 data bytes; the package's server raises (and logs a traceback) on a
   shorter one. Such a request is answered with the abort "command specifier not
   valid or unknown" (0x05040001) and counted as bad, as CANopenNode's server
-  refuses any SDO frame whose length is not 8.
+  refuses any SDO frame whose length is not 8. Block downloads, which the
+  package's server does not support, get the same abort (and no error log).
 - :func:`setpoint_abort`: the CiA 301 abort code of a setpoint the wheel must
   refuse (0x06090030 value range exceeded for a non-finite number, 0x06090031 /
   0x06090032 written too high / too low), raised by a write callback so the
@@ -58,6 +59,7 @@ ABORT_TOO_HIGH = 0x06090031  # value of parameter written too high
 ABORT_TOO_LOW = 0x06090032  # value of parameter written too low
 ABORT_DEVICE_STATE = 0x08000022  # cannot be transferred or stored: present device state
 SDO_FRAME_BYTES = 8
+BLOCK_DOWNLOAD = 0xC0  # client command specifier 6, in bits 5..7
 SDO_RX, SDO_TX = 0x600, 0x580
 
 
@@ -107,7 +109,11 @@ class BusNetwork(canopen.Network):
 
 
 def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearray) -> bool:
-    """True when ``data`` is a well-formed SDO request; otherwise answer its abort, False.
+    """True when ``data`` is an SDO request for the package's server; otherwise answer its abort.
+
+    A request that is not 8 bytes, and a block download (which the package's
+    server refuses with the same abort, but logs as an error), are answered
+    0x05040001 here.
 
     Parameters
     ----------
@@ -122,7 +128,7 @@ def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearra
     -------
     bool
     """
-    if len(data) == SDO_FRAME_BYTES:
+    if len(data) == SDO_FRAME_BYTES and data[0] & 0xE0 != BLOCK_DOWNLOAD:
         return True
     head = bytes(data[1:4]).ljust(3, b"\0")  # index and subindex, as far as they came
     abort = bytes([0x80]) + head + struct.pack("<I", ABORT_UNKNOWN_COMMAND)
