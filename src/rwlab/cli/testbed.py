@@ -93,7 +93,17 @@ class _ExperimentCommand(click.Command):
     help="Wheel protocol: rwlab (default), canopen, nsp, or a registered one "
     "(`rwlab wheel protocols`).",
 )
-@click.option("--raw-frames", is_flag=True, default=None, help="Also record every CAN frame.")
+@click.option(
+    "--profile",
+    help="The protocol's profile (canopen: rwlab, oresat, cia402; `rwlab wheel protocols`).",
+)
+@click.option(
+    "--raw-frames",
+    is_flag=True,
+    default=None,
+    help="Also record every CAN frame (CAN protocols only; `rwlab export --format asc|blf` "
+    "writes them for CAN tools).",
+)
 @click.option(
     "--rate-limit/--no-rate-limit",
     default=None,
@@ -121,7 +131,7 @@ class _ExperimentCommand(click.Command):
 )
 @click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def experiment(config_file, out, monitor, port, force, **settings):
+def experiment(config_file, out, monitor, port, force, profile, **settings):
     """Play a test signal into a wheel and record every command and telemetry frame.
 
     With the default virtual interface a simulated RW90 answers, on a simulated
@@ -137,6 +147,12 @@ def experiment(config_file, out, monitor, port, force, **settings):
         cfg = ExperimentConfig.from_toml(config_file, **overrides)
     else:
         cfg = ExperimentConfig(**{k: v for k, v in overrides.items() if v is not None})
+    if profile is not None:
+        from dataclasses import replace
+
+        from rwlab.wheel.link import resolve_protocol
+
+        cfg = replace(cfg, protocol=resolve_protocol(cfg.protocol, profile))
     cfg.check_limits(cfg.wheel_params())
     if Path(out).suffix.lower() != ".mcap":
         raise ConfigError(f"--out {out}: a record is an .mcap file; name it NAME.mcap")
@@ -209,7 +225,14 @@ def _timing_line(t: dict) -> str:
 
 @main.command("export")
 @click.argument("record", type=click.Path(dir_okay=False))
-@click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "mat"]), required=True)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["csv", "parquet", "mat", "asc", "blf"]),
+    required=True,
+    help="csv, parquet, mat: sampled signals; asc, blf: the raw CAN frames of a record made "
+    "with --raw-frames (Vector logs, python-can's writers).",
+)
 @click.option("--out", type=click.Path(dir_okay=False), required=True)
 @click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (default: the record's).")
 @click.option(
@@ -231,10 +254,11 @@ def _timing_line(t: dict) -> str:
 @_salvage_option
 @_friendly_errors
 def export(record, fmt, out, Ts, max_gap, node, satellite, force):
-    """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts.
+    """Write a record as CSV, Parquet or MATLAB .mat, sampled at Ts; or its CAN frames.
 
     Columns: time_s, command, speed_rpm, acceleration_rpm_s, current_a; with
     --satellite the satellite channel of a hil record at its logging period.
+    --format asc|blf writes every recorded CAN frame as a Vector log instead.
     """
     from rwlab.testbed import load_record
 
@@ -248,6 +272,17 @@ def export(record, fmt, out, Ts, max_gap, node, satellite, force):
     if path.exists() and not force:
         raise FileExistsError(f"{path} exists; pass --force to replace it")
     _check_folder(path.parent)
+    if fmt in ("asc", "blf"):
+        if satellite or node is not None or Ts is not None or max_gap is not None:
+            raise ConfigError(
+                f"--format {fmt} writes the recorded CAN frames as they came; leave out "
+                "--satellite, --node, --Ts and --max-gap"
+            )
+        from rwlab.testbed.canlog import write_can_log
+
+        count = write_can_log(record, path, fmt)
+        click.echo(f"{path}: {count} CAN frames")
+        return
     if satellite:
         if node is not None or Ts is not None or max_gap is not None:
             raise ConfigError(

@@ -34,6 +34,12 @@ def _bus_options(func):
                 help="Wheel protocol (rwlab, canopen, nsp, or a registered one; "
                 "see `rwlab wheel protocols`).",
             ),
+            click.option(
+                "--profile",
+                default=None,
+                help="The protocol's profile: canopen: rwlab, oresat, cia402; nsp: its wheel "
+                "families (`rwlab wheel protocols` lists them). Default: rwlab's own.",
+            ),
         ]
     ):
         func = option(func)
@@ -92,6 +98,7 @@ def wheel_serve(
     channel,
     node_id,
     protocol,
+    profile,
     telemetry_rate,
     latency_ms,
     watchdog,
@@ -110,8 +117,9 @@ def wheel_serve(
     from rwlab.errors import ConfigError
     from rwlab.wheel import RW90, WheelNode, WheelParams
     from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport, transport_names
-    from rwlab.wheel.link import get_protocol
+    from rwlab.wheel.link import get_protocol, resolve_protocol
 
+    protocol = resolve_protocol(protocol, profile)
     if params and wheel_model:
         raise ConfigError("give the wheel once: --params FILE or --wheel NAME|FILE")
     wheel_params = WheelParams.load(params or wheel_model) if params or wheel_model else RW90
@@ -144,12 +152,11 @@ def wheel_serve(
             watchdog=watchdog,
             protocol=protocol,
         ).start()
-        answers_as = get_protocol(protocol).answers_as(node_id)
         click.echo(
-            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop"
-            + (f"\nit answers as {answers_as}" if answers_as else ""),
+            f"simulated wheel {node_id} ({protocol}) on {interface}:{channel}; Ctrl-C to stop",
             err=True,
         )
+        click.echo(f"answering as {get_protocol(protocol).addresses(node_id)}", err=True)
         start = time.monotonic()
         with _stop_signals():
             while duration is None or time.monotonic() - start < duration:
@@ -224,7 +231,7 @@ def _status(node) -> str:
 )
 @click.option("--timeout", type=Number(0, 3600, low_open=True), default=0.5, show_default=True)
 @_friendly_errors
-def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeout):
+def wheel_cmd(interface, channel, node_id, protocol, profile, action, value, watch, timeout):
     """Send one command (speed rpm, accel rpm/s, idle, clear) and print telemetry.
 
     On the virtual interface an in-process simulated wheel answers. The wheel is
@@ -232,9 +239,10 @@ def wheel_cmd(interface, channel, node_id, protocol, action, value, watch, timeo
     """
     from rwlab.wheel import WheelClient, WheelNode
     from rwlab.wheel.bus import open_transport
-    from rwlab.wheel.link import get_protocol
+    from rwlab.wheel.link import get_protocol, resolve_protocol
     from rwlab.wheel.serial import open_pty
 
+    protocol = resolve_protocol(protocol, profile)
     node = None
     if interface == "virtual" and "can" not in get_protocol(protocol).transports:
         node_bus, bus = open_pty()  # a serial protocol's twin answers over a pty pair
@@ -289,14 +297,16 @@ def wheel_protocols():
     from rwlab.wheel.bus import transport_names
     from rwlab.wheel.link import get_protocol, protocol_names
 
-    click.echo("protocols:")
+    click.echo("protocols (a family's bare name is its rwlab profile):")
     for name, target in protocol_names().items():
         try:
             protocol = get_protocol(name)
             about = f"{protocol.description} [transports: {', '.join(protocol.transports)}]"
         except Exception as exc:  # a broken plugin is listed with why, not fatal
             about = f"cannot be loaded: {exc}"
-        click.echo(f"  {name:<10} {target}\n             {about}")
+        family, _, profile = name.partition("/")
+        shown = f"--protocol {family}" + (f" --profile {profile}" if profile else "")
+        click.echo(f"  {name:<16} ({shown}) {target}\n                   {about}")
     click.echo("interfaces:")
     for name, target in transport_names().items():
         click.echo(f"  {name:<14} {target}")

@@ -30,7 +30,13 @@ rate; TPDO2 (0x280 + id) state, faults, flags with it; TPDO3 (0x380 + id)
 temperature, commands seen, uptime at 1 Hz with the NMT heartbeat (0x700 + id,
 operational). A fault that latches sends an EMCY (0x080 + id). SDO (0x600/0x580
 + id) reads and writes every object: a bare ``canopen`` client can drive the
-wheel by writing 0x4002 then 0x4000.
+wheel by writing 0x4002 then 0x4000. A setpoint beyond the wheel's limit or not
+a number is aborted (CiA 301 0x06090031/32, 0x06090030) and never applied; an
+unknown requested state is aborted 0x06090030; an SDO request that is not 8
+bytes is answered 0x05040001 and counted (:mod:`rwlab.wheel.canopen_common`).
+
+Node ids: wheel ``n`` (0..15) is CANopen node ``n + 1``, since CANopen node id 0
+is reserved; ``rwlab wheel serve`` prints the COB-IDs it answers on.
 
 The PDO layouts, SDO server, EMCY producer and object encoding are the
 ``canopen`` package's; this module only maps them to the twin's messages.
@@ -48,9 +54,17 @@ from typing import Any
 import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary
+from canopen.sdo import SdoAbortedError
 
-from rwlab.interrupts import uninterrupted
 from rwlab.wheel import protocol as proto
+from rwlab.wheel.canopen_common import (
+    ABORT_RANGE_EXCEEDED,
+    BusNetwork,
+    checked_sdo_request,
+    cob_ids,
+    send_frame,
+    setpoint_abort,
+)
 from rwlab.wheel.dbc_link import read_frames
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
@@ -109,41 +123,13 @@ def canopen_id(node_id: int) -> int:
     return proto._check_node(node_id) + 1
 
 
-def _send(bus: can.BusABC, cob_id: int, data: bytes, t: float) -> None:
-    msg = can.Message(arbitration_id=cob_id, data=bytes(data), is_extended_id=False)
-    msg.timestamp = t
-    with uninterrupted():  # a stop inside python-can's queue can leave its lock taken
-        bus.send(msg)
-
-
-class _BusNetwork(canopen.Network):
-    """A ``canopen`` network fed by the caller (no notifier thread: a simulated clock rules).
-
-    Frames the ``canopen`` package sends itself (SDO answers, EMCY) carry the time
-    the link last saw, so simulated records stay on simulated time.
-    """
-
-    def __init__(self, bus: can.BusABC) -> None:
-        super().__init__(bus)
-        self.stamp = 0.0  # s, the time stamp of frames the package sends (SDO answers, EMCY)
-        self._bus = bus
-
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        msg = can.Message(
-            arbitration_id=can_id, data=bytes(data), is_extended_id=False, is_remote_frame=remote
-        )
-        msg.timestamp = self.stamp
-        with uninterrupted(), self.send_lock:
-            self._bus.send(msg)
-
-
 class CanopenNodeLink(NodeLink):
     """The twin as a CANopen node (``canopen.LocalNode``)."""
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
         self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
-        self.network = _BusNetwork(bus)
+        self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
         self.network.add_node(self.local)
@@ -184,6 +170,9 @@ class CanopenNodeLink(NodeLink):
                 continue
             self._arrival = msg.timestamp if self.clock.simulated else now
             self.network.stamp = self._arrival
+            if cob == 0x600 + self.cid and not checked_sdo_request(self.network, cob, msg.data):
+                self.bad_frames += 1  # answered with an abort
+                continue
             try:
                 self.network.notify(cob, bytearray(msg.data), self._arrival)
             except (struct.error, ValueError, IndexError, KeyError, TypeError):
@@ -201,17 +190,31 @@ class CanopenNodeLink(NodeLink):
         self._request(state, setpoint, sequence)
 
     def _on_sdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        """Apply a written state or setpoint; abort (CiA 301) one the wheel must refuse."""
         if index == 0x4000:
             (state,) = struct.unpack("<B", data)
+            if state not in _FROM_STATE:
+                raise SdoAbortedError(ABORT_RANGE_EXCEEDED)
             setpoint = self._stored_float(0x4002)
+            self._check_setpoint(state, setpoint)
             self._sequence = self._sequence % 255 + 1
             self._request(state, setpoint, self._sequence)
         elif index == 0x4002:
             state = int(self.local.data_store.get(0x4000, {}).get(0, b"\0")[0])
+            (setpoint,) = struct.unpack("<f", data)
+            self._check_setpoint(state, setpoint)
             if state in (TORQUE_CONTROL, VELOCITY_CONTROL):
-                (setpoint,) = struct.unpack("<f", data)
                 self._sequence = self._sequence % 255 + 1
                 self._request(state, setpoint, self._sequence)
+
+    def _check_setpoint(self, state: int, setpoint: float) -> None:
+        """SDO abort for a setpoint beyond the wheel's limit in ``state`` (or not a number)."""
+        p = self._params
+        speed_limit = rpm_to_rad_s(p.max_speed_rpm)  # rad/s
+        if state == TORQUE_CONTROL:
+            setpoint_abort(setpoint, p.inertia * rpm_to_rad_s(p.max_accel_rpm_s))  # N·m
+        else:  # velocity control, or stored for later: the larger limit
+            setpoint_abort(setpoint, speed_limit)
 
     def _stored_float(self, index: int) -> float:
         raw = self.local.data_store.get(index, {}).get(0)
@@ -264,9 +267,9 @@ class CanopenNodeLink(NodeLink):
             values[0x400C] = flags | int(frame.speed_limited)
             self._values.update(values)
             self._fill(tpdo[2])
-            _send(self.bus, 0x280 + cid, tpdo[2].data, t)
+            send_frame(self.bus, 0x280 + cid, tpdo[2].data, t)
             self._fill(tpdo[1])
-            _send(self.bus, 0x180 + cid, tpdo[1].data, t)
+            send_frame(self.bus, 0x180 + cid, tpdo[1].data, t)
             return
         new = frame.faults & ~self._faults
         self._faults = frame.faults
@@ -282,8 +285,8 @@ class CanopenNodeLink(NodeLink):
             }
         )
         self._fill(tpdo[3])
-        _send(self.bus, 0x380 + cid, tpdo[3].data, t)
-        _send(self.bus, 0x700 + cid, bytes([NMT_OPERATIONAL]), t)
+        send_frame(self.bus, 0x380 + cid, tpdo[3].data, t)
+        send_frame(self.bus, 0x700 + cid, bytes([NMT_OPERATIONAL]), t)
         for fault, code in EMCY_CODES.items():
             if new & fault:
                 self.local.emcy.send(code, 0x01, struct.pack("<B", int(frame.faults)))
@@ -302,7 +305,7 @@ class CanopenHostLink(HostLink):
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
         self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
-        self.network = _BusNetwork(bus)
+        self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))
         self.network.add_node(self.remote)
@@ -329,7 +332,7 @@ class CanopenHostLink(HostLink):
         rpdo["Requested state"].raw = _TO_STATE[cmd.mode]
         rpdo["Setpoint"].raw = setpoint
         rpdo["Setpoint sequence"].raw = cmd.sequence & 0xFF
-        _send(self.bus, rpdo.cob_id, rpdo.data, now)
+        send_frame(self.bus, rpdo.cob_id, rpdo.data, now)
         if self.raw_listener:
             self.raw_listener(now, rpdo.cob_id, bytes(rpdo.data), "tx")
 
@@ -409,6 +412,11 @@ class CanopenProtocol(WheelProtocol):
 
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> CanopenNodeLink:
         return CanopenNodeLink(transport, node_id, clock)
+
+    def addresses(self, node_id: int) -> str:
+        """CANopen node ``node_id + 1`` (CANopen ids start at 1) and its COB-IDs."""
+        cid = canopen_id(node_id)
+        return cob_ids(cid, (0x180 + cid, 0x280 + cid, 0x380 + cid), (0x200 + cid,))
 
     def identity(self) -> str:
         return f"canopen eds sha256 {hashlib.sha256(_eds_text().encode()).hexdigest()}"

@@ -14,11 +14,13 @@ so one client and one twin serve every protocol. Anything on the transport
 that is not a valid message for this end is dropped and counted by the link
 (``bad_frames``: damaged; ``foreign_frames``: valid but not ours), never raised.
 
-Protocols are found by name, as python-can finds its interfaces: those built
-in (``rwlab``, ``canopen``, ``nsp``, and the NSP wheel families' profiles
-``nsp/nrwa-t6`` and ``nsp/rw4-12``) and any a package declares under
+Protocols are found by name, as python-can finds its interfaces: the ones
+built in (``rwlab``, ``canopen``, ``nsp`` and the profiles of a family, named
+``family/profile`` such as ``canopen/cia402``) and any a package declares under
 the entry-point group ``rwlab.wheel_protocols`` (``name = "module:Class"``).
-Transports likewise under ``rwlab.wheel_transports``.
+Transports likewise under ``rwlab.wheel_transports``. A family's bare name
+(``canopen``) is rwlab's own profile of it; :func:`resolve_protocol` turns the
+CLI's ``--protocol F --profile P`` into a registry name.
 """
 
 from __future__ import annotations
@@ -45,7 +47,9 @@ __all__ = [
     "NodeLink",
     "WheelProtocol",
     "get_protocol",
+    "profiles_of",
     "protocol_names",
+    "resolve_protocol",
 ]
 
 PROTOCOL_GROUP = "rwlab.wheel_protocols"
@@ -57,7 +61,10 @@ BUILTIN_PROTOCOLS = {
     "nsp": "rwlab.wheel.nsp:NspProtocol",
     "nsp/nrwa-t6": "rwlab.wheel.nsp_t6:NrwaT6Protocol",
     "nsp/rw4-12": "rwlab.wheel.nsp_rw4:Rw412Protocol",
+    "canopen/oresat": "rwlab.wheel.canopen_oresat:OresatProtocol",
+    "canopen/cia402": "rwlab.wheel.canopen_cia402:Cia402Protocol",
 }
+OWN_PROFILE = "rwlab"  # ``--profile rwlab``: a family's bare name, rwlab's own profile of it
 
 RawListener = Callable[[float, int, bytes, str], None]
 """Called with (time s, id, bytes, 'rx' or 'tx') for every frame, for recording the bus."""
@@ -174,22 +181,23 @@ class WheelProtocol(abc.ABC):
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
         """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
 
-    def answers_as(self, node_id: int) -> str:
-        """Where the twin of wheel ``node_id`` answers, in the protocol's own terms ("" if by id).
+    def identity(self) -> str:
+        """A text naming the protocol's definition exactly (a file hash), for records."""
+        return self.name
+
+    def addresses(self, node_id: int) -> str:
+        """What the twin of wheel ``node_id`` answers on, in the protocol's terms (for ``serve``).
 
         Parameters
         ----------
         node_id : int
+            The wheel's node id, 0..15.
 
         Returns
         -------
         str
         """
-        return ""
-
-    def identity(self) -> str:
-        """A text naming the protocol's definition exactly (a file hash), for records."""
-        return self.name
+        return f"node {node_id}"
 
 
 def _entry_points(group: str) -> dict[str, metadata.EntryPoint]:
@@ -240,3 +248,60 @@ def get_protocol(name: str) -> WheelProtocol:
     if not isinstance(protocol, WheelProtocol):
         raise ConfigError(f"wheel protocol {name!r} ({target}) is not a WheelProtocol")
     return protocol
+
+
+def profiles_of(family: str) -> list[str]:
+    """The profiles registered for protocol ``family`` (``rwlab`` for its bare name).
+
+    Parameters
+    ----------
+    family : str
+        A protocol family, e.g. ``canopen`` or ``nsp``.
+
+    Returns
+    -------
+    list of str
+        Profile names, rwlab's own first when the family's bare name is registered.
+    """
+    names = protocol_names()
+    own = [OWN_PROFILE] if family in names else []
+    return own + sorted(n.split("/", 1)[1] for n in names if n.startswith(f"{family}/"))
+
+
+def resolve_protocol(protocol: str, profile: str | None) -> str:
+    """The registry name of ``--protocol protocol --profile profile``.
+
+    Parameters
+    ----------
+    protocol : str
+        A protocol family (``canopen``) or a full registry name (``canopen/cia402``).
+    profile : str or None
+        A profile of the family; None leaves ``protocol`` as given.
+
+    Returns
+    -------
+    str
+        ``family/profile``, or the family's bare name for the ``rwlab`` profile.
+    """
+    if profile is None:
+        return protocol
+    if "/" in protocol:
+        raise ConfigError(
+            f"--protocol {protocol} already names a profile; give --protocol "
+            f"{protocol.split('/', 1)[0]} --profile {profile}, or leave out --profile"
+        )
+    names = protocol_names()
+    if f"{protocol}/{profile}" in names:
+        return f"{protocol}/{profile}"
+    if profile == OWN_PROFILE and protocol in names:
+        return protocol
+    known = profiles_of(protocol)
+    if not known:
+        raise ConfigError(
+            f"unknown wheel protocol {protocol!r}; choose from "
+            f"{', '.join(sorted({n.split('/', 1)[0] for n in names}))}"
+        )
+    raise ConfigError(
+        f"protocol {protocol!r} has no profile {profile!r}; choose from {', '.join(known)} "
+        "(`rwlab wheel protocols` lists them)"
+    )

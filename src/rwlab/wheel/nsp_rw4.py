@@ -254,5 +254,5 @@ class Rw412Protocol(WheelProtocol):
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> Rw412NodeLink:
         return Rw412NodeLink(transport, node_id, clock)
 
-    def answers_as(self, node_id: int) -> str:
+    def addresses(self, node_id: int) -> str:
         return f"NSP address 0x{wheel_address(node_id):02X}"

@@ -453,6 +453,6 @@ class NrwaT6Protocol(WheelProtocol):
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NrwaT6NodeLink:
         return NrwaT6NodeLink(transport, node_id, clock)
 
-    def answers_as(self, node_id: int) -> str:
+    def addresses(self, node_id: int) -> str:
         address = wheel_address(node_id)
         return f"NSP address 0x{address:02X} (redundant port 0x{address | REDUNDANT_PORT:02X})"

@@ -1,0 +1,276 @@
+"""What every CANopen profile of the twin shares: the bus network, SDO checks, the SDO pump.
+
+The profiles (``canopen``, ``canopen/oresat``, ``canopen/cia402``) are built on
+the ``canopen`` package: its object dictionaries, PDO maps, SDO server
+(``LocalNode``) and SDO client (``SdoClient``). This module adds only what the
+package leaves to its user:
+
+- :class:`BusNetwork`: a ``canopen.Network`` fed by the caller, so a simulated
+  clock rules time (no notifier thread), and frames carry the caller's stamps.
+- :func:`checked_sdo_request`: the SDO server's input check. CiA 301 SDO frames
+  have 8 data bytes; the package's server raises (and logs a traceback) on a
+  shorter one. Such a request is answered with the abort "command specifier not
+  valid or unknown" (0x05040001) and counted as bad, as CANopenNode's server
+  refuses any SDO frame whose length is not 8. Block downloads, which the
+  package's server does not support, get the same abort (and no error log).
+- :func:`setpoint_abort`: the CiA 301 abort code of a setpoint the wheel must
+  refuse (0x06090030 value range exceeded for a non-finite number, 0x06090031 /
+  0x06090032 written too high / too low), raised by a write callback so the
+  package's server answers the abort and the value is never applied.
+- :class:`SdoPumpNetwork`: the driver's side. The package's ``SdoClient`` waits
+  for its answer on a queue a notifier thread fills; here the network itself
+  fills it while it waits (kicking a simulated clock so the twin answers at the
+  same simulated instant), and keeps every other frame for the link to read.
+
+CiA 301 abort codes as ``canopen.sdo.exceptions.SdoAbortedError.CODES`` lists them.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import time
+from collections.abc import Callable
+
+import can
+import canopen
+from canopen.sdo import SdoAbortedError
+
+from rwlab.interrupts import uninterrupted
+from rwlab.wheel.dbc_link import read_frames
+from rwlab.wheel.link import Clock
+
+__all__ = [
+    "ABORT_RANGE_EXCEEDED",
+    "ABORT_TOO_HIGH",
+    "ABORT_TOO_LOW",
+    "ABORT_UNKNOWN_COMMAND",
+    "BusNetwork",
+    "SdoPumpNetwork",
+    "checked_sdo_request",
+    "cob_ids",
+    "send_frame",
+    "setpoint_abort",
+]
+
+ABORT_UNKNOWN_COMMAND = 0x05040001  # client/server command specifier not valid or unknown
+ABORT_RANGE_EXCEEDED = 0x06090030  # value range of parameter exceeded (write access)
+ABORT_TOO_HIGH = 0x06090031  # value of parameter written too high
+ABORT_TOO_LOW = 0x06090032  # value of parameter written too low
+ABORT_DEVICE_STATE = 0x08000022  # cannot be transferred or stored: present device state
+SDO_FRAME_BYTES = 8
+BLOCK_DOWNLOAD = 0xC0  # client command specifier 6, in bits 5..7
+SDO_RX, SDO_TX = 0x600, 0x580
+
+
+def send_frame(bus: can.BusABC, cob_id: int, data: bytes, t: float) -> None:
+    """Send one standard-id frame stamped ``t`` (s, the caller's clock).
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    cob_id : int
+        The 11-bit COB-ID.
+    data : bytes
+        0..8 bytes.
+    t : float
+        Time stamp, s.
+    """
+    msg = can.Message(arbitration_id=cob_id, data=bytes(data), is_extended_id=False)
+    msg.timestamp = t
+    with uninterrupted():  # a stop inside python-can's queue can leave its lock taken
+        bus.send(msg)
+
+
+class BusNetwork(canopen.Network):
+    """A ``canopen`` network fed by the caller (no notifier thread: a simulated clock rules).
+
+    Frames the ``canopen`` package sends itself (SDO answers, EMCY) carry the time
+    the link last saw, so simulated records stay on simulated time.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The bus the network sends on (the caller reads it).
+    """
+
+    def __init__(self, bus: can.BusABC) -> None:
+        super().__init__(bus)
+        self.stamp = 0.0  # s, the time stamp of frames the package sends (SDO answers, EMCY)
+        self._bus = bus
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        msg = can.Message(
+            arbitration_id=can_id, data=bytes(data), is_extended_id=False, is_remote_frame=remote
+        )
+        msg.timestamp = self.stamp
+        with uninterrupted(), self.send_lock:
+            self._bus.send(msg)
+
+
+def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearray) -> bool:
+    """True when ``data`` is an SDO request for the package's server; otherwise answer its abort.
+
+    A request that is not 8 bytes, and a block download (which the package's
+    server refuses with the same abort, but logs as an error), are answered
+    0x05040001 here.
+
+    Parameters
+    ----------
+    network : BusNetwork
+        The twin's network (sends the abort).
+    cob_id : int
+        The request's COB-ID, 0x600 + node id.
+    data : bytes
+        The request.
+
+    Returns
+    -------
+    bool
+    """
+    if len(data) == SDO_FRAME_BYTES and data[0] & 0xE0 != BLOCK_DOWNLOAD:
+        return True
+    head = bytes(data[1:4]).ljust(3, b"\0")  # index and subindex, as far as they came
+    abort = bytes([0x80]) + head + struct.pack("<I", ABORT_UNKNOWN_COMMAND)
+    network.send_message(cob_id - SDO_RX + SDO_TX, abort)
+    return False
+
+
+def setpoint_abort(value: float, limit: float) -> None:
+    """Raise the CiA 301 abort for a setpoint beyond ``±limit`` or not a number.
+
+    Parameters
+    ----------
+    value : float
+        The setpoint, in the unit of ``limit``.
+    limit : float
+        The largest magnitude the wheel obeys.
+
+    Raises
+    ------
+    canopen.SdoAbortedError
+        0x06090030 (not finite), 0x06090031 (above), 0x06090032 (below).
+    """
+    if not math.isfinite(value):
+        raise SdoAbortedError(ABORT_RANGE_EXCEEDED)
+    if value > limit:
+        raise SdoAbortedError(ABORT_TOO_HIGH)
+    if value < -limit:
+        raise SdoAbortedError(ABORT_TOO_LOW)
+
+
+def cob_ids(canopen_id: int, tpdos: tuple[int, ...], rpdos: tuple[int, ...]) -> str:
+    """The COB-IDs a CANopen node ``canopen_id`` answers on, for ``serve`` to print.
+
+    Parameters
+    ----------
+    canopen_id : int
+        1..127.
+    tpdos, rpdos : tuple of int
+        The COB-IDs of its TPDOs and RPDOs.
+
+    Returns
+    -------
+    str
+    """
+    return (
+        f"CANopen node {canopen_id} (0x{canopen_id:02X}): SDO 0x{SDO_RX + canopen_id:03X} "
+        f"-> 0x{SDO_TX + canopen_id:03X}, "
+        + (f"RPDO {'/'.join(f'0x{c:03X}' for c in rpdos)}, " if rpdos else "")
+        + f"TPDO {'/'.join(f'0x{c:03X}' for c in tpdos)}, EMCY 0x{0x80 + canopen_id:03X}, "
+        f"heartbeat 0x{0x700 + canopen_id:03X}"
+    )
+
+
+class SdoPumpNetwork(BusNetwork):
+    """The driver's network: an SDO request waits for its answer by reading the bus itself.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    clock : WallClock or SimClock
+        A simulated clock is kicked so the twin answers at the same instant.
+    server_id : int
+        The CANopen node id of the SDO server (the wheel).
+    timeout : float
+        Wall seconds to wait for an answer.
+    """
+
+    def __init__(self, bus: can.BusABC, clock: Clock, server_id: int, timeout: float = 0.3):
+        super().__init__(bus)
+        self.clock, self.timeout = clock, timeout
+        self._request_id, self._response_id = SDO_RX + server_id, SDO_TX + server_id
+        self.kept: list[can.Message] = []  # frames read while waiting, for the link
+        self.on_frame: Callable[[float, int, bytes, str], None] | None = None  # a recorder
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        self.stamp = self.clock.now()
+        super().send_message(can_id, data, remote)
+        if self.on_frame is not None:
+            self.on_frame(self.stamp, can_id, bytes(data), "tx")
+        if can_id == self._request_id:
+            self._pump()
+
+    def _pump(self) -> None:
+        """Read the bus until the SDO answer comes (the package's client then finds it)."""
+        deadline = time.monotonic() + self.timeout
+        while time.monotonic() < deadline:
+            if self.clock.simulated:
+                self.clock.kick()  # type: ignore[union-attr]
+            for msg in read_frames(self._bus):
+                if msg.arbitration_id == self._response_id and not msg.is_remote_frame:
+                    if self.on_frame is not None:
+                        t = msg.timestamp if self.clock.simulated else self.clock.now()
+                        self.on_frame(t, msg.arbitration_id, bytes(msg.data), "rx")
+                    self.notify(msg.arbitration_id, bytearray(msg.data), msg.timestamp)
+                    return
+                self.kept.append(msg)
+            time.sleep(2e-5)
+
+    def take(self) -> list[can.Message]:
+        """Frames kept while waiting, then those waiting on the bus now, oldest first.
+
+        Returns
+        -------
+        list of can.Message
+        """
+        out, self.kept = self.kept, []
+        return out + read_frames(self._bus)
+
+
+class TpdoSchedule:
+    """When each TPDO of a twin is due, from its event timer (0x1800 + n - 1, sub 5, ms).
+
+    CiA 301: a TPDO of transmission type 254/255 is sent when its event timer
+    elapses; a timer of 0 disables it, and the TPDO is then sent on every
+    change, which for telemetry is every sample. The timer is read from the
+    node's object dictionary each time, so a host that writes it (as OreSat's
+    C3 may) changes the rate at once.
+
+    Parameters
+    ----------
+    node : canopen.LocalNode
+    """
+
+    def __init__(self, node: canopen.LocalNode) -> None:
+        self.node = node
+        self._booked: dict[int, tuple[float, float, float]] = {}  # last sent, period, next
+
+    def timer_s(self, number: int) -> float:
+        """The event timer of TPDO ``number`` (1-based), s (0: sent on every sample)."""
+        raw = self.node.get_data(0x1800 + number - 1, 5)
+        return int.from_bytes(raw, "little") / 1000
+
+    def due(self, number: int, t: float) -> bool:
+        """True (and the next time booked) when TPDO ``number`` should be sent at ``t`` (s)."""
+        period = self.timer_s(number)
+        if period <= 0:
+            return True
+        last, booked_period, due = self._booked.get(number, (t - period, period, t))
+        if period != booked_period:  # the timer was written: count from the last send
+            due = last + period
+        if t < due - min(1e-3, 0.1 * period):  # a sample early by rounding still counts
+            self._booked[number] = (last, period, due)
+            return False
+        self._booked[number] = (t, period, due + period if due + period > t else t + period)
+        return True
