@@ -19,8 +19,8 @@ For the statistical interpretations (see :mod:`rwlab.campaign.budget`) each run
 also gives, for the total error |e|: the fraction of its steady time within the
 requirement and the ``probability``-quantile of |e| over its steady time. And
 how the run converged: the time it settled inside the requirement for good, and
-the time the filter's attitude σ first came within 1.5× of its median over the
-run's second half.
+the time every σ the filter logs (attitude, and rate or gyro bias) first came
+within 1.5× of its median over the run's second half.
 
 Everything here comes from the logged trace (``SimResult`` rows): content
 faster than the logging interval is not seen (the total APE, from every step,
@@ -135,7 +135,7 @@ def run_indices(
     steady_from_s: float,
     req: PointingRequirement,
     bound_deg: float,
-    attitude_sigma: np.ndarray | None = None,
+    filter_sigma: np.ndarray | None = None,
 ) -> dict[str, float | None]:
     """One run's ECSS indices and convergence, as a flat row (degrees, seconds, fractions).
 
@@ -155,8 +155,8 @@ def run_indices(
         Windows and the probability of the time quantile.
     bound_deg : float
         The APE bound on the total error, degrees.
-    attitude_sigma : numpy.ndarray, shape (K, 3), optional
-        The filter's attitude 1σ, rad (for its convergence time).
+    filter_sigma : numpy.ndarray, shape (K, m), optional
+        The filter's logged 1σ (attitude, then rate or gyro bias; for its convergence).
 
     Returns
     -------
@@ -196,7 +196,7 @@ def run_indices(
         float(np.quantile(total, req.probability, method="inverted_cdf")) if total.size else 0.0
     )
     out["settled_s"] = _settled(t, total_error_deg, bound_deg)
-    out["filter_converged_s"] = _filter_converged(t, attitude_sigma)
+    out["filter_converged_s"] = _filter_converged(t, filter_sigma)
     return out
 
 
@@ -240,11 +240,10 @@ def _settled(t: np.ndarray, total: np.ndarray, bound: float) -> float | None:
 
 
 def _filter_converged(t: np.ndarray, sigma: np.ndarray | None) -> float | None:
-    """The first time the largest attitude σ is within :data:`FILTER_SETTLED` of its median
-    over the run's second half (None without a filter)."""
+    """The first time every logged σ of the filter is within :data:`FILTER_SETTLED` of its
+    median over the run's second half (None without a filter)."""
     if sigma is None or sigma.size == 0 or not np.any(sigma):
         return None
-    s = np.max(sigma, axis=1)
-    level = FILTER_SETTLED * float(np.median(s[s.size // 2 :]))
-    first = np.flatnonzero(s <= level)
+    level = FILTER_SETTLED * np.median(sigma[sigma.shape[0] // 2 :], axis=0)
+    first = np.flatnonzero(np.all(sigma <= level, axis=1))
     return float(t[first[0]]) if first.size else None

@@ -234,7 +234,7 @@ def _indices(run: SimResult, campaign: Campaign, sc: Scenario) -> dict:
     """The run's ECSS indices (:func:`rwlab.campaign.indices.run_indices`)."""
     bound = campaign.requirement.bound_deg(campaign.scenario.control.pointing_requirement_deg)
     know = np.degrees(run.est_error_axes) if run.est_error_axes is not None else None
-    sigma = run.sigma[:, :3] if run.sigma is not None else None
+    sigma = run.sigma if run.sigma is not None else None
     return run_indices(
         run.t,
         axis_errors_deg(run.q),
@@ -742,6 +742,6 @@ def _steady_window(rows: list[dict], campaign: Campaign) -> dict:
         "filter_converged": filt,
         "runs_converged_after_start": late,
         "definition": "settled: the time after which the total error stays within the APE bound "
-        "to the end; filter converged: the first time the filter's largest attitude σ is within "
-        "1.5× its median over the run's second half",
+        "to the end; filter converged: the first time every σ the filter logs (attitude, and "
+        "rate or gyro bias) is within 1.5× its median over the run's second half",
     }

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from rwlab._io import output_folder
+from rwlab.campaign.indices import PointingRequirement
 from rwlab.errors import ConfigError, RwlabError
 
 __all__ = ["montecarlo"]
@@ -34,6 +35,9 @@ def montecarlo(
     seed: int = 0,
     epoch: str | None = None,
     epoch_spread_days: float = 0.0,
+    steady_after: float | None = None,
+    start: str = "acquisition",
+    requirement: PointingRequirement | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     force: bool = False,
@@ -63,6 +67,13 @@ def montecarlo(
         UTC start, ISO 8601: the real sky.
     epoch_spread_days : float
         Each run starts at ``epoch`` plus a uniform draw of up to this many days.
+    steady_after : float, optional
+        Seconds from which the budget counts (default: half the run, at most an hour).
+    start : {'acquisition', 'converged'}
+        How each run starts (see :class:`rwlab.campaign.montecarlo.Campaign`).
+    requirement : PointingRequirement, optional
+        What the budget checks, its interpretation and windows (default: the
+        scenario's APE bound, P = 0.95 of the runs, 95 % confidence, ensemble).
     workers : int, optional
         Processes of a new local Dask cluster (default: the cores).
     scheduler : str, optional
@@ -118,6 +129,9 @@ def montecarlo(
             runs,
             epoch=epoch,
             epoch_spread_days=epoch_spread_days,
+            steady_after=steady_after,
+            start=start,
+            requirement=requirement or PointingRequirement(),
         )
         check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume, say=say)
