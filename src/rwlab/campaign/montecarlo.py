@@ -338,12 +338,12 @@ def run_campaign(
     progress=None,
     store: RunStore | None = None,
     execution: Execution | None = None,
+    say=None,
 ) -> list[dict]:
     """Every run's row, in run order, computed in batches on ``client``'s workers.
 
     Parameters
     ----------
-    campaign : Campaign
     campaign : Campaign
         The campaign.
     client : distributed.Client
@@ -354,7 +354,9 @@ def run_campaign(
         Where finished batches are kept as they finish; runs it already holds
         are not computed again (a resumed campaign).
     execution : Execution, optional
-        Filled with what happened: runs kept from before, batches retried.
+        Filled with what happened: runs kept from before, batches retried, workers lost.
+    say : callable, optional
+        ``say(line)`` when a worker is lost or a batch retried (the console).
 
     Returns
     -------
@@ -366,7 +368,9 @@ def run_campaign(
     kept = store.rows() if store is not None else {}
     kept = {i: r for i, r in kept.items() if i < campaign.runs}
     execution.resumed_runs = len(kept)
-    execution.retries.extend(store.retries() if store is not None else [])
+    if store is not None:
+        execution.retries.extend(store.retries())
+        execution.lost_workers.extend(store.lost_workers())
     todo = [(i, s) for i, s in enumerate(seeds) if i not in kept]
     work = batches(todo, worker_count(client)) if todo else []
 
@@ -374,12 +378,33 @@ def run_campaign(
         if store is not None:
             store.add(rows)
 
-    def retried(i: int, attempt: int, reason: str) -> None:
-        execution.retries.append(
-            {"runs": [run for run, _ in work[i]], "attempt": attempt, "reason": reason}
-        )
+    def save() -> None:
         if store is not None:
-            store.save_retries(execution.retries)
+            store.save_retries(execution.retries, execution.lost_workers)
+
+    def retried(i: int, attempt: int, reason: str) -> None:
+        runs = [run for run, _ in work[i]]
+        execution.retries.append({"runs": runs, "attempt": attempt, "reason": reason})
+        save()
+        if say is not None:
+            say(f"retrying runs {_span(runs)} (attempt {attempt}): {reason}")
+
+    def lost(worker) -> None:
+        entry = {
+            "address": worker.address,
+            "time": worker.time,
+            "running_runs": sorted(run for i in worker.running for run, _ in work[i]),
+            "recomputed_runs": sorted(run for i in worker.recomputed for run, _ in work[i]),
+        }
+        execution.lost_workers.append(entry)
+        save()
+        if say is not None:
+            what = [f"it was computing runs {_span(entry['running_runs'])}"] * bool(
+                entry["running_runs"]
+            ) + [
+                f"runs {_span(entry['recomputed_runs'])} it had finished are computed again"
+            ] * bool(entry["recomputed_runs"])
+            say(f"worker {worker.address} lost" + (f": {'; '.join(what)}" if what else ""))
 
     if progress is not None and kept:
         progress(len(kept))
@@ -391,35 +416,59 @@ def run_campaign(
         progress=None if progress is None else (lambda k: progress(len(kept) + k)),
         on_batch=keep,
         on_retry=retried,
+        on_lost_worker=lost,
     )
     rows = {**kept, **{r["run"]: r for r in new}}
     return [rows[i] for i in range(campaign.runs)]
 
 
+def _span(runs: list[int]) -> str:
+    """Run indices in words: "3–7" for a contiguous span, else the list."""
+    if runs and runs == list(range(runs[0], runs[-1] + 1)) and len(runs) > 2:
+        return f"{runs[0]}–{runs[-1]}"
+    return ", ".join(map(str, runs))
+
+
 @dataclass
 class Execution:
-    """How a campaign ran: runs kept from an interrupted run, batches retried.
+    """How a campaign ran: runs kept from an interrupted run, batches retried, workers lost.
 
     Attributes
     ----------
     resumed_runs : int
         Runs read back from a :class:`RunStore` rather than computed.
     retries : list of dict
-        One entry per retry: ``runs`` (the run indices of the batch), ``attempt``
-        (1 for the first retry of that batch) and ``reason``.
+        One entry per batch this process submitted again: ``runs`` (the run indices of
+        the batch), ``attempt`` (1 for the first retry of that batch) and ``reason``.
+    lost_workers : list of dict
+        One entry per worker the scheduler lost: ``address``, ``time`` (Unix, s),
+        ``running_runs`` (the runs it was computing) and ``recomputed_runs`` (runs it
+        had finished whose results were lost before they were gathered, computed again
+        by the scheduler without an error).
     """
 
     resumed_runs: int = 0
     retries: list[dict] = field(default_factory=list)
+    lost_workers: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        """Plain JSON: the retries and the runs they concern (for budget.json)."""
-        runs = sorted({r for entry in self.retries for r in entry["runs"]})
+        """Plain JSON for budget.json: every re-execution counted, whoever made it.
+
+        ``retries`` counts the batches this process submitted again, plus the runs the
+        scheduler computed again on its own (lost results, or its own retries of a lost
+        worker's runs beyond those this process made).
+        """
+        ours = sorted({r for entry in self.retries for r in entry["runs"]})
+        recomputed = sorted({r for w in self.lost_workers for r in w["recomputed_runs"]})
+        running = sorted({r for w in self.lost_workers for r in w["running_runs"]})
+        silent = sorted(set(running) - set(ours))
         return {
             "resumed_runs": self.resumed_runs,
-            "retries": len(self.retries),
-            "retried_runs": runs,
+            "retries": len(self.retries) + len(recomputed) + len(silent),
+            "retried_runs": sorted({*ours, *recomputed, *silent}),
+            "recomputed_runs": recomputed,
             "retry_log": list(self.retries),
+            "lost_workers": list(self.lost_workers),
         }
 
 
@@ -522,11 +571,19 @@ class RunStore:
         path = self.folder / "retries.json"
         return list(self._read(path).get("retries", [])) if path.is_file() else []
 
-    def save_retries(self, retries: list[dict]) -> None:
-        """Record the retries so far."""
+    def lost_workers(self) -> list[dict]:
+        """Workers lost so far."""
+        path = self.folder / "retries.json"
+        return list(self._read(path).get("lost_workers", [])) if path.is_file() else []
+
+    def save_retries(self, retries: list[dict], lost_workers: list[dict] | None = None) -> None:
+        """Record the retries and lost workers so far."""
         from rwlab._io import write_json
 
-        write_json(self.folder / "retries.json", {"retries": retries})
+        write_json(
+            self.folder / "retries.json",
+            {"retries": retries, "lost_workers": list(lost_workers or [])},
+        )
 
     @staticmethod
     def _read(path: Path) -> dict:

@@ -16,6 +16,7 @@ from pathlib import Path
 from rwlab._io import output_folder
 from rwlab.campaign.indices import PointingRequirement
 from rwlab.errors import ConfigError, RwlabError
+from rwlab.interrupts import stopped
 
 __all__ = ["montecarlo"]
 
@@ -141,9 +142,20 @@ def montecarlo(
         try:
             with dask_client(workers, scheduler) as client:
                 rows = run_campaign(
-                    campaign, client, progress=progress, store=store, execution=execution
+                    campaign,
+                    client,
+                    progress=progress,
+                    store=store,
+                    execution=execution,
+                    say=say,
                 )
-        except (KeyboardInterrupt, RwlabError, OSError):
+        except KeyboardInterrupt as exc:  # one line: the signal, what is kept, how to go on
+            why = stopped() or (exc.args[0] if exc.args else "interrupted")
+            raise KeyboardInterrupt(
+                f"{why}; campaign stopped: {len(store.rows())} of {runs} runs kept in "
+                f"{store.folder}, continue it with the same arguments and resume=True"
+            ) from None
+        except (RwlabError, OSError):
             say(
                 f"\ncampaign stopped: {len(store.rows())} of {runs} runs kept in "
                 f"{store.folder}; continue it with the same arguments and resume=True"
@@ -153,9 +165,13 @@ def montecarlo(
         worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
         paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
     shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
-    if execution.retries:
-        ex = stats["execution"]
-        say(f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}")
+    ex = stats["execution"]
+    if ex["retries"] or ex["lost_workers"]:
+        say(
+            f"{len(ex['lost_workers'])} worker(s) lost, {ex['retries']} re-execution(s): runs "
+            f"{ex['retried_runs']} computed again (each run depends only on its seed: the "
+            "rows are those of an undisturbed campaign); see execution in budget.json"
+        )
     return stats, {name: Path(out) / Path(p).name for name, p in paths.items()}
 
 
