@@ -211,8 +211,10 @@ def _moving_mean(x: np.ndarray, width: int) -> np.ndarray:
 
 
 def _rpe(e: np.ndarray, width: int) -> float:
-    """max |e(t) − mean of e over the ``width`` samples centred on t| (0 when the trace is
-    shorter than one window)."""
+    """max |e(t) − mean of e over the window centred on t| (0 when the trace is shorter than
+    one window). The window is ``width`` samples made odd (one more when even): an even one
+    is centred half a sample off t, which reads a ramp's slope as RPE."""
+    width += 1 - width % 2
     if e.size < width:
         return 0.0
     mean = _moving_mean(e, width)
