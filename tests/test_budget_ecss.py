@@ -290,3 +290,14 @@ def test_execution_counts_silent_recomputations_as_retries():
     assert d["retries"] == 1 + 2 + 1
     assert d["retried_runs"] == [0, 1, 4, 5, 8] and d["recomputed_runs"] == [0, 1]
     assert len(d["lost_workers"]) == 2
+
+
+def test_long_runs_go_few_to_a_task_and_short_ones_are_grouped():
+    from rwlab.campaign.engine import batches
+    from rwlab.campaign.montecarlo import tasks_per_worker
+
+    per_worker = tasks_per_worker(40, 86400.0, 2)
+    assert {len(b) for b in batches(list(range(40)), 2, per_worker)} == {1}  # day-runs: 1 a task
+    assert tasks_per_worker(96, 600.0, 2) == 8  # 16 simulated hours over 2 workers
+    assert tasks_per_worker(12, 200.0, 2) == 4  # the floor
+    assert tasks_per_worker(10**6, 3600.0, 2) == 64  # the cap

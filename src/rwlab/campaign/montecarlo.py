@@ -372,7 +372,9 @@ def run_campaign(
         execution.retries.extend(store.retries())
         execution.lost_workers.extend(store.lost_workers())
     todo = [(i, s) for i, s in enumerate(seeds) if i not in kept]
-    work = batches(todo, worker_count(client)) if todo else []
+    workers = worker_count(client)
+    per_worker = tasks_per_worker(len(todo), campaign.duration, workers)
+    work = batches(todo, workers, per_worker) if todo else []
 
     def keep(i: int, rows: list[dict]) -> None:
         if store is not None:
@@ -420,6 +422,31 @@ def run_campaign(
     )
     rows = {**kept, **{r["run"]: r for r in new}}
     return [rows[i] for i in range(campaign.runs)]
+
+
+def tasks_per_worker(runs: int, duration: float, workers: int) -> int:
+    """Tasks per worker: about an hour of simulated time each, 4 to 64 per worker.
+
+    Long runs go one or a few to a task, so that the campaign's tail (the last
+    worker busy while the others idle) is one short task, not a quarter of a
+    worker's share; short runs are grouped, so that Dask's per-task cost stays
+    small against the work; at most 64 per worker keeps the kept batches' files few.
+
+    Parameters
+    ----------
+    runs : int
+        Runs to compute.
+    duration : float
+        Seconds simulated per run.
+    workers : int
+        Workers.
+
+    Returns
+    -------
+    int
+    """
+    hours = runs * duration / 3600.0
+    return int(min(64, max(4, math.ceil(hours / max(1, workers)))))
 
 
 def _span(runs: list[int]) -> str:
