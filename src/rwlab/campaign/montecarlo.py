@@ -692,11 +692,11 @@ def budget(rows: list[dict], campaign: Campaign) -> dict:
         out: dict[str, dict | None] = {}
         for a in AXES:
             values = [r.get(pattern.format(a)) for r in rows]
-            out[a] = (
-                None
-                if any(v is None for v in values)
-                else {"max": float(np.max(values)), "quantiles": quantile_table(values)}
-            )
+            if any(v is None for v in values):
+                out[a] = None
+                continue
+            x = np.array(values, dtype=float)
+            out[a] = {"max": float(np.max(x)), "quantiles": quantile_table(x)}
         return out
 
     return {
