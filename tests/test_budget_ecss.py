@@ -301,3 +301,26 @@ def test_long_runs_go_few_to_a_task_and_short_ones_are_grouped():
     assert tasks_per_worker(96, 600.0, 2) == 8  # 16 simulated hours over 2 workers
     assert tasks_per_worker(12, 200.0, 2) == 4  # the floor
     assert tasks_per_worker(10**6, 3600.0, 2) == 64  # the cap
+
+
+def test_the_console_opens_with_requirement_interpretation_and_verdict(tmp_path):
+    from click.testing import CliRunner
+
+    from rwlab.cli import main
+
+    args = ["attitude", "montecarlo", "--scenario", "geo-smallsat", "--runs", "2",
+            "--duration", "120", "--workers", "1", "--seed", "3", "--steady-after", "60",
+            "--interpretation", "mixed", "--out", str(tmp_path / "mc")]  # fmt: skip
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    lines = [x for x in r.stdout.splitlines() if x.strip()]
+    assert lines[0].startswith("requirement: APE ≤ 0.1°") and "t ≥ 60 s" in lines[0]
+    assert lines[1].startswith("interpretation (mixed):") and lines[2].startswith("verdict:")
+    b = json.loads((tmp_path / "mc" / "budget.json").read_text())
+    assert b["interpretation"]["name"] == "mixed" and b["steady_window"]["start_s"] == 60.0
+    bad = CliRunner().invoke(main, [*args[:-1], str(tmp_path / "x"), "--steady-after", "120"])
+    assert (
+        bad.exit_code == 2
+        and bad.output.startswith("error:")
+        and "--steady-after must be" in bad.output
+    )
