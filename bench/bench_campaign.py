@@ -1,27 +1,50 @@
-"""Monte Carlo campaign throughput: runs per second in one process and on 1 and 2 Dask workers.
+"""Monte Carlo campaign scaling: 1 and 2 Dask workers back to back, with the noise.
 
-Run:  python bench/bench_campaign.py [--runs 96] [--duration 600]
+Run:  python bench/bench_campaign.py [--runs 24] [--duration 3600] [--repeats 3]
 
 Each run: geo-smallsat with rwlab's default dispersions, the LQG loop (MEKF),
 ``--duration`` s at dt = 0.1 s, as ``rwlab attitude montecarlo`` flies it.
-"in process" flies the runs one after the other without Dask (the floor of the
-per-run cost); the Dask rows time a whole campaign on a local cluster after a
-warm-up campaign that makes every worker load the compiled loop, and report
-the cluster's start-up (processes + imports + loading numba's cache) apart.
+"in process" flies the runs one after the other without Dask (the floor).
+Then, ``--repeats`` times, alternating, a campaign on a fresh local cluster of
+1 worker and one of 2: start-up (processes, imports, every worker loading the
+compiled loop from numba's cache: ``client.run`` warms each worker, so no
+worker compiles or loads inside the timed campaign) and the campaign apart.
+Besides wall time, each task reports its process CPU time: when the CPU
+seconds per run stay the same on 2 workers but the wall time does not halve,
+the cores were busy with something else (a shared machine), not with Dask.
+The machine's 1-minute load average is printed beside each campaign.
+
 A benchmark, not a test: numbers depend on the machine's load.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import statistics
 import time
 
 from threadpoolctl import threadpool_limits
 
 from rwlab.attitude.scenario import load_scenario
 from rwlab.campaign.dispersions import load_dispersions
-from rwlab.campaign.engine import dask_client
-from rwlab.campaign.montecarlo import Campaign, fly_run, run_campaign, run_seeds
+from rwlab.campaign.engine import batches, dask_client, map_batches
+from rwlab.campaign.montecarlo import Campaign, fly_run, run_seeds
+
+
+def timed_batch(items, campaign):
+    """A campaign batch that also reports its CPU seconds (runs on a worker)."""
+    cpu = time.process_time()
+    for _, seed in items:
+        fly_run(campaign, seed)
+    return [time.process_time() - cpu] + [0.0] * (len(items) - 1)
+
+
+def warm(campaign):
+    """Load the compiled loop on this worker (one short run)."""
+    short = Campaign(campaign.scenario, campaign.dispersions, 10.0, campaign.controller, 1, 1)
+    fly_run(short, run_seeds(1, 1)[0])
+    return os.getpid()
 
 
 def in_process(campaign: Campaign) -> float:
@@ -33,36 +56,59 @@ def in_process(campaign: Campaign) -> float:
     return time.perf_counter() - t0
 
 
-def on_dask(campaign: Campaign, workers: int) -> tuple[float, float]:
+def on_dask(campaign: Campaign, workers: int) -> tuple[float, float, float]:
+    """(start-up s, campaign wall s, worker CPU s) of one campaign on a new cluster."""
     t0 = time.perf_counter()
     with dask_client(workers) as client:
-        warm = Campaign(campaign.scenario, campaign.dispersions, 10.0, campaign.controller, 1, 4)
-        run_campaign(warm, client)
+        client.run(warm, campaign)
         startup = time.perf_counter() - t0
+        work = batches(list(enumerate(run_seeds(campaign.seed, campaign.runs))), workers)
         t1 = time.perf_counter()
-        rows = run_campaign(campaign, client)
+        cpu = map_batches(client, timed_batch, work, campaign)
         elapsed = time.perf_counter() - t1
-    assert len(rows) == campaign.runs
-    return startup, elapsed
+    return startup, elapsed, sum(cpu)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=int, default=96)
-    parser.add_argument("--duration", type=float, default=600.0)
+    parser.add_argument("--runs", type=int, default=24)
+    parser.add_argument("--duration", type=float, default=3600.0)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     c = Campaign(
         load_scenario("geo-smallsat"), load_dispersions(), args.duration, "lqg", 5, args.runs
     )
-    print(f"{args.runs} runs, geo-smallsat, LQG, {args.duration:g} s each (dt 0.1 s)")
-    print(f"{'engine':<22} {'start-up [s]':>12} {'campaign [s]':>13} {'runs/s':>8}")
+    print(
+        f"{args.runs} runs, geo-smallsat, LQG, {args.duration:g} s each (dt 0.1 s), "
+        f"{os.cpu_count()} cores"
+    )
     with threadpool_limits(1, user_api="blas"):
         serial = in_process(c)
-    print(f"{'in process (no Dask)':<22} {'':>12} {serial:13.2f} {args.runs / serial:8.1f}")
-    for workers in (1, 2):
-        startup, elapsed = on_dask(c, workers)
-        label = f"Dask, {workers} worker{'s' if workers > 1 else ''}"
-        print(f"{label:<22} {startup:12.1f} {elapsed:13.2f} {args.runs / elapsed:8.1f}")
+    print(f"in process (no Dask): {serial:.2f} s, {args.runs / serial:.2f} runs/s")
+    print(
+        f"{'repeat':>6} {'workers':>7} {'start-up [s]':>12} {'campaign [s]':>12} "
+        f"{'CPU/run [s]':>11} {'runs/s':>7} {'load':>5}"
+    )
+    walls: dict[int, list[float]] = {1: [], 2: []}
+    starts: dict[int, list[float]] = {1: [], 2: []}
+    for k in range(args.repeats):
+        for workers in (1, 2):
+            startup, elapsed, cpu = on_dask(c, workers)
+            walls[workers].append(elapsed)
+            starts[workers].append(startup)
+            print(
+                f"{k + 1:>6} {workers:>7} {startup:12.1f} {elapsed:12.2f} "
+                f"{cpu / args.runs:11.3f} {args.runs / elapsed:7.2f} {os.getloadavg()[0]:5.1f}"
+            )
+    ratios = [a / b for a, b in zip(walls[1], walls[2], strict=True)]
+    print(
+        f"speed-up of 2 workers over 1, pair by pair: {', '.join(f'{r:.2f}' for r in ratios)}"
+        f" (median {statistics.median(ratios):.2f}, range {min(ratios):.2f}–{max(ratios):.2f})"
+    )
+    print(
+        f"start-up: 1 worker {statistics.median(starts[1]):.1f} s, "
+        f"2 workers {statistics.median(starts[2]):.1f} s (median)"
+    )
 
 
 if __name__ == "__main__":

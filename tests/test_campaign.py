@@ -284,6 +284,10 @@ def test_budget_statistics_over_runs():
                 "wheel_momentum_peak_fraction": 0.3,
                 "torque_saturated_fraction": 0.0,
                 "settling_time_s": None,
+                "time_quantile_error_deg": 0.005 * (i + 1),
+                "time_within_requirement_fraction": 1.0,
+                "settled_s": 0.0,
+                "filter_converged_s": 0.0,
             }
         )
     c = Campaign(SMALLSAT, (), 10.0)

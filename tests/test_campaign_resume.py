@@ -73,6 +73,12 @@ def test_a_campaign_killed_with_sigterm_then_resumed_is_the_uninterrupted_one(tm
     _, err = child.communicate(timeout=120)
     assert child.returncode == 130, err
     assert "campaign stopped:" in err and "--resume" in err and "Traceback" not in err
+    said = [
+        line
+        for line in err.splitlines()
+        if line.strip() and not line.startswith(("pd campaign", "12 runs of"))
+    ]  # one line after the progress: the signal, what is kept, how to go on
+    assert len(said) == 1 and said[0].startswith("interrupted (SIGTERM; campaign stopped:"), err
     assert not out.exists()  # nothing that looks like a complete campaign
     n_kept = sum(len(json.loads(p.read_text())["rows"]) for p in kept.glob("batch-*.json"))
     assert 1 <= n_kept < 12
@@ -150,4 +156,6 @@ def test_a_killed_worker_is_retried_and_the_retry_reported():
     report = execution.to_dict()
     assert report["retries"] >= 1 and report["retried_runs"]
     assert all(entry["reason"].startswith("worker lost") for entry in report["retry_log"])
+    lost = report["lost_workers"]
+    assert lost and set(lost[0]["running_runs"]) <= set(report["retried_runs"])
     assert set(report["retried_runs"]) <= set(range(8))

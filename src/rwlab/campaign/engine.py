@@ -8,7 +8,10 @@ replacement, and :func:`map_batches` submits the batches it was computing
 again (up to ``MAX_RETRIES`` times each) and reports every retry, so a campaign
 finishes with every run; each task is a pure function of its inputs, so a
 retried batch gives the same rows. The local scheduler is told not to retry on
-its own (``allowed-failures`` 0), so that no retry goes unreported.
+its own (``allowed-failures`` 0); what a scheduler still does silently (a lost
+worker's finished but not yet gathered results computed again; a retry under a
+remote scheduler's own ``allowed-failures``) is read from its event log
+(``remove-worker`` events) and reported too (:class:`LostWorker`).
 """
 
 from __future__ import annotations
@@ -17,11 +20,12 @@ import contextlib
 import itertools
 import logging
 import os
+from dataclasses import dataclass
 
 from rwlab._optional import require
 from rwlab.errors import ConfigError, LostWorkerError
 
-__all__ = ["MAX_RETRIES", "batches", "dask_client", "map_batches", "worker_count"]
+__all__ = ["MAX_RETRIES", "LostWorker", "batches", "dask_client", "map_batches", "worker_count"]
 
 MAX_RETRIES = 3  # times one batch is submitted again after its worker died
 
@@ -72,6 +76,9 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=None,
+                # the scheduler's HTTP server (health, metrics) always starts: on a free
+                # loopback port, not 8787 (taken by any other cluster: a warning each run)
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                 silence_logs=logging.ERROR,
             ) as cluster,
             Client(cluster) as client,
@@ -136,6 +143,60 @@ def batches(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     return [items[a:b] for a, b in itertools.pairwise(edges)]
 
 
+@dataclass(frozen=True)
+class LostWorker:
+    """A worker the scheduler removed while the campaign ran, and what it took with it.
+
+    Attributes
+    ----------
+    address : str
+        The worker's address.
+    time : float
+        When the scheduler removed it (Unix time, s).
+    running : tuple of int
+        The batches it was computing (run again: by :func:`map_batches`, or by the
+        scheduler's own retries).
+    recomputed : tuple of int
+        The batches it had finished whose results were lost before they were gathered
+        (computed again by the scheduler).
+    """
+
+    address: str
+    time: float
+    running: tuple[int, ...]
+    recomputed: tuple[int, ...]
+
+
+def _lost_workers(client, since: float, where: dict, seen: set) -> list[LostWorker]:
+    """The scheduler's ``remove-worker`` events after ``since`` not in ``seen`` (unexpected
+    removals only: a worker closed on purpose loses nothing), with our batches' indices."""
+    found = []
+    with contextlib.suppress(Exception):  # no event log (an old scheduler): nothing known
+        for stamp, msg in client.get_events("all"):
+            if (
+                stamp < since
+                or not isinstance(msg, dict)
+                or msg.get("action") != "remove-worker"
+                or msg.get("expected")
+                or (stamp, msg.get("worker")) in seen
+            ):
+                continue
+            seen.add((stamp, msg.get("worker")))
+
+            def ours(keys) -> tuple[int, ...]:
+                return tuple(sorted({where[k] for k in keys or () if k in where}))
+
+            found.append(
+                LostWorker(
+                    str(msg.get("worker")),
+                    float(stamp),
+                    ours(msg.get("processing-tasks")),
+                    ours(msg.get("lost-computed-tasks")),
+                )
+            )
+    return found
+
+
 def _pinned(fn, batch, *args):
     """Run ``fn(batch, *args)`` with BLAS on one thread (the work is small matrices)."""
     from threadpoolctl import threadpool_limits
@@ -152,6 +213,7 @@ def map_batches(
     progress=None,
     on_batch=None,
     on_retry=None,
+    on_lost_worker=None,
     max_retries: int = MAX_RETRIES,
 ) -> list:
     """``fn(batch, *args)`` for every batch on the cluster; the results of all, in order.
@@ -173,6 +235,9 @@ def map_batches(
     on_retry : callable, optional
         ``on_retry(i, attempt, reason)`` when batch ``i`` is submitted again because
         the worker computing it died (``attempt`` 1, 2, …).
+    on_lost_worker : callable, optional
+        ``on_lost_worker(lost)`` for each :class:`LostWorker` the scheduler reports
+        (checked after each batch and at the end).
     max_retries : int
         Retries of one batch before the campaign stops.
 
@@ -186,8 +251,18 @@ def map_batches(
     LostWorkerError
         A batch lost its worker more than ``max_retries`` times.
     """
+    import time
+
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
+
+    since = time.time()
+    seen: set = set()
+
+    def check_lost() -> None:
+        if on_lost_worker is not None:
+            for lost in _lost_workers(client, since, where, seen):
+                on_lost_worker(lost)
 
     def submit(i: int):
         future = client.submit(_pinned, fn, work[i], *args, pure=False)
@@ -216,6 +291,7 @@ def map_batches(
                     on_retry(i, attempts[i], f"worker lost ({type(exc).__name__})")
                 futures.append(submit(i))
                 pending.add(futures[-1])
+                check_lost()
                 continue
             results[i] = batch
             if on_batch is not None:
@@ -223,6 +299,8 @@ def map_batches(
             done += len(work[i])
             if progress is not None:
                 progress(done)
+            check_lost()
     finally:
         client.cancel([f for f in futures if not f.done()])
+    check_lost()
     return [r for batch in results for r in batch]

@@ -108,7 +108,7 @@ class _Cli(click.Group):
         except click.Abort as exc:
             cause = exc.__cause__ or exc.__context__
             why = cause.args[0] if isinstance(cause, KeyboardInterrupt) and cause.args else ""
-            click.echo(f"interrupted{f' ({why})' if why else ''}", err=True)
+            click.echo(_flags(f"interrupted{f' ({why})' if why else ''}"), err=True)
             sys.exit(130)
 
 

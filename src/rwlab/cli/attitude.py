@@ -366,6 +366,69 @@ def attitude_simulate(
     click.echo(_wrote(out, paths.values()))
 
 
+def _requirement_options(func):
+    """The requirement the budget checks, its statistical interpretation and its windows."""
+    options = [
+        click.option(
+            "--requirement",
+            type=Number(0, 180, low_open=True),
+            default=None,
+            help="APE bound on the total error, degrees [default: the scenario's].",
+        ),
+        click.option(
+            "--probability",
+            type=Number(0, 1, low_open=True, high_open=True),
+            default=0.95,
+            show_default=True,
+            help="P_C: the share of runs, of time, or of both that must meet it.",
+        ),
+        click.option(
+            "--confidence",
+            type=Number(0, 1, low_open=True, high_open=True),
+            default=0.95,
+            show_default=True,
+            help="Confidence level of every bound.",
+        ),
+        click.option(
+            "--interpretation",
+            type=click.Choice(["ensemble", "temporal", "mixed"]),
+            default="ensemble",
+            show_default=True,
+            help="ECSS-E-ST-60-10C statistical interpretation of the verdict.",
+        ),
+        click.option(
+            "--rpe-requirement",
+            type=Number(0, 180, low_open=True),
+            default=None,
+            help="RPE bound per axis, degrees [default: reported, no verdict].",
+        ),
+        click.option(
+            "--rpe-window",
+            type=SECONDS,
+            default=60.0,
+            show_default=True,
+            help="The RPE's window, s.",
+        ),
+        click.option(
+            "--drift-window",
+            type=SECONDS,
+            default=600.0,
+            show_default=True,
+            help="PDE/KDE averaging window, s.",
+        ),
+        click.option(
+            "--drift-separation",
+            type=SECONDS,
+            default=3600.0,
+            show_default=True,
+            help="Time between the PDE/KDE windows, s.",
+        ),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
 @attitude.command("montecarlo")
 @click.option("--scenario", default="geo-comsat", show_default=True)
 @click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
@@ -392,6 +455,22 @@ def attitude_simulate(
     help="Each run starts at --epoch plus a uniform draw of up to this many days "
     "(e.g. 30 for an eclipse season, 365 for a year).",
 )
+@click.option(
+    "--steady-after",
+    type=Number(0, 1e9),
+    default=None,
+    help="Seconds from which the budget counts (t ≥ this) [default: half the run, at most "
+    "its first hour].",
+)
+@click.option(
+    "--start",
+    type=click.Choice(["acquisition", "converged"]),
+    default="acquisition",
+    show_default=True,
+    help="converged: every run starts on target at the orbital rate with the filter's "
+    "attitude at the truth (gyro bias and disturbance estimates still converge).",
+)
+@_requirement_options
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out (and start over).")
 @click.option(
@@ -411,6 +490,16 @@ def attitude_montecarlo(
     seed,
     epoch,
     epoch_spread_days,
+    steady_after,
+    start,
+    requirement,
+    probability,
+    confidence,
+    interpretation,
+    rpe_requirement,
+    rpe_window,
+    drift_window,
+    drift_separation,
     out,
     force,
     resume,
@@ -424,8 +513,24 @@ def attitude_montecarlo(
     Finished runs are kept in OUT.partial as they finish: an interrupted
     campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
     computing only the runs it lacks, with the results of an uninterrupted one.
+
+    The budget checks the requirement (--requirement, --probability) under one
+    ECSS-E-ST-60-10C statistical interpretation (--interpretation) at
+    --confidence, over t ≥ --steady-after.
     """
+    from rwlab.campaign.indices import PointingRequirement
     from rwlab.report.montecarlo import montecarlo
+
+    req = PointingRequirement(
+        ape_deg=requirement,
+        rpe_deg=rpe_requirement,
+        rpe_window_s=rpe_window,
+        probability=probability,
+        confidence=confidence,
+        interpretation=interpretation,
+        drift_window_s=drift_window,
+        drift_separation_s=drift_separation,
+    )
 
     _check_run(duration, None)
     _check_folder(Path(out).absolute().parent)
@@ -440,6 +545,9 @@ def attitude_montecarlo(
             seed=seed,
             epoch=epoch,
             epoch_spread_days=epoch_spread_days,
+            steady_after=steady_after,
+            start=start,
+            requirement=req,
             workers=workers,
             scheduler=scheduler,
             force=force,
@@ -447,6 +555,7 @@ def attitude_montecarlo(
             progress=progress,
             echo=lambda text: click.echo(_flags(text), err=True),
         )
+    _echo_verdict(stats)
     click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
     for axis, s in stats["pointing_error_deg"].items():
         click.echo(
@@ -466,4 +575,48 @@ def attitude_montecarlo(
         click.echo(
             f"  {q['p']:.2%} quantile of {stats['statistic_column']}: {q['estimate']:.4g}°, {bound}"
         )
+    _echo_indices(stats)
     click.echo(_wrote(out, paths.values()))
+
+
+def _echo_verdict(stats: dict) -> None:
+    """The requirement, the interpretation and the verdict: the first lines printed."""
+    req, verdict = stats["requirement"], stats["verdict"]
+    window = stats["steady_window"]
+    click.echo(
+        f"requirement: APE ≤ {req['ape_deg']:g}° on the total error, P = {req['probability']:g}, "
+        f"confidence {req['confidence']:.0%}; steady window t ≥ {window['start_s']:g} s "
+        f"({window['start']} start)"
+    )
+    click.echo(
+        f"interpretation ({stats['interpretation']['name']}): "
+        f"{stats['interpretation']['statement']}"
+    )
+    click.echo(f"verdict: {verdict['text']}")
+    worst = ", ".join(f"run {w['run']} ({w['value']:.4g})" for w in verdict["worst_runs"])
+    click.echo(f"  set by: {worst}")
+    if verdict["rpe"] is not None:
+        r = verdict["rpe"]
+        state = "met" if r["met"] else "NOT MET"
+        click.echo(
+            f"RPE ≤ {r['bound_deg']:g}° ({r['window_s']:g} s window, every axis): {state}, "
+            f"{r['estimate']:.1%} of runs (≥ {r['lower_bound']:.1%} at {req['confidence']:.0%})"
+        )
+    late = window["runs_converged_after_start"]
+    if late:
+        click.echo(
+            f"warning: {len(late)} run(s) settled or converged after the steady window's start "
+            f"(runs {late[:10]}{' …' if len(late) > 10 else ''}); see steady_window in budget.json",
+            err=True,
+        )
+
+
+def _echo_indices(stats: dict) -> None:
+    """The ECSS indices per axis: max over runs and the run that set it."""
+    click.echo(f"{'index':<6} {'x [°]':>10} {'y [°]':>10} {'z [°]':>10}   (max over runs)")
+    for name, entry in stats["indices"].items():
+        cells = [
+            f"{entry[a]['max']:10.4g}" if entry[a] is not None else f"{'n/a':>10}"
+            for a in ("x", "y", "z")
+        ]
+        click.echo(f"{name:<6} {' '.join(cells)}")

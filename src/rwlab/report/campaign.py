@@ -123,24 +123,101 @@ def _confidence_section(page: Page, budget: dict, req: float) -> None:
         )
     page.text(" ".join(words))
     rows = []
-    for name, key in (("APE", "APE"), ("RPE", "RPE"), ("knowledge", "knowledge_error")):
+    for name, entry in budget["indices"].items():
         for a in AXES:
-            q = {row["p"]: row for row in budget[key][a]["quantiles"]}
-            bound = q[0.9]["upper_bound"]
+            if entry[a] is None:
+                continue
+            q = {row["p"]: row for row in entry[a]["quantiles"]}
+            p = budget["requirement"]["probability"]
+            worst = entry[a]["worst_runs"][0]
             rows.append(
-                [name, a, q[0.5]["estimate"], q[0.9]["estimate"], bound, budget[key][a]["max"]]
+                [
+                    name,
+                    a,
+                    q[0.5]["estimate"],
+                    q[p]["estimate"],
+                    q[p]["upper_bound"],
+                    entry[a]["max"],
+                    f"run {worst['run']}",
+                ]
             )
+    conf = budget["requirement"]["confidence"]
+    p = budget["requirement"]["probability"]
     page.table(
-        ["ECSS index", "axis", "median [°]", "90 % [°]", "90 % bound (95 %) [°]", "max [°]"],
+        [
+            "ECSS index",
+            "axis",
+            "median [°]",
+            f"{p:.4g} quantile [°]",
+            f"its bound ({conf:.0%}) [°]",
+            "max [°]",
+            "set by",
+        ],
         rows,
         table_id="table-ecss",
     )
     page.text(
-        "ECSS-E-ST-60-10C indices over runs of each run's steady-state maximum: APE the "
-        f"absolute error, RPE the error minus its {budget['RPE']['window_s']:g} s centred mean, "
-        "knowledge the estimate's error; an empty bound: too few runs.",
+        "ECSS-E-ST-60-10C indices over runs, each run's over the steady window: "
+        + "; ".join(f"{k} {v['definition']}" for k, v in budget["indices"].items())
+        + ". An empty bound: too few runs for that quantile at that confidence.",
         note=True,
     )
+
+
+def _verdict_section(page: Page, budget: dict) -> None:
+    """The first screen: the requirement, its statistical interpretation and the verdict."""
+    req, verdict, window = budget["requirement"], budget["verdict"], budget["steady_window"]
+    interp = budget["interpretation"]
+    page.heading("Requirement, interpretation, verdict", "verdict")
+    rows = [
+        [
+            "requirement",
+            f"APE ≤ {req['ape_deg']:g}° on the total error for P = "
+            f"{req['probability']:g}, bounds at {req['confidence']:.0%} confidence",
+        ],
+        ["interpretation", f"{interp['name']} (ECSS-E-ST-60-10C): {interp['statement']}"],
+        ["verdict", verdict["text"]],
+        [
+            "set by",
+            ", ".join(
+                f"run {w['run']} (seed {w['seed']}): {w['value']:.4g}"
+                for w in verdict["worst_runs"]
+            ),
+        ],
+        [
+            "steady window",
+            f"t ≥ {window['start_s']:g} s ({window['source']}); runs start "
+            f"from {window['start']}; settled by {_at(window['settled'])}, filter converged by "
+            f"{_at(window['filter_converged'])}",
+        ],
+    ]
+    if verdict.get("rpe"):
+        r = verdict["rpe"]
+        rows.append(
+            [
+                "RPE",
+                f"≤ {r['bound_deg']:g}° over {r['window_s']:g} s on every axis: "
+                f"{'met' if r['met'] else 'NOT MET'}, {r['estimate']:.1%} of runs "
+                f"(≥ {r['lower_bound']:.1%})",
+            ]
+        )
+    page.table(["", ""], rows, table_id="table-verdict")
+    late = window["runs_converged_after_start"]
+    if late:
+        page.text(
+            f"{len(late)} run(s) settled inside the bound or had their filter converge after "
+            f"the steady window's start: runs {late}. Their steady statistics include "
+            "acquisition; start the window later (--steady-after).",
+            note=True,
+        )
+
+
+def _at(entry: dict) -> str:
+    if entry["max_s"] is None:
+        return "never"
+    never = entry["not_converged_runs"]
+    tail = f"; never: runs {never}" if never else ""
+    return f"{entry['max_s']:.0f} s (run {entry['run']}){tail}"
 
 
 def _execution_note(page: Page, execution: dict | None) -> None:
@@ -175,6 +252,7 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
         f"error) and uses the dispersed sensor noise. Requirement ±{req:g}°. "
         f"{budget['meets_requirement_fraction']:.1%} of the runs meet it in steady state."
     )
+    _verdict_section(page, budget)
     _confidence_section(page, budget, req)
     _execution_note(page, budget.get("execution"))
     page.heading("Pointing budget", "budget")

@@ -14,7 +14,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 from rwlab._io import output_folder
+from rwlab.campaign.indices import PointingRequirement
 from rwlab.errors import ConfigError, RwlabError
+from rwlab.interrupts import stopped
 
 __all__ = ["montecarlo"]
 
@@ -34,6 +36,9 @@ def montecarlo(
     seed: int = 0,
     epoch: str | None = None,
     epoch_spread_days: float = 0.0,
+    steady_after: float | None = None,
+    start: str = "acquisition",
+    requirement: PointingRequirement | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     force: bool = False,
@@ -63,6 +68,13 @@ def montecarlo(
         UTC start, ISO 8601: the real sky.
     epoch_spread_days : float
         Each run starts at ``epoch`` plus a uniform draw of up to this many days.
+    steady_after : float, optional
+        Seconds from which the budget counts (default: half the run, at most an hour).
+    start : {'acquisition', 'converged'}
+        How each run starts (see :class:`rwlab.campaign.montecarlo.Campaign`).
+    requirement : PointingRequirement, optional
+        What the budget checks, its interpretation and windows (default: the
+        scenario's APE bound, P = 0.95 of the runs, 95 % confidence, ensemble).
     workers : int, optional
         Processes of a new local Dask cluster (default: the cores).
     scheduler : str, optional
@@ -118,6 +130,9 @@ def montecarlo(
             runs,
             epoch=epoch,
             epoch_spread_days=epoch_spread_days,
+            steady_after=steady_after,
+            start=start,
+            requirement=requirement or PointingRequirement(),
         )
         check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume, say=say)
@@ -127,9 +142,20 @@ def montecarlo(
         try:
             with dask_client(workers, scheduler) as client:
                 rows = run_campaign(
-                    campaign, client, progress=progress, store=store, execution=execution
+                    campaign,
+                    client,
+                    progress=progress,
+                    store=store,
+                    execution=execution,
+                    say=say,
                 )
-        except (KeyboardInterrupt, RwlabError, OSError):
+        except KeyboardInterrupt as exc:  # one line: the signal, what is kept, how to go on
+            why = stopped() or (exc.args[0] if exc.args else "interrupted")
+            raise KeyboardInterrupt(
+                f"{why}; campaign stopped: {len(store.rows())} of {runs} runs kept in "
+                f"{store.folder}, continue it with the same arguments and resume=True"
+            ) from None
+        except (RwlabError, OSError):
             say(
                 f"\ncampaign stopped: {len(store.rows())} of {runs} runs kept in "
                 f"{store.folder}; continue it with the same arguments and resume=True"
@@ -139,9 +165,13 @@ def montecarlo(
         worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
         paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
     shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
-    if execution.retries:
-        ex = stats["execution"]
-        say(f"retried {ex['retries']} batch(es) after lost workers: runs {ex['retried_runs']}")
+    ex = stats["execution"]
+    if ex["retries"] or ex["lost_workers"]:
+        say(
+            f"{len(ex['lost_workers'])} worker(s) lost, {ex['retries']} re-execution(s): runs "
+            f"{ex['retried_runs']} computed again (each run depends only on its seed: the "
+            "rows are those of an undisturbed campaign); see execution in budget.json"
+        )
     return stats, {name: Path(out) / Path(p).name for name, p in paths.items()}
 
 
