@@ -43,7 +43,7 @@ layouts they share are defined here once.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -59,7 +59,7 @@ from rwlab.attitude.ekf import (
     predict_covariance_into,
     propagate_attitude_into,
 )
-from rwlab.attitude.plant import rk4_step
+from rwlab.attitude.plant import rk4_step, rk4_step_forced
 from rwlab.attitude.sensors import gyro_sample_into, tracker_visible
 from rwlab.attitude.wheels import realise
 
@@ -79,6 +79,7 @@ __all__ = [
     "command_step",
     "control_torque",
     "finish_step",
+    "jitter_torque_into",
     "new_stats",
     "new_work",
     "run_block",
@@ -143,6 +144,12 @@ NO_UPDATE, TRACKER_BLIND = _AT["no_update_ticks"], _AT["star_tracker_blinded"]
 JITTER_SQ, POWER = _AT["steady_torque_jitter_sq_sum"], _AT["steady_wheel_power_sum"]
 ZERO_CROSS = _AT["wheel_zero_crossings"]
 
+# The step's entry points are compiled without numba's reference counting: the stages are
+# inlined into them and read their arrays from the records, and every such read would
+# otherwise cost an atomic increment and decrement (three quarters of the step's time when
+# measured). Nothing in them allocates; the functions they call keep the runtime.
+_LEAN: dict[str, Any] = {"cache": True, "_nrt": False}
+
 # the filter's modes (``Filter.mode``)
 TRUTH, DYNAMICS, GYRO = 0, 1, 2
 
@@ -152,7 +159,9 @@ class Plant(NamedTuple):
     the wheel axes G (3, N) and G⁺, momentum limits ``h_max`` (N,), N·m·s, torque limit
     ``tau_max``, N·m, the disturbance vector ``dist`` (``DisturbanceModel.vector``), the
     wheels' spin inertia, kg·m² (for their power), and the factor by which every wheel's
-    realised torque differs from its command (motor constant, drive electronics)."""
+    realised torque differs from its command (motor constant, drive electronics); with
+    ``jitter`` the wheels' imbalance [U_s kg·m, U_d kg·m²] (N, 2), their centres (N, 3) m
+    and rotor axes ŵ₂, ŵ₃ at angle 0 (N, 2, 3) (:func:`jitter_torque_into`)."""
 
     dt: float
     n: float
@@ -165,6 +174,10 @@ class Plant(NamedTuple):
     dist: np.ndarray
     wheel_inertia: float
     torque_scale: float
+    jitter: bool
+    imbalance: np.ndarray
+    wheel_position: np.ndarray
+    rotor_axes: np.ndarray
 
 
 class Law(NamedTuple):
@@ -265,7 +278,8 @@ class State(NamedTuple):
     """What a block changes in place: the plant x, the estimate q̂ (4,), ŵ (the rest of the
     filter's state: ω̂ [, b̂] or the gyro bias β̂), P (n, n), the gyros' state (9,) =
     [β walk, β Gauss–Markov, ω at the last sample], ``stats`` (:data:`STATS`) and each
-    wheel's last sign of spin (N,) (0 before it first turns), for counting zero crossings."""
+    wheel's last sign of spin (N,) (0 before it first turns), for counting zero crossings,
+    and each rotor's angle (N,) rad from its ŵ₂ axis (the imbalance's phase)."""
 
     x: np.ndarray
     q_hat: np.ndarray
@@ -274,6 +288,7 @@ class State(NamedTuple):
     gyro: np.ndarray
     stats: np.ndarray
     wheel_sign: np.ndarray
+    wheel_angle: np.ndarray
 
 
 class Wheels(NamedTuple):
@@ -338,15 +353,14 @@ def _dcm_into(q, C):
 
 
 @njit(cache=True)
-def _nees(q, q_hat, e, P, L):
+def _nees(q, q_hat, e, P, L, z):
     """Normalised estimation error squared δxᵀ P⁻¹ δx, δx = [2 (q ⊗ q̂⁻¹)_v, e[3:]] (n,):
     the caller fills ``e[3:]`` with the truth minus the estimate of the rest of the state
     (ω − ω̂, b − b̂ or β − β̂); e[:3] is written here. By a Cholesky factor of P written
-    into the (n, n) scratch L."""
+    into the (n, n) scratch L (z: (n,) scratch)."""
     e[0], e[1], e[2] = attitude_error(q, q_hat)
     nx = P.shape[0]
     total = 0.0
-    z = np.empty(nx)  # only at logged steps
     for i in range(nx):
         for j in range(i + 1):
             acc = P[i, j]
@@ -440,7 +454,9 @@ def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, t
             h_body[i] += G[i, c] * x[7 + c]
         tau_thr[i] = 0.0
     h_frac = dev_frac = 0.0
+    h_min = h_max[0]
     for i in range(nw):
+        h_min = min(h_min, h_max[i])
         h_frac = max(h_frac, abs(x[7 + i]) / h_max[i])
         dev_frac = max(dev_frac, abs(x[7 + i] - hw_target[i]) / h_max[i])
     if unload[0] > 0:
@@ -458,7 +474,7 @@ def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, t
                     dev = h_body[i]
                     for c in range(nw):
                         dev -= G[i, c] * hw_target[c]
-                    if abs(dev) > unload[2] * h_max.min():
+                    if abs(dev) > unload[2] * h_min:
                         tau_thr[i] = -math.copysign(unload[3], dev)
                         stats[IMPULSE] += unload[3] * dt
                         fired = True
@@ -514,7 +530,8 @@ def _steady_stats(stats, err, hw_cmd, hw_prev, x, wheel_inertia, at_limit, in_de
 def _tracker_measurement(x, frame, sigma, e, out):
     """The tracker's quaternion: the truth turned by its noise (σ·e about its own axes)."""
     v0, v1, v2 = sigma[0] * e[0], sigma[1] * e[1], sigma[2] * e[2]
-    out[:] = x[:4]
+    for i in range(4):
+        out[i] = x[i]
     b0 = frame[0, 0] * v0 + frame[1, 0] * v1 + frame[2, 0] * v2  # body = frameᵀ v
     b1 = frame[0, 1] * v0 + frame[1, 1] * v1 + frame[2, 1] * v2
     b2 = frame[0, 2] * v0 + frame[1, 2] * v1 + frame[2, 2] * v2
@@ -615,6 +632,7 @@ class Work(NamedTuple):
     C_hat: np.ndarray
     Bmap: np.ndarray
     e_nees: np.ndarray
+    forcing: np.ndarray
 
 
 def new_work(plant: Plant, filt: Filter, nx: int) -> Work:
@@ -678,7 +696,15 @@ def new_work(plant: Plant, filt: Filter, nx: int) -> Work:
         C_hat=np.zeros((3, 3)),
         Bmap=Bmap,
         e_nees=v(nx),
+        forcing=np.zeros((3, 3)),
     )
+
+
+@njit(cache=True, inline="always")
+def _copy_into(a, out):
+    """out[:] = a by a loop (a slice assignment needs numba's runtime: see ``_LEAN``)."""
+    for i in range(a.shape[0]):
+        out[i] = a[i]
 
 
 @njit(cache=True)
@@ -689,7 +715,7 @@ def start_block(work):
         work.flags[i] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sky_stage(work, stats, sky, k, t):
     """The Sun and Moon at t (into ``work``), and the eclipse counters."""
     f = work.flags
@@ -705,7 +731,7 @@ def _sky_stage(work, stats, sky, k, t):
             stats[MOON_STEPS] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _gyro_stage(state, work, sensors, mode, gyro_noise, k, n, dt):
     """The gyros' sample over the last step; the gyro filter propagates q̂ with it."""
     x, gs, w_mean = state.x, state.gyro, work.w_mean
@@ -723,7 +749,7 @@ def _gyro_stage(state, work, sensors, mode, gyro_noise, k, n, dt):
         )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _visibility_stage(state, work, sensors, filt, noise, k):
     """At a sensor tick: what each sensor can see, and the star tracker's update."""
     f, x, C = work.flags, state.x, work.C
@@ -766,7 +792,7 @@ def _visibility_stage(state, work, sensors, filt, noise, k):
         f[I_TRACKER] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _vector_update(state, work, b, ref, r, rejected, filt, at):
     """One vector sensor's gated update (its misalignment states at ``at``; 0: none);
     whether the filter took it. ``rejected``: that sensor's consecutive rejections."""
@@ -776,7 +802,7 @@ def _vector_update(state, work, b, ref, r, rejected, filt, at):
     return gated_update_into(state.q_hat, state.w_hat, state.P, b, ref, r, g, work.Wn)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _measure_stage(state, work, sensors, filt, sensor_noise):
     """The sun and earth sensors' measurements and the filter's updates (a sensor tick)."""
     f, stats, nx = work.flags, state.stats, state.P.shape[0]
@@ -820,7 +846,7 @@ def _measure_stage(state, work, sensors, filt, sensor_noise):
         stats[NO_UPDATE] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _control_stage(state, work, law, filt, n):
     """What the law sees (the truth, or the estimate) and its torque, less the estimated
     disturbance (disturbance accommodation)."""
@@ -848,7 +874,7 @@ def _control_stage(state, work, law, filt, n):
             work.tau[i] -= work.tau_b[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _allocate_stage(state, work, plant, law, h_frac):
     """The wheel commands: the body torque (feedback, plus the known thruster torque and
     ``tau_known`` fed forward) through G⁺, the null-space momentum bias, the torque limit."""
@@ -876,7 +902,7 @@ def _allocate_stage(state, work, plant, law, h_frac):
         work.flags[SATURATED] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _account_stage(state, work, plant, unload, k, j, t, steady_from):
     """The statistics of the step: the worst error, and the steady window's."""
     stats, err, hw_cmd = state.stats, work.flags[ERROR], work.hw_cmd
@@ -884,7 +910,7 @@ def _account_stage(state, work, plant, unload, k, j, t, steady_from):
     stats[MAX_ERR] = max(stats[MAX_ERR], err)
     if k >= steady_from:
         if k == steady_from or j == 0:  # no previous command in this window
-            work.hw_prev[:] = hw_cmd
+            _copy_into(hw_cmd, work.hw_prev)
         _steady_stats(
             stats,
             err,
@@ -896,10 +922,10 @@ def _account_stage(state, work, plant, unload, k, j, t, steady_from):
             in_desat,
             work.flags[EARTH_LIT],
         )
-    work.hw_prev[:] = hw_cmd
+    _copy_into(hw_cmd, work.hw_prev)
 
 
-@njit(cache=True)
+@njit(**_LEAN)
 def command_step(state, work, k, j, plant, law, sky, sensors, filt, noise, steady_from):
     """The first half of step ``k`` (row ``j`` of the block's noise): sky, gyros, sensors
     and the filter's updates, thruster unloading, the control law and the wheel commands
@@ -936,7 +962,7 @@ def command_step(state, work, k, j, plant, law, sky, sensors, filt, noise, stead
     _account_stage(state, work, plant, law.unload, k, j, t, steady_from)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nees_of(state, work, sensors, filt):
     """The filter's NEES now (:func:`_nees`), the rest of its error state filled in."""
     x, w_hat, mode, e, gs = state.x, state.w_hat, filt.mode, work.e_nees, state.gyro
@@ -951,10 +977,10 @@ def _nees_of(state, work, sensors, filt):
             e[i] = x[1 + i] - w_hat[i - 3]
         else:
             e[i] = filt.bias_true[i - 6] - w_hat[i - 3]
-    return _nees(x, state.q_hat, e, state.P, work.Wn[0])
+    return _nees(x, state.q_hat, e, state.P, work.Wn[0], work.Wn[1, 0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _log_stage(state, work, plant, sensors, filt, log, log_k, t):
     """One logged row (see :func:`run_block`)."""
     x, w_hat, f, mode, nx = state.x, state.w_hat, work.flags, filt.mode, state.P.shape[0]
@@ -986,7 +1012,7 @@ def _log_stage(state, work, plant, sensors, filt, log, log_k, t):
     log.sky[log_k, 3] = f[TRACKER_STATUS] if sensors.tracker else 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _predict_stage(state, work, plant, sensors, filt):
     """The filter to the next step: its covariance to the next measurement (at one), and
     the DYNAMICS filter's state through its own plant model."""
@@ -1013,9 +1039,8 @@ def _predict_stage(state, work, plant, sensors, filt):
             predict_covariance_into(P, work.F, filt.Qc, T_sensor, work.Wn)
     if mode == DYNAMICS:
         x, xm = state.x, work.xm
-        xm[:4] = state.q_hat
-        xm[4:7] = state.w_hat[:3]
-        xm[7:] = x[7:]
+        for i in range(x.shape[0]):
+            xm[i] = state.q_hat[i] if i < 4 else (state.w_hat[i - 4] if i < 7 else x[i])
         for i in range(3):  # the thruster command (and b̂'s torque) is known to the filter
             dm[7 + i] = filt.dist_model[7 + i] + work.tau_thr[i] + work.tau_b[i]
         # the filter knows the wheels' torques and momenta (their tachometers)
@@ -1040,6 +1065,44 @@ def _predict_stage(state, work, plant, sensors, filt):
 
 
 @njit(cache=True)
+def jitter_torque_into(plant, x, angle, ahead, out):
+    """The wheels' imbalance torque on the body (3,) N·m, ``ahead`` s after the state x with
+    rotor angles ``angle`` (N,) rad (each rotor turning at its speed now), into ``out``.
+
+    Basilisk's simple jitter model (``reactionWheelStateEffector``, JitterSimple): a rotor
+    at angle θ and speed Ω relative to the body puts the force F = U_s Ω² ŵ₂(θ) on the body
+    at its centre r and the torque U_d Ω² ŵ₂(θ), ŵ₂(θ) = cos θ ŵ₂ + sin θ ŵ₃ (ŵ₃ = ĝ × ŵ₂):
+    τ = r × F + U_d Ω² ŵ₂(θ). Ω = h_w / J_s − ĝᵀω (h_w is the absolute momentum, see
+    ``plant``)."""
+    G, r, axes = plant.G, plant.wheel_position, plant.rotor_axes
+    out[0] = out[1] = out[2] = 0.0
+    for i in range(G.shape[1]):
+        omega = x[7 + i] / plant.wheel_inertia - (G[0, i] * x[4] + G[1, i] * x[5] + G[2, i] * x[6])
+        th = angle[i] + omega * ahead
+        c, s = math.cos(th), math.sin(th)
+        u0 = c * axes[i, 0, 0] + s * axes[i, 1, 0]
+        u1 = c * axes[i, 0, 1] + s * axes[i, 1, 1]
+        u2 = c * axes[i, 0, 2] + s * axes[i, 1, 2]
+        fs, td = plant.imbalance[i, 0] * omega * omega, plant.imbalance[i, 1] * omega * omega
+        out[0] += r[i, 1] * fs * u2 - r[i, 2] * fs * u1 + td * u0
+        out[1] += r[i, 2] * fs * u0 - r[i, 0] * fs * u2 + td * u1
+        out[2] += r[i, 0] * fs * u1 - r[i, 1] * fs * u0 + td * u2
+
+
+@njit(cache=True, inline="always")
+def _jitter_stage(state, work, plant):
+    """The imbalance torques at the RK4 stages' times (``work.forcing``), and each rotor's
+    angle advanced over the step (at its speed at the step's start, as the forcing)."""
+    x, dt, angle = state.x, plant.dt, state.wheel_angle
+    for s in range(3):
+        jitter_torque_into(plant, x, angle, 0.5 * dt * s, work.forcing[s])
+    G = plant.G
+    for i in range(G.shape[1]):
+        omega = x[7 + i] / plant.wheel_inertia - (G[0, i] * x[4] + G[1, i] * x[5] + G[2, i] * x[6])
+        angle[i] = (angle[i] + omega * dt) % (2.0 * math.pi)
+
+
+@njit(cache=True, inline="always")
 def _propagate_stage(state, work, plant, process_noise, h_reported):
     """The plant over the step (RK4) under the disturbances, the process noise, the
     thrusters and the realised wheel torques; with ``h_reported`` (N,) the wheels'
@@ -1048,26 +1111,21 @@ def _propagate_stage(state, work, plant, process_noise, h_reported):
     for i in range(3):
         d[7 + i] = plant.dist[7 + i] + process_noise[i] + work.tau_thr[i]
     d[1] = plant.dist[1] * work.flags[SRP_SCALE]  # SRP: none in the shadow, ∝ 1/r² of the Sun
-    rk4_step(
-        x,
-        work.hw_real,
-        plant.dt,
-        plant.J,
-        plant.J_inv,
-        plant.G,
-        plant.h_max,
-        plant.n,
-        d,
-        work.s_orb,
-        work.m_orb,
-        work.rk4,
-    )
+    J, J_inv, G, h_max, n, dt = plant.J, plant.J_inv, plant.G, plant.h_max, plant.n, plant.dt
+    if plant.jitter:  # the wheels' imbalance, turning with the rotors within the step
+        _jitter_stage(state, work, plant)
+        rk4_step_forced(
+            x, work.hw_real, dt, J, J_inv, G, h_max, n, d, work.s_orb, work.m_orb, work.rk4,
+            work.forcing,
+        )  # fmt: skip
+    else:
+        rk4_step(x, work.hw_real, dt, J, J_inv, G, h_max, n, d, work.s_orb, work.m_orb, work.rk4)
     for i in range(h_reported.shape[0]):
         x[7 + i] = min(max(h_reported[i], -plant.h_max[i]), plant.h_max[i])
     _count_zero_crossings(state.stats, x, plant.h_max, state.wheel_sign)
 
 
-@njit(cache=True)
+@njit(**_LEAN)
 def finish_step(state, work, k, j, log_k, plant, sensors, filt, noise, log, h_reported):
     """The second half of step ``k``, after the wheels realised ``work.hw_real`` (N,) N·m:
     the log row (every ``log.every`` steps), the filter's prediction and the plant's
@@ -1080,7 +1138,7 @@ def finish_step(state, work, k, j, log_k, plant, sensors, filt, noise, log, h_re
     return log_k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _actuate_stage(work, wheels, plant, x, t):
     """The wheel models realise the commands (into ``work.hw_real``)."""
     realise(
@@ -1102,7 +1160,7 @@ def _actuate_stage(work, wheels, plant, x, t):
             work.hw_real[i] *= plant.torque_scale
 
 
-@njit(cache=True)
+@njit(**_LEAN)
 def run_block(state, work, k0, steps, log_k, plant, law, sky, sensors, filt, noise, wheels, log):
     """Run ``steps`` steps from step index ``k0``; returns the next log row and whether a
     wheel touched its momentum limit (in this run so far).
@@ -1126,7 +1184,7 @@ def run_block(state, work, k0, steps, log_k, plant, law, sky, sensors, filt, noi
     1 unavailable, 2 gated).
     """
     start_block(work)
-    integrated = np.empty(0)  # the plant integrates the wheels' momenta
+    integrated = work.hw_real[:0]  # none reported: the plant integrates the wheels' momenta
     for j in range(steps):
         k = k0 + j
         command_step(state, work, k, j, plant, law, sky, sensors, filt, noise, log.steady_from)

@@ -30,7 +30,7 @@ from rwlab.attitude import kernel
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
 from rwlab.attitude.kernel import control_torque
 from rwlab.attitude.scenario import Scenario
-from rwlab.attitude.wheels import wheel_setup
+from rwlab.attitude.wheels import jitter_arrays, transverse_axes, wheel_setup
 from rwlab.errors import ConfigError
 from rwlab.wheel.physics import rad_s_to_rpm
 
@@ -626,6 +626,7 @@ def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) ->
 
 def _plant_record(sc: Scenario) -> kernel.Plant:
     G = sc.wheel_matrix
+    imbalance, positions = jitter_arrays(sc)
     return kernel.Plant(
         dt=sc.run.dt,
         n=GEO_RATE,
@@ -638,6 +639,10 @@ def _plant_record(sc: Scenario) -> kernel.Plant:
         dist=sc.spacecraft.disturbances.vector(),
         wheel_inertia=sc.wheels.inertia,
         torque_scale=sc.wheels.torque_scale,
+        jitter=bool(imbalance.any()),
+        imbalance=imbalance,
+        wheel_position=positions,
+        rotor_axes=transverse_axes(G),
     )
 
 
@@ -810,6 +815,7 @@ class Loop:
             gyro=gyro_state,
             stats=kernel.new_stats(),
             wheel_sign=np.sign(hw0),
+            wheel_angle=np.zeros(hw0.size),
         )
         self.work = kernel.new_work(self.plant, self.filt, P.shape[0])
         self.wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))

@@ -249,6 +249,12 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     help="Seconds after which the steady-state metrics start [default: half the run, at "
     "most its first hour].",
 )
+@click.option(
+    "--no-jitter",
+    is_flag=True,
+    help="Fly the scenario's wheels as perfect rotors (wheels.jitter = false): their "
+    "imbalance off, for comparison.",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @_friendly_errors
@@ -263,6 +269,7 @@ def attitude_simulate(
     relinearize,
     epoch,
     steady_after,
+    no_jitter,
     out,
     force,
 ):
@@ -288,6 +295,8 @@ def attitude_simulate(
             from rwlab.report.attitude import write_simulation
 
         overrides = {"run.dt": dt} if dt is not None else {}
+        if no_jitter:
+            overrides["wheels.jitter"] = False
         sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
         steps = _check_steps(duration, sc)
         config = _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize)
