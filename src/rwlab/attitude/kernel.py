@@ -148,7 +148,7 @@ ZERO_CROSS = _AT["wheel_zero_crossings"]
 # inlined into them and read their arrays from the records, and every such read would
 # otherwise cost an atomic increment and decrement (three quarters of the step's time when
 # measured). Nothing in them allocates; the functions they call keep the runtime.
-_LEAN: dict[str, Any] = {"cache": True, "_nrt": False}
+_LEAN: dict[str, Any] = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
 # the filter's modes (``Filter.mode``)
 TRUTH, DYNAMICS, GYRO = 0, 1, 2
