@@ -4,7 +4,7 @@ Run:  PYTHONPATH=src python tools/loop_reference.py --write   (once, on the code
       reference stands for; ORIGIN.md names the commit)
 
 Cases: every shipped scenario flown by ``attitude simulate`` (PD on the truth, LQG on the
-MEKF) for 120 s, the RW-physics and identified-free wheel models, a re-linearising LQR,
+MEKF) for 120 s, ideal and RW-physics wheels, a re-linearising LQR,
 and the HIL ``Satellite`` with wheels that report less than they were asked (so the
 reported momentum, not the command, drives the plant) and a wheel taken out of the
 allocation. The test ``tests/test_attitude_loop.py`` flies them again and compares.
