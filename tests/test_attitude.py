@@ -556,11 +556,11 @@ def test_kernel_nees_is_the_textbook_quadratic_form():
     e = np.concatenate([2 * dq[:3], x[4:7] - w_hat, b - b_hat])
     expected = e[:6] @ np.linalg.solve(P[:6, :6], e[:6])
     rest = np.concatenate([np.zeros(3), x[4:7] - w_hat])  # the caller fills e[3:]
-    got = _nees(x, q_hat, rest, P[:6, :6].copy(), np.empty((6, 6)))
+    got = _nees(x, q_hat, rest, P[:6, :6].copy(), np.empty((6, 6)), np.empty(6))
     assert got == pytest.approx(expected, rel=1e-9)
     # with the disturbance state the error gains b − b̂
     rest = np.concatenate([np.zeros(3), x[4:7] - w_hat, b - b_hat])
-    got = _nees(x, q_hat, rest, P, np.empty((9, 9)))
+    got = _nees(x, q_hat, rest, P, np.empty((9, 9)), np.empty(9))
     assert got == pytest.approx(e @ np.linalg.solve(P, e), rel=1e-9)
 
 

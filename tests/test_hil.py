@@ -102,7 +102,7 @@ def test_reallocation_needs_three_axes():
     sc = load_scenario("geo-smallsat").with_(**{"wheels.axes": "pyramid"})
     sat = Satellite(sc, LQRController(sc), duration=1.0, seed=0)
     sat.set_active(np.array([True, False, True, True]))  # any three of a pyramid span
-    assert np.allclose(sc.wheel_matrix[:, sat.active] @ sat._pinv[sat.active], np.eye(3))
+    assert np.allclose(sc.wheel_matrix[:, sat.active] @ sat.allocation[sat.active], np.eye(3))
     with pytest.raises(ConfigError, match="span"):
         sat.set_active(np.array([True, False, False, True]))
 

@@ -40,7 +40,7 @@ from numba import njit
 
 from rwlab.attitude.frames import EARTH_RADIUS, GEO_RADIUS, GEO_RATE, J2_EARTH, dcm, xi
 
-__all__ = ["DisturbanceModel", "derivative", "propagate", "rk4_step"]
+__all__ = ["DisturbanceModel", "derivative", "propagate", "rk4_step", "rk4_step_forced"]
 
 SOLAR_PRESSURE = 4.56e-6  # N/m² at 1 AU
 SUN_TIDE = 1.32712440018e20 / 1.495978707e11**3  # μ/R³ of the Sun at 1 AU, 1/s²
@@ -234,6 +234,42 @@ def rk4_step(x, hw_dot, dt, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, work
     for i in range(m):
         xt[i] = x[i] + dt * k3[i]
     _derivative_into(xt, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k4)
+    for i in range(m):
+        x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    for i in range(4):
+        x[i] /= norm
+    for i in range(h_max.shape[0]):
+        x[7 + i] = min(max(x[7 + i], -h_max[i]), h_max[i])
+
+
+@njit(cache=True)
+def rk4_step_forced(x, hw_dot, dt, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, work, forcing):
+    """:func:`rk4_step` with an extra body torque that changes within the step: ``forcing``
+    (3, 3) N·m at the step's start, middle and end (the RK4 stages' times), e.g. the wheels'
+    imbalance turning with the rotors. ``dist`` is used as scratch and restored.
+
+    Written beside :func:`rk4_step` rather than through it: the balanced loop keeps its
+    step as it was (bit for bit, and as fast).
+    """
+    m = x.shape[0]
+    k1, k2, k3, k4, xt = work[0], work[1], work[2], work[3], work[4]
+    base0, base1, base2 = dist[7], dist[8], dist[9]
+    stage = (0, 1, 1, 2)
+    ks = (k1, k2, k3, k4)
+    for s in range(4):
+        dist[7] = base0 + forcing[stage[s], 0]
+        dist[8] = base1 + forcing[stage[s], 1]
+        dist[9] = base2 + forcing[stage[s], 2]
+        if s == 0:
+            _derivative_into(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, k1)
+        else:
+            h = dt if s == 3 else 0.5 * dt
+            prev = ks[s - 1]
+            for i in range(m):
+                xt[i] = x[i] + h * prev[i]
+            _derivative_into(xt, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, ks[s])
+    dist[7], dist[8], dist[9] = base0, base1, base2
     for i in range(m):
         x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
     norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])

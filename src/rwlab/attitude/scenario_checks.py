@@ -69,9 +69,31 @@ def check(sc: Scenario) -> None:
             "(the wheel would saturate within one step)"
         )
     _check_sky(sc)
+    _check_jitter(sc)
     ratio = sc.sensors.period / sc.run.dt
     if abs(ratio - round(ratio)) > 1e-9:
         raise ConfigError(f"{sc.name}: sensors.period must be a whole number of run.dt")
+
+
+JITTER_STEP_RAD = 0.5  # the most a wheel may turn in one step with its imbalance on
+
+
+def _check_jitter(sc: Scenario) -> None:
+    """Imbalances ≥ 0, one value or one per wheel; positions (N, 3); and a step that
+    resolves the imbalance's rotation at the wheels' top speed (the plant's RK4 samples
+    it at each stage: more than ``JITTER_STEP_RAD`` a step and it aliases)."""
+    from rwlab.attitude.wheels import jitter_arrays
+
+    imbalance, _ = jitter_arrays(sc)  # raises on a bad shape or value
+    if not sc.wheels.jitter or not imbalance.any():
+        return
+    top = sc.wheels.max_momentum / sc.wheels.inertia  # rad/s
+    if top * sc.run.dt > JITTER_STEP_RAD:
+        raise ConfigError(
+            f"{sc.name}: wheel imbalance turns {top * sc.run.dt:.3g} rad a step at the wheels' "
+            f"top speed ({top:.4g} rad/s); set run.dt ≤ {JITTER_STEP_RAD / top:.3g} s, "
+            "or wheels.jitter = false"
+        )
 
 
 def _check_sky(sc: Scenario) -> None:
@@ -246,7 +268,13 @@ def _check_types(sc: Scenario) -> None:
             _check_type(sc.name, name, getattr(getattr(sc, section), f.name), f.default)
 
 
+# one number or one per wheel: checked by ``_check_jitter``
+_PER_WHEEL = ("wheels.static_imbalance_kg_m", "wheels.dynamic_imbalance_kg_m2")
+
+
 def _check_type(where: str, name: str, value: Any, default: Any) -> None:
+    if name in _PER_WHEEL:
+        return
     if name in _VECTORS:
         ok = isinstance(value, (tuple, list)) and len(value) in _VECTORS[name]
         if not (ok and all(_is_number(v) for v in value)):

@@ -89,6 +89,16 @@ class Wheels:
     friction_factor : float
         The true friction over what the drive's feed-forward assumes (a worn or cold
         bearing; ``"physics"`` wheels).
+    static_imbalance_kg_m, dynamic_imbalance_kg_m2 : float or tuple of float
+        Each wheel's static imbalance U_s (kg·m) and dynamic imbalance U_d (kg·m²), one
+        value for every wheel or one per wheel (Basilisk's simple jitter model: a force
+        U_s Ω² and a torque U_d Ω² turning with the rotor; 0: a balanced wheel).
+    positions_m : tuple of tuple of float
+        Each wheel's centre relative to the spacecraft's centre of mass, body axes, m (the
+        static imbalance's force acts there); empty: at the centre of mass.
+    jitter : bool
+        The imbalances act on the plant (False: the same wheels as perfect rotors, for
+        comparison).
     """
 
     spec: str = "nrwa-t6"
@@ -107,6 +117,10 @@ class Wheels:
     torque_scale: float = 1.0
     stiction: bool = True
     friction_factor: float = 1.0
+    static_imbalance_kg_m: float | tuple = 0.0
+    dynamic_imbalance_kg_m2: float | tuple = 0.0
+    positions_m: tuple = ()
+    jitter: bool = True
 
     def __post_init__(self) -> None:
         spec = self.wheel_spec

@@ -7,13 +7,15 @@ realise it (ideal, the RW physics of ``rwlab.wheel``, or the identified model
 from ``model.json``), and the plant and the filter move one step.
 
 Controllers are linear laws τ = −K s (:class:`LinearController`) acting on the
-estimate (or on the truth with ``estimator='truth'``); the whole loop runs
-compiled (``kernel.run_block``, wheel models in ``wheels``).
+estimate (or on the truth with ``estimator='truth'``). :class:`Loop` sets a run up
+(records, state, noise streams, block by block); the step itself is compiled
+(``kernel.command_step`` + ``kernel.finish_step``, the wheel models of ``wheels`` in
+between): ``simulate`` runs it a block at a time (``kernel.run_block``), ``hil.Satellite``
+a period at a time with its wheels on a bus.
 
 Why this module is long: the loop's set-up (noise streams, the filter's design noise,
-initial state and estimate), its controllers and its result type sit beside the loop
-that uses them; ``hil.satellite`` mirrors this file step by step, and one file per side
-keeps the mirror readable.
+initial state and estimate, the kernel's records), its controllers and its result type
+sit beside the loop that uses them.
 """
 
 from __future__ import annotations
@@ -28,18 +30,21 @@ from rwlab.attitude import kernel
 from rwlab.attitude.frames import GEO_RATE, angle_deg, dcm, from_axis_angle, qmul
 from rwlab.attitude.kernel import control_torque
 from rwlab.attitude.scenario import Scenario
-from rwlab.attitude.wheels import wheel_setup
+from rwlab.attitude.wheels import jitter_arrays, transverse_axes, wheel_setup
 from rwlab.errors import ConfigError
 from rwlab.wheel.physics import rad_s_to_rpm
 
 __all__ = [
     "LinearController",
+    "Loop",
     "PDController",
     "SimResult",
     "attitude_noise_psd",
     "default_filter_psd",
     "disturbance_psd",
     "disturbance_state",
+    "filter_psd",
+    "relative_rate",
     "simulate",
     "steady_start",
     "sun_direction",
@@ -167,8 +172,23 @@ class SimResult(ShortRepr):
     tracker_status: np.ndarray | None = None
 
 
-def _w_bo(q, w, n=GEO_RATE):
-    """ω_bo = ω − A(q) (0, −n, 0) for one row or each row of (K, 4) and (K, 3) arrays."""
+def relative_rate(q, w, n=GEO_RATE):
+    """ω_bo = ω − A(q) (0, −n, 0) for one row or each row of (K, 4) and (K, 3) arrays.
+
+    Parameters
+    ----------
+    q : array, shape (4,) or (K, 4)
+        Attitude quaternions, orbital → body.
+    w : array, shape (3,) or (K, 3)
+        Body rates, rad/s (inertial).
+    n : float
+        Orbit rate, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3,) or (K, 3)
+        The rates relative to the orbital frame, rad/s.
+    """
     q1, q2, q3, q4 = (np.asarray(q, float)[..., i] for i in range(4))
     c = q4 * q4 - (q1 * q1 + q2 * q2 + q3 * q3)
     col = np.stack([2 * (q1 * q2 + q4 * q3), c + 2 * q2 * q2, 2 * (q2 * q3 - q4 * q1)], axis=-1)
@@ -413,24 +433,38 @@ def simulate(
         raise ConfigError(
             f"steady_after must be a number of seconds in [0, duration), got {steady_after!r}"
         )
-    kw = dict(
+    loop = Loop(
+        scenario,
+        controller,
         steps=steps,
-        streams=_Streams(scenario.run.seed if seed is None else seed),
         estimator=estimator,
         log_every=-(-max(1, int(log_every)) // sensor_every) * sensor_every,
+        seed=scenario.run.seed if seed is None else seed,
         wheel_momentum0=wheel_momentum0,
-        filter_psd=default_filter_psd(scenario)
-        if filter_torque_psd is None
-        else scenario.spacecraft.process_noise_torque**2 + filter_torque_psd,
+        filter_psd=filter_psd(scenario, filter_torque_psd),
         noise_scale=scenario.filter.noise_margin * filter_noise_scale,
         steady_from=round(steady_after / scenario.run.dt),
-        progress=progress,
     )
-    result = _simulate_compiled(scenario, controller, **kw)
-    result.stats["steps"] = steps
-    result.stats["dt_s"] = scenario.run.dt
-    result.stats["sensor_period_s"] = scenario.sensors.period
-    return result
+    return _fly_blocks(loop, progress)
+
+
+def filter_psd(sc: Scenario, filter_torque_psd: float | None) -> float:
+    """The torque PSD the filter assumes, N²·m²·s: :func:`default_filter_psd`, or the
+    process noise plus ``filter_torque_psd`` (LTR's fictitious noise) when given.
+
+    Parameters
+    ----------
+    sc : Scenario
+    filter_torque_psd : float or None
+        N²·m²·s.
+
+    Returns
+    -------
+    float
+    """
+    if filter_torque_psd is None:
+        return default_filter_psd(sc)
+    return sc.spacecraft.process_noise_torque**2 + filter_torque_psd
 
 
 SUN_ALIGNMENT_PRIOR_DEG = 0.03  # 1σ of the sun sensor's misalignment the filter starts from
@@ -592,6 +626,7 @@ def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) ->
 
 def _plant_record(sc: Scenario) -> kernel.Plant:
     G = sc.wheel_matrix
+    imbalance, positions = jitter_arrays(sc)
     return kernel.Plant(
         dt=sc.run.dt,
         n=GEO_RATE,
@@ -604,6 +639,10 @@ def _plant_record(sc: Scenario) -> kernel.Plant:
         dist=sc.spacecraft.disturbances.vector(),
         wheel_inertia=sc.wheels.inertia,
         torque_scale=sc.wheels.torque_scale,
+        jitter=bool(imbalance.any()),
+        imbalance=imbalance,
+        wheel_position=positions,
+        rotor_axes=transverse_axes(G),
     )
 
 
@@ -709,76 +748,142 @@ def _law_record(sc: Scenario, controller, K: np.ndarray) -> kernel.Law:
     )
 
 
-def _simulate_compiled(
-    sc,
-    controller,
-    *,
-    steps,
-    estimator,
-    log_every,
-    streams,
-    wheel_momentum0,
-    filter_psd,
-    noise_scale,
-    steady_from,
-    progress,
-):
-    q0, w0, hw0, q_hat, w_hat, P = _initial(sc, streams.init, wheel_momentum0)
-    x = np.concatenate([q0, w0, hw0])
-    if estimator != "ekf":
-        q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
-    gyro_state, gyro_E = np.zeros(9), np.zeros((3, 3))
-    if sc.sensors.gyro is not None:  # the unit's fixed errors and turn-on bias
-        from rwlab.attitude.sensors import draw_gyro_errors
+class Loop:
+    """One run's attitude loop, set up: its records, state and noise streams, block by block.
 
-        gyro_E, gyro_state[:3] = draw_gyro_errors(sc.sensors.gyro, streams.gyro)
-        gyro_state[6:] = w0
-    plant = _plant_record(sc)
-    sensors = _sensor_record(sc, gyro_E)
-    filt = _filter_record(sc, estimator, P.shape[0], filter_psd, noise_scale)
-    log = _log_record(steps, log_every, steady_from, x.size)
-    state = kernel.State(
-        x=x,
-        q_hat=q_hat,
-        w_hat=w_hat,
-        P=P,
-        gyro=gyro_state,
-        stats=kernel.new_stats(),
-        wheel_sign=np.sign(hw0),
-    )
-    wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
-    period = controller.update_period
-    block = BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.run.dt)))
-    noise_sd = sc.spacecraft.process_noise_torque / math.sqrt(sc.run.dt)
-    k, log_k, saturated = 0, 0, False
-    while k <= steps:
-        n_steps = min(block, steps + 1 - k)
+    ``simulate`` runs each block compiled (``kernel.run_block``); ``hil.Satellite`` runs
+    the same step (``kernel.command_step`` and ``kernel.finish_step``) period by period
+    with its wheels on a bus in between. Both take every input from here.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    controller : LinearController
+    steps : int
+        Steps of ``run.dt`` to fly (``steps + 1`` samples).
+    estimator : {'ekf', 'truth'}
+    log_every : int
+        Steps between logged rows (a whole number of sensor periods).
+    seed : int
+        Seeds the independent noise streams.
+    wheel_momentum0 : (N,) array or None
+        Initial wheel momenta, N·m·s (None: the momentum bias).
+    filter_psd : float
+        The torque PSD the filter assumes, N²·m²·s.
+    noise_scale : float
+        Scales the sensor σ the filter assumes.
+    steady_from : int
+        First step of the steady-state statistics.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        controller: LinearController,
+        *,
+        steps: int,
+        estimator: str,
+        log_every: int,
+        seed: int,
+        wheel_momentum0: np.ndarray | None,
+        filter_psd: float,
+        noise_scale: float,
+        steady_from: int,
+    ) -> None:
+        sc = self.scenario = scenario
+        self.controller, self.steps, self.steady_from = controller, steps, steady_from
+        self.streams = _Streams(seed)
+        q0, w0, hw0, q_hat, w_hat, P = _initial(sc, self.streams.init, wheel_momentum0)
+        x = np.concatenate([q0, w0, hw0])
+        if estimator != "ekf":
+            q_hat, w_hat, P = q0.copy(), w0.copy(), P[:6, :6].copy()
+        gyro_state, gyro_E = np.zeros(9), np.zeros((3, 3))
+        if sc.sensors.gyro is not None:  # the unit's fixed errors and turn-on bias
+            from rwlab.attitude.sensors import draw_gyro_errors
+
+            gyro_E, gyro_state[:3] = draw_gyro_errors(sc.sensors.gyro, self.streams.gyro)
+            gyro_state[6:] = w0
+        self.plant = _plant_record(sc)
+        self.sensors = _sensor_record(sc, gyro_E)
+        self.filt = _filter_record(sc, estimator, P.shape[0], filter_psd, noise_scale)
+        self.log = _log_record(steps, log_every, steady_from, x.size)
+        self.state = kernel.State(
+            x=x,
+            q_hat=q_hat,
+            w_hat=w_hat,
+            P=P,
+            gyro=gyro_state,
+            stats=kernel.new_stats(),
+            wheel_sign=np.sign(hw0),
+            wheel_angle=np.zeros(hw0.size),
+        )
+        self.work = kernel.new_work(self.plant, self.filt, P.shape[0])
+        self.wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
+        period = controller.update_period
+        self.block_steps = (
+            BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.run.dt)))
+        )
+        self.noise_sd = sc.spacecraft.process_noise_torque / math.sqrt(sc.run.dt)
+
+    def block(self, k: int) -> tuple[kernel.Law, kernel.Sky, kernel.Noise, int]:
+        """The block that starts at step ``k``: the law (the gain at what the controller
+        knows now), the sky table, the block's noise and its number of steps."""
+        sc, x, filt, sn = self.scenario, self.state.x, self.filt, self.sensors
+        n_steps = min(self.block_steps, self.steps + 1 - k)
         # the gain's operating point: what the controller knows (with gyros, q̂ and the
         # nominal rate, ω_bo = 0)
-        s_q = x[:4] if filt.mode == kernel.TRUTH else state.q_hat
+        s_q = x[:4] if filt.mode == kernel.TRUTH else self.state.q_hat
         s_w = {
             kernel.TRUTH: x[4:7],
-            kernel.DYNAMICS: state.w_hat[:3],
+            kernel.DYNAMICS: self.state.w_hat[:3],
             kernel.GYRO: dcm(s_q) @ np.array([0.0, -GEO_RATE, 0.0]),
         }[filt.mode]
         K = np.ascontiguousarray(
-            controller.gain(k * sc.run.dt, s_q, _w_bo(s_q, s_w), plant.G @ x[7:]), dtype=float
+            self.controller.gain(k * sc.run.dt, s_q, relative_rate(s_q, s_w), self.plant.G @ x[7:]),
+            dtype=float,
         )
-        noise = streams.block(k, n_steps, (sensors.every, sensors.tracker_every), noise_sd, sensors)
+        noise = self.streams.block(k, n_steps, (sn.every, sn.tracker_every), self.noise_sd, sn)
         sky_t0 = math.floor(k * sc.run.dt / SKY_STEP) * SKY_STEP
         rows = math.ceil(((k + n_steps) * sc.run.dt - sky_t0) / SKY_STEP) + 2
         sky = kernel.Sky(sky_table(sc, sky_t0 + SKY_STEP * np.arange(rows)), sky_t0, SKY_STEP)
-        law = _law_record(sc, controller, K)
-        log_k, sat = kernel.run_block(
-            state, k, n_steps, log_k, plant, law, sky, sensors, filt, noise, wheels, log
+        return _law_record(sc, self.controller, K), sky, noise, n_steps
+
+    def result(self, log_k: int) -> SimResult:
+        """The run's first ``log_k`` logged rows and its statistics as a :class:`SimResult`."""
+        sc, mode = self.scenario, self.filt.mode
+        saturated = self.work.flags[kernel.SATURATED] > 0
+        result = _assemble(sc, self.log, log_k, saturated, self.state.stats, self.steady_from, mode)
+        result.stats["steps"] = self.steps
+        result.stats["dt_s"] = sc.run.dt
+        result.stats["sensor_period_s"] = sc.sensors.period
+        result.stats["filter_states"] = self.state.P.shape[0] if mode != kernel.TRUTH else 0
+        return result
+
+
+def _fly_blocks(loop: Loop, progress) -> SimResult:
+    """Every block of ``loop`` compiled (``kernel.run_block``)."""
+    k = log_k = 0
+    while k <= loop.steps:
+        law, sky, noise, n_steps = loop.block(k)
+        log_k, _ = kernel.run_block(
+            loop.state,
+            loop.work,
+            k,
+            n_steps,
+            log_k,
+            loop.plant,
+            law,
+            sky,
+            loop.sensors,
+            loop.filt,
+            noise,
+            loop.wheels,
+            loop.log,
         )
-        saturated |= sat
         k += n_steps
         if progress is not None:
-            progress(min(k, steps))
-    result = _assemble(sc, log, log_k, saturated, state.stats, steady_from, filt.mode)
-    result.stats["filter_states"] = P.shape[0] if filt.mode != kernel.TRUTH else 0
-    return result
+            progress(min(k, loop.steps))
+    return loop.result(log_k)
 
 
 def astuple_shallow(obj) -> tuple:
@@ -790,8 +895,8 @@ def astuple_shallow(obj) -> tuple:
 
 def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:
     log_x, log_est = log.x[:log_k], log.est[:log_k]
-    w_bo = _w_bo(log_x[:, :4], log_x[:, 4:7])
-    w_est = _w_bo(log_est[:, :4], log_est[:, 4:7])
+    w_bo = relative_rate(log_x[:, :4], log_x[:, 4:7])
+    w_est = relative_rate(log_est[:, :4], log_est[:, 4:7])
     wheel = rad_s_to_rpm(log_x[:, 7:] / sc.wheels.inertia)
     result = _result(
         log.t[:log_k],

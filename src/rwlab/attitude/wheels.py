@@ -303,3 +303,67 @@ def realise(kind, t, dt, cmd, x, healthy, faulty, fault_s, state, model, nominal
     else:
         for i in range(nw):
             out[i] = cmd[i]
+
+
+def jitter_arrays(sc) -> tuple[np.ndarray, np.ndarray]:
+    """Each wheel's imbalance [U_s kg·m, U_d kg·m²] (N, 2) (zeros with ``wheels.jitter``
+    off) and centre relative to the centre of mass (N, 3), m, from the scenario.
+
+    Parameters
+    ----------
+    sc : Scenario
+
+    Returns
+    -------
+    imbalance : numpy.ndarray, shape (N, 2)
+    positions : numpy.ndarray, shape (N, 3)
+
+    Raises
+    ------
+    ConfigError
+        A value that is not a number ≥ 0, or not one per wheel.
+    """
+    from rwlab.errors import ConfigError
+
+    nw, w = sc.n_wheels, sc.wheels
+    cols = []
+    for name in ("static_imbalance_kg_m", "dynamic_imbalance_kg_m2"):
+        try:
+            v = np.broadcast_to(np.asarray(getattr(w, name), dtype=float), (nw,)).copy()
+        except (TypeError, ValueError):
+            raise ConfigError(
+                f"{sc.name}: wheels.{name} must be one number or {nw} (one per wheel)"
+            ) from None
+        if not np.all(np.isfinite(v) & (v >= 0)):
+            raise ConfigError(f"{sc.name}: wheels.{name} must be ≥ 0")
+        cols.append(v)
+    try:
+        pos = np.zeros((nw, 3)) if len(w.positions_m) == 0 else np.array(w.positions_m, float)
+    except (TypeError, ValueError):
+        pos = np.empty(0)
+    if pos.shape != (nw, 3) or not np.all(np.isfinite(pos)):
+        raise ConfigError(f"{sc.name}: wheels.positions_m must be {nw} points [x, y, z] in m")
+    imbalance = np.column_stack(cols) if w.jitter else np.zeros((nw, 2))
+    return imbalance, pos
+
+
+def transverse_axes(G: np.ndarray) -> np.ndarray:
+    """Each wheel's rotor axes at angle 0 (N, 2, 3): ŵ₂ ⟂ its spin axis ĝ (towards the body
+    axis least aligned with ĝ, made orthogonal) and ŵ₃ = ĝ × ŵ₂ (Basilisk's w2Hat0, w3Hat0).
+
+    Parameters
+    ----------
+    G : numpy.ndarray, shape (3, N)
+        Spin axes (unit columns), body axes.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, 2, 3)
+    """
+    out = np.empty((G.shape[1], 2, 3))
+    for i, g in enumerate(G.T):
+        e = np.eye(3)[int(np.argmin(np.abs(g)))]
+        w2 = e - (e @ g) * g
+        w2 /= np.linalg.norm(w2)
+        out[i] = w2, np.cross(g, w2)
+    return out

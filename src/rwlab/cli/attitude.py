@@ -286,6 +286,12 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     type=click.Path(exists=True, dir_okay=False),
     help="model.json from `rwlab identify`: fly it as the actuator (with its wheel spec).",
 )
+@click.option(
+    "--no-jitter",
+    is_flag=True,
+    help="Fly the scenario's wheels as perfect rotors (wheels.jitter = false): their "
+    "imbalance off, for comparison.",
+)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option(
     "--force",
@@ -306,6 +312,7 @@ def attitude_simulate(
     epoch,
     steady_after,
     wheel_model,
+    no_jitter,
     out,
     force,
 ):
@@ -331,6 +338,8 @@ def attitude_simulate(
             from rwlab.report.attitude import write_simulation
 
         overrides = {"run.dt": dt} if dt is not None else {}
+        if no_jitter:
+            overrides["wheels.jitter"] = False
         sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
         sc = _with_wheel_model(sc, wheel_model)
         forced = _wheel_check(sc, force)

@@ -44,7 +44,7 @@ from rwlab.attitude.control import (
     slew_rate_limit,
 )
 from rwlab.attitude.scenario import Scenario, load_scenario
-from rwlab.attitude.sim import SimResult, _w_bo
+from rwlab.attitude.sim import SimResult, relative_rate
 from rwlab.attitude.wheels import physics_params
 from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
@@ -579,7 +579,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     if cfg.reference:
         reference, ref_metrics = reference_simulation(sc, cfg, seed, loop.h0, run.t.size)
     wheel_log = loop.wheel_log()
-    # the plant's momenta are the readings: count on them (the Satellite does not)
+    # the plant's momenta are the readings: count on every one the wheels sent
     m["wheel_zero_crossings"] = sum(zero_crossings(w["speed_rpm"]) for w in wheel_log.values())
     payload = {
         **m,
@@ -869,9 +869,8 @@ class _Loop:
     # -- the satellite's channel ---------------------------------------------------------
     def _write_satellite(self, torques) -> None:
         sat = self.sat
-        step = sat._step
-        sensors = sat.last_sensors if step.get("measured") else {}
-        tracker = sat.last_tracker if step.get("measured") else None
+        sensors = sat.last_sensors if sat.measured else {}
+        tracker = sat.last_tracker if sat.measured else None
         x = sat.x
         self.record.write(
             "/satellite",
@@ -881,8 +880,8 @@ class _Loop:
                 "estimation_error_deg": sat.estimation_error_deg,
                 "q": x[:4].tolist(),
                 "q_est": sat.q_hat.tolist(),
-                "w_bo": _w_bo(x[:4], x[4:7]).tolist(),  # relative to the orbit frame
-                "torque_demand_Nm": step["demand"].tolist(),
+                "w_bo": relative_rate(x[:4], x[4:7]).tolist(),  # relative to the orbit frame
+                "torque_demand_Nm": sat.demand.tolist(),
                 "wheel_torque_cmd_Nm": np.asarray(torques).tolist(),
                 "wheel_momentum_Nms": x[7:].tolist(),
                 "sun_sensor": None if sensors.get("sun") is None else sensors["sun"].tolist(),
