@@ -92,13 +92,15 @@ class Wheels:
     static_imbalance_kg_m, dynamic_imbalance_kg_m2 : float or tuple of float
         Each wheel's static imbalance U_s (kg·m) and dynamic imbalance U_d (kg·m²), one
         value for every wheel or one per wheel (Basilisk's simple jitter model: a force
-        U_s Ω² and a torque U_d Ω² turning with the rotor; 0: a balanced wheel).
+        U_s Ω² and a torque U_d Ω² turning with the rotor; 0: a balanced wheel). None:
+        the wheel spec's.
     positions_m : tuple of tuple of float
         Each wheel's centre relative to the spacecraft's centre of mass, body axes, m (the
         static imbalance's force acts there); empty: at the centre of mass.
     jitter : bool
-        The imbalances act on the plant (False: the same wheels as perfect rotors, for
-        comparison).
+        The imbalances act on the plant (default False: the wheels fly as perfect
+        rotors, since resolving the spin needs a step of about 0.5 / Ω_max s; True for
+        the relative pointing error at the wheels' spin rate).
     """
 
     spec: str = "nrwa-t6"
@@ -117,10 +119,10 @@ class Wheels:
     torque_scale: float = 1.0
     stiction: bool = True
     friction_factor: float = 1.0
-    static_imbalance_kg_m: float | tuple = 0.0
-    dynamic_imbalance_kg_m2: float | tuple = 0.0
+    static_imbalance_kg_m: float | tuple = None  # type: ignore[assignment]
+    dynamic_imbalance_kg_m2: float | tuple = None  # type: ignore[assignment]
     positions_m: tuple = ()
-    jitter: bool = True
+    jitter: bool = False
 
     def __post_init__(self) -> None:
         spec = self.wheel_spec
@@ -129,6 +131,8 @@ class Wheels:
             ("max_torque", spec.max_torque_nm),
             ("max_momentum", spec.momentum_capacity_nms),
             ("max_speed_rpm", spec.max_speed_rpm),
+            ("static_imbalance_kg_m", spec.static_imbalance_kg_m),
+            ("dynamic_imbalance_kg_m2", spec.dynamic_imbalance_kg_m2),
         ):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)

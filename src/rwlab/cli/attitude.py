@@ -287,10 +287,11 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     help="model.json from `rwlab identify`: fly it as the actuator (with its wheel spec).",
 )
 @click.option(
-    "--no-jitter",
-    is_flag=True,
-    help="Fly the scenario's wheels as perfect rotors (wheels.jitter = false): their "
-    "imbalance off, for comparison.",
+    "--jitter/--no-jitter",
+    default=None,
+    help="The wheels' imbalance (the wheel spec's U_s, U_d) shakes the spacecraft at their "
+    "spin rate (needs --dt of about 0.5 / top wheel speed in rad/s) [default: the "
+    "scenario's wheels.jitter, off in the shipped ones].",
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option(
@@ -312,7 +313,7 @@ def attitude_simulate(
     epoch,
     steady_after,
     wheel_model,
-    no_jitter,
+    jitter,
     out,
     force,
 ):
@@ -338,8 +339,8 @@ def attitude_simulate(
             from rwlab.report.attitude import write_simulation
 
         overrides = {"run.dt": dt} if dt is not None else {}
-        if no_jitter:
-            overrides["wheels.jitter"] = False
+        if jitter is not None:
+            overrides["wheels.jitter"] = jitter
         sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
         sc = _with_wheel_model(sc, wheel_model)
         forced = _wheel_check(sc, force)
