@@ -17,7 +17,7 @@ grid of change times: the GLR's maximisation over the onset).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,6 +55,36 @@ class WindowFit:
     against: str
 
 
+def _relative(fit: Fit, before: Fit) -> Fit:
+    """A change against the record's own past: a factor as the ratio to the past's, a bias
+    as the difference (intervals combined in quadrature, in log for factors); a clamp in A
+    is absolute."""
+    if fit.unit == "factor":
+        lo, hi = np.log(fit.ci95), np.log(before.ci95)
+        mid = np.log(fit.size / before.size)
+        half = np.hypot(np.diff(lo)[0], np.diff(hi)[0]) / 2
+        return replace(
+            fit,
+            size=float(np.exp(mid)),
+            ci95=(float(np.exp(mid - half)), float(np.exp(mid + half))),
+        )
+    if fit.unit == "rpm":
+        half = np.hypot(fit.ci95[1] - fit.ci95[0], before.ci95[1] - before.ci95[0]) / 2
+        mid = fit.size - before.size
+        return replace(fit, size=mid, ci95=(mid - half, mid + half))
+    return fit
+
+
+def _widened(fit: Fit, zone: tuple[float, float]) -> Fit:
+    """A fault from power-up against the population: the interval also spans where a
+    healthy unit may sit (the zone about the nominal size), for a factor or a bias."""
+    if fit.unit == "factor":
+        return replace(fit, ci95=(fit.ci95[0] * min(zone[0], 1.0), fit.ci95[1] * max(zone[1], 1.0)))
+    if fit.unit == "rpm":
+        return replace(fit, ci95=(fit.ci95[0] + min(zone[0], 0.0), fit.ci95[1] + max(zone[1], 0.0)))
+    return fit
+
+
 class Bank:
     """The model-based detectors' cumulative gains over one record.
 
@@ -68,8 +98,8 @@ class Bank:
         Per fault, how far a healthy record's size moves within it (size units).
     dispersion : dict of str to float, optional
         Per fault, φ: the healthy windows' scatter of the size over what the
-        likelihood's curvature says (quasi-likelihood: the log-likelihood is
-        divided by φ, so intervals and log-LRs carry the model's misfit). 1 if absent.
+        likelihood says (quasi-likelihood: the intervals are those of ll/φ, so
+        they carry the model's misfit). 1 if absent.
     faults : sequence of str
         The model-based detectors to run.
     """
@@ -97,6 +127,7 @@ class Bank:
             for n, d in self.detectors.items()
         }
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
+        self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
         self.dispersion = {n: (dispersion or {}).get(n, 1.0) for n in self.detectors}
         Ts = features.scales.Ts
@@ -113,18 +144,22 @@ class Bank:
 
     def fit(self, name: str, a: int, k: int) -> WindowFit:
         """Detector ``name`` on samples [a, k): its GLR over the larger-supported healthy zone."""
-        ll = (self.cum[name][k] - self.cum[name][a]) / self.dispersion[name]
+        ll = self.cum[name][k] - self.cum[name][a]
+        phi = self.dispersion[name]
         det = self.detectors[name]
         t = self.features.t_s
-        best = profile_fit(det.fault, det.unit, self.grid[name], ll, self.zone[name])
+        best = profile_fit(det.fault, det.unit, self.grid[name], ll, self.zone[name], phi)
         against = "population"
         if a >= self.past_min:
-            past = (self.cum[name][a] - self.cum[name][0]) / self.dispersion[name]
-            ok = self.grid[name][past >= past.max() - SUPPORT]
+            past = self.cum[name][a] - self.cum[name][0]
+            ok = self.grid[name][past >= past.max() - SUPPORT * phi]
             own = self._between(name, ok[0] - self.drift[name], ok[-1] + self.drift[name])
-            change = profile_fit(det.fault, det.unit, self.grid[name], ll, own)
+            change = profile_fit(det.fault, det.unit, self.grid[name], ll, own, phi)
             if change.log_lr > best.log_lr:
-                best, against = change, "own past"
+                before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi)
+                best, against = _relative(change, before), "own past"
+        if against == "population":
+            best = _widened(best, self.zone_bounds[name])
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
 
     def at(self, name: str, k: int) -> WindowFit:

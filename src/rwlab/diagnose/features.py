@@ -110,8 +110,9 @@ class Features:
         Sample times, s.
     speed_rpm, model_rpm : numpy.ndarray
         Measured and model speed, rpm.
-    accel_rpm_s, demand_accel_rpm_s : numpy.ndarray
-        Measured acceleration (backward difference) and the loop's demand, rpm/s.
+    accel_rpm_s, model_accel_rpm_s, demand_accel_rpm_s : numpy.ndarray
+        Measured and model acceleration (backward differences) and the loop's
+        demand, rpm/s.
     current_a : numpy.ndarray
         Measured motor current, A.
     friction_current_a, drive_current_a : numpy.ndarray
@@ -133,6 +134,7 @@ class Features:
     speed_rpm: np.ndarray
     model_rpm: np.ndarray
     accel_rpm_s: np.ndarray
+    model_accel_rpm_s: np.ndarray
     demand_accel_rpm_s: np.ndarray
     current_a: np.ndarray
     friction_current_a: np.ndarray
@@ -234,6 +236,7 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
         speed_rpm=speed,
         model_rpm=model,
         accel_rpm_s=accel,
+        model_accel_rpm_s=model_accel,
         demand_accel_rpm_s=demand,
         current_a=current,
         friction_current_a=friction,

@@ -40,6 +40,14 @@ def jerk(features: Features) -> np.ndarray:
     return d / features.scales.Ts
 
 
+def bins(features: Features) -> np.ndarray:
+    """Each sample's noise bin: its jerk's, or the last one (``len(JERK_EDGES) + 1``) where
+    the loop demands its acceleration limit (the model misses the wheel most there)."""
+    return np.where(
+        features.saturated, len(JERK_EDGES) + 1, np.searchsorted(JERK_EDGES, jerk(features))
+    )
+
+
 @dataclass(frozen=True)
 class NoiseModel:
     """σ per channel per jerk bin, and each channel's inflation.
@@ -47,8 +55,8 @@ class NoiseModel:
     Attributes
     ----------
     sigma : dict of str to tuple of float
-        Per channel (:data:`CHANNELS`), σ in each of ``len(JERK_EDGES) + 1`` bins,
-        in the channel's unit (A, rpm/s, rpm).
+        Per channel (:data:`CHANNELS`), σ in each of ``len(JERK_EDGES) + 2`` bins
+        (:func:`bins`), in the channel's unit (A, rpm/s, rpm).
     inflation : dict of str to float
         κ per channel (≥ 1).
     """
@@ -90,17 +98,17 @@ class NoiseModel:
         sigma: dict[str, tuple[float, ...]] = {}
         inflation: dict[str, float] = {}
         for name, attr in CHANNELS.items():
-            values, bins = [], []
+            values, where = [], []
             for f in records:
                 ok = f.usable & ~f.repeated
                 r = getattr(f, attr)[ok]
                 values.append(r - np.median(r))
-                bins.append(np.searchsorted(JERK_EDGES, jerk(f)[ok]))
-            v, b = np.concatenate(values), np.concatenate(bins)
+                where.append(bins(f)[ok])
+            v, b = np.concatenate(values), np.concatenate(where)
             if v.size < MIN_SAMPLES:
                 raise DataError(f"the noise model needs ≥ {MIN_SAMPLES} usable healthy samples")
             per_bin = []
-            for i in range(len(JERK_EDGES) + 1):
+            for i in range(len(JERK_EDGES) + 2):
                 x = v[b == i]
                 # MAD·1.4826: σ for Gaussian samples, unmoved by a few outliers
                 per_bin.append(
@@ -111,12 +119,11 @@ class NoiseModel:
                 if not np.isfinite(s[i]):
                     near = np.flatnonzero(np.isfinite(s))
                     s[i] = s[near[np.argmin(np.abs(near - i))]]
-            s = np.maximum.accumulate(np.maximum(s, 1e-12))  # never less noise at more jerk
+            s[:-1] = np.maximum.accumulate(np.maximum(s[:-1], 1e-12))  # never less at more jerk
             sigma[name] = tuple(float(x) for x in s)
             z = np.concatenate(
                 [
-                    (getattr(f, attr) - np.median(getattr(f, attr)))
-                    / s[np.searchsorted(JERK_EDGES, jerk(f))]
+                    ((getattr(f, attr) - np.median(getattr(f, attr))) / s[bins(f)])[f.usable]
                     for f in records
                 ]
             )

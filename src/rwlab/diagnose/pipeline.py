@@ -7,8 +7,10 @@ calibration (:mod:`~rwlab.diagnose.wheel_calibration`) and a false-alarm rate:
    each decision time (:class:`~rwlab.diagnose.bank.Bank`) against its
    threshold for the rate; the stuck and dropout tests on the telemetry;
 2. isolation: when any statistic crosses its threshold, every fault model is
-   fitted on the same window and the largest log-likelihood ratio names the
-   fault; the runner-up and its log-likelihood ratio to the winner are kept;
+   fitted on the same samples and the largest log-likelihood ratio beyond that
+   model's healthy level (its threshold: a fault model's misfit on a healthy
+   wheel is measured, not assumed) names the fault; the runner-up and its
+   log-likelihood ratio to the winner on that scale are kept;
 3. the event then follows the record: its window grows from its onset, the
    faults that share its signature channel (:data:`SIGNATURE`) are refitted on
    it, and one that becomes better supported re-labels the event (the history
@@ -64,8 +66,12 @@ class Event:
     relabelled: list[tuple[float, str]] = field(default_factory=list)
     start: int = 0
 
+    def __post_init__(self) -> None:
+        self.first = self.fit.fault  # the name at the alarm
+
     @property
     def fault(self) -> str:
+        """The fault named now (after any re-labelling)."""
         return self.fit.fault
 
     def to_dict(self) -> dict:
@@ -145,9 +151,33 @@ class Result:
         return "; ".join(parts)
 
 
-def _isolate(bank: Bank, k: int, names) -> list[WindowFit]:
+def _onset(bank: Bank, fault: str, k: int) -> int:
+    """The change time's maximum-likelihood estimate: the window start, on the decision
+    grid within the longest window before k, whose fit of ``fault`` has the largest log-LR
+    (a window reaching back before the onset mixes healthy samples in and fits worse)."""
+    starts = range(max(0, k - bank.windows[-1]), k - 1, bank.every)
+    return max(starts, key=lambda a: bank.fit(fault, a, k).fit.log_lr)
+
+
+def _owned(events) -> frozenset[str]:
+    """The channels the events' faults, first and present names, already explain."""
+    out: frozenset[str] = frozenset()
+    for e in events:
+        out |= SIGNATURE[e.first] | SIGNATURE[e.fault]
+    return out
+
+
+def _excess(w: WindowFit, limits: dict[str, Threshold]) -> float:
+    """A fit's log-LR beyond what healthy records reach at the rate asked: the model's
+    misfit on a healthy wheel differs between fault models (a clamp model fits the
+    back-EMF limit of a healthy wheel at high speed), so the raw log-LRs of two fault
+    models compare only beyond their own healthy level."""
+    return w.fit.log_lr - limits[w.fit.fault].log_lr
+
+
+def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     """Every candidate fault on its best window ending at k, most likely first."""
-    return sorted((bank.at(n, k) for n in names), key=lambda w: -w.fit.log_lr)
+    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w, limits))
 
 
 def run(features: Features, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> Result:
@@ -177,29 +207,40 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
         if k > end:
             break
         for e in events:  # follow each open event on its growing window
-            rivals = [n for n in MODEL_BASED if SIGNATURE[n] == SIGNATURE[e.fault]]
-            fits = sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -w.fit.log_lr)
+            others = _owned(x for x in events if x is not e)
+            rivals = [
+                n
+                for n in MODEL_BASED
+                if SIGNATURE[n] & SIGNATURE[e.first] and not SIGNATURE[n] & others
+            ]
+            if e.first not in MODEL_BASED or not rivals:
+                continue
+            fits = sorted(
+                (bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits)
+            )
             if fits[0].fit.fault != e.fault:
                 e.relabelled.append((float(features.t_s[k - 1]), e.fault))
             e.fit = fits[0].fit
-        owned = {SIGNATURE[e.fault] for e in events}
-        free = [n for n in MODEL_BASED if SIGNATURE[n] not in owned]
+        owned = _owned(events)
+        free = [n for n in MODEL_BASED if not SIGNATURE[n] & owned]
         crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]
         if not crossed:
             continue
-        ranked = _isolate(bank, k, free)
+        ranked = _isolate(bank, k, free, limits)
         best = ranked[0]
         runner = ranked[1] if len(ranked) > 1 else None
-        start = max(0, round((best.start_s - features.t_s[0]) / Ts))
+        start = _onset(bank, best.fit.fault, k)
         events.append(
             Event(
                 t_s=float(features.t_s[k - 1]),
-                onset_s=best.start_s,
+                onset_s=float(features.t_s[start]),
                 fit=best.fit,
                 detector=crossed[0],
                 threshold=limits[crossed[0]].log_lr,
                 runner_up=None if runner is None else runner.fit.fault,
-                runner_up_log_lr=None if runner is None else best.fit.log_lr - runner.fit.log_lr,
+                runner_up_log_lr=None
+                if runner is None
+                else _excess(best, limits) - _excess(runner, limits),
                 start=start,
             )
         )

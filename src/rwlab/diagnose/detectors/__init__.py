@@ -10,15 +10,16 @@ from rwlab.diagnose.detectors.torque_constant import TorqueConstant
 
 # the model-based detectors: their sizes compete by likelihood on the same residuals
 MODEL_BASED = ("friction", "torque_constant", "current_limit", "speed_sensor_bias")
-# the residual channel that carries each fault's signature: two faults on different
-# channels can both be present; on the same one they compete for one event
+# the residual channels that carry each fault's signature (a fault-signature matrix by
+# rows): two faults whose channels overlap compete for one event; two on disjoint
+# channels can both be present
 SIGNATURE = {
-    "friction": "current",
-    "torque_constant": "current",
-    "current_limit": "accel",
-    "speed_sensor_bias": "speed",
-    "speed_sensor_stuck": "reading",
-    "telemetry_dropout": "frames",
+    "friction": frozenset({"current"}),
+    "torque_constant": frozenset({"current", "accel"}),
+    "current_limit": frozenset({"accel"}),
+    "speed_sensor_bias": frozenset({"speed"}),
+    "speed_sensor_stuck": frozenset({"reading"}),
+    "telemetry_dropout": frozenset({"frames"}),
 }
 
 __all__ = [

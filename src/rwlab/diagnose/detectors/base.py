@@ -64,7 +64,12 @@ class Fit:
 
 
 def profile_fit(
-    fault: str, unit: str, grid: np.ndarray, ll: np.ndarray, healthy: np.ndarray
+    fault: str,
+    unit: str,
+    grid: np.ndarray,
+    ll: np.ndarray,
+    healthy: np.ndarray,
+    dispersion: float = 1.0,
 ) -> Fit:
     """The GLR fit of one window from its log-likelihood over the grid.
 
@@ -77,6 +82,10 @@ def profile_fit(
         Log-likelihood gain of each size over the reference wheel.
     healthy : numpy.ndarray of bool, shape (G,)
         The sizes a healthy wheel may have (the zone).
+    dispersion : float
+        φ ≥ 1: the interval is the quasi-likelihood's, ll/φ (the model's misfit
+        measured on healthy records); the log-LR stays the likelihood's, so the
+        faults' log-LRs compare on one scale.
 
     Returns
     -------
@@ -86,7 +95,7 @@ def profile_fit(
     tied = np.flatnonzero(ll >= top_ll - 1e-9)  # a flat top (a clamp never reached): the
     centre = float(np.mean(grid[healthy])) if healthy.any() else float(grid[0])
     best = int(tied[np.argmin(np.abs(grid[tied] - centre))])  # size nearest the healthy
-    inside = np.flatnonzero(ll >= ll[best] - HALF_CHI2_95)
+    inside = np.flatnonzero(ll >= ll[best] - HALF_CHI2_95 * dispersion)
     top = float(ll[best])
     zone = float(np.max(ll[healthy])) if healthy.any() else 0.0
     return Fit(

@@ -18,7 +18,7 @@ class TorqueConstant(Detector):
     healthy_size = 1.0
 
     def grid(self, features: Features) -> np.ndarray:
-        return np.geomspace(0.1, 2.0, 241)
+        return np.geomspace(0.1, 2.0, 801)
 
     def gains(self, features, weights, grid):
         c0 = features.scales.current_model[0]
