@@ -4,12 +4,15 @@ wheel physics (current balance, loop, sensor) with Gaussian noise of known σ.""
 from __future__ import annotations
 
 import itertools
+import json
 import math
 
+import jsonschema
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
@@ -18,6 +21,7 @@ from rwlab.diagnose.features import WheelScales, compute_features
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, excursion_peaks, garwood
 from rwlab.errors import ConfigError, DataError, FileFormatError
+from rwlab.schemas import schema
 from rwlab.wheel.faults import FAULTS
 
 TS = 0.5
@@ -156,6 +160,14 @@ def test_calibration_file_round_trips(calibration, tmp_path):
     (tmp_path / "bad.json").write_text('{"format": "rwlab.Other/1"}')
     with pytest.raises(FileFormatError, match="rwlab diagnose calibrate"):
         DiagnosisCalibration.load(tmp_path / "bad.json")
+
+
+def test_written_files_validate_against_their_schemas(calibration, tmp_path):
+    path = calibration.save(tmp_path / "calibration.json")
+    kind = Draft202012Validator
+    jsonschema.validate(json.loads(path.read_text()), schema("diagnosis_calibration"), cls=kind)
+    result = run(features(100, fault="friction", size=2.0), calibration)
+    jsonschema.validate(result.to_dict(str(path)), schema("fdi_diagnosis"), cls=kind)
 
 
 def test_garwood_interval_known_values():

@@ -257,6 +257,8 @@ def _fdi_features(record: Path, model_file):
         data = load_record(record, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
         return compute_features(data, wheel, scales)
     except RwlabError as exc:
+        if str(record) in str(exc) or record.name in str(exc):
+            raise
         raise _named(exc, record) from exc
 
 

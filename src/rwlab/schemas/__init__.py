@@ -41,6 +41,8 @@ NAMES = (
     "ssmodel",
     "frequency_response",
     "fir",
+    "diagnosis_calibration",
+    "fdi_diagnosis",
 )
 
 
