@@ -190,3 +190,14 @@ def test_a_record_without_current_is_refused():
     speed_only = IOData(data.u, data.y[:, :1], TS, output_names=["speed_rpm"])
     with pytest.raises(DataError, match="current_a"):
         compute_features(speed_only, wheel, SCALES)
+
+
+def test_the_page_gives_the_verdict_before_the_alarms(calibration, tmp_path):
+    from rwlab.report.fdi import fdi_page
+
+    path = calibration.save(tmp_path / "calibration.json")
+    result = run(features(100, fault="speed_sensor_bias", size=12.0), calibration)
+    text = fdi_page(result, calibration, path, title="rec").render()
+    verdict = text.index("speed_sensor_bias")
+    assert verdict < text.index('id="alarms"') < text.index('id="thresholds"')
+    assert path.resolve().as_uri() in text and "synthetic" in text

@@ -267,11 +267,16 @@ def _diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) 
     from rwlab._io import write_json
     from rwlab.diagnose.pipeline import run
     from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
+    from rwlab.report.fdi import fdi_page
 
     calibration = DiagnosisCalibration.load(calibration_file)
     result = run(_fdi_features(record, model_file), calibration, rate)
-    with _output(out, ("fdi.json",), force, "diagnosis") as stage:
+    files = ("fdi.json", "report.html")
+    with _output(out, files, force, "diagnosis") as stage:
         write_json(stage / "fdi.json", result.to_dict(calibration_file))
+        fdi_page(result, calibration, calibration_file, title=record.name).save(
+            stage / "report.html"
+        )
     click.echo(result.verdict())
     for e in result.events:
         runner = (
@@ -280,7 +285,7 @@ def _diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) 
             else f"; runner-up {e.runner_up}, ln LR {e.runner_up_log_lr:.3g}"
         )
         click.echo(f"alarm at {e.t_s:g} s: {e.fault} ({e.detector} crossed{runner})")
-    click.echo(_wrote(out, ("fdi.json",)))
+    click.echo(_wrote(out, files))
     if result.events:
         sys.exit(EXIT_ALARM)
 
