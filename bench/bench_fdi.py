@@ -29,8 +29,8 @@ from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
-# held out: units 7001-7104, seeds 77001-78104, never looked at while the pipeline was
-# written; sizes between the usual grid (friction x1.7, 0.55 A, k_t x0.85)
+# held out: sizes between the usual grid (friction x1.7, 0.55 A, k_t x0.85), faults
+# from power-up, two at once, on units and seeds no other set uses
 HELD = (
     ("friction=1.7", "prbs"),
     ("friction=1.7", "chirp"),
@@ -50,18 +50,22 @@ HELD = (
 HELD_POWER_UP = ("friction=1.5", "torque_constant=0.8", "current_limit=0.45")
 
 
-def held() -> dict[str, tuple]:
-    """name → spec of the held-out set (as bench_diagnose.records)."""
+def held(first: int = 7000, tag: str = "held") -> dict[str, tuple]:
+    """name → spec of a held-out set (as bench_diagnose.records): units first+1...
+
+    ``held`` (units 7001-7104) was judged once and then looked at; ``fresh`` (units
+    7201-7304) was made after the last change and judged once.
+    """
     out = {}
     for i, (fault, signal) in enumerate(HELD):
-        u = 7001 + i
-        out[f"held_f{u}"] = (u, 70000 + u, signal, 900, b._faults(fault, 600.0), fault, 600.0)
+        u = first + 1 + i
+        out[f"{tag}_f{u}"] = (u, 70000 + u, signal, 900, b._faults(fault, 600.0), fault, 600.0)
     for i, fault in enumerate(HELD_POWER_UP):
-        u = 7051 + i
-        out[f"held_p{u}"] = (u, 70000 + u, "prbs", 600, b._faults(fault, 0.0), fault, 0.0)
+        u = first + 51 + i
+        out[f"{tag}_p{u}"] = (u, 70000 + u, "prbs", 600, b._faults(fault, 0.0), fault, 0.0)
     for i in range(4):
-        u = 7101 + i
-        out[f"held_h{i}"] = (u, 71000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
+        u = first + 101 + i
+        out[f"{tag}_h{i}"] = (u, 71000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
     return out
 
 
@@ -81,7 +85,7 @@ def main() -> None:
     p.add_argument("--rate", type=float, default=1e-3)
     p.add_argument("--make", action="store_true", help="simulate missing records")
     args = p.parse_args()
-    specs = {**b.records("tune"), **held()}
+    specs = {**b.records("tune"), **held(), **held(7200, "fresh")}
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

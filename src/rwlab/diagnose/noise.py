@@ -41,11 +41,12 @@ def jerk(features: Features) -> np.ndarray:
 
 
 def bins(features: Features) -> np.ndarray:
-    """Each sample's noise bin: its jerk's, or the last one (``len(JERK_EDGES) + 1``) where
-    the loop demands its acceleration limit (the model misses the wheel most there)."""
-    return np.where(
-        features.saturated, len(JERK_EDGES) + 1, np.searchsorted(JERK_EDGES, jerk(features))
-    )
+    """Each sample's noise bin: its jerk's; or the last one (``len(JERK_EDGES) + 1``) where
+    the loop holds its acceleration limit (a slew: the model's slope misses the wheel's by
+    the spread of inertia between units, not by the jerk's timing error)."""
+    j = jerk(features)
+    held = features.saturated & (j < JERK_EDGES[0])
+    return np.where(held, len(JERK_EDGES) + 1, np.searchsorted(JERK_EDGES, j))
 
 
 @dataclass(frozen=True)
