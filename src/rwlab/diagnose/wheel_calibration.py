@@ -299,9 +299,9 @@ class DiagnosisCalibration:
             raise FileFormatError(f"{source}: bad diagnosis calibration ({exc!r})") from None
 
     @classmethod
-    def load(cls, path: str | os.PathLike | None = None) -> DiagnosisCalibration:
-        """Read a calibration file (default: the package's twin-calibrated one)."""
-        p = Path(path) if path is not None else Path(__file__).with_name("calibration_rw90.json")
+    def load(cls, path: str | os.PathLike) -> DiagnosisCalibration:
+        """Read a calibration file written by :meth:`save` (``rwlab diagnose calibrate``)."""
+        p = Path(path)
         try:
             d = json.loads(p.read_text())
         except (OSError, json.JSONDecodeError) as exc:
