@@ -4,12 +4,15 @@ pipeline (:mod:`rwlab.diagnose.pipeline`) from the command line."""
 from __future__ import annotations
 
 import sys
+import warnings
 from pathlib import Path
 
 import click
 
 from rwlab.cli._common import _friendly_errors, _output, _wrote, main
-from rwlab.errors import RwlabError
+from rwlab.errors import RwlabError, RwlabWarning
+
+MIN_HOURS = 2.0  # issue 42: a lab calibrates on 2-4 h of its wheel's normal test signals
 
 EXIT_ALARM = 1
 """``rwlab diagnose``'s exit status when a record raised an alarm (0: none; 2: an error),
@@ -108,6 +111,14 @@ def calibrate_cmd(records, model_file, out, origin):
     features = [_fdi_features(Path(r), model_file) for r in records]
     names = [Path(r).name for r in records]
     calibration = DiagnosisCalibration.measure(features, sources=names, origin=origin)
+    if calibration.hours < MIN_HOURS:
+        warnings.warn(
+            f"{calibration.hours:.2g} h of healthy records: thresholds for rates under "
+            f"{1 / calibration.hours:.2g}/h are extrapolated, and a unit's spread is thinly "
+            f"sampled; calibrate on at least {MIN_HOURS:g} h of the wheel's normal test signals",
+            RwlabWarning,
+            stacklevel=2,
+        )
     calibration.save(out)
     click.echo(f"{len(records)} records, {calibration.hours:.3g} h")
     for fault in (*MODEL_BASED, "speed_sensor_stuck"):
