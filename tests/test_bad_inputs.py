@@ -354,6 +354,25 @@ def cases() -> list[tuple[str, list[str]]]:
             ["diagnose", "{D}/rec.mcap", "--model", "{D}/model.json", *out],
         )
     )
+    cal = ["diagnose", "calibrate", "{D}/rec.mcap", "--model", "{D}/refmodel.json"]
+    c.append(
+        (
+            "diagnose calibrate a binary record",
+            [*cal[:2], "{D}/binary.mcap", *cal[3:], "--out", "{D}/c.json"],
+        )
+    )
+    c.append(
+        (
+            "diagnose calibrate --model without a healthy reference",
+            [*cal[:4], "{D}/model.json", "--out", "{D}/c.json"],
+        )
+    )
+    c.append(
+        (
+            "diagnose run --calibration not a calibration",
+            ["diagnose", "run", *dia[1:], "--calibration", "{D}/other.json"],
+        )
+    )
     # attitude
     cmp_ = ["attitude", "compare", *out]
     c += _numbers(cmp_, "--duration", ALL)

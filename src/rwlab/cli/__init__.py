@@ -4,6 +4,7 @@ from rwlab.cli import (  # noqa: F401
     attitude,
     compare,
     demo,
+    fdi,
     hil,
     ident,
     nonparametric,

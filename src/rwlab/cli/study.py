@@ -22,6 +22,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
+from rwlab.cli.fdi import EXIT_ALARM, _named, diagnose_fdi, diagnose_group
 from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
 
 
@@ -183,7 +184,7 @@ def _rate_unit(study: dict) -> str:
     return f"{unit}/s" if unit else "(output unit)/s"
 
 
-@main.command("diagnose")
+@diagnose_group.command("run")
 @click.argument("record", type=click.Path(exists=True))
 @click.option(
     "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
@@ -198,10 +199,17 @@ def _rate_unit(study: dict) -> str:
     help="Wanted false alarms per hour per detector: thresholds from the rates measured on "
     "healthy records of other units; a rate a detector cannot deliver is a warning.",
 )
+@click.option(
+    "--calibration",
+    "calibration_file",
+    type=click.Path(dir_okay=False, exists=True),
+    help="A calibration.json from rwlab diagnose calibrate: run the GLR pipeline "
+    "(rwlab.diagnose.pipeline) with it and write OUT/fdi.json instead.",
+)
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_salvage_option
 @_friendly_errors
-def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
+def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force, calibration_file=None):
     """Detect, name and size wheel faults in a record with an identified model.
 
     The detectors compare the record, from its first sample, with the healthy
@@ -221,6 +229,9 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
     from rwlab.wheel import IdentifiedWheel
 
     _check_folder(out)
+    if calibration_file is not None:
+        diagnose_fdi(Path(record), model_file, calibration_file, out, false_alarms_per_hour, force)
+        return
     wheel = IdentifiedWheel.from_json(model_file)
     reference = HealthyReference.from_model_file(model_file)
     if Path(record).is_dir():
@@ -238,11 +249,6 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force):
         results = [result]
     if any(r.alarms for r in results):
         sys.exit(EXIT_ALARM)
-
-
-EXIT_ALARM = 1
-"""``rwlab diagnose``'s exit status when a record raised an alarm (0: none; 2: an error),
-as ``diff`` and ``grep`` tell a script what they found; the outputs are written either way."""
 
 
 _DIAGNOSIS_FILES = ("diagnosis.json", "report.html")
@@ -358,14 +364,6 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
     into.mkdir(parents=True, exist_ok=True)
     write_diagnosis(result, into, title=record.name, events=events, record_note=truncated)
     return result, events
-
-
-def _named(exc: RwlabError, record: Path) -> RwlabError:
-    """The same error, its message naming the record."""
-    try:
-        return type(exc)(f"{record}: {exc}")
-    except TypeError:  # an error class with another signature
-        return RwlabError(f"{record}: {exc}")
 
 
 def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> list:

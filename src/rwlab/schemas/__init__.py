@@ -61,6 +61,8 @@ NAMES = (
     "frequency_response",
     "fir",
     "wheelspec",
+    "diagnosis_calibration",
+    "fdi_diagnosis",
 )
 
 

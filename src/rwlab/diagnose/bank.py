@@ -1,0 +1,182 @@
+"""Evaluation and decision: each model-based detector's GLR over windows of the record.
+
+For detector j and a window of samples [a, k), the window's log-likelihood
+over the size grid is a difference of cumulative sums of the per-sample gains
+(:meth:`Detector.gains`), so every window costs O(grid). Its statistic is the
+GLR against the sizes a healthy wheel may have, the larger of two:
+
+- against the *population zone* (the sizes healthy records of the calibration
+  were consistent with): a fault present from power-up;
+- against the record's *own past* (the sizes the samples before the window are
+  consistent with, widened by the drift measured within healthy records): a
+  fault that starts within the record, smaller than the spread between units.
+
+The windows end every ``EVERY_S`` and span each of ``WINDOWS_S`` (a coarse
+grid of change times: the GLR's maximisation over the onset).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
+from rwlab.diagnose.features import Features
+from rwlab.diagnose.noise import NoiseModel
+
+__all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit"]
+
+# design choices, not measurements: a decision every 5 s; onsets 1, 2.5 and 5 min
+# back (5 min is the longest detection delay the lab accepts)
+EVERY_S = 5.0
+WINDOWS_S = (60.0, 150.0, 300.0)
+PAST_MIN_S = 120.0  # the record's own past counts once it spans this much
+SUPPORT = 2 * HALF_CHI2_95  # a past consistent with a size: within this log-likelihood
+
+
+@dataclass(frozen=True)
+class WindowFit:
+    """A detector's fit on one window.
+
+    Attributes
+    ----------
+    fit : Fit
+    start_s, end_s : float
+        The window, s.
+    against : str
+        ``"population"`` or ``"own past"``: which healthy zone the log-LR is over.
+    """
+
+    fit: Fit
+    start_s: float
+    end_s: float
+    against: str
+
+
+def _relative(fit: Fit, before: Fit) -> Fit:
+    """A change against the record's own past: a factor as the ratio to the past's, a bias
+    as the difference (intervals combined in quadrature, in log for factors); a clamp in A
+    is absolute."""
+    if fit.unit == "factor":
+        lo, hi = np.log(fit.ci95), np.log(before.ci95)
+        mid = np.log(fit.size / before.size)
+        half = np.hypot(np.diff(lo)[0], np.diff(hi)[0]) / 2
+        return replace(
+            fit,
+            size=float(np.exp(mid)),
+            ci95=(float(np.exp(mid - half)), float(np.exp(mid + half))),
+        )
+    if fit.unit == "rpm":
+        half = np.hypot(fit.ci95[1] - fit.ci95[0], before.ci95[1] - before.ci95[0]) / 2
+        mid = fit.size - before.size
+        return replace(fit, size=mid, ci95=(mid - half, mid + half))
+    return fit
+
+
+def _widened(fit: Fit, zone: tuple[float, float]) -> Fit:
+    """A fault from power-up against the population: the interval also spans where a
+    healthy unit may sit (the zone about the nominal size), for a factor or a bias."""
+    if fit.unit == "factor":
+        return replace(fit, ci95=(fit.ci95[0] * min(zone[0], 1.0), fit.ci95[1] * max(zone[1], 1.0)))
+    if fit.unit == "rpm":
+        return replace(fit, ci95=(fit.ci95[0] + min(zone[0], 0.0), fit.ci95[1] + max(zone[1], 0.0)))
+    return fit
+
+
+class Bank:
+    """The model-based detectors' cumulative gains over one record.
+
+    Parameters
+    ----------
+    features : Features
+    noise : NoiseModel
+    zones : dict of str to tuple of 2 float
+        Per fault, the population's healthy sizes [lo, hi].
+    drift : dict of str to float
+        Per fault, how far a healthy record's size moves within it (size units).
+    dispersion : dict of str to float, optional
+        Per fault, φ: the healthy windows' scatter of the size over what the
+        likelihood says (quasi-likelihood: the intervals are those of ll/φ, so
+        they carry the model's misfit). 1 if absent.
+    faults : sequence of str
+        The model-based detectors to run.
+    """
+
+    def __init__(
+        self,
+        features: Features,
+        noise: NoiseModel,
+        zones,
+        drift,
+        dispersion=None,
+        faults=MODEL_BASED,
+    ) -> None:
+        self.features = features
+        weights = noise.weights(features)
+        self.detectors = {name: detector(name) for name in faults}
+        self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
+        self.cum = {
+            n: np.vstack(
+                [
+                    np.zeros(self.grid[n].size),
+                    np.cumsum(d.gains(features, weights, self.grid[n]), axis=0),
+                ]
+            )
+            for n, d in self.detectors.items()
+        }
+        self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
+        self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
+        self.drift = drift
+        self.dispersion = {n: (dispersion or {}).get(n, 1.0) for n in self.detectors}
+        Ts = features.scales.Ts
+        self.every = max(1, round(EVERY_S / Ts))
+        self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
+        self.past_min = round(PAST_MIN_S / Ts)
+
+    def _between(self, name: str, lo: float, hi: float) -> np.ndarray:
+        g = self.grid[name]
+        mask = (g >= lo) & (g <= hi)
+        if not mask.any():  # a zone between grid points holds the nearest one
+            mask[np.argmin(np.abs(g - 0.5 * (lo + hi)))] = True
+        return mask
+
+    def fit(self, name: str, a: int, k: int) -> WindowFit:
+        """Detector ``name`` on samples [a, k): its GLR over the larger-supported healthy zone."""
+        ll = self.cum[name][k] - self.cum[name][a]
+        phi = self.dispersion[name]
+        det = self.detectors[name]
+        t = self.features.t_s
+        best = profile_fit(det.fault, det.unit, self.grid[name], ll, self.zone[name], phi)
+        against = "population"
+        if a >= self.past_min:
+            past = self.cum[name][a] - self.cum[name][0]
+            ok = self.grid[name][past >= past.max() - SUPPORT * phi]
+            own = self._between(name, ok[0] - self.drift[name], ok[-1] + self.drift[name])
+            change = profile_fit(det.fault, det.unit, self.grid[name], ll, own, phi)
+            if change.log_lr > best.log_lr:
+                before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi)
+                best, against = _relative(change, before), "own past"
+        if against == "population":
+            best = _widened(best, self.zone_bounds[name])
+        return WindowFit(best, float(t[a]), float(t[k - 1]), against)
+
+    def at(self, name: str, k: int) -> WindowFit:
+        """The best window ending at sample k (exclusive) for detector ``name``."""
+        fits = [self.fit(name, max(0, k - w), k) for w in self.windows if k - max(0, k - w) >= 2]
+        return max(fits, key=lambda f: f.fit.log_lr)
+
+    def tiles(self) -> list[tuple[int, int]]:
+        """Back-to-back windows of the longest length over the record: (start, end)."""
+        w = self.windows[-1]
+        return [(a, a + w) for a in range(0, self.features.N - w + 1, w)]
+
+    def ends(self) -> range:
+        """The window ends the decisions are taken at (exclusive sample indices)."""
+        return range(self.every, self.features.N + 1, self.every)
+
+    def statistics(self) -> dict[str, np.ndarray]:
+        """Each detector's statistic (log-LR) at every decision, shape (len(ends),)."""
+        ends = list(self.ends())
+        return {n: np.array([self.at(n, k).fit.log_lr for k in ends]) for n in self.detectors}

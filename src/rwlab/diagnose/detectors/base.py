@@ -1,0 +1,168 @@
+"""The detector protocol: one fault model each, a registry by fault name.
+
+As python-can's ``BusABC`` with its interface registry, every detector is a
+subclass of :class:`Detector` that registers itself under its fault's name
+(:data:`REGISTRY`, :func:`detector`); the pipeline knows detectors only
+through this interface.
+
+A model-based detector is one fault's model in the residual channels: for a
+candidate size θ it predicts each channel's residual p(θ) per sample, and the
+log-likelihood gain of θ over the healthy wheel at sample k is
+
+    ℓ_k(θ) = Σ_channels w_k · (r_k·p_k(θ) − p_k(θ)²/2),   w = 1/(σ²κ)
+
+(Gaussian residuals of the measured noise model, :mod:`~rwlab.diagnose.noise`).
+Summed over a window it is the window's log-likelihood ratio; its maximum over
+θ the generalised likelihood ratio (GLR), θ̂ the maximum-likelihood size, and
+{θ : ℓ(θ̂) − ℓ(θ) ≤ χ²₁(0.95)/2} the profile-likelihood 95 % interval. Because
+every fault's ℓ is on the same samples and channels, the sizes of different
+faults compare by likelihood: that is the isolation
+(:mod:`~rwlab.diagnose.isolation`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy.stats import chi2
+
+from rwlab.diagnose.features import Features
+from rwlab.errors import ConfigError
+
+__all__ = ["REGISTRY", "Detector", "Fit", "detector", "profile_fit"]
+
+HALF_CHI2_95 = float(chi2.ppf(0.95, 1)) / 2  # 1.92: the profile likelihood's 95 % drop
+
+REGISTRY: dict[str, type[Detector]] = {}
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One fault model fitted on a window.
+
+    Attributes
+    ----------
+    fault : str
+        The fault's name (:data:`rwlab.wheel.faults.FAULTS`).
+    size : float
+        Maximum-likelihood size, in ``unit``.
+    ci95 : tuple of 2 float
+        Profile-likelihood 95 % interval (a bound at the grid's edge is that edge).
+    log_lr : float
+        Log-likelihood ratio of the fitted size over the nearest healthy size.
+    unit : str
+    """
+
+    fault: str
+    size: float
+    ci95: tuple[float, float]
+    log_lr: float
+    unit: str
+
+
+def profile_fit(
+    fault: str,
+    unit: str,
+    grid: np.ndarray,
+    ll: np.ndarray,
+    healthy: np.ndarray,
+    dispersion: float = 1.0,
+) -> Fit:
+    """The GLR fit of one window from its log-likelihood over the grid.
+
+    Parameters
+    ----------
+    fault, unit : str
+    grid : numpy.ndarray, shape (G,)
+        Candidate sizes, increasing.
+    ll : numpy.ndarray, shape (G,)
+        Log-likelihood gain of each size over the reference wheel.
+    healthy : numpy.ndarray of bool, shape (G,)
+        The sizes a healthy wheel may have (the zone).
+    dispersion : float
+        φ ≥ 1: the interval is the quasi-likelihood's, ll/φ (the model's misfit
+        measured on healthy records); the log-LR stays the likelihood's, so the
+        faults' log-LRs compare on one scale.
+
+    Returns
+    -------
+    Fit
+    """
+    top_ll = float(np.max(ll))
+    tied = np.flatnonzero(ll >= top_ll - 1e-9)  # a flat top (a clamp never reached): the
+    centre = float(np.mean(grid[healthy])) if healthy.any() else float(grid[0])
+    best = int(tied[np.argmin(np.abs(grid[tied] - centre))])  # size nearest the healthy
+    inside = np.flatnonzero(ll >= ll[best] - HALF_CHI2_95 * dispersion)
+    top = float(ll[best])
+    zone = float(np.max(ll[healthy])) if healthy.any() else 0.0
+    return Fit(
+        fault,
+        float(grid[best]),
+        (float(grid[inside[0]]), float(grid[inside[-1]])),
+        max(0.0, top - zone),
+        unit,
+    )
+
+
+class Detector(ABC):
+    """One fault's model in the residual channels (module docstring).
+
+    Subclasses set ``fault`` (the registry key), ``unit`` and ``healthy_size`` and
+    give the candidate sizes and the per-sample log-likelihood gains.
+    """
+
+    fault: ClassVar[str]
+    unit: ClassVar[str]
+    healthy_size: ClassVar[float]
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if getattr(cls, "fault", None):
+            REGISTRY[cls.fault] = cls
+
+    @abstractmethod
+    def grid(self, features: Features) -> np.ndarray:
+        """Candidate sizes, increasing, shape (G,), in ``unit``."""
+
+    @abstractmethod
+    def gains(
+        self, features: Features, weights: dict[str, np.ndarray], grid: np.ndarray
+    ) -> np.ndarray:
+        """Per-sample log-likelihood gain of each size over the healthy wheel, shape (N, G).
+
+        Parameters
+        ----------
+        features : Features
+        weights : dict of str to numpy.ndarray
+            1/(σ²κ) per channel and sample (:meth:`NoiseModel.weights`).
+        grid : numpy.ndarray, shape (G,)
+        """
+
+    @staticmethod
+    def channel_gain(r: np.ndarray, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """w·(r·p − p²/2) for residuals r, weights w (N,) and predictions p (N, G)."""
+        return w[:, None] * (r[:, None] * p - 0.5 * p * p)
+
+
+def detector(fault: str) -> Detector:
+    """The registered detector of a fault.
+
+    Parameters
+    ----------
+    fault : str
+
+    Returns
+    -------
+    Detector
+
+    Raises
+    ------
+    ConfigError
+        No detector for that fault.
+    """
+    if fault not in REGISTRY:
+        raise ConfigError(f"no detector for {fault!r}; known: {', '.join(sorted(REGISTRY))}")
+    return REGISTRY[fault]()

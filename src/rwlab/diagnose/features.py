@@ -1,0 +1,251 @@
+"""Residual generation: every per-sample feature the detectors read, computed once.
+
+The identified model (:class:`rwlab.wheel.IdentifiedWheel`) runs beside the
+record on the commands the wheel was given; the motor's current balance
+
+    i = c₀·α + c₁·ω + c₂·sign ω + c₃   (A; α in rpm/s, ω in rpm)
+
+(``model.json``'s healthy reference: c = [I/k_t, b/k_t, τ_c/k_t, offset]) says what
+current a healthy wheel draws for the acceleration it achieved. Three residual
+channels follow, each zero-mean on a healthy wheel of the reference's unit:
+
+- ``current_residual_a``: measured current minus the balance at the measured α, ω
+  (friction and the torque constant show here);
+- ``accel_residual_rpm_s``: measured acceleration minus the acceleration the
+  wheel's loop asks for, the model's acceleration plus the loop's catch-up
+  ``kp·(ω_model − ω)``, clipped at the acceleration limit (a current clamp or a
+  weak motor at the limit shows here);
+- ``speed_residual_rpm``: measured minus model speed (a sensor bias shows here).
+
+Every scale comes from the model file (sample time, acceleration and current
+limits, the loop's gain where the grey box identified it): no wheel's numbers
+are written here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rwlab.data import IOData
+from rwlab.errors import DataError
+
+__all__ = ["RECORD_OUTPUTS", "Features", "WheelScales", "compute_features"]
+
+# what load_record must give the diagnosis (its default is the speed alone)
+RECORD_OUTPUTS = ("speed", "current", "age", "lost")
+
+
+@dataclass(frozen=True)
+class WheelScales:
+    """What the pipeline takes from ``model.json``: the wheel's own scales.
+
+    Attributes
+    ----------
+    Ts : float
+        Sample time, s.
+    accel_limit_rpm_s : float
+        The loop's acceleration limit, rpm/s.
+    current_limit_a : float
+        The driver's specified current clamp, A.
+    current_model : tuple of 4 float
+        c of the current balance (A per rpm/s, A per rpm, A, A).
+    loop_gain_per_s : float
+        The speed loop's proportional gain kp, 1/s (0 where the model file has no
+        grey box: the catch-up term is then left out).
+    """
+
+    Ts: float
+    accel_limit_rpm_s: float
+    current_limit_a: float
+    current_model: tuple[float, float, float, float]
+    loop_gain_per_s: float = 0.0
+
+    @classmethod
+    def from_model_file(cls, path) -> WheelScales:
+        """The scales of a ``model.json`` written by ``rwlab identify``.
+
+        Parameters
+        ----------
+        path : path-like
+
+        Returns
+        -------
+        WheelScales
+
+        Raises
+        ------
+        FileFormatError
+            No healthy reference in the file (identify on a record with motor current).
+        """
+        from rwlab.diagnose.reference import HealthyReference
+        from rwlab.ident.model_file import WheelModelFile
+
+        info = WheelModelFile.load(path)
+        reference = HealthyReference.from_model_file(path)
+        grey = info.nonlinear_models.get("greybox") or {}
+        c = reference.current_model
+        # the clamp: the file's, else the current the balance needs at the limit
+        limit = info.current_limit_a or grey.get("current_limit")
+        if not limit:  # the current the balance needs at the acceleration limit
+            limit = c[0] * info.accel_limit_rpm_s + abs(c[2])
+        return cls(
+            Ts=float(info.model.Ts),
+            accel_limit_rpm_s=float(info.accel_limit_rpm_s),
+            current_limit_a=float(limit),
+            current_model=c,
+            loop_gain_per_s=float(grey.get("kp", 0.0)),
+        )
+
+
+@dataclass(frozen=True)
+class Features:
+    """Per-sample features of one record against the identified model, each shape (N,).
+
+    Attributes
+    ----------
+    t_s : numpy.ndarray
+        Sample times, s.
+    speed_rpm, model_rpm : numpy.ndarray
+        Measured and model speed, rpm.
+    accel_rpm_s, model_accel_rpm_s, demand_accel_rpm_s : numpy.ndarray
+        Measured and model acceleration (backward differences) and the loop's
+        demand, rpm/s.
+    current_a : numpy.ndarray
+        Measured motor current, A.
+    friction_current_a, drive_current_a : numpy.ndarray
+        The balance's friction part c₁ω + c₂ sign ω and its whole motion part
+        c₀α + c₁ω + c₂ sign ω at the measured α, ω, A.
+    current_residual_a, accel_residual_rpm_s, speed_residual_rpm : numpy.ndarray
+        The three residual channels (module docstring).
+    usable : numpy.ndarray of bool
+        A new telemetry frame at this sample and the one before (lost frames
+        leave held values that are no measurement).
+    repeated : numpy.ndarray of bool
+        The speed reading equals the previous one and is not 0 rpm.
+    lost_frames : numpy.ndarray
+        Telemetry frames lost since the previous sample.
+    scales : WheelScales
+    """
+
+    t_s: np.ndarray
+    speed_rpm: np.ndarray
+    model_rpm: np.ndarray
+    accel_rpm_s: np.ndarray
+    model_accel_rpm_s: np.ndarray
+    demand_accel_rpm_s: np.ndarray
+    current_a: np.ndarray
+    friction_current_a: np.ndarray
+    drive_current_a: np.ndarray
+    current_residual_a: np.ndarray
+    accel_residual_rpm_s: np.ndarray
+    speed_residual_rpm: np.ndarray
+    usable: np.ndarray
+    repeated: np.ndarray
+    lost_frames: np.ndarray
+    scales: WheelScales
+
+    @property
+    def N(self) -> int:
+        """Number of samples."""
+        return len(self.t_s)
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """The loop demands its acceleration limit, bool, shape (N,)."""
+        limit = self.scales.accel_limit_rpm_s
+        return np.abs(self.demand_accel_rpm_s) >= limit * (1 - 1e-9)
+
+
+def _columns(data: IOData, Ts: float) -> dict[str, np.ndarray]:
+    """The record's columns, checked: a clear error for what the diagnosis cannot use."""
+    if not math.isclose(data.Ts, Ts, rel_tol=1e-6):
+        raise DataError(
+            f"the data are sampled at {data.Ts:g} s, the model at {Ts:g} s: load the record "
+            f"on the model's grid, load_record(path, {Ts:g}, outputs={RECORD_OUTPUTS!r})"
+        )
+    if data.nu != 1 or (data.input_units and data.input_units[0] == "rpm/s"):
+        raise DataError("diagnosis needs one input, the speed command in rpm (a speed-mode record)")
+    names = list(data.output_names)
+    for needed in ("speed_rpm", "current_a"):
+        if needed not in names:
+            raise DataError(
+                f"diagnosis needs a {needed} output, got {names}: load the record with "
+                f"load_record(path, {Ts:g}, outputs={RECORD_OUTPUTS!r})"
+            )
+    out = {name: np.array(data.y[:, names.index(name)], dtype=float) for name in names}
+    if not (np.isfinite(out["speed_rpm"]).all() and np.isfinite(out["current_a"]).all()):
+        raise DataError("the record's speed or current holds NaN or Inf: no sample can be judged")
+    out.setdefault("telemetry_age_s", np.zeros(data.N))
+    out.setdefault("lost_frames", np.zeros(data.N))
+    u = np.asarray(data.u[:, 0], dtype=float)
+    out["held_rpm"] = np.concatenate([u[:1], u[:-1]])  # in force over the last interval
+    return out
+
+
+def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
+    """Run the model beside the record and form every feature (module docstring).
+
+    Parameters
+    ----------
+    data : IOData
+        u = speed command (rpm); outputs ``speed_rpm``, ``current_a`` and, where the
+        record has them, ``telemetry_age_s`` and ``lost_frames``, at the model's Ts.
+    wheel : IdentifiedWheel
+        The identified model (reset and stepped here; the caller's copy is reused).
+    scales : WheelScales
+
+    Returns
+    -------
+    Features
+
+    Raises
+    ------
+    DataError
+        Another sample time, no speed or current, an acceleration-mode record,
+        non-finite values.
+    """
+    Ts = scales.Ts
+    col = _columns(data, Ts)
+    speed, current = col["speed_rpm"], col["current_a"]
+    wheel.reset(float(speed[0]))
+    model = np.empty(data.N)
+    model[0] = speed[0]
+    for k in range(1, data.N):
+        model[k] = wheel.step(float(col["held_rpm"][k]))
+    accel = np.concatenate([[0.0], np.diff(speed) / Ts])
+    model_accel = np.concatenate([[0.0], np.diff(model) / Ts])
+    c0, c1, c2, c3 = scales.current_model
+    friction = c1 * speed + c2 * np.sign(speed)
+    drive = c0 * accel + friction
+    lag = np.concatenate([[0.0], (model - speed)[:-1]])  # the loop acts on last sample's error
+    demand = np.clip(
+        model_accel + scales.loop_gain_per_s * lag,
+        -scales.accel_limit_rpm_s,
+        scales.accel_limit_rpm_s,
+    )
+    fresh = col["telemetry_age_s"] < Ts
+    usable = fresh & np.concatenate([[False], fresh[:-1]])
+    repeated = np.concatenate([[False], (np.diff(speed) == 0) & (speed[1:] != 0)])
+    lost = np.concatenate([[0.0], np.maximum(np.diff(col["lost_frames"]), 0.0)])
+    t = data.tstart + Ts * np.arange(data.N)
+    return Features(
+        t_s=t,
+        speed_rpm=speed,
+        model_rpm=model,
+        accel_rpm_s=accel,
+        model_accel_rpm_s=model_accel,
+        demand_accel_rpm_s=demand,
+        current_a=current,
+        friction_current_a=friction,
+        drive_current_a=drive,
+        current_residual_a=current - drive - c3,
+        accel_residual_rpm_s=accel - demand,
+        speed_residual_rpm=speed - model,
+        usable=usable,
+        repeated=repeated,
+        lost_frames=lost,
+        scales=scales,
+    )

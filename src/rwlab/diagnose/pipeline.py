@@ -1,0 +1,259 @@
+"""The diagnosis pipeline: residuals → evaluation → decision → isolation → sizing.
+
+:func:`run` takes a record's features (:mod:`~rwlab.diagnose.features`), the
+calibration (:mod:`~rwlab.diagnose.wheel_calibration`) and a false-alarm rate:
+
+1. evaluation and decision: every model-based detector's GLR statistic at
+   each decision time (:class:`~rwlab.diagnose.bank.Bank`) against its
+   threshold for the rate; the stuck and dropout tests on the telemetry;
+2. isolation: when any statistic crosses its threshold, every fault model is
+   fitted on the same samples and the largest log-likelihood ratio beyond that
+   model's healthy level (its threshold: a fault model's misfit on a healthy
+   wheel is measured, not assumed) names the fault; the runner-up and its
+   log-likelihood ratio to the winner on that scale are kept;
+3. the event then follows the record: its window grows from its onset, the
+   faults that share its signature channel (:data:`SIGNATURE`) are refitted on
+   it, and one that becomes better supported re-labels the event (the history
+   is kept). A fault on another channel opens an event of its own (two faults);
+4. sizing: each event's size and 95 % interval are its fault's profile
+   likelihood on the event's window at the record's end.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from rwlab.diagnose.bank import Bank, WindowFit
+from rwlab.diagnose.detectors import MODEL_BASED, SIGNATURE, Fit, FrozenReading, LostFrames
+from rwlab.diagnose.features import Features
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, Threshold
+
+__all__ = ["Event", "Result", "run"]
+
+
+@dataclass
+class Event:
+    """One fault found: when, what, how large, and how sure.
+
+    Attributes
+    ----------
+    t_s : float
+        Alarm time, s.
+    onset_s : float
+        Start of the window that raised it, s.
+    fit : Fit
+        The named fault, its size and 95 % interval (at the record's end).
+    detector : str
+        The detector whose threshold was crossed.
+    threshold : float
+        That threshold (log-LR).
+    runner_up : str or None
+        The next most likely fault at the alarm.
+    runner_up_log_lr : float or None
+        ln(L(named) / L(runner-up)) at the alarm.
+    relabelled : list of (float, str)
+        (time s, earlier name) for each re-labelling.
+    """
+
+    t_s: float
+    onset_s: float
+    fit: Fit
+    detector: str
+    threshold: float
+    runner_up: str | None = None
+    runner_up_log_lr: float | None = None
+    relabelled: list[tuple[float, str]] = field(default_factory=list)
+    start: int = 0
+
+    def __post_init__(self) -> None:
+        self.first = self.fit.fault  # the name at the alarm
+
+    @property
+    def fault(self) -> str:
+        """The fault named now (after any re-labelling)."""
+        return self.fit.fault
+
+    def to_dict(self) -> dict:
+        f = self.fit
+        return {
+            "t_s": self.t_s,
+            "onset_s": self.onset_s,
+            "fault": f.fault,
+            "size": None if math.isnan(f.size) else f.size,
+            "ci95": None if math.isnan(f.ci95[0]) else list(f.ci95),
+            "unit": f.unit,
+            "log_lr": f.log_lr,
+            "detector": self.detector,
+            "threshold": self.threshold,
+            "runner_up": self.runner_up,
+            "runner_up_log_lr": self.runner_up_log_lr,
+            "relabelled": [{"t_s": t, "was": was} for t, was in self.relabelled],
+        }
+
+
+@dataclass
+class Result:
+    """What :func:`run` found.
+
+    Attributes
+    ----------
+    events : list of Event
+        In alarm order.
+    thresholds : dict of str to Threshold
+    duration_s : float
+    per_hour : float
+        The false-alarm rate asked, per detector.
+    """
+
+    events: list[Event]
+    thresholds: dict[str, Threshold]
+    duration_s: float
+    per_hour: float
+
+    def to_dict(self, calibration: str = "") -> dict:
+        """The JSON form (``rwlab.FdiDiagnosis/1``): the verdict first."""
+        return {
+            "format": "rwlab.FdiDiagnosis/1",
+            "verdict": self.verdict(),
+            "events": [e.to_dict() for e in self.events],
+            "duration_s": self.duration_s,
+            "false_alarms_per_hour_per_detector": self.per_hour,
+            "calibration": calibration,
+            "thresholds": {
+                name: {
+                    "log_lr": t.log_lr,
+                    "measured_per_hour": t.measured_per_hour,
+                    "ci95_per_hour": list(t.ci95_per_hour),
+                    "extrapolated": t.extrapolated,
+                }
+                for name, t in self.thresholds.items()
+            },
+        }
+
+    def faults(self) -> list[str]:
+        """The faults named, in alarm order."""
+        return [e.fault for e in self.events]
+
+    def verdict(self) -> str:
+        """One line: healthy, or each fault with its size, interval and alarm time."""
+        if not self.events:
+            return f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
+        parts = []
+        for e in self.events:
+            f = e.fit
+            size = (
+                ""
+                if math.isnan(f.size)
+                else f" {f.size:.3g} {f.unit} [{f.ci95[0]:.3g}, {f.ci95[1]:.3g}]"
+            )
+            parts.append(f"{f.fault}{size} from {e.t_s:g} s")
+        return "; ".join(parts)
+
+
+def _onset(bank: Bank, fault: str, k: int) -> int:
+    """The change time's maximum-likelihood estimate: the window start, on the decision
+    grid within the longest window before k, whose fit of ``fault`` has the largest log-LR
+    (a window reaching back before the onset mixes healthy samples in and fits worse)."""
+    starts = range(max(0, k - bank.windows[-1]), k - 1, bank.every)
+    return max(starts, key=lambda a: bank.fit(fault, a, k).fit.log_lr)
+
+
+def _owned(events) -> frozenset[str]:
+    """The channels the events' faults, first and present names, already explain."""
+    out: frozenset[str] = frozenset()
+    for e in events:
+        out |= SIGNATURE[e.first] | SIGNATURE[e.fault]
+    return out
+
+
+def _excess(w: WindowFit, limits: dict[str, Threshold]) -> float:
+    """A fit's log-LR beyond what healthy records reach at the rate asked: the model's
+    misfit on a healthy wheel differs between fault models (a clamp model fits the
+    back-EMF limit of a healthy wheel at high speed), so the raw log-LRs of two fault
+    models compare only beyond their own healthy level."""
+    return w.fit.log_lr - limits[w.fit.fault].log_lr
+
+
+def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
+    """Every candidate fault on its best window ending at k, most likely first."""
+    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w, limits))
+
+
+def run(features: Features, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> Result:
+    """Diagnose one record (module docstring).
+
+    Parameters
+    ----------
+    features : Features
+    calibration : DiagnosisCalibration
+    per_hour : float
+        False alarms per hour asked of each detector.
+
+    Returns
+    -------
+    Result
+    """
+    bank = Bank(
+        features, calibration.noise, calibration.zones, calibration.drift, calibration.dispersion
+    )
+    limits = {n: calibration.threshold(n, per_hour) for n in MODEL_BASED}
+    Ts = features.scales.Ts
+    events: list[Event] = []
+    limits["speed_sensor_stuck"] = calibration.threshold("speed_sensor_stuck", per_hour)
+    stuck = FrozenReading().first_alarm(features, limits["speed_sensor_stuck"].log_lr)
+    end = features.N if stuck is None else stuck[0]  # a frozen reading blinds the model tests
+    for k in bank.ends():
+        if k > end:
+            break
+        for e in events:  # follow each open event on its growing window
+            others = _owned(x for x in events if x is not e)
+            rivals = [
+                n
+                for n in MODEL_BASED
+                if SIGNATURE[n] & SIGNATURE[e.first] and not SIGNATURE[n] & others
+            ]
+            if e.first not in MODEL_BASED or not rivals:
+                continue
+            fits = sorted(
+                (bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits)
+            )
+            if fits[0].fit.fault != e.fault:
+                e.relabelled.append((float(features.t_s[k - 1]), e.fault))
+            e.fit = fits[0].fit
+        owned = _owned(events)
+        free = [n for n in MODEL_BASED if not SIGNATURE[n] & owned]
+        crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]
+        if not crossed:
+            continue
+        ranked = _isolate(bank, k, free, limits)
+        best = ranked[0]
+        runner = ranked[1] if len(ranked) > 1 else None
+        start = _onset(bank, best.fit.fault, k)
+        events.append(
+            Event(
+                t_s=float(features.t_s[k - 1]),
+                onset_s=float(features.t_s[start]),
+                fit=best.fit,
+                detector=crossed[0],
+                threshold=limits[crossed[0]].log_lr,
+                runner_up=None if runner is None else runner.fit.fault,
+                runner_up_log_lr=None
+                if runner is None
+                else _excess(best, limits) - _excess(runner, limits),
+                start=start,
+            )
+        )
+    if stuck is not None:
+        k, fit = stuck
+        events.append(
+            Event(float(features.t_s[k]), float(features.t_s[k]), fit, fit.fault, fit.log_lr)
+        )
+    dropout = LostFrames().first_alarm(features, calibration.lost_per_sample, per_hour)
+    if dropout is not None:
+        k, fit = dropout
+        events.append(
+            Event(float(features.t_s[k]), float(features.t_s[k]), fit, fit.fault, fit.log_lr)
+        )
+    events.sort(key=lambda e: e.t_s)
+    return Result(events, limits, features.N * Ts, per_hour)

@@ -1,0 +1,315 @@
+"""Calibration from a wheel's own healthy records: noise, healthy zones, thresholds.
+
+:meth:`DiagnosisCalibration.measure` takes the features of healthy records
+(the lab's own wheel, or the twin's units for the shipped file) and measures
+everything the pipeline decides with:
+
+- the noise model (:class:`~rwlab.diagnose.noise.NoiseModel`);
+- per model-based fault, the *population zone*: the union of each record's
+  profile-likelihood 95 % interval of the fault's size (a unit of another
+  friction or k_t than the reference's is healthy);
+- per fault, the *drift*: the largest change of the size between a healthy
+  record's halves;
+- per fault, the peaks of its statistic's excursions above χ²₁(0.95)/2 on every
+  record (restarted detectors: each excursion is one false alarm). A rate r per
+  hour maps to the threshold exceeded r·hours times; below one such peak per
+  record-hour the tail is extrapolated as an exponential fitted to the largest
+  peaks (peaks over threshold; with under ``MIN_TAIL`` peaks the GLR's own
+  tail, 2·log-LR ~ χ²₁, i.e. a unit scale), and the threshold says so;
+- the telemetry's repeat probability of a non-zero speed reading (Laplace's
+  rule) and frames lost per sample (Jeffreys): the stuck and dropout tests.
+
+File format ``rwlab.DiagnosisCalibration/1`` (schema
+``diagnosis_calibration.schema.json``); one owner, this class.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from rwlab._io import write_json
+from rwlab.diagnose.bank import Bank
+from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading
+from rwlab.diagnose.detectors.base import HALF_CHI2_95
+from rwlab.diagnose.features import Features
+from rwlab.diagnose.noise import NoiseModel
+from rwlab.errors import ConfigError, DataError, FileFormatError
+
+__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold"]
+
+FORMAT = "rwlab.DiagnosisCalibration/1"
+STUCK = "speed_sensor_stuck"
+MIN_TAIL = 5  # peaks needed to fit the tail's scale
+TAIL = 20  # the largest peaks the tail is fitted to
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """A threshold and the false-alarm rate measured at it.
+
+    Attributes
+    ----------
+    log_lr : float
+        The threshold on the detector's log-likelihood ratio.
+    asked_per_hour : float
+    measured_per_hour : float
+        False alarms per hour counted at the threshold on the calibration records.
+    ci95_per_hour : tuple of 2 float
+        Garwood's exact Poisson 95 % interval of the measured rate.
+    extrapolated : bool
+        The rate asked is below what the hours resolve (the tail fit set it).
+    """
+
+    log_lr: float
+    asked_per_hour: float
+    measured_per_hour: float
+    ci95_per_hour: tuple[float, float]
+    extrapolated: bool
+
+
+def garwood(n: int, hours: float) -> tuple[float, float]:
+    """Exact 95 % interval of a Poisson rate from n events in ``hours``, per hour."""
+    lo = 0.0 if n == 0 else float(chi2.ppf(0.025, 2 * n)) / 2
+    return lo / hours, float(chi2.ppf(0.975, 2 * n + 2)) / 2 / hours
+
+
+def excursion_peaks(stat: np.ndarray, floor: float = HALF_CHI2_95) -> list[float]:
+    """The maximum of each run of ``stat`` above ``floor``."""
+    peaks, top = [], None
+    for x in stat:
+        if x > floor:
+            top = x if top is None else max(top, x)
+        elif top is not None:
+            peaks.append(float(top))
+            top = None
+    if top is not None:
+        peaks.append(float(top))
+    return peaks
+
+
+@dataclass(frozen=True)
+class DiagnosisCalibration:
+    """What the pipeline decides with, measured on healthy records (module docstring).
+
+    Attributes
+    ----------
+    Ts : float
+        Sample time of the records, s.
+    hours : float
+        Healthy record-hours measured.
+    noise : NoiseModel
+    zones : dict of str to tuple of 2 float
+    drift : dict of str to float
+    peaks : dict of str to tuple of float
+    repeat_probability, lost_per_sample : float
+    sources : tuple of str
+        The records (names) it was measured on.
+    origin : str
+        One line: whose wheel, which records.
+    """
+
+    Ts: float
+    hours: float
+    noise: NoiseModel
+    zones: dict[str, tuple[float, float]]
+    drift: dict[str, float]
+    dispersion: dict[str, float]
+    peaks: dict[str, tuple[float, ...]]
+    repeat_probability: float
+    lost_per_sample: float
+    sources: tuple[str, ...] = ()
+    origin: str = ""
+    records: int = field(default=0)
+
+    @classmethod
+    def measure(
+        cls, records: list[Features], *, sources=(), origin: str = ""
+    ) -> DiagnosisCalibration:
+        """Measure a calibration on healthy records' features (one wheel model, one Ts).
+
+        Parameters
+        ----------
+        records : list of Features
+            Healthy records, as :func:`~rwlab.diagnose.features.compute_features` gives them.
+        sources : sequence of str
+            Their names, kept in the file.
+        origin : str
+
+        Returns
+        -------
+        DiagnosisCalibration
+
+        Raises
+        ------
+        ConfigError
+            No record, or records of different sample times.
+        """
+        if not records:
+            raise ConfigError("a calibration needs at least one healthy record")
+        Ts = records[0].scales.Ts
+        if any(not math.isclose(f.scales.Ts, Ts) for f in records):
+            raise ConfigError("a calibration's records must share one sample time")
+        noise = NoiseModel.measure(records)
+        point = {n: cls._healthy_point(n, records[0]) for n in MODEL_BASED}
+        none = dict.fromkeys(MODEL_BASED, 0.0)
+        dispersion = {n: cls._dispersion(n, records, noise, point[n]) for n in MODEL_BASED}
+        zones: dict[str, tuple[float, float]] = {}
+        drift: dict[str, float] = {}
+        for name in MODEL_BASED:
+            sizes, moves = [point[name]], [0.0]
+            for f in records:
+                bank = Bank(f, noise, {name: (point[name],) * 2}, none, dispersion, faults=(name,))
+                tiles = [bank.fit(name, a, b).fit.size for a, b in bank.tiles()]
+                sizes += tiles
+                moves += list(np.abs(np.diff(tiles)))
+            zones[name] = (float(min(sizes)), float(max(sizes)))
+            drift[name] = float(max(moves))
+        peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
+        peaks[STUCK] = []
+        for f in records:
+            bank = Bank(f, noise, zones, drift, dispersion)
+            for name, stat in bank.statistics().items():
+                peaks[name] += excursion_peaks(stat)
+            runs = FrozenReading.runs(f)
+            peaks[STUCK] += [float(r) for r, nxt in itertools.pairwise(runs) if r > nxt]
+        moving = sum(int((f.usable & (f.speed_rpm != 0)).sum()) for f in records)
+        repeats = sum(int((f.usable & f.repeated).sum()) for f in records)
+        lost = sum(float(f.lost_frames.sum()) for f in records)
+        n = sum(f.N for f in records)
+        return cls(
+            Ts=float(Ts),
+            hours=n * Ts / 3600,
+            noise=noise,
+            zones=zones,
+            drift=drift,
+            dispersion=dispersion,
+            peaks={k: tuple(sorted(v, reverse=True)) for k, v in peaks.items()},
+            repeat_probability=(repeats + 1) / (moving + 2),
+            lost_per_sample=(lost + 0.5) / n,
+            sources=tuple(str(s) for s in sources),
+            origin=origin,
+            records=len(records),
+        )
+
+    @staticmethod
+    def _dispersion(name: str, records: list[Features], noise: NoiseModel, point: float) -> float:
+        """φ: twice the log-likelihood by which each longest window prefers its own size to
+        its record's, whose median is χ²₁'s (0.455) for a true likelihood, over 0.455."""
+        twice = []
+        for f in records:
+            bank = Bank(f, noise, {name: (point, point)}, {name: 0.0}, faults=(name,))
+            whole = int(np.argmax(bank.cum[name][f.N] - bank.cum[name][0]))
+            for a, b in bank.tiles():
+                ll = bank.cum[name][b] - bank.cum[name][a]
+                twice.append(2 * float(ll.max() - ll[whole]))
+        if len(twice) < 3:
+            return 1.0
+        return max(1.0, float(np.median(twice)) / float(chi2.ppf(0.5, 1)))
+
+    @staticmethod
+    def _healthy_point(name: str, f: Features) -> float:
+        return {"current_limit": f.scales.current_limit_a}.get(
+            name, {"friction": 1.0, "torque_constant": 1.0}.get(name, 0.0)
+        )
+
+    def threshold(self, fault: str, per_hour: float) -> Threshold:
+        """The threshold for ``per_hour`` false alarms of one detector, and its measured rate.
+
+        Parameters
+        ----------
+        fault : str
+            A model-based detector's fault.
+        per_hour : float
+            False alarms per hour asked (> 0).
+
+        Returns
+        -------
+        Threshold
+        """
+        if not (math.isfinite(per_hour) and per_hour > 0):
+            raise ConfigError(f"the false-alarm rate must be > 0 per hour, got {per_hour}")
+        peaks = np.array(self.peaks[fault])
+        wanted = per_hour * self.hours  # alarms over the calibration hours
+        m = math.floor(wanted)
+        if m >= 1 and peaks.size > m:  # exceeded m times: the m-th largest peak's successor
+            h = float(peaks[m])
+            extrapolated = False
+        else:
+            tail = peaks[: min(TAIL, peaks.size)]
+            if tail.size >= MIN_TAIL:
+                u, scale, m = float(tail[-1]), float(np.mean(tail - tail[-1])), tail.size
+            else:  # the GLR's own tail: P(log-LR > h) ∝ exp(−h)
+                u, scale, m = HALF_CHI2_95, 1.0, max(peaks.size, 1)
+            h = u + max(scale, 1e-6) * math.log(m / max(wanted, 1e-300))
+            h = max(h, float(peaks[0]) if peaks.size else HALF_CHI2_95)
+            extrapolated = True
+        n = int(np.sum(peaks > h))
+        return Threshold(h, per_hour, n / self.hours, garwood(n, self.hours), extrapolated)
+
+    # -- the file -----------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "format": FORMAT,
+            "Ts": self.Ts,
+            "hours": self.hours,
+            "records": self.records,
+            "origin": self.origin,
+            "sources": list(self.sources),
+            "noise": self.noise.to_dict(),
+            "zones": {k: list(v) for k, v in self.zones.items()},
+            "drift": dict(self.drift),
+            "dispersion": dict(self.dispersion),
+            "peaks": {k: list(v) for k, v in self.peaks.items()},
+            "repeat_probability": self.repeat_probability,
+            "lost_per_sample": self.lost_per_sample,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "calibration") -> DiagnosisCalibration:
+        """Read the JSON form (``FileFormatError`` when it is not one)."""
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise FileFormatError(
+                f"{source}: not a diagnosis calibration ({FORMAT}); make one with "
+                "rwlab diagnose calibrate RECORDS... --model model.json --out calibration.json"
+            )
+        try:
+            return cls(
+                Ts=float(d["Ts"]),
+                hours=float(d["hours"]),
+                noise=NoiseModel.from_dict(d["noise"]),
+                zones={k: (float(v[0]), float(v[1])) for k, v in d["zones"].items()},
+                drift={k: float(v) for k, v in d["drift"].items()},
+                dispersion={k: float(v) for k, v in d["dispersion"].items()},
+                peaks={k: tuple(float(x) for x in v) for k, v in d["peaks"].items()},
+                repeat_probability=float(d["repeat_probability"]),
+                lost_per_sample=float(d["lost_per_sample"]),
+                sources=tuple(d.get("sources", ())),
+                origin=str(d.get("origin", "")),
+                records=int(d.get("records", 0)),
+            )
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise FileFormatError(f"{source}: bad diagnosis calibration ({exc!r})") from None
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> DiagnosisCalibration:
+        """Read a calibration file written by :meth:`save` (``rwlab diagnose calibrate``)."""
+        p = Path(path)
+        try:
+            d = json.loads(p.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise FileFormatError(f"{p}: not a readable calibration ({exc})") from None
+        return cls.from_dict(d, str(p))
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the file atomically."""
+        if self.hours <= 0:
+            raise DataError("an empty calibration cannot be saved")
+        return write_json(path, self.to_dict())

@@ -1,0 +1,104 @@
+"""The GLR diagnosis's page: the verdict first, then the alarms, then the evidence."""
+
+from __future__ import annotations
+
+import html
+import math
+import os
+from pathlib import Path
+
+from rwlab.diagnose.pipeline import Result
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
+from rwlab.report.html import Page
+
+__all__ = ["fdi_page"]
+
+
+def _interval(ci: tuple[float, float]) -> str:
+    return "" if math.isnan(ci[0]) else f"[{ci[0]:.4g}, {ci[1]:.4g}]"
+
+
+def fdi_page(
+    result: Result,
+    calibration: DiagnosisCalibration,
+    calibration_path: str | os.PathLike,
+    *,
+    title: str,
+) -> Page:
+    """The page a lab engineer reads in ten seconds.
+
+    Parameters
+    ----------
+    result : Result
+        What :func:`rwlab.diagnose.pipeline.run` found.
+    calibration : DiagnosisCalibration
+        The calibration it ran with.
+    calibration_path : path-like
+        Its file (linked from the provenance line).
+    title : str
+
+    Returns
+    -------
+    Page
+        Verdict, alarm table, evidence (thresholds with their measured rates).
+    """
+    page = Page(title)
+    page.heading("Verdict", "verdict")
+    page.html(f'<p class="verdict"><strong>{html.escape(result.verdict())}</strong></p>')
+    link = Path(calibration_path).resolve().as_uri()
+    provenance = (
+        f"Calibrated on {calibration.records} healthy records, {calibration.hours:.3g} h"
+        + (f" ({calibration.origin})" if calibration.origin else "")
+    )
+    page.html(f'<p class="note">{html.escape(provenance)}: <a href="{link}">details</a></p>')
+    page.heading("Alarms", "alarms")
+    if result.events:
+        rows = []
+        for e in result.events:
+            f = e.fit
+            rows.append(
+                [
+                    e.t_s,
+                    f.fault,
+                    None if math.isnan(f.size) else f.size,
+                    _interval(f.ci95),
+                    f.unit,
+                    e.onset_s,
+                    e.runner_up,
+                    e.runner_up_log_lr,
+                    ", ".join(f"{was} until {t:g} s" for t, was in e.relabelled),
+                ]
+            )
+        page.table(
+            [
+                "alarm s",
+                "fault",
+                "size",
+                "95 % interval",
+                "unit",
+                "onset s",
+                "runner-up",
+                "ln LR over runner-up",
+                "re-labelled from",
+            ],
+            rows,
+            table_id="alarms",
+        )
+    else:
+        page.text("No alarm.")
+    page.heading("Evidence", "evidence")
+    page.text(
+        f"Each detector's threshold on its log-likelihood ratio for "
+        f"{result.per_hour:g} false alarms per hour, and the rate counted at it on the "
+        "calibration's healthy records (Garwood 95 % interval); an extrapolated threshold "
+        "lies beyond what those hours resolve."
+    )
+    page.table(
+        ["detector", "threshold (ln LR)", "measured /h", "95 % interval /h", "extrapolated"],
+        [
+            [name, t.log_lr, t.measured_per_hour, _interval(t.ci95_per_hour), t.extrapolated]
+            for name, t in result.thresholds.items()
+        ],
+        table_id="thresholds",
+    )
+    return page

@@ -1,0 +1,203 @@
+"""The GLR diagnosis pipeline against known truth: records made from the pipeline's own
+wheel physics (current balance, loop, sensor) with Gaussian noise of known σ."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+
+import jsonschema
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from jsonschema import Draft202012Validator
+
+from rwlab.data import IOData
+from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
+from rwlab.diagnose.features import WheelScales, compute_features
+from rwlab.diagnose.pipeline import run
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, excursion_peaks, garwood
+from rwlab.errors import ConfigError, DataError, FileFormatError
+from rwlab.schemas import schema
+from rwlab.wheel.faults import FAULTS
+
+TS = 0.5
+# c = [I/k_t, b/k_t, τ_c/k_t, offset] of a small wheel, A per (rpm/s, rpm, 1, 1)
+C = (1.8e-3, 2.5e-6, 9.2e-3, 0.0)
+SCALES = WheelScales(TS, accel_limit_rpm_s=300.0, current_limit_a=0.7, current_model=C)
+SIGMA_A = 0.004  # current noise, A
+SIGMA_RPM = 0.3  # speed noise, rpm
+
+
+class Replay:
+    """A perfect model: it replays the healthy wheel's speed (reset/step as IdentifiedWheel)."""
+
+    def __init__(self, speed: np.ndarray) -> None:
+        self.speed, self.k, self.Ts = speed, 0, TS
+
+    def reset(self, speed_rpm: float = 0.0) -> None:
+        self.k = 0
+
+    def step(self, command_rpm: float) -> float:
+        self.k += 1
+        return float(self.speed[self.k])
+
+
+def profile(n: int) -> np.ndarray:
+    """Holds at ±1000..±3000 rpm joined by 150 rpm/s ramps (under the limit), rpm."""
+    levels = [1000.0, 3000.0, -2000.0, 2500.0, -1000.0, 2000.0]
+    out, w = [0.0], 0.0
+    i = 0
+    while len(out) < n:
+        target = levels[i % len(levels)]
+        while abs(target - w) > 1e-9 and len(out) < n:
+            w += float(np.clip(target - w, -150 * TS, 150 * TS))
+            out.append(w)
+        out += [w] * min(60, n - len(out))
+        i += 1
+    return np.array(out[:n])
+
+
+def record(seed: int, n: int = 2400, fault: str = "", size: float = 1.0, onset: int = 1200):
+    """(IOData, wheel) of a healthy wheel, with ``fault`` of ``size`` from sample ``onset``."""
+    rng = np.random.default_rng(seed)
+    speed = profile(n)
+    accel = np.concatenate([[0.0], np.diff(speed) / TS])
+    friction = C[1] * speed + C[2] * np.sign(speed)
+    after = np.arange(n) >= onset
+    f_fric = np.where(after & (fault == "friction"), size, 1.0)
+    f_kt = np.where(after & (fault == "torque_constant"), size, 1.0)
+    current = (C[0] * accel + f_fric * friction) / f_kt + C[3] + SIGMA_A * rng.standard_normal(n)
+    reported = speed + SIGMA_RPM * rng.standard_normal(n)
+    reported += np.where(after & (fault == "speed_sensor_bias"), size, 0.0)
+    y = np.column_stack([reported, current, np.zeros(n), np.zeros(n)])
+    names = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
+    return IOData(speed, y, TS, output_names=names), Replay(speed)
+
+
+def features(seed: int, **fault):
+    data, wheel = record(seed, **fault)
+    return compute_features(data, wheel, SCALES)
+
+
+@pytest.fixture(scope="module")
+def calibration() -> DiagnosisCalibration:
+    return DiagnosisCalibration.measure([features(s) for s in range(6)], origin="synthetic")
+
+
+def test_every_fault_has_one_registered_detector():
+    assert set(REGISTRY) == set(FAULTS)
+    assert set(SIGNATURE) == set(FAULTS)
+    for name in FAULTS:
+        assert detector(name).fault == name
+    with pytest.raises(ConfigError, match="known"):
+        detector("gearbox")
+
+
+def test_noise_free_residuals_are_zero():
+    data, wheel = record(0)
+    f = compute_features(data, wheel, SCALES)
+    # the model starts at the first reading, then replays the true speed: the residual
+    # is the sensor noise alone
+    assert f.speed_residual_rpm[0] == 0.0
+    assert np.allclose(f.speed_residual_rpm[1:], (data.y[:, 0] - wheel.speed)[1:])
+    assert abs(np.median(f.current_residual_a)) < SIGMA_A
+    assert not np.shares_memory(f.speed_rpm, data.y)
+
+
+def test_profile_interval_of_a_gaussian_is_textbook():
+    """ll(θ) = −(θ − 2)²/(2·0.1²): θ̂ = 2, interval 2 ± 1.96·0.1."""
+    grid = np.linspace(0, 4, 40001)
+    ll = -((grid - 2.0) ** 2) / (2 * 0.1**2)
+    fit = profile_fit("x", "u", grid, ll, grid <= 1.0)
+    assert fit.size == pytest.approx(2.0, abs=1e-3)
+    half = math.sqrt(2 * HALF_CHI2_95) * 0.1
+    assert fit.ci95 == pytest.approx((2 - half, 2 + half), abs=2e-4)
+    assert fit.log_lr == pytest.approx(1.0**2 / (2 * 0.1**2), rel=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("fault", "size", "unit"),
+    [
+        ("friction", 2.0, "factor"),
+        ("torque_constant", 0.85, "factor"),
+        ("speed_sensor_bias", 12.0, "rpm"),
+    ],
+)
+def test_a_fault_is_named_and_sized_with_an_interval_holding_it(calibration, fault, size, unit):
+    result = run(features(100, fault=fault, size=size), calibration)
+    assert result.events, result.verdict()
+    first = result.events[0]
+    assert first.fault == fault
+    assert first.t_s >= 600.0  # onset at sample 1200: no alarm before
+    assert first.fit.unit == unit
+    assert first.fit.ci95[0] <= size <= first.fit.ci95[1]
+    assert first.runner_up in MODEL_BASED and first.runner_up_log_lr >= 0
+
+
+def test_healthy_records_of_other_seeds_raise_no_alarm(calibration):
+    for seed in (200, 201):
+        result = run(features(seed), calibration)
+        assert result.events == [], result.verdict()
+        assert result.verdict().startswith("healthy")
+
+
+def test_thresholds_fall_as_the_rate_asked_rises(calibration):
+    for name in MODEL_BASED:
+        hs = [calibration.threshold(name, r).log_lr for r in (1e-3, 1e-1, 10.0, 1000.0)]
+        assert all(a >= b for a, b in itertools.pairwise(hs))
+    with pytest.raises(ConfigError):
+        calibration.threshold("friction", 0.0)
+
+
+def test_calibration_file_round_trips(calibration, tmp_path):
+    path = calibration.save(tmp_path / "calibration.json")
+    again = DiagnosisCalibration.load(path)
+    assert again.to_dict() == calibration.to_dict()
+    (tmp_path / "bad.json").write_text('{"format": "rwlab.Other/1"}')
+    with pytest.raises(FileFormatError, match="rwlab diagnose calibrate"):
+        DiagnosisCalibration.load(tmp_path / "bad.json")
+
+
+def test_written_files_validate_against_their_schemas(calibration, tmp_path):
+    path = calibration.save(tmp_path / "calibration.json")
+    kind = Draft202012Validator
+    jsonschema.validate(json.loads(path.read_text()), schema("diagnosis_calibration"), cls=kind)
+    result = run(features(100, fault="friction", size=2.0), calibration)
+    jsonschema.validate(result.to_dict(str(path)), schema("fdi_diagnosis"), cls=kind)
+
+
+def test_garwood_interval_known_values():
+    """Exact Poisson 95 % limits (Garwood 1936): n = 0 → [0, 3.689]; n = 1 → [0.0253, 5.572]."""
+    assert garwood(0, 1.0) == pytest.approx((0.0, 3.6889), abs=1e-4)
+    assert garwood(1, 2.0) == pytest.approx((0.02532 / 2, 5.5716 / 2), abs=1e-4)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-5, 50, allow_nan=False), max_size=60))
+def test_excursion_peaks_are_the_maxima_of_runs_over_the_floor(xs):
+    peaks = excursion_peaks(np.array(xs), floor=2.0)
+    above = [x for x in xs if x > 2.0]
+    assert len(peaks) <= len(above)
+    assert (max(above) in peaks) if above else peaks == []
+
+
+def test_a_record_without_current_is_refused():
+    data, wheel = record(0)
+    speed_only = IOData(data.u, data.y[:, :1], TS, output_names=["speed_rpm"])
+    with pytest.raises(DataError, match="current_a"):
+        compute_features(speed_only, wheel, SCALES)
+
+
+def test_the_page_gives_the_verdict_before_the_alarms(calibration, tmp_path):
+    from rwlab.report.fdi import fdi_page
+
+    path = calibration.save(tmp_path / "calibration.json")
+    result = run(features(100, fault="speed_sensor_bias", size=12.0), calibration)
+    text = fdi_page(result, calibration, path, title="rec").render()
+    verdict = text.index("speed_sensor_bias")
+    assert verdict < text.index('id="alarms"') < text.index('id="thresholds"')
+    assert path.resolve().as_uri() in text and "synthetic" in text
