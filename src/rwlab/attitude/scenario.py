@@ -211,14 +211,12 @@ _FIELD_HINT = (
 def _set_path(obj: Any, path: str, value: Any, full: str) -> Any:
     """``obj`` (a frozen dataclass) with the field at dotted ``path`` set to ``value``."""
     head, _, rest = path.partition(".")
-    if not is_dataclass(obj) or head not in {f.name for f in fields(obj)}:
+    if not is_dataclass(obj) or isinstance(obj, type) or head not in {f.name for f in fields(obj)}:
         raise ConfigError(f"unknown scenario field {full!r}; {_FIELD_HINT}")
     new = _set_path(getattr(obj, head), rest, value, full) if rest else value
     if isinstance(obj, Wheels) and head == "spec" and new != obj.spec:
-        # another wheel model: its own limits, not the last one's
-        limits = dict.fromkeys(("inertia", "max_torque", "max_momentum", "max_speed_rpm"))
-        return replace(obj, spec=new, **limits)
-    return replace(obj, **{head: new})  # type: ignore[type-var]
+        return obj.with_spec(new)
+    return replace(obj, **{head: new})
 
 
 # What each mission needs of its wheels about any axis (the wheel models are checked

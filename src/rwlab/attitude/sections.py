@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from rwlab.attitude.plant import DisturbanceModel
 from rwlab.attitude.sensors import GyroModel, StarTrackerModel
@@ -141,6 +141,29 @@ class Wheels:
     def wheel_spec(self) -> WheelSpec:
         """The wheel model's spec (:class:`rwlab.wheelspec.WheelSpec`)."""
         return load_wheel_spec(self.spec)
+
+    def with_spec(self, spec: str) -> Wheels:
+        """These wheels as another wheel model: its limits, not this one's.
+
+        Parameters
+        ----------
+        spec : str
+            A preset, a wheel spec file or a ``model.json`` (as :attr:`spec`).
+
+        Returns
+        -------
+        Wheels
+            The rest (geometry, model, faults, imbalances) kept.
+        """
+        new = load_wheel_spec(spec)
+        return replace(
+            self,
+            spec=spec,
+            inertia=new.inertia_kg_m2,
+            max_torque=new.max_torque_nm,
+            max_momentum=new.momentum_capacity_nms,
+            max_speed_rpm=new.max_speed_rpm,
+        )
 
 
 def load_wheel_spec(name_or_path: str) -> WheelSpec:

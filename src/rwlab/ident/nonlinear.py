@@ -248,6 +248,11 @@ def _initial_guess(linear, data: IOData) -> tuple[float, float, float, float]:
     return g, c, float(-(slow[0] + slow[1]).real), float((slow[0] * slow[1]).real)
 
 
+def _pair(bounds: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = bounds  # a list from a caller or a TOML file becomes the model's tuple
+    return float(lo), float(hi)
+
+
 def servo_fit(
     data: IOData,
     linear=None,
@@ -321,7 +326,7 @@ def servo_fit(
         ki,
         alpha,
         tau,
-        tuple(input_limits),
-        tuple(output_limits),
+        _pair(input_limits),
+        _pair(output_limits),
         int(substeps),
     )
