@@ -50,6 +50,7 @@ from scipy.optimize import least_squares
 
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
+from rwlab.ident.models import PolyModel
 
 __all__ = ["ServoModel", "servo_advance", "servo_fit"]
 
@@ -59,7 +60,9 @@ DELAY_STARTS = (0.1, 0.25, 0.5)  # the delay's starting values, shares of Ts
 
 
 @njit(cache=True)
-def servo_advance(w, integral, u_prev, u, p):
+def servo_advance(
+    w: float, integral: float, u_prev: float, u: float, p: np.ndarray
+) -> tuple[float, float]:
     """One sample of the servo model: ``(w, I, u[k−1], u[k]) → (w, I)`` at the next sample.
 
     The single definition of the model's simulation (``IdentifiedWheel.step``
@@ -82,7 +85,7 @@ def servo_advance(w, integral, u_prev, u, p):
 
 
 @njit(cache=True)
-def _simulate(u, w0, i0, p):
+def _simulate(u: np.ndarray, w0: float, i0: float, p: np.ndarray) -> np.ndarray:
     n = u.size
     y = np.empty(n)
     w, integral = w0, i0
@@ -168,7 +171,7 @@ class ServoModel:
         """Estimated parameters: g, c, kp, ki, α, τ."""
         return 6
 
-    def simulate(self, u, w0: float, integral0: float = 0.0) -> np.ndarray:
+    def simulate(self, u: np.ndarray, w0: float, integral0: float = 0.0) -> np.ndarray:
         """Output from the state (w0, I0) at sample 0 for inputs ``u`` (N,); returns (N,)."""
         u = np.asarray(u, dtype=float).ravel()
         if u.size == 0 or not np.all(np.isfinite(u)):
@@ -191,7 +194,7 @@ class ServoModel:
         )
         return float(sol.x[0]), float(sol.x[1])
 
-    def predict(self, data: IOData, horizon: float = np.inf, initial: str = "steady"):
+    def predict(self, data: IOData, horizon: float = np.inf, initial: str = "steady") -> np.ndarray:
         """Simulated output on ``data``, shape (N,).
 
         An output-error model predicts by simulating at every horizon (its noise
@@ -230,7 +233,7 @@ def _siso(data: IOData) -> tuple[np.ndarray, np.ndarray]:
     return data.u[:, 0].copy(), data.y[:, 0].copy()
 
 
-def _initial_guess(linear, data: IOData) -> tuple[float, float, float, float]:
+def _initial_guess(linear: PolyModel | None, data: IOData) -> tuple[float, float, float, float]:
     """(g, c, kp, ki) from a linear PolyModel on the same data, or from the data alone."""
     u, y = _siso(data)
     if linear is None:
@@ -255,7 +258,7 @@ def _pair(bounds: tuple[float, float]) -> tuple[float, float]:
 
 def servo_fit(
     data: IOData,
-    linear=None,
+    linear: PolyModel | None = None,
     *,
     input_limits: tuple[float, float] = (-math.inf, math.inf),
     output_limits: tuple[float, float] = (-math.inf, math.inf),
@@ -300,7 +303,7 @@ def servo_fit(
     fixed = np.array([Ts, substeps, *input_limits, *output_limits], dtype=float)
     scale = float(np.std(y)) or 1.0
 
-    def residuals(x):
+    def residuals(x: np.ndarray) -> np.ndarray:
         p = np.concatenate([x, fixed[:2], fixed[2:]])
         return (_simulate(u, y[0], 0.0, p) - y) / scale
 

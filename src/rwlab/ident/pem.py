@@ -71,6 +71,10 @@ MAX_ITER = "maximum iterations reached"
 EXACT_FIT = 1e-24  # Σε² below this fraction of Σy²: the data are noise-free and fitted exactly
 ESTIMATION_INITIAL = ("zero", "steady")  # what an estimator can assume before the record
 
+Series = list[tuple[np.ndarray, np.ndarray]]  # (y of shape (N,), u of shape (N, nu)) per record
+Fit = tuple[np.ndarray, np.ndarray, float, int, str]  # θ, ψᵀψ, Σε², iterations, why it stopped
+InputOrders = int | Sequence[int]  # one per input, or one for every input
+
 
 def _stabilized(orders: _Orders, theta: np.ndarray, gain: StaticGain | None = None) -> np.ndarray:
     """Roots of C, D and F reflected inside the unit circle; back on ``gain``'s constraint
@@ -80,7 +84,9 @@ def _stabilized(orders: _Orders, theta: np.ndarray, gain: StaticGain | None = No
     return theta if gain is None else gain.project(theta)
 
 
-def _reduced(H: np.ndarray, g: np.ndarray, gain: StaticGain | None):
+def _reduced(
+    H: np.ndarray, g: np.ndarray, gain: StaticGain | None
+) -> tuple[np.ndarray, np.ndarray]:
     """ψᵀψ and ψᵀε in the coordinates η the constraint leaves free (θ = θ₀ + Nη)."""
     if gain is None:
         return H, g
@@ -88,7 +94,9 @@ def _reduced(H: np.ndarray, g: np.ndarray, gain: StaticGain | None):
     return N.T @ H @ N, N.T @ g
 
 
-def _signals(orders: _Orders, theta, y, u):
+def _signals(
+    orders: _Orders, theta: np.ndarray, y: np.ndarray, u: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """ε, [wⱼ = (Bⱼ/Fⱼ) uⱼ] and v = A y − Σⱼ wⱼ for one experiment."""
     A, Bs, C, D, Fs = orders.unpack(theta)
     st = orders.steady
@@ -101,7 +109,7 @@ def _signals(orders: _Orders, theta, y, u):
     return e, ws, v
 
 
-def _sse(orders, theta, experiments) -> float:
+def _sse(orders: _Orders, theta: np.ndarray, experiments: Series) -> float:
     total = 0.0
     for y, u in experiments:
         e = _signals(orders, theta, y, u)[0]
@@ -109,7 +117,15 @@ def _sse(orders, theta, experiments) -> float:
     return total
 
 
-def _jacobian_block(orders: _Orders, theta, y, u, e, ws, v) -> np.ndarray:
+def _jacobian_block(
+    orders: _Orders,
+    theta: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    e: np.ndarray,
+    ws: list[np.ndarray],
+    v: np.ndarray,
+) -> np.ndarray:
     """ψᵀ = (∂ε/∂θ)ᵀ for one experiment, shape (d, N): one contiguous row per parameter."""
     C, D, Fs = orders.unpack(theta)[2:]
     N = len(y)
@@ -119,7 +135,7 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, ws, v) -> np.ndarray:
     noise = orders.nc or orders.nd
     st = orders.steady
 
-    def put(signal, first_lag, count, sign):
+    def put(signal: np.ndarray, first_lag: int, count: int, sign: int) -> None:
         nonlocal row
         for i in range(count):
             k = min(first_lag + i, N)
@@ -129,7 +145,7 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, ws, v) -> np.ndarray:
                 psi_t[row] *= -1.0  # a contiguous row: safe in place
             row += 1
 
-    def through_noise_and_f(x, F):  # (D/(C F)) x
+    def through_noise_and_f(x: np.ndarray, F: np.ndarray) -> np.ndarray:  # (D/(C F)) x
         return filt(D, np.convolve(C, F), x, st) if (noise or len(F) > 1) else x
 
     if orders.na:
@@ -147,7 +163,9 @@ def _jacobian_block(orders: _Orders, theta, y, u, e, ws, v) -> np.ndarray:
     return psi_t
 
 
-def _normal_equations(orders, theta, experiments):
+def _normal_equations(
+    orders: _Orders, theta: np.ndarray, experiments: Series
+) -> tuple[np.ndarray, np.ndarray, float]:
     """ψᵀψ, ψᵀε and ε'ε summed over experiments at θ."""
     d = orders.d
     H = np.zeros((d, d))
@@ -162,7 +180,7 @@ def _normal_equations(orders, theta, experiments):
     return H, g, sse
 
 
-def _stalled(Hs, gs, sse: float, tol: float) -> str:
+def _stalled(Hs: np.ndarray, gs: np.ndarray, sse: float, tol: float) -> str:
     """Why no step decreases the loss: the optimum itself (the Gauss–Newton step
     promises less than the tolerance: rounding is all that is left), or not."""
     try:
@@ -174,7 +192,14 @@ def _stalled(Hs, gs, sse: float, tol: float) -> str:
     return "no further decrease possible (local minimum)"
 
 
-def _minimize(orders, theta, experiments, max_iter: int, tol: float, gain=None):
+def _minimize(
+    orders: _Orders,
+    theta: np.ndarray,
+    experiments: Series,
+    max_iter: int,
+    tol: float,
+    gain: StaticGain | None = None,
+) -> Fit:
     """Levenberg–Marquardt on ½Σε² (on the free coordinates of ``gain``'s constraint,
     when given). Returns θ, H, sse, iterations, reason."""
     theta = _stabilized(orders, theta, gain)
@@ -218,7 +243,9 @@ def _minimize(orders, theta, experiments, max_iter: int, tol: float, gain=None):
 
 
 # -- starting values -------------------------------------------------------------------
-def _prepare(data, orders: _Orders, what: str):
+def _prepare(
+    data: IOData | Sequence[IOData], orders: _Orders, what: str
+) -> tuple[list[IOData], Series]:
     experiments = as_experiments(data)
     first = experiments[0]
     if first.ny != 1:
@@ -241,11 +268,18 @@ def _prepare(data, orders: _Orders, what: str):
     return experiments, [(e.y[:, 0], e.u) for e in experiments]
 
 
-def _init_subset(series):
+def _init_subset(series: Series) -> Series:
     return [(y[:START_SAMPLES], u[:START_SAMPLES]) for y, u in series]
 
 
-def _search(orders, starts, series, max_iter, tol, gain=None):
+def _search(
+    orders: _Orders,
+    starts: Sequence[np.ndarray],
+    series: Series,
+    max_iter: int,
+    tol: float,
+    gain: StaticGain | None = None,
+) -> Fit:
     """LM from every start on the first ``START_SAMPLES`` samples; the best, refined on all data.
 
     Several starts guard against local minima (ARMAX's likelihood has them);
@@ -271,7 +305,16 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _finish(orders, starts, experiments, series, method, max_iter, tol, gain=None) -> PolyModel:
+def _finish(
+    orders: _Orders,
+    starts: Sequence[np.ndarray],
+    experiments: list[IOData],
+    series: Series,
+    method: str,
+    max_iter: int,
+    tol: float,
+    gain: StaticGain | None = None,
+) -> PolyModel:
     theta, H, sse, iterations, reason = _search(orders, starts, series, max_iter, tol, gain)
     if reason == MAX_ITER:
         warnings.warn(
@@ -350,16 +393,16 @@ def _finish(orders, starts, experiments, series, method, max_iter, tol, gain=Non
     return model
 
 
-def _nu(data) -> int:
+def _nu(data: IOData | Sequence[IOData]) -> int:
     return as_experiments(data)[0].nu
 
 
 def armax(
     data: IOData | Sequence[IOData],
     na: int,
-    nb=None,
+    nb: InputOrders | None = None,
     nc: int | None = None,
-    nk=1,
+    nk: InputOrders = 1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,
@@ -433,9 +476,9 @@ def _method(name: str, gain: StaticGain | None) -> str:
 
 def oe(
     data: IOData | Sequence[IOData],
-    nb,
-    nf,
-    nk=1,
+    nb: InputOrders,
+    nf: InputOrders,
+    nk: InputOrders = 1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,
@@ -491,11 +534,11 @@ def oe(
 
 def bj(
     data: IOData | Sequence[IOData],
-    nb,
+    nb: InputOrders,
     nc: int,
     nd: int,
-    nf,
-    nk=1,
+    nf: InputOrders,
+    nk: InputOrders = 1,
     *,
     max_iter: int = 100,
     tol: float = 1e-8,

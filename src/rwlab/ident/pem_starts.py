@@ -21,8 +21,11 @@ from rwlab.errors import DataError
 from rwlab.ident.arx import check_order
 from rwlab.ident.polynomials import stabilize
 
+Series = Sequence[tuple[np.ndarray, np.ndarray]]  # (y of shape (N,), u of (N, nu) or (N,)) each
+Dynamics = tuple[list[np.ndarray], list[np.ndarray]]  # ([B₁ …], [F₁ …]), one pair per input
 
-def _per_input_tuple(value, nu: int) -> tuple[int, ...]:
+
+def _per_input_tuple(value: int | Sequence[int], nu: int) -> tuple[int, ...]:
     values = np.atleast_1d(np.asarray(value, dtype=int)).tolist()
     return tuple(values * nu if len(values) == 1 and nu != 1 else values)
 
@@ -43,7 +46,7 @@ class _Orders:
     nk: tuple[int, ...]
     steady: bool = False  # pre-sample values: zero, or each signal's first value
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         nb = tuple(int(b) for b in np.atleast_1d(self.nb))
         object.__setattr__(self, "nb", nb)
         for name in ("nf", "nk"):
@@ -60,7 +63,9 @@ class _Orders:
     def d(self) -> int:
         return self.na + sum(self.nb) + self.nc + self.nd + sum(self.nf)
 
-    def unpack(self, theta: np.ndarray):
+    def unpack(
+        self, theta: np.ndarray
+    ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray, list[np.ndarray]]:
         """θ → (A, [B₁ …], C, D, [F₁ …]) polynomials in q⁻¹."""
         pos = 0
 
@@ -76,7 +81,14 @@ class _Orders:
         Fs = [np.concatenate([[1.0], take(f)]) for f in self.nf]
         return A, Bs, C, D, Fs
 
-    def pack(self, A, Bs, C, D, Fs) -> np.ndarray:
+    def pack(
+        self,
+        A: np.ndarray,
+        Bs: Sequence[np.ndarray],
+        C: np.ndarray,
+        D: np.ndarray,
+        Fs: Sequence[np.ndarray],
+    ) -> np.ndarray:
         bs = [B[k : k + b] for B, b, k in zip(Bs, self.nb, self.nk, strict=True)]
         fs = [F[1 : f + 1] for F, f in zip(Fs, self.nf, strict=True)]
         return np.concatenate([A[1 : self.na + 1], *bs, C[1:], D[1:], *fs])
@@ -121,7 +133,7 @@ def _arma_hannan_rissanen(v: np.ndarray, nc: int, nd: int) -> tuple[np.ndarray, 
     return stabilize(C), stabilize(D)
 
 
-def _input_lags(u: np.ndarray, nb, nk, n0: int) -> list[np.ndarray]:
+def _input_lags(u: np.ndarray, nb: Sequence[int], nk: Sequence[int], n0: int) -> list[np.ndarray]:
     """Lagged columns uⱼ(t−nkⱼ−i), i < nbⱼ, of every input, rows t = n0..N−1."""
     u = _columns(u)
     return [
@@ -129,11 +141,11 @@ def _input_lags(u: np.ndarray, nb, nk, n0: int) -> list[np.ndarray]:
     ]
 
 
-def _first_row(nb, nk, *others: int) -> int:
+def _first_row(nb: Sequence[int], nk: Sequence[int], *others: int) -> int:
     return max([*others, *[k + b - 1 for b, k in zip(nb, nk, strict=True)], 0])
 
 
-def _split_b(th: np.ndarray, nb, nk) -> list[np.ndarray]:
+def _split_b(th: np.ndarray, nb: Sequence[int], nk: Sequence[int]) -> list[np.ndarray]:
     """Consecutive coefficient blocks of θ → one B per input, with nk leading zeros."""
     out, pos = [], 0
     for b, k in zip(nb, nk, strict=True):
@@ -142,7 +154,7 @@ def _split_b(th: np.ndarray, nb, nk) -> list[np.ndarray]:
     return out
 
 
-def _initial_armax(orders: _Orders, experiments) -> np.ndarray:
+def _initial_armax(orders: _Orders, experiments: Series) -> np.ndarray:
     """Hannan–Rissanen: long ARX residuals ê, then y on lags of y, u and ê."""
     na, nb, nc, nk = orders.na, orders.nb, orders.nc, orders.nk
     long = max(10, 2 * (na + nc), na + max(nb, default=0))
@@ -169,37 +181,46 @@ def _initial_armax(orders: _Orders, experiments) -> np.ndarray:
     return orders.pack(A, Bs, C, np.ones(1), [np.ones(1)] * orders.nu)
 
 
-def _initial_oe(nb, nf: int, nk, experiments, iterations: int = 3):
+def _initial_oe(
+    nb: int | Sequence[int],
+    nf: int,
+    nk: int | Sequence[int],
+    experiments: Series,
+    iterations: int = 3,
+) -> tuple[list[np.ndarray], np.ndarray]:
     """Bⱼ and a common F by ARX(nf, nb, nk), then instrumental variables with simulated
     instruments. Returns ([B₁ …], F)."""
     nb, nk = tuple(np.atleast_1d(nb)), tuple(np.atleast_1d(nk))
     n0 = _first_row(nb, nk, nf)
 
-    def regress(instrumented: bool, Bs, F):
+    def regress(instruments: tuple[list[np.ndarray], np.ndarray] | None) -> np.ndarray:
+        """ARX by least squares (no instruments), or IV with the outputs that ([B₁ …], F)
+        simulate as instruments."""
         Phi, Z, T = [], [], []
         for y, u in experiments:
             inputs = _input_lags(u, nb, nk, n0)
             Phi.append(np.column_stack([-c for c in _lags(y, 1, nf, n0)] + inputs))
             T.append(y[n0:])
-            if instrumented:
-                x = sum(sps.lfilter(B, F, _columns(u)[:, j]) for j, B in enumerate(Bs))
+            if instruments is not None:
+                Bs, F = instruments
+                x = _simulated(Bs, [F] * len(Bs), u)
                 Z.append(np.column_stack([-c for c in _lags(x, 1, nf, n0)] + inputs))
         phi, target = np.vstack(Phi), np.concatenate(T)
-        if not instrumented:
+        if instruments is None:
             return _least_squares(list(phi.T), target)
         z = np.vstack(Z)
         return np.linalg.lstsq(z.T @ phi, z.T @ target, rcond=None)[0]
 
-    th = regress(False, None, None)
+    th = regress(None)
     for i in range(iterations + 1):
         F = stabilize(np.concatenate([[1.0], th[:nf]]))
         Bs = _split_b(th[nf:], nb, nk)
         if i < iterations:
-            th = regress(True, Bs, F)
+            th = regress((Bs, F))
     return Bs, F
 
 
-def _initial_dynamics(orders: _Orders, experiments, sweeps: int = 2):
+def _initial_dynamics(orders: _Orders, experiments: Series, sweeps: int = 2) -> Dynamics:
     """Bⱼ and Fⱼ per input: one input at a time on the output less the other inputs'
     simulated contributions (backfitting), each by :func:`_initial_oe`."""
     if orders.nu == 1:
@@ -218,7 +239,7 @@ def _initial_dynamics(orders: _Orders, experiments, sweeps: int = 2):
     return Bs, Fs
 
 
-def _simulated(Bs, Fs, u) -> np.ndarray:
+def _simulated(Bs: Sequence[np.ndarray], Fs: Sequence[np.ndarray], u: np.ndarray) -> np.ndarray:
     u = _columns(u)
     return sum(
         (sps.lfilter(B, F, u[:, j]) for j, (B, F) in enumerate(zip(Bs, Fs, strict=True))),
@@ -226,7 +247,9 @@ def _simulated(Bs, Fs, u) -> np.ndarray:
     )
 
 
-def _initial_bj(orders: _Orders, experiments, dynamics=None) -> np.ndarray:
+def _initial_bj(
+    orders: _Orders, experiments: Series, dynamics: Dynamics | None = None
+) -> np.ndarray:
     Bs, Fs = _initial_dynamics(orders, experiments) if dynamics is None else dynamics
     v = np.concatenate([y - _simulated(Bs, Fs, u) for y, u in experiments])
     C, D = _arma_hannan_rissanen(v, orders.nc, orders.nd)
@@ -246,7 +269,7 @@ def _random_monic(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.real(np.poly(roots)) if n else np.ones(1)
 
 
-def _b_given_f(orders: _Orders, Fs, experiments) -> list[np.ndarray]:
+def _b_given_f(orders: _Orders, Fs: Sequence[np.ndarray], experiments: Series) -> list[np.ndarray]:
     """Bⱼ by least squares once the Fⱼ are fixed: y is linear in B given F."""
     cols_all, targets = [], []
     for y, u in experiments:
@@ -259,7 +282,7 @@ def _b_given_f(orders: _Orders, Fs, experiments) -> list[np.ndarray]:
     return _split_b(th, orders.nb, orders.nk)
 
 
-def _dynamics_starts(orders: _Orders, experiments, count: int) -> list[tuple[list, list]]:
+def _dynamics_starts(orders: _Orders, experiments: Series, count: int) -> list[Dynamics]:
     """Starting (B, F) pairs for OE and BJ: instrumental variables, plain ARX, and
     ``count`` random stable Fⱼ with Bⱼ by least squares given them.
 
@@ -293,7 +316,9 @@ def _dynamics_starts(orders: _Orders, experiments, count: int) -> list[tuple[lis
 
 
 # -- order checks of the estimators -----------------------------------------------
-def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
+def _input_orders(
+    name: str, value: int | Sequence[int] | None, nu: int, minimum: int
+) -> tuple[int, ...]:
     """One order per input (MATLAB's order vectors); a scalar applies to every input."""
     if nu == 0:
         if value is None or (isinstance(value, Sequence) and len(value) == 0):
@@ -310,7 +335,7 @@ def _input_orders(name: str, value, nu: int, minimum: int) -> tuple[int, ...]:
     return tuple(check_order(name, v, minimum) for v in values)
 
 
-def _check_starts(starts) -> int:
+def _check_starts(starts: object) -> int:
     if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 0:
         raise DataError(f"starts must be a non-negative integer, got {starts!r}")
     return int(starts)
