@@ -1,5 +1,6 @@
 """The import graph has no layering violation and no cycle (``python tools/importgraph.py``)."""
 
+import ast
 import os
 import sys
 from pathlib import Path
@@ -29,13 +30,16 @@ def test_the_checker_sees_what_it_must():
     }
     assert importgraph.violations(graph) == [("rwlab.data", "rwlab.testbed.load")]
     assert importgraph.cycles(graph) == [["data", "testbed"]]
+    modules = {"rwlab.attitude.a": {"rwlab.attitude.b"}, "rwlab.attitude.b": {"rwlab.attitude.a"}}
+    assert importgraph.cycles(modules) == []  # inside one package: only module-wise
+    assert importgraph.cycles(modules, packages=False) == [["rwlab.attitude.a", "rwlab.attitude.b"]]
 
 
 def test_the_real_graph_is_read_including_imports_inside_functions():
     graph = importgraph.imports()
     assert "rwlab.datafiles" in graph["rwlab.testbed.load"]
     assert "rwlab.ident.model_file" in graph["rwlab.wheel.identified"]
-    assert "rwlab.testbed" not in {m.split(".")[1] for m in graph["rwlab.ident.study"]}
+    assert "testbed" not in {m.split(".")[1] for m in graph["rwlab.ident.study"]}
     assert {importgraph.layer(m) for m in importgraph.modules()} <= set(
         range(len(importgraph.LAYERS))
     )
@@ -67,13 +71,46 @@ def test_a_format_is_read_by_the_reader_its_owner_registers(tmp_path):
         data.load(path)
 
 
-def test_the_data_layer_imports_the_testbed_only_to_read_a_record(tmp_path):
+def test_the_data_layer_names_no_reader_of_a_higher_layer():
+    """rwlab.data imports nothing above it, not even by name: its readers and writers come
+    from the entry points that rwlab's pyproject declares, one per suffix, each the owner's
+    function."""
+    import importlib.metadata
+    import tomllib
+
+    from rwlab import data
+
+    graph = importgraph.imports()
+    assert {importgraph.layer(m) for m in graph["rwlab.data"]} <= {
+        0,
+        importgraph.layer("rwlab.data"),
+    }
+    tree = ast.parse(Path(data.__file__).read_text(encoding="utf-8"))
+    named = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)}
+    assert not named & set(importgraph.modules()), "data names a module to import"
+    root = Path(__file__).resolve().parent.parent
+    declared = tomllib.loads((root / "pyproject.toml").read_text())["project"]["entry-points"]
+    assert declared[data.READERS]["mcap"] == "rwlab.testbed.load:read_mcap"
+    assert set(declared[data.WRITERS]) == {"csv", "parquet", "mat"}
+    installed = {p.name: p.value for p in importlib.metadata.entry_points(group=data.READERS)}
+    if installed != declared[data.READERS]:
+        pytest.skip("rwlab's installed metadata is stale: pip install -e . (its entry points)")
+    for group in (data.READERS, data.WRITERS):
+        for point in importlib.metadata.entry_points(group=group):
+            assert callable(point.load()), point
+
+
+def test_reading_a_format_imports_only_its_owner(tmp_path):
     """In a fresh interpreter: rwlab.data alone does not import rwlab.testbed; reading a
-    CSV does not either; reading an .mcap imports the module that registered it."""
+    CSV does not either; reading an .mcap imports the module its entry point names."""
+    import importlib.metadata
     import subprocess
 
+    from rwlab import data
     from rwlab.testbed import ExperimentConfig, run_experiment
 
+    if "mcap" not in {p.name for p in importlib.metadata.entry_points(group=data.READERS)}:
+        pytest.skip("rwlab's installed metadata is stale: pip install -e . (its entry points)")
     run_experiment(ExperimentConfig(duration=20, Ts=0.5, seed=1), tmp_path / "r.mcap")
     (tmp_path / "d.csv").write_text("time_s,u,y\n0,1,2\n0.5,2,3\n1.0,3,4\n")
     code = (
@@ -88,7 +125,9 @@ def test_the_data_layer_imports_the_testbed_only_to_read_a_record(tmp_path):
     assert done.returncode == 0, done.stderr.decode()
 
 
-def test_imports_for_annotations_only_are_not_dependencies(tmp_path):
+def test_imports_for_annotations_and_by_name_are_dependencies(tmp_path):
+    """A type-only import, and an import_module of a constant name, are edges: two modules
+    that need each other only for annotations are still a cycle."""
     pkg = tmp_path / "rwlab"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
@@ -97,6 +136,12 @@ def test_imports_for_annotations_only_are_not_dependencies(tmp_path):
         "else:\n    import rwlab.errors\n"
     )
     (pkg / "b.py").write_text("def f():\n    from rwlab import a\n")
+    (pkg / "c.py").write_text("import importlib\nimportlib.import_module('rwlab.b')\n")
     (pkg / "errors.py").write_text("")
     graph = importgraph.imports(tmp_path)
-    assert graph == {"rwlab.a": {"rwlab.errors"}, "rwlab.b": {"rwlab.a"}}
+    assert graph == {
+        "rwlab.a": {"rwlab.b", "rwlab.errors"},
+        "rwlab.b": {"rwlab.a"},
+        "rwlab.c": {"rwlab.b"},
+    }
+    assert importgraph.cycles(graph, packages=False) == [["rwlab.a", "rwlab.b"]]

@@ -5,8 +5,10 @@ Run ``python tools/importgraph.py`` (exit 1 on a violation or a cycle); the test
 import-linter/grimp: those are not in rwlab's dependencies, and the rule here (an
 ordered list of layers plus "no cycle between modules") is fifty lines.
 
-Every ``import`` counts, also those inside functions: a lazy import is still a
-dependency. A module's layer is that of its top-level name under ``rwlab``.
+Every ``import`` counts, also those inside functions (a lazy import is still a
+dependency), those under ``if TYPE_CHECKING:`` (a type-only import is one too) and
+``importlib.import_module("rwlab.…")``. A module's layer is that of its top-level
+name under ``rwlab``.
 """
 
 from __future__ import annotations
@@ -19,10 +21,12 @@ from pathlib import Path
 SRC = Path(__file__).resolve().parent.parent / "src"
 
 # Lowest first. A module may import its own layer and those below, never above.
-# testbed sits above diagnose (the runner diagnoses live), both above wheel.
+# testbed sits above diagnose (the runner diagnoses live), both above wheel. The package
+# itself (``rwlab``, its __init__) is the front door: it exports the workflows, so it
+# sits on top, and no module below imports a name from it (``rwlab._version`` holds the
+# version they stamp).
 LAYERS: list[set[str]] = [
-    # __init__: root
-    {"__init__", "errors", "interrupts", "_toml", "_io", "_display", "_optional", "schemas"},
+    {"_version", "errors", "interrupts", "_toml", "_io", "_display", "_optional", "schemas"},
     {"data", "signals", "datafiles", "datasets", "wheelspec"},
     {"ident"},
     {"wheel"},
@@ -33,7 +37,7 @@ LAYERS: list[set[str]] = [
     {"campaign"},
     {"report"},
     {"workflows"},
-    {"cli", "demo", "__main__"},
+    {"cli", "demo", "__main__", "__init__"},
 ]
 
 
@@ -47,27 +51,31 @@ def modules(src: Path = SRC) -> dict[str, Path]:
     return out
 
 
-def _is_type_checking(node: ast.AST) -> bool:
-    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+def _import_module_call(node: ast.AST) -> str | None:
+    """The module named by ``importlib.import_module("rwlab.x")`` (a constant name), else None."""
+    if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)):
+        return None
+    func = ast.unparse(node.func)
+    name = node.args[0].value
+    if func in ("importlib.import_module", "import_module") and isinstance(name, str):
+        return name
+    return None
 
 
 def imports(src: Path = SRC) -> dict[str, set[str]]:
-    """The graph: module → the rwlab modules it imports (anywhere in its body)."""
+    """The graph: module → the rwlab modules it imports (anywhere in its body).
+
+    An import under ``if TYPE_CHECKING:`` counts: a module that needs another's names
+    for its annotations depends on it, and two that need each other are a cycle
+    whether or not Python runs the import. So does ``importlib.import_module`` of a
+    constant rwlab name: an import by name is still an import.
+    """
     mods = modules(src)
     graph: dict[str, set[str]] = defaultdict(set)
     for name, path in mods.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        typing_only = {  # imports under `if TYPE_CHECKING:` are for annotations, not run
-            id(n)  # (its else branch does run)
-            for block in ast.walk(tree)
-            if _is_type_checking(block)
-            for stmt in block.body  # type: ignore[attr-defined]
-            for n in ast.walk(stmt)
-        }
         for node in ast.walk(tree):
-            if id(node) in typing_only:
-                continue
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -78,6 +86,8 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
                 # "from rwlab import datasets" imports the module rwlab.datasets
                 targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in mods else base
                            for a in node.names]  # fmt: skip
+            elif by_name := _import_module_call(node):
+                targets = [by_name]
             else:
                 continue
             for t in targets:
@@ -150,7 +160,8 @@ def cycles(graph: dict[str, set[str]], *, packages: bool = True) -> list[list[st
 
 def main() -> int:
     graph = imports()
-    bad, loops = violations(graph), cycles(graph)
+    bad = violations(graph)
+    loops = cycles(graph) + [c for c in cycles(graph, packages=False) if c not in cycles(graph)]
     for a, b in bad:
         print(f"layering: {a} (layer {layer(a)}) imports {b} (layer {layer(b)})")
     for c in loops:

@@ -15,6 +15,7 @@ import importlib
 import sys
 import types
 
+from rwlab._version import __version__
 from rwlab.errors import (
     ConfigError,
     DataError,
@@ -23,8 +24,6 @@ from rwlab.errors import (
     ModelError,
     RwlabError,
 )
-
-__version__ = "0.1.0"
 
 _LAZY = {
     "WheelSpec": "rwlab.wheelspec",

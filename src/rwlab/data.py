@@ -17,7 +17,7 @@ the registered readers) are one concept: the container and how it is read and wr
 from __future__ import annotations
 
 import copy
-import importlib
+import importlib.metadata
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -634,7 +634,7 @@ class IOData:
         path = Path(path)
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        writer = _registered(_WRITERS, path.suffix.lower(), "write")
+        writer = _registered(_WRITERS, WRITERS, path.suffix.lower())
         return atomic_write_bytes(path, lambda tmp: writer(self, tmp, plain=plain))
 
 
@@ -715,7 +715,7 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
     if not path.is_file():
         raise FileNotFoundError(f"no such data file: {path}")
     suffix = path.suffix.lower()
-    reader = _registered(_READERS, suffix, "read")
+    reader = _registered(_READERS, READERS, suffix)
     try:
         return reader(path, Ts, **options)
     except (RwlabError, OSError, TypeError):
@@ -725,18 +725,13 @@ def load(path: str | os.PathLike, Ts: float | None = None, **options) -> IOData:
 
 
 # -- file formats: registered by the layer that owns each ----------------------------
-# The data layer only names the module that registers a suffix (rwlab.datafiles for
-# tables, rwlab.testbed.load for testbed records) and imports it by name on first use:
-# it never depends on a higher layer's code, and a new layer adds its format by calling
-# register_reader/register_writer.
-_OWNERS = {
-    ".csv": "rwlab.datafiles",
-    ".dat": "rwlab.datafiles",
-    ".txt": "rwlab.datafiles",
-    ".parquet": "rwlab.datafiles",
-    ".mat": "rwlab.datafiles",
-    ".mcap": "rwlab.testbed.load",
-}
+# Each reader and writer is declared where rwlab is installed, as an entry point of the
+# group READERS or WRITERS (pyproject.toml: the suffix, without its dot, → the owner's
+# function: rwlab.datafiles for tables, rwlab.testbed.load for testbed records), and
+# another installed package may add its formats the same way. The data layer fills its
+# registry from them on a suffix's first use and never names a module of its own.
+READERS = "rwlab.readers"
+WRITERS = "rwlab.writers"
 _READERS: dict[str, Callable[..., IOData]] = {}
 _WRITERS: dict[str, Callable[..., None]] = {}
 
@@ -769,10 +764,19 @@ def register_writer(suffix: str, writer: Callable[..., None]) -> None:
     _WRITERS[suffix.lower()] = writer
 
 
-def _registered(table: dict[str, Callable], suffix: str, what: str) -> Callable:
-    if suffix not in table and suffix in _OWNERS:
-        importlib.import_module(_OWNERS[suffix])
+def _registered(table: dict[str, Callable], group: str, suffix: str) -> Callable:
     if suffix not in table:
-        known = sorted(s for s in _OWNERS if what == "read" or s in (".csv", ".parquet", ".mat"))
+        for point in importlib.metadata.entry_points(group=group, name=suffix.lstrip(".")):
+            table[suffix] = point.load()
+            break
+    if suffix not in table:
+        known = sorted(
+            {*table, *(f".{p.name}" for p in importlib.metadata.entry_points(group=group))}
+        )
+        if not known:
+            raise DataError(
+                f"no data file formats are registered (entry points {group!r}): install rwlab "
+                "(pip install -e .) so that its readers and writers are known"
+            )
         raise DataError(f"unknown data file type {suffix!r}; use {', '.join(known)}")
     return table[suffix]

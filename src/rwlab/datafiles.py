@@ -2,8 +2,9 @@
 
 Every writer is atomic (temporary file, then rename). Every reader turns a
 malformed file into ``FileFormatError`` naming the file and the problem. The
-readers and writers are registered with :mod:`rwlab.data` at import (testbed
-records, ``.mcap``, are registered by :mod:`rwlab.testbed.load`, their owner).
+readers and writers are registered with :mod:`rwlab.data` as entry points
+(``pyproject.toml``; testbed records, ``.mcap``, by :mod:`rwlab.testbed.load`,
+their owner).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +23,6 @@ from rwlab.data import (
     IOData,
     Trend,
     check_Ts,
-    register_reader,
-    register_writer,
     warn_implausible_Ts,
 )
 from rwlab.errors import DataError, FileFormatError
@@ -231,7 +229,7 @@ def _check_plain_trend(trend: Trend, path) -> None:
 
 
 # -- CSV ----------------------------------------------------------------------------
-def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
+def write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
     names, table = _columns(data)
     with open(tmp, "w", newline="") as fh:
         if not plain or _salvaged(data):  # the metadata line: its name says salvaged
@@ -241,7 +239,7 @@ def _write_csv(data: IOData, tmp: Path, plain: bool = False) -> None:
         writer.writerows([[repr(float(v)) for v in row] for row in table])
 
 
-def _read_csv(path: Path, Ts, **options) -> IOData:
+def read_csv(path: Path, Ts, **options) -> IOData:
     text = path.read_text()
     meta = None
     if text.startswith(_META_PREFIX):
@@ -275,7 +273,7 @@ def _read_csv(path: Path, Ts, **options) -> IOData:
     )
 
 
-def _read_text(path: Path, Ts, **options) -> IOData:
+def read_text(path: Path, Ts, **options) -> IOData:
     table = np.loadtxt(path, ndmin=2)
     names = [f"c{i + 1}" for i in range(table.shape[1])]
     opts = {k: (names[v] if isinstance(v, int) else v) for k, v in options.items()}
@@ -283,7 +281,7 @@ def _read_text(path: Path, Ts, **options) -> IOData:
 
 
 # -- Parquet ------------------------------------------------------------------------
-def _write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
+def write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -294,7 +292,7 @@ def _write_parquet(data: IOData, tmp: Path, plain: bool = False) -> None:
     pq.write_table(arrow, tmp)
 
 
-def _read_parquet(path: Path, Ts, **options) -> IOData:
+def read_parquet(path: Path, Ts, **options) -> IOData:
     import pyarrow.parquet as pq
 
     arrow = pq.read_table(path)
@@ -307,7 +305,7 @@ def _read_parquet(path: Path, Ts, **options) -> IOData:
 
 
 # -- MATLAB .mat --------------------------------------------------------------------
-def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
+def write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
     """rwlab's form: u (N×nu), y (N×ny), Ts, t, metadata; ``plain``: one vector per channel."""
     from scipy.io import savemat
 
@@ -332,7 +330,7 @@ def _write_mat(data: IOData, tmp: Path, plain: bool = False) -> None:
         savemat(fh, variables)
 
 
-def _read_mat(path: Path, Ts, input_columns=None, output_columns=None) -> IOData:
+def read_mat(path: Path, Ts, input_columns=None, output_columns=None) -> IOData:
     """Variables ``u`` and ``y`` (rwlab's form) or any vectors chosen by name."""
     from scipy.io import loadmat
 
@@ -375,22 +373,3 @@ def _read_mat(path: Path, Ts, input_columns=None, output_columns=None) -> IOData
             raise FileFormatError(f"{path}: the variables {names} differ in length")
     table = np.column_stack([vectors[n] for n in names]) if names else np.zeros((0, 0))
     return from_table(names, table, Ts, None, path, inputs, outputs)
-
-
-# -- registration -------------------------------------------------------------------
-_READERS: dict[str, Callable[..., IOData]] = {
-    ".csv": _read_csv,
-    ".dat": _read_text,
-    ".txt": _read_text,
-    ".parquet": _read_parquet,
-    ".mat": _read_mat,
-}
-_WRITERS: dict[str, Callable[..., None]] = {
-    ".csv": _write_csv,
-    ".parquet": _write_parquet,
-    ".mat": _write_mat,
-}
-for _suffix, _reader in _READERS.items():
-    register_reader(_suffix, _reader)
-for _suffix, _writer in _WRITERS.items():
-    register_writer(_suffix, _writer)

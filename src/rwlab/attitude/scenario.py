@@ -59,7 +59,7 @@ import numpy as np
 
 from rwlab._toml import unknown_keys
 from rwlab.attitude.plant import DisturbanceModel
-from rwlab.attitude.scenario_checks import _is_number, check
+from rwlab.attitude.scenario_checks import check, is_number
 from rwlab.attitude.sections import (
     LEGACY_NAMES,
     SECTIONS,
@@ -463,14 +463,14 @@ def _subtable(table: Any, name: str, base: Scenario, path: Path) -> Any:
         default = getattr(current, key)
         if isinstance(value, list):
             if isinstance(default, tuple) and not (
-                len(value) == len(default) and all(map(_is_number, value))
+                len(value) == len(default) and all(map(is_number, value))
             ):
                 raise ConfigError(f"{path}: {name}.{key} must be a list of {len(default)} numbers")
             table[key] = tuple(value)
         elif cls is DisturbanceModel and isinstance(default, bool) != isinstance(value, bool):
             raise ConfigError(f"{path}: {name}.{key} must be true or false")
         elif cls is DisturbanceModel and isinstance(default, float):
-            if not (_is_number(value) and value >= 0):
+            if not (is_number(value) and value >= 0):
                 raise ConfigError(f"{path}: {name}.{key} must be a number ≥ 0")
     try:
         return replace(current, **table)

@@ -8,23 +8,54 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
-from typing import TYPE_CHECKING, Any, TypeGuard
+from typing import Any, Protocol, TypeGuard
 
 import numpy as np
 
 from rwlab._toml import unknown_keys
 from rwlab.attitude.plant import DisturbanceModel
-from rwlab.attitude.sections import SECTIONS
+from rwlab.attitude.sections import SECTIONS, Momentum, RunSettings, Sensors, Sky, Wheels
 from rwlab.attitude.sensors import GyroModel, StarTrackerModel
 from rwlab.errors import ConfigError
 
-if TYPE_CHECKING:
-    from rwlab.attitude.scenario import Scenario
-
-__all__ = ["check"]
+__all__ = ["check", "is_number"]
 
 
-def check(sc: Scenario) -> None:
+class CheckedScenario(Protocol):
+    """What the checks read of a scenario: :class:`rwlab.attitude.scenario.Scenario` has
+    it (typed by shape, so that the checks do not depend on the module that calls them)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def wheels(self) -> Wheels: ...
+
+    @property
+    def sensors(self) -> Sensors: ...
+
+    @property
+    def sky(self) -> Sky: ...
+
+    @property
+    def momentum(self) -> Momentum: ...
+
+    @property
+    def run(self) -> RunSettings: ...
+
+    @property
+    def n_wheels(self) -> int: ...
+
+    @property
+    def inertia_matrix(self) -> np.ndarray: ...
+
+    @property
+    def filter_inertia_matrix(self) -> np.ndarray: ...
+
+    def get(self, name: str) -> Any: ...
+
+
+def check(sc: CheckedScenario) -> None:
     """Every field of the type and in the range its meaning allows, the sections consistent.
 
     Parameters
@@ -78,7 +109,7 @@ def check(sc: Scenario) -> None:
 JITTER_STEP_RAD = 0.5  # the most a wheel may turn in one step with its imbalance on
 
 
-def _check_jitter(sc: Scenario) -> None:
+def _check_jitter(sc: CheckedScenario) -> None:
     """Imbalances ≥ 0, one value or one per wheel; positions (N, 3); and a step that
     resolves the imbalance's rotation at the wheels' top speed (the plant's RK4 samples
     it at each stage: more than ``JITTER_STEP_RAD`` a step and it aliases)."""
@@ -96,7 +127,7 @@ def _check_jitter(sc: Scenario) -> None:
         )
 
 
-def _check_sky(sc: Scenario) -> None:
+def _check_sky(sc: CheckedScenario) -> None:
     epoch = sc.sky.epoch
     if epoch is not None:
         from rwlab.attitude.ephemeris import parse_epoch
@@ -164,7 +195,7 @@ _VECTORS = {
 }
 
 
-def _check_ranges(sc: Scenario) -> None:
+def _check_ranges(sc: CheckedScenario) -> None:
     """Positive numbers, non-negative numbers and fractions where the physics needs them."""
     for name in _POSITIVE:
         value = sc.get(name)
@@ -192,7 +223,7 @@ def _check_ranges(sc: Scenario) -> None:
         )
 
 
-def _check_inertia(sc: Scenario) -> None:
+def _check_inertia(sc: CheckedScenario) -> None:
     """The truth's and the filter's inertia symmetric positive definite, a physical body."""
     J = sc.inertia_matrix
     if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(J) <= 0):
@@ -212,7 +243,7 @@ _FAULT_KEYS = {
 }
 
 
-def _check_wheel_faults(sc: Scenario) -> None:
+def _check_wheel_faults(sc: CheckedScenario) -> None:
     """Each fault names an existing wheel, a start time and at least one known change."""
     faults = sc.wheels.faults
     if not isinstance(faults, (tuple, list)):
@@ -229,7 +260,7 @@ def _check_wheel_faults(sc: Scenario) -> None:
         if isinstance(wheel, bool) or not isinstance(wheel, int) or not 1 <= wheel <= sc.n_wheels:
             raise ConfigError(f"{sc.name}: wheel fault needs wheel = 1..{sc.n_wheels}")
         at = f.get("at_s")
-        if not (_is_number(at) and at >= 0):
+        if not (is_number(at) and at >= 0):
             raise ConfigError(f"{sc.name}: wheel fault needs at_s = a time ≥ 0 (s)")
         if not set(f) & set(_FAULT_KEYS):
             raise ConfigError(
@@ -237,11 +268,11 @@ def _check_wheel_faults(sc: Scenario) -> None:
             )
         for key, what in _FAULT_KEYS.items():
             v = f.get(key, 1.0)
-            if not (_is_number(v) and (v > 0 if key == "friction" else v >= 0)):
+            if not (is_number(v) and (v > 0 if key == "friction" else v >= 0)):
                 raise ConfigError(f"{sc.name}: wheel fault {key} must be {what}, got {v!r}")
 
 
-def _check_attitude_sensors(sc: Scenario) -> None:
+def _check_attitude_sensors(sc: CheckedScenario) -> None:
     """Gyros and a star tracker: of their model types, the tracker on the sensors' clock."""
     gyro, st = sc.sensors.gyro, sc.sensors.star_tracker
     if gyro is not None and not isinstance(gyro, GyroModel):
@@ -260,7 +291,7 @@ def _check_attitude_sensors(sc: Scenario) -> None:
         )
 
 
-def _check_types(sc: Scenario) -> None:
+def _check_types(sc: CheckedScenario) -> None:
     """Every field of the type its default has (numbers finite), vectors of the right length."""
     for section in SECTIONS:
         for f in fields(getattr(sc, section)):
@@ -277,14 +308,14 @@ def _check_type(where: str, name: str, value: Any, default: Any) -> None:
         return
     if name in _VECTORS:
         ok = isinstance(value, (tuple, list)) and len(value) in _VECTORS[name]
-        if not (ok and all(_is_number(v) for v in value)):
+        if not (ok and all(is_number(v) for v in value)):
             sizes = " or ".join(str(n) for n in _VECTORS[name])
             raise ConfigError(f"{where}: {name} must be a list of {sizes} numbers")
     elif isinstance(default, bool):
         if not isinstance(value, bool):
             raise ConfigError(f"{where}: {name} must be true or false, got {value!r}")
     elif isinstance(default, float):
-        if not _is_number(value):
+        if not is_number(value):
             raise ConfigError(f"{where}: {name} must be a number, got {value!r}")
     elif isinstance(default, int):
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
@@ -295,5 +326,16 @@ def _check_type(where: str, name: str, value: Any, default: Any) -> None:
         raise ConfigError(f"{where}: {name} must be a DisturbanceModel")
 
 
-def _is_number(v) -> TypeGuard[float]:
+def is_number(v: object) -> TypeGuard[float]:
+    """Whether ``v`` is a finite real number (a bool is not one).
+
+    Parameters
+    ----------
+    v : object
+        A value read from a scenario file or set by a caller.
+
+    Returns
+    -------
+    bool
+    """
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)

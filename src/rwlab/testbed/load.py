@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.data import IOData, check_Ts, register_reader
+from rwlab.data import IOData, check_Ts
 from rwlab.datafiles import from_table
 from rwlab.errors import DataError, RecordGapError
 from rwlab.testbed.record import read_record, readable_seconds
@@ -318,6 +318,3 @@ def read_mcap(
         units=units,
     )
     return data._with(data.u, data.y, name=rec.name, source=rec.source)
-
-
-register_reader(".mcap", read_mcap)

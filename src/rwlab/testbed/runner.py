@@ -28,8 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from rwlab import __version__, signals
+from rwlab import signals
 from rwlab._display import ShortRepr
+from rwlab._version import __version__
 from rwlab.data import load as load_data
 from rwlab.errors import ConfigError, WheelFault
 from rwlab.testbed.record import RecordWriter

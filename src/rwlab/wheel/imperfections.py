@@ -20,16 +20,57 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import replace
-from typing import TYPE_CHECKING
+from dataclasses import Field, replace
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
 from rwlab.errors import ConfigError
 from rwlab.wheelspec import Tolerance, WheelSpec
 
-if TYPE_CHECKING:
-    from rwlab.wheel.physics import WheelParams
+
+class UnitParams(Protocol):
+    """What :func:`draw_unit` needs of a wheel's parameters: a frozen dataclass (the
+    toleranced fields are read by name) with the friction levels it keeps ordered.
+    :class:`rwlab.wheel.WheelParams` is one; typed by shape so that this module does not
+    depend on the module that calls it."""
+
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
+
+    @property
+    def coulomb_friction(self) -> float: ...
+
+    @property
+    def breakaway_friction(self) -> float: ...
+
+
+class HallParams(Protocol):
+    """The sensor fields :class:`HallSpeedSensor` reads (:class:`rwlab.wheel.WheelParams`
+    has them)."""
+
+    @property
+    def pole_pairs(self) -> int: ...
+
+    @property
+    def hall_misalignment_deg(self) -> float: ...
+
+    @property
+    def hall_jitter_s(self) -> float: ...
+
+    @property
+    def hall_timer_hz(self) -> float: ...
+
+    @property
+    def hall_window_s(self) -> float: ...
+
+    @property
+    def hall_pattern_seed(self) -> int: ...
+
+    @property
+    def min_measurable_rpm(self) -> float: ...
+
+
+P = TypeVar("P", bound=UnitParams)
 
 __all__ = ["TOLERANCES", "HallSpeedSensor", "Tolerance", "draw_unit", "stribeck_friction"]
 
@@ -73,9 +114,7 @@ and the sensor electronics'. The Hall sensors' placement pattern is drawn per un
 too (``hall_pattern_seed``)."""
 
 
-def draw_unit(
-    params: WheelParams, unit: int, tolerances: Mapping[str, Tolerance] | None = None
-) -> WheelParams:
+def draw_unit(params: P, unit: int, tolerances: Mapping[str, Tolerance] | None = None) -> P:
     """Another wheel of the same model: every toleranced parameter drawn around ``params``.
 
     Parameters
@@ -134,7 +173,7 @@ class HallSpeedSensor:
         ``min_measurable_rpm``.
     """
 
-    def __init__(self, params: WheelParams) -> None:
+    def __init__(self, params: HallParams) -> None:
         self.edges_per_rev = 6 * int(params.pole_pairs)
         self.pitch = 2 * math.pi / self.edges_per_rev  # rad between nominal edges
         rng = np.random.default_rng([int(params.hall_pattern_seed), 0x48414C4C])
