@@ -528,15 +528,15 @@ def test_the_scalar_update_holds_on_ill_conditioned_innovations():
 
 
 def test_report_envelope_keeps_every_peak_of_a_long_trace():
-    from rwlab.report.attitude import _envelope
+    from rwlab.report.attitude import envelope
 
     t = np.arange(100_000) * 0.1
     y = np.random.default_rng(5).standard_normal(t.size)
     y[12_345], y[77_777] = 50.0, -40.0
-    t2, y2 = _envelope(t, y, bins=500)
+    t2, y2 = envelope(t, y, bins=500)
     assert t2.size <= 1000 + 2 * 200 and np.all(np.diff(t2) > 0)
     assert y2.max() == 50.0 and y2.min() == -40.0
-    assert np.array_equal(_envelope(t[:900], y[:900], bins=500)[1], y[:900])
+    assert np.array_equal(envelope(t[:900], y[:900], bins=500)[1], y[:900])
 
 
 def test_kernel_nees_is_the_textbook_quadratic_form():

@@ -184,7 +184,7 @@ def test_greybox_refuses_bad_uncertainty_settings(unit_a):
 def test_newey_west_sandwich_matches_the_spread_under_coloured_errors():
     """Least squares with an autocorrelated regressor and AR(1) errors (ρ = 0.9): the
     white-noise covariance is too small, the Newey–West sandwich matches the spread."""
-    from rwlab.ident.greybox import _sandwich
+    from rwlab.ident.greybox import sandwich_covariance
 
     rng = np.random.default_rng(0)
     n, runs = 800, 300
@@ -197,7 +197,7 @@ def test_newey_west_sandwich_matches_the_spread_under_coloured_errors():
         beta, *_ = np.linalg.lstsq(X, 2.0 * x + e, rcond=None)
         r = X @ beta - (2.0 * x + e)
         slopes.append(beta[0])
-        hac.append(math.sqrt(_sandwich(r, X, n, seen, None)[0][0, 0]))
+        hac.append(math.sqrt(sandwich_covariance(r, X, n, seen, None)[0][0, 0]))
         lam = r @ r / (n - 2)
         white.append(math.sqrt(lam * np.linalg.inv(X.T @ X)[0, 0]))
     spread = np.std(slopes, ddof=1)
@@ -264,7 +264,7 @@ def test_the_structure_envelope_is_measured_data_per_wheel_model(tmp_path, monke
     path = tmp_path / "s.json"
     path.write_text(json.dumps(edited))
     monkeypatch.setattr(greybox_std, "STRUCTURE_FILE", path)
-    std, _, budget = greybox_std._budget(
+    std, _, budget = greybox_std.uncertainty_budget(
         {"kp": 0.0}, {"kp": 2.0}, None, greybox_std.Uncertainty(), 4.2e-4
     )
     assert budget["kp"]["structure"] == pytest.approx(1.0) and std["kp"] == pytest.approx(1.0)

@@ -145,3 +145,24 @@ def test_imports_for_annotations_and_by_name_are_dependencies(tmp_path):
         "rwlab.c": {"rwlab.b"},
     }
     assert importgraph.cycles(graph, packages=False) == [["rwlab.a", "rwlab.b"]]
+
+
+def test_no_module_takes_a_private_name_from_another():
+    """src only (tests may reach into a module): a name another module needs is public."""
+    assert importgraph.private_imports() == []
+
+
+def test_the_private_name_check_sees_what_it_must(tmp_path):
+    pkg = tmp_path / "rwlab"
+    (pkg / "cli").mkdir(parents=True)
+    for f in ("__init__.py", "a.py", "cli/__init__.py", "cli/_common.py"):
+        (pkg / f).write_text("def _own():\n    pass\n\n\ndef public():\n    _own()\n")
+    (pkg / "b.py").write_text("from rwlab.a import _own, public\n")
+    (pkg / "c.py").write_text("from rwlab import a\n\na._own()\na.public()\n")
+    (pkg / "cli" / "x.py").write_text("from rwlab.cli._common import _own\n")  # its package's
+    (pkg / "d.py").write_text("from rwlab.cli._common import _own\n")  # another package's
+    assert importgraph.private_imports(tmp_path) == [
+        ("rwlab.b", "rwlab.a._own"),
+        ("rwlab.c", "rwlab.a._own"),
+        ("rwlab.d", "rwlab.cli._common._own"),
+    ]

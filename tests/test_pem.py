@@ -6,7 +6,7 @@ from rwlab import datasets
 from rwlab.data import IOData, merge
 from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident import PolyModel, armax, arx, bj, oe, pem
-from rwlab.ident.pem import _jacobian_block, _Orders, _signals
+from rwlab.ident.pem import Orders, _jacobian_block, _signals
 from rwlab.ident.polynomials import is_stable
 
 # Truths: (A, B, C, D, F), orders for the estimator, estimator
@@ -79,7 +79,7 @@ def test_reported_covariance_is_honest_over_100_seeds(kind):
     assert np.all(coverage >= 0.95), coverage
 
 
-# Free polynomials of each structure, in _Orders field order (na, nb, nc, nd, nf).
+# Free polynomials of each structure, in Orders field order (na, nb, nc, nd, nf).
 STRUCTURES = {
     "arx": ("na", "nb"),
     "armax": ("na", "nb", "nc"),
@@ -89,7 +89,7 @@ STRUCTURES = {
 }
 
 
-def _orders_with(structure: str, d: int, nk: int, steady: bool) -> _Orders:
+def _orders_with(structure: str, d: int, nk: int, steady: bool) -> Orders:
     """Orders of ``structure`` with exactly d free parameters, spread round-robin (nb ≥ 1)."""
     names = STRUCTURES[structure]
     counts = dict.fromkeys(("na", "nb", "nc", "nd", "nf"), 0)
@@ -98,7 +98,7 @@ def _orders_with(structure: str, d: int, nk: int, steady: bool) -> _Orders:
     if counts["nb"] == 0:  # d smaller than the number of polynomials
         counts[names[(d - 1) % len(names)]] -= 1
         counts["nb"] = 1
-    return _Orders(**counts, nk=nk, steady=steady)
+    return Orders(**counts, nk=nk, steady=steady)
 
 
 def _finite_difference_jacobian(orders, theta, y, u, h=1e-6):
@@ -293,12 +293,12 @@ def test_armax_escapes_the_local_minimum_of_the_cascaded_tanks():
 
 # Several inputs (per-input nb, nf, nk: MATLAB's order vectors) and no input (time series).
 MULTI = {
-    "armax_2u": _Orders(2, (2, 1), 1, 0, (0, 0), (1, 3)),
-    "oe_2u": _Orders(0, (2, 1), 0, 0, (2, 1), (1, 0)),
-    "bj_2u": _Orders(0, (1, 2), 1, 2, (1, 2), (2, 1)),
-    "poly_3u": _Orders(1, (1, 1, 2), 1, 1, (1, 0, 2), (1, 2, 0)),
-    "arma": _Orders(2, (), 1, 0, (), ()),
-    "ar_noise_d": _Orders(1, (), 1, 2, (), ()),
+    "armax_2u": Orders(2, (2, 1), 1, 0, (0, 0), (1, 3)),
+    "oe_2u": Orders(0, (2, 1), 0, 0, (2, 1), (1, 0)),
+    "bj_2u": Orders(0, (1, 2), 1, 2, (1, 2), (2, 1)),
+    "poly_3u": Orders(1, (1, 1, 2), 1, 1, (1, 0, 2), (1, 2, 0)),
+    "arma": Orders(2, (), 1, 0, (), ()),
+    "ar_noise_d": Orders(1, (), 1, 2, (), ()),
 }
 
 
@@ -306,7 +306,7 @@ MULTI = {
 @pytest.mark.parametrize("name", sorted(MULTI))
 def test_analytic_jacobian_matches_finite_differences_for_several_and_no_inputs(name, steady):
     orders = MULTI[name]
-    orders = _Orders(orders.na, orders.nb, orders.nc, orders.nd, orders.nf, orders.nk, steady)
+    orders = Orders(orders.na, orders.nb, orders.nc, orders.nd, orders.nf, orders.nk, steady)
     r = np.random.default_rng(len(name))
     y, u = r.standard_normal(150), r.standard_normal((150, orders.nu))
     theta = 0.3 / np.sqrt(orders.d) * r.standard_normal(orders.d)
@@ -420,7 +420,7 @@ def test_oe_multi_start_escapes_the_local_minimum_a_single_start_stops_in():
     u = r.standard_normal(2000)
     y = lfilter(B, F, u) + 5 * r.standard_normal(2000)
     data = IOData(u, y, 1.0)
-    orders = P._Orders(0, (4,), 0, 0, (4,), (1,), False)
+    orders = P.Orders(0, (4,), 0, 0, (4,), (1,), False)
     truth = np.concatenate([B[1:], F[1:]])
     best = P._minimize(orders, truth, [(y, u[:, None])], 100, 1e-10)[2] / 2000
     assert oe(data, 4, 4, 1, starts=0).report["loss"] > 1.001 * best

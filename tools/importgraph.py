@@ -1,6 +1,7 @@
 """rwlab's import graph, its layering violations and cycles — read from the source with ast.
 
-Run ``python tools/importgraph.py`` (exit 1 on a violation or a cycle); the test
+Run ``python tools/importgraph.py`` (exit 1 on a violation, a cycle or a private name
+taken from another module); the test
 ``tests/test_layering.py`` runs the same check. Hand-written on ``ast`` rather than
 import-linter/grimp: those are not in rwlab's dependencies, and the rule here (an
 ordered list of layers plus "no cycle between modules") is fifty lines.
@@ -98,6 +99,53 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
     return dict(graph)
 
 
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.endswith("__")
+
+
+def private_imports(src: Path = SRC) -> list[tuple[str, str]]:
+    """(importer, ``module._name``) for every private name a module takes from another.
+
+    Counted: ``from rwlab.x import _y`` and ``x._y`` where ``x`` names an imported rwlab
+    module. Allowed: a name of a package-private module (``rwlab.cli._common``) taken by a
+    module of the same package: the module's own name already says "this package only".
+    A name another module needs is public API of its module, or belongs elsewhere.
+    """
+    mods = modules(src)
+    found: set[tuple[str, str]] = set()
+    for name, path in mods.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        bound: dict[str, str] = {}  # local name → the rwlab module it is
+        taken: list[tuple[str, str]] = []  # (module, private name)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name in mods:
+                        bound[a.asname or a.name] = a.name
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join([*up, base] if base else up)
+                for a in node.names:
+                    if f"{base}.{a.name}" in mods:
+                        bound[a.asname or a.name] = f"{base}.{a.name}"
+                    elif base in mods and _private(a.name):
+                        taken.append((base, a.name))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and _private(node.attr):
+                owner = bound.get(ast.unparse(node.value))
+                if owner is not None:
+                    taken.append((owner, node.attr))
+        for owner, attr in taken:
+            owner_package, _, owner_leaf = owner.rpartition(".")
+            if owner == name or (_private(owner_leaf) and owner_package == package):
+                continue
+            found.add((name, f"{owner}.{attr}"))
+    return sorted(found)
+
+
 def layer(module: str) -> int:
     """The layer index of a module (0 lowest)."""
     top = module.split(".")[1] if "." in module else "__init__"
@@ -166,9 +214,15 @@ def main() -> int:
         print(f"layering: {a} (layer {layer(a)}) imports {b} (layer {layer(b)})")
     for c in loops:
         print(f"cycle: {' <-> '.join(c)}")
+    private = private_imports()
+    for importer, taken in private:
+        print(f"private: {importer} takes {taken}")
     n_edges = sum(map(len, graph.values()))
-    print(f"{len(graph)} modules, {n_edges} imports: {len(bad)} violations, {len(loops)} cycles")
-    return 1 if bad or loops else 0
+    print(
+        f"{len(graph)} modules, {n_edges} imports: {len(bad)} violations, {len(loops)} cycles, "
+        f"{len(private)} private names taken from another module"
+    )
+    return 1 if bad or loops or private else 0
 
 
 if __name__ == "__main__":

@@ -198,9 +198,9 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_map, F, W):
         J[2, 0] * w[0] + J[2, 1] * w[1] + J[2, 2] * w[2] + h[2],
     )
     rx, A, B, S = W[0], W[1], W[2], W[3]
-    _skew_into(r0, r1, r2, rx)
+    skew_into(r0, r1, r2, rx)
     _mm(rx, J, A)  # [r×] J − [(J r)×]
-    _skew_into(Jr[0], Jr[1], Jr[2], B)
+    skew_into(Jr[0], Jr[1], Jr[2], B)
     for i in range(3):
         for j in range(3):
             A[i, j] = gg_gain * (A[i, j] - B[i, j])
@@ -209,9 +209,9 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_map, F, W):
     for i in range(3):
         for j in range(3):
             F[3 + i, j] = S[i, j]
-    _skew_into(w[0], w[1], w[2], rx)  # [(J ω + h)×] − [ω×] J
+    skew_into(w[0], w[1], w[2], rx)  # [(J ω + h)×] − [ω×] J
     _mm(rx, J, A)
-    _skew_into(Jw[0], Jw[1], Jw[2], B)
+    skew_into(Jw[0], Jw[1], Jw[2], B)
     for i in range(3):
         for j in range(3):
             B[i, j] -= A[i, j]
@@ -228,7 +228,7 @@ def error_jacobian_into(q, w, h, J, J_inv, n, gg_gain, bias_map, F, W):
 
 
 @njit(cache=True, inline="always")
-def _skew_into(a, b, c, out):
+def skew_into(a, b, c, out):
     out[0, 0], out[0, 1], out[0, 2] = 0.0, -c, b
     out[1, 0], out[1, 1], out[1, 2] = c, 0.0, -a
     out[2, 0], out[2, 1], out[2, 2] = -b, a, 0.0
@@ -304,7 +304,7 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
         + (s + 2 * q3 * q3) * ref[2]
     )
     Hx, PHt, K, X = W[0], W[1], W[2], W[3]  # Hx: [b×] in the top-left 3×3
-    _skew_into(b0, b1, b2, Hx)
+    skew_into(b0, b1, b2, Hx)
     for i in range(nx):  # P Hᵀ (n×3)
         for j in range(3):
             acc = 0.0

@@ -30,10 +30,10 @@ from rwlab.errors import ConfigError
 @main.group()
 def attitude() -> None:
     """GEO attitude control with reaction wheels (paper B): LQR, LQG, LQG/LTR."""
-    _single_thread_blas()
+    single_thread_blas()
 
 
-def _single_thread_blas() -> None:
+def single_thread_blas() -> None:
     """Pin BLAS to one thread: on 3×3 to 18×18 matrices its threads only wait for each
     other, and on a busy machine they make every Riccati solve ~7× slower (measured)."""
     from threadpoolctl import threadpool_limits

@@ -7,7 +7,7 @@ import sys
 import click
 
 from rwlab.cli._common import _check_folder, _friendly_errors, _stop_signals, main
-from rwlab.cli.attitude import _single_thread_blas
+from rwlab.cli.attitude import single_thread_blas
 
 
 @main.command("demo")
@@ -26,7 +26,7 @@ def demo(out, realtime, monitor, quick, force):
 
     from rwlab.demo import DemoConfig, run_demo
 
-    _single_thread_blas()
+    single_thread_blas()
     _check_folder(out)
     cfg = DemoConfig.quick() if quick else DemoConfig()
     cfg = dataclasses.replace(cfg, realtime=realtime, monitor=monitor)

@@ -36,7 +36,7 @@ def diagnose_group():
     rwlab diagnose calibrate RECORDS... --model model.json --out calibration.json."""
 
 
-def _named(exc: RwlabError, record: Path) -> RwlabError:
+def named_for_record(exc: RwlabError, record: Path) -> RwlabError:
     """The same error, its message naming the record."""
     try:
         return type(exc)(f"{record}: {exc}")
@@ -60,7 +60,7 @@ def _fdi_features(record: Path, model_file):
     except RwlabError as exc:
         if str(record) in str(exc) or record.name in str(exc):
             raise
-        raise _named(exc, record) from exc
+        raise named_for_record(exc, record) from exc
 
 
 def diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) -> None:

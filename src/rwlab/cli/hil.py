@@ -142,12 +142,12 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
     a silent wheel, a broken bus, Ctrl-C, SIGTERM, an error), every wheel is
     idled and the record closed with a stop event.
     """
-    from rwlab.cli.attitude import _single_thread_blas
+    from rwlab.cli.attitude import single_thread_blas
     from rwlab.hil.run import HilConfig, parse_node_fault, run_hil
     from rwlab.report.hil import write_hil_report
 
     _only_with("calibration", settings["diagnosis"] is not False, "with the diagnosis on")
-    _single_thread_blas()
+    single_thread_blas()
     # the options not named here are named after their HilConfig field
     cfg = HilConfig(
         nodes=_nodes(nodes),

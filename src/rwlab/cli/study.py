@@ -22,7 +22,7 @@ from rwlab.cli._common import (
     _wrote,
     main,
 )
-from rwlab.cli.fdi import EXIT_ALARM, _named, diagnose_fdi, diagnose_group
+from rwlab.cli.fdi import EXIT_ALARM, diagnose_fdi, diagnose_group, named_for_record
 from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
 
 
@@ -352,7 +352,7 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
     except RwlabError as exc:
         if str(record) in str(exc) or record.name in str(exc):
             raise
-        raise _named(exc, record) from exc
+        raise named_for_record(exc, record) from exc
     events = rec.topic("/event")
     truncated = None if rec.complete else f"the record is truncated ({rec.problem})"
     if rec.damage is not None:  # read_record said so already, on the console

@@ -25,7 +25,7 @@ from scipy import linalg
 
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError
-from rwlab.ident.arx import _triangular_factor, check_order
+from rwlab.ident.arx import check_order, triangular_factor
 from rwlab.ident.models import PolyModel
 from rwlab.ident.validation import estimation_report
 
@@ -83,7 +83,7 @@ def ar(data: IOData | Sequence[IOData], na: int, approach: str = "fb") -> PolyMo
             f"(got {max(e.N for e in experiments)})"
         )
     blocks = forward + ([_rows(y, na, True) for y in used] if approach == "fb" else [])
-    R = _triangular_factor(np.vstack(blocks))
+    R = triangular_factor(np.vstack(blocks))
     R11 = R[:na, :na]
     diag = np.abs(np.diag(R11))
     if na and diag.min() <= 1e-11 * max(diag.max(), 1e-300):
@@ -93,7 +93,7 @@ def ar(data: IOData | Sequence[IOData], na: int, approach: str = "fb") -> PolyMo
     eps = Phi_f[:, na] - Phi_f[:, :na] @ theta
     sse = float(eps @ eps)
     lam = sse / (rows_f - na)
-    Rf = _triangular_factor(Phi_f[:, :na])
+    Rf = triangular_factor(Phi_f[:, :na])
     Rinv = linalg.solve_triangular(Rf, np.eye(na)) if na else np.zeros((0, 0))
     model = PolyModel(
         np.concatenate([[1.0], theta]),

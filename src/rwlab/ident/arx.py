@@ -83,7 +83,7 @@ def regression(data: IOData, na: int, nb: list[int], nk: list[int], n0: int):
     return out[:, :-1], out[:, -1]
 
 
-def _triangular_factor(M: np.ndarray, block: int = 65536) -> np.ndarray:
+def triangular_factor(M: np.ndarray, block: int = 65536) -> np.ndarray:
     """R of M = QR, by QR of row blocks then of the stacked block factors (TSQR).
 
     Same numerical stability as one Householder QR, but each block fits in
@@ -125,7 +125,7 @@ def _solve(experiments, na, nb, nk, n0=None):
     for e in used:
         _fill(e, na, nb, nk, n0, M[pos : pos + e.N - n0])
         pos += e.N - n0
-    R = _triangular_factor(M)
+    R = triangular_factor(M)
     R11, r12, r22 = R[:d, :d], R[:d, d], abs(R[d, d]) if R.shape[0] > d else 0.0
     diag = np.abs(np.diag(R11))
     if d and (diag.min() <= 1e-11 * max(diag.max(), 1e-300)):

@@ -77,9 +77,9 @@ from rwlab.ident.greybox_std import (
     ESTIMATED,
     STRUCTURE_ERROR,
     Uncertainty,
-    _budget,
-    _sandwich,
+    sandwich_covariance,
     structure_error,
+    uncertainty_budget,
 )
 
 __all__ = [
@@ -488,14 +488,14 @@ def greybox_fit(
     blind = norms <= 1e-8 * max(float(norms.max()), 1e-300)
 
     def spread(seen):
-        cov, lags = _sandwich(sol.fun, sol.jac, y.size, seen, hac_lags)
+        cov, lags = sandwich_covariance(sol.fun, sol.jac, y.size, seen, hac_lags)
         cov /= np.outer(1 / scale, 1 / scale)
         fit_std = {k: math.sqrt(max(cov[i, i], 0.0)) for i, k in enumerate(names) if seen[i]}
         clamp = None  # with the limit held: its tolerance carried through the fit
         if not estimate_current_limit:
             clamp = _clamp_sensitivity(residuals, sol, p, current_limit, seen, names)
             clamp = {k: abs(v) * current_limit * tol_c / math.sqrt(3.0) for k, v in clamp.items()}
-        return cov, lags, *_budget(fit_std, fitted, clamp, unc, inertia)
+        return cov, lags, *uncertainty_budget(fit_std, fitted, clamp, unc, inertia)
 
     b, c = names.index("breakaway"), names.index("coulomb")
     cov, lags, std, ratios, budget = spread(~blind)

@@ -142,7 +142,7 @@ stiction. On units 20, 25, 30 (``--seed 2``): RMS 0.83, up to +1.31. With this t
 record shows a breakaway beyond 2 σ of Coulomb: it is reported unidentified."""
 
 
-def _budget(
+def uncertainty_budget(
     fit_std: dict, fitted: dict, clamp: dict | None, unc: Uncertainty, inertia: float
 ) -> tuple[dict, dict, dict]:
     """σ of each parameter with a statistical σ, as the root sum of squares of its budget
@@ -166,7 +166,7 @@ def _budget(
     return std, ratios, budget
 
 
-def _sandwich(fun, jac, n_y: int, seen, lags: int | None) -> tuple[np.ndarray, int]:
+def sandwich_covariance(fun, jac, n_y: int, seen, lags: int | None) -> tuple[np.ndarray, int]:
     """Covariance of the least-squares estimate H⁻¹ S H⁻¹ (H = JᵀJ) with S the long-run
     covariance of the per-sample scores gₜ = Σ_outputs Jₜᵀrₜ: the simulation errors are
     coloured (a missed ramp is wrong for many samples), which λ(JᵀJ)⁻¹ ignores, and the

@@ -49,15 +49,15 @@ from rwlab.ident.arx import check_order
 from rwlab.ident.gain_constraint import StaticGain
 from rwlab.ident.models import PolyModel
 from rwlab.ident.pem_starts import (
-    _check_starts,
-    _columns,
-    _dynamics_starts,
-    _initial_armax,
-    _initial_bj,
-    _initial_oe,
-    _input_orders,
-    _needs_input,
-    _Orders,
+    Orders,
+    as_columns,
+    check_starts,
+    dynamics_starts,
+    initial_armax,
+    initial_bj,
+    initial_oe,
+    input_orders,
+    needs_input,
 )
 from rwlab.ident.polynomials import check_initial, filt, stabilize
 from rwlab.ident.validation import estimation_report
@@ -76,7 +76,7 @@ Fit = tuple[np.ndarray, np.ndarray, float, int, str]  # θ, ψᵀψ, Σε², ite
 InputOrders = int | Sequence[int]  # one per input, or one for every input
 
 
-def _stabilized(orders: _Orders, theta: np.ndarray, gain: StaticGain | None = None) -> np.ndarray:
+def _stabilized(orders: Orders, theta: np.ndarray, gain: StaticGain | None = None) -> np.ndarray:
     """Roots of C, D and F reflected inside the unit circle; back on ``gain``'s constraint
     (reflecting F's roots changes F(1))."""
     A, Bs, C, D, Fs = orders.unpack(theta)
@@ -95,12 +95,12 @@ def _reduced(
 
 
 def _signals(
-    orders: _Orders, theta: np.ndarray, y: np.ndarray, u: np.ndarray
+    orders: Orders, theta: np.ndarray, y: np.ndarray, u: np.ndarray
 ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """ε, [wⱼ = (Bⱼ/Fⱼ) uⱼ] and v = A y − Σⱼ wⱼ for one experiment."""
     A, Bs, C, D, Fs = orders.unpack(theta)
     st = orders.steady
-    u = _columns(u)
+    u = as_columns(u)
     ws = [filt(B, F, u[:, j], st) for j, (B, F) in enumerate(zip(Bs, Fs, strict=True))]
     v = filt(A, [1.0], y, st) if orders.na else y
     for w in ws:
@@ -109,7 +109,7 @@ def _signals(
     return e, ws, v
 
 
-def _sse(orders: _Orders, theta: np.ndarray, experiments: Series) -> float:
+def _sse(orders: Orders, theta: np.ndarray, experiments: Series) -> float:
     total = 0.0
     for y, u in experiments:
         e = _signals(orders, theta, y, u)[0]
@@ -118,7 +118,7 @@ def _sse(orders: _Orders, theta: np.ndarray, experiments: Series) -> float:
 
 
 def _jacobian_block(
-    orders: _Orders,
+    orders: Orders,
     theta: np.ndarray,
     y: np.ndarray,
     u: np.ndarray,
@@ -129,7 +129,7 @@ def _jacobian_block(
     """ψᵀ = (∂ε/∂θ)ᵀ for one experiment, shape (d, N): one contiguous row per parameter."""
     C, D, Fs = orders.unpack(theta)[2:]
     N = len(y)
-    u = _columns(u)
+    u = as_columns(u)
     psi_t = np.empty((orders.d, N))
     row = 0
     noise = orders.nc or orders.nd
@@ -164,7 +164,7 @@ def _jacobian_block(
 
 
 def _normal_equations(
-    orders: _Orders, theta: np.ndarray, experiments: Series
+    orders: Orders, theta: np.ndarray, experiments: Series
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """ψᵀψ, ψᵀε and ε'ε summed over experiments at θ."""
     d = orders.d
@@ -193,7 +193,7 @@ def _stalled(Hs: np.ndarray, gs: np.ndarray, sse: float, tol: float) -> str:
 
 
 def _minimize(
-    orders: _Orders,
+    orders: Orders,
     theta: np.ndarray,
     experiments: Series,
     max_iter: int,
@@ -244,7 +244,7 @@ def _minimize(
 
 # -- starting values -------------------------------------------------------------------
 def _prepare(
-    data: IOData | Sequence[IOData], orders: _Orders, what: str
+    data: IOData | Sequence[IOData], orders: Orders, what: str
 ) -> tuple[list[IOData], Series]:
     experiments = as_experiments(data)
     first = experiments[0]
@@ -273,7 +273,7 @@ def _init_subset(series: Series) -> Series:
 
 
 def _search(
-    orders: _Orders,
+    orders: Orders,
     starts: Sequence[np.ndarray],
     series: Series,
     max_iter: int,
@@ -306,7 +306,7 @@ def _padded(rows: list[np.ndarray]) -> np.ndarray:
 
 
 def _finish(
-    orders: _Orders,
+    orders: Orders,
     starts: Sequence[np.ndarray],
     experiments: list[IOData],
     series: Series,
@@ -448,22 +448,22 @@ def armax(
     nu = _nu(data)
     if nc is None:
         raise DataError("armax needs nc, the order of C (armax(data, na, nb, nc, nk))")
-    nb = _input_orders("nb", nb, nu, 1)
-    orders = _Orders(
+    nb = input_orders("nb", nb, nu, 1)
+    orders = Orders(
         check_order("na", na),
         nb,
         check_order("nc", nc),
         0,
         (0,) * nu,
-        _input_orders("nk", nk if nu else None, nu, 0),
+        input_orders("nk", nk if nu else None, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "armax")
     subset = _init_subset(series)
-    starts = [_initial_armax(orders, subset)]
+    starts = [initial_armax(orders, subset)]
     if orders.na and orders.nu:  # also from the output-error dynamics: a start in another basin
-        Bs, F = _initial_oe(orders.nb, orders.na, orders.nk, subset)
+        Bs, F = initial_oe(orders.nb, orders.na, orders.nk, subset)
         C = np.concatenate([[1.0], np.zeros(orders.nc)])
         starts.append(orders.pack(F, Bs, C, np.ones(1), [np.ones(1)] * orders.nu))
     return _finish(orders, starts, experiments, series, _method("armax", gain), max_iter, tol, gain)
@@ -513,21 +513,21 @@ def oe(
         The output-error model with its covariance and estimation report.
     """
     nu = _nu(data)
-    _needs_input("oe", nu)
-    orders = _Orders(
+    needs_input("oe", nu)
+    orders = Orders(
         0,
-        _input_orders("nb", nb, nu, 1),
+        input_orders("nb", nb, nu, 1),
         0,
         0,
-        _input_orders("nf", nf, nu, 0),
-        _input_orders("nk", nk, nu, 0),
+        input_orders("nf", nf, nu, 0),
+        input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "oe")
     thetas = [
         orders.pack(np.ones(1), Bs, np.ones(1), np.ones(1), Fs)
-        for Bs, Fs in _dynamics_starts(orders, _init_subset(series), _check_starts(starts))
+        for Bs, Fs in dynamics_starts(orders, _init_subset(series), check_starts(starts))
     ]
     return _finish(orders, thetas, experiments, series, _method("oe", gain), max_iter, tol, gain)
 
@@ -571,22 +571,22 @@ def bj(
         The Box–Jenkins model with its covariance and estimation report.
     """
     nu = _nu(data)
-    _needs_input("bj", nu)
-    orders = _Orders(
+    needs_input("bj", nu)
+    orders = Orders(
         0,
-        _input_orders("nb", nb, nu, 1),
+        input_orders("nb", nb, nu, 1),
         check_order("nc", nc),
         check_order("nd", nd),
-        _input_orders("nf", nf, nu, 0),
-        _input_orders("nk", nk, nu, 0),
+        input_orders("nf", nf, nu, 0),
+        input_orders("nk", nk, nu, 0),
         check_initial(initial, ESTIMATION_INITIAL) == "steady",
     )
     gain = StaticGain.of(dc_gain, orders)
     experiments, series = _prepare(data, orders, "bj")
     subset = _init_subset(series)
     thetas = [
-        _initial_bj(orders, subset, dynamics)
-        for dynamics in _dynamics_starts(orders, subset, _check_starts(starts))
+        initial_bj(orders, subset, dynamics)
+        for dynamics in dynamics_starts(orders, subset, check_starts(starts))
     ]
     return _finish(orders, thetas, experiments, series, _method("bj", gain), max_iter, tol, gain)
 
@@ -618,7 +618,7 @@ def pem(
         The refined model with its covariance and estimation report.
     """
     nu = init.nu
-    orders = _Orders(
+    orders = Orders(
         init.na,
         tuple(init.nb),
         init.nc,

@@ -31,7 +31,7 @@ def _per_input_tuple(value: int | Sequence[int], nu: int) -> tuple[int, ...]:
 
 
 @dataclass(frozen=True)
-class _Orders:
+class Orders:
     """Orders of ``A y = Σⱼ (Bⱼ/Fⱼ) uⱼ(t−nkⱼ) + (C/D) e``; nb, nf, nk per input.
 
     An int for nb, nf or nk means one input (nb) or the same for every input (nf, nk);
@@ -94,7 +94,7 @@ class _Orders:
         return np.concatenate([A[1 : self.na + 1], *bs, C[1:], D[1:], *fs])
 
 
-def _columns(u: np.ndarray) -> np.ndarray:
+def as_columns(u: np.ndarray) -> np.ndarray:
     """Inputs as an (N, nu) array (a 1-D u is one input)."""
     return u[:, None] if u.ndim == 1 else u
 
@@ -135,7 +135,7 @@ def _arma_hannan_rissanen(v: np.ndarray, nc: int, nd: int) -> tuple[np.ndarray, 
 
 def _input_lags(u: np.ndarray, nb: Sequence[int], nk: Sequence[int], n0: int) -> list[np.ndarray]:
     """Lagged columns uⱼ(t−nkⱼ−i), i < nbⱼ, of every input, rows t = n0..N−1."""
-    u = _columns(u)
+    u = as_columns(u)
     return [
         c for j, (b, k) in enumerate(zip(nb, nk, strict=True)) for c in _lags(u[:, j], k, b, n0)
     ]
@@ -154,7 +154,7 @@ def _split_b(th: np.ndarray, nb: Sequence[int], nk: Sequence[int]) -> list[np.nd
     return out
 
 
-def _initial_armax(orders: _Orders, experiments: Series) -> np.ndarray:
+def initial_armax(orders: Orders, experiments: Series) -> np.ndarray:
     """Hannan–Rissanen: long ARX residuals ê, then y on lags of y, u and ê."""
     na, nb, nc, nk = orders.na, orders.nb, orders.nc, orders.nk
     long = max(10, 2 * (na + nc), na + max(nb, default=0))
@@ -167,7 +167,7 @@ def _initial_armax(orders: _Orders, experiments: Series) -> np.ndarray:
         )
         ehat = np.convolve(y, np.concatenate([[1.0], th[:long]]))[: len(y)]
         for j, B in enumerate(_split_b(th[long:], longs, nk)):
-            ehat = ehat - np.convolve(_columns(u)[:, j], B)[: len(y)]
+            ehat = ehat - np.convolve(as_columns(u)[:, j], B)[: len(y)]
         n0 = max(_first_row(longs, nk, long), _first_row(nb, nk, na, nc))
         cols = (
             [-c for c in _lags(y, 1, na, n0)] + _input_lags(u, nb, nk, n0) + _lags(ehat, 1, nc, n0)
@@ -181,7 +181,7 @@ def _initial_armax(orders: _Orders, experiments: Series) -> np.ndarray:
     return orders.pack(A, Bs, C, np.ones(1), [np.ones(1)] * orders.nu)
 
 
-def _initial_oe(
+def initial_oe(
     nb: int | Sequence[int],
     nf: int,
     nk: int | Sequence[int],
@@ -220,11 +220,11 @@ def _initial_oe(
     return Bs, F
 
 
-def _initial_dynamics(orders: _Orders, experiments: Series, sweeps: int = 2) -> Dynamics:
+def _initial_dynamics(orders: Orders, experiments: Series, sweeps: int = 2) -> Dynamics:
     """Bⱼ and Fⱼ per input: one input at a time on the output less the other inputs'
-    simulated contributions (backfitting), each by :func:`_initial_oe`."""
+    simulated contributions (backfitting), each by :func:`initial_oe`."""
     if orders.nu == 1:
-        Bs, F = _initial_oe(orders.nb, orders.nf[0], orders.nk, experiments)
+        Bs, F = initial_oe(orders.nb, orders.nf[0], orders.nk, experiments)
         return Bs, [F]
     Bs = [np.zeros(k + b) for b, k in zip(orders.nb, orders.nk, strict=True)]
     Fs = [np.ones(1)] * orders.nu
@@ -232,24 +232,22 @@ def _initial_dynamics(orders: _Orders, experiments: Series, sweeps: int = 2) -> 
         for j in range(orders.nu):
             parts = []
             for y, u in experiments:
-                u = _columns(u)
+                u = as_columns(u)
                 others = sum(sps.lfilter(Bs[i], Fs[i], u[:, i]) for i in range(orders.nu) if i != j)
                 parts.append((y - others, u[:, j]))
-            (Bs[j],), Fs[j] = _initial_oe(orders.nb[j], orders.nf[j], orders.nk[j], parts)
+            (Bs[j],), Fs[j] = initial_oe(orders.nb[j], orders.nf[j], orders.nk[j], parts)
     return Bs, Fs
 
 
 def _simulated(Bs: Sequence[np.ndarray], Fs: Sequence[np.ndarray], u: np.ndarray) -> np.ndarray:
-    u = _columns(u)
+    u = as_columns(u)
     return sum(
         (sps.lfilter(B, F, u[:, j]) for j, (B, F) in enumerate(zip(Bs, Fs, strict=True))),
         np.zeros(len(u)),
     )
 
 
-def _initial_bj(
-    orders: _Orders, experiments: Series, dynamics: Dynamics | None = None
-) -> np.ndarray:
+def initial_bj(orders: Orders, experiments: Series, dynamics: Dynamics | None = None) -> np.ndarray:
     Bs, Fs = _initial_dynamics(orders, experiments) if dynamics is None else dynamics
     v = np.concatenate([y - _simulated(Bs, Fs, u) for y, u in experiments])
     C, D = _arma_hannan_rissanen(v, orders.nc, orders.nd)
@@ -269,11 +267,11 @@ def _random_monic(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.real(np.poly(roots)) if n else np.ones(1)
 
 
-def _b_given_f(orders: _Orders, Fs: Sequence[np.ndarray], experiments: Series) -> list[np.ndarray]:
+def _b_given_f(orders: Orders, Fs: Sequence[np.ndarray], experiments: Series) -> list[np.ndarray]:
     """Bⱼ by least squares once the Fⱼ are fixed: y is linear in B given F."""
     cols_all, targets = [], []
     for y, u in experiments:
-        u = _columns(u)
+        u = as_columns(u)
         n0 = _first_row(orders.nb, orders.nk)
         filtered = np.column_stack([sps.lfilter([1.0], F, u[:, j]) for j, F in enumerate(Fs)])
         cols_all.append(np.column_stack(_input_lags(filtered, orders.nb, orders.nk, n0)))
@@ -282,7 +280,7 @@ def _b_given_f(orders: _Orders, Fs: Sequence[np.ndarray], experiments: Series) -
     return _split_b(th, orders.nb, orders.nk)
 
 
-def _dynamics_starts(orders: _Orders, experiments: Series, count: int) -> list[Dynamics]:
+def dynamics_starts(orders: Orders, experiments: Series, count: int) -> list[Dynamics]:
     """Starting (B, F) pairs for OE and BJ: instrumental variables, plain ARX, and
     ``count`` random stable Fⱼ with Bⱼ by least squares given them.
 
@@ -316,7 +314,7 @@ def _dynamics_starts(orders: _Orders, experiments: Series, count: int) -> list[D
 
 
 # -- order checks of the estimators -----------------------------------------------
-def _input_orders(
+def input_orders(
     name: str, value: int | Sequence[int] | None, nu: int, minimum: int
 ) -> tuple[int, ...]:
     """One order per input (MATLAB's order vectors); a scalar applies to every input."""
@@ -335,12 +333,12 @@ def _input_orders(
     return tuple(check_order(name, v, minimum) for v in values)
 
 
-def _check_starts(starts: object) -> int:
+def check_starts(starts: object) -> int:
     if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 0:
         raise DataError(f"starts must be a non-negative integer, got {starts!r}")
     return int(starts)
 
 
-def _needs_input(what: str, nu: int) -> None:
+def needs_input(what: str, nu: int) -> None:
     if nu == 0:
         raise DataError(f"{what} needs an input; for a time series use ar, arx or armax")

@@ -24,8 +24,8 @@ from rwlab.ident.base import IdentifiedModel
 __all__ = ["SSModel"]
 
 _FORMAT = "rwlab.SSModel/1"
-_WEIGHTINGS = ("auto", "CVA", "MOESP", "N4SID", "SSARX")
-_INITIAL = ("auto", "zero", "estimate", "steady")
+WEIGHTINGS = ("auto", "CVA", "MOESP", "N4SID", "SSARX")
+INITIAL = ("auto", "zero", "estimate", "steady")
 
 
 @njit(cache=True)
@@ -265,7 +265,7 @@ class SSModel(IdentifiedModel):
         if horizon == np.inf or horizon >= data.N:
             return _simulate_from(self, data, initial)
         if horizon == 1:
-            return _predict(self, data.u, data.y, initial)[0]
+            return predict_one_step(self, data.u, data.y, initial)[0]
         return _k_step(self, data, int(horizon), initial)
 
     def residuals(self, data: IOData, initial="zero") -> np.ndarray:
@@ -440,7 +440,7 @@ class SSModel(IdentifiedModel):
 
 
 # -- prediction and initial state --------------------------------------------------------
-def _predict(model: SSModel, u, y, initial) -> tuple[np.ndarray, np.ndarray]:
+def predict_one_step(model: SSModel, u, y, initial) -> tuple[np.ndarray, np.ndarray]:
     """One-step prediction and the initial state used."""
     Ab, Bb, Db = model._predictor()
     w = np.ascontiguousarray(np.hstack([u, y]))
@@ -459,7 +459,7 @@ def _predict(model: SSModel, u, y, initial) -> tuple[np.ndarray, np.ndarray]:
         x0 = np.asarray(initial, float).reshape(model.nx)
     yhat = _run(Ab, Bb, C, Db, w, x0)
     if isinstance(initial, str) and initial == "estimate" and model.nx:
-        free = _free_responses(Ab, C, y.shape[0])
+        free = free_responses(Ab, C, y.shape[0])
         e = (y - yhat).ravel()
         dx, *_ = np.linalg.lstsq(free, e, rcond=None)
         yhat = yhat + (free @ dx).reshape(yhat.shape)
@@ -483,7 +483,7 @@ def _simulate_from(model: SSModel, data: IOData, initial) -> np.ndarray:
         x0 = np.asarray(initial, float).reshape(model.nx)
     yhat = model.simulate(u, x0) if model.nu else np.zeros((data.N, model.ny))
     if isinstance(initial, str) and initial == "estimate" and model.nx:
-        free = _free_responses(np.ascontiguousarray(model.A), np.ascontiguousarray(model.C), data.N)
+        free = free_responses(np.ascontiguousarray(model.A), np.ascontiguousarray(model.C), data.N)
         dx, *_ = np.linalg.lstsq(free, (data.y - yhat).ravel(), rcond=None)
         yhat = yhat + (free @ dx).reshape(yhat.shape)
     return yhat
@@ -495,7 +495,7 @@ def _k_step(model: SSModel, data: IOData, k: int, initial) -> np.ndarray:
     # x̂(t | t−1) for every t: the predictor's state (its "output" with C = I)
     Ab, Bb, _ = model._predictor()
     w = np.ascontiguousarray(np.hstack([data.u, data.y]))
-    x0 = _predict(model, data.u, data.y, initial)[1]
+    x0 = predict_one_step(model, data.u, data.y, initial)[1]
     states = _run(
         np.ascontiguousarray(Ab),
         np.ascontiguousarray(Bb),
@@ -513,7 +513,7 @@ def _k_step(model: SSModel, data: IOData, k: int, initial) -> np.ndarray:
     return states @ model.C.T + u @ model.D.T
 
 
-def _free_responses(Ab: np.ndarray, C: np.ndarray, N: int) -> np.ndarray:
+def free_responses(Ab: np.ndarray, C: np.ndarray, N: int) -> np.ndarray:
     """Columns: the predictor's output (flattened N×ny) from each unit initial state."""
     nx = Ab.shape[0]
     cols = np.empty((N * C.shape[0], nx))
@@ -527,11 +527,11 @@ def _free_responses(Ab: np.ndarray, C: np.ndarray, N: int) -> np.ndarray:
     return cols
 
 
-def _fit_report(model: SSModel, experiments: list[IOData], initial: str, method: str) -> dict:
+def fit_report(model: SSModel, experiments: list[IOData], initial: str, method: str) -> dict:
     """Loss det(Λ), MSE, FPE-like counts and per-output 1-step prediction fit %."""
     errors, ys, x0s = [], [], []
     for d in experiments:
-        yhat, x0 = _predict(model, d.u, d.y, initial)
+        yhat, x0 = predict_one_step(model, d.u, d.y, initial)
         errors.append(d.y - yhat)
         ys.append(d.y)
         x0s.append(x0)
@@ -552,7 +552,7 @@ def _fit_report(model: SSModel, experiments: list[IOData], initial: str, method:
     }
 
 
-def _finish(model: SSModel, rep: dict, covariance, extra: dict) -> SSModel:
+def finish_estimate(model: SSModel, rep: dict, covariance, extra: dict) -> SSModel:
     Lam = rep.pop("_Lambda")
     x0 = rep.pop("_x0")
     rep.update(extra)

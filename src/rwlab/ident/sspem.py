@@ -17,7 +17,7 @@ from threadpoolctl import threadpool_limits
 
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError, ModelError, RwlabWarning
-from rwlab.ident.ssmodel import _INITIAL, SSModel, _finish, _fit_report, _predict
+from rwlab.ident.ssmodel import INITIAL, SSModel, finish_estimate, fit_report, predict_one_step
 from rwlab.ident.subspace import n4sid
 
 __all__ = ["ssest"]
@@ -145,8 +145,8 @@ def ssest(
         raise DataError(f"form must be 'free' or 'canonical', got {form!r}")
     if disturbance not in ("estimate", "none"):
         raise DataError(f"disturbance must be 'estimate' or 'none', got {disturbance!r}")
-    if initial not in _INITIAL:
-        raise DataError(f"initial must be one of {_INITIAL}, got {initial!r}")
+    if initial not in INITIAL:
+        raise DataError(f"initial must be one of {INITIAL}, got {initial!r}")
     init = "estimate" if initial == "auto" else initial
     if isinstance(nx, SSModel):
         start = nx
@@ -178,13 +178,13 @@ def ssest(
             k_rows = np.arange(start.n_params - start.K.size, start.n_params)
             basis = _restrict(basis, k_rows)
     theta0 = start.parameters
-    Lam0 = _fit_report(start, experiments, init, "start")["_Lambda"]
+    Lam0 = fit_report(start, experiments, init, "start")["_Lambda"]
     Wt = np.linalg.cholesky(np.linalg.inv((Lam0 + Lam0.T) / 2))  # e Wt: whitened errors
     nb = basis.shape[1]
     n_x0 = start.nx * len(experiments) if init == "estimate" else 0
     x0_start = []
     for d in experiments:
-        x0_start.append(_predict(start, d.u, d.y, init)[1] if n_x0 else np.zeros(start.nx))
+        x0_start.append(predict_one_step(start, d.u, d.y, init)[1] if n_x0 else np.zeros(start.nx))
 
     def residuals(beta: np.ndarray) -> np.ndarray:
         model = start.with_parameters(theta0 + basis @ beta[:nb])
@@ -192,7 +192,7 @@ def ssest(
         for i, d in enumerate(experiments):
             x0 = beta[nb + i * start.nx : nb + (i + 1) * start.nx] if n_x0 else init
             with np.errstate(all="ignore"):
-                yhat, _ = _predict(model, d.u, d.y, x0)
+                yhat, _ = predict_one_step(model, d.u, d.y, x0)
             out.append(((d.y - yhat) @ Wt).ravel())
         r = np.concatenate(out)
         return r if np.all(np.isfinite(r)) else np.full(r.shape, 1e10)
@@ -211,8 +211,8 @@ def ssest(
     sigma2 = float(sol.fun @ sol.fun) / max(n_obs - J.shape[1], 1)
     cov_beta = sigma2 * np.linalg.pinv(J.T @ J)[:nb, :nb]
     covariance = basis @ cov_beta @ basis.T
-    rep = _fit_report(model, experiments, init, "ssest")
-    return _finish(
+    rep = fit_report(model, experiments, init, "ssest")
+    return finish_estimate(
         model,
         rep,
         covariance=covariance,

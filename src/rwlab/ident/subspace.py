@@ -16,11 +16,11 @@ from scipy import linalg
 from rwlab.data import IOData, as_experiments
 from rwlab.errors import DataError, EstimationError, RwlabWarning
 from rwlab.ident.ssmodel import (
-    _WEIGHTINGS,
+    WEIGHTINGS,
     SSModel,
-    _finish,
-    _fit_report,
-    _free_responses,
+    finish_estimate,
+    fit_report,
+    free_responses,
 )
 
 __all__ = ["n4sid"]
@@ -185,8 +185,8 @@ def n4sid(
     """
     experiments = as_experiments(data)
     nu, ny = experiments[0].nu, experiments[0].ny
-    if weighting not in _WEIGHTINGS:
-        raise DataError(f"weighting must be one of {_WEIGHTINGS}, got {weighting!r}")
+    if weighting not in WEIGHTINGS:
+        raise DataError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     if disturbance not in ("estimate", "none"):
         raise DataError(f"disturbance must be 'estimate' or 'none', got {disturbance!r}")
     if initial not in ("estimate", "zero"):
@@ -276,8 +276,8 @@ def n4sid(
         input_names=experiments[0].input_names,
         output_names=experiments[0].output_names,
     )
-    rep = _fit_report(model, experiments, initial, "n4sid")
-    return _finish(
+    rep = fit_report(model, experiments, initial, "n4sid")
+    return finish_estimate(
         model,
         rep,
         covariance=None,
@@ -374,7 +374,7 @@ def _refit_b_d(A, C, experiments, feedthrough: bool):
                 col = np.zeros((d.N, ny))
                 col[:, i] = d.u[:, j]
                 cols[:, n_b + i * nu + j] = col.ravel()
-        cols[:, n_b + n_d + e_i * nx : n_b + n_d + (e_i + 1) * nx] = _free_responses(
+        cols[:, n_b + n_d + e_i * nx : n_b + n_d + (e_i + 1) * nx] = free_responses(
             np.ascontiguousarray(A), np.ascontiguousarray(C), d.N
         )
         blocks.append(cols)

@@ -406,11 +406,11 @@ def _estimation_figure(page, run) -> None:
     for i, axis in enumerate("xyz"):
         ax = axes[i]
         three = 3 * np.degrees(run.sigma[:, i])
-        ax.fill_between(*_envelope(t_h, three), 0, color="#1f77b4", alpha=0.15, lw=0)
-        ax.plot(*_envelope(t_h, three), color="#1f77b4", lw=0.6, label="±3σ")
-        ax.plot(*_envelope(t_h, -three), color="#1f77b4", lw=0.6)
+        ax.fill_between(*envelope(t_h, three), 0, color="#1f77b4", alpha=0.15, lw=0)
+        ax.plot(*envelope(t_h, three), color="#1f77b4", lw=0.6, label="±3σ")
+        ax.plot(*envelope(t_h, -three), color="#1f77b4", lw=0.6)
         ax.plot(
-            *_envelope(t_h, np.degrees(run.est_error_axes[:, i])),
+            *envelope(t_h, np.degrees(run.est_error_axes[:, i])),
             color="k",
             lw=0.5,
             label=f"δθ{axis}",
@@ -443,7 +443,7 @@ def _disturbance_estimates(r) -> list[tuple[str, np.ndarray]]:
     return [(name, est) for name, est in pairs if est is not None and np.any(est)]
 
 
-def _envelope(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+def envelope(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
     """(t, y) thinned for a figure: each of ``bins`` equal slices keeps its minimum and
     maximum in time order, so every peak of a long trace is still drawn."""
     if t.size <= 2 * bins:
@@ -494,19 +494,19 @@ def write_simulation(
     fig, axes = figure(10, 7.5, 3, 1, sharex=True)
     t_h = run.t / 3600
     for y, lw, label in ((run.error_deg, 0.8, "pointing"), (run.est_error_deg, 0.6, "estimation")):
-        axes[0].semilogy(*_envelope(t_h, np.maximum(y, 1e-6)), lw=lw, label=f"{label} error")
+        axes[0].semilogy(*envelope(t_h, np.maximum(y, 1e-6)), lw=lw, label=f"{label} error")
     axes[0].axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
     axes[0].set_ylabel("error [°]")
     axes[0].legend(fontsize=8, loc="upper right")
     h = run.wheel_speed_rpm * (np.pi / 30) * scenario.wheels.inertia / scenario.wheels.max_momentum
     for i in range(h.shape[1]):
-        axes[1].plot(*_envelope(t_h, h[:, i]), lw=0.8, label=f"wheel {i + 1}")
+        axes[1].plot(*envelope(t_h, h[:, i]), lw=0.8, label=f"wheel {i + 1}")
     axes[1].axhline(scenario.momentum.unload_start_fraction, color="k", ls=":", lw=1)
     axes[1].axhline(-scenario.momentum.unload_start_fraction, color="k", ls=":", lw=1)
     axes[1].set_ylabel("momentum / limit")
     axes[1].legend(fontsize=8, loc="upper right")
     for i, axis in enumerate("xyz"):
-        axes[2].plot(*_envelope(t_h, run.torque[:, i]), lw=0.6, label=f"τ{axis}")
+        axes[2].plot(*envelope(t_h, run.torque[:, i]), lw=0.6, label=f"τ{axis}")
     axes[2].set_ylabel("torque [N·m]")
     axes[2].set_xlabel("t [h]")
     axes[2].legend(fontsize=8, loc="upper right")
@@ -536,7 +536,7 @@ def write_simulation(
         axes = axes[:, 0]
         for ax, (name, est) in zip(axes, estimates, strict=True):
             for i, axis in enumerate("xyz"):
-                ax.plot(*_envelope(t_h, est[:, i]), lw=0.8, label=f"{axis}")
+                ax.plot(*envelope(t_h, est[:, i]), lw=0.8, label=f"{axis}")
             ax.set_ylabel("b̂ [N·m]" if name == "torque_est" else "β̂ [N·m]")
             ax.legend(fontsize=8, loc="upper right")
             ax.grid(alpha=0.3)

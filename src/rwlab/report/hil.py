@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.report.attitude import _envelope
+from rwlab.report.attitude import envelope
 from rwlab.report.html import Page, figure
 
 __all__ = ["write_hil_report"]
@@ -111,10 +111,10 @@ def _pointing_figure(page: Page, run, ref, req: float) -> None:
     )
     ax = axes[0, 0]
     t_h = run.t / 3600
-    ax.semilogy(*_envelope(t_h, np.maximum(run.error_deg, 1e-6)), lw=0.8, label="bench")
+    ax.semilogy(*envelope(t_h, np.maximum(run.error_deg, 1e-6)), lw=0.8, label="bench")
     if ref is not None:
         ax.semilogy(
-            *_envelope(ref.t / 3600, np.maximum(ref.error_deg, 1e-6)),
+            *envelope(ref.t / 3600, np.maximum(ref.error_deg, 1e-6)),
             lw=0.8,
             alpha=0.8,
             label="simulation (physics wheel)",
@@ -126,7 +126,7 @@ def _pointing_figure(page: Page, run, ref, req: float) -> None:
     ax.grid(alpha=0.3)
     if paired:  # same noise, same rows: the difference is the wheels'
         diff = run.error_deg - ref.error_deg
-        axes[1, 0].plot(*_envelope(t_h, diff), lw=0.6, color="k")
+        axes[1, 0].plot(*envelope(t_h, diff), lw=0.6, color="k")
         axes[1, 0].set_ylabel("bench − simulation [°]")
         axes[1, 0].grid(alpha=0.3)
     axes[-1, 0].set_xlabel("t [h]")
@@ -144,10 +144,10 @@ def _wheel_figure(page: Page, result) -> None:
     fig, axes = figure(10, 1.8 * n + 0.6, n, 1, sharex=True, squeeze=False)
     for i in range(n):
         ax = axes[i, 0]
-        ax.plot(*_envelope(run.t / 3600, run.wheel_speed_rpm[:, i]), lw=0.8, label="bench")
+        ax.plot(*envelope(run.t / 3600, run.wheel_speed_rpm[:, i]), lw=0.8, label="bench")
         if ref is not None:
             ax.plot(
-                *_envelope(ref.t / 3600, ref.wheel_speed_rpm[:, i]), lw=0.8, alpha=0.8,
+                *envelope(ref.t / 3600, ref.wheel_speed_rpm[:, i]), lw=0.8, alpha=0.8,
                 label="simulation",
             )  # fmt: skip
         ax.set_ylabel(f"node {result.metrics['config']['nodes'][i]} [rpm]")
@@ -218,7 +218,7 @@ def _measurement(page: Page, m: dict, result, sc) -> None:
             continue
         realised = np.diff(log["speed_rpm"]) / sc.run.dt
         err = (realised - log["command_rpm_s"][1:]) * sc.wheels.inertia * np.pi / 30
-        ax.plot(*_envelope(log["t"][1:] / 3600, err), lw=0.5, label=f"node {node}")
+        ax.plot(*envelope(log["t"][1:] / 3600, err), lw=0.5, label=f"node {node}")
     ax.set_xlabel("t [h]")
     ax.set_ylabel("realised − commanded [N·m]")
     ax.legend(fontsize=8, loc="upper right")

@@ -167,7 +167,7 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
 
 def canopen_id(node_id: int) -> int:
     """The CANopen node id of wheel ``node_id``: ``node_id + 1`` (id 0 is reserved)."""
-    return proto._check_node(node_id) + 1
+    return proto.check_node(node_id) + 1
 
 
 class Cia402NodeLink(NodeLink):
@@ -183,7 +183,7 @@ class Cia402NodeLink(NodeLink):
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
@@ -465,7 +465,7 @@ class Cia402HostLink(HostLink):
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.cid = canopen_id(node_id)
         self.network = SdoPumpNetwork(bus, clock, self.cid)
         self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))

@@ -142,7 +142,7 @@ def canopen_id(node_id: int) -> int:
     -------
     int
     """
-    return FIRST_WHEEL_ID + ID_STEP * proto._check_node(node_id)
+    return FIRST_WHEEL_ID + ID_STEP * proto.check_node(node_id)
 
 
 def object_dictionary(node_id: int) -> ObjectDictionary:
@@ -205,7 +205,7 @@ class OresatNodeLink(NodeLink):
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
@@ -396,7 +396,7 @@ class OresatHostLink(HostLink):
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.cid = canopen_id(node_id)
         self.network = SdoPumpNetwork(bus, clock, self.cid)
         self.network.on_frame = self._record

@@ -89,7 +89,7 @@ class WheelClient:
         protocol: str = "rwlab",
     ) -> None:
         self.bus = bus
-        self.node_id = proto._check_node(node_id)
+        self.node_id = proto.check_node(node_id)
         self.params = params
         self.clock = clock or WallClock()
         self.timeout = timeout

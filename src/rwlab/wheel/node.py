@@ -129,7 +129,7 @@ class WheelNode:
         if not 0 < physics_dt <= 0.01:
             raise ConfigError(f"physics_dt must be in (0, 0.01] s, got {physics_dt}")
         self.bus = bus
-        self.node_id = proto._check_node(node_id)
+        self.node_id = proto.check_node(node_id)
         self.clock = clock or WallClock()
         self.wheel = WheelPhysics(params, seed)
         self.period = 1.0 / telemetry_rate

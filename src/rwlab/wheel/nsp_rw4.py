@@ -69,7 +69,7 @@ def wheel_address(node_id: int) -> int:
     -------
     int
     """
-    return 0x20 + proto._check_node(node_id)
+    return 0x20 + proto.check_node(node_id)
 
 
 class Rw412NodeLink(NspNodeLinkBase):

@@ -291,7 +291,7 @@ class NspNodeLinkBase(NodeLink):
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
         self.params = RW90
         self.nacked = 0
         self.bytes_received = self.bytes_sent = self.messages_received = 0
@@ -380,7 +380,7 @@ class NspHostLinkBase(HostLink):
 
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__()
-        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
         self.params = RW90
         self.period = 1.0 / poll_rate
         self.reply_timeout = 0.5  # s of wall time: a pty or a 115200-baud line answers in ms
