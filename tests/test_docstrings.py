@@ -1,5 +1,7 @@
-"""At least 95 % of the exported callables have numpydoc Parameters and Returns sections
-(as python-control's docstring test); ``python tools/doccheck.py`` lists the rest."""
+"""Every exported callable's numpydoc docstring has the sections it needs and names every
+parameter, none stale (as python-control's docstring test checks); the public methods of
+the exported classes are held to the same, their undocumented rest may only shrink.
+``python tools/doccheck.py`` lists what lacks what."""
 
 import sys
 from pathlib import Path
@@ -10,40 +12,78 @@ pytest.importorskip("numpydoc", reason="the docs extra: pip install -e '.[docs]'
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import doccheck
 
+# Public methods of exported classes still without a Parameters or Returns section, when
+# the per-parameter check came (issue 45). Lower it as they are documented; never raise it.
+UNDOCUMENTED_METHODS = 315
 
-def test_exported_callables_have_parameters_and_returns():
-    share, lacking = doccheck.coverage()
-    assert share >= 0.95, f"{share:.1%}; lacking: {sorted(lacking)}"
+
+@pytest.fixture(scope="module")
+def lacking():
+    return doccheck.coverage()[1]
 
 
-def test_the_check_sees_a_missing_section():
-    def documented(x: float) -> float:
+def test_every_exported_callable_documents_every_parameter_by_name(lacking):
+    exported = set(doccheck.exported())
+    found = {name: what for name, what in lacking.items() if name in exported}
+    assert not found, found
+
+
+def test_a_method_that_documents_parameters_names_each_and_no_other(lacking):
+    found = {
+        name: what
+        for name, what in lacking.items()
+        if any(w.startswith(("parameter", "stale")) for w in what)
+    }
+    assert not found, found
+
+
+def test_the_undocumented_methods_only_shrink(lacking):
+    methods = set(doccheck.documented_callables()) - set(doccheck.exported())
+    assert len(methods & set(lacking)) <= UNDOCUMENTED_METHODS
+
+
+def test_the_check_sees_a_missing_section_or_name():
+    def documented(x: float, *, scale: float = 1.0) -> float:
         """Twice x.
 
         Parameters
         ----------
-        x : float
-            A value.
+        x, scale : float
+            A value, and a factor.
 
         Returns
         -------
         float
         """
-        return 2 * x
+        return 2 * x * scale
 
     def undocumented(x: float) -> float:
         """Twice x."""
         return 2 * x
 
-    def returns_nothing(x: float) -> None:
+    def returns_nothing(x: float, **options) -> None:
         """Nothing.
 
         Parameters
         ----------
         x : float
             Ignored.
+        **options
+            Ignored too.
+        """
+
+    def one_forgotten_one_stale(x: float, y: float) -> None:
+        """Nothing.
+
+        Parameters
+        ----------
+        x : float
+            Ignored.
+        z : float
+            No longer a parameter.
         """
 
     assert doccheck.missing(documented) == []
     assert doccheck.missing(undocumented) == ["Parameters", "Returns"]
     assert doccheck.missing(returns_nothing) == []
+    assert doccheck.missing(one_forgotten_one_stale) == ["parameter 'y'", "stale 'z'"]

@@ -58,6 +58,28 @@ def _params(fn) -> list[str]:
     return [p for p in sig.parameters if p not in ("self", "cls")]
 
 
+def _signature(fn) -> list[inspect.Parameter]:
+    """The parameters a caller names (``self``/``cls`` left out), ``*args``/``**kw`` included."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return []
+    # a leading underscore: not for callers (a test hook), so not for the docstring either
+    return [p for p in sig.parameters.values() if p.name not in ("self", "cls")
+            and not p.name.startswith("_")]  # fmt: skip
+
+
+def _documented(section: list) -> list[str]:
+    """The names a numpydoc Parameters section gives: ``a, b : float`` names two,
+    ``**options`` names ``options``."""
+    return [
+        part.strip().lstrip("*")
+        for entry in section
+        for part in entry.name.split(",")
+        if part.strip()
+    ]
+
+
 def _returns_value(fn) -> bool:
     """Whether an unannotated function has a ``return <value>`` or a ``yield``."""
     try:
@@ -73,19 +95,43 @@ def _returns_value(fn) -> bool:
     )
 
 
+def _names(params: list[inspect.Parameter], documented: list[str]) -> list[str]:
+    """Each parameter the docstring does not name, and each name it gives that is no
+    parameter (stale); with ``**kwargs`` the docstring may name the keywords it takes."""
+    lacks = [f"parameter {p.name!r}" for p in params if p.name not in documented]
+    if not any(p.kind is p.VAR_KEYWORD for p in params):
+        names = {p.name for p in params}
+        lacks += [f"stale {n!r}" for n in documented if n not in names]
+    return lacks
+
+
+def _constructor(cls) -> list[inspect.Parameter]:
+    if "__init__" in vars(cls) or hasattr(cls, "__dataclass_fields__"):
+        return _signature(cls)
+    return []
+
+
 def missing(obj) -> list[str]:
-    """The numpydoc sections ``obj`` lacks."""
+    """What ``obj``'s numpydoc docstring lacks: a section it needs (``"Parameters"``,
+    ``"Returns"``), a parameter it does not name (``"parameter 'x'"``) or a name that is
+    no parameter (``"stale 'y'"``). A class documents its constructor's parameters under
+    Parameters, or (a dataclass) under Attributes."""
     if inspect.isclass(obj):
         doc = ClassDoc(obj, config={"show_class_members": False})
-        need_params = bool(_params(obj.__init__)) if "__init__" in vars(obj) else False
-        if not need_params and hasattr(obj, "__dataclass_fields__"):
-            need_params = bool(_params(obj))
-        fields = doc["Parameters"] or doc["Attributes"]
-        return ["Parameters"] if need_params and not fields else []
+        params = _constructor(obj)
+        if not params:
+            return []
+        fields = doc["Parameters"] + doc["Attributes"]
+        if not fields:
+            return ["Parameters"]
+        return [n for n in _names(params, _documented(fields)) if not n.startswith("stale")]
     doc = FunctionDoc(obj)
     lacks = []
-    if _params(obj) and not doc["Parameters"]:
+    params = _signature(obj)
+    if params and not doc["Parameters"]:
         lacks.append("Parameters")
+    elif params:
+        lacks += _names(params, _documented(doc["Parameters"] + doc["Other Parameters"]))
     ret = inspect.signature(obj).return_annotation
     returns_none = ret in (None, "None", "NoReturn") or (
         ret is inspect.Signature.empty and not _returns_value(obj)
@@ -95,9 +141,30 @@ def missing(obj) -> list[str]:
     return lacks
 
 
-def coverage() -> tuple[float, dict[str, list[str]]]:
-    """The share of exported callables with every section they need, and what the rest lack."""
+def methods(cls) -> dict[str, object]:
+    """The public methods ``cls`` itself defines (properties and inherited ones left out)."""
+    return {
+        f"{cls.__module__}.{cls.__qualname__}.{name}": fn
+        for name, value in vars(cls).items()
+        if not name.startswith("_")
+        and (fn := value.__func__ if isinstance(value, classmethod | staticmethod) else value)
+        and inspect.isfunction(fn)
+    }
+
+
+def documented_callables() -> dict[str, object]:
+    """The exported callables and the public methods of the exported classes."""
     objs = exported()
+    for obj in list(objs.values()):
+        if inspect.isclass(obj):
+            objs.update(methods(obj))
+    return objs
+
+
+def coverage() -> tuple[float, dict[str, list[str]]]:
+    """The share of the documented callables (:func:`documented_callables`) whose docstring
+    has every section and names every parameter, and what the rest lack."""
+    objs = documented_callables()
     lacking = {name: m for name, obj in objs.items() if (m := missing(obj))}
     return 1 - len(lacking) / len(objs), lacking
 
@@ -106,8 +173,8 @@ def main() -> int:
     share, lacking = coverage()
     for name, sections in sorted(lacking.items()):
         print(f"{name}: no {' / '.join(sections)}")
-    print(f"{share:.1%} of {len(exported())} exported callables documented")
-    return 0 if share >= 0.95 else 1
+    print(f"{share:.1%} of {len(documented_callables())} callables documented")
+    return 0 if not lacking else 1
 
 
 if __name__ == "__main__":

@@ -545,7 +545,15 @@ class IOData:
             Take minimum and range from this record (typically the estimation
             part). Default: ``self``.
 
-        Raises ``DataError`` for a constant channel, whose range is zero.
+        Returns
+        -------
+        IOData
+            The normalised record; ``trend`` holds the offsets and ranges.
+
+        Raises
+        ------
+        DataError
+            A constant channel (its range is zero).
         """
         ref = self._reference(reference)
 
@@ -574,7 +582,15 @@ class IOData:
             Take the magnitudes from this record (typically the estimation
             part). Default: ``self``.
 
-        Raises ``DataError`` for a channel that is zero throughout.
+        Returns
+        -------
+        IOData
+            The scaled record.
+
+        Raises
+        ------
+        DataError
+            A channel that is zero throughout.
         """
         ref = self._reference(reference)
 

@@ -38,6 +38,8 @@ class DemoConfig:
         Length of each testbed record, simulated s.
     attitude_duration : float
         Length of each attitude run, s.
+    hil_duration : float
+        Length of the hardware-in-the-loop run, s.
     realtime : bool
         Run the testbed at wall-clock speed.
     monitor : bool

@@ -82,8 +82,13 @@ class WheelConflict(RwlabError):
 class HilStopped(RwlabError):
     """A hardware-in-the-loop run stopped before its end (the wheels idled, the record closed).
 
-    ``interrupted`` is True when Ctrl-C, SIGTERM or SIGHUP stopped it (the CLI then
-    exits with status 130, as every other command does).
+    Parameters
+    ----------
+    message : str
+        What stopped it.
+    interrupted : bool
+        True when Ctrl-C, SIGTERM or SIGHUP stopped it (the CLI then exits with status
+        130, as every other command does).
     """
 
     def __init__(self, message: str, *, interrupted: bool = False) -> None:

@@ -47,7 +47,13 @@ def stop(name: str) -> None:
 
 
 def stopped() -> str | None:
-    """The first stop signal's name since :func:`clear`, or None."""
+    """The first stop signal since :func:`clear`.
+
+    Returns
+    -------
+    str or None
+        Its name (``"SIGTERM"`` …), or None when none came.
+    """
     return _stopped[0] if _stopped else None
 
 
@@ -78,6 +84,11 @@ def uninterrupted() -> Iterator[None]:
     Sections nest; only the main thread's count (signal handlers run there), other
     threads pass through. A stop that came before the block (a clean-up after Ctrl-C
     talks to the wheel in such blocks) raises nothing again.
+
+    Yields
+    ------
+    None
+        The block runs.
 
     Raises
     ------

@@ -123,6 +123,8 @@ def mlbs(n_bits: int, amplitude: float, *, hold: int = 1, periods: int = 1) -> n
     ----------
     n_bits : int
         Shift-register length, 2..32.
+    amplitude : float
+        The two levels, ±amplitude.
     hold : int
         Samples per bit (the clock period of the sequence).
     periods : int

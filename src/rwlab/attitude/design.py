@@ -346,7 +346,8 @@ class LTRResult(ShortRepr):
     target : (F, k) singular values of the LQR (or Kalman) target loop
     loops : dict ρ → (F, k) singular values of the recovered loop
     compensators : dict ρ → control.StateSpace K(s)
-    K : regulator gain; L : dict ρ → estimator gain
+    K : (m, n) regulator gain
+    L : dict ρ → estimator gain
     side : 'input' or 'output'
     """
 

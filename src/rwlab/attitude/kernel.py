@@ -49,7 +49,6 @@ import numpy as np
 from numba import njit
 
 from rwlab.attitude.ekf import (
-    _skew_into,
     aligned_update_into,
     attitude_error,
     attitude_update_into,
@@ -58,6 +57,7 @@ from rwlab.attitude.ekf import (
     gyro_predict_covariance_into,
     predict_covariance_into,
     propagate_attitude_into,
+    skew_into,
 )
 from rwlab.attitude.plant import rk4_step, rk4_step_forced
 from rwlab.attitude.sensors import gyro_sample_into, tracker_visible
@@ -308,7 +308,13 @@ class Wheels(NamedTuple):
 
 
 def new_stats() -> np.ndarray:
-    """A fresh statistics vector (see :data:`STATS`)."""
+    """A fresh statistics vector (see :data:`STATS`).
+
+    Returns
+    -------
+    numpy.ndarray, shape (len(STATS),)
+        Zeros, the unloading end at −inf (none yet).
+    """
     s = np.zeros(len(STATS))
     s[UNLOAD_END] = -math.inf
     return s
@@ -381,7 +387,7 @@ def _srp_map_into(q, s_orb, sunlit, C, s_body, out):
     (C (3, 3) and s_body (3,) are scratch)."""
     _dcm_into(q, C)
     _matvec(C, s_orb, s_body)
-    _skew_into(sunlit * s_body[0], sunlit * s_body[1], sunlit * s_body[2], out)
+    skew_into(sunlit * s_body[0], sunlit * s_body[1], sunlit * s_body[2], out)
 
 
 @njit(cache=True)

@@ -127,12 +127,18 @@ class SimResult(ShortRepr):
 
     Attributes
     ----------
-    t : (K,) s; q : (K, 4) true attitude (orbital → body); w_bo : (K, 3) rad/s;
-    q_est, w_est : the estimate; torque : (K, 3) body control torque, N·m;
-    wheel_speed_rpm : (K, N); error_deg : (K,) true pointing error;
-    est_error_deg : (K,) estimation error; nees : (K,) normalised estimation error²
-    (at measurement steps; 0 without a filter).
-    wheel_saturated : a wheel touched its momentum limit.
+    t : (K,) s
+    q : (K, 4) true attitude (orbital → body)
+    w_bo : (K, 3) rad/s
+    q_est, w_est : the estimate
+    torque : (K, 3) body control torque, N·m
+    wheel_speed_rpm : (K, N)
+    error_deg : (K,) true pointing error
+    est_error_deg : (K,) estimation error
+    nees : (K,) normalised estimation error²
+        At measurement steps; 0 without a filter.
+    wheel_saturated : bool
+        A wheel touched its momentum limit.
     stats : dict over every step (not only the logged ones), see ``kernel.STATS``.
     steady_from_s : start of the steady-state window, s.
     sky : (K, 3) sunlit fraction and the sun and earth sensors' status (0 used,
@@ -406,13 +412,15 @@ def simulate(
     progress : callable, optional
         Called with the number of steps done after each block.
 
-    Every wheel model runs in the compiled kernel (``kernel.run_block``), in blocks
-    of at most an hour of steps (shorter when the controller re-linearises).
-
     Returns
     -------
     SimResult
         The logged time histories and the statistics over every step.
+
+    Notes
+    -----
+    Every wheel model runs in the compiled kernel (``kernel.run_block``), in blocks
+    of at most an hour of steps (shorter when the controller re-linearises).
     """
     if estimator not in ("ekf", "truth"):
         raise ConfigError(f"estimator must be 'ekf' or 'truth', got {estimator!r}")

@@ -148,13 +148,39 @@ def cusum_alarms(zs: list[np.ndarray], k: float, sides: str, grid=H_GRID) -> np.
 
 
 def run_alarms(runs: list[int], n_max: int = N_MAX) -> np.ndarray:
-    """Alarms of a restarted run test (n in a row) over runs of events, for n = 1..n_max."""
+    """Alarms of a restarted run test (n in a row) over runs of events, for n = 1..n_max.
+
+    Parameters
+    ----------
+    runs : list of int
+        The lengths of the runs of consecutive events.
+    n_max : int
+        The largest n.
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n_max,)
+        Alarms at n = 1..n_max (a run of r events raises r // n).
+    """
     n = np.arange(1, n_max + 1)
     return np.array([sum(r // m for r in runs) for m in n], dtype=int)
 
 
 def count_alarms(counts: list[int], n_max: int = N_MAX) -> np.ndarray:
-    """Blocks whose event count reaches n, for n = 1..n_max."""
+    """Blocks whose event count reaches n, for n = 1..n_max.
+
+    Parameters
+    ----------
+    counts : list of int
+        Events in each block.
+    n_max : int
+        The largest n.
+
+    Returns
+    -------
+    numpy.ndarray of int, shape (n_max,)
+        Blocks with at least n events, n = 1..n_max.
+    """
     c = np.asarray(counts, dtype=int)
     return np.array([int((c >= m).sum()) for m in range(1, n_max + 1)], dtype=int)
 

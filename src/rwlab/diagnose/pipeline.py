@@ -54,6 +54,8 @@ class Event:
         ln(L(named) / L(runner-up)) at the alarm.
     relabelled : list of (float, str)
         (time s, earlier name) for each re-labelling.
+    start : int
+        Sample index where the window that raised it starts.
     """
 
     t_s: float

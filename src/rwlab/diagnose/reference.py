@@ -119,7 +119,18 @@ def nominal_friction_currents(spec: WheelSpec | None = None) -> tuple[float, flo
 
 def nominal_inertial_current(spec: WheelSpec | None = None) -> float:
     """The wheel model's datasheet inertial current I/k_t per rpm/s, A (the current
-    model's c₀ of a nominal unit; ``spec`` default the RW90's)."""
+    model's c₀ of a nominal unit).
+
+    Parameters
+    ----------
+    spec : WheelSpec, optional
+        The wheel model; default the RW90's.
+
+    Returns
+    -------
+    float
+        A per rpm/s.
+    """
     s = _spec(spec)
     return s.inertia_kg_m2 / s.torque_constant_nm_a * 2.0 * math.pi / 60.0
 

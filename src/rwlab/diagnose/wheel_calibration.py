@@ -108,12 +108,17 @@ class DiagnosisCalibration:
     noise : NoiseModel
     zones : dict of str to tuple of 2 float
     drift : dict of str to float
+    dispersion : dict of str to float
+        φ per model-based fault: how much more the window likelihoods spread on healthy
+        records than a true likelihood's (1: not at all).
     peaks : dict of str to tuple of float
     repeat_probability, lost_per_sample : float
     sources : tuple of str
         The records (names) it was measured on.
     origin : str
         One line: whose wheel, which records.
+    records : int
+        How many healthy records it was measured on.
     """
 
     Ts: float

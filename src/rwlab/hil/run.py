@@ -82,7 +82,18 @@ _NODE_FAULT = re.compile(r"^\s*(\d+)\s*:(.+)$")
 
 
 def parse_node_fault(text: str) -> tuple[int, ScheduledFault]:
-    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault)."""
+    """``NODE:NAME[=VALUE]@SECONDS`` (e.g. ``2:torque_constant=0@1800``) → (node, fault).
+
+    Parameters
+    ----------
+    text : str
+        The ``--fault`` argument.
+
+    Returns
+    -------
+    (int, ScheduledFault)
+        The wheel's node id and the fault scheduled on it.
+    """
     match = _NODE_FAULT.match(text) if isinstance(text, str) else None
     if match is None:
         raise ConfigError(

@@ -102,6 +102,8 @@ class StudyResult(ShortRepr):
     ----------
     data, est, val : IOData
         Preprocessed record and its estimation / validation parts.
+    preprocess : str
+        The preprocessing applied (``"detrend"``, …).
     delay : dict
         ``nk`` and ``losses`` (nk → loss).
     models : dict
@@ -115,11 +117,36 @@ class StudyResult(ShortRepr):
         on the estimation part's settled holds (``gain_constraint``), named
         ``ARX221+K`` …; empty when that part has too few settled holds.
     chosen : PolyModel
-        The selected model; ``chosen_name`` is its row's name, ``reason`` says why.
+        The selected model.
+    chosen_name : str
+        Its row's name (``ARX221+K`` for a constrained one).
+    reason : str
+        Why it was chosen.
+    residuals : dict
+        The residual tests (``resid``) of the chosen model and of the best other
+        structure, on the validation part, by structure name.
     continuous : dict
         ZOH and Tustin transfer functions and the discrete-vs-continuous check.
     acceleration : dict
         The acceleration check (Fig. 24).
+    new_input : dict
+        ``u``: an input the record did not contain (for the continuous-time check).
+    servo : ServoModel or None
+        The nonlinear servo model, when the wheel stages ran.
+    nonlinear : dict or None
+        Its fit report, or why it was skipped; None with ``nonlinear=False``.
+    greybox : WheelGreyBox or None
+        The physical grey-box wheel model, when fitted.
+    nlarx : NLARXModel or None
+        The black-box nonlinear ARX model, when fitted.
+    physical_val : IOData or None
+        The validation part in physical units (before preprocessing).
+    steady_state : dict or None
+        The static gain measured on the record's settled holds.
+    gain_constraint : dict or None
+        The gain the ``+K`` models were constrained to, and where it was measured.
+    parts : dict or None
+        How the estimation and validation parts differ, and the chosen model's fit on each.
     segments : list of [t_start, t_end] or None
         The gap-free parts the record was split into (s from its start), each an
         experiment of its own; None for one record without gaps.

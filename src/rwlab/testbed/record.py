@@ -306,6 +306,8 @@ class Record:
 
     Attributes
     ----------
+    path : Path
+        The file read.
     metadata : dict
         The ``rwlab`` metadata (empty if the file lost it).
     messages : dict

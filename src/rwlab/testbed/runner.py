@@ -407,8 +407,14 @@ class RunSummary(ShortRepr):
         Telemetry frames missing, and refused (bad checksum or length).
     duration : float
         Length of the experiment, s.
-    status : {'completed', 'interrupted', 'fault', 'error'}
+    status : {'completed', 'completed with timing faults', 'interrupted', 'fault', 'error'}
         How it ended.
+    timing : dict
+        Command timing (:class:`Timing`): period and lateness p50/p99/max, commands late.
+    alarms : tuple of str
+        The live fault detector's alarms (``--model``), as the record's ``alarm`` events.
+    faults_injected : tuple of str
+        The faults injected into the twin (``NAME=VALUE@SECONDS``), as recorded.
     """
 
     path: Path

@@ -120,15 +120,25 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
 
 def canopen_id(node_id: int) -> int:
     """The CANopen node id of wheel ``node_id``: ``node_id + 1`` (CANopen ids start at 1)."""
-    return proto._check_node(node_id) + 1
+    return proto.check_node(node_id) + 1
 
 
 class CanopenNodeLink(NodeLink):
-    """The twin as a CANopen node (``canopen.LocalNode``)."""
+    """The twin as a CANopen node (``canopen.LocalNode``).
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The python-can bus.
+    node_id : int
+        The wheel's CANopen node id.
+    clock : Clock
+        Where time comes from (simulated or wall clock).
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
@@ -300,11 +310,21 @@ class CanopenNodeLink(NodeLink):
 
 
 class CanopenHostLink(HostLink):
-    """The driver as a CANopen client (``canopen.RemoteNode``): RPDO out, TPDOs in."""
+    """The driver as a CANopen client (``canopen.RemoteNode``): RPDO out, TPDOs in.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The python-can bus.
+    node_id : int
+        The wheel's CANopen node id.
+    clock : Clock
+        Where time comes from (simulated or wall clock).
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto._check_node(node_id), clock
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
         self.network = BusNetwork(bus)
         self.cid = canopen_id(node_id)
         self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))

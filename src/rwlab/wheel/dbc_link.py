@@ -44,11 +44,21 @@ def read_frames(bus: can.BusABC) -> list[can.Message]:
 
 
 class RwlabHostLink(HostLink):
-    """The driver's end of ``rw.dbc`` on a python-can bus."""
+    """The driver's end of ``rw.dbc`` on a python-can bus.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The python-can bus.
+    node_id : int
+        The wheel's node id (:func:`rwlab.wheel.protocol.check_node`).
+    simulated : bool
+        Frames carry simulated time (the twin's clock), not the wall clock.
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, simulated: bool) -> None:
         super().__init__()
-        self.bus, self.node_id, self.simulated = bus, proto._check_node(node_id), simulated
+        self.bus, self.node_id, self.simulated = bus, proto.check_node(node_id), simulated
 
     def send(self, cmd: proto.Command, now: float) -> None:
         msg = proto.encode_command(cmd)
@@ -79,11 +89,21 @@ class RwlabHostLink(HostLink):
 
 
 class RwlabNodeLink(NodeLink):
-    """The twin's end of ``rw.dbc`` on a python-can bus."""
+    """The twin's end of ``rw.dbc`` on a python-can bus.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The python-can bus.
+    node_id : int
+        The wheel's node id (:func:`rwlab.wheel.protocol.check_node`).
+    simulated : bool
+        Frames carry simulated time (the twin's clock), not the wall clock.
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int, simulated: bool) -> None:
         super().__init__()
-        self.bus, self.node_id, self.simulated = bus, proto._check_node(node_id), simulated
+        self.bus, self.node_id, self.simulated = bus, proto.check_node(node_id), simulated
         self._twin: str | None = None
 
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:

@@ -81,7 +81,7 @@ def wheel_address(node_id: int) -> int:
     -------
     int
     """
-    return 0x20 + proto._check_node(node_id)
+    return 0x20 + proto.check_node(node_id)
 
 
 def encode_packet(packet: NspPacket) -> bytes:
@@ -123,11 +123,21 @@ _read = nsp_wire.read_port
 
 
 class NspNodeLink(NodeLink):
-    """The twin's end: answers PING, PEEK, POKE and CLEAR-FAULT as wheel ``0x20 + node_id``."""
+    """The twin's end: answers PING, PEEK, POKE and CLEAR-FAULT as wheel ``0x20 + node_id``.
+
+    Parameters
+    ----------
+    port : serial port
+        The byte link to the driver (pyserial-like: ``read``/``write``).
+    node_id : int
+        The wheel's node id.
+    clock : Clock
+        Where time comes from (simulated or wall clock).
+    """
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
         super().__init__()
-        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
         self.address = wheel_address(node_id)
         self._reader = SlipReader()
         self._sequence = 0
@@ -215,13 +225,28 @@ class NspNodeLink(NodeLink):
 
 
 class NspHostLink(HostLink):
-    """The driver's end: POKEs modes, PEEKs the telemetry block at ``poll_rate``."""
+    """The driver's end: POKEs modes, PEEKs the telemetry block at ``poll_rate``.
+
+    Parameters
+    ----------
+    port : serial port
+        The byte link to the wheel (pyserial-like: ``read``/``write``).
+    node_id : int
+        The wheel's node id; it answers as NSP address ``0x20 + node_id``.
+    clock : Clock
+        Where time comes from (simulated or wall clock).
+    poll_rate : float
+        Telemetry PEEKs per second, Hz.
+    inertia : float
+        Rotor inertia, kg·m²: turns an acceleration command (rpm/s) into the torque
+        (N·m) NSP commands; 0: the RW90's.
+    """
 
     def __init__(
         self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0, inertia: float = 0.0
     ) -> None:
         super().__init__()
-        self.port, self.node_id, self.clock = port, proto._check_node(node_id), clock
+        self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
         self.address = wheel_address(node_id)
         self.inertia = inertia or RW90.inertia
         self.period = 1.0 / poll_rate

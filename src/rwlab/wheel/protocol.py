@@ -67,7 +67,19 @@ def dbc_sha256() -> str:
 
 @dataclass(frozen=True)
 class Command:
-    """A host command. ``setpoint`` is rpm (SPEED) or rpm/s (ACCELERATION)."""
+    """A host command.
+
+    Parameters
+    ----------
+    node_id : int
+        The wheel addressed.
+    mode : Mode
+        IDLE, SPEED or ACCELERATION.
+    setpoint : float
+        rpm (SPEED) or rpm/s (ACCELERATION).
+    sequence : int
+        The command's sequence number (the wheel echoes it).
+    """
 
     node_id: int
     mode: Mode
@@ -77,7 +89,27 @@ class Command:
 
 @dataclass(frozen=True)
 class Telemetry:
-    """A wheel's telemetry frame. Speed in rpm, current in A."""
+    """A wheel's telemetry frame.
+
+    Parameters
+    ----------
+    node_id : int
+        The wheel that sent it.
+    speed_rpm : float
+        Measured speed, rpm.
+    current : float
+        Motor current, A.
+    mode : Mode
+        The mode the wheel is in.
+    fault_active : bool
+        A fault is latched (see the heartbeat).
+    speed_limited : bool
+        The speed limit is holding the wheel.
+    sequence_echo : int
+        The sequence number of the last command applied.
+    counter : int
+        The frame counter (a gap is a lost frame).
+    """
 
     node_id: int
     speed_rpm: float
@@ -91,10 +123,27 @@ class Telemetry:
 
 @dataclass(frozen=True)
 class Heartbeat:
-    """A wheel's status frame: latched faults, temperature (°C), uptime (s), bus voltage (V).
+    """A wheel's status frame.
 
-    ``command_rejected`` says the wheel refused a setpoint beyond its limits
-    since the last CLEAR_FAULT (the motor kept its previous command).
+    Parameters
+    ----------
+    node_id : int
+        The wheel that sent it.
+    mode : Mode
+        The mode the wheel is in.
+    faults : Fault
+        The latched faults.
+    temperature : float
+        Motor temperature, °C.
+    uptime : int
+        Seconds since power-on.
+    commands_seen : int
+        Commands received.
+    bus_voltage : float
+        Supply voltage, V (the field's floor, 10 V, when the sender has none).
+    command_rejected : bool
+        The wheel refused a setpoint beyond its limits since the last CLEAR_FAULT (the
+        motor kept its previous command).
     """
 
     node_id: int
@@ -107,7 +156,24 @@ class Heartbeat:
     command_rejected: bool = False
 
 
-def _check_node(node_id: int) -> int:
+def check_node(node_id: int) -> int:
+    """A CAN node id, checked (every protocol's node and client call this).
+
+    Parameters
+    ----------
+    node_id : int
+        0 … ``MAX_NODE_ID``.
+
+    Returns
+    -------
+    int
+        ``node_id`` itself.
+
+    Raises
+    ------
+    ProtocolError
+        Not an integer in range.
+    """
     if not isinstance(node_id, int) or not 0 <= node_id <= MAX_NODE_ID:
         raise ProtocolError(f"node id must be an integer 0..{MAX_NODE_ID}, got {node_id!r}")
     return node_id
@@ -156,8 +222,8 @@ def frame_crc(arbitration_id: int, data: bytes | bytearray) -> int:
 def _frame(base: int, node_id: int, name: str, signals: dict[str, float]) -> can.Message:
     """One frame of ``rw.dbc`` with its check byte."""
     data = bytearray(database().get_message_by_name(name).encode({**signals, "Checksum": 0}))
-    data[7] = frame_crc(base + _check_node(node_id), bytes(data))
-    return can.Message(arbitration_id=base + _check_node(node_id), data=data, is_extended_id=False)
+    data[7] = frame_crc(base + check_node(node_id), bytes(data))
+    return can.Message(arbitration_id=base + check_node(node_id), data=data, is_extended_id=False)
 
 
 def encode_command(cmd: Command) -> can.Message:

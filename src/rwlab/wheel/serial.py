@@ -119,6 +119,8 @@ class SlipSerialBus(can.BusABC):
         ``loop://``) opened at ``baudrate``.
     baudrate : int
         Line speed when ``port`` is a name (default 115200).
+    **kwargs
+        Passed on to :class:`can.BusABC`.
     """
 
     def __init__(self, port, baudrate: int = 115200, **kwargs) -> None:

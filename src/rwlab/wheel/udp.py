@@ -108,6 +108,8 @@ class LoopbackMulticastBus(can.BusABC):
         UDP port (python-can's 43113 by default).
     ttl : int
         Multicast TTL: 0 keeps frames on this host; raised to 1 when an interface is named.
+    **kwargs
+        Passed on to :class:`can.BusABC`.
     """
 
     reports_sources = True
