@@ -27,7 +27,17 @@ SRC = Path(__file__).resolve().parent.parent / "src"
 # sits on top, and no module below imports a name from it (``rwlab._version`` holds the
 # version they stamp).
 LAYERS: list[set[str]] = [
-    {"_version", "errors", "interrupts", "_toml", "_io", "_display", "_optional", "schemas"},
+    {
+        "_version",
+        "_lazy",
+        "errors",
+        "interrupts",
+        "_toml",
+        "_io",
+        "_display",
+        "_optional",
+        "schemas",
+    },
     {"data", "signals", "datafiles", "datasets", "wheelspec"},
     {"ident"},
     {"wheel"},

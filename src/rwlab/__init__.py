@@ -15,6 +15,7 @@ import importlib
 import sys
 import types
 
+from rwlab._lazy import lazy_exports
 from rwlab._version import __version__
 from rwlab.errors import (
     ConfigError,
@@ -84,16 +85,15 @@ class _Rwlab(types.ModuleType):
 sys.modules[__name__].__class__ = _Rwlab
 
 
+_lazy = lazy_exports(__name__, _LAZY)
+
+
 def __getattr__(name: str):
     """Import on first use (PEP 562): ``import rwlab`` stays light."""
     if name in _PACKAGES:
         importlib.import_module(f"rwlab.{name}")  # binds the wrapper (_Rwlab.__setattr__)
         return globals()[name]
-    if name not in _LAZY:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_LAZY[name]), name)
-    globals()[name] = value
-    return value
+    return _lazy(name)
 
 
 __all__ = [

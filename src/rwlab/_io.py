@@ -123,30 +123,51 @@ def _json_default(obj):
 
 
 # -- output folders -------------------------------------------------------------------
-def _lock(lock_path: Path, out: Path) -> int:
-    """An exclusive lock on ``lock_path`` (its descriptor), or ``OutputBusyError`` at once.
+def lock_exclusive(path: Path, busy: Exception) -> int:
+    """A descriptor of ``path`` (created if need be) under an exclusive ``flock``.
 
-    The lock file is removed on release; a descriptor locked on a file that was
-    removed meanwhile is stale, so the lock is taken again on the new file.
+    The lock is advisory and the OS releases it when the process dies. A file
+    renamed or removed between opening and locking is stale: the lock is taken
+    again on the new one (ten tries).
+
+    Parameters
+    ----------
+    path : Path
+        The file to lock.
+    busy : Exception
+        Raised, at once, when another process holds the lock (or the file keeps
+        being replaced); its message says what to do.
+
+    Returns
+    -------
+    int
+        The open descriptor, read-write, holding the lock.
     """
     for _ in range(10):
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise OutputBusyError(
-                f"{out}: another rwlab run is writing this output folder now; wait for it "
-                "to finish or choose another folder"
-            ) from None
+            raise busy from None
         try:
-            same = os.stat(lock_path).st_ino == os.fstat(fd).st_ino
+            same = os.stat(path).st_ino == os.fstat(fd).st_ino
         except FileNotFoundError:
             same = False
         if same:
             return fd
         os.close(fd)
-    raise OutputBusyError(f"{out}: could not lock the output folder (it keeps changing)")
+    raise busy
+
+
+def _lock(lock_path: Path, out: Path) -> int:
+    """An exclusive lock on ``lock_path`` (its descriptor), or ``OutputBusyError`` at once
+    (the lock file is removed on release)."""
+    busy = OutputBusyError(
+        f"{out}: another rwlab run is writing this output folder now; wait for it "
+        "to finish or choose another folder"
+    )
+    return lock_exclusive(lock_path, busy)
 
 
 def _unlock(fd: int, lock_path: Path) -> None:

@@ -30,6 +30,18 @@ def _path(name: str):
     return resources.files(__package__).joinpath(name)
 
 
+def _bundled(
+    file: str, Ts: float, name: str, names: tuple[str, str], units: tuple[str, str]
+) -> IOData:
+    """A bundled single-experiment file: (input, output) names and units ("": none)."""
+    with resources.as_file(_path(file)) as p:
+        d = load(p, Ts=Ts)
+    return IOData(
+        d.u, d.y, d.Ts, input_names=[names[0]], output_names=[names[1]],
+        input_units=[units[0]], output_units=[units[1]], name=name,
+    )  # fmt: skip
+
+
 def dryer() -> IOData:
     """Feedback PT326 hair dryer (DaISy 96-006, MATLAB ``dryer2``): 1000 samples, Ts = 0.08 s.
 
@@ -40,18 +52,7 @@ def dryer() -> IOData:
     IOData
         1000 samples, Ts = 0.08 s.
     """
-    with resources.as_file(_path("daisy_dryer.dat")) as p:
-        d = load(p, Ts=0.08)
-    return IOData(
-        d.u,
-        d.y,
-        d.Ts,
-        input_names=["power"],
-        output_names=["temperature"],
-        input_units=["V"],
-        output_units=["V"],
-        name="dryer",
-    )
+    return _bundled("daisy_dryer.dat", 0.08, "dryer", ("power", "temperature"), ("V", "V"))
 
 
 def gas_furnace() -> IOData:
@@ -64,17 +65,7 @@ def gas_furnace() -> IOData:
     IOData
         296 samples, Ts = 9 s.
     """
-    with resources.as_file(_path("bj_gas_furnace.csv")) as p:
-        d = load(p, Ts=9.0)
-    return IOData(
-        d.u,
-        d.y,
-        d.Ts,
-        input_names=["gas_rate"],
-        output_names=["co2"],
-        output_units=["%"],
-        name="gas_furnace",
-    )
+    return _bundled("bj_gas_furnace.csv", 9.0, "gas_furnace", ("gas_rate", "co2"), ("", "%"))
 
 
 def cascaded_tanks() -> tuple[IOData, IOData]:

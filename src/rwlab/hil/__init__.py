@@ -7,7 +7,7 @@
 - :func:`run_hil` — the loop itself, its record, timing and live diagnosis.
 """
 
-import importlib
+from rwlab._lazy import lazy_exports
 
 _SOURCES = {
     "Satellite": "rwlab.hil.satellite",
@@ -18,13 +18,8 @@ _SOURCES = {
 }
 
 
-def __getattr__(name: str):
-    """Import on first use (PEP 562): ``rwlab --help`` must not load numba and python-can."""
-    if name not in _SOURCES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_SOURCES[name]), name)
-    globals()[name] = value
-    return value
+# imported on first use: ``rwlab --help`` must not load numba and python-can
+__getattr__ = lazy_exports(__name__, _SOURCES)
 
 
 __all__ = ["HilConfig", "HilResult", "Satellite", "WheelBank", "run_hil"]

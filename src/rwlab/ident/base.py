@@ -23,7 +23,32 @@ from rwlab.schemas import read_json
 __all__ = ["IdentifiedModel", "load_model_json", "save_model_json"]
 
 
-class IdentifiedModel:
+class SavedAsJson:
+    """What writes itself as one JSON file, its ``to_dict()``: a model, ``model.json``."""
+
+    def to_dict(self) -> dict:  # pragma: no cover - abstract
+        """The JSON content."""
+        raise NotImplementedError
+
+    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write :meth:`to_dict` as JSON, atomically.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file.
+        overwrite : bool
+            Replace an existing file; otherwise ``FileExistsError``.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
+        return save_model_json(path, self.to_dict(), overwrite=overwrite)
+
+
+class IdentifiedModel(SavedAsJson):
     """Base class of the identified models (not used on its own).
 
     Subclasses set ``Ts`` (s), ``report`` (dict) and implement ``nu``,
@@ -85,23 +110,6 @@ class IdentifiedModel:
         if not np.all(np.isfinite(arr)):
             raise DataError("u contains NaN or Inf")
         return arr
-
-    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write the model as JSON, atomically.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file.
-        overwrite : bool
-            Replace an existing file; otherwise ``FileExistsError``.
-
-        Returns
-        -------
-        Path
-            The file written.
-        """
-        return save_model_json(path, self.to_dict(), overwrite=overwrite)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Self:

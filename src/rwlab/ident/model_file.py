@@ -23,11 +23,10 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from rwlab.errors import FileFormatError, ModelError
-from rwlab.ident.base import save_model_json
+from rwlab.ident.base import SavedAsJson
 from rwlab.ident.gain_constraint import study_name
 from rwlab.ident.models import PolyModel
 from rwlab.ident.nonlinear import ServoModel
@@ -76,7 +75,7 @@ class Channel:
 
 
 @dataclass(frozen=True, eq=False)
-class WheelModelFile:
+class WheelModelFile(SavedAsJson):
     """The content of ``model.json``: a wheel's identified model in physical units.
 
     Parameters
@@ -270,23 +269,6 @@ class WheelModelFile:
             raise FileFormatError(f"{source}: {exc}") from None
         except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
             raise FileFormatError(f"{source}: missing or malformed field ({exc})") from None
-
-    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write ``model.json`` atomically.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file.
-        overwrite : bool
-            Replace an existing file; otherwise ``FileExistsError``.
-
-        Returns
-        -------
-        Path
-            The file written.
-        """
-        return save_model_json(path, self.to_dict(), overwrite=overwrite)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> WheelModelFile:

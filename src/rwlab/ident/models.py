@@ -551,12 +551,9 @@ def c2d(sys: control.TransferFunction, Ts: float, method: str = "zoh") -> PolyMo
 
     Parameters
     ----------
-    sys : control.TransferFunction or control.StateSpace
-        Continuous-time (dt = 0) SISO system.
-    Ts : float
-        Sample time in seconds.
-    method : {'zoh', 'tustin'}
-        Zero-order hold or bilinear transform.
+    sys, Ts, method
+        As for :func:`rwlab.ident.conversions.c2d_coefficients`: the continuous system
+        (dt = 0), the sample time (s), and ``'zoh'`` or ``'tustin'``.
 
     Returns
     -------

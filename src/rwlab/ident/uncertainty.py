@@ -134,8 +134,7 @@ def step_band(model, n: int, *, method: str = "linear", n_samples: int = 500, se
     Band
         The step response and its standard deviation, shape (n, ny, nu).
     """
-    f = lambda m: _step(m, n)  # noqa: E731
-    return Band(np.arange(n) * model.Ts, f(model), _propagate(model, f, method, n_samples, seed))
+    return _time_band(model, n, _step, method, n_samples, seed)
 
 
 def impulse_band(model, n: int, *, method: str = "linear", n_samples: int = 500, seed=None) -> Band:
@@ -143,19 +142,19 @@ def impulse_band(model, n: int, *, method: str = "linear", n_samples: int = 500,
 
     Parameters
     ----------
-    model : PolyModel or SSModel
-        A model with a parameter covariance.
-    n : int
-        Number of samples.
-    method, n_samples, seed
-        As for :func:`bode_band`.
+    model, n, method, n_samples, seed
+        As for :func:`step_band`.
 
     Returns
     -------
     Band
         The pulse response and its standard deviation, shape (n, ny, nu).
     """
-    f = lambda m: _impulse(m, n)  # noqa: E731
+    return _time_band(model, n, _impulse, method, n_samples, seed)
+
+
+def _time_band(model, n: int, response, method: str, n_samples: int, seed) -> Band:
+    f = lambda m: response(m, n)  # noqa: E731
     return Band(np.arange(n) * model.Ts, f(model), _propagate(model, f, method, n_samples, seed))
 
 

@@ -368,10 +368,8 @@ def write_fleet(
     ----------
     records : list of dict
         One per record: its name, study summary or error.
-    out_dir : str or os.PathLike
-        The folder.
-    force : bool
-        Replace existing files.
+    out_dir, force
+        As for :func:`write_campaign`.
 
     Returns
     -------

@@ -45,7 +45,7 @@ from mcap.records import Channel, Chunk, Footer, Message, MessageIndex, Metadata
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from rwlab._io import naming
+from rwlab._io import lock_exclusive, naming
 from rwlab.errors import FileFormatError, RecordBusyError, RecordDamagedError, RwlabWarning
 
 __all__ = [
@@ -119,33 +119,17 @@ def partial_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.partial{path.suffix or '.mcap'}")
 
 
-def _open_locked(path: Path, asked: Path):
-    """Open ``path`` for writing under an exclusive lock, or raise ``RecordBusyError``.
-
-    ``fcntl.flock`` (advisory, released by the OS when the process dies) guards
-    the file; it is truncated only once the lock is held, and the lock is
-    retried when the file was renamed away between opening and locking.
-    """
-    import fcntl
-
-    while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise RecordBusyError(
-                f"{asked} is being written by another run (into {path.name}); wait for it or "
-                "choose another --out"
-            ) from None
-        try:
-            same = os.stat(path).st_ino == os.fstat(fd).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            os.ftruncate(fd, 0)
-            return os.fdopen(fd, "wb")
-        os.close(fd)  # the previous writer renamed it to its record meanwhile: start again
+def _open_locked(path: Path, asked: Path) -> io.BufferedWriter:
+    """Open ``path`` for writing under an exclusive lock, or raise ``RecordBusyError``;
+    it is truncated only once the lock is held (a previous writer that renamed it to its
+    record meanwhile: the lock is taken on the new file)."""
+    busy = RecordBusyError(
+        f"{asked} is being written by another run (into {path.name}); wait for it or "
+        "choose another --out"
+    )
+    fd = lock_exclusive(path, busy)
+    os.ftruncate(fd, 0)
+    return os.fdopen(fd, "wb")
 
 
 class RecordWriter:

@@ -11,7 +11,7 @@
 - :class:`IdentifiedWheel` — the model chosen by ``rwlab identify`` (``model.json``).
 """
 
-import importlib
+from rwlab._lazy import lazy_exports
 
 _SOURCES = {
     "WheelCommandError": "rwlab.errors",
@@ -36,13 +36,8 @@ _SOURCES = {
 }
 
 
-def __getattr__(name: str):
-    """Import on first use (PEP 562): ``rwlab --help`` must not load python-can and SciPy."""
-    if name not in _SOURCES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_SOURCES[name]), name)
-    globals()[name] = value
-    return value
+# imported on first use: ``rwlab --help`` must not load python-can and SciPy
+__getattr__ = lazy_exports(__name__, _SOURCES)
 
 
 __all__ = [

@@ -82,10 +82,7 @@ together (the state machine itself is :mod:`rwlab.wheel.cia402_state`).
 
 from __future__ import annotations
 
-import hashlib
 import struct
-from functools import cache
-from importlib import resources
 from typing import Any
 
 import can
@@ -98,16 +95,17 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
     BusNetwork,
+    CanopenNodeBase,
     SdoPumpNetwork,
+    ShippedEds,
     TpdoSchedule,
-    checked_sdo_request,
+    canopen_id,
     cob_ids,
     send_frame,
     setpoint_abort,
 )
 from rwlab.wheel.cia402_state import DriveState, S, next_state, statusword
-from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = [
@@ -120,7 +118,6 @@ __all__ = [
     "statusword",
 ]
 
-EDS = "cia402_wheel.eds"
 PROFILE_VELOCITY, PROFILE_TORQUE = 3, 4
 SUPPORTED_MODES = {0, PROFILE_VELOCITY, PROFILE_TORQUE}
 MILLI = 1000  # 0.001 rpm per rpm; ‰ per unit
@@ -135,19 +132,8 @@ ERROR_CODES = {  # CiA 301 error code classes, as in the ``canopen`` profile
 }
 
 
-def eds_path() -> str:
-    """Path of the profile's object dictionary, ``cia402_wheel.eds``.
-
-    Returns
-    -------
-    str
-    """
-    return str(resources.files(__package__).joinpath(EDS))
-
-
-@cache
-def _eds_text() -> str:
-    return resources.files(__package__).joinpath(EDS).read_text()
+EDS = ShippedEds("cia402_wheel.eds")
+eds_path = EDS.path  # the path of ``cia402_wheel.eds``, the profile's object dictionary
 
 
 def object_dictionary(node_id: int) -> ObjectDictionary:
@@ -162,15 +148,10 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
     -------
     canopen.ObjectDictionary
     """
-    return canopen.import_od(eds_path(), node_id=canopen_id(node_id))
+    return EDS.dictionary(canopen_id(node_id))
 
 
-def canopen_id(node_id: int) -> int:
-    """The CANopen node id of wheel ``node_id``: ``node_id + 1`` (id 0 is reserved)."""
-    return proto.check_node(node_id) + 1
-
-
-class Cia402NodeLink(NodeLink):
+class Cia402NodeLink(CanopenNodeBase):
     """The twin as a CiA 402 drive (``canopen.LocalNode`` with the drive state machine).
 
     Parameters
@@ -231,33 +212,7 @@ class Cia402NodeLink(NodeLink):
 
     # -- receiving --------------------------------------------------------------------------
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
-        for msg in read_frames(self.bus):
-            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
-                self.foreign_frames += 1
-                continue
-            cob = msg.arbitration_id
-            if cob in self._own or cob == 0x700 + self.cid:
-                self._twin = (
-                    str(msg.channel)
-                    if getattr(self.bus, "reports_sources", False)
-                    else ("another sender")
-                )
-                continue
-            if cob not in self._ids:
-                self.foreign_frames += 1
-                continue
-            self._arrival = msg.timestamp if self.clock.simulated else now
-            self.network.stamp = self._arrival
-            if cob == 0x600 + self.cid and not checked_sdo_request(self.network, cob, msg.data):
-                self.bad_frames += 1
-                continue
-            if cob in self._rpdo_bytes and len(msg.data) != self._rpdo_bytes[cob]:
-                self.bad_frames += 1
-                continue
-            try:
-                self.network.notify(cob, bytearray(msg.data), self._arrival)
-            except (struct.error, ValueError, IndexError, KeyError, TypeError):
-                self.bad_frames += 1  # an RPDO too short for its objects
+        self._route_frames(now, self._own, self._ids, self._rpdo_bytes)
         out, self._commands = self._commands, []
         return out
 
@@ -440,9 +395,6 @@ class Cia402NodeLink(NodeLink):
     def _fill(self, pdo_map: Any) -> None:
         for var in pdo_map:
             var.raw = self._values.get(var.index, 0)
-
-    def heard_twin(self) -> str | None:
-        return self._twin
 
 
 class Cia402HostLink(HostLink):
@@ -629,4 +581,4 @@ class Cia402Protocol(WheelProtocol):
         return cob_ids(cid, tpdos, (0x200 + cid, 0x300 + cid))
 
     def identity(self) -> str:
-        return f"canopen/cia402 eds sha256 {hashlib.sha256(_eds_text().encode()).hexdigest()}"
+        return f"canopen/cia402 eds sha256 {EDS.sha256}"

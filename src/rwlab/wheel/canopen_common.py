@@ -27,18 +27,23 @@ CiA 301 abort codes as ``canopen.sdo.exceptions.SdoAbortedError.CODES`` lists th
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Container, Mapping
+from importlib import resources
 
 import can
 import canopen
+from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError
 
 from rwlab.interrupts import uninterrupted
+from rwlab.wheel import protocol as proto
 from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock
+from rwlab.wheel.link import Clock, NodeLink
 
 __all__ = [
     "ABORT_RANGE_EXCEEDED",
@@ -61,6 +66,64 @@ ABORT_DEVICE_STATE = 0x08000022  # cannot be transferred or stored: present devi
 SDO_FRAME_BYTES = 8
 BLOCK_DOWNLOAD = 0xC0  # client command specifier 6, in bits 5..7
 SDO_RX, SDO_TX = 0x600, 0x580
+
+
+def canopen_id(node_id: int) -> int:
+    """The CANopen node id of wheel ``node_id`` in rwlab's profiles: ``node_id + 1``
+    (CANopen ids start at 1; OreSat's cards have their own, ``canopen_oresat.canopen_id``).
+
+    Parameters
+    ----------
+    node_id : int
+        0..15.
+
+    Returns
+    -------
+    int
+    """
+    return proto.check_node(node_id) + 1
+
+
+class ShippedEds:
+    """An object dictionary rwlab ships beside its profile (``rwlab/wheel/*.eds``).
+
+    Parameters
+    ----------
+    name : str
+        The file name, e.g. ``"cia402_wheel.eds"``.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def path(self) -> str:
+        """Path of the profile's object dictionary.
+
+        Returns
+        -------
+        str
+        """
+        return str(resources.files(__package__).joinpath(self.name))
+
+    @functools.cached_property
+    def sha256(self) -> str:
+        """The file's SHA-256, hex: what a protocol's identity names."""
+        text = resources.files(__package__).joinpath(self.name).read_text()
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def dictionary(self, cid: int) -> ObjectDictionary:
+        """A fresh object dictionary for CANopen node ``cid``.
+
+        Parameters
+        ----------
+        cid : int
+            The CANopen node id.
+
+        Returns
+        -------
+        canopen.ObjectDictionary
+        """
+        return canopen.import_od(self.path(), node_id=cid)
 
 
 def send_frame(bus: can.BusABC, cob_id: int, data: bytes, t: float) -> None:
@@ -106,6 +169,65 @@ class BusNetwork(canopen.Network):
         msg.timestamp = self.stamp
         with uninterrupted(), self.send_lock:
             self._bus.send(msg)
+
+
+class CanopenNodeBase(NodeLink):
+    """What the twin's end of every CANopen profile does with the frames it receives.
+
+    Subclasses set ``bus``, ``clock``, ``cid`` (the CANopen id), ``network`` and
+    ``_twin`` (None) in their constructor, and call :meth:`_route_frames` from
+    ``receive``.
+    """
+
+    bus: can.BusABC
+    clock: Clock
+    cid: int
+    network: BusNetwork
+    _twin: str | None
+    _arrival: float
+
+    def _route_frames(
+        self, now: float, own: Container[int], wanted: Container[int], sizes: Mapping[int, int]
+    ) -> None:
+        """Hand each received frame to ``network``: the node's own COB-ids (``own``, and its
+        heartbeat) heard from elsewhere name another twin on the bus; a COB-id not in
+        ``wanted`` is foreign; a bad SDO request is answered with an abort, and a frame
+        whose length is not its ``sizes`` entry (RPDOs), or too short for its objects, is
+        counted bad."""
+        for msg in read_frames(self.bus):
+            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                self.foreign_frames += 1
+                continue
+            cob = msg.arbitration_id
+            if cob in own or cob == 0x700 + self.cid:
+                reports = getattr(self.bus, "reports_sources", False)
+                self._twin = str(msg.channel) if reports else "another sender"
+                continue
+            if cob not in wanted:
+                self.foreign_frames += 1
+                continue
+            self._arrival = msg.timestamp if self.clock.simulated else now
+            self.network.stamp = self._arrival
+            if cob == 0x600 + self.cid and not checked_sdo_request(self.network, cob, msg.data):
+                self.bad_frames += 1
+                continue
+            if cob in sizes and len(msg.data) != sizes[cob]:
+                self.bad_frames += 1
+                continue
+            try:
+                self.network.notify(cob, bytearray(msg.data), self._arrival)
+            except (struct.error, ValueError, IndexError, KeyError, TypeError):
+                self.bad_frames += 1  # a frame too short for its objects
+
+    def heard_twin(self) -> str | None:
+        """Where another twin answering as this node was heard from, or None.
+
+        Returns
+        -------
+        str or None
+            The bus channel it came from, or ``"another sender"``.
+        """
+        return self._twin
 
 
 def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearray) -> bool:

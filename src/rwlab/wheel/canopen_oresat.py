@@ -61,11 +61,8 @@ The TPDOs have no counter: rwlab's driver cannot see a lost TPDO here.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import struct
-from functools import cache
-from importlib import resources
 from typing import Any
 
 import can
@@ -78,20 +75,19 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
     BusNetwork,
+    CanopenNodeBase,
     SdoPumpNetwork,
+    ShippedEds,
     TpdoSchedule,
-    checked_sdo_request,
     cob_ids,
     send_frame,
     setpoint_abort,
 )
-from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["OresatHostLink", "OresatNodeLink", "OresatProtocol", "canopen_id", "eds_path"]
 
-EDS = "oresat_wheel.eds"
 FIRST_WHEEL_ID, ID_STEP = 0x3C, 4  # OreSat1 cards.csv: rw_1..rw_4 at 0x3C, 0x40, 0x44, 0x48
 IDLE, SYSTEM_ERROR, CONTROLLER_ERROR, TORQUE_CONTROL, VEL_CONTROL, CLEAR_ERRORS = 1, 2, 3, 4, 5, 13
 _TO_STATE = {
@@ -115,19 +111,8 @@ NMT_OPERATIONAL = 0x05
 HOUSEKEEPING_MS = 1000  # TPDO3/4 (bus, temperatures): the driver asks for them at 1 Hz
 
 
-def eds_path() -> str:
-    """Path of the profile's object dictionary, ``oresat_wheel.eds``.
-
-    Returns
-    -------
-    str
-    """
-    return str(resources.files(__package__).joinpath(EDS))
-
-
-@cache
-def _eds_text() -> str:
-    return resources.files(__package__).joinpath(EDS).read_text()
+EDS = ShippedEds("oresat_wheel.eds")
+eds_path = EDS.path  # the path of ``oresat_wheel.eds``, the profile's object dictionary
 
 
 def canopen_id(node_id: int) -> int:
@@ -157,7 +142,7 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
     -------
     canopen.ObjectDictionary
     """
-    return canopen.import_od(eds_path(), node_id=canopen_id(node_id))
+    return EDS.dictionary(canopen_id(node_id))
 
 
 def error_bits(faults: Fault) -> int:
@@ -192,7 +177,7 @@ def faults_of(errors: int) -> Fault:
     return out
 
 
-class OresatNodeLink(NodeLink):
+class OresatNodeLink(CanopenNodeBase):
     """The twin as OreSat's reaction-wheel card (``canopen.LocalNode``).
 
     Parameters
@@ -231,27 +216,7 @@ class OresatNodeLink(NodeLink):
         self._params = params
 
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
-        for msg in read_frames(self.bus):
-            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
-                self.foreign_frames += 1
-                continue
-            cob = msg.arbitration_id
-            if cob in self._own or cob == 0x700 + self.cid:
-                reports = getattr(self.bus, "reports_sources", False)
-                self._twin = str(msg.channel) if reports else "another sender"
-                continue
-            if cob not in (0x000, 0x600 + self.cid):
-                self.foreign_frames += 1
-                continue
-            self._arrival = msg.timestamp if self.clock.simulated else now
-            self.network.stamp = self._arrival
-            if cob != 0x000 and not checked_sdo_request(self.network, cob, msg.data):
-                self.bad_frames += 1
-                continue
-            try:
-                self.network.notify(cob, bytearray(msg.data), self._arrival)
-            except (struct.error, ValueError, IndexError, KeyError, TypeError):
-                self.bad_frames += 1  # an NMT command too short
+        self._route_frames(now, self._own, (0x000, 0x600 + self.cid), {})
         out, self._commands = self._commands, []
         return out
 
@@ -371,9 +336,6 @@ class OresatNodeLink(NodeLink):
                 for var in pdo_map:
                     var.raw = self._values.get((var.index, var.subindex), 0)
                 send_frame(self.bus, pdo_map.cob_id, pdo_map.data, t)
-
-    def heard_twin(self) -> str | None:
-        return self._twin
 
 
 class OresatHostLink(HostLink):
@@ -558,4 +520,4 @@ class OresatProtocol(WheelProtocol):
         return cob_ids(cid, (0x180 + cid, 0x280 + cid, 0x380 + cid, 0x480 + cid), ())
 
     def identity(self) -> str:
-        return f"canopen/oresat eds sha256 {hashlib.sha256(_eds_text().encode()).hexdigest()}"
+        return f"canopen/oresat eds sha256 {EDS.sha256}"

@@ -45,10 +45,7 @@ The frames are sent with the caller's time stamps (a simulated clock's, too).
 
 from __future__ import annotations
 
-import hashlib
 import struct
-from functools import cache
-from importlib import resources
 from typing import Any
 
 import can
@@ -60,13 +57,15 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
     BusNetwork,
-    checked_sdo_request,
+    CanopenNodeBase,
+    ShippedEds,
+    canopen_id,
     cob_ids,
     send_frame,
     setpoint_abort,
 )
 from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
+from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["CanopenHostLink", "CanopenNodeLink", "CanopenProtocol", "eds_path", "object_dictionary"]
@@ -88,19 +87,8 @@ EMCY_CODES = {  # CiA 301 error code classes
 }
 
 
-def eds_path() -> str:
-    """Path of the shipped object dictionary, ``rw_canopen.eds``.
-
-    Returns
-    -------
-    str
-    """
-    return str(resources.files(__package__).joinpath("rw_canopen.eds"))
-
-
-@cache
-def _eds_text() -> str:
-    return resources.files(__package__).joinpath("rw_canopen.eds").read_text()
+EDS = ShippedEds("rw_canopen.eds")
+eds_path = EDS.path  # the path of ``rw_canopen.eds``, the profile's object dictionary
 
 
 def object_dictionary(node_id: int) -> ObjectDictionary:
@@ -115,15 +103,10 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
     -------
     canopen.ObjectDictionary
     """
-    return canopen.import_od(eds_path(), node_id=canopen_id(node_id))
+    return EDS.dictionary(canopen_id(node_id))
 
 
-def canopen_id(node_id: int) -> int:
-    """The CANopen node id of wheel ``node_id``: ``node_id + 1`` (CANopen ids start at 1)."""
-    return proto.check_node(node_id) + 1
-
-
-class CanopenNodeLink(NodeLink):
+class CanopenNodeLink(CanopenNodeBase):
     """The twin as a CANopen node (``canopen.LocalNode``).
 
     Parameters
@@ -163,30 +146,7 @@ class CanopenNodeLink(NodeLink):
 
     # -- receiving ------------------------------------------------------------------------
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
-        for msg in read_frames(self.bus):
-            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
-                self.foreign_frames += 1
-                continue
-            cob = msg.arbitration_id
-            if cob in {0x180 + self.cid, 0x280 + self.cid, 0x700 + self.cid}:
-                self._twin = (
-                    str(msg.channel)
-                    if getattr(self.bus, "reports_sources", False)
-                    else ("another sender")
-                )
-                continue
-            if cob not in self._ids:
-                self.foreign_frames += 1
-                continue
-            self._arrival = msg.timestamp if self.clock.simulated else now
-            self.network.stamp = self._arrival
-            if cob == 0x600 + self.cid and not checked_sdo_request(self.network, cob, msg.data):
-                self.bad_frames += 1  # answered with an abort
-                continue
-            try:
-                self.network.notify(cob, bytearray(msg.data), self._arrival)
-            except (struct.error, ValueError, IndexError, KeyError, TypeError):
-                self.bad_frames += 1  # an RPDO or SDO request too short for its objects
+        self._route_frames(now, {0x180 + self.cid, 0x280 + self.cid}, self._ids, {})
         out, self._commands = self._commands, []
         return out
 
@@ -305,21 +265,14 @@ class CanopenNodeLink(NodeLink):
         for var in pdo_map:
             var.raw = self._values.get(var.index, 0)
 
-    def heard_twin(self) -> str | None:
-        return self._twin
-
 
 class CanopenHostLink(HostLink):
     """The driver as a CANopen client (``canopen.RemoteNode``): RPDO out, TPDOs in.
 
     Parameters
     ----------
-    bus : can.BusABC
-        The python-can bus.
-    node_id : int
-        The wheel's CANopen node id.
-    clock : Clock
-        Where time comes from (simulated or wall clock).
+    bus, node_id, clock
+        As for :class:`CanopenNodeLink`.
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
@@ -439,4 +392,4 @@ class CanopenProtocol(WheelProtocol):
         return cob_ids(cid, (0x180 + cid, 0x280 + cid, 0x380 + cid), (0x200 + cid,))
 
     def identity(self) -> str:
-        return f"canopen eds sha256 {hashlib.sha256(_eds_text().encode()).hexdigest()}"
+        return f"canopen eds sha256 {EDS.sha256}"

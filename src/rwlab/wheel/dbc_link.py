@@ -93,12 +93,8 @@ class RwlabNodeLink(NodeLink):
 
     Parameters
     ----------
-    bus : can.BusABC
-        The python-can bus.
-    node_id : int
-        The wheel's node id (:func:`rwlab.wheel.protocol.check_node`).
-    simulated : bool
-        Frames carry simulated time (the twin's clock), not the wall clock.
+    bus, node_id, simulated
+        As for :class:`RwlabHostLink`.
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, simulated: bool) -> None:

@@ -210,12 +210,8 @@ class NrwaT6NodeLink(NspNodeLinkBase):
 
     Parameters
     ----------
-    port : serial port
-        A pyserial-like port (``in_waiting``, ``read``, ``write``).
-    node_id : int
-        The wheel.
-    clock : WallClock or SimClock
-        The twin's clock.
+    port, node_id, clock
+        As for :class:`rwlab.wheel.nsp_wire.NspNodeLinkBase` (the twin's clock).
     """
 
     def __init__(self, port: Any, node_id: int, clock: Clock) -> None:
@@ -365,14 +361,8 @@ class NrwaT6HostLink(NspHostLinkBase):
 
     Parameters
     ----------
-    port : serial port
-        A pyserial-like port (``in_waiting``, ``read``, ``write``).
-    node_id : int
-        The wheel.
-    clock : WallClock or SimClock
-        The driver's clock (on a SimClock the link polls as the clock advances).
-    poll_rate : float
-        Telemetry polls per second, Hz.
+    port, node_id, clock, poll_rate
+        As for :class:`rwlab.wheel.nsp_wire.NspHostLinkBase`.
     """
 
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
