@@ -14,7 +14,7 @@ import doccheck
 
 # Public methods of exported classes still without a Parameters or Returns section, when
 # the per-parameter check came (issue 45). Lower it as they are documented; never raise it.
-UNDOCUMENTED_METHODS = 312
+UNDOCUMENTED_METHODS = 250
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +40,38 @@ def test_a_method_that_documents_parameters_names_each_and_no_other(lacking):
 def test_the_undocumented_methods_only_shrink(lacking):
     methods = set(doccheck.documented_callables()) - set(doccheck.exported())
     assert len(methods & set(lacking)) <= UNDOCUMENTED_METHODS
+
+
+def test_an_override_without_a_docstring_is_documented_by_its_base():
+    class Base:
+        def f(self, x: float) -> float:
+            """Twice x.
+
+            Parameters
+            ----------
+            x : float
+                A value.
+
+            Returns
+            -------
+            float
+            """
+            return 2 * x
+
+    class Child(Base):
+        def f(self, x: float) -> float:
+            return 3 * x
+
+    class Renamed(Base):
+        def f(self, y: float) -> float:
+            return 3 * y
+
+    assert doccheck.declared(Child, "f") is Base.f
+    assert doccheck.missing(Child.f, doccheck.declared(Child, "f")) == []
+    assert doccheck.missing(Renamed.f, doccheck.declared(Renamed, "f")) == [
+        "parameter 'y'",
+        "stale 'x'",
+    ]
 
 
 def test_the_check_sees_a_missing_section_or_name():

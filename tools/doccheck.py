@@ -111,7 +111,7 @@ def _constructor(cls) -> list[inspect.Parameter]:
     return []
 
 
-def missing(obj) -> list[str]:
+def missing(obj, doc_from: object = None) -> list[str]:
     """What ``obj``'s numpydoc docstring lacks: a section it needs (``"Parameters"``,
     ``"Returns"``), a parameter it does not name (``"parameter 'x'"``) or a name that is
     no parameter (``"stale 'y'"``). A class documents its constructor's parameters under
@@ -125,7 +125,7 @@ def missing(obj) -> list[str]:
         if not fields:
             return ["Parameters"]
         return [n for n in _names(params, _documented(fields)) if not n.startswith("stale")]
-    doc = FunctionDoc(obj)
+    doc = FunctionDoc(obj, doc=inspect.getdoc(doc_from) if doc_from is not None else None)
     lacks = []
     params = _signature(obj)
     if params and not doc["Parameters"]:
@@ -152,6 +152,22 @@ def methods(cls) -> dict[str, object]:
     }
 
 
+def declared(cls, name: str) -> object:
+    """Where the docstring of ``cls.name`` is: the method itself, or, when it has none, the
+    base class method it overrides (what the API pages show, as ``inspect.getdoc`` does)."""
+    fn = vars(cls)[name]
+    fn = fn.__func__ if isinstance(fn, classmethod | staticmethod) else fn
+    if (fn.__doc__ or "").strip():
+        return fn
+    for base in cls.__mro__[1:]:
+        if name in vars(base):
+            inherited = vars(base)[name]
+            inherited = getattr(inherited, "__func__", inherited)
+            if (getattr(inherited, "__doc__", None) or "").strip():
+                return inherited
+    return fn
+
+
 def documented_callables() -> dict[str, object]:
     """The exported callables and the public methods of the exported classes."""
     objs = exported()
@@ -161,11 +177,22 @@ def documented_callables() -> dict[str, object]:
     return objs
 
 
+def _doc_owner(qualified: str, obj: object) -> object:
+    """For a method, where its docstring is (:func:`declared`); else the object itself."""
+    owner_name, _, attr = qualified.rpartition(".")
+    module_name, _, class_name = owner_name.rpartition(".")
+    module = sys.modules.get(module_name)
+    cls = getattr(module, class_name, None) if module else None
+    if inspect.isclass(cls) and attr in vars(cls) and not inspect.isclass(obj):
+        return declared(cls, attr)
+    return obj
+
+
 def coverage() -> tuple[float, dict[str, list[str]]]:
     """The share of the documented callables (:func:`documented_callables`) whose docstring
     has every section and names every parameter, and what the rest lack."""
     objs = documented_callables()
-    lacking = {name: m for name, obj in objs.items() if (m := missing(obj))}
+    lacking = {name: m for name, obj in objs.items() if (m := missing(obj, _doc_owner(name, obj)))}
     return 1 - len(lacking) / len(objs), lacking
 
 

@@ -98,18 +98,53 @@ class HostLink(abc.ABC):
         self.raw_listener: RawListener | None = None
 
     def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
-        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
+        """Learn the wheel's parameters (a protocol in SI units needs its inertia).
+
+        Parameters
+        ----------
+        params : WheelParams
+            The wheel's parameters.
+        """
 
     def set_telemetry_rate(self, rate: float) -> None:  # noqa: B027 - streaming links ignore it
-        """Telemetry wanted per second, Hz (a polling protocol polls at this rate)."""
+        """Set the telemetry wanted (a polling protocol polls at this rate).
+
+        Parameters
+        ----------
+        rate : float
+            Telemetry per second, Hz.
+        """
 
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
-        """Send ``cmd`` at clock time ``now`` (s); ``ProtocolError`` if it cannot be encoded."""
+        """Send a command to the wheel.
+
+        Parameters
+        ----------
+        cmd : Command
+            The command.
+        now : float
+            Clock time, s.
+
+        Raises
+        ------
+        ProtocolError
+            The protocol cannot encode it.
+        """
 
     @abc.abstractmethod
     def receive(self, now: float) -> list[Incoming]:
-        """Every valid telemetry and heartbeat of this wheel waiting now, oldest first."""
+        """Every valid telemetry and heartbeat of this wheel waiting now, oldest first.
+
+        Parameters
+        ----------
+        now : float
+            Clock time, s.
+
+        Returns
+        -------
+        list of Incoming
+        """
 
     def close(self) -> None:  # noqa: B027 - most links own nothing beyond the transport
         """Release what the link opened (not the transport)."""
@@ -123,25 +158,54 @@ class NodeLink(abc.ABC):
         self.foreign_frames = 0
 
     def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
-        """Learn the wheel's parameters (a protocol in SI units needs its inertia)."""
+        """Learn the wheel's parameters (as :meth:`HostLink.configure`).
+
+        Parameters
+        ----------
+        params : WheelParams
+        """
 
     def close(self) -> None:  # noqa: B027 - most links own nothing beyond the transport
         """Release what the link opened (not the transport)."""
 
     @abc.abstractmethod
     def receive(self, now: float) -> list[tuple[float, Command]]:
-        """Every valid command for this wheel waiting now, with its arrival time, s."""
+        """Every valid command for this wheel waiting now.
+
+        Parameters
+        ----------
+        now : float
+            Clock time, s.
+
+        Returns
+        -------
+        list of (float, Command)
+            Each command with its arrival time, s, oldest first.
+        """
 
     @abc.abstractmethod
     def send(self, frame: Telemetry | Heartbeat, t: float, corrupt: int | None = None) -> None:
-        """Send telemetry or a heartbeat at clock time ``t``.
+        """Send telemetry or a heartbeat.
 
-        ``corrupt`` (fault injection): damage the encoded message by flipping bits
-        of its byte at this index (modulo its length), as a noisy line would.
+        Parameters
+        ----------
+        frame : Telemetry or Heartbeat
+            What to send.
+        t : float
+            Clock time, s.
+        corrupt : int, optional
+            Fault injection: damage the encoded message by flipping bits of its byte at
+            this index (modulo its length), as a noisy line would.
         """
 
     def heard_twin(self) -> str | None:
-        """The source of another wheel answering under this node id, if one was heard."""
+        """Whether another wheel answers under this node id.
+
+        Returns
+        -------
+        str or None
+            Its source, if one was heard.
+        """
         return None
 
 
@@ -179,10 +243,26 @@ class WheelProtocol(abc.ABC):
 
     @abc.abstractmethod
     def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
-        """The twin's link as wheel ``node_id`` on ``transport`` (see :meth:`host_link`)."""
+        """The twin's link as wheel ``node_id`` on ``transport``.
+
+        Parameters
+        ----------
+        transport, node_id, clock
+            As for :meth:`host_link` (the twin's clock).
+
+        Returns
+        -------
+        NodeLink
+        """
 
     def identity(self) -> str:
-        """A text naming the protocol's definition exactly (a file hash), for records."""
+        """What names the protocol's definition exactly, for records.
+
+        Returns
+        -------
+        str
+            The name, and the hash of a definition file where there is one.
+        """
         return self.name
 
     def addresses(self, node_id: int) -> str:

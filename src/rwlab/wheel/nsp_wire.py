@@ -301,11 +301,27 @@ class NspNodeLinkBase(NodeLink):
 
     @abc.abstractmethod
     def addresses(self) -> tuple[int, ...]:
-        """The NSP destination addresses this wheel answers on."""
+        """The NSP destination addresses this wheel answers on.
+
+        Returns
+        -------
+        tuple of int
+        """
 
     @abc.abstractmethod
     def handle(self, packet: NspPacket) -> Verdict:
-        """Carry out one request addressed to this wheel."""
+        """Carry out one request addressed to this wheel.
+
+        Parameters
+        ----------
+        packet : NspPacket
+            The request.
+
+        Returns
+        -------
+        Verdict
+            The reply to send and the command it carried, if any.
+        """
 
     def configure(self, params: WheelParams) -> None:
         """The wheel's inertia (SI units) and limits (what is NACKed)."""
@@ -405,15 +421,48 @@ class NspHostLinkBase(HostLink):
 
     @abc.abstractmethod
     def encode_command(self, cmd: proto.Command) -> tuple[int, bytes]:
-        """(NSP command code, data field) for ``cmd``; ProtocolError if not encodable."""
+        """The request that carries a command.
+
+        Parameters
+        ----------
+        cmd : Command
+            The command.
+
+        Returns
+        -------
+        (int, bytes)
+            The NSP command code and the data field.
+
+        Raises
+        ------
+        ProtocolError
+            The wheel's protocol cannot encode it.
+        """
 
     @abc.abstractmethod
     def read_telemetry(self) -> proto.Telemetry | None:
-        """Poll the wheel's state; None when a reply is missing or malformed."""
+        """Poll the wheel's state.
+
+        Returns
+        -------
+        Telemetry or None
+            None when a reply is missing or malformed.
+        """
 
     @abc.abstractmethod
     def read_heartbeat(self, telemetry: proto.Telemetry) -> proto.Heartbeat | None:
-        """Poll the wheel's slow state (temperature, supply, faults); None when missing."""
+        """Poll the wheel's slow state (temperature, supply, faults).
+
+        Parameters
+        ----------
+        telemetry : Telemetry
+            The telemetry just read (its mode and node).
+
+        Returns
+        -------
+        Heartbeat or None
+            None when a reply is missing.
+        """
 
     # -- the wire ---------------------------------------------------------------------
     def transact(self, command: int, payload: bytes = b"") -> NspPacket | None:
