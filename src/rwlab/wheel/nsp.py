@@ -34,15 +34,15 @@ inertia. SLIP and this CRC are a few lines each (see :mod:`rwlab.wheel.serial`).
 from __future__ import annotations
 
 import struct
-import time
+from dataclasses import replace
 from typing import Any
 
 from rwlab.wheel import nsp_wire
 from rwlab.wheel import protocol as proto
-from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink, WheelProtocol
-from rwlab.wheel.nsp_wire import NspPacket, SlipReader
+from rwlab.wheel.link import Clock, NodeLink, WheelProtocol
+from rwlab.wheel.nsp_wire import NspHostLinkBase, NspPacket, SlipReader
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
-from rwlab.wheel.serial import crc16_ccitt, slip_encode
+from rwlab.wheel.serial import crc16_ccitt
 
 __all__ = [
     "HOST_ADDRESS",
@@ -224,168 +224,75 @@ class NspNodeLink(NodeLink):
         self._corrupt_next = corrupt if corrupt is not None else self._corrupt_next
 
 
-class NspHostLink(HostLink):
+class NspHostLink(NspHostLinkBase):
     """The driver's end: POKEs modes, PEEKs the telemetry block at ``poll_rate``.
+
+    The polling, the ACK counting and the request/reply wire are the NSP family's
+    (:class:`rwlab.wheel.nsp_wire.NspHostLinkBase`), with rwlab's MSB-first CRC.
 
     Parameters
     ----------
-    port : serial port
-        The byte link to the wheel (pyserial-like: ``read``/``write``).
-    node_id : int
-        The wheel's node id; it answers as NSP address ``0x20 + node_id``.
-    clock : Clock
-        Where time comes from (simulated or wall clock).
-    poll_rate : float
-        Telemetry PEEKs per second, Hz.
+    port, node_id, clock, poll_rate
+        As for :class:`rwlab.wheel.nsp_wire.NspHostLinkBase`; the wheel answers as NSP
+        address ``0x20 + node_id``.
     inertia : float
         Rotor inertia, kg·m²: turns an acceleration command (rpm/s) into the torque
-        (N·m) NSP commands; 0: the RW90's.
+        (N·m) NSP commands; 0: the RW90's (:meth:`configure` sets the wheel's).
     """
+
+    wheel_address = staticmethod(wheel_address)
+
+    crc = staticmethod(crc16_ccitt)
 
     def __init__(
         self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0, inertia: float = 0.0
     ) -> None:
-        super().__init__()
-        self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
-        self.address = wheel_address(node_id)
-        self.inertia = inertia or RW90.inertia
-        self.period = 1.0 / poll_rate
-        self.reply_timeout = 0.5  # s of wall time: a pty or a 115200-baud line answers in ms
-        self._reader = SlipReader()
-        self._queue: list[Incoming] = []
-        self._next_poll = clock.now()
-        self._acked = 0
-        self._polls = 0
-        self._last_heartbeat: tuple[int, int] | None = None
-        self._heartbeat_due = clock.now()
-        self._busy = False
-        if clock.simulated:
-            clock.attach(self._tick)  # type: ignore[union-attr]
+        super().__init__(port, node_id, clock, poll_rate)
+        if inertia:
+            self.params = replace(self.params, inertia=inertia)
+        self._block: tuple[Any, ...] = ()
 
-    # -- the wire ---------------------------------------------------------------------
-    def transact(self, command: int, payload: bytes = b"") -> NspPacket | None:
-        """Send a polled request; the wheel's reply (ACK or NACK), or None without one.
-
-        Parameters
-        ----------
-        command : int
-            The MCF command, 0..31.
-        payload : bytes
-
-        Returns
-        -------
-        NspPacket or None
-        """
-        self._busy = True
-        try:
-            return self._transact(command, payload)
-        finally:
-            self._busy = False
-
-    def _transact(self, command: int, payload: bytes) -> NspPacket | None:
-        self._reader.feed(_read(self.port))  # stale bytes are not this reply
-        request = NspPacket(self.address, HOST_ADDRESS, POLL | command, payload)
-        wire = encode_packet(request)
-        self.port.write(wire)
-        now = self.clock.now()
-        if self.raw_listener:
-            self.raw_listener(now, request.mcf, wire, "tx")
-        deadline = time.monotonic() + self.reply_timeout
-        while time.monotonic() < deadline:
-            if self.clock.simulated:
-                self.clock.kick()  # type: ignore[union-attr]
-            for body in self._reader.feed(_read(self.port)):
-                try:
-                    packet = decode_packet(body)
-                except proto.ProtocolError:
-                    self.bad_frames += 1
-                    continue
-                if packet.src != self.address or packet.dst != HOST_ADDRESS:
-                    self.foreign_frames += 1
-                    continue
-                if self.raw_listener:
-                    self.raw_listener(now, packet.mcf, slip_encode(body), "rx")
-                if packet.command == command:
-                    return packet
-            time.sleep(5e-5)
-        return None
-
-    def send(self, cmd: proto.Command, now: float) -> None:
+    def encode_command(self, cmd: proto.Command) -> tuple[int, bytes]:
         if cmd.mode == Mode.CLEAR_FAULT:
-            command, payload = CLEAR_FAULT, b""
-        else:
-            value = 0.0
-            if cmd.mode == Mode.SPEED:
-                value = rpm_to_rad_s(cmd.setpoint)
-            elif cmd.mode == Mode.ACCELERATION:
-                value = self.inertia * rpm_to_rad_s(cmd.setpoint)  # N·m
-            command = POKE
-            payload = bytes([0x00, _TO_NSP[cmd.mode]]) + struct.pack("<f", value)
-        reply = self.transact(command, payload)
-        if reply is None or not reply.mcf & ACK:
-            self.lost_commands += 1
-        else:
-            self._acked = cmd.sequence
+            return CLEAR_FAULT, b""
+        value = 0.0
+        if cmd.mode == Mode.SPEED:
+            value = rpm_to_rad_s(cmd.setpoint)
+        elif cmd.mode == Mode.ACCELERATION:
+            value = self.params.inertia * rpm_to_rad_s(cmd.setpoint)  # N·m
+        return POKE, bytes([0x00, _TO_NSP[cmd.mode]]) + struct.pack("<f", value)
 
-    # -- telemetry ----------------------------------------------------------------------
-    def configure(self, params: WheelParams) -> None:
-        """The wheel's inertia turns rpm/s into the TORQUE (N·m) NSP speaks."""
-        self.inertia = params.inertia
-
-    def set_telemetry_rate(self, rate: float) -> None:
-        """Poll the telemetry block ``rate`` times per second, Hz."""
-        self.period = 1.0 / rate
-        self._next_poll = self.clock.now()
-
-    def _tick(self, now: float) -> float:
-        if not self._busy and now >= self._next_poll - 1e-12:
-            self._poll(now)
-            self._next_poll += self.period
-            if self._next_poll <= now:
-                self._next_poll = now + self.period
-        return self._next_poll
-
-    def _poll(self, now: float) -> None:
-        self._polls += 1
+    def read_telemetry(self) -> proto.Telemetry | None:
         reply = self.transact(PEEK, bytes([TELEMETRY_BLOCK]))
-        if reply is None or not reply.mcf & ACK or len(reply.payload) != 1 + BLOCK.size:
-            return  # the counter skips: the driver counts a lost frame
-        mode, speed, current, faults, flags, temp, uptime, seen, _ = BLOCK.unpack(reply.payload[1:])
-        telemetry = proto.Telemetry(
-            self.node_id,
+        if reply is None or not reply.acked or len(reply.payload) != 1 + BLOCK.size:
+            return None
+        self._block = BLOCK.unpack(reply.payload[1:])
+        mode, speed, current, faults, flags = self._block[:5]
+        return self.telemetry(
             rad_s_to_rpm(speed),
             current,
             _FROM_NSP.get(mode, Mode.IDLE),
             bool(faults),
             bool(flags & 1),
-            self._acked,
-            self._polls & 0xFF,
         )
-        self._queue.append(Incoming(now, telemetry))
-        state = (faults, flags & 2)
-        if now >= self._heartbeat_due or state != self._last_heartbeat:
-            heartbeat = proto.Heartbeat(
-                self.node_id,
-                telemetry.mode,
-                Fault(faults & 0xF),
-                temp,
-                uptime,
-                seen,
-                bool(flags & 2),
-            )
-            self._queue.append(Incoming(now, heartbeat))
-            self._last_heartbeat = state
-            self._heartbeat_due = now + 1.0
 
-    def receive(self, now: float) -> list[Incoming]:
-        if not self.clock.simulated:
-            self._tick(now)
-        out, self._queue = self._queue, []
-        return out
+    def read_heartbeat(self, telemetry: proto.Telemetry) -> proto.Heartbeat | None:
+        """The heartbeat from the telemetry block just read (no request of its own).
 
-    def close(self) -> None:
-        if self.clock.simulated:
-            self.clock.detach(self._tick)  # type: ignore[union-attr]
+        Parameters
+        ----------
+        telemetry : Telemetry
+            The telemetry of that block.
+
+        Returns
+        -------
+        Heartbeat
+        """
+        _, _, _, faults, flags, temp, uptime, seen, _ = self._block
+        rejected = bool(flags & 2) or self._rejected
+        return proto.Heartbeat(
+            self.node_id, telemetry.mode, Fault(faults & 0xF), temp, uptime, seen, rejected
+        )
 
 
 class NspProtocol(WheelProtocol):

@@ -161,16 +161,13 @@ class Rw412HostLink(NspHostLinkBase):
         As for :class:`rwlab.wheel.nsp_wire.NspHostLinkBase`.
     """
 
+    wheel_address = staticmethod(wheel_address)
+
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__(port, node_id, clock, poll_rate)
-        self._address = wheel_address(node_id)
         self._status = 0
         self._status_file = True  # rwlab's extension file 0x40, until the wheel NACKs it
         self._opened = clock.now()
-
-    @property
-    def address(self) -> int:
-        return self._address
 
     def encode_command(self, cmd: proto.Command) -> tuple[int, bytes]:
         if cmd.mode == Mode.CLEAR_FAULT:

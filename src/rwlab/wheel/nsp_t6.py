@@ -365,14 +365,11 @@ class NrwaT6HostLink(NspHostLinkBase):
         As for :class:`rwlab.wheel.nsp_wire.NspHostLinkBase`.
     """
 
+    wheel_address = staticmethod(wheel_address)
+
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__(port, node_id, clock, poll_rate)
-        self._address = wheel_address(node_id)
         self._faults = 0
-
-    @property
-    def address(self) -> int:
-        return self._address
 
     def encode_command(self, cmd: proto.Command) -> tuple[int, bytes]:
         if cmd.mode == Mode.CLEAR_FAULT:

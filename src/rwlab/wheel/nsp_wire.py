@@ -393,10 +393,12 @@ class NspHostLinkBase(HostLink):
     """
 
     host_address = 0x11  # "by convention … the primary computer" (NRWA-T6 ICD §11.2.2)
+    crc: Any = staticmethod(crc16_nsp)  # the frames' CRC; rwlab's own NSP has its own
 
     def __init__(self, port: Any, node_id: int, clock: Clock, poll_rate: float = 10.0) -> None:
         super().__init__()
         self.port, self.node_id, self.clock = port, proto.check_node(node_id), clock
+        self.address = self.wheel_address(node_id)
         self.params = RW90
         self.period = 1.0 / poll_rate
         self.reply_timeout = 0.5  # s of wall time: a pty or a 115200-baud line answers in ms
@@ -414,10 +416,20 @@ class NspHostLinkBase(HostLink):
         if clock.simulated:
             clock.attach(self._tick)  # type: ignore[union-attr]
 
-    @property
+    @staticmethod
     @abc.abstractmethod
-    def address(self) -> int:
-        """The wheel's NSP address."""
+    def wheel_address(node_id: int) -> int:
+        """The family's NSP address of wheel ``node_id`` (the link's ``address``).
+
+        Parameters
+        ----------
+        node_id : int
+            The wheel.
+
+        Returns
+        -------
+        int
+        """
 
     @abc.abstractmethod
     def encode_command(self, cmd: proto.Command) -> tuple[int, bytes]:
@@ -488,7 +500,7 @@ class NspHostLinkBase(HostLink):
     def _transact(self, command: int, payload: bytes) -> NspPacket | None:
         self._reader.feed(read_port(self.port))  # stale bytes are not this reply
         request = NspPacket(self.address, self.host_address, POLL | command, payload)
-        wire = encode_packet(request)
+        wire = encode_packet(request, self.crc)
         self.port.write(wire)
         now = self.clock.now()
         if self.raw_listener:
@@ -499,7 +511,7 @@ class NspHostLinkBase(HostLink):
                 self.clock.kick()  # type: ignore[union-attr]
             for body in self._reader.feed(read_port(self.port)):
                 try:
-                    packet = decode_packet(body)
+                    packet = decode_packet(body, self.crc)
                 except proto.ProtocolError:
                     self.bad_frames += 1
                     continue
