@@ -551,12 +551,23 @@ class WheelSpec:
             out[section] = {
                 name: {"value": getattr(self, name), "source": self.sources[name]}
                 for name, _ in items
+                if not self._implicit(name)
             }
         out["tolerances"] = {
             name: {"relative": t.relative, "absolute": t.absolute, "source": t.source}
             for name, t in self.tolerances.items()
         }
         return out
+
+    def _implicit(self, name: str) -> bool:
+        """A field its file did not state (:data:`OPTIONAL`'s value and source): left out
+        of the file's form, so a spec (and ``model.json``) written before the field keeps
+        its hash."""
+        default = OPTIONAL.get(name)
+        return default is not None and (getattr(self, name), self.sources.get(name)) == (
+            default["value"],
+            default["source"],
+        )
 
     @property
     def hash(self) -> str:
