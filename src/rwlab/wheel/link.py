@@ -103,6 +103,11 @@ class HostLink(abc.ABC):
     def set_telemetry_rate(self, rate: float) -> None:  # noqa: B027 - streaming links ignore it
         """Telemetry wanted per second, Hz (a polling protocol polls at this rate)."""
 
+    def start_telemetry(self) -> None:  # noqa: B027 - streaming links need nothing
+        """Set the wheel up to send its telemetry at the rate asked, before any command
+        (a protocol whose wheel streams only once configured, e.g. OreSat's TPDO event
+        timers, does it here; otherwise it does on its first command)."""
+
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
         """Send ``cmd`` at clock time ``now`` (s); ``ProtocolError`` if it cannot be encoded."""
