@@ -117,3 +117,15 @@ def test_the_tests_scale_with_the_wheels_current_noise_and_speed_limit():
         emf = spec.bus_voltage_v * spec.driver_max_duty / spec.torque_constant_nm_a * 30 / math.pi
         assert d.held_max_rpm == pytest.approx(5 / 6 * min(spec.max_speed_rpm, emf))
         assert d.held_max_rpm < spec.max_speed_rpm
+
+
+def test_the_reference_is_measured_with_the_prior_it_is_tested_with():
+    """The friction-change test's values on the identification record (its σ in the
+    reference) come from the same datasheet prior as the test on a later record: with the
+    RW90's prior there and the T6's here, a healthy T6 unit (unit 11's 20-minute PRBS
+    against unit 0's model) alarmed at 909 s."""
+    spec = WheelSpec.load("nrwa-t6")
+    measuring = Diagnoser(_wheel(spec), None)
+    testing = Diagnoser(_wheel(spec), _reference(spec, 1.0), calibration=False)
+    assert measuring._change_probe.spec is spec
+    assert testing._detectors["friction_change"].spec is spec

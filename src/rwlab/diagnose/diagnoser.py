@@ -352,7 +352,7 @@ class Diagnoser:
         self._still_speeds: deque = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
         if reference is None:  # measuring a reference: collect the change test's values
             probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
-            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
+            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4, spec=self.spec)
             self._change_probe.add = lambda t, v: self.collected["friction_change"].append(v)  # type: ignore[method-assign]
         else:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
