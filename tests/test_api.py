@@ -41,6 +41,6 @@ def test_simulate_flies_the_scenarios_wheel_and_refuses_a_misfit():
     assert metrics["wheel_forced"] == [] and run.t[-1] == pytest.approx(60.0)
     with pytest.raises(ConfigError, match=r"needs 0\.1 N·m"):
         rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90")
-    _, forced = rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90", force=True)
+    _, forced = rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90", force_wheel=True)
     assert forced["wheel_forced"][0].startswith("FORCED: geo-comsat needs 0.1 N·m")
     assert rwlab.WheelSpec.load("rw-0.01").max_torque_nm == 0.001

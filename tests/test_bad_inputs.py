@@ -466,6 +466,12 @@ def cases() -> list[tuple[str, list[str]]]:
         ("hil --nodes garbage", [*hil, "--nodes", "a,b"]),
         ("hil --scenario empty.toml", [*hil, "--scenario", "{D}/empty.toml"]),
         ("hil --fault bogus", [*hil, "--fault", "9:bogus@1"]),
+        ("hil --protocol nsp (serial: not multi-drop)", [*hil, "--protocol", "nsp"]),
+        ("hil --profile unknown", [*hil, "--protocol", "canopen", "--profile", "bogus"]),
+        (
+            "hil rw90 wheels on geo-comsat with --force (only overwrites)",
+            [*hil, "--scenario", "geo-comsat", "--wheel", "rw90", "--force"],
+        ),
     ]
     # demo, monitor, wheel, datasets
     c += [

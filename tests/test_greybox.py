@@ -271,3 +271,32 @@ def test_the_structure_envelope_is_measured_data_per_wheel_model(tmp_path, monke
     # a wheel model without its own measurement: the widest measured envelope, said so
     shape, source = greybox_std.structure_error("t6")
     assert shape == {"kp": 0.5} and "no measured envelope" in source
+
+
+@pytest.mark.parametrize("name", ["rw90", "nrwa-t6", "rw-0.01"])
+def test_the_study_names_the_records_wheel_model_to_the_grey_box(name):
+    """The study's datasheet for a record carries its wheel spec's name (issue 41: the
+    envelope was the RW90's for every wheel)."""
+    from rwlab.ident.study import wheel_datasheet
+    from rwlab.wheelspec import WheelSpec
+
+    sheet = wheel_datasheet(WheelSpec.load(name))
+    assert sheet["wheel_model"] == name
+    assert sheet["max_speed_rpm"] == WheelSpec.load(name).max_speed_rpm
+
+
+def test_a_wheel_model_without_its_own_envelope_gets_the_widest_and_says_so(grey, unit_a):
+    """The grey box of a record of another wheel model: σ from the widest measured
+    envelope, and ``std_method`` says which wheel had none; the RW90's names its own."""
+    from rwlab.ident import greybox_std
+
+    model, data = grey
+    assert "the rw90 envelope measured by" in model.std_method
+    _, current = _record(unit_a, 1)
+    est = data.split(0.7)[0]
+    sheet = {**DATASHEET, "wheel_model": "nrwa-t6"}
+    other = greybox_fit(est, kp=0.4, ki=0.08, current=current[: est.N], **sheet)
+    assert "nrwa-t6 has no measured envelope" in other.std_method
+    widest, _ = greybox_std.structure_error("nrwa-t6")
+    kp = other.std_budget["kp"]["structure"]
+    assert kp == pytest.approx(widest["kp"] * abs(other.kp))

@@ -654,3 +654,55 @@ def test_a_failed_hil_run_keeps_its_record_but_never_looks_complete(tmp_path, mo
     res = CliRunner().invoke(main, [*args, "--out", str(out)])  # the name is still free
     assert res.exit_code == 0, res.output
     assert {p.name for p in out.iterdir()} == {"record.mcap", "metrics.json", "report.html"}
+
+
+@pytest.mark.parametrize("protocol", ["rwlab", "canopen/cia402", "canopen/oresat"])
+def test_hil_flies_its_wheels_through_a_canopen_profile(protocol, tmp_path):
+    """The same flight with the wheels driven as CiA 402 drives and as OreSat's cards
+    (issue 43): every command arrives (0 lost), telemetry flows from the first period,
+    and the record says which protocol carried it."""
+    cfg = HilConfig(duration=20.0, seed=3, channel=_channel(), protocol=protocol, diagnosis=False)
+    result = run_hil(cfg, tmp_path / "out")
+    m = result.metrics
+    assert all(v == 0 for v in m["bench"]["lost_commands"].values()), m["bench"]
+    assert all(v == 0 for v in m["bench"]["lost_telemetry_frames"].values()), m["bench"]
+    rec = read_record(tmp_path / "out" / "record.mcap")
+    assert rec.metadata["protocol"] == protocol == m["config"]["protocol"]
+    assert rec.metadata["protocol_identity"]
+    steps = result.run.stats["steps"]
+    for n in (1, 2, 3):
+        assert len(rec.topic(f"/wheel{n}/telemetry")) >= steps
+
+
+def test_hil_refuses_a_serial_profile_in_one_line(tmp_path):
+    """NSP over a pty is one wheel per link: hil (all wheels on one bus) refuses it before
+    anything starts, saying why and what to choose."""
+    result = CliRunner().invoke(
+        main,
+        [
+            *("hil", "--duration", "5", "--protocol", "nsp", "--profile", "rw4-12"),
+            *("--out", str(tmp_path / "o")),
+        ],
+    )
+    assert result.exit_code == 2
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "serial byte stream" in lines[0] and "CAN protocol" in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_force_overwrites_and_force_wheel_flies_a_mismatched_wheel(tmp_path):
+    """Two meanings, two flags (issue 41): RW90 wheels on geo-comsat are refused even with
+    --force (which only overwrites outputs); --force-wheel flies them and the report's
+    first screen says so."""
+    args = ["hil", "--scenario", "geo-comsat", "--wheel", "rw90", "--duration", "2"]
+    args += ["--no-reference", "--no-diagnosis", "--channel", _channel()]
+    out = tmp_path / "o"
+    r = CliRunner().invoke(main, [*args, "--out", str(out), "--force"])
+    assert r.exit_code == 2 and "--force-wheel" in r.output, r.output
+    assert not out.exists()
+    r = CliRunner().invoke(main, [*args, "--out", str(out), "--force-wheel"])
+    assert r.exit_code == 0, r.output
+    config = json.loads((out / "metrics.json").read_text())["config"]
+    assert config["wheel_forced"]
+    html = (out / "report.html").read_text()
+    assert "--force-wheel" in html and html.index("FORCED") < html.index("flew")

@@ -70,7 +70,7 @@ def test_a_mismatch_is_one_line_naming_both_numbers(tmp_path):
         check_wheel_fit(sc)
     text = str(err.value)
     assert "\n" not in text and "0.1 N·m" in text and "0.02 N·m" in text
-    assert "rw90 spec" in text and "geo-comsat" in text and "--force" in text
+    assert "rw90 spec" in text and "geo-comsat" in text and "--force-wheel" in text
     forced = check_wheel_fit(sc, force=True)
     assert [f.split(" ")[0] for f in forced] == ["FORCED:"] * 3
 
@@ -102,7 +102,10 @@ def test_an_rw90_model_on_geo_comsat_exits_2_and_force_flies_it(tmp_path):
     assert r.exit_code == 2
     line = r.output.strip().splitlines()[-1]
     assert "needs 0.1 N·m" in line and "model.json" in line and "rw90" in line
+    # --force only overwrites outputs: the wheel is still refused
     r = CliRunner().invoke(main, [*sim, "--out", str(tmp_path / "b"), "--force"])
+    assert r.exit_code == 2 and "--force-wheel" in r.output
+    r = CliRunner().invoke(main, [*sim, "--out", str(tmp_path / "b"), "--force-wheel"])
     assert r.exit_code == 0, r.output
     config = json.loads((tmp_path / "b" / "metrics.json").read_text())["config"]
     assert config["wheel_forced"] and config["wheel_spec"]["name"] == "rw90"

@@ -60,3 +60,38 @@ def test_twin_current_stays_within_the_current_limit(name):
         wheel.step(2e-3)
         peak = max(peak, abs(wheel.current))
     assert peak <= spec.current_limit_a * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_the_setpoint_weight_is_the_specs_inner_controller(name, tmp_path):
+    """β belongs to the spec's inner controller (each preset a plain PI, β = 1, with its
+    source) and flows into the twin; a spec file with its own β flies it, and one written
+    before β reads 1 and says so."""
+    spec = WheelSpec.load(name)
+    assert spec.speed_setpoint_weight == 1.0
+    assert "assumed, because" in spec.source("speed_setpoint_weight")
+    assert WheelParams.from_spec(spec).speed_setpoint_weight == 1.0
+    half = WheelParams.from_spec(spec.with_(speed_setpoint_weight=0.15))
+    assert half.speed_setpoint_weight == 0.15
+    # a step with β = 0.15 has less proportional kick: the wheel starts slower
+    starts = []
+    for params in (WheelParams.from_spec(spec), half):
+        wheel = WheelPhysics(params, seed=0)
+        wheel.command(Mode.SPEED, 0.2 * spec.max_speed_rpm)
+        for _ in range(20):
+            wheel.step(0.01)
+        starts.append(wheel.momentum)
+    assert starts[1] < starts[0]
+    old = spec.to_dict()
+    del old["controller"]["speed_setpoint_weight"]
+    back = WheelSpec.from_dict(old)
+    assert back.speed_setpoint_weight == 1.0
+    assert "states none" in back.source("speed_setpoint_weight")
+    # a spec (a model.json) written before β keeps its hash: its file's form has no β
+    assert "speed_setpoint_weight" not in back.to_dict()["controller"]
+    import hashlib
+    import json
+
+    text = json.dumps(old, sort_keys=True, separators=(",", ":"))
+    assert back.hash == hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+    assert WheelSpec.from_dict(back.to_dict()) == back

@@ -82,7 +82,7 @@ def simulate(
     wheel: str | None = None,
     wheel_model: str | os.PathLike | None = None,
     seed: int | None = None,
-    force: bool = False,
+    force_wheel: bool = False,
     **overrides: Any,
 ):
     """Fly one controller on a scenario with its wheel model.
@@ -100,7 +100,7 @@ def simulate(
         Fly this ``model.json`` as the actuator (with the wheel spec it carries).
     seed : int, optional
         Noise seed (the scenario's by default).
-    force : bool
+    force_wheel : bool
         Fly wheels that cannot deliver the scenario's needs (else ``ConfigError``);
         the metrics' ``wheel_forced`` says what they lack.
     **overrides
@@ -127,7 +127,7 @@ def simulate(
         if WheelModelFile.load(wheel_model).wheel_spec is not None:
             changes["wheels.spec"] = str(wheel_model)
     sc = load_scenario(scenario, **changes)
-    forced = check_wheel_fit(sc, force=force)
+    forced = check_wheel_fit(sc, force=force_wheel)
     run, metrics = fly(sc, controller, duration=duration, seed=seed)
     return run, {**metrics, "wheel_forced": forced}
 
@@ -160,6 +160,7 @@ def hil(
     duration: float,
     wheel: str | None = None,
     force: bool = False,
+    force_wheel: bool = False,
     **settings: Any,
 ):
     """Fly the satellite on the host with its wheels on a (virtual) bus.
@@ -175,7 +176,10 @@ def hil(
     wheel : str, optional
         The wheel model the twin nodes fly: a preset or a unit's own spec file.
     force : bool
-        Overwrite ``out``'s files and fly wheels that cannot deliver the scenario's needs.
+        Overwrite ``out``'s files.
+    force_wheel : bool
+        Fly wheels that cannot deliver the scenario's needs (else ``ConfigError``); the
+        report's first screen and ``metrics["config"]["wheel_forced"]`` say what they lack.
     **settings
         Other :class:`rwlab.hil.run.HilConfig` fields (``controller``, ``seed`` …).
 
@@ -188,7 +192,7 @@ def hil(
     from rwlab.report.hil import write_hil_report
 
     cfg = HilConfig(
-        scenario=scenario, duration=duration, wheel=wheel, force_wheel=force, **settings
+        scenario=scenario, duration=duration, wheel=wheel, force_wheel=force_wheel, **settings
     )
     result = run_hil(cfg, out, force=force)
     write_hil_report(result, out)

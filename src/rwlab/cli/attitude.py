@@ -71,14 +71,17 @@ _EPOCH = click.option(
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
 @_EPOCH
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @click.option(
-    "--force",
+    "--force-wheel",
     is_flag=True,
-    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
-    "torque, momentum or speed (the report says so first).",
+    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
+    "(else refused, exit 2); the report's first screen says what it lacks.",
 )
 @_friendly_errors
-def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force):
+def attitude_compare(
+    scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force, force_wheel
+):
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
     if not (math.isfinite(rho) and rho > 0):
         raise ConfigError(f"--rho must be a positive number, got {rho:g}")
@@ -100,7 +103,7 @@ def attitude_compare(scenario, out, duration, wheel_model, rho, seed, relineariz
         if wheel_model:
             IdentifiedWheel.from_json(wheel_model)  # a clear error now, not after the runs
             sc = sc.with_(**{"wheels.spec": _with_wheel_model(sc, wheel_model).wheels.spec})
-        forced = _wheel_check(_with_wheel_model(sc, wheel_model), force)
+        forced = _wheel_check(_with_wheel_model(sc, wheel_model), force_wheel)
         click.echo(
             f"simulating {sc.name} for {duration:g} s (LQR, LQG, LQG/LTR"
             f"{', identified wheel' if wheel_model else ''}; the first run compiles the loop, "
@@ -212,11 +215,11 @@ def _with_wheel_model(sc, wheel_model: str | None):
     return sc.with_(**changes)
 
 
-def _wheel_check(sc, force: bool) -> list[str]:
+def _wheel_check(sc, force_wheel: bool) -> list[str]:
     """Refuse (exit 2) wheels that cannot deliver the scenario's needs; forced: the lines."""
     from rwlab.attitude.wheel_fit import check_wheel_fit
 
-    forced = check_wheel_fit(sc, force=force)
+    forced = check_wheel_fit(sc, force=force_wheel)
     for line in forced:
         click.echo(line, err=True)
     return forced
@@ -294,11 +297,12 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     "scenario's wheels.jitter, off in the shipped ones].",
 )
 @click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @click.option(
-    "--force",
+    "--force-wheel",
     is_flag=True,
-    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
-    "torque, momentum or speed (the report says so first).",
+    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
+    "(else refused, exit 2); the report's first screen says what it lacks.",
 )
 @_friendly_errors
 def attitude_simulate(
@@ -316,6 +320,7 @@ def attitude_simulate(
     jitter,
     out,
     force,
+    force_wheel,
 ):
     """One controller on one scenario for any duration: metrics.json, trace.parquet, report.html."""
     _only_with("rho", controller == "lqg_ltr", "with --controller lqg_ltr")
@@ -343,7 +348,7 @@ def attitude_simulate(
             overrides["wheels.jitter"] = jitter
         sc = load_scenario(scenario, **overrides, **({"sky.epoch": epoch} if epoch else {}))
         sc = _with_wheel_model(sc, wheel_model)
-        forced = _wheel_check(sc, force)
+        forced = _wheel_check(sc, force_wheel)
         steps = _check_steps(duration, sc)
         config = _simulation_config(sc, controller, estimator, seed, duration, rho, relinearize)
         config["wheel_forced"] = forced

@@ -61,6 +61,18 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     show_default=True,
 )
 @click.option("--channel", default=None, help="Bus channel (the interface's default).")
+@click.option(
+    "--protocol",
+    default="rwlab",
+    show_default=True,
+    help="Wheel protocol on the bus: rwlab, canopen, or a registered CAN one (`rwlab wheel "
+    "protocols`); serial NSP wheels cannot share one bus and are refused.",
+)
+@click.option(
+    "--profile",
+    default=None,
+    help="The protocol's profile (canopen: rwlab, oresat, cia402).",
+)
 @click.option("--nodes", default=None, help="Node id of each wheel, e.g. 1,2,3 [default: 1..N].")
 @click.option("--duration", type=SECONDS, required=True, help="Seconds of flight.")
 @click.option("--seed", type=click.IntRange(min=0), default=None)
@@ -124,14 +136,26 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 )
 @click.option("--no-reference", is_flag=True, help="Do not fly the simulation beside it.")
 @click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @click.option(
-    "--force",
+    "--force-wheel",
     is_flag=True,
-    help="Overwrite outputs in --out; fly a wheel model that cannot deliver the scenario's "
-    "torque, momentum or speed (the report says so first).",
+    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
+    "(else refused, exit 2); the report's first screen says what it lacks.",
 )
 @_friendly_errors
-def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **settings):
+def hil(
+    out,
+    force,
+    force_wheel,
+    nodes,
+    faults,
+    wheels_running,
+    no_reference,
+    calibration,
+    profile,
+    **settings,
+):
     """Fly the satellite on the host with its wheels on a bus: record.mcap, metrics.json,
     report.html.
 
@@ -145,8 +169,10 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
     from rwlab.cli.attitude import single_thread_blas
     from rwlab.hil.run import HilConfig, parse_node_fault, run_hil
     from rwlab.report.hil import write_hil_report
+    from rwlab.wheel.link import resolve_protocol
 
     _only_with("calibration", settings["diagnosis"] is not False, "with the diagnosis on")
+    settings["protocol"] = resolve_protocol(settings["protocol"], profile)
     single_thread_blas()
     # the options not named here are named after their HilConfig field
     cfg = HilConfig(
@@ -155,7 +181,7 @@ def hil(out, force, nodes, faults, wheels_running, no_reference, calibration, **
         twins=False if wheels_running else None,
         calibration_s=calibration,
         reference=not no_reference,
-        force_wheel=force,
+        force_wheel=force_wheel,
         **settings,
     )
     scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller

@@ -18,7 +18,9 @@ from rwlab.diagnose.isolate import (
 from rwlab.diagnose.reference import (
     BlockStats,
     nominal_friction_currents,
+    unit_bounds,
 )
+from rwlab.wheelspec import WheelSpec
 
 CUSUM_K = 0.5
 # σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
@@ -72,12 +74,13 @@ SLEW_BASE_MIN = 3
 SLEW_BASE_MAX = 10
 
 
-def _law_prior() -> tuple[np.ndarray, np.ndarray]:
+def _law_prior(spec: WheelSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The datasheet's friction law as current [viscous A/rpm, Coulomb A, offset A] and
-    the σ of a unit's law about it: :data:`CHANGE_PRIOR` of each friction part, 5 mA of
-    sense offset (:data:`rwlab.wheel.imperfections.TOLERANCES`)."""
-    viscous, coulomb = nominal_friction_currents()
-    sd = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, 5e-3])
+    the σ of a unit's law about it: :data:`CHANGE_PRIOR` of each friction part, the
+    spec's current-sense offset tolerance (the RW90's 5 mA); ``spec`` default the RW90's."""
+    viscous, coulomb = nominal_friction_currents(spec)
+    offset = unit_bounds(spec).current_offset_a
+    sd = np.array([CHANGE_PRIOR * viscous, CHANGE_PRIOR * coulomb, max(offset, HOLD_MIN_SD_A)])
     return np.array([viscous, coulomb, 0.0]), sd
 
 
@@ -185,8 +188,18 @@ class FrictionChange(BlockCusum):
     current offset differ from the reference's has a speed-dependent excess), and a fault
     enters the baseline only ``GUARD_S`` after its onset."""
 
-    def __init__(self, stats, tolerance: float, h: float, baseline_blocks: int, c) -> None:
+    def __init__(
+        self,
+        stats,
+        tolerance: float,
+        h: float,
+        baseline_blocks: int,
+        c,
+        *,
+        spec: WheelSpec | None = None,
+    ) -> None:
         super().__init__(stats, tolerance, h, "up")
+        self.spec = spec  # the wheel model whose datasheet law is the prior (None: RW90)
         self.mean = 0.0
         self.c = np.asarray(c, dtype=float)  # the reference's current model
         self._need = baseline_blocks * stats.block
@@ -216,7 +229,7 @@ class FrictionChange(BlockCusum):
         model: +1700 rpm held at 18.6 mA, the law 11.5 at +1950: a friction alarm)."""
         n, s1, s2 = self._r
         var = max(s2 / n - (s1 / n) ** 2, 0.0)
-        _, prior = _law_prior()
+        _, prior = _law_prior(self.spec)
         for _ in range(2):
             noise_sq = max(var, HOLD_MIN_SD_A**2) * self.stats.block
             self._cov = np.linalg.inv(self._xtx / noise_sq + np.diag(1 / prior**2))  # A²
@@ -472,9 +485,10 @@ class ClampedFriction:
         Threshold on the median relative excess.
     """
 
-    def __init__(self, c, h: float) -> None:
+    def __init__(self, c, h: float, *, spec: WheelSpec | None = None) -> None:
         self.c = np.asarray(c, dtype=float)
         self.h = h
+        self.spec = spec  # the wheel model whose datasheet law is the prior (None: RW90)
         self._xtx = np.zeros((3, 3))
         self._xtr = np.zeros(3)
         self._n, self._yy = 0, 0.0  # own samples: count, Σ of their friction currents², A²
@@ -504,7 +518,7 @@ class ClampedFriction:
         noise = math.sqrt(max(rss / max(self._n - 3, 1), 0.0) * BLOCK_OWN) + 1e-6
         # prior: the datasheet's friction (not the reference's law: its identified
         # Coulomb/viscous split is poor, and a chirp's slow samples leave it standing)
-        mean, prior = _law_prior()
+        mean, prior = _law_prior(self.spec)
         precision = np.diag(1 / prior**2)
         cov = np.linalg.inv(self._xtx / noise**2 + precision)
         law = cov @ (self._xtr / noise**2 + precision @ mean)

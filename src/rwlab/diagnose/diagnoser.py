@@ -119,8 +119,6 @@ from rwlab.diagnose.calibration import (
 )
 from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_length
 from rwlab.diagnose.isolate import (
-    FRICTION_UNIT_SD,
-    MOTOR_UNIT_SD,
     SPEED_UNIT_SD,
     Z95,
     isolate,
@@ -148,26 +146,29 @@ from rwlab.diagnose.reference import (
     HealthyReference,
     nominal_friction_currents,
     nominal_inertial_current,
+    unit_bounds,
 )
 from rwlab.diagnose.residuals import ResidualGenerator
 from rwlab.errors import ConfigError, RwlabWarning
+from rwlab.wheelspec import WheelSpec
 
 __all__ = ["Alarm", "Diagnoser"]
 
 QUIET_RPM_S = 10.0  # "constant speed": |measured acceleration| below ≈ 7 σ of its noise at 0.5 s
 STILL_SPAN_S = 2.0  # the wheel's quiet for the speed test: its mean acceleration over this
 FRICTION_MIN_RPM = 500.0  # the friction current is large enough to compare relative to it
-MOTOR_UPPER = 1.02 / 0.95  # a healthy unit's I/k_t at most this × nominal (TOLERANCES)
-FRICTION_UPPER = 1.3  # a healthy unit's friction at most this × nominal (TOLERANCES: ±30 %)
 OFFSET_MIN_SAMPLES = 10  # friction samples of each sign before the current offset counts
-MOTOR_MIN_A = 0.1  # the inertial current is large enough to compare relative to it
+MOTOR_MIN_NOISE = 25.0  # the inertial current is large enough to compare relative to it:
+# this many σ of the wheel's current noise (its spec's), so the motor value's noise is ≤ 4 %
 LAG_SHARE = 0.8  # the model runs at ≥ this share of its acceleration limit
 LAG_MIN_RPM = 50.0  # ... and at least this fast (a Hall reading near zero is no rate), rpm
 SETTLE_S = 30.0  # a command held this long: wheel and model settled, s
 STILL_S = 10.0  # ... and both quiet (|α| < QUIET_RPM_S) this long: a step of 12000 rpm at the
 # acceleration limit outlasts any fixed hold time, s
 STILL_RPM = 50.0  # below this the wheel may rest in stiction while the model turns, rpm
-HELD_MAX_RPM = 6500.0  # held speeds the RW90 reaches on any unit (back-EMF), rpm
+HELD_MAX_SHARE = 5 / 6  # held speeds any unit reaches: this share of the lower of the
+# wheel's speed limit and its no-load back-EMF speed (the driver's largest duty over k_t),
+# where the loop keeps room to reject a unit's friction and drift
 BLOCKS = {"friction": 20, "motor": 10, "speed": 20, "lag": 10}
 # every CUSUM test, in the order a report shows them (stat_NAME in the history)
 CUSUM_TESTS = (*BLOCKS, "friction_change", "hold", "offset", "slew", "slew_change")
@@ -245,7 +246,10 @@ class Diagnoser:
     Parameters
     ----------
     wheel : IdentifiedWheel
-        The identified model; the samples come at its Ts.
+        The identified model; the samples come at its Ts. Its ``wheel_spec`` (the
+        wheel model ``model.json`` names) gives the nominal friction, inertia, current
+        noise, speed limits and the tolerances between units the tests are scaled by;
+        a model without one (a version-1 ``model.json``) is judged by the RW90's.
     reference : HealthyReference or None
         The healthy reference (``model.json``'s); None only to measure one
         (:func:`healthy_reference`): then nothing is tested.
@@ -283,6 +287,13 @@ class Diagnoser:
         self.Ts = float(wheel.Ts)
         self.accel_limit = float(wheel.accel_limit_rpm_s)
         self.reference = reference
+        spec = getattr(wheel, "wheel_spec", None)
+        self.spec: WheelSpec = spec if spec is not None else WheelSpec.load("rw90")
+        self.bounds = unit_bounds(self.spec)
+        self.motor_min_a = MOTOR_MIN_NOISE * self.spec.current_noise_a
+        s = self.spec
+        emf_rpm = s.bus_voltage_v * s.driver_max_duty / s.torque_constant_nm_a * 30 / math.pi
+        self.held_max_rpm = HELD_MAX_SHARE * min(s.max_speed_rpm, emf_rpm)
         self.latch = latch
         self.false_alarms_per_hour = float(false_alarms_per_hour)
         self.arl0 = arl_to_samples(false_alarms_per_hour, self.Ts)
@@ -341,7 +352,7 @@ class Diagnoser:
         self._still_speeds: deque = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
         if reference is None:  # measuring a reference: collect the change test's values
             probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
-            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4)
+            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4, spec=self.spec)
             self._change_probe.add = lambda t, v: self.collected["friction_change"].append(v)  # type: ignore[method-assign]
         else:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
@@ -375,7 +386,7 @@ class Diagnoser:
                 # change values, which the plain friction test's σ does not hold)
                 change = ref.tests.get("friction_change", stats)
                 change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
-                det = FrictionChange(change, tol, h_analytic, 6, ref.current_model)
+                det = FrictionChange(change, tol, h_analytic, 6, ref.current_model, spec=self.spec)
                 det.h = self._calibrated("friction_change", h_analytic, det)
                 self._detectors["friction_change"] = det
                 self.thresholds["friction_change"] = det.h
@@ -404,7 +415,8 @@ class Diagnoser:
         det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
         self._detectors["hold"] = det
         self._detectors["rest"] = RestReading()
-        self._detectors["clamped"] = ClampedFriction(ref.current_model, CLAMP_EXCESS)
+        clamped = ClampedFriction(ref.current_model, CLAMP_EXCESS, spec=self.spec)
+        self._detectors["clamped"] = clamped
         self.thresholds["clamped"] = CLAMP_EXCESS
         self._charge = StepCharge(ref.current_model, self.Ts, QUIET_RPM_S)
         self._detectors["charge"] = FrozenMotor(self._motor_headroom(ref))
@@ -441,16 +453,16 @@ class Diagnoser:
             return ref.lost_per_sample
         return bus
 
-    @staticmethod
-    def _motor_headroom(ref: HealthyReference) -> float:
+    def _motor_headroom(self, ref: HealthyReference) -> float:
         """How far above the reference's inertial current a healthy unit's may sit: the
-        datasheet's upper bound of I/k_t (I +2 %, k_t −5 %: 1.074 × nominal) over the
+        datasheet's upper bound of I/k_t (the spec's tolerances: the RW90's I +2 %, k_t
+        −5 % give 1.074 × nominal) over the
         reference's identified one (within 0.5 % of its unit's on the twin). The constant
         tolerance (0.15, two units at opposite bounds) made the rate a requested 1/h
         delivers depend on where the reference unit sits: 0 to 4.5/h over the tune set's
         model units (a reference at 1.056 × nominal leaves healthy units 2 % of room)."""
-        nominal = nominal_inertial_current()
-        return max(MOTOR_UPPER * nominal / ref.current_model[0] - 1.0, 0.0)
+        nominal = nominal_inertial_current(self.spec)
+        return max(self.bounds.motor_upper * nominal / ref.current_model[0] - 1.0, 0.0)
 
     @staticmethod
     def _slew_stats(ref: HealthyReference) -> BlockStats:
@@ -667,7 +679,7 @@ class Diagnoser:
             return None
         value = slew_asymmetry(slew, c, self._slew_scale)
         if value is not None:
-            self._slew_gain = slew_friction_gain(slew) or 1.0
+            self._slew_gain = slew_friction_gain(slew, self.spec) or 1.0
         return value
 
     def _trace_run(self, event: bool) -> None:
@@ -702,7 +714,7 @@ class Diagnoser:
         self._moved = self._moved or self._command[0] != 0.0
         if settled and not self._moved and speed_rpm == 0.0 and math.isfinite(current_a):
             self._rest_current = current_a  # at rest since power-up: the sense offset
-        if settled and (STILL_RPM <= held <= HELD_MAX_RPM or held == 0.0):
+        if settled and (STILL_RPM <= held <= self.held_max_rpm or held == 0.0):
             # the wheel's PI loop holds the true speed at the command: model-free, and the
             # same for every unit (the identified model's own steady error is no part of it)
             out["speed"] = speed_rpm - self._command[0]
@@ -715,11 +727,11 @@ class Diagnoser:
         sign = 0.0 if speed_rpm == 0 else math.copysign(1.0, speed_rpm)
         friction = c[1] * speed_rpm + c[2] * sign
         inertial = c[0] * accel
-        if "lag" in out and abs(inertial) >= MOTOR_MIN_A:
+        if "lag" in out and abs(inertial) >= self.motor_min_a:
             excess = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
             self._lag_excess.append((t_s, excess))
         if abs(accel) < QUIET_RPM_S and abs(speed_rpm) >= FRICTION_MIN_RPM and friction * sign > 0:
-            if settled and STILL_RPM <= held <= HELD_MAX_RPM:  # the hold test's sample
+            if settled and STILL_RPM <= held <= self.held_max_rpm:  # the hold test's sample
                 self._hold_sample = (self._command[0], current_a)
             offset = self._current_offset(sign, r["current"])
             if offset is not None:
@@ -727,7 +739,8 @@ class Diagnoser:
                 self._friction_allowance = self._allowance(abs(friction), speed_rpm)
             self._friction_sample = (r["current"], speed_rpm, friction)
         sustained = inertial * c[0] * prev.get("accel", 0.0) > 0
-        if abs(inertial) >= MOTOR_MIN_A and sustained and abs(c[0] * prev["accel"]) >= MOTOR_MIN_A:
+        floor = self.motor_min_a
+        if abs(inertial) >= floor and sustained and abs(c[0] * prev["accel"]) >= floor:
             out["motor"] = math.copysign(1.0, inertial) * r["current"] / abs(inertial)
         return out
 
@@ -777,7 +790,8 @@ class Diagnoser:
     def _allowance(self, friction_a: float, speed_rpm: float) -> float:
         """How far beyond the friction test's tolerance a healthy unit may sit at this
         speed, relative to the reference's friction current ``friction_a`` (A): the
-        datasheet's upper bound, 1.3 × the nominal friction current at this speed, over
+        datasheet's upper bound (the spec's tolerance: the RW90's 1.3) × the nominal
+        friction current at this speed, over
         the reference's, less the tolerance the CUSUM already holds. A reference from a
         low-friction unit (or one whose identified viscous part is low) makes the bound
         a larger excess than the constant tolerance (×1.86, a reference at exactly the
@@ -786,8 +800,8 @@ class Diagnoser:
         ref = self.reference
         if ref is None:
             return 0.0
-        viscous, coulomb = nominal_friction_currents()
-        upper = FRICTION_UPPER * (viscous * abs(speed_rpm) + coulomb) / friction_a - 1.0
+        viscous, coulomb = nominal_friction_currents(self.spec)
+        upper = self.bounds.friction_upper * (viscous * abs(speed_rpm) + coulomb) / friction_a - 1.0
         return max(0.0, upper - ref.tolerance.get("friction", DEFAULT_TOLERANCE["friction"]))
 
     def _current_offset(self, sign: float, residual_a: float) -> float | None:
@@ -879,8 +893,10 @@ class Diagnoser:
         reference unit's own difference from the wheel is common to all its records,
         so it moves a trend as a whole and hides no change within it); and
         ``ci95_units``, which adds the spread between healthy units
-        (:data:`~rwlab.diagnose.isolate.FRICTION_UNIT_SD`, ``MOTOR_UNIT_SD``,
-        ``SPEED_UNIT_SD``), for a reading against a healthy unit of the wheel model.
+        (the wheel spec's tolerances:
+        :attr:`~rwlab.diagnose.reference.UnitBounds.friction_sd` and ``motor_sd``;
+        :data:`~rwlab.diagnose.isolate.SPEED_UNIT_SD`), for a reading against a healthy
+        unit of the wheel model.
         After a stuck-sensor alarm no estimate is given: each rests on the speed reading.
 
         Returns
@@ -915,12 +931,13 @@ class Diagnoser:
         e_m, h_m = _relative(e_m, h_m, ref.tests["motor"].mean if motor else 0.0)
         if motor:
             k_t, rel = 1 / (1 + e_m), h_m / (1 + e_m)
-            out["torque_constant"] = _estimate(k_t, rel, Z95 * MOTOR_UNIT_SD, "factor", motor[2])
+            unit_rel = Z95 * self.bounds.motor_sd
+            out["torque_constant"] = _estimate(k_t, rel, unit_rel, "factor", motor[2])
         if friction:
             e_f, h_f, n = friction
             e_f, h_f = _relative(e_f, h_f, ref.tests["friction"].mean)
             rel = math.hypot(h_f / (1 + e_f), h_m / (1 + e_m))
-            unit_rel = Z95 * FRICTION_UNIT_SD
+            unit_rel = Z95 * self.bounds.friction_sd
             out["friction"] = _estimate((1 + e_f) / (1 + e_m), rel, unit_rel, "factor", n)
         if speed:
             bias = speed[0] - ref.tests["speed"].mean

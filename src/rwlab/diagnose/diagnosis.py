@@ -36,10 +36,10 @@ from rwlab.diagnose.isolate import (
     combine,
 )
 from rwlab.diagnose.reference import (
-    DEFAULT_TOLERANCE,
     HealthyReference,
     block_stats,
     nominal_coulomb_deceleration,
+    unit_tolerance,
 )
 from rwlab.diagnose.residuals import fit_current_model
 from rwlab.errors import ConfigError, DataError, RwlabWarning
@@ -76,8 +76,8 @@ def healthy_reference(
     wheel : IdentifiedWheel
         The model identified on it.
     tolerance : dict, optional
-        Tolerance between healthy units per test (default
-        :data:`~rwlab.diagnose.reference.DEFAULT_TOLERANCE`).
+        Tolerance between healthy units per test (default: the wheel model's,
+        :func:`~rwlab.diagnose.reference.unit_tolerance` of ``wheel.wheel_spec``).
     source : str
         Where the record came from.
 
@@ -101,7 +101,7 @@ def healthy_reference(
     second = Diagnoser(wheel, None)
     second.residuals.current_model = coef
     second._change_probe.c = coef
-    second._slew_scale = scale = nominal_coulomb_deceleration()
+    second._slew_scale = scale = nominal_coulomb_deceleration(second.spec)
     for k in range(data.N):
         second.update(float(t[k]), float(u[k]), speed[k], current[k], age[k], lost[k])
     tests = {}
@@ -126,7 +126,7 @@ def healthy_reference(
         repeat_samples=int(readings),
         lost_per_sample=(float(lost[-1] - lost[0]) + 0.5) / data.N,  # Jeffreys: never 0
         samples=int(data.N),
-        tolerance=dict(DEFAULT_TOLERANCE if tolerance is None else tolerance),
+        tolerance=dict(unit_tolerance(second.spec) if tolerance is None else tolerance),
         source=source,
         slew_scale_rpm_s=scale,
     )

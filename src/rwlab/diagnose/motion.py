@@ -35,6 +35,8 @@ from collections import deque
 
 import numpy as np
 
+from rwlab.wheelspec import WheelSpec
+
 __all__ = [
     "OFFSET_SIGMA_RPM",
     "OFFSET_WINDOW",
@@ -288,7 +290,9 @@ def clamped_deceleration(segment: list[tuple[float, float, float]]) -> tuple[flo
     return float((toward - away) / 2), speed
 
 
-def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | None:
+def slew_friction_gain(
+    segment: list[tuple[float, float, float]], spec: WheelSpec | None = None
+) -> float | None:
     """The friction at a slew's speeds over the Coulomb friction, nominal: 1 + b·|ω̄|/τ_c.
 
     The slew asymmetry is in Coulomb decelerations, but worn bearings scale the viscous
@@ -301,6 +305,8 @@ def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | Non
     ----------
     segment : list of (t_s, speed_rpm, current_a)
         One slew's samples, as :func:`slew_asymmetry` takes them.
+    spec : WheelSpec, optional
+        The wheel model whose datasheet friction law is nominal (default the RW90's).
 
     Returns
     -------
@@ -312,7 +318,7 @@ def slew_friction_gain(segment: list[tuple[float, float, float]]) -> float | Non
     halves = _halves(segment[1:-1])
     if min(len(h) for h in halves) < SLEW_MIN:
         return None
-    viscous, coulomb = nominal_friction_currents()
+    viscous, coulomb = nominal_friction_currents(spec)
     mean_rpm = np.mean([(abs(h[0][1]) + abs(h[-1][1])) / 2 for h in halves])
     return float(1 + viscous * mean_rpm / coulomb)
 

@@ -47,10 +47,13 @@ __all__ = [
     "FORMAT",
     "BlockStats",
     "HealthyReference",
+    "UnitBounds",
     "block_stats",
     "nominal_coulomb_deceleration",
     "nominal_friction_currents",
     "nominal_inertial_current",
+    "unit_bounds",
+    "unit_tolerance",
 ]
 
 FORMAT = "rwlab.HealthyReference/1"
@@ -73,6 +76,92 @@ DEFAULT_TOLERANCE = {
 def _spec(spec: WheelSpec | None) -> WheelSpec:
     """The wheel model's spec; the RW90's for a model that carries none."""
     return spec if spec is not None else WheelSpec.load("rw90")
+
+
+def _relative(spec: WheelSpec, *names: str) -> float:
+    """The largest relative unit-to-unit tolerance among ``names`` (0 where the spec
+    states none: every unit has the nominal value)."""
+    return max((spec.tolerances[n].relative for n in names if n in spec.tolerances), default=0.0)
+
+
+@dataclass(frozen=True)
+class UnitBounds:
+    """How far a healthy unit of a wheel model may sit from nominal: its spec's tolerances.
+
+    Attributes
+    ----------
+    friction_upper : float
+        A healthy unit's friction at most this × nominal (1 + the larger of the Coulomb
+        and viscous tolerances).
+    motor_upper : float
+        A healthy unit's inertial current I/k_t at most this × nominal ((1 + I's
+        tolerance) / (1 − k_t's)).
+    current_offset_a : float
+        Half-width of a unit's current-sense offset, A.
+    friction_sd, motor_sd : float
+        σ of the friction ratio and of the I/k_t ratio between two healthy units, each
+        part uniform within its tolerance (relative).
+    """
+
+    friction_upper: float
+    motor_upper: float
+    current_offset_a: float
+    friction_sd: float
+    motor_sd: float
+
+
+def unit_bounds(spec: WheelSpec | None = None) -> UnitBounds:
+    """The spread of healthy units about nominal, from the wheel spec's tolerances.
+
+    Parameters
+    ----------
+    spec : WheelSpec, optional
+        The wheel model (``model.json``'s ``wheel_spec``); default the RW90's.
+
+    Returns
+    -------
+    UnitBounds
+    """
+    s = _spec(spec)
+    friction = _relative(s, "coulomb_friction_nm", "viscous_friction_nm_s")
+    inertia = _relative(s, "inertia_kg_m2")
+    k_t = _relative(s, "torque_constant_nm_a")
+    offset = s.tolerances.get("current_offset_a")
+    return UnitBounds(
+        friction_upper=1.0 + friction,
+        motor_upper=(1.0 + inertia) / (1.0 - k_t),
+        current_offset_a=0.0 if offset is None else offset.absolute,
+        friction_sd=math.sqrt(2) * friction / math.sqrt(3),
+        motor_sd=math.sqrt(2 * (inertia**2 + k_t**2) / 3),
+    )
+
+
+def unit_tolerance(spec: WheelSpec | None = None) -> dict[str, float]:
+    """:data:`DEFAULT_TOLERANCE` with the wheel model's own spread between two healthy
+    units for the friction and motor tests: a friction ratio up to (1 + f)/(1 − f), an
+    inertial-current ratio up to (1 + δI)(1 + δk_t)/((1 − δI)(1 − δk_t)), from the spec's
+    tolerances, to two decimals (the RW90's ±30 %, ±2 %, ±5 % give the defaults' 0.86
+    and 0.15).
+
+    Parameters
+    ----------
+    spec : WheelSpec, optional
+        The wheel model; default the RW90's.
+
+    Returns
+    -------
+    dict of str to float
+        Tolerance per test, as :attr:`HealthyReference.tolerance`.
+    """
+    s = _spec(spec)
+    friction = _relative(s, "coulomb_friction_nm", "viscous_friction_nm_s")
+    inertia = _relative(s, "inertia_kg_m2")
+    k_t = _relative(s, "torque_constant_nm_a")
+    motor = (1 + inertia) * (1 + k_t) / ((1 - inertia) * (1 - k_t)) - 1.0
+    return DEFAULT_TOLERANCE | {
+        "friction": round((1 + friction) / (1 - friction) - 1.0, 2),
+        "motor": round(motor, 2),
+    }
 
 
 def nominal_coulomb_deceleration(spec: WheelSpec | None = None) -> float:

@@ -29,7 +29,31 @@ from rwlab.wheel.physics import Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 if TYPE_CHECKING:
     import can
 
-__all__ = ["WheelBank", "WheelReading", "twin_params_toml"]
+__all__ = ["WheelBank", "WheelReading", "check_multidrop", "twin_params_toml"]
+
+
+def check_multidrop(protocol: str) -> None:
+    """Refuse a protocol whose wheels cannot share the bus ``hil`` flies them on.
+
+    Parameters
+    ----------
+    protocol : str
+        A registry name (:func:`rwlab.wheel.link.get_protocol`).
+
+    Raises
+    ------
+    ConfigError
+        The protocol is unknown, or runs on a byte stream (NSP over a pty is one
+        point-to-point link per wheel, not a multi-drop bus).
+    """
+    from rwlab.wheel.link import get_protocol
+
+    if "can" not in get_protocol(protocol).transports:
+        raise ConfigError(
+            f"protocol {protocol!r} runs on a serial byte stream, one wheel per link (a pty "
+            "here), and hil flies every wheel on one shared bus: choose a CAN protocol "
+            "(rwlab, canopen, canopen/oresat, canopen/cia402)"
+        )
 
 
 class _Only:
@@ -105,6 +129,10 @@ class WheelBank:
         Twins' measurement noise (node n uses seed + n).
     timeout : float
         Seconds without telemetry before a wheel is declared silent (``WheelTimeout``).
+    protocol : str
+        The wheel protocol's registry name (``rwlab``, ``canopen``, ``canopen/oresat``,
+        ``canopen/cia402``, :func:`rwlab.wheel.link.resolve_protocol`): a CAN protocol,
+        since the wheels share one bus (a byte stream's pty is one wheel's).
     """
 
     def __init__(
@@ -120,7 +148,9 @@ class WheelBank:
         latency: float = 0.02,
         seed: int = 0,
         timeout: float = 0.5,
+        protocol: str = "rwlab",
     ) -> None:
+        check_multidrop(protocol)
         nodes = [int(n) for n in nodes]
         if len(set(nodes)) != len(nodes):
             raise ConfigError(f"node ids must differ, got {nodes}")
@@ -135,6 +165,7 @@ class WheelBank:
                 "use --realtime for other buses or for wheels that already run"
             )
         self.interface, self.nodes, self.params, self.clock = interface, nodes, params, clock
+        self.protocol = protocol
         self.timeout = timeout
         self.simulated = isinstance(clock, SimClock)
         self.buses: list = []
@@ -146,14 +177,15 @@ class WheelBank:
         self._seen: dict[int, int] = {}
         try:
             for n in nodes:
-                bus = cast(
-                    "can.BusABC",
-                    _Only(self._open(channel), proto.TELEMETRY_ID + n, proto.HEARTBEAT_ID + n),
+                bus = self._handle(channel, proto.TELEMETRY_ID + n, proto.HEARTBEAT_ID + n)
+                client = WheelClient(
+                    bus, n, params, clock=clock, timeout=timeout, protocol=protocol
                 )
-                self.clients.append(WheelClient(bus, n, params, clock=clock, timeout=timeout))
+                client.link.set_telemetry_rate(telemetry_rate)  # a polled or timed protocol's
+                self.clients.append(client)
             if twins:
                 for n in nodes:
-                    bus = cast("can.BusABC", _Only(self._open(channel), proto.COMMAND_ID + n))
+                    bus = self._handle(channel, proto.COMMAND_ID + n)
                     node = WheelNode(
                         bus,
                         n,
@@ -163,6 +195,7 @@ class WheelBank:
                         latency=latency,
                         physics_dt=0.01 if self.simulated else 1e-3,
                         seed=seed + n,
+                        protocol=protocol,
                     )
                     self.twins.append(node)
                     if not self.simulated:
@@ -170,6 +203,15 @@ class WheelBank:
         except BaseException:
             self.close()
             raise
+
+    def _handle(self, channel, *rwlab_ids: int) -> can.BusABC:
+        """One bus handle for a client or a twin. On the ``rwlab`` protocol it takes only
+        ``rwlab_ids`` (its node's frames); another protocol's link takes its own node's
+        COB-IDs itself and counts the rest as foreign, so its handle takes every frame."""
+        bus = self._open(channel)
+        if self.protocol != "rwlab":
+            return cast("can.BusABC", bus)
+        return cast("can.BusABC", _Only(bus, *rwlab_ids))
 
     def _open(self, channel):
         bus = open_bus(self.interface, channel, simulated_clock=self.simulated)
@@ -191,6 +233,10 @@ class WheelBank:
         ConfigError
             A node id answers from two sources, or a wheel reports a latched fault.
         """
+        for c in self.clients:
+            # a protocol whose wheel streams only once configured (OreSat's TPDO timers)
+            # sets it up now, so telemetry flows from the run's first period
+            c.link.start_telemetry()
         for c in self.clients:
             c.drain()
         self.clock.sleep_until(self.clock.now() + listen_s)

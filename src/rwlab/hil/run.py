@@ -60,6 +60,7 @@ from rwlab.hil.satellite import Satellite
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
+from rwlab.wheel.link import get_protocol
 from rwlab.wheel.physics import rad_s_to_rpm
 
 __all__ = [
@@ -119,6 +120,10 @@ class HilConfig:
     controller : str
         ``pd``, ``lqr``, ``lqg`` or ``lqg_ltr`` (as ``attitude simulate``).
     interface, channel : the bus.
+    protocol : str
+        The wheel protocol's registry name: ``rwlab`` (default), ``canopen``,
+        ``canopen/oresat``, ``canopen/cia402`` or a registered CAN one; a serial (NSP)
+        profile is refused, since its wheels cannot share one bus.
     nodes : tuple of int, optional
         Node id of each wheel in the scenario's order (default 1..N).
     duration : float
@@ -177,6 +182,7 @@ class HilConfig:
     controller: str = "lqg"
     interface: str = "virtual"
     channel: str | None = None
+    protocol: str = "rwlab"
     nodes: tuple[int, ...] | None = None
     duration: float = 600.0
     seed: int | None = None
@@ -362,46 +368,75 @@ def _frame_writer(record, node: int, clock):
             frame = proto.decode(msg)
         except proto.ProtocolError:
             return  # the client counts bad frames
-        if isinstance(frame, proto.Command):
-            record.write(
-                f"/wheel{node}/command",
-                {
-                    "t": t,
-                    "sequence": frame.sequence,
-                    "mode": frame.mode.name,
-                    "setpoint": frame.setpoint,
-                },
-            )
-        elif isinstance(frame, proto.Telemetry):
-            record.write(
-                f"/wheel{node}/telemetry",
-                {
-                    "t": t,
-                    "speed_rpm": frame.speed_rpm,
-                    "current_a": frame.current,
-                    "mode": frame.mode.name,
-                    "fault_active": frame.fault_active,
-                    "speed_limited": frame.speed_limited,
-                    "sequence_echo": frame.sequence_echo,
-                    "counter": frame.counter,
-                },
-            )
-        elif isinstance(frame, proto.Heartbeat):
-            record.write(
-                f"/wheel{node}/heartbeat",
-                {
-                    "t": t,
-                    "mode": frame.mode.name,
-                    "faults": int(frame.faults),
-                    "temperature_c": frame.temperature,
-                    "uptime_s": frame.uptime,
-                },
-            )
+        _write_frame(record, node, t, frame)
 
     return listen
 
 
+def _message_writer(record, client) -> None:
+    """Record a client's commands and incoming telemetry and heartbeats as its link hands
+    them over, protocol-free: a protocol other than rwlab's has no frame that
+    :func:`rwlab.wheel.protocol.decode` reads (its SDOs and PDOs are not one message
+    each), so its messages are recorded where the link has made them."""
+    link, node = client.link, client.node_id
+    send, receive = link.send, link.receive
+
+    def sent(cmd: proto.Command, now: float) -> None:
+        send(cmd, now)
+        _write_frame(record, node, now, cmd)
+
+    def received(now: float) -> list:
+        incoming = receive(now)
+        for i in incoming:
+            _write_frame(record, node, i.t, i.frame)
+        return incoming
+
+    link.send, link.receive = sent, received
+
+
+def _write_frame(record, node: int, t: float, frame) -> None:
+    """One command, telemetry or heartbeat to the node's topic."""
+    if isinstance(frame, proto.Command):
+        record.write(
+            f"/wheel{node}/command",
+            {
+                "t": t,
+                "sequence": frame.sequence,
+                "mode": frame.mode.name,
+                "setpoint": frame.setpoint,
+            },
+        )
+    elif isinstance(frame, proto.Telemetry):
+        record.write(
+            f"/wheel{node}/telemetry",
+            {
+                "t": t,
+                "speed_rpm": frame.speed_rpm,
+                "current_a": frame.current,
+                "mode": frame.mode.name,
+                "fault_active": frame.fault_active,
+                "speed_limited": frame.speed_limited,
+                "sequence_echo": frame.sequence_echo,
+                "counter": frame.counter,
+            },
+        )
+    elif isinstance(frame, proto.Heartbeat):
+        record.write(
+            f"/wheel{node}/heartbeat",
+            {
+                "t": t,
+                "mode": frame.mode.name,
+                "faults": int(frame.faults),
+                "temperature_c": frame.temperature,
+                "uptime_s": frame.uptime,
+            },
+        )
+
+
 def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
+    from rwlab.hil.bench import check_multidrop
+
+    check_multidrop(cfg.protocol)  # before anything starts
     nodes = cfg.nodes or tuple(range(1, sc.n_wheels + 1))
     if len(nodes) != sc.n_wheels:
         raise ConfigError(f"{sc.name} has {sc.n_wheels} wheels; nodes names {len(nodes)} ({nodes})")
@@ -499,6 +534,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "duration_s": cfg.duration,
         "interface": cfg.interface,
         "channel": cfg.channel,
+        "protocol": cfg.protocol,
         "nodes": list(nodes),
         "clock": "wall" if cfg.realtime else "simulated",
         "twins": twins,
@@ -535,6 +571,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         latency=cfg.latency_s,
         seed=seed,
         timeout=cfg.timeout_s,
+        protocol=cfg.protocol,
     )
     record = None
     restore = _real_time(cfg.rt_priority) if cfg.realtime else None
@@ -547,6 +584,8 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 "kind": "rwlab.hil/1",
                 "config": config,
                 "dbc_sha256": proto.dbc_sha256(),
+                "protocol": cfg.protocol,
+                "protocol_identity": get_protocol(cfg.protocol).identity(),
                 "Ts": sc.run.dt,  # what `rwlab export --node N` samples a wheel at
                 # every channel's t is flight time (the spin-up before 0): export keeps it
                 "time_axis": "flight",
@@ -756,7 +795,10 @@ class _Loop:
         self._first_fault_s = min((f.t_s for _, f in cfg.faults), default=math.inf)
         self.max_error_from_fault = 0.0
         for c in bank.clients:
-            c.frame_listener = _frame_writer(record, c.node_id, clock)
+            if cfg.protocol == "rwlab":  # the frames on the wire, as sent and heard
+                c.frame_listener = _frame_writer(record, c.node_id, clock)
+            else:
+                _message_writer(record, c)
 
     def event(self, kind: str, message: str, t: float | None = None) -> None:
         t = self.clock.now() if t is None else t

@@ -361,6 +361,7 @@ def greybox_fit(
     current=None,
     uncertainty: Uncertainty | None = None,
     estimate_current_limit: bool | None = None,
+    wheel_model: str | None = None,
 ) -> WheelGreyBox:
     """Estimate the grey-box wheel by simulation error from its datasheet values.
 
@@ -390,6 +391,11 @@ def greybox_fit(
         Estimate the current limit (True), hold it at ``current_limit`` with its
         tolerance in every σ (False), or (None, default) estimate it when the
         measured ``current`` shows the clamp binding (:func:`clamp_visible`).
+    wheel_model : str, optional
+        The wheel model the record is of (its spec's name): whose measured
+        structure-error envelope the σ hold (default ``uncertainty.wheel_model``, the
+        RW90's); a model without its own gets the widest measured, and ``std_method``
+        says so.
 
     Returns
     -------
@@ -398,6 +404,8 @@ def greybox_fit(
         record identifies without J) and ``std_method``.
     """
     unc = Uncertainty() if uncertainty is None else uncertainty
+    if wheel_model is not None:
+        unc = replace(unc, wheel_model=wheel_model)
     inertia_tolerance, hac_lags = unc.inertia_tolerance, unc.hac_lags
     if not isinstance(data, IOData) or data.nu != 1 or data.ny != 1:
         raise DataError("the grey-box fit needs a single-input single-output IOData")

@@ -902,7 +902,8 @@ def wheel_datasheet(spec: WheelSpec) -> dict:
     -------
     dict
         inertia, torque_constant, current_limit, coulomb, viscous, accel_limit_rpm_s,
-        max_speed_rpm (SI, rpm).
+        max_speed_rpm (SI, rpm), and wheel_model (the spec's name: whose grey-box
+        structure-error envelope).
     """
     return {
         "inertia": spec.inertia_kg_m2,
@@ -912,6 +913,7 @@ def wheel_datasheet(spec: WheelSpec) -> dict:
         "viscous": spec.viscous_friction_nm_s,
         "accel_limit_rpm_s": spec.max_accel_rpm_s,
         "max_speed_rpm": spec.max_speed_rpm,
+        "wheel_model": spec.name,
     }
 
 

@@ -126,7 +126,7 @@ def _forced_note(page: Page, forced) -> None:
     if forced:
         page.text(
             "The wheel model cannot deliver what this scenario needs; it was flown "
-            "anyway (--force). " + " ".join(forced),
+            "anyway (--force-wheel). " + " ".join(forced),
             note=True,
         )
 

@@ -58,7 +58,7 @@ def _page(result) -> Page:
     if cfg.get("wheel_forced"):
         page.text(
             "The wheel model cannot deliver what this scenario needs; it was flown anyway "
-            "(--force). " + " ".join(cfg["wheel_forced"]),
+            "(--force-wheel). " + " ".join(cfg["wheel_forced"]),
             note=True,
         )
     clock = "the wall clock" if cfg["clock"] == "wall" else "the simulated clock"

@@ -385,6 +385,14 @@ class OresatHostLink(HostLink):
         self.period_ms = max(1, min(0xFFFF, round(1000 / rate)))
         self._timers_set = False
 
+    def start_telemetry(self) -> None:
+        """Write the TPDO event timers now (else on the first command); a write the card
+        does not confirm is tried again with that command."""
+        try:
+            self._set_timers()
+        except SdoError:
+            self._timers_set = False
+
     def _set_timers(self) -> None:
         sdo = self.remote.sdo
         for index, period in ((0x1800, self.period_ms), (0x1801, self.period_ms)):

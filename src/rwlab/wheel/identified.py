@@ -43,6 +43,9 @@ class IdentifiedWheel:
     servo : ServoModel, optional
         Fly this nonlinear model (rpm, rpm/s) instead of ``model``, which then
         only gives the equilibrium for ``reset``.
+    wheel_spec : WheelSpec, optional
+        The wheel model the model was identified on (``model.json``'s): what the
+        diagnosis scales its tests by. None: a model file without one.
     """
 
     def __init__(
@@ -54,6 +57,7 @@ class IdentifiedWheel:
         speed_limit_rpm: float = _RW90.max_speed_rpm,
         accel_limit_rpm_s: float = _RW90.max_accel_rpm_s,
         servo: ServoModel | None = None,
+        wheel_spec: WheelSpec | None = None,
     ) -> None:
         if model.nu != 1:
             raise FileFormatError("an identified wheel model must have one input")
@@ -66,6 +70,7 @@ class IdentifiedWheel:
         self._A, self._B = np.asarray(ss.A), np.asarray(ss.B)[:, 0]
         self._C, self._D = np.asarray(ss.C)[0], float(np.asarray(ss.D)[0, 0])
         self.servo = servo
+        self.wheel_spec = wheel_spec
         self.kind = "linear" if servo is None else "nonlinear"
         if servo is not None:
             if servo.Ts != self.Ts:
@@ -155,6 +160,7 @@ class IdentifiedWheel:
             speed_limit_rpm=info.speed_limit_rpm,
             accel_limit_rpm_s=info.accel_limit_rpm_s,
             servo=info.servo if kind == "nonlinear" else None,
+            wheel_spec=info.wheel_spec,
         )
         try:
             wheel._check(source)

@@ -115,6 +115,11 @@ class HostLink(abc.ABC):
             Telemetry per second, Hz.
         """
 
+    def start_telemetry(self) -> None:  # noqa: B027 - streaming links need nothing
+        """Set the wheel up to send its telemetry at the rate asked, before any command
+        (a protocol whose wheel streams only once configured, e.g. OreSat's TPDO event
+        timers, does it here; otherwise it does on its first command)."""
+
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
         """Send a command to the wheel.

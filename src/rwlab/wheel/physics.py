@@ -242,7 +242,7 @@ class WheelParams:
     coulomb_friction: float = _NOMINAL["coulomb_friction"]
     speed_kp: float = _NOMINAL["speed_kp"]
     speed_ki: float = _NOMINAL["speed_ki"]
-    speed_setpoint_weight: float = 1.0
+    speed_setpoint_weight: float = _NOMINAL["speed_setpoint_weight"]
     speed_resolution_rpm: float = _NOMINAL["speed_resolution_rpm"]
     speed_noise_rpm: float = _NOMINAL["speed_noise_rpm"]
     min_measurable_rpm: float = _NOMINAL["min_measurable_rpm"]

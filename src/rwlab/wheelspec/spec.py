@@ -102,6 +102,7 @@ SECTIONS: dict[str, tuple[tuple[str, type], ...]] = {
         ("controller_mode", str),
         ("speed_kp", float),
         ("speed_ki", float),
+        ("speed_setpoint_weight", float),
         ("control_rate_hz", float),
     ),
     "telemetry": (
@@ -165,6 +166,15 @@ TWIN_NAMES: MappingProxyType[str, str] = MappingProxyType(
 
 # may be ≤ 0 (an offset, a temperature); every other number must be ≥ 0
 _SIGNED = {"current_offset_a", "ambient_c", "overtemp_fault_c"}
+# fields a spec file written before them may lack: the value they had implicitly then
+OPTIONAL: MappingProxyType[str, dict[str, Any]] = MappingProxyType(
+    {
+        "speed_setpoint_weight": {
+            "value": 1.0,
+            "source": "assumed, because the file states none: a plain PI (setpoint weight 1)",
+        },
+    }
+)
 _ZERO_ALLOWED = {  # physical zeros a datasheet may state: none, off, perfect
     "static_imbalance_kg_m",
     "dynamic_imbalance_kg_m2",
@@ -179,6 +189,7 @@ _ZERO_ALLOWED = {  # physical zeros a datasheet may state: none, off, perfect
     "viscous_temp_coeff",
     "friction_drift",
     "speed_ki",
+    "speed_setpoint_weight",
     "speed_resolution_rpm",
     "speed_noise_rpm",
     "min_measurable_rpm",
@@ -262,6 +273,10 @@ class WheelSpec:
         The mode the wheel is flown in by an attitude controller.
     speed_kp, speed_ki : float
         The inner PI speed loop: acceleration request per speed error (1/s, 1/s²).
+    speed_setpoint_weight : float
+        The inner loop's setpoint weight β (a 2-DOF PI's proportional part acts on
+        β·setpoint − speed; 1: a plain PI). A file without it reads 1, said in its
+        source.
     control_rate_hz : float
         Rate of the wheel's own control loop, Hz.
     telemetry_rate_hz : float
@@ -324,6 +339,7 @@ class WheelSpec:
     controller_mode: str
     speed_kp: float
     speed_ki: float
+    speed_setpoint_weight: float
     control_rate_hz: float
     telemetry_rate_hz: float
     speed_resolution_rpm: float
@@ -492,7 +508,9 @@ class WheelSpec:
         for section, items in SECTIONS.items():
             table = raw[section]
             for name, kind in items:
-                entry = table[name]
+                entry = table.get(name, OPTIONAL.get(name))
+                if entry is None:  # the schema passed it (or validate=False): say which
+                    raise ConfigError(f"{where}: [{section}] has no {name}")
                 value = entry["value"]
                 if kind is float and isinstance(value, int) and not isinstance(value, bool):
                     value = float(value)
@@ -533,12 +551,23 @@ class WheelSpec:
             out[section] = {
                 name: {"value": getattr(self, name), "source": self.sources[name]}
                 for name, _ in items
+                if not self._implicit(name)
             }
         out["tolerances"] = {
             name: {"relative": t.relative, "absolute": t.absolute, "source": t.source}
             for name, t in self.tolerances.items()
         }
         return out
+
+    def _implicit(self, name: str) -> bool:
+        """A field its file did not state (:data:`OPTIONAL`'s value and source): left out
+        of the file's form, so a spec (and ``model.json``) written before the field keeps
+        its hash."""
+        default = OPTIONAL.get(name)
+        return default is not None and (getattr(self, name), self.sources.get(name)) == (
+            default["value"],
+            default["source"],
+        )
 
     @property
     def hash(self) -> str:
