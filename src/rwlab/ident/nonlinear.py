@@ -253,7 +253,20 @@ def _initial_guess(linear, data: IOData) -> tuple[float, float, float, float]:
 def in_threads(fn, items) -> list:
     """``[fn(item) for item in items]``, each call in a thread of its own: independent
     starts of a fit whose compiled simulation releases the GIL run side by side on a
-    machine's cores, and give the same results as one after the other."""
+    machine's cores, and give the same results as one after the other.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(item)``; it must not share mutable state between calls.
+    items : iterable
+        The arguments.
+
+    Returns
+    -------
+    list
+        ``fn(item)`` for each item, in order.
+    """
     items = list(items)
     if len(items) < 2 or (os.cpu_count() or 1) < 2:
         return [fn(item) for item in items]
