@@ -1,7 +1,7 @@
 """Wall time of ``rwlab identify`` against ``rwlab ident arx`` on one record, and of ``rwlab demo``.
 
 Run:  python bench/bench_identify.py [--record FILE.mcap] [--repeats 5] [--quick]
-          [--baseline SRC] [--no-demo]
+          [--baseline SRC] [--no-demo | --demo-only]
 
 Makes a 25-minute PRBS record of the RW90 twin (simulated clock, seed 3) unless
 ``--record`` names one, then runs, ``--repeats`` times and back to back (so a busy
@@ -114,12 +114,14 @@ def main() -> None:
     parser.add_argument("--baseline", type=Path, help="another source tree's src/ to time")
     parser.add_argument("--quick", action="store_true", help="3 rounds, the quick demo")
     parser.add_argument("--no-demo", action="store_true", help="skip the demo")
+    parser.add_argument("--demo-only", action="store_true", help="only the demo")
     args = parser.parse_args()
     repeats = 3 if args.quick else args.repeats
     with tempfile.TemporaryDirectory(prefix="bench_identify_") as tmp:
         out = Path(tmp)
-        record = args.record or make_record(out, 1500.0)
-        bench_identify(record, repeats, args.baseline, out)
+        if not args.demo_only:
+            record = args.record or make_record(out, 1500.0)
+            bench_identify(record, repeats, args.baseline, out)
         if not args.no_demo:
             bench_demo(args.quick, out)
 
