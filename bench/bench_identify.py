@@ -7,13 +7,14 @@ Makes a 25-minute PRBS record of the RW90 twin (simulated clock, seed 3) unless
 ``--record`` names one, then runs, ``--repeats`` times and back to back (so a busy
 machine slows both alike), ``rwlab identify`` and ``rwlab ident arx FILE 2 2 1`` on it
 as the command line does (a fresh process each: imports and the record's read
-included), after one round not counted (numba's cache filled). ``--baseline SRC`` also times ``identify`` from another source tree (e.g.
-``git archive 96f5310 src | tar -x -C /tmp/base`` and ``--baseline /tmp/base/src``),
-in the same rounds. The table gives the median wall and CPU time (this process's
-children) with the spread (min–max) and the ratio of the medians; the target (issue 45)
-is identify ≤ 2× ident arx. Then ``rwlab demo`` (``--quick``: its quick version)
-twice with a fresh numba cache: cold (every kernel compiled) and warm (the cache
-filled), target ≤ 20 s warm on a quiet machine.
+included), after one round not counted (numba's cache filled). ``--baseline SRC``
+also times ``identify`` from another source tree (e.g. ``git archive 96f5310 src |
+tar -x -C /tmp/base`` and ``--baseline /tmp/base/src``), in the same rounds. The
+table gives the median wall and CPU time (this process's children) with the spread
+(min–max) and the ratio of the medians; the target (issue 45) is identify ≤ 2×
+ident arx. Then ``rwlab demo`` (``--quick``: its quick version) twice with a fresh
+numba cache: cold (every kernel compiled) and warm (the cache filled), target
+≤ 20 s warm on a quiet machine.
 
 The machine's load average is printed with each table: on a shared machine the
 numbers are an upper bound, and the spread says how far to trust them. A
