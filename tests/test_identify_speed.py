@@ -22,7 +22,8 @@ RECORD = REFERENCE / "prbs600.mcap"
 NAME = "small6.mcap"  # the record's name when the reference was written
 OPTIONAL_STUDY = {"/nonlinear/greybox", "/nonlinear/nlarx", "/nonlinear/chosen"}
 OPTIONAL_STUDY |= {"/nonlinear/choice", "/nonlinear/not_fitted"}
-OPTIONAL_MODEL = {"/greybox", "/nlarx", "/nonlinear_chosen", "/nonlinear_choice"}
+OPTIONAL_MODEL_KEYS = ("greybox", "nlarx", "nonlinear_chosen", "nonlinear_choice")
+OPTIONAL_MODEL = {f"/{k}" for k in OPTIONAL_MODEL_KEYS}
 
 
 def _differences(old, new, path: str = "") -> list[tuple[str, object, object]]:
@@ -106,3 +107,20 @@ def test_identify_decodes_the_record_once(record, tmp_path, monkeypatch):
         monkeypatch.setattr(f"{module}.read_record", counting)
     _identify(record, tmp_path / "out", "--gaps", "split")
     assert calls == [record]
+
+
+def test_the_glr_loop_gain_and_clamp_come_from_the_servo_and_spec_without_a_grey_box(tmp_path):
+    from rwlab.diagnose.features import WheelScales
+
+    info = json.loads((REFERENCE / "model.json").read_text())
+    with_grey = WheelScales.from_model_file(REFERENCE / "model.json")
+    assert with_grey.loop_gain_per_s == info["greybox"]["kp"]
+    assert with_grey.current_limit_a == info["greybox"]["current_limit"]
+    bare = {k: v for k, v in info.items() if k not in OPTIONAL_MODEL_KEYS}
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(bare))
+    scales = WheelScales.from_model_file(path)
+    assert scales.loop_gain_per_s == info["nonlinear"]["kp"] > 0  # the servo model's
+    assert scales.current_limit_a == info["wheel"]["current_limit_a"]  # the wheel model's
+    # the two loop gains are the same quantity, estimated by two models: close, not equal
+    assert scales.loop_gain_per_s == pytest.approx(with_grey.loop_gain_per_s, rel=0.05)
