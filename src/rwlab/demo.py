@@ -279,12 +279,16 @@ def _run_side_by_side(out: Path, cfg: DemoConfig, echo, t_start: float) -> dict:
     experiments = _experiments(cfg)
     # fork: the workers start with rwlab imported; none of them uses a thread it inherits
     context = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(len(experiments) + 1, mp_context=context) as pool:
+    # one worker per core, the PRBS first (the study waits for it) and the HIL next (the
+    # longest of the rest): more workers than cores would share the PRBS's core
+    workers = min(len(experiments) + 1, os.cpu_count() or 2)
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
         jobs = {}
-        for name, title, exp in experiments:
+        for name, title, exp in sorted(experiments, key=lambda e: e[0] != "prbs"):
             echo(f"[testbed] {title}: {round(exp.duration / exp.Ts)} commands")
             jobs[name] = pool.submit(_record_job, exp, out / "records" / f"{name}.mcap")
-        hil_job = pool.submit(_hil_job, out, cfg)
+            if name == "prbs":
+                hil_job = pool.submit(_hil_job, out, cfg)
         jobs["prbs"].result()
         study, comparison = _identify_and_fly(out, cfg, echo)
         records = [
