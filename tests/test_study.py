@@ -22,11 +22,13 @@ from tests.conftest import needs_chromium
 
 @pytest.fixture(scope="module")
 def study_dir(tmp_path_factory):
-    """`rwlab identify` on a 20-minute PRBS record of the simulated RW90 (Ts = 0.5 s)."""
+    """`rwlab identify --nonlinear-models` on a 20-minute PRBS record of the simulated RW90
+    (Ts = 0.5 s)."""
     root = tmp_path_factory.mktemp("study")
     record = root / "prbs.mcap"
     run_experiment(ExperimentConfig(duration=1200, Ts=0.5, seed=5), record)
-    result = CliRunner().invoke(main, ["identify", str(record), "--out", str(root / "out")])
+    out = str(root / "out")
+    result = CliRunner().invoke(main, ["identify", str(record), "--out", out, "--nonlinear-models"])
     assert result.exit_code == 0, result.output
     return root / "out"
 
@@ -420,7 +422,8 @@ def test_a_diverged_nonlinear_model_is_flagged_failed_not_ranked_nor_chosen(monk
 
 
 def test_non_wheel_data_gets_no_wheel_stages_and_says_so(tmp_path):
-    r = CliRunner().invoke(main, ["identify", "dryer", "--out", str(tmp_path / "d")])
+    out = str(tmp_path / "d")
+    r = CliRunner().invoke(main, ["identify", "dryer", "--out", out, "--nonlinear-models"])
     assert r.exit_code == 0, r.output
     assert "wheel models: none (not a wheel record" in r.output
     study = json.loads((tmp_path / "d" / "study.json").read_text())
@@ -435,7 +438,11 @@ def test_non_wheel_data_gets_no_wheel_stages_and_says_so(tmp_path):
     u = np.repeat(rng.uniform(-3000, 3000, 30), 40)
     y = lfilter([0, 0.2], [1, -0.8], u) + rng.normal(0, 5, u.size)
     rpm = IOData(u, y, 0.5, input_units="rpm", output_units="rpm")
-    assert identification_study(rpm, orders=(2,), nk_max=2).wheel_stages["run"] is True
+    default = identification_study(rpm, orders=(2,), nk_max=2)
+    assert default.wheel_stages["run"] is True and default.servo is not None
+    # the grey box and the NLARX only on request: the study says they were not fitted
+    assert default.greybox is None and default.nlarx is None
+    assert "--nonlinear-models" in default.nonlinear["not_fitted"]
     named = IOData(u, y, 0.5, input_names="command", output_names="speed_rpm")  # exported CSV
     assert identification_study(named, orders=(2,), nk_max=2, nonlinear=False).wheel_stages["run"]
     off = identification_study(rpm, orders=(2,), nk_max=2, wheel=False)

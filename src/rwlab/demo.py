@@ -170,15 +170,12 @@ DEMO_FILES = ("records", "identification", "attitude", "hil", "summary.json", "i
 
 def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
     """The demo's work, every file written into ``out`` (the staging folder)."""
-    from rwlab.attitude.control import compare, ltr_study
-    from rwlab.attitude.scenario import SCENARIOS
-    from rwlab.ident.study import identification_study, physical_model
-    from rwlab.report.attitude import write_comparison
-    from rwlab.report.identification import write_study
-    from rwlab.testbed import load_record, run_experiment
+    from rwlab.testbed import run_experiment
 
     (out / "records").mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
+    if _side_by_side(cfg):
+        return _run_side_by_side(out, cfg, echo, t_start)
     records = []
     monitor = None
     for name, title, exp in _experiments(cfg):
@@ -214,6 +211,20 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
             }
         )
 
+    study, comparison = _identify_and_fly(out, cfg, echo)
+    hil = _hil_stage(out, cfg, echo)
+    return _finish(out, cfg, study, comparison, records, hil, t_start)
+
+
+def _identify_and_fly(out: Path, cfg: DemoConfig, echo) -> tuple:
+    """Paper A's study on the PRBS record, then the attitude comparison with its model."""
+    from rwlab.attitude.control import compare, ltr_study
+    from rwlab.attitude.scenario import SCENARIOS
+    from rwlab.ident.study import identification_study, physical_model
+    from rwlab.report.attitude import write_comparison
+    from rwlab.report.identification import write_study
+    from rwlab.testbed import load_record
+
     echo("[identify] paper A's study on the PRBS record")
     study = identification_study(load_record(out / "records" / "prbs.mcap"))
     model = physical_model(study, saturation_source="the record's driver settings")
@@ -233,8 +244,71 @@ def _run(out: Path, cfg: DemoConfig, echo, progress) -> dict:
         progress=lambda name: echo(f"[attitude]   flying {name}"),
     )
     write_comparison(comparison, out / "attitude", force=True, ltr_result=ltr_study(scenario))
-    hil = _hil_stage(out, cfg, echo)
+    return study, comparison
 
+
+def _side_by_side(cfg: DemoConfig) -> bool:
+    """Whether the records and the HIL run in processes of their own, side by side: on
+    the simulated clock (each is then its own simulation, seeded, the same in any
+    process) on a machine of several cores; the wall clock and the live monitor run
+    one record after the other, as a lab would."""
+    return not (cfg.realtime or cfg.monitor) and (os.cpu_count() or 1) >= 2
+
+
+def _record_job(exp, path: Path) -> dict:
+    """One testbed record (in a worker process): its counts for the summary."""
+    from rwlab.testbed import run_experiment
+
+    run = run_experiment(exp, path, force=True)
+    return {"commands": run.commands, "telemetry": run.telemetry, "lost_frames": run.lost_frames}
+
+
+def _hil_job(out: Path, cfg: DemoConfig) -> tuple[dict, list[str]]:
+    """The HIL stage (in a worker process): its summary and its console lines."""
+    lines: list[str] = []
+    return _hil_stage(out, cfg, lines.append), lines
+
+
+def _run_side_by_side(out: Path, cfg: DemoConfig, echo, t_start: float) -> dict:
+    """The demo with the records and the HIL in worker processes: the study and the
+    attitude runs start as soon as the PRBS record is written, while the others run.
+    The records are the same as one after the other (each its own seeded simulation on
+    the simulated clock); the 20-minute PRBS is the longest, so the wall time is about
+    its record, the study and the attitude runs."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    experiments = _experiments(cfg)
+    # fork: the workers start with rwlab imported; none of them uses a thread it inherits
+    context = multiprocessing.get_context("fork")
+    # one worker per core, the PRBS first (the study waits for it) and the HIL next (the
+    # longest of the rest): more workers than cores would share the PRBS's core
+    workers = min(len(experiments) + 1, os.cpu_count() or 2)
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        jobs = {}
+        for name, title, exp in sorted(experiments, key=lambda e: e[0] != "prbs"):
+            echo(f"[testbed] {title}: {round(exp.duration / exp.Ts)} commands")
+            jobs[name] = pool.submit(_record_job, exp, out / "records" / f"{name}.mcap")
+            if name == "prbs":
+                hil_job = pool.submit(_hil_job, out, cfg)
+        jobs["prbs"].result()
+        study, comparison = _identify_and_fly(out, cfg, echo)
+        records = [
+            {"name": name, "title": title, "file": f"records/{name}.mcap", **jobs[name].result()}
+            for name, title, _ in experiments
+        ]
+        hil, lines = hil_job.result()
+    for line in lines:
+        echo(line)
+    return _finish(out, cfg, study, comparison, records, hil, t_start)
+
+
+def _finish(out: Path, cfg, study, comparison, records, hil, t_start: float) -> dict:
+    """``summary.json`` and ``index.html``; returns the summary."""
+    from rwlab.attitude.scenario import SCENARIOS
+
+    scenario = SCENARIOS["geo-smallsat"]
+    chosen = study.to_dict()["chosen"]
     summary = {
         "chosen_model": {
             "structure": chosen["structure"],

@@ -69,6 +69,13 @@ from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
     help="Percent within which the chosen model's DC gain must match the steady-state gain "
     "measured on the record's settled holds (a record without them: fit alone).",
 )
+@click.option(
+    "--nonlinear-models",
+    is_flag=True,
+    help="Also fit the grey-box wheel and the NLARX (about twice the study's time; the "
+    "servo model is always fitted). rwlab compare scores them; without them the GLR "
+    "diagnosis takes its loop gain from the servo model.",
+)
 @_engine_options
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_salvage_option
@@ -84,6 +91,7 @@ def identify(
     tolerance,
     gaps,
     gain_tolerance,
+    nonlinear_models,
     workers,
     scheduler,
     force,
@@ -113,6 +121,7 @@ def identify(
         tolerance=tolerance,
         gaps=gaps,
         gain_tolerance=gain_tolerance,
+        nonlinear_models=nonlinear_models,
     )
     if Path(file).is_dir():
         _identify_fleet(Path(file), Path(out), options, workers, scheduler, force)
@@ -166,6 +175,8 @@ def identify(
             click.echo(f"{name}: validation fit {row['fit_percent']:.2f} %")
         elif row.get("failed") or row.get("error"):
             click.echo(f"{name}: failed ({row.get('failed') or row.get('error')})")
+    if (nl or {}).get("not_fitted"):
+        click.echo("grey box, NLARX: not fitted (--nonlinear-models fits them)")
     ref = study.get("healthy_reference") or {}
     if ref.get("stored"):
         click.echo(

@@ -81,6 +81,7 @@ from rwlab.ident.greybox_std import (
     structure_error,
     uncertainty_budget,
 )
+from rwlab.ident.nonlinear import in_threads
 
 __all__ = [
     "CLAMP_SAMPLES",
@@ -97,7 +98,7 @@ _POSITION = dict(zip((*ESTIMATED, CLAMP), (1, 3, 4, 6, 7, 8, 9, 2), strict=True)
 CLAMP_SAMPLES = 10  # measured-current samples at the clamp that make it visible
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # nogil: the fit's starts run in threads
 def _simulate(u_rpm, w0_rpm, p):  # pragma: no cover - compiled
     """Speed (rpm) sampled before each command is applied, and the motor current (A)
     at the same instants; p: see WheelGreyBox.vector."""
@@ -466,13 +467,13 @@ def greybox_fit(
     )
     lower = np.array([bounds[k][0] for k in names], dtype=float)
     upper = np.array([bounds[k][1] for k in names], dtype=float)
+
     # the loss is piecewise smooth (anti-windup switching, stiction): from a few starts
     # of the PI gains, with finite differences wide enough to see across the kinks
-    sol = None
-    for fk, fi in ((1.0, 1.0), (0.7, 1.4), (1.4, 0.7), (1.0, 2.0), (1.0, 0.5)):
+    def start(gains: tuple[float, float]):
         z0 = np.ones(len(x0))
-        z0[names.index("kp")], z0[names.index("ki")] = fk, fi
-        trial = least_squares(
+        z0[names.index("kp")], z0[names.index("ki")] = gains
+        return least_squares(
             residuals,
             np.clip(z0, lower, upper),
             bounds=(lower, upper),
@@ -481,6 +482,9 @@ def greybox_fit(
             ftol=1e-10,
             xtol=1e-10,
         )
+
+    sol = None
+    for trial in in_threads(start, ((1.0, 1.0), (0.7, 1.4), (1.4, 0.7), (1.0, 2.0), (1.0, 0.5))):
         if sol is None or trial.cost < sol.cost:
             sol = trial
     if sol is None or not np.all(np.isfinite(sol.x)):

@@ -304,6 +304,7 @@ def identification_study(
     current=None,
     segments: Sequence[tuple[int, int]] | None = None,
     wheel: bool | None = None,
+    nonlinear_models: bool = False,
 ) -> StudyResult:
     """Run paper A's identification procedure on a SISO record.
 
@@ -370,6 +371,12 @@ def identification_study(
         it: a testbed record's or its exported CSV's ``speed_rpm``); a hair dryer, a
         furnace or a unitless file is not, and gets the linear study and the NLARX only.
         ``study.json``'s ``wheel_stages`` says which.
+    nonlinear_models : bool
+        Also fit the grey-box wheel and the NLARX (step 8, with ``nonlinear``). Off by
+        default: they took over half of the study's time (the grey box alone 5 starts
+        of a 50-substep simulation fit), and only ``rwlab compare``, the report and
+        the GLR diagnosis's loop gain read them (which then takes the servo model's);
+        ``nonlinear['not_fitted']`` says so.
 
     Returns
     -------
@@ -477,8 +484,11 @@ def identification_study(
             servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
         else:
             nl = {"structure": "servo", "skipped": stages["why"]}
-        sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
-        grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
+        if nonlinear_models:
+            sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
+            grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
+        else:
+            nl["not_fitted"] = NOT_FITTED
         step("nonlinear")
     return StudyResult(
         data=prepared,
@@ -510,6 +520,12 @@ def identification_study(
         best_fit_percent=max(r["fit_percent"] for r in candidates),
     )
 
+
+NOT_FITTED = (
+    "the grey-box wheel and the NLARX were not fitted (rwlab identify --nonlinear-models, "
+    "or nonlinear_models=True, fits them)"
+)
+"""``nonlinear['not_fitted']`` of a study that left the grey box and the NLARX out."""
 
 SPEED_UNITS = ("rpm", "rad/s", "deg/s", "rps")
 """Output units that make a record a wheel's (``identification_study``'s ``wheel=None``)."""
@@ -1255,7 +1271,9 @@ def _to_physical(m: PolyModel, trend, input_name: str = "u", output_name: str = 
     )
 
 
-def load_current(path: str, Ts: float | None = None, *, gaps: str = "refuse") -> np.ndarray | None:
+def load_current(
+    path: str, Ts: float | None = None, *, gaps: str = "refuse", reader=None
+) -> np.ndarray | None:
     """The motor current (A) of a testbed record at the speed's instants, or None
     for a file without one (the grey box then fits the speed alone).
 
@@ -1267,17 +1285,17 @@ def load_current(path: str, Ts: float | None = None, *, gaps: str = "refuse") ->
         Sample time, s (the record's own by default).
     gaps : {'refuse', 'split'}
         ``split``: read a record with telemetry gaps whole (see :func:`load_study_data`).
+    reader : callable, optional
+        As for :func:`load_study_data`.
     """
     from pathlib import Path
-
-    from rwlab.data import load
 
     if Path(path).suffix.lower() != ".mcap":
         return None
     extra = {"max_gap": math.inf} if gaps == "split" else {}
     try:
         columns = {"input_columns": "command", "output_columns": "current_a"}
-        return load(path, Ts, **columns, **extra).y[:, 0]
+        return _reader(path, reader)(Ts, **columns, **extra).y[:, 0]
     except DataError:
         return None
 
@@ -1291,6 +1309,7 @@ def load_study_data(
     max_orders: int = 5,
     nk_max: int = 10,
     gaps: str = "refuse",
+    reader=None,
 ) -> tuple[IOData, dict]:
     """Read a testbed record (``.mcap``), an exported or other data file, or a bundled set.
 
@@ -1305,6 +1324,10 @@ def load_study_data(
     With ``gaps="split"`` such a record is read whole, stale samples included: the caller
     identifies its gap-free parts as separate experiments (``identification_study``'s
     ``segments``, from :func:`rwlab.testbed.load.gap_free_segments`).
+    ``reader(Ts, **options) -> IOData`` reads a ``.mcap`` in place of
+    :func:`rwlab.data.load` of ``path``: a caller that decoded the record already
+    (``rwlab identify`` reads it once for the study, the current and the healthy
+    reference) passes one that samples it.
     """
     if gaps not in ("refuse", "split"):
         raise DataError(f"gaps must be 'refuse' or 'split', got {gaps!r}")
@@ -1322,14 +1345,15 @@ def load_study_data(
     if Path(path).suffix.lower() == ".mcap":
         from rwlab.errors import RecordGapError
 
+        read = _reader(path, reader)
         try:
             try:  # no max_gap: every gap and a too-fine Ts refused
-                data = load(path, Ts, **columns)
+                data = read(Ts, **columns)
             except RecordGapError:
                 if gaps != "split":
                     raise
                 # Ts was accepted before the gaps were found: read it whole
-                data = load(path, Ts, **columns, max_gap=math.inf)
+                data = read(Ts, **columns, max_gap=math.inf)
         except RecordGapError as exc:
             raise RecordGapError(
                 f"{str(exc).partition(' Pass max_gap')[0]} Identification refuses a record "
@@ -1359,3 +1383,12 @@ def load_study_data(
     from rwlab.datafiles import check_magnitude
 
     return check_magnitude(load(path, Ts, **columns), path), saturation
+
+
+def _reader(path: str, reader=None) -> Callable[..., IOData]:
+    """``reader``, or one that reads ``path`` with :func:`rwlab.data.load`."""
+    if reader is not None:
+        return reader
+    from rwlab.data import load
+
+    return lambda Ts, **options: load(path, Ts, **options)

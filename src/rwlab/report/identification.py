@@ -485,6 +485,8 @@ def _nonlinear_notes(nl: dict, stages: dict | None) -> list[str]:
             lines.append(f"Nonlinear {name}: validation fit {row['fit_percent']:.2f} %.")
         elif row.get("failed") or row.get("error"):
             lines.append(f"Nonlinear {name}: failed, {row.get('failed') or row.get('error')}.")
+    if nl.get("not_fitted"):
+        lines.append(f"Nonlinear grey box and NLARX: {nl['not_fitted']}.")
     return lines
 
 

@@ -12,6 +12,7 @@ folder whole or not at all, and refuse a second run on it at once
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -46,6 +47,7 @@ def identify(
     tolerance: float = 3.0,
     gaps: str = "refuse",
     gain_tolerance: float = 2.0,
+    nonlinear_models: bool = False,
     force: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
     echo: Callable[[str], None] | None = None,
@@ -74,6 +76,9 @@ def identify(
     gain_tolerance : float
         Percent within which the chosen model's DC gain must match the steady-state gain
         measured on the record's settled holds.
+    nonlinear_models : bool
+        Also fit the grey-box wheel and the NLARX (see
+        :func:`rwlab.ident.study.identification_study`; the servo model is always fitted).
     force : bool
         Replace a previous study in ``out`` (only when this one succeeds).
     progress : callable, optional
@@ -104,6 +109,7 @@ def identify(
         tolerance=tolerance,
         gaps=gaps,
         gain_tolerance=gain_tolerance,
+        nonlinear_models=nonlinear_models,
         force=force,
     )
     with output_folder(out, STUDY_FILES, force=force, what="identification study") as stage:
@@ -141,7 +147,8 @@ def identify_into(
         As in :func:`identify`.
     **options
         ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
-        ``tolerance``, ``gaps``, ``gain_tolerance``, ``force`` as in :func:`identify`.
+        ``tolerance``, ``gaps``, ``gain_tolerance``, ``nonlinear_models``, ``force`` as
+        in :func:`identify`.
 
     Returns
     -------
@@ -150,20 +157,38 @@ def identify_into(
     paths : dict of str to Path
         The files written, by name.
     """
+    from threadpoolctl import threadpool_limits
+
+    # BLAS on one thread: the study's matrices are at most a few thousand by ten, where
+    # BLAS threads only wait for each other; on a busy machine one SVD of the fits took
+    # 250 ms threaded against 2 ms on one thread (measured), and the numbers agree to
+    # round-off (1 ulp in one standard deviation of study.json)
+    with threadpool_limits(1, user_api="blas"):
+        return _identify_into(file, folder, progress=progress, echo=echo, **options)
+
+
+def _identify_into(file, folder, *, progress, echo, **options) -> tuple[dict, dict[str, Path]]:
+    """:func:`identify_into`'s work."""
     from rwlab.ident.study import identification_study, load_current, load_study_data
     from rwlab.ident.study import wheel_model as make_wheel_model
     from rwlab.report.identification import write_study
 
     Ts, gaps = options["Ts"], options.get("gaps", "refuse")
     file = str(file)
+    record, reader = _read_once(file)
     data, saturation = load_study_data(
-        file, Ts, input_col=options["input_col"], output_col=options["output_col"], gaps=gaps
+        file,
+        Ts,
+        input_col=options["input_col"],
+        output_col=options["output_col"],
+        gaps=gaps,
+        reader=reader,
     )
     segments = None
-    if gaps == "split" and Path(file).suffix.lower() == ".mcap":
+    if gaps == "split" and record is not None:
         from rwlab.testbed.load import gap_free_segments
 
-        segments = gap_free_segments(file, data.Ts)
+        segments = gap_free_segments(record, data.Ts)
     if echo is not None:  # the data are shown once the study accepts them (a refusal: one line)
         progress = _after_first(progress, lambda: echo(f"data: {data!r}"))
     datasheet = None
@@ -186,8 +211,9 @@ def identify_into(
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
         progress=progress,
         datasheet=datasheet,
-        current=load_current(file, Ts, gaps=gaps),
+        current=load_current(file, Ts, gaps=gaps, reader=reader),
         segments=segments,
+        nonlinear_models=options.get("nonlinear_models", False),
     )
     model = make_wheel_model(  # the owner class: the healthy reference is added below
         result,
@@ -196,7 +222,7 @@ def identify_into(
         saturation_source=saturation["saturation_source"],
         wheel_spec=spec,
     )
-    reference = _healthy_reference(file, model)
+    reference = _healthy_reference(file, model, record)
     if isinstance(reference, dict):
         model = dataclasses.replace(model, healthy_reference=reference)
     elif echo is not None:
@@ -220,6 +246,20 @@ def identify_into(
     return study, paths
 
 
+def _read_once(file: str):
+    """A testbed record decoded once, and a reader that samples it (for
+    :func:`rwlab.ident.study.load_study_data`); (None, None) for any other file. The
+    study, the motor current, the gap-free segments and the healthy reference all
+    sample the one decoded record: decoding is most of a record's read."""
+    if Path(file).suffix.lower() != ".mcap" or not Path(file).is_file():
+        return None, None  # a missing file is refused by load_study_data, as any file
+    from rwlab.testbed import read_record
+    from rwlab.testbed.load import read_mcap
+
+    record = read_record(file)
+    return record, functools.partial(read_mcap, record)
+
+
 def _after_first(progress, first: Callable[[], None]):
     """``progress`` that calls ``first()`` before its first report."""
     done: list[bool] = []
@@ -237,8 +277,9 @@ def _after_first(progress, first: Callable[[], None]):
 NOT_A_RECORD = "not a testbed record (.mcap with motor current)"
 
 
-def _healthy_reference(file, model) -> dict | str:
-    """The healthy reference measured on a testbed record, or why there is none."""
+def _healthy_reference(file, model, record=None) -> dict | str:
+    """The healthy reference measured on a testbed record (``record``: the record
+    decoded already, else read from ``file``), or why there is none."""
     import numpy as np
 
     from rwlab.diagnose import healthy_reference
@@ -250,7 +291,10 @@ def _healthy_reference(file, model) -> dict | str:
     try:
         wheel = IdentifiedWheel.from_file(model)
         data = load_record(
-            file, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+            file if record is None else record,
+            wheel.Ts,
+            outputs=("speed", "current", "age", "lost"),
+            max_gap=np.inf,
         )
         # the data's name: the file's, and says so where the record was salvaged
         return healthy_reference(data, wheel, source=data.name).to_dict()
@@ -346,7 +390,8 @@ def identify_fleet(
         ``progress(done)``: records finished so far.
     **options
         ``Ts``, ``input_col``, ``output_col``, ``preprocess``, ``split``,
-        ``tolerance``, ``gaps``, ``gain_tolerance`` as in :func:`identify`.
+        ``tolerance``, ``gaps``, ``gain_tolerance``, ``nonlinear_models`` as in
+        :func:`identify`.
 
     Returns
     -------
@@ -369,6 +414,7 @@ def identify_fleet(
         "tolerance": 3.0,
         "gaps": "refuse",
         "gain_tolerance": 2.0,
+        "nonlinear_models": False,
         **options,
         "force": force,
     }

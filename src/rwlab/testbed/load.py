@@ -10,7 +10,7 @@ import numpy as np
 from rwlab.data import IOData, check_Ts
 from rwlab.datafiles import from_table
 from rwlab.errors import DataError, RecordGapError
-from rwlab.testbed.record import read_record, readable_seconds
+from rwlab.testbed.record import Record, read_record, readable_seconds
 
 __all__ = ["gap_free_segments", "load_record", "salvage_note", "telemetry_gaps"]
 
@@ -50,7 +50,7 @@ def telemetry_gaps(times: np.ndarray, max_gap: float) -> list[tuple[float, float
 
 
 def load_record(
-    path: str | os.PathLike,
+    path: str | os.PathLike | Record,
     Ts: float | None = None,
     *,
     outputs: tuple[str, ...] = ("speed",),
@@ -63,8 +63,10 @@ def load_record(
 
     Parameters
     ----------
-    path : path-like
-        An ``.mcap`` record written by ``rwlab experiment``.
+    path : path-like or Record
+        An ``.mcap`` record written by ``rwlab experiment``, or one read already
+        (:func:`rwlab.testbed.read_record`: a caller that samples a record several
+        ways decodes it once).
     Ts : float, optional
         Sample time in seconds (default: the record's command period).
     outputs : tuple of {'speed', 'acceleration', 'current', 'age', 'lost'}
@@ -101,7 +103,8 @@ def load_record(
         (``rwlab hil``: flight time, the spin-up at negative times), so every
         channel of such a record reads on one clock.
     """
-    record = read_record(path, salvage=salvage)
+    record = _read(path, salvage)
+    path = record.path
     meta = record.metadata
     if Ts is None:
         Ts = meta.get("Ts")
@@ -173,6 +176,11 @@ def load_record(
     )
 
 
+def _read(path: str | os.PathLike | Record, salvage: bool | None) -> Record:
+    """The record at ``path``, or ``path`` itself when it was read already."""
+    return path if isinstance(path, Record) else read_record(path, salvage=salvage)
+
+
 def salvage_note(record) -> dict:
     """What outputs carry of a record read up to its damage (``source["salvaged"]``).
 
@@ -215,7 +223,7 @@ def _origin(meta: dict, first_command_t: float) -> float:
 
 
 def gap_free_segments(
-    path: str | os.PathLike,
+    path: str | os.PathLike | Record,
     Ts: float | None = None,
     *,
     node: int | None = None,
@@ -230,8 +238,8 @@ def gap_free_segments(
 
     Parameters
     ----------
-    path : path-like
-        The record.
+    path : path-like or Record
+        The record (or the record read already).
     Ts : float, optional
         Sample time, s (the record's by default), as for :func:`load_record`.
     node : int, optional
@@ -245,8 +253,8 @@ def gap_free_segments(
         ``[i0, i1)`` ranges of the samples of ``load_record(path, Ts, max_gap=numpy.inf)``,
         in time order; one range covering every sample when the record has no gap.
     """
-    data = load_record(path, Ts, outputs=("age",), max_gap=np.inf, node=node, salvage=salvage)
-    record = read_record(path, salvage=salvage)
+    record = _read(path, salvage)
+    data = load_record(record, Ts, outputs=("age",), max_gap=np.inf, node=node)
     prefix = "" if node is None else f"/wheel{node}"
     t0 = record.topic(f"{prefix}/command")[0]["t"]
     tt = np.array([m["t"] for m in record.topic(f"{prefix}/telemetry")])
@@ -269,7 +277,7 @@ def _lost_frames(telemetry: list[dict]) -> np.ndarray:
 
 
 def read_mcap(
-    path: Path,
+    path: Path | Record,
     Ts: float | None,
     input_columns=None,
     output_columns=None,
@@ -281,8 +289,8 @@ def read_mcap(
 
     Parameters
     ----------
-    path : Path
-        The ``.mcap`` record.
+    path : Path or Record
+        The ``.mcap`` record (or the record read already).
     Ts : float, optional
         Sample time, s (default: the record's).
     input_columns, output_columns : str or list, optional
@@ -304,6 +312,8 @@ def read_mcap(
         max_gap_samples=max_gap_samples,
         salvage=salvage,
     )
+    if isinstance(path, Record):
+        path = path.path
     names = ["time_s", *rec.input_names, *rec.output_names]
     units = dict(zip(names[1:], [*rec.input_units, *rec.output_units], strict=True))
     table = np.column_stack([rec.time, rec.u, rec.y])
