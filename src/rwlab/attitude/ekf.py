@@ -336,8 +336,7 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
             if j < 3:
                 v -= K[i, 0] * Hx[0, j] + K[i, 1] * Hx[1, j] + K[i, 2] * Hx[2, j]
             PHt[i, j] = v
-    _mm(PHt, P, X)  # Joseph form: (I − KH) P (I − KH)ᵀ + K R Kᵀ
-    _mmt(X, PHt, Hx)
+    _joseph_products(PHt, P, X, Hx)  # (I − KH) P (I − KH)ᵀ into Hx
     for i in range(nx):
         for j in range(i, nx):
             kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
@@ -348,6 +347,47 @@ def gated_update_into(q, w, P, b_meas, ref, sigma, gate, W):
     for i in range(nx - 3):
         w[i] += dx[3 + i]
     return True
+
+
+@njit(cache=True, inline="always")
+def _joseph_products(A, P, X, out):
+    """out = A P Aᵀ (X: scratch) for A = I − K H with H = [[b×], 0]: A's row i is zero
+    outside columns 0, 1, 2 and i, so each entry is a sum of at most four terms.
+
+    The same sums as ``_mm(A, P, X)`` then ``_mmt(X, A, out)``, term for term in the same
+    order (k ascending, exact zeros of A skipped, from 0.0), so the result is equal bit for
+    bit; only the loops over A's known zeros are gone and each sum stays in a register
+    (the generic products load and store ``out`` at every term: 40 % of the update's time).
+    """
+    nx = P.shape[0]
+    for i in range(nx):
+        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
+        ai = A[i, i] if i >= 3 else 0.0
+        for j in range(nx):
+            acc = 0.0
+            if a0 != 0.0:
+                acc += a0 * P[0, j]
+            if a1 != 0.0:
+                acc += a1 * P[1, j]
+            if a2 != 0.0:
+                acc += a2 * P[2, j]
+            if ai != 0.0:
+                acc += ai * P[i, j]
+            X[i, j] = acc
+    for j in range(nx):
+        b0, b1, b2 = A[j, 0], A[j, 1], A[j, 2]
+        bj = A[j, j] if j >= 3 else 0.0
+        for i in range(nx):
+            acc = 0.0
+            if b0 != 0.0:
+                acc += X[i, 0] * b0
+            if b1 != 0.0:
+                acc += X[i, 1] * b1
+            if b2 != 0.0:
+                acc += X[i, 2] * b2
+            if bj != 0.0:
+                acc += X[i, j] * bj
+            out[i, j] = acc
 
 
 @njit(cache=True, inline="always")
