@@ -233,10 +233,12 @@ class Sensors(NamedTuple):
 class Filter(NamedTuple):
     """The estimator: ``mode`` TRUTH (the controller sees the true state), DYNAMICS (the MEKF
     on the plant model, its disturbance state of kind ``bias_kind``, truth ``bias_true``
-    for NEES, disturbances it models ``dist_model``) or GYRO (the gyro-driven MEKF); its
-    continuous process noise Qc (n, n); the σ it assumes for the sun and earth sensors
-    (rad); the innovation ``gate`` (2,); the star tracker's covariance ``tracker_R`` (3, 3);
-    the inertia J and J⁻¹ (3, 3) of the DYNAMICS filter's model (not necessarily the truth's)."""
+    for NEES (unread for the torque state alone, whose truth is the torque the filter does
+    not model: :func:`_unmodelled_torque_into`), disturbances it models ``dist_model``)
+    or GYRO (the gyro-driven MEKF); its continuous process noise Qc (n, n); the σ it
+    assumes for the sun and earth sensors (rad); the innovation ``gate`` (2,); the star
+    tracker's covariance ``tracker_R`` (3, 3); the inertia J and J⁻¹ (3, 3) of the
+    DYNAMICS filter's model (not necessarily the truth's)."""
 
     mode: int
     bias_kind: int
