@@ -318,7 +318,7 @@ def new_stats() -> np.ndarray:
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sky_at(sky, u, sun, moon):
     """Sun and Moon unit vectors (into ``sun``, ``moon``) and (sunlit, earth_lit,
     moon_visible, srp_scale) at row position ``u`` of the sky table (linear interpolation,
@@ -445,7 +445,7 @@ def _control_into(K_w, M, w_max, s, work, tau):
         tau[i] = -tau[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, tau_thr):
     """Momentum unloading: thruster pulses (into ``tau_thr``) against the wheels' body
     momentum off its target G·``hw_target`` (the body momentum into ``h_body``); returns the
@@ -501,7 +501,7 @@ def _count_zero_crossings(stats, x, h_max, sign):
             sign[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _steady_stats(stats, err, hw_cmd, hw_prev, x, wheel_inertia, at_limit, in_desat, earth_lit):
     """The steady window's statistics of one step."""
     nw = hw_cmd.shape[0]
