@@ -500,3 +500,20 @@ def test_the_campaign_workflow_locks_the_files_the_report_writes():
     from rwlab.report.campaign import CAMPAIGN_FILES
 
     assert sorted(montecarlo._FILES) == sorted(CAMPAIGN_FILES)
+
+
+def _imported(module):
+    import sys
+
+    return module in sys.modules
+
+
+@pytest.mark.slow
+def test_local_workers_are_forked_with_the_campaign_modules_imported():
+    """Start-up costs one worker's imports, not one per worker (issue 44): before any task
+    the workers already hold rwlab's campaign modules (a spawned worker would not)."""
+    if "forkserver" not in __import__("multiprocessing").get_all_start_methods():
+        pytest.skip("no fork server on this platform")
+    with dask_client(2) as client:
+        held = client.run(_imported, "rwlab.campaign.montecarlo")
+    assert len(held) == 2 and all(held.values())

@@ -151,7 +151,7 @@ def _mv(M, a0, a1, a2):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _derivative_into(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb, out):
     """:func:`derivative` written with scalars into ``out``: the same maths, no temporaries.
 
