@@ -21,6 +21,13 @@ everything the pipeline decides with:
 
 File format ``rwlab.DiagnosisCalibration/1`` (schema
 ``diagnosis_calibration.schema.json``); one owner, this class.
+
+The package ships one twin-calibrated file per wheel preset,
+``twin_calibration_<preset>.json`` (:func:`twin_calibration_file`): measured by
+``bench/bench_fdi.py --save-calibration`` on the twin's healthy records of
+that preset (its ``origin`` and ``sources`` say which records and how many
+hours). It applies to a model of that preset identified with the defaults; a
+lab's own wheel is better served by its own ``rwlab diagnose calibrate``.
 """
 
 from __future__ import annotations
@@ -43,7 +50,7 @@ from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
 from rwlab.errors import ConfigError, DataError, FileFormatError
 
-__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold"]
+__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold", "twin_calibration_file"]
 
 FORMAT = "rwlab.DiagnosisCalibration/1"
 STUCK = "speed_sensor_stuck"
@@ -344,3 +351,34 @@ class DiagnosisCalibration:
         if self.hours <= 0:
             raise DataError("an empty calibration cannot be saved")
         return write_json(path, self.to_dict())
+
+
+def twin_calibration_file(wheel: str) -> Path:
+    """The package's twin-calibrated file for a wheel preset (module docstring).
+
+    Parameters
+    ----------
+    wheel : str
+        A wheel preset's name (``rwlab wheel models``).
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ConfigError
+        No file shipped for that wheel.
+    """
+    path = Path(__file__).with_name(f"twin_calibration_{wheel}.json")
+    if not path.is_file():
+        shipped = sorted(
+            p.stem.removeprefix("twin_calibration_")
+            for p in path.parent.glob("twin_calibration_*.json")
+        )
+        raise ConfigError(
+            f"no twin calibration for the wheel {wheel!r} (shipped: {', '.join(shipped)}); "
+            "calibrate on the wheel's own healthy records: rwlab diagnose calibrate RECORDS... "
+            "--model model.json --out calibration.json"
+        )
+    return path
