@@ -63,9 +63,10 @@ HELD = (
 HELD_POWER_UP = ("friction=1.5", "torque_constant=0.8", "current_limit=0.45")
 
 
-def wheel_set(current_limit_a: float) -> dict[str, tuple]:
-    """name → spec of the per-wheel held-out set (units 9001-9104), limits at 60-80 % of
-    the wheel's specified clamp ``current_limit_a`` (A)."""
+def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dict[str, tuple]:
+    """name → spec of a per-wheel held-out set (``w5``: units 9001-9102; ``w6``: units
+    9201-9302, made after the last change to judge it once), limits at 60-80 % of the
+    wheel's specified clamp ``current_limit_a`` (A)."""
     limit = current_limit_a
     faults = (
         ("friction=1.5", "prbs"),
@@ -83,14 +84,14 @@ def wheel_set(current_limit_a: float) -> dict[str, tuple]:
     )
     out = {}
     for i, (fault, signal) in enumerate(faults):
-        u = 9001 + i
-        out[f"w5_f{u}"] = (u, 90000 + u, signal, 900, b._faults(fault, 600.0), fault, 600.0)
+        u = first + 1 + i
+        out[f"{tag}_f{u}"] = (u, 90000 + u, signal, 900, b._faults(fault, 600.0), fault, 600.0)
     for i, fault in enumerate(("friction=1.5", f"current_limit={0.8 * limit:.4g}")):
-        u = 9051 + i
-        out[f"w5_p{u}"] = (u, 90000 + u, "prbs", 600, b._faults(fault, 0.0), fault, 0.0)
+        u = first + 51 + i
+        out[f"{tag}_p{u}"] = (u, 90000 + u, "prbs", 600, b._faults(fault, 0.0), fault, 0.0)
     for i in range(2):
-        u = 9101 + i
-        out[f"w5_h{i}"] = (u, 91000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
+        u = first + 101 + i
+        out[f"{tag}_h{i}"] = (u, 91000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
     return out
 
 
@@ -185,6 +186,7 @@ def main() -> None:
     reference = b.HealthyReference.from_model_file(args.model) if args.rules else None
     limit = WheelSpec.load(args.wheel).current_limit_a
     specs = {**b.records("tune"), **held(), **held(7200, "fresh"), **wheel_set(limit)}
+    specs |= wheel_set(limit, 9200, "w6")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
