@@ -4,12 +4,22 @@ Run:  python bench/bench_fdi.py --cache DIR --model model.json --calibrate NAME.
           --judge NAME... [--rate 1e-3]
 
 Records are read from ``--cache`` by name (``bench_diagnose.py``'s names and
-specs, plus the held-out ``held_*`` set below, made by ``--make``). The
+specs, the held-out ``held_*``/``fresh_*`` sets and the per-wheel ``w5_*`` set
+below, made by ``--make`` for ``--wheel``). The
 calibration is measured on the ``--calibrate`` records (healthy) and every
 ``--judge`` record is diagnosed with it; the table prints, per record, the
 injected fault, the first alarm, whether it came within 300 s of onset, whether
 its name is the injected fault's, and whether the 95 % interval holds the size.
-A benchmark, not a test.
+``--rules`` also runs the rule detectors (``rwlab diagnose`` without
+``--calibration``) on the same records and scores them the same way;
+``--save-calibration`` writes the calibration with its provenance. A
+benchmark, not a test.
+
+Every wheel model (``--wheel``): the ``w5`` set is made per preset on units
+9001-9104, its current limits at 60-80 % of the preset's spec:
+
+    python bench/bench_fdi.py --wheel nrwa-t6 --cache C/nrwa-t6 --model M/model.json \
+        --calibrate tune_h0 ... tune_h5 --judge w5_f9001 ... w5_h1 --make --rules
 """
 
 from __future__ import annotations
@@ -17,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +37,10 @@ import bench_diagnose as b
 from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
-from rwlab.testbed import load_record
+from rwlab.errors import RwlabWarning
+from rwlab.testbed import ExperimentConfig, load_record, run_experiment
 from rwlab.wheel import IdentifiedWheel
+from rwlab.wheelspec import WheelSpec
 
 # held out: sizes between the usual grid (friction x1.7, 0.55 A, k_t x0.85), faults
 # from power-up, two at once, on units and seeds no other set uses
@@ -50,6 +63,51 @@ HELD = (
 HELD_POWER_UP = ("friction=1.5", "torque_constant=0.8", "current_limit=0.45")
 
 
+def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dict[str, tuple]:
+    """name → spec of a per-wheel held-out set (``w5``: units 9001-9102; ``w6``: units
+    9201-9302, made after the last change to judge it once), limits at 60-80 % of the
+    wheel's specified clamp ``current_limit_a`` (A)."""
+    limit = current_limit_a
+    faults = (
+        ("friction=1.5", "prbs"),
+        ("friction=1.7", "chirp"),
+        ("friction=3", "step"),
+        ("torque_constant=0.8", "prbs"),
+        ("torque_constant=0.85", "chirp"),
+        ("speed_sensor_bias=15", "prbs"),
+        ("speed_sensor_bias=25", "chirp"),
+        (f"current_limit={0.7 * limit:.4g}", "prbs"),
+        (f"current_limit={0.6 * limit:.4g}", "chirp"),
+        ("speed_sensor_stuck", "chirp"),
+        ("telemetry_dropout=0.3", "prbs"),
+        ("torque_constant=0.8+speed_sensor_bias=20", "chirp"),
+    )
+    out = {}
+    for i, (fault, signal) in enumerate(faults):
+        u = first + 1 + i
+        out[f"{tag}_f{u}"] = (u, 90000 + u, signal, 900, b._faults(fault, 600.0), fault, 600.0)
+    for i, fault in enumerate(("friction=1.5", f"current_limit={0.8 * limit:.4g}")):
+        u = first + 51 + i
+        out[f"{tag}_p{u}"] = (u, 90000 + u, "prbs", 600, b._faults(fault, 0.0), fault, 0.0)
+    for i in range(2):
+        u = first + 101 + i
+        out[f"{tag}_h{i}"] = (u, 91000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
+    return out
+
+
+def make(cache: Path, name: str, spec: tuple, wheel: str) -> Path:
+    """Simulate one record of ``wheel`` into the cache (kept: made once)."""
+    path = cache / f"{name}.mcap"
+    if not path.exists():
+        unit, seed, signal, duration, faults, _, _ = spec
+        cfg = ExperimentConfig(
+            signal=signal, duration=duration, seed=seed, unit=unit, faults=faults, wheel=wheel
+        )
+        run_experiment(cfg, cache / "tmp.mcap", force=True)
+        (cache / "tmp.mcap").rename(path)
+    return path
+
+
 def held(first: int = 7000, tag: str = "held") -> dict[str, tuple]:
     """name → spec of a held-out set (as bench_diagnose.records): units first+1...
 
@@ -69,11 +127,46 @@ def held(first: int = 7000, tag: str = "held") -> dict[str, tuple]:
     return out
 
 
-def holds(fault: str, size: float | None, truth: dict[str, float]) -> str:
+def holds(fault: str, size: tuple | None, truth: dict[str, float]) -> str:
     """'yes'/'no' for an interval holding the injected size; '-' without one."""
     if size is None or fault not in truth or fault == "telemetry_dropout":
         return "-"
     return "yes" if size[0] <= truth[fault] <= size[1] else "no"
+
+
+class Tally:
+    """Detections, namings and intervals of one detector family over the judged records."""
+
+    def __init__(self) -> None:
+        self.faulty = self.detected = self.named = self.ci = self.ci_n = self.false = 0
+        self.healthy_h = 0.0
+
+    def add(self, text: str, onset, duration: float, alarms: list[tuple]) -> str:
+        """Score one record's alarms, (t_s, fault, ci or None) each; the table's cell."""
+        if not text:
+            self.healthy_h += duration / 3600
+            self.false += len(alarms)
+            return "healthy: no alarm" if not alarms else f"{alarms[0][1]} at {alarms[0][0]:g}"
+        self.faulty += 1
+        before = [a for a in alarms if a[0] < onset]
+        after = [a for a in alarms if onset <= a[0] <= onset + 300 or onset == 0]
+        first = after[0] if after and not before else None
+        named = first is not None and first[1] in b._truth(text)
+        self.detected += first is not None
+        self.named += named
+        h = holds(first[1], first[2], b._sizes(text)) if first else "-"
+        self.ci += h == "yes"
+        self.ci_n += h != "-"
+        cell = "none" if first is None else f"{first[1]} {first[3]} at {first[0]:g}"
+        cell += f" (before onset: {before[0][1]})" if before else ""
+        return f"{cell}  named={'yes' if named else 'no'} ci={h}"
+
+    def line(self, rate: str) -> str:
+        return (
+            f"faults {self.faulty}: detected in 300 s {self.detected}, first named right "
+            f"{self.named}, intervals holding the truth {self.ci}/{self.ci_n}; healthy "
+            f"{self.healthy_h:.2f} h: {self.false} alarms at {rate}"
+        )
 
 
 def main() -> None:
@@ -83,57 +176,62 @@ def main() -> None:
     p.add_argument("--calibrate", nargs="+", required=True)
     p.add_argument("--judge", nargs="+", required=True)
     p.add_argument("--rate", type=float, default=1e-3)
+    p.add_argument("--wheel", default="rw90", help="the wheel model the records are made of")
     p.add_argument("--make", action="store_true", help="simulate missing records")
+    p.add_argument("--rules", action="store_true", help="also score the rule detectors")
+    p.add_argument("--save-calibration", type=Path, help="write the calibration here")
+    p.add_argument("--origin", default="", help="the calibration's provenance line")
     args = p.parse_args()
-    specs = {**b.records("tune"), **held(), **held(7200, "fresh")}
+    warnings.simplefilter("ignore", RwlabWarning)
+    reference = b.HealthyReference.from_model_file(args.model) if args.rules else None
+    limit = WheelSpec.load(args.wheel).current_limit_a
+    specs = {**b.records("tune"), **held(), **held(7200, "fresh"), **wheel_set(limit)}
+    specs |= wheel_set(limit, 9200, "w6")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
+    def path(name):
+        if args.make:
+            return make(args.cache, name, specs[name], args.wheel)
+        return args.cache / f"{name}.mcap"
+
     def features(name):
-        path = args.cache / f"{name}.mcap"
-        if args.make and not path.exists():
-            b._record(args.cache, name, specs[name])
-        data = load_record(path, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+        data = load_record(path(name), scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
         return compute_features(data, wheel, scales)
 
     cal = DiagnosisCalibration.measure(
-        [features(n) for n in args.calibrate], sources=args.calibrate
+        [features(n) for n in args.calibrate], sources=args.calibrate, origin=args.origin
     )
+    if args.save_calibration:
+        cal.save(args.save_calibration)
     print(f"calibration: {len(args.calibrate)} records, {cal.hours:.2f} h")
-    tally = {"faulty": 0, "detected": 0, "named": 0, "ci": 0, "ci_n": 0, "healthy_h": 0.0}
-    tally["false"] = 0
+    glr, rules = Tally(), Tally()
     print(f"{'record':12s} {'signal':9s} {'injected':42s} first alarm")
     for name in args.judge:
         _, _, signal, duration, _, text, onset = specs[name]
         res = run(features(name), cal, args.rate)
-        truth = b._sizes(text) if text else {}
-        if not text:
-            tally["healthy_h"] += duration / 3600
-            tally["false"] += len(res.events)
-            print(f"{name:12s} {signal:9s} {'healthy':42s} {res.verdict()}")
-            continue
-        tally["faulty"] += 1
-        before = [e for e in res.events if e.t_s < onset]
-        after = [e for e in res.events if onset <= e.t_s <= onset + 300 or onset == 0]
-        first = after[0] if after and not before else None
-        named = first is not None and first.fault in b._truth(text)
-        tally["detected"] += first is not None
-        tally["named"] += named
-        ci = None if first is None or math.isnan(first.fit.size) else first.fit.ci95
-        h = holds(first.fault, ci, truth) if first else "-"
-        tally["ci"] += h == "yes"
-        tally["ci_n"] += h != "-"
-        alarm = (
-            "none" if first is None else f"{first.fault} {first.fit.size:.3g} {ci} at {first.t_s:g}"
-        )
-        alarm += f" (before onset: {before[0].fault})" if before else ""
-        print(f"{name:12s} {signal:9s} {text:42s} {alarm}  named={'yes' if named else 'no'} ci={h}")
-    t = tally
-    print(
-        f"\nfaults {t['faulty']}: detected in 300 s {t['detected']}, first named right "
-        f"{t['named']}, intervals holding the truth {t['ci']}/{t['ci_n']}; healthy "
-        f"{t['healthy_h']:.2f} h: {t['false']} alarms at {args.rate:g}/h"
-    )
+        alarms = [
+            (
+                e.t_s,
+                e.fault,
+                None if math.isnan(e.fit.size) else e.fit.ci95,
+                f"{e.fit.size:.3g} {None if math.isnan(e.fit.size) else e.fit.ci95}",
+            )
+            for e in res.events
+        ]
+        cell = glr.add(text, onset, duration, alarms)
+        print(f"{name:12s} {signal:9s} {text or 'healthy':42s} {cell}")
+        if args.rules:
+            found = b.diagnose(b.load(path(name), wheel.Ts), wheel, reference).alarms
+            alarms = [
+                (a.t_s, a.kind, a.ci, f"{a.magnitude:.3g} {a.ci}" if a.magnitude else "")
+                for a in found
+            ]
+            cell = rules.add(text, onset, duration, alarms)
+            print(f"{'':12s} {'':9s} {'rule detectors':42s} {cell}")
+    print("\nGLR pipeline:   " + glr.line(f"{args.rate:g}/h"))
+    if args.rules:
+        print("rule detectors: " + rules.line("their default rates"))
 
 
 if __name__ == "__main__":

@@ -16,10 +16,16 @@ from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
-from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
-from rwlab.diagnose.features import WheelScales, compute_features
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, profile_fit
+from rwlab.diagnose.features import REFERENCE_LAG_S, STEADY_SHARE, WheelScales, compute_features
+from rwlab.diagnose.noise import channel_mask
 from rwlab.diagnose.pipeline import run
-from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, excursion_peaks, garwood
+from rwlab.diagnose.wheel_calibration import (
+    DiagnosisCalibration,
+    excursion_peaks,
+    garwood,
+    twin_calibration_file,
+)
 from rwlab.errors import ConfigError, DataError, FileFormatError
 from rwlab.schemas import schema
 from rwlab.wheel.faults import FAULTS
@@ -61,16 +67,27 @@ def profile(n: int) -> np.ndarray:
     return np.array(out[:n])
 
 
-def record(seed: int, n: int = 2400, fault: str = "", size: float = 1.0, onset: int = 1200):
-    """(IOData, wheel) of a healthy wheel, with ``fault`` of ``size`` from sample ``onset``."""
+def record(
+    seed: int,
+    n: int = 2400,
+    fault: str = "",
+    size: float = 1.0,
+    onset: int = 1200,
+    unit_friction: float = 1.0,
+    unit_offset_a: float = 0.0,
+):
+    """(IOData, wheel) of a healthy wheel, with ``fault`` of ``size`` from sample ``onset``;
+    ``unit_friction`` and ``unit_offset_a``: another unit's friction (× the reference's)
+    and current offset (A)."""
     rng = np.random.default_rng(seed)
     speed = profile(n)
     accel = np.concatenate([[0.0], np.diff(speed) / TS])
-    friction = C[1] * speed + C[2] * np.sign(speed)
+    friction = unit_friction * (C[1] * speed + C[2] * np.sign(speed))
     after = np.arange(n) >= onset
     f_fric = np.where(after & (fault == "friction"), size, 1.0)
     f_kt = np.where(after & (fault == "torque_constant"), size, 1.0)
-    current = (C[0] * accel + f_fric * friction) / f_kt + C[3] + SIGMA_A * rng.standard_normal(n)
+    current = (C[0] * accel + f_fric * friction) / f_kt + C[3] + unit_offset_a
+    current = current + SIGMA_A * rng.standard_normal(n)
     reported = speed + SIGMA_RPM * rng.standard_normal(n)
     reported += np.where(after & (fault == "speed_sensor_bias"), size, 0.0)
     y = np.column_stack([reported, current, np.zeros(n), np.zeros(n)])
@@ -201,3 +218,70 @@ def test_the_page_gives_the_verdict_before_the_alarms(calibration, tmp_path):
     verdict = text.index("speed_sensor_bias")
     assert verdict < text.index('id="alarms"') < text.index('id="thresholds"')
     assert path.resolve().as_uri() in text and "synthetic" in text
+
+
+def test_the_own_reference_takes_out_a_units_friction_and_offset():
+    """A unit with 1.4 × the reference's friction and a +6 mA offset: against the population
+    its constant-speed current residual is that misfit; against its own past (fitted on
+    samples older than the lag) it is the noise alone."""
+    data, wheel = record(3, unit_friction=1.4, unit_offset_a=0.006)
+    f = compute_features(data, wheel, SCALES)
+    late = f.t_s >= REFERENCE_LAG_S + 120.0
+    steady = channel_mask(f, "current") & f.steady(STEADY_SHARE) & late
+    own = f.own()
+    n = int(steady.sum())
+    assert n > 200
+    misfit = 0.4 * f.friction_current_a[steady] + 0.006
+    assert np.abs(misfit).mean() > 1.5 * SIGMA_A
+    assert abs((f.current_residual_a[steady] - misfit).mean()) < 4 * SIGMA_A / math.sqrt(n)
+    assert abs(own.current_residual_a[steady].mean()) < 4 * SIGMA_A / math.sqrt(n)
+    assert own.current_residual_a[steady].std() < 1.3 * SIGMA_A
+    assert not own.usable[: round(REFERENCE_LAG_S / TS)].any()  # no reference yet
+
+
+@pytest.mark.slow
+def test_a_friction_change_on_a_unit_off_the_reference_is_named_friction():
+    """Calibrated on units whose friction spreads ×0.7–1.45 about the reference's, friction
+    × 1.5 mid-record on a unit of 1.3 × (within the spread: no power-up alarm): the change
+    against its own past names friction."""
+    spread = (0.7, 0.85, 1.0, 1.15, 1.3, 1.45)
+    calibration = DiagnosisCalibration.measure(
+        [features(s, unit_friction=u) for s, u in enumerate(spread)], origin="synthetic"
+    )
+    f = features(101, fault="friction", size=1.5, unit_friction=1.3)
+    result = run(f, calibration)
+    assert result.events and result.events[0].fault == "friction", result.verdict()
+    assert result.events[0].t_s >= 600.0
+
+
+def test_a_weak_motor_or_more_friction_fall_short_only_where_the_clamp_binds():
+    """The loop's integrator makes up lost torque until the driver's clamp binds: no
+    shortfall where the demand needs less than the clamp, never one for a stronger motor."""
+    f = compute_features(*record(0), SCALES)
+    c0 = C[0]
+    needed = np.abs(c0 * f.demand_accel_rpm_s + f.friction_current_a)
+    stronger = Detector.shortfall(f, SCALES.current_limit_a, torque_factor=np.array([1.3]))
+    assert not stronger.any()
+    weak = Detector.shortfall(f, SCALES.current_limit_a, torque_factor=np.array([0.3]))[:, 0]
+    assert (weak[needed < 0.3 * SCALES.current_limit_a - 1e-9] == 0).all()
+    binding = needed > 0.3 * SCALES.current_limit_a + 1e-9
+    assert (
+        binding.any() and (np.sign(weak[binding]) == -np.sign(f.demand_accel_rpm_s[binding])).all()
+    )
+
+
+@pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])
+def test_every_preset_ships_a_twin_calibration_with_its_provenance(wheel):
+    calibration = DiagnosisCalibration.load(twin_calibration_file(wheel))
+    assert calibration.hours >= 1.0 and calibration.records == len(calibration.sources)
+    assert wheel in calibration.origin and "bench_fdi.py" in calibration.origin
+    jsonschema.validate(
+        json.loads(twin_calibration_file(wheel).read_text()),
+        schema("diagnosis_calibration"),
+        cls=Draft202012Validator,
+    )
+
+
+def test_an_unshipped_wheel_has_no_twin_calibration():
+    with pytest.raises(ConfigError, match="rwlab diagnose calibrate"):
+        twin_calibration_file("gearbox-wheel")

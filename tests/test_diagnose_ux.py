@@ -309,3 +309,13 @@ def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
     # a weak motor it is not: the torque constant stays at the healthy record's
     kt = [p["estimates"]["torque_constant"]["magnitude"] for p in records]
     assert max(kt) - min(kt) < 0.03
+
+
+def test_the_twin_calibration_of_the_models_preset_is_written_and_read(tmp_path, model_file):
+    out = tmp_path / "twin.json"
+    result = _cli("diagnose", "twin-calibration", "--model", model_file, "--out", out)
+    assert result.exit_code == 0, result.output
+    assert "rw90" in result.output and "bench_fdi.py" in result.output
+    from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
+
+    assert DiagnosisCalibration.load(out).hours >= 2.0

@@ -129,3 +129,35 @@ def calibrate_cmd(records, model_file, out, origin):
             f"[{lo:.3g}, {hi:.3g}]{' (extrapolated)' if t.extrapolated else ''}"
         )
     click.echo(f"wrote {out}")
+
+
+@diagnose_group.command("twin-calibration")
+@click.option(
+    "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
+)
+@click.option(
+    "--out", type=click.Path(dir_okay=False), required=True, help="The calibration.json to write."
+)
+@_friendly_errors
+def twin_calibration_cmd(model_file, out):
+    """Write the package's twin-calibrated file for the model's wheel preset (measured on
+    the twin's healthy records of that preset; its origin says which): a start before the
+    lab's own rwlab diagnose calibrate. Use it with rwlab diagnose RECORD --calibration."""
+    from rwlab._io import write_json
+    from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, twin_calibration_file
+    from rwlab.errors import ConfigError
+    from rwlab.ident.model_file import WheelModelFile
+
+    spec = WheelModelFile.load(model_file).wheel_spec
+    if spec is None:
+        raise ConfigError(
+            f"{model_file} carries no wheel spec (identified before the wheel models): "
+            "identify again, or calibrate on the wheel's own healthy records"
+        )
+    calibration = DiagnosisCalibration.load(twin_calibration_file(spec.name))
+    write_json(out, calibration.to_dict())
+    click.echo(
+        f"{spec.name}: {calibration.records} records, {calibration.hours:.3g} h "
+        f"({calibration.origin})"
+    )
+    click.echo(f"wrote {out}")

@@ -114,10 +114,30 @@ class Bank:
         faults=MODEL_BASED,
     ) -> None:
         self.features = features
-        weights = noise.weights(features)
         self.detectors = {name: detector(name) for name in faults}
         self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
-        self.cum = {
+        self.cum = self._cumulative(features, noise)
+        # the same gains against the record's own past (features.own()): a change of the
+        # unit against itself, free of its misfit to the reference unit
+        own = features.own()
+        self.own_ready = np.isfinite(own.current_nuisance_a)  # type: ignore[arg-type]
+        self.cum_own = self._cumulative(own, noise)
+        self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
+        self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
+        self.drift = drift
+        self.dispersion = {n: (dispersion or {}).get(n, 1.0) for n in self.detectors}
+        self.dispersion.update(
+            {k: v for k, v in (dispersion or {}).items() if k.split("@")[0] in self.detectors}
+        )
+        Ts = features.scales.Ts
+        self.every = max(1, round(EVERY_S / Ts))
+        self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
+        self.past_min = round(PAST_MIN_S / Ts)
+
+    def _cumulative(self, features: Features, noise: NoiseModel) -> dict[str, np.ndarray]:
+        """Per detector, the cumulative per-sample gains, shape (N + 1, G)."""
+        weights = noise.weights(features)
+        return {
             n: np.vstack(
                 [
                     np.zeros(self.grid[n].size),
@@ -126,14 +146,6 @@ class Bank:
             )
             for n, d in self.detectors.items()
         }
-        self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
-        self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
-        self.drift = drift
-        self.dispersion = {n: (dispersion or {}).get(n, 1.0) for n in self.detectors}
-        Ts = features.scales.Ts
-        self.every = max(1, round(EVERY_S / Ts))
-        self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
-        self.past_min = round(PAST_MIN_S / Ts)
 
     def _between(self, name: str, lo: float, hi: float) -> np.ndarray:
         g = self.grid[name]
@@ -151,12 +163,17 @@ class Bank:
         best = profile_fit(det.fault, det.unit, self.grid[name], ll, self.zone[name], phi)
         against = "population"
         if a >= self.past_min:
-            past = self.cum[name][a] - self.cum[name][0]
-            ok = self.grid[name][past >= past.max() - SUPPORT * phi]
-            own = self._between(name, ok[0] - self.drift[name], ok[-1] + self.drift[name])
-            change = profile_fit(det.fault, det.unit, self.grid[name], ll, own, phi)
+            cum = self.cum_own[name]
+            ll_own = cum[k] - cum[a]
+            past = cum[a] - cum[0]
+            key = f"{name}@own"
+            phi_own = self.dispersion.get(key, phi)
+            drift = self.drift.get(key, self.drift[name])
+            ok = self.grid[name][past >= past.max() - SUPPORT * phi_own]
+            own = self._between(name, ok[0] - drift, ok[-1] + drift)
+            change = profile_fit(det.fault, det.unit, self.grid[name], ll_own, own, phi_own)
             if change.log_lr > best.log_lr:
-                before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi)
+                before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi_own)
                 best, against = _relative(change, before), "own past"
         if against == "population":
             best = _widened(best, self.zone_bounds[name])

@@ -17,6 +17,22 @@ channels follow, each zero-mean on a healthy wheel of the reference's unit:
   weak motor at the limit shows here);
 - ``speed_residual_rpm``: measured minus model speed (a sensor bias shows here).
 
+The reference is one unit's (the identified one's); another unit of the same
+model sits off it by its own current offset, friction and inertia/k_t, and
+that misfit, constant over minutes, is many times the current's noise (on the
+RW90 a unit's friction current is ±30 % of the reference's, several mA against
+~4.5 mA of noise per sample). :meth:`Features.own` gives the same features
+against the record's *own* past: the current residual less the unit's
+deviation, ``current_nuisance_a``, fitted by least squares on the record's
+samples older than ``REFERENCE_LAG_S`` (the longest detection window), in the
+deviations a healthy unit has at constant speed: an offset and scales of its
+viscous and Coulomb friction currents (units differ in each). Its inertia/k_t is left to the
+detectors' own-past comparison (the size the past fits): a past of slow motion
+(a chirp's first minutes) does not determine it, and a least-squares scale
+fitted there is extrapolated wildly into the fast part (healthy chirps then
+gave log-LRs of 10⁵). A fault younger than the lag is a change against the
+unit itself.
+
 Every scale comes from the model file (sample time, acceleration and current
 limits, the loop's gain where the grey box identified it): no wheel's numbers
 are written here.
@@ -25,17 +41,32 @@ are written here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from rwlab.data import IOData
 from rwlab.errors import DataError
 
-__all__ = ["RECORD_OUTPUTS", "Features", "WheelScales", "compute_features"]
+__all__ = [
+    "RECORD_OUTPUTS",
+    "REFERENCE_LAG_S",
+    "Features",
+    "WheelScales",
+    "compute_features",
+    "current_nuisance",
+]
 
 # what load_record must give the diagnosis (its default is the speed alone)
 RECORD_OUTPUTS = ("speed", "current", "age", "lost")
+# design choices, not measurements: the own reference is fitted on samples older than the
+# longest detection window (5 min, the longest delay the lab accepts), and only once it
+# holds this long of the current channel's samples
+REFERENCE_LAG_S = 300.0
+REFERENCE_MIN_S = 60.0
+# a twentieth of the acceleration limit: "constant speed" (the model's own lag is then a
+# fraction of an rpm, and the inertia's current a few % of the clamp)
+STEADY_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -138,6 +169,12 @@ class Features:
     lost_frames : numpy.ndarray
         Telemetry frames lost since the previous sample.
     scales : WheelScales
+    current_nuisance_a : numpy.ndarray or None
+        The unit's own deviation from the reference's current balance at each sample,
+        fitted on the record's past older than ``REFERENCE_LAG_S``, A; NaN until that
+        past holds ``REFERENCE_MIN_S`` of usable samples (module docstring).
+    against_own : bool
+        The current residual is against the record's own past (:meth:`own`).
     """
 
     t_s: np.ndarray
@@ -156,11 +193,35 @@ class Features:
     repeated: np.ndarray
     lost_frames: np.ndarray
     scales: WheelScales
+    current_nuisance_a: np.ndarray | None = None
+    against_own: bool = False
+
+    def own(self) -> Features:
+        """The same features with the current residual against the record's own past
+        (samples whose own reference is not yet fitted are unusable)."""
+        nuisance = self.current_nuisance_a
+        if nuisance is None:
+            nuisance = current_nuisance(self)
+        ready = np.isfinite(nuisance)
+        return replace(
+            self,
+            current_residual_a=np.where(ready, self.current_residual_a - nuisance, 0.0),
+            usable=self.usable & ready,
+            current_nuisance_a=nuisance,
+            against_own=True,
+        )
 
     @property
     def N(self) -> int:
         """Number of samples."""
         return len(self.t_s)
+
+    def steady(self, share: float) -> np.ndarray:
+        """Constant speed, bool, shape (N,): the model's and the measured acceleration both
+        within ``share`` of the acceleration limit (a wheel that lags the model, as a weak
+        motor or a clamp makes it, is not at constant speed while it catches up)."""
+        limit = share * self.scales.accel_limit_rpm_s
+        return (np.abs(self.model_accel_rpm_s) <= limit) & (np.abs(self.accel_rpm_s) <= limit)
 
     @property
     def saturated(self) -> np.ndarray:
@@ -241,7 +302,7 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
     repeated = np.concatenate([[False], (np.diff(speed) == 0) & (speed[1:] != 0)])
     lost = np.concatenate([[0.0], np.maximum(np.diff(col["lost_frames"]), 0.0)])
     t = data.tstart + Ts * np.arange(data.N)
-    return Features(
+    out = Features(
         t_s=t,
         speed_rpm=speed,
         model_rpm=model,
@@ -259,3 +320,48 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
         lost_frames=lost,
         scales=scales,
     )
+    return replace(out, current_nuisance_a=current_nuisance(out))
+
+
+def current_nuisance(features: Features) -> np.ndarray:
+    """The unit's own deviation from the reference current balance, per sample, A, shape (N,).
+
+    At sample k: the least-squares fit of the current residual on an offset and the
+    balance's viscous and Coulomb currents, over the current channel's
+    samples (:func:`rwlab.diagnose.noise.channel_mask`) older than ``REFERENCE_LAG_S``,
+    evaluated at k; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
+    past has not excited (no motion yet: the friction and the offset alike) takes the
+    least-norm solution, i.e. the reference's value.
+
+    Parameters
+    ----------
+    features : Features
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    from rwlab.diagnose.noise import channel_mask
+
+    f = features
+    # regressors of comparable size (A): the offset's column is the friction current's scale
+    unit = max(float(np.max(np.abs(f.friction_current_a))), 1e-12)
+    c1, c2 = f.scales.current_model[1:3]
+    # the offset's column a tenth of the others: a past at one speed (offset and Coulomb
+    # friction alike there) is read as friction, the deviation a unit has most
+    X = np.column_stack([np.full(f.N, 0.1 * unit), c1 * f.speed_rpm, c2 * np.sign(f.speed_rpm)])
+    ok = channel_mask(f, "current")
+    Xo = X * ok[:, None]
+    A = np.cumsum(Xo[:, :, None] * X[:, None, :], axis=0)
+    b = np.cumsum(Xo * f.current_residual_a[:, None], axis=0)
+    count = np.cumsum(ok)
+    lag = round(REFERENCE_LAG_S / f.scales.Ts)
+    need = round(REFERENCE_MIN_S / f.scales.Ts)
+    out = np.full(f.N, np.nan)
+    for k in range(lag, f.N):
+        j = k - lag
+        if count[j] < need:
+            continue
+        theta = np.linalg.lstsq(A[j], b[j], rcond=1e-6)[0]
+        out[k] = X[k] @ theta
+    return out

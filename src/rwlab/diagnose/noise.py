@@ -17,16 +17,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rwlab.diagnose.features import Features
+from rwlab.diagnose.features import STEADY_SHARE, Features
 from rwlab.errors import DataError
 
-__all__ = ["CHANNELS", "NoiseModel"]
+__all__ = ["CHANNELS", "NoiseModel", "channel_mask"]
 
 # channel name → the Features attribute it reads
 CHANNELS = {
     "current": "current_residual_a",
     "accel": "accel_residual_rpm_s",
     "speed": "speed_residual_rpm",
+    # the current at constant speed (friction's alone): its own σ, free of the inertia's
+    # misfit between units that the moving samples carry
+    "current_steady": "current_residual_a",
 }
 BLOCK = 20  # samples per block mean for κ: longer than the residuals' correlation
 # jerk bin edges, rpm/s²: spaced by ×5 between a held speed and a chirp's fast end
@@ -38,6 +41,24 @@ def jerk(features: Features) -> np.ndarray:
     """|Δ demand acceleration| / Ts per sample, rpm/s², shape (N,)."""
     d = np.abs(np.diff(features.demand_accel_rpm_s, prepend=features.demand_accel_rpm_s[0]))
     return d / features.scales.Ts
+
+
+def channel_mask(features: Features, name: str) -> np.ndarray:
+    """The samples a channel is read on, bool, shape (N,): fresh, not a repeated reading;
+    for the current channel also a turning wheel that kept its direction over the sample.
+    At rest (a zero reading: below what the sensor measures) and through a reversal the
+    bearing's friction is static, anywhere within its breakaway band, and the loop's
+    integrator holds whatever current it last needed: the current there says nothing of
+    the friction or the torque constant, and a healthy wheel's current at rest sits
+    ±(breakaway friction)/k_t off the balance for minutes (measured: ±9 mA on an RW90)."""
+    ok = features.usable & ~features.repeated
+    if name.startswith("current"):
+        w = features.speed_rpm
+        before = np.concatenate([w[:1], w[:-1]])
+        ok = ok & (w != 0) & (np.sign(w) == np.sign(before))
+    if name == "current_steady":
+        ok = ok & features.steady(STEADY_SHARE)
+    return ok
 
 
 def bins(features: Features) -> np.ndarray:
@@ -67,14 +88,21 @@ class NoiseModel:
 
     def weights(self, features: Features) -> dict[str, np.ndarray]:
         """1/(σ²κ) per sample and channel (0 where a sample is unusable), shape (N,) each."""
-        bins = np.searchsorted(JERK_EDGES, jerk(features))
-        ok = features.usable & ~features.repeated
-        return {
-            name: np.where(
-                ok, 1.0 / (np.asarray(self.sigma[name])[bins] ** 2 * self.inflation[name]), 0.0
+        where = bins(features)  # the same bins the σ were measured in
+        out = {}
+        for name in CHANNELS:
+            key = self.key(name, features.against_own)
+            sigma = np.asarray(self.sigma[key])[where]
+            out[name] = np.where(
+                channel_mask(features, name), 1.0 / (sigma**2 * self.inflation[key]), 0.0
             )
-            for name in CHANNELS
-        }
+        return out
+
+    def key(self, name: str, against_own: bool) -> str:
+        """The noise model's entry for channel ``name``: ``current_own`` for the current
+        against the record's own past where measured (:meth:`Features.own`)."""
+        own = f"{name}_own"
+        return own if against_own and own in self.sigma else name
 
     @classmethod
     def measure(cls, records: list[Features]) -> NoiseModel:
@@ -98,14 +126,22 @@ class NoiseModel:
         """
         sigma: dict[str, tuple[float, ...]] = {}
         inflation: dict[str, float] = {}
-        for name, attr in CHANNELS.items():
+        own = [f.own() for f in records]
+        for key, attr, name, group in (
+            *((n, a, n, records) for n, a in CHANNELS.items()),
+            *((f"{n}_own", CHANNELS[n], n, own) for n in ("current", "current_steady")),
+        ):
             values, where = [], []
-            for f in records:
-                ok = f.usable & ~f.repeated
+            group = [f for f in group if channel_mask(f, name).any()]
+            for f in group:
+                ok = channel_mask(f, name)
                 r = getattr(f, attr)[ok]
                 values.append(r - np.median(r))
                 where.append(bins(f)[ok])
-            v, b = np.concatenate(values), np.concatenate(where)
+            v = np.concatenate(values) if values else np.zeros(0)
+            b = np.concatenate(where) if where else np.zeros(0, dtype=int)
+            if v.size < MIN_SAMPLES and key.endswith("_own"):
+                continue  # records too short for their own reference: the population's only
             if v.size < MIN_SAMPLES:
                 raise DataError(f"the noise model needs ≥ {MIN_SAMPLES} usable healthy samples")
             per_bin = []
@@ -121,16 +157,19 @@ class NoiseModel:
                     near = np.flatnonzero(np.isfinite(s))
                     s[i] = s[near[np.argmin(np.abs(near - i))]]
             s[:-1] = np.maximum.accumulate(np.maximum(s[:-1], 1e-12))  # never less at more jerk
-            sigma[name] = tuple(float(x) for x in s)
+            sigma[key] = tuple(float(x) for x in s)
             z = np.concatenate(
                 [
-                    ((getattr(f, attr) - np.median(getattr(f, attr))) / s[bins(f)])[f.usable]
-                    for f in records
+                    (
+                        (getattr(f, attr) - np.median(getattr(f, attr)[channel_mask(f, name)]))
+                        / s[bins(f)]
+                    )[channel_mask(f, name)]
+                    for f in group
                 ]
             )
             n = z.size // BLOCK
             means = z[: n * BLOCK].reshape(n, BLOCK).mean(axis=1)
-            inflation[name] = max(1.0, float(means.var() * BLOCK / max(z.var(), 1e-300)))
+            inflation[key] = max(1.0, float(means.var() * BLOCK / max(z.var(), 1e-300)))
         return cls(sigma, inflation)
 
     def to_dict(self) -> dict:

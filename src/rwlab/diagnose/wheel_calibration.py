@@ -21,6 +21,13 @@ everything the pipeline decides with:
 
 File format ``rwlab.DiagnosisCalibration/1`` (schema
 ``diagnosis_calibration.schema.json``); one owner, this class.
+
+The package ships one twin-calibrated file per wheel preset,
+``twin_calibration_<preset>.json`` (:func:`twin_calibration_file`): measured by
+``bench/bench_fdi.py --save-calibration`` on the twin's healthy records of
+that preset (its ``origin`` and ``sources`` say which records and how many
+hours). It applies to a model of that preset identified with the defaults; a
+lab's own wheel is better served by its own ``rwlab diagnose calibrate``.
 """
 
 from __future__ import annotations
@@ -38,12 +45,12 @@ from scipy.stats import chi2
 from rwlab._io import write_json
 from rwlab.diagnose.bank import Bank
 from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading
-from rwlab.diagnose.detectors.base import HALF_CHI2_95
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
 from rwlab.errors import ConfigError, DataError, FileFormatError
 
-__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold"]
+__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold", "twin_calibration_file"]
 
 FORMAT = "rwlab.DiagnosisCalibration/1"
 STUCK = "speed_sensor_stuck"
@@ -166,17 +173,23 @@ class DiagnosisCalibration:
         point = {n: cls._healthy_point(n, records[0]) for n in MODEL_BASED}
         none = dict.fromkeys(MODEL_BASED, 0.0)
         dispersion = {n: cls._dispersion(n, records, noise, point[n]) for n in MODEL_BASED}
+        dispersion |= {
+            f"{n}@own": cls._dispersion(n, records, noise, point[n], own=True) for n in MODEL_BASED
+        }
         zones: dict[str, tuple[float, float]] = {}
         drift: dict[str, float] = {}
         for name in MODEL_BASED:
-            sizes, moves = [point[name]], [0.0]
+            sizes, moves, moves_own = [point[name]], [0.0], [0.0]
             for f in records:
                 bank = Bank(f, noise, {name: (point[name],) * 2}, none, dispersion, faults=(name,))
                 tiles = [bank.fit(name, a, b).fit.size for a, b in bank.tiles()]
                 sizes += tiles
                 moves += list(np.abs(np.diff(tiles)))
+                own = cls._own_sizes(bank, name, point[name], dispersion.get(f"{name}@own", 1.0))
+                moves_own += list(np.abs(np.diff(own)))
             zones[name] = (float(min(sizes)), float(max(sizes)))
             drift[name] = float(max(moves))
+            drift[f"{name}@own"] = float(max(moves_own))
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
         peaks[STUCK] = []
         for f in records:
@@ -205,15 +218,40 @@ class DiagnosisCalibration:
         )
 
     @staticmethod
-    def _dispersion(name: str, records: list[Features], noise: NoiseModel, point: float) -> float:
+    def _own_sizes(bank: Bank, name: str, point: float, phi: float) -> list[float]:
+        """The size each longest window of a record fits against the record's own past
+        (windows whose own reference is fitted on every sample only)."""
+        out = []
+        ready = bank.own_ready
+        for a, b in bank.tiles():
+            if a < bank.past_min or not ready[a:b].all():
+                continue
+            ll = bank.cum_own[name][b] - bank.cum_own[name][a]
+            zone = bank._between(name, point, point)
+            out.append(profile_fit(name, "", bank.grid[name], ll, zone, phi).size)
+        return out
+
+    @staticmethod
+    def _dispersion(
+        name: str, records: list[Features], noise: NoiseModel, point: float, own: bool = False
+    ) -> float:
         """φ: twice the log-likelihood by which each longest window prefers its own size to
-        its record's, whose median is χ²₁'s (0.455) for a true likelihood, over 0.455."""
+        its record's, whose median is χ²₁'s (0.455) for a true likelihood, over 0.455
+        (``own``: the gains against the record's own past, on its fitted windows)."""
         twice = []
         for f in records:
             bank = Bank(f, noise, {name: (point, point)}, {name: 0.0}, faults=(name,))
-            whole = int(np.argmax(bank.cum[name][f.N] - bank.cum[name][0]))
-            for a, b in bank.tiles():
-                ll = bank.cum[name][b] - bank.cum[name][a]
+            cum = bank.cum_own[name] if own else bank.cum[name]
+            tiles = [
+                (a, b)
+                for a, b in bank.tiles()
+                if not own or (a >= bank.past_min and bank.own_ready[a:b].all())
+            ]
+            if not tiles:
+                continue
+            whole = int(np.argmax(sum(cum[b] - cum[a] for a, b in tiles)))
+            for a, b in tiles:
+                ll = cum[b] - cum[a]
                 twice.append(2 * float(ll.max() - ll[whole]))
         if len(twice) < 3:
             return 1.0
@@ -318,3 +356,34 @@ class DiagnosisCalibration:
         if self.hours <= 0:
             raise DataError("an empty calibration cannot be saved")
         return write_json(path, self.to_dict())
+
+
+def twin_calibration_file(wheel: str) -> Path:
+    """The package's twin-calibrated file for a wheel preset (module docstring).
+
+    Parameters
+    ----------
+    wheel : str
+        A wheel preset's name (``rwlab wheel models``).
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ConfigError
+        No file shipped for that wheel.
+    """
+    path = Path(__file__).with_name(f"twin_calibration_{wheel}.json")
+    if not path.is_file():
+        shipped = sorted(
+            p.stem.removeprefix("twin_calibration_")
+            for p in path.parent.glob("twin_calibration_*.json")
+        )
+        raise ConfigError(
+            f"no twin calibration for the wheel {wheel!r} (shipped: {', '.join(shipped)}); "
+            "calibrate on the wheel's own healthy records: rwlab diagnose calibrate RECORDS... "
+            "--model model.json --out calibration.json"
+        )
+    return path

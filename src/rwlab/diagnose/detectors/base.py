@@ -142,6 +142,29 @@ class Detector(ABC):
         """
 
     @staticmethod
+    def shortfall(
+        features: Features,
+        clamp_a: np.ndarray,
+        torque_factor: np.ndarray | float = 1.0,
+        friction_factor: np.ndarray | float = 1.0,
+    ) -> np.ndarray:
+        """The acceleration residual a driver clamp makes, rpm/s, shape (N, G).
+
+        The loop's integrator makes up any loss of torque or added friction until the
+        driver's current clamp binds; only then does the wheel fall short of the loop's
+        demand: it reaches α = (±F_k·L − c₃ − F_f·friction current)/c₀ (current-balance
+        units). Each of ``clamp_a`` (L), ``torque_factor`` (F_k) and ``friction_factor``
+        (F_f) is a scalar or a row of candidate sizes, shape (G,).
+        """
+        c0, _, _, c3 = features.scales.current_model
+        demand = features.demand_accel_rpm_s[:, None]
+        d = np.sign(demand)
+        available = d * np.asarray(torque_factor) * np.asarray(clamp_a)
+        friction = np.asarray(friction_factor) * features.friction_current_a[:, None]
+        reach = (available - c3 - friction) / c0
+        return np.where(d * demand > d * reach, reach - demand, 0.0)
+
+    @staticmethod
     def channel_gain(r: np.ndarray, w: np.ndarray, p: np.ndarray) -> np.ndarray:
         """w·(r·p − p²/2) for residuals r, weights w (N,) and predictions p (N, G)."""
         return w[:, None] * (r[:, None] * p - 0.5 * p * p)

@@ -15,7 +15,10 @@ class CurrentLimit(Detector):
     acceleration residual α_L − α_demand; and the measured current (less the
     sense offset c₃) exceeds L by its noise alone, so every ampere over L costs
     the current channel's Gaussian log-likelihood (a weak motor at the
-    acceleration limit draws the full current: no clamp can explain it). Sizes
+    acceleration limit draws the full current: no clamp can explain it); where it
+    binds, the current sits at L (a flat top), so a current below L there costs as
+    much (a healthy wheel whose loop demand the model overstates, on a chirp's fast
+    end, draws less than L: the clamp must not explain its shortfall). Sizes
     up to the specified clamp (``model.json``), which is the healthy one."""
 
     fault = "current_limit"
@@ -27,11 +30,13 @@ class CurrentLimit(Detector):
         return spec * np.linspace(0.1, 1.0, 361)
 
     def gains(self, features, weights, grid):
-        c0, _, _, c3 = features.scales.current_model
-        demand = features.demand_accel_rpm_s
-        d = np.sign(demand)[:, None]
-        reach = (d * grid[None, :] - c3 - features.friction_current_a[:, None]) / c0
-        p = np.where(d * demand[:, None] > d * reach, reach - demand[:, None], 0.0)
-        over = np.maximum(np.abs(features.current_a - c3)[:, None] - grid[None, :], 0.0)
-        beyond = -0.5 * weights["current"][:, None] * over * over
+        c3 = features.scales.current_model[3]
+        p = self.shortfall(features, grid[None, :])
+        binding = p != 0.0
+        level = np.abs(features.current_a - c3)[:, None] - grid[None, :]
+        # where it binds the clamp holds the current at L (a flat top); elsewhere it allows
+        # any current up to L: a shortfall of acceleration with the current below L is not
+        # the clamp's, and a current over L never is
+        miss = np.where(binding, level, np.maximum(level, 0.0))
+        beyond = -0.5 * weights["current"][:, None] * miss * miss
         return self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p) + beyond

@@ -5,16 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from rwlab.diagnose.detectors.base import Detector
-from rwlab.diagnose.features import Features
-
-QUIET_SHARE = 0.05  # a twentieth of the limit: the model's own lag is a fraction of an rpm
+from rwlab.diagnose.features import STEADY_SHARE, Features
 
 
 class SensorBias(Detector):
     """Bias b: the speed residual b (the loop closes on the true speed); the
     loop's catch-up read from the reported speed is off by kp·b, so the
-    acceleration residual is +kp·b. Both are read only where the model is quiet
-    (|α_model| under ``QUIET_SHARE`` of the acceleration limit): in a speed change
+    acceleration residual is +kp·b. Both are read only at constant speed
+    (measured and model |α| under ``STEADY_SHARE`` of the acceleration limit): in a speed change
     a weak motor, worn bearings or a clamp make the wheel lag, which a constant
     offset would otherwise absorb."""
 
@@ -27,9 +25,7 @@ class SensorBias(Detector):
 
     def gains(self, features, weights, grid):
         n = features.N
-        quiet = (
-            np.abs(features.model_accel_rpm_s) <= QUIET_SHARE * features.scales.accel_limit_rpm_s
-        )
+        quiet = features.steady(STEADY_SHARE)
         weights = {k: v * quiet for k, v in weights.items()}
         p_speed = np.broadcast_to(grid[None, :], (n, grid.size))
         gain = self.channel_gain(features.speed_residual_rpm, weights["speed"], p_speed)

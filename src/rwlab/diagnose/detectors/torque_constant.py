@@ -10,8 +10,10 @@ from rwlab.diagnose.features import Features
 
 class TorqueConstant(Detector):
     """k_t × F: the current residual (1/F − 1)·(c₀α + c₁ω + c₂ sign ω) at the
-    measured motion; at the acceleration limit the loop's current is the nominal
-    one, so the acceleration falls short by (F − 1)·(α_demand + friction current / c₀)."""
+    measured motion; the loop's integrator makes up the lost torque until the
+    driver's clamp L binds, so the acceleration falls short only where the demand
+    needs more than F·L (:meth:`Detector.shortfall`): a stronger motor (F > 1) is
+    never faster than the loop's demand."""
 
     fault = "torque_constant"
     unit = "factor"
@@ -21,11 +23,8 @@ class TorqueConstant(Detector):
         return np.geomspace(0.1, 2.0, 801)
 
     def gains(self, features, weights, grid):
-        c0 = features.scales.current_model[0]
         p_current = (1.0 / grid[None, :] - 1.0) * features.drive_current_a[:, None]
-        reach = features.demand_accel_rpm_s + features.friction_current_a / c0
-        p_accel = (grid[None, :] - 1.0) * reach[:, None]
+        clamp = features.scales.current_limit_a
+        p_accel = self.shortfall(features, clamp, torque_factor=grid[None, :])
         gain = self.channel_gain(features.current_residual_a, weights["current"], p_current)
-        return gain + self.channel_gain(
-            features.accel_residual_rpm_s, weights["accel"] * features.saturated, p_accel
-        )
+        return gain + self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p_accel)
