@@ -11,6 +11,7 @@ from __future__ import annotations
 import html
 import json
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from matplotlib.ticker import MaxNLocator
 from rwlab._io import atomic_write_bytes
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
-from rwlab.report.html import Page, figure
+from rwlab.report.html import Page, figure, trace_styles
 
 __all__ = ["FIGURES", "write_study"]
 
@@ -85,14 +86,14 @@ def _compare_figure(
     val = result.val
     t = val.time - val.time[0]
     fig, ax = figure(9, 3.2)
-    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
-    for name in names:
-        m = result.models[name]
-        if not m.is_stable():
-            continue
-        ax.plot(t, m.simulate(val, initial=INITIAL), lw=1, label=name)
+    stable = [name for name in names if result.models[name].is_stable()]
+    styles = trace_styles(len(stable) + 1)  # the measured output widest, underneath
+    ax.plot(t, val.y[:, 0], color="0.45", label="measured", **styles[0])
+    for name, style in zip(stable, styles[1:], strict=True):
+        ax.plot(t, result.models[name].simulate(val, initial=INITIAL), label=name, **style)
     ax.set_xlabel("time in validation record [s]")
-    ax.set_ylabel(_preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess))
+    label = _preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess)
+    ax.set_ylabel(textwrap.fill(label, 28))  # a long label on two lines, not cut off
     ax.legend(loc="best", fontsize=8)
     page.figure(fig, fig_id, caption)
 
@@ -181,6 +182,8 @@ def _reference_text(model_info: dict) -> str:
 def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     d = study["data"]
     page = Page(f"Identification study — {d['name'] or 'record'}")
+    _choice_section(page, study)
+    page.heading("The record", "record")
     page.text(
         f"Record: {d['N']} samples at Ts = {d['Ts']:g} s "
         f"(input {d['input']}, output {d['output']}), preprocessed: {d['preprocess']}; "
@@ -201,17 +204,6 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
             note=True,
         )
     ch = study["chosen"]
-    page.html(
-        f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
-        f"{ch['fit_percent']:.2f} %. {html.escape(ch['reason'])}.</p>"
-    )
-    if study.get("no_model_fits"):
-        page.text(
-            f"No model fits: the best validation fit is {study['best_fit_percent']:.2f} %, "
-            "worse than the validation output's mean (rwlab identify exits 1). The tables "
-            "below show what was tried.",
-            note=True,
-        )
     note = (study.get("parts") or {}).get("note")
     if note:
         page.text(f"Estimation and validation parts differ: {note}.", note=True)
@@ -419,6 +411,92 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     if result.servo is not None:
         _nonlinear_section(page, result, study["nonlinear"])
     return page
+
+
+def _choice_section(page: Page, study: dict) -> None:
+    """The verdict first, then why: the choice's reasons one per line and every candidate
+    in a table (the reason is study.json's ``chosen.reason``, split, not re-worded)."""
+    ch = study["chosen"]
+    best = study["best_fit_percent"]
+    dc = ""
+    if ch.get("dc_gain") is not None:
+        dc = f", DC gain {ch['dc_gain']:.4f}"
+        if ch.get("dc_gain_error_percent") is not None:
+            dc += f" ({ch['dc_gain_error_percent']:+.1f} % of the measured)"
+    if study.get("no_model_fits"):
+        page.verdict(
+            f"No model fits: the best validation fit is {best:.2f} %, worse than the "
+            f"validation output's mean (rwlab identify exits 1). Chosen model: "
+            f"{ch['structure']}, validation fit {ch['fit_percent']:.2f} %.",
+            False,
+        )
+    else:
+        page.verdict(
+            f"Chosen model: {ch['structure']}, validation fit {ch['fit_percent']:.2f} % "
+            f"(best {best:.2f} %){dc}; model.json holds it for control.",
+            True,
+        )
+    page.heading("How the model was chosen", "choice")
+    items = "".join(f"<li>{html.escape(c)}</li>" for c in _reason_clauses(ch["reason"]))
+    page.html(f'<ul id="choice-reasons">{items}</ul>')
+    rows = [
+        r
+        for r in study["orders"] + study["others"] + (study.get("constrained") or [])
+        if r.get("fit_percent") is not None
+    ]
+    rows.sort(key=lambda r: -r["fit_percent"])
+    table = [
+        [
+            r["structure"],
+            r["n_params"],
+            f"{r['fit_percent']:.2f}",
+            f"{best - r['fit_percent']:.2f}",
+            "none (a pole at 1)" if r.get("dc_gain") is None else f"{r['dc_gain']:.4f}",
+            "" if r.get("dc_gain_error_percent") is None else f"{r['dc_gain_error_percent']:+.1f}",
+        ]
+        for r in rows
+    ]
+    chosen_at = next(i for i, r in enumerate(rows) if r["structure"] == ch["structure"])
+    page.table(
+        [
+            "model",
+            "parameters",
+            "validation fit [%]",
+            "below the best [points]",
+            "DC gain",
+            "DC gain − measured [%]",
+        ],
+        table,
+        table_id="table-choice",
+        highlight=chosen_at,
+    )
+
+
+def _reason_clauses(reason: str) -> list[str]:
+    """The choice's reason cut at its top-level semicolons (not those in parentheses),
+    paper A's comparison kept whole, each clause capitalised.
+
+    Parameters
+    ----------
+    reason : str
+        study.json's ``chosen.reason``.
+
+    Returns
+    -------
+    list of str
+        The clauses, in order, every character of ``reason`` but the separators kept.
+    """
+    head, paper_sep, paper = reason.partition("; paper A's choice is not: ")
+    clauses, depth, start = [], 0, 0
+    for i, char in enumerate(head):
+        depth += {"(": 1, ")": -1}.get(char, 0)
+        if depth == 0 and head.startswith("; ", i):
+            clauses.append(head[start:i])
+            start = i + 2
+    clauses.append(head[start:])
+    if paper_sep:
+        clauses.append(paper_sep[2:] + paper)
+    return [c[:1].upper() + c[1:] for c in clauses if c]
 
 
 def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
