@@ -125,14 +125,9 @@ def test_run_test_length_meets_the_exact_arl():
 
 
 @pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
+def model_file(identified_prbs):
     """A model identified (paper A's study) from a fault-free 20-minute PRBS, seed 0."""
-    out = tmp_path_factory.mktemp("ident")
-    run_experiment(ExperimentConfig(duration=1200, seed=0), out / "prbs.mcap")
-    study = out / "study"
-    result = CliRunner().invoke(main, ["identify", str(out / "prbs.mcap"), "--out", str(study)])
-    assert result.exit_code == 0, result.output
-    return study / "model.json"
+    return identified_prbs[1] / "model.json"
 
 
 def _diagnose(path, model_file):

@@ -53,9 +53,7 @@ def test_the_readme_shows_the_workflow_and_the_tour():
 
 def test_no_committed_png_outside_the_builds_list():
     committed = {
-        p.resolve()
-        for p in DOCS.rglob("*.png")
-        if p.relative_to(DOCS).parts[0] not in GENERATED
+        p.resolve() for p in DOCS.rglob("*.png") if p.relative_to(DOCS).parts[0] not in GENERATED
     }
     assert committed <= _built(), sorted(str(p) for p in committed - _built())
 
