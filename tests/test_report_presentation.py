@@ -8,7 +8,7 @@ import pytest
 from rwlab.report import attitude as attitude_report
 from rwlab.report import diagnosis as diagnosis_report
 from rwlab.report.html import Page, signed, trace_styles
-from rwlab.report.identification import _reason_clauses
+from rwlab.report.model_choice import reason_clauses
 
 # study.json's chosen.reason of `rwlab demo` (seed 1): the ~1000-character sentence
 REASON = (
@@ -28,7 +28,7 @@ REASON = (
 
 
 def test_the_choice_is_cut_into_its_clauses_and_nothing_is_lost():
-    clauses = _reason_clauses(REASON)
+    clauses = reason_clauses(REASON)
     assert len(clauses) == 5
     assert clauses[0].startswith("OE221+K is the simplest model (fewest parameters: 4; then")
     assert clauses[1] == "Passed over for a DC gain off the measured one: OE221 (0.9638, -3.6 %)"
@@ -40,7 +40,7 @@ def test_the_choice_is_cut_into_its_clauses_and_nothing_is_lost():
         return "".join(text.split()).replace(";", "").lower()
 
     assert letters("".join(clauses)) == letters(REASON)  # only the separators go
-    assert _reason_clauses("ARX221 is the simplest model") == ["ARX221 is the simplest model"]
+    assert reason_clauses("ARX221 is the simplest model") == ["ARX221 is the simplest model"]
 
 
 @pytest.mark.parametrize(
