@@ -309,7 +309,7 @@ def _pointing_png(comparison) -> str:
     ax.set_xlabel("t [s]")
     ax.set_ylabel("pointing error [°]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right", ncol=3)
     return png_uri(fig)
 
 

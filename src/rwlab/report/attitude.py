@@ -253,7 +253,7 @@ def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
     ax.axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}° requirement")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("pointing error [°]")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right", ncol=3)
     fig_id = "fig-identified-wheel" if "lqg_identified_wheel" in runs else "fig-pointing"
     page.figure(fig, fig_id, f"Pointing error of every run against the ±{req:g}° requirement.")
     if ltr_result is not None:

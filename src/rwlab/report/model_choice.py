@@ -30,7 +30,7 @@ def choice_section(page: Page, study: dict) -> None:
     if ch.get("dc_gain") is not None:
         dc = f", DC gain {ch['dc_gain']:.4f}"
         if ch.get("dc_gain_error_percent") is not None:
-            dc += f" ({ch['dc_gain_error_percent']:+.1f} % of the measured)"
+            dc += f" ({ch['dc_gain_error_percent']:+.2f} % of the measured)"
     if study.get("no_model_fits"):
         page.verdict(
             f"No model fits: the best validation fit is {best:.2f} %, worse than the "
@@ -60,7 +60,7 @@ def choice_section(page: Page, study: dict) -> None:
             f"{r['fit_percent']:.2f}",
             f"{best - r['fit_percent']:.2f}",
             "none (a pole at 1)" if r.get("dc_gain") is None else f"{r['dc_gain']:.4f}",
-            "" if r.get("dc_gain_error_percent") is None else f"{r['dc_gain_error_percent']:+.1f}",
+            "" if r.get("dc_gain_error_percent") is None else f"{r['dc_gain_error_percent']:+.2f}",
         ]
         for r in rows
     ]
