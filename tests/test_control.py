@@ -146,6 +146,7 @@ def _discrete_plant(name):
     )
 
 
+@pytest.mark.slow  # nested numerical integrals of expm: ~10 s
 def test_lqrd_weights_match_the_integral_of_the_continuous_cost():
     """Van Loan's Qd, Rd, Nd equal ∫ over one period of the continuous cost with u held:
     checked by integrating numerically and solving the discrete problem independently."""

@@ -150,6 +150,7 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
     assert again == ref
 
 
+@pytest.mark.slow  # a 20-minute record, its reference and its diagnosis: ~20 s
 def test_a_reference_without_the_optional_change_test_is_still_stored(tmp_path, model_file):
     # a PRBS of ±1200 rpm never holds the ≥ 1500 rpm the friction-change test takes (the
     # held-out unit 842's default PRBS gave it 5 of 80 samples, and no reference was stored)
