@@ -177,7 +177,7 @@ def _threshold_table(page: Page, notes: list[str]) -> None:
     """How each detector's threshold was set (the diagnosis's notes, one row each)."""
     if not notes:
         return
-    page.heading("How each threshold was set", "thresholds")
+    page.heading("How each threshold was set", "threshold-setting")
     rows = [note.split(": ", 1) if ": " in note else ["", note] for note in notes]
     page.table(["detector", "threshold"], rows, table_id="threshold-notes")
 
