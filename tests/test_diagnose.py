@@ -265,6 +265,7 @@ def test_diagnose_refuses_a_model_without_reference(tmp_path, model_file):
     assert result.exit_code == 2 and "rwlab identify" in result.output
 
 
+@pytest.mark.slow  # 9 s in the quick lane (-n 2, shared machine)
 def test_diagnose_over_a_folder_writes_the_trend(tmp_path, model_file):
     folder = tmp_path / "wheel"
     folder.mkdir()
@@ -851,6 +852,7 @@ def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path
     assert kt.ci[0] <= 0.8 <= kt.ci[1] and bias.ci[0] <= 20 <= bias.ci[1]
 
 
+@pytest.mark.slow  # 8 s in the quick lane (-n 2, shared machine)
 def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, model_file):
     """Units differ by ±5 mA of current-sense offset, as much as the friction current
     at 500 rpm. The same record with 5 mA added to every current reading gives the
@@ -1100,6 +1102,7 @@ def test_a_weak_motor_is_named_at_the_limit_only_when_its_interval_excludes_one(
     assert found.ci[0] <= 0.8 <= found.ci[1]
 
 
+@pytest.mark.slow  # 8 s in the quick lane (-n 2, shared machine)
 def test_friction_after_a_rest_is_seen_against_the_mirror_speed(tmp_path, model_file):
     """Worn bearings from a 0-rpm rest on: the next hold (−A) has no earlier hold at that
     speed, but friction is even in speed and the current before the first motion is the

@@ -148,6 +148,7 @@ def test_the_exit_status_says_whether_a_fault_was_found_and_the_sizes_are_printe
     assert low <= factor <= high and low < size < high
 
 
+@pytest.mark.slow  # 9 s in the quick lane (-n 2, shared machine)
 def test_the_estimates_are_the_records_latest_minutes_not_a_quiet_tests(tmp_path, model_file):
     """A 30 rpm bias from 600 s of a 20-minute PRBS (another unit): the held-speed test
     last decided minutes before the end, and its latest 10 minutes of values reached back

@@ -62,6 +62,7 @@ def test_model_json_has_one_owner_on_both_sides(study_out):
     assert wheel.accel_limit_rpm_s == owner.accel_limit_rpm_s
 
 
+@pytest.mark.slow  # 12 s in the quick lane (-n 2, shared machine)
 def test_fleet_identification_writes_a_valid_fleet_json(tmp_path):
     fleet = tmp_path / "fleet"
     fleet.mkdir()
