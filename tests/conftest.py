@@ -1,12 +1,16 @@
-"""Shared fixtures: seeded simulated systems with known truth."""
+"""Shared fixtures: seeded simulated systems with known truth, and the records and
+identifications several test files read, made once per test session."""
 
 from __future__ import annotations
 
+import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from filelock import FileLock
 from scipy.signal import lfilter
 
 from rwlab.data import IOData
@@ -72,3 +76,60 @@ def browser():
     yield make
     for driver in drivers:
         driver.quit()
+
+
+def _once_per_session(tmp_path_factory, name: str, make: Callable[[Path], None]) -> Path:
+    """A folder ``make(folder)`` fills once per test session, whatever the number of
+    pytest-xdist workers: the first worker to ask makes it under a lock, the others wait
+    for it and read it (pytest-xdist's documented recipe). Tests read it, never write it."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this session
+    folder = root / f"session-{name}"
+    with FileLock(str(folder) + ".lock"):
+        if not (folder / ".done").exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            make(folder)
+            (folder / ".done").touch()
+    return folder
+
+
+@pytest.fixture(scope="session")
+def identified_prbs(tmp_path_factory) -> tuple[str, Path, Path]:
+    """``rwlab identify`` on a fault-free 20-minute PRBS of the simulated RW90 (seed 0),
+    made once per session: (the command's console output, the study folder with
+    report.html, study.json and model.json, the record). Read-only."""
+
+    def make(folder: Path) -> None:
+        from click.testing import CliRunner
+
+        from rwlab.cli import main
+        from rwlab.testbed import ExperimentConfig, run_experiment
+
+        run_experiment(ExperimentConfig(duration=1200, seed=0), folder / "prbs.mcap")
+        args = ["identify", str(folder / "prbs.mcap"), "--out", str(folder / "study")]
+        args.append("--nonlinear-models")  # the grey box and the NLARX too: the reports show them
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 0, result.output
+        (folder / "output.txt").write_text(result.output)
+
+    folder = _once_per_session(tmp_path_factory, "identified-prbs", make)
+    return (folder / "output.txt").read_text(), folder / "study", folder / "prbs.mcap"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels(tmp_path_factory) -> None:
+    """Under pytest-xdist, the attitude loop's numba kernels compile in one worker while
+    the others wait, then load from numba's cache (``cache=True``) instead of compiling
+    the same code again. A no-op in one process (``-p no:xdist``, ``-o addopts=""``)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+
+    def make(folder: Path) -> None:
+        import rwlab
+
+        for controller in ("lqr", "lqg"):
+            rwlab.simulate("geo-smallsat", controller, duration=2.0)
+
+    _once_per_session(tmp_path_factory, "compiled-kernels", make)

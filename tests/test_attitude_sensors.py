@@ -256,6 +256,7 @@ def test_aligned_update_equals_the_dense_kalman_formulas():
     assert np.allclose(q1, qmul(dq / np.linalg.norm(dq), q), atol=1e-12)
 
 
+@pytest.mark.slow  # 15 s in the quick lane (-n 2, shared machine)
 def test_the_gyro_filter_calibrates_a_misaligned_sun_sensor():
     """A sun sensor turned by 0.03° about body x and y: with the Sun moving through the body
     frame (a quarter day) the filter learns the turn against the earth sensor, and

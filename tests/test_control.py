@@ -146,6 +146,7 @@ def _discrete_plant(name):
     )
 
 
+@pytest.mark.slow  # nested numerical integrals of expm: ~10 s
 def test_lqrd_weights_match_the_integral_of_the_continuous_cost():
     """Van Loan's Qd, Rd, Nd equal ∫ over one period of the continuous cost with u held:
     checked by integrating numerically and solving the discrete problem independently."""
@@ -257,17 +258,9 @@ def test_paper_comparison_all_within_requirement_without_torque_saturation(name)
 
 
 @pytest.fixture(scope="module")
-def identified_wheel(tmp_path_factory):
+def identified_wheel(identified_prbs):
     """model.json through the real pipeline: twin experiment → rwlab identify."""
-    from rwlab.ident.study import identification_study, physical_model
-    from rwlab.report.identification import write_study
-    from rwlab.testbed import ExperimentConfig, load_record, run_experiment
-
-    root = tmp_path_factory.mktemp("wheel")
-    run_experiment(ExperimentConfig(duration=1200, Ts=0.5, seed=7), root / "prbs.mcap")
-    result = identification_study(load_record(root / "prbs.mcap"))
-    write_study(result, physical_model(result), root / "study")
-    return root / "study" / "model.json"
+    return identified_prbs[1] / "model.json"
 
 
 def test_the_identified_wheel_flies_and_its_lag_cost_is_reported(tmp_path, identified_wheel):

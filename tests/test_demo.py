@@ -63,7 +63,8 @@ def test_demo_writes_every_output_and_they_agree(demo_dir):
     assert summary["hil"]["lost_commands"] == 0 < summary["hil"]["commands_sent"]
     parser = _Links()
     parser.feed((demo_dir / "index.html").read_text())
-    assert parser.links and all((demo_dir / link).exists() for link in parser.links)
+    files = [link.partition("#")[0] for link in parser.links]  # a link to a page's section
+    assert files and all((demo_dir / f).exists() for f in files)
 
 
 @pytest.mark.slow

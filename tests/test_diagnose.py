@@ -125,14 +125,9 @@ def test_run_test_length_meets_the_exact_arl():
 
 
 @pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
+def model_file(identified_prbs):
     """A model identified (paper A's study) from a fault-free 20-minute PRBS, seed 0."""
-    out = tmp_path_factory.mktemp("ident")
-    run_experiment(ExperimentConfig(duration=1200, seed=0), out / "prbs.mcap")
-    study = out / "study"
-    result = CliRunner().invoke(main, ["identify", str(out / "prbs.mcap"), "--out", str(study)])
-    assert result.exit_code == 0, result.output
-    return study / "model.json"
+    return identified_prbs[1] / "model.json"
 
 
 def _diagnose(path, model_file):
@@ -155,6 +150,7 @@ def test_the_model_carries_a_healthy_reference_measured_on_the_whole_record(mode
     assert again == ref
 
 
+@pytest.mark.slow  # a 20-minute record, its reference and its diagnosis: ~20 s
 def test_a_reference_without_the_optional_change_test_is_still_stored(tmp_path, model_file):
     # a PRBS of ±1200 rpm never holds the ≥ 1500 rpm the friction-change test takes (the
     # held-out unit 842's default PRBS gave it 5 of 80 samples, and no reference was stored)
@@ -269,6 +265,7 @@ def test_diagnose_refuses_a_model_without_reference(tmp_path, model_file):
     assert result.exit_code == 2 and "rwlab identify" in result.output
 
 
+@pytest.mark.slow  # 9 s in the quick lane (-n 2, shared machine)
 def test_diagnose_over_a_folder_writes_the_trend(tmp_path, model_file):
     folder = tmp_path / "wheel"
     folder.mkdir()
@@ -855,6 +852,7 @@ def test_a_weak_motor_and_a_biased_sensor_are_both_named_during_a_chirp(tmp_path
     assert kt.ci[0] <= 0.8 <= kt.ci[1] and bias.ci[0] <= 20 <= bias.ci[1]
 
 
+@pytest.mark.slow  # 8 s in the quick lane (-n 2, shared machine)
 def test_a_current_sense_offset_leaves_the_friction_test_unchanged(tmp_path, model_file):
     """Units differ by ±5 mA of current-sense offset, as much as the friction current
     at 500 rpm. The same record with 5 mA added to every current reading gives the
@@ -1104,6 +1102,7 @@ def test_a_weak_motor_is_named_at_the_limit_only_when_its_interval_excludes_one(
     assert found.ci[0] <= 0.8 <= found.ci[1]
 
 
+@pytest.mark.slow  # 8 s in the quick lane (-n 2, shared machine)
 def test_friction_after_a_rest_is_seen_against_the_mirror_speed(tmp_path, model_file):
     """Worn bearings from a 0-rpm rest on: the next hold (−A) has no earlier hold at that
     speed, but friction is even in speed and the current before the first motion is the

@@ -23,15 +23,10 @@ OUTPUTS = ("speed", "current", "age", "lost")
 
 
 @pytest.fixture(scope="module")
-def identified(tmp_path_factory):
+def identified(identified_prbs):
     """``rwlab identify`` on a fault-free 20-minute PRBS (seed 0): its output and model."""
-    out = tmp_path_factory.mktemp("ident")
-    run_experiment(ExperimentConfig(duration=1200, seed=0), out / "prbs.mcap")
-    result = CliRunner().invoke(
-        main, ["identify", str(out / "prbs.mcap"), "--out", str(out / "study")]
-    )
-    assert result.exit_code == 0, result.output
-    return result.output, out / "study" / "model.json"
+    output, study, _ = identified_prbs
+    return output, study / "model.json"
 
 
 @pytest.fixture(scope="module")
@@ -153,6 +148,7 @@ def test_the_exit_status_says_whether_a_fault_was_found_and_the_sizes_are_printe
     assert low <= factor <= high and low < size < high
 
 
+@pytest.mark.slow  # 9 s in the quick lane (-n 2, shared machine)
 def test_the_estimates_are_the_records_latest_minutes_not_a_quiet_tests(tmp_path, model_file):
     """A 30 rpm bias from 600 s of a 20-minute PRBS (another unit): the held-speed test
     last decided minutes before the end, and its latest 10 minutes of values reached back
@@ -274,6 +270,7 @@ def test_live_alarms_and_injected_faults_are_printed(tmp_path, model_file):
     assert printed and all(p in events for p in printed)
 
 
+@pytest.mark.slow  # three 15-minute records and a folder diagnosis: ~1 min
 def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
     """Records of one wheel, the same test signal, friction ×1, ×1.15, ×1.3 from power-up:
     each record's friction estimate, alarm or not, and their ratios are the factors."""

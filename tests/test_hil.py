@@ -359,6 +359,7 @@ def test_steady_after_sets_the_window_of_bench_and_simulation(tmp_path):
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow  # 21 s in the quick lane (-n 2, shared machine)
 def test_the_gyro_filter_flies_on_the_bus(tmp_path):
     """geo-comsat-gyro (issue 24's sensors) through twins: the gyro-driven 12-state filter
     holds the requirement with the wheels' telemetry in the loop, as it does in simulation."""

@@ -47,6 +47,8 @@ def _command(words):
     cmd, rest = main, list(words)
     while rest and isinstance(cmd, click.Group) and rest[0] in cmd.commands:
         cmd = cmd.commands[rest.pop(0)]
+    if rest and isinstance(cmd, click.Group) and "run" in cmd.commands:
+        cmd = cmd.commands["run"]  # `rwlab diagnose RECORD ...` is `rwlab diagnose run ...`
     return cmd, rest
 
 

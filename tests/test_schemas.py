@@ -32,12 +32,9 @@ def _rwlab(*args):
 
 
 @pytest.fixture(scope="module")
-def study_out(tmp_path_factory):
-    """``rwlab identify`` on a 20-minute PRBS record of the simulated wheel."""
-    root = tmp_path_factory.mktemp("schemas")
-    run_experiment(ExperimentConfig(duration=1200, Ts=0.5, seed=7), root / "prbs.mcap")
-    _rwlab("identify", root / "prbs.mcap", "--out", root / "out")
-    return root
+def study_out(identified_prbs):
+    """``rwlab identify``'s folder for a 20-minute PRBS record of the simulated wheel."""
+    return identified_prbs[1]
 
 
 @pytest.mark.parametrize("name", schemas.NAMES)
@@ -50,13 +47,13 @@ def test_every_shipped_schema_is_a_valid_2020_12_schema(name):
 
 
 def test_identify_writes_a_valid_model_and_study(study_out):
-    model = _valid(study_out / "out" / "model.json", "model")
-    study = _valid(study_out / "out" / "study.json", "study")
+    model = _valid(study_out / "model.json", "model")
+    study = _valid(study_out / "study.json", "study")
     assert model["structure"] == study["chosen"]["structure"]
 
 
 def test_model_json_has_one_owner_on_both_sides(study_out):
-    path = study_out / "out" / "model.json"
+    path = study_out / "model.json"
     owner = WheelModelFile.load(path)
     assert owner.to_dict() == json.loads(path.read_text())  # lossless round trip
     wheel = IdentifiedWheel.from_json(path, model="linear")
@@ -65,6 +62,7 @@ def test_model_json_has_one_owner_on_both_sides(study_out):
     assert wheel.accel_limit_rpm_s == owner.accel_limit_rpm_s
 
 
+@pytest.mark.slow  # 12 s in the quick lane (-n 2, shared machine)
 def test_fleet_identification_writes_a_valid_fleet_json(tmp_path):
     fleet = tmp_path / "fleet"
     fleet.mkdir()
@@ -94,7 +92,7 @@ def test_montecarlo_writes_a_valid_budget(tmp_path):
 
 def test_diagnose_writes_a_valid_diagnosis(study_out, tmp_path):
     run_experiment(ExperimentConfig(duration=300, seed=2), tmp_path / "r.mcap")
-    _rwlab("diagnose", tmp_path / "r.mcap", "--model", study_out / "out" / "model.json",
+    _rwlab("diagnose", tmp_path / "r.mcap", "--model", study_out / "model.json",
            "--out", tmp_path / "d")  # fmt: skip
     _valid(tmp_path / "d" / "diagnosis.json", "diagnosis")
 
@@ -127,7 +125,7 @@ def test_reading_rule_upgrades_older_refuses_newer_and_other_kinds():
 
 
 def test_a_newer_model_file_is_refused_with_what_to_do(study_out, tmp_path):
-    d = json.loads((study_out / "out" / "model.json").read_text())
+    d = json.loads((study_out / "model.json").read_text())
     (tmp_path / "m.json").write_text(json.dumps({**d, "format": "rwlab.WheelModel/3"}))
     with pytest.raises(FileFormatError, match="update rwlab"):
         IdentifiedWheel.from_json(tmp_path / "m.json")

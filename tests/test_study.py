@@ -14,23 +14,16 @@ from rwlab.ident import fit_percent
 from rwlab.ident.study import _choose, identification_study, physical_model, steady_state_gain
 from rwlab.report.identification import FIGURES
 from rwlab.signals import prbs
-from rwlab.testbed import ExperimentConfig, RecordWriter, run_experiment
+from rwlab.testbed import RecordWriter
 from rwlab.wheel import IdentifiedWheel
 from rwlab.wheel.physics import simulate_speed_command
 from tests.conftest import needs_chromium
 
 
 @pytest.fixture(scope="module")
-def study_dir(tmp_path_factory):
-    """`rwlab identify --nonlinear-models` on a 20-minute PRBS record of the simulated RW90
-    (Ts = 0.5 s)."""
-    root = tmp_path_factory.mktemp("study")
-    record = root / "prbs.mcap"
-    run_experiment(ExperimentConfig(duration=1200, Ts=0.5, seed=5), record)
-    out = str(root / "out")
-    result = CliRunner().invoke(main, ["identify", str(record), "--out", out, "--nonlinear-models"])
-    assert result.exit_code == 0, result.output
-    return root / "out"
+def study_dir(identified_prbs):
+    """`rwlab identify` on a 20-minute PRBS record of the simulated RW90 (Ts = 0.5 s)."""
+    return identified_prbs[1]
 
 
 class _Figures(HTMLParser):

@@ -57,6 +57,7 @@ def test_chirp_is_tracked_at_low_and_attenuated_at_high_frequency():
     assert np.max(np.abs(y[late])) < 0.3 * np.max(np.abs(u[late]))
 
 
+@pytest.mark.slow  # 10 s in the quick lane (-n 2, shared machine)
 def test_prbs_identification_finds_nk_1_and_a_paper_like_arx221_fit():
     """Paper A: PRBS at Ts = 0.5 s, normalised, 70/30 → nk = 1, ARX221 fit ~75–80 %."""
     fits = []

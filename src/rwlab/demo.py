@@ -370,20 +370,34 @@ def _hil_stage(out: Path, cfg: DemoConfig, echo) -> dict:
 
 def _pointing_png(comparison) -> str:
     """The pointing error of every run as an embedded PNG (data URI)."""
-    from rwlab.report.attitude import COLORS, LABELS
-    from rwlab.report.html import figure, png_uri
+    from rwlab.report.attitude import COLORS, LABELS, POINTING_ORDER
+    from rwlab.report.html import figure, png_uri, trace_styles
 
     fig, ax = figure(8, 3.0)
-    for name, r in comparison.runs.items():
+    order = [k for k in POINTING_ORDER if k in comparison.runs]
+    for name, style in zip(order, trace_styles(len(order)), strict=True):
+        r = comparison.runs[name]
         ax.semilogy(
-            r.t, np.maximum(r.error_deg, 1e-6), lw=1, color=COLORS[name], label=LABELS[name]
+            r.t, np.maximum(r.error_deg, 1e-6), color=COLORS[name], label=LABELS[name], **style
         )
-    ax.axhline(comparison.scenario.control.pointing_requirement_deg, color="k", ls="--", lw=1)
+    req = comparison.scenario.control.pointing_requirement_deg
+    ax.axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}° requirement")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("pointing error [°]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right", ncol=3)
     return png_uri(fig)
+
+
+def _verdict(s: dict) -> str:
+    """The demo's answer in one line: the model chosen and which controllers meet ±0.1°."""
+    failed = [n for n, m in s["controllers"].items() if not m["meets_requirement"]]
+    flown = "every controller meets" if not failed else f"{', '.join(failed)} miss"
+    return (
+        f"The identified wheel model ({s['chosen_model']['structure']}) flies: {flown} the "
+        f"±0.1° pointing requirement; on the bus (HIL) the LQG's steady maximum is "
+        f"{s['hil']['steady_max_error_deg']:.3g}°."
+    )
 
 
 def _index(s: dict, figure_uri: str) -> str:
@@ -406,9 +420,11 @@ line-height:1.5;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px s
 padding:.3em .7em}}th{{background:#f3f3f3}}.box{{background:#eef7ee;padding:.8em 1em;
 border-left:4px solid #4a4}}img{{max-width:100%}}</style></head><body>
 <h1>rwlab demo: a reaction wheel from the bench to the satellite</h1>
-<div class="box" id="summary"><p><b>Identified wheel model: {esc(cm["structure"])}</b>,
-validation fit {cm["fit_percent"]:.2f} % (delay nk = {cm["delay_nk"]}, Ts = {cm["Ts"]:g} s).
-{esc(cm["reason"])}.</p>
+<div class="box" id="summary"><p id="verdict"><b>{esc(_verdict(s))}</b></p>
+<p><b>Identified wheel model: {esc(cm["structure"])}</b>,
+validation fit {cm["fit_percent"]:.2f} % (delay nk = {cm["delay_nk"]}, Ts = {cm["Ts"]:g} s);
+why this one: the table at the top of the
+<a href="identification/report.html#choice">identification report</a>.</p>
 <p>GEO smallsat ({esc(s["scenario"])}), steady-state pointing error against the ±0.1°
 requirement:</p>
 <table id="pointing"><tr><th>controller</th><th>max [°]</th><th>RMS [°]</th>

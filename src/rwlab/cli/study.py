@@ -156,7 +156,11 @@ def identify(
         fit = "unstable" if row["fit_percent"] is None else f"{row['fit_percent']:8.2f}"
         mse = "" if row["mse"] is None else f"{row['mse']:11.4g}"
         click.echo(f"{row['structure']:<12} {fit:>8} {mse:>11}")
-    click.echo(f"chosen: {study['chosen']['reason']}")
+    from rwlab.report.model_choice import reason_clauses
+
+    click.echo(f"chosen: {study['chosen']['structure']}, because:")
+    for clause in reason_clauses(study["chosen"]["reason"]):  # one line each, not one sentence
+        click.echo(f"  - {clause}")
     if (study.get("parts") or {}).get("note"):
         click.echo(f"estimation vs validation part: {study['parts']['note']}")
     nl = study["nonlinear"]

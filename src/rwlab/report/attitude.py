@@ -17,7 +17,7 @@ import numpy as np
 from rwlab._io import atomic_write_bytes
 from rwlab.attitude.control import Comparison
 from rwlab.attitude.design import LTRResult
-from rwlab.report.html import Page, figure
+from rwlab.report.html import Page, figure, signed, trace_styles
 
 __all__ = ["write_comparison", "write_ltr"]
 
@@ -61,11 +61,11 @@ def _write_json(path: Path, payload) -> None:
 def _grid(page: Page, runs: dict, keys: list[str], series, ylabels, fig_id: str, caption: str):
     fig, axes = figure(10, 1.9 * len(ylabels), len(ylabels), 1, sharex=True)
     axes = np.atleast_1d(axes)
-    for name in keys:
+    for name, style in zip(keys, trace_styles(len(keys)), strict=True):
         r = runs[name]
         data = series(r)
         for i, ax in enumerate(axes):
-            ax.plot(r.t, data[:, i], lw=1, color=COLORS[name], label=LABELS[name])
+            ax.plot(r.t, data[:, i], color=COLORS[name], label=LABELS[name], **style)
     for ax, label in zip(axes, ylabels, strict=True):
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -120,6 +120,40 @@ def write_comparison(
     return targets
 
 
+POINTING_ORDER = ("lqr", "lqg_ltr", "lqg", "lqg_identified_wheel")
+"""The runs in drawing order: the last, the identified wheel where flown, on top."""
+
+
+def _verdict(page: Page, metrics: dict, req: float) -> None:
+    """First on the page: which runs meet the requirement, with each steady maximum."""
+    failed = [LABELS[n] for n, m in metrics.items() if not m["meets_requirement"]]
+    maxima = ", ".join(f"{LABELS[n]} {m['steady_max_error_deg']:.3g}°" for n, m in metrics.items())
+    if failed:
+        head = f"{', '.join(failed)} do{'es' if len(failed) == 1 else ''} NOT meet ±{req:g}°"
+    else:
+        head = f"Every run meets the ±{req:g}° requirement"
+    page.verdict(f"{head}. Steady-state maximum pointing error: {maxima}.", not failed)
+
+
+def _identified_wheel_note(page: Page, metrics: dict, payload: dict, req: float) -> None:
+    """What flying the identified wheel model instead of an ideal torque source cost."""
+    if "identified_wheel_lag_cost_deg" not in payload:
+        return
+    m = metrics["lqg_identified_wheel"]
+    ideal = metrics["lqg"]["steady_rms_error_deg"]
+    cost = payload["identified_wheel_lag_cost_deg"]
+    verdict = "within" if m["meets_requirement"] else "outside"
+    share = f" ({signed(100 * cost / ideal, 2)} %)" if ideal else ""
+    page.text(
+        f"With the identified wheel model as the actuator (LQG), the loop stays stable, "
+        f"{verdict} the ±{req:g}° requirement (steady max "
+        f"{m['steady_max_error_deg']:.3g}°). The wheel's lag costs {signed(cost)}°{share} "
+        f"of steady RMS pointing error compared with an ideal torque source "
+        f"({ideal:.3g}°).",
+        note=True,
+    )
+
+
 def _forced_note(page: Page, forced) -> None:
     """First on the page: the wheels were flown although they cannot deliver what the
     scenario needs (``--force``)."""
@@ -135,7 +169,9 @@ def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
     sc = comp.scenario
     req = sc.control.pointing_requirement_deg
     page = Page(f"Attitude control — LQR vs LQG vs LQG/LTR ({sc.name})")
+    _verdict(page, comp.metrics, req)
     _forced_note(page, comp.config.get("wheel_forced"))
+    _identified_wheel_note(page, comp.metrics, payload, req)
     page.text(
         f"Scenario {sc.name}: inertia {sc.spacecraft.inertia} kg·m², {sc.n_wheels} wheels "
         f"({sc.wheels.wheel_spec.name}, {sc.wheels.model}, ±{sc.wheels.max_torque:g} N·m, "
@@ -160,20 +196,9 @@ def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
         "wheel_momentum_peak_fraction": "peak momentum / limit",
         "meets_requirement": f"meets ±{req:g}°",
     }
-    rows = [[LABELS[name]] + [m[k] for k in columns] for name, m in comp.metrics.items()]
+    rows = [[LABELS[name]] + [_cell(m[k]) for k in columns] for name, m in comp.metrics.items()]
     page.heading("Metrics (every step; steady state after the first half, at most 1 h)", "metrics")
     page.table(["controller", *columns.values()], rows, table_id="table-metrics")
-    if "identified_wheel_lag_cost_deg" in payload:
-        m = comp.metrics["lqg_identified_wheel"]
-        verdict = "within" if m["meets_requirement"] else "outside"
-        page.text(
-            f"With the identified wheel model as the actuator (LQG), the loop stays stable, "
-            f"{verdict} the ±{req:g}° requirement (steady max "
-            f"{m['steady_max_error_deg']:.4f}°). The wheel's lag costs "
-            f"{payload['identified_wheel_lag_cost_deg']:+.4f}° of steady RMS pointing error "
-            "compared with an ideal torque source.",
-            note=True,
-        )
     runs = comp.runs
     q_label = ["q1", "q2", "q3", "q4"]
     w_label = ["ωx [rad/s]", "ωy [rad/s]", "ωz [rad/s]"]
@@ -219,14 +244,16 @@ def _comparison_page(comp: Comparison, payload: dict, ltr_result) -> Page:
         "Wheel speeds.",
     )
     fig, ax = figure(10, 3.0)
-    for name, r in runs.items():
+    order = [k for k in POINTING_ORDER if k in runs]
+    for name, style in zip(order, trace_styles(len(order)), strict=True):
+        r = runs[name]
         ax.semilogy(
-            r.t, np.maximum(r.error_deg, 1e-6), lw=1, color=COLORS[name], label=LABELS[name]
+            r.t, np.maximum(r.error_deg, 1e-6), color=COLORS[name], label=LABELS[name], **style
         )
-    ax.axhline(req, color="k", ls="--", lw=1)
+    ax.axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}° requirement")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("pointing error [°]")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right", ncol=3)
     fig_id = "fig-identified-wheel" if "lqg_identified_wheel" in runs else "fig-pointing"
     page.figure(fig, fig_id, f"Pointing error of every run against the ±{req:g}° requirement.")
     if ltr_result is not None:
@@ -473,8 +500,15 @@ def write_simulation(
     table = _trace_table(run)
     atomic_write_bytes(targets["trace.parquet"], lambda tmp: pq.write_table(table, tmp))
     page = Page(f"Attitude simulation — {config['controller']} on {scenario.name}")
-    _forced_note(page, config.get("wheel_forced"))
     req = scenario.control.pointing_requirement_deg
+    met = bool(metrics["meets_requirement"])
+    page.verdict(
+        f"{config['controller']} {'meets' if met else 'does NOT meet'} the ±{req:g}° "
+        f"requirement: steady-state pointing error max {metrics['steady_max_error_deg']:.3g}°, "
+        f"RMS {metrics['steady_rms_error_deg']:.3g}° (from t = {run.steady_from_s:g} s).",
+        met,
+    )
+    _forced_note(page, config.get("wheel_forced"))
     sky = (
         f"Sky: the ephemerides from {scenario.sky.epoch} (UTC), station at "
         f"{scenario.sky.station_longitude_deg:g}° E; in the Earth's shadow for "
@@ -493,8 +527,11 @@ def write_simulation(
     page.table(["metric", "value"], rows, table_id="table-metrics")
     fig, axes = figure(10, 7.5, 3, 1, sharex=True)
     t_h = run.t / 3600
-    for y, lw, label in ((run.error_deg, 0.8, "pointing"), (run.est_error_deg, 0.6, "estimation")):
-        axes[0].semilogy(*envelope(t_h, np.maximum(y, 1e-6)), lw=lw, label=f"{label} error")
+    traces = ((run.est_error_deg, "C1", "estimation"), (run.error_deg, "C0", "pointing"))
+    for (y, color, label), style in zip(traces, trace_styles(2), strict=True):
+        axes[0].semilogy(
+            *envelope(t_h, np.maximum(y, 1e-6)), color=color, label=f"{label} error", **style
+        )
     axes[0].axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
     axes[0].set_ylabel("error [°]")
     axes[0].legend(fontsize=8, loc="upper right")
@@ -550,3 +587,10 @@ def write_simulation(
         )
     page.save(targets["report.html"])
     return targets
+
+
+def _cell(value):
+    """A metrics table cell: a requirement met reads yes / NO, not True / False."""
+    if isinstance(value, bool):
+        return "yes" if value else "NO"
+    return value

@@ -201,7 +201,7 @@ def _verdict_section(page: Page, budget: dict) -> None:
                 f"(≥ {r['lower_bound']:.1%})",
             ]
         )
-    page.table(["", ""], rows, table_id="table-verdict")
+    page.table(["", "this campaign"], rows, table_id="table-verdict")
     late = window["runs_converged_after_start"]
     if late:
         page.text(
@@ -244,6 +244,9 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
     sc = campaign.scenario
     req = budget["requirement_deg"]
     page = Page(f"Monte Carlo pointing budget — {campaign.controller} on {sc.name}")
+    verdict = budget["verdict"]
+    shown = True if verdict["demonstrated"] else (None if verdict["met"] else False)
+    page.verdict(verdict["text"][:1].upper() + verdict["text"][1:], shown)
     page.text(
         f"{budget['runs']} runs of {campaign.duration:g} s, campaign seed {campaign.seed}; each "
         "run's seed is a child of numpy's SeedSequence(campaign seed), and from it alone come "

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab._io import atomic_write_bytes
-from rwlab.diagnose import Diagnosis
+from rwlab.diagnose import Alarm, Diagnosis
 from rwlab.report.attitude import check_outputs
 from rwlab.report.html import Page, figure
 
@@ -64,10 +64,10 @@ def write_diagnosis(
 
 
 def _mark_alarms(ax, diagnosis: Diagnosis, injected: list[dict]) -> None:
-    for a in diagnosis.alarms:
-        ax.axvline(a.t_s, color="r", ls="--", lw=1)
-    for e in injected:
-        ax.axvline(e["t"], color="tab:purple", ls=":", lw=1)
+    for i, a in enumerate(diagnosis.alarms):
+        ax.axvline(a.t_s, color="r", ls="--", lw=1, label=None if i else "alarm")
+    for i, e in enumerate(injected):
+        ax.axvline(e["t"], color="tab:purple", ls=":", lw=1, label=None if i else "injected")
 
 
 def _page(
@@ -76,6 +76,7 @@ def _page(
     h = diagnosis.history
     t = h["t_s"]
     page = Page(f"Fault diagnosis — {title}")
+    _verdict(page, diagnosis)
     page.text(
         f"The identified model ran beside the telemetry at Ts = {diagnosis.reference.Ts:g} s. "
         f"The detectors compare it with the healthy reference measured on the identification "
@@ -95,11 +96,10 @@ def _page(
             f"on in this {diagnosis.duration_s:g}-s record: no alarm says nothing of friction, "
             "the motor, the current limit or a sensor bias.</p>"
         )
-    for note in diagnosis.notes:
-        page.html(f'<p class="note">Threshold: {html.escape(note)}</p>')
     page.heading("Alarms", "alarms-heading")
     _alarm_table(page, diagnosis, injected)
     _coverage_table(page, diagnosis)
+    _threshold_table(page, diagnosis.notes)
     if diagnosis.estimates:
         page.heading("Sizes against the healthy reference", "estimates")
         page.text(
@@ -128,9 +128,10 @@ def _page(
     for ax, (name, unit) in zip(
         axes, (("speed", "rpm"), ("acceleration", "rpm/s"), ("current", "A")), strict=True
     ):
-        ax.plot(t, h[name], lw=0.8)
+        ax.plot(t, h[name], lw=0.8, label=f"{name} residual")
         ax.set_ylabel(f"{name} [{unit}]")
         _mark_alarms(ax, diagnosis, injected)
+        ax.legend(loc="upper left", fontsize=8)
     axes[-1].set_xlabel("time [s]")
     page.figure(
         fig,
@@ -148,6 +149,37 @@ def _page(
                 rows.append([name, stats_["unit"], part.replace("_", " "), *s.values()])
     page.table(["residual", "unit", "part", "mean", "σ", "max |·|"], rows)
     return page
+
+
+def _verdict(page: Page, diagnosis: Diagnosis) -> None:
+    """First on the page: the faults named, each first alarm's time and test, or none."""
+    first: dict[str, Alarm] = {}
+    for a in sorted(diagnosis.alarms, key=lambda a: a.t_s):
+        first.setdefault(a.kind, a)
+    if first:
+        named = "; ".join(f"{kind} at {a.t_s:g} s ({a.detector} test)" for kind, a in first.items())
+        page.verdict(
+            f"{len(diagnosis.alarms)} alarm{'s' if len(diagnosis.alarms) != 1 else ''}, "
+            f"first of each fault: {named}. Sizes: the alarm table and the sizes below.",
+            False,
+        )
+    elif diagnosis.model_tested():
+        page.verdict(f"No alarm in this {diagnosis.duration_s:g}-s record.", True)
+    else:
+        page.verdict(
+            f"No alarm, but no model-based test had anything to decide on in this "
+            f"{diagnosis.duration_s:g}-s record (see below).",
+            False,
+        )
+
+
+def _threshold_table(page: Page, notes: list[str]) -> None:
+    """How each detector's threshold was set (the diagnosis's notes, one row each)."""
+    if not notes:
+        return
+    page.heading("How each threshold was set", "threshold-setting")
+    rows = [note.split(": ", 1) if ": " in note else ["", note] for note in notes]
+    page.table(["detector", "threshold"], rows, table_id="threshold-notes")
 
 
 def _alarm_table(page: Page, diagnosis: Diagnosis, injected: list[dict]) -> None:
@@ -217,8 +249,8 @@ def _statistics_figure(page: Page, diagnosis: Diagnosis, injected: list[dict]) -
         ax.set_yscale("symlog", linthresh=max(diagnosis.thresholds[name], 0.1))
         ax.set_ylim(bottom=0)
         ax.set_ylabel("[σ]")
-        ax.legend(loc="upper left", fontsize=8)
         _mark_alarms(ax, diagnosis, injected)
+        ax.legend(loc="upper left", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
     page.figure(
         fig,

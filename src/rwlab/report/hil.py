@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab.report.attitude import envelope
-from rwlab.report.html import Page, figure
+from rwlab.report.html import Page, figure, trace_styles
 
 __all__ = ["write_hil_report"]
 
@@ -55,6 +55,13 @@ def _page(result) -> Page:
     cfg = m["config"]
     req = sc.control.pointing_requirement_deg
     page = Page(f"Hardware in the loop — {cfg['controller']} on {sc.name}")
+    ref_m = m.get("reference_simulation")
+    beside = f" ({ref_m['steady_max_error_deg']:.3g}° in the simulation beside it)" if ref_m else ""
+    page.verdict(
+        f"Requirement ±{req:g}° {'met' if m['meets_requirement'] else 'NOT met'} on the bus: "
+        f"steady-state maximum {m['steady_max_error_deg']:.3g}°{beside}.",
+        bool(m["meets_requirement"]),
+    )
     if cfg.get("wheel_forced"):
         page.text(
             "The wheel model cannot deliver what this scenario needs; it was flown anyway "
@@ -81,6 +88,11 @@ def _page(result) -> Page:
     return page
 
 
+def _time_unit(t: np.ndarray) -> tuple[float, str]:
+    """Seconds for a run shorter than two hours, hours beyond: (s per unit, its name)."""
+    return (3600.0, "h") if t.size and t[-1] > 7200 else (1.0, "s")
+
+
 def _comparison(page: Page, m: dict) -> None:
     ref = m.get("reference_simulation")
     page.heading("Bench and simulation side by side", "comparison")
@@ -105,22 +117,24 @@ def _comparison(page: Page, m: dict) -> None:
 
 
 def _pointing_figure(page: Page, run, ref, req: float) -> None:
+    scale, unit = _time_unit(run.t)
     paired = ref is not None and ref.t.shape == run.t.shape and np.allclose(ref.t, run.t)
     fig, axes = figure(
         10, 6.0 if paired else 3.6, 2 if paired else 1, 1, sharex=True, squeeze=False
     )
     ax = axes[0, 0]
-    t_h = run.t / 3600
-    ax.semilogy(*envelope(t_h, np.maximum(run.error_deg, 1e-6)), lw=0.8, label="bench")
-    if ref is not None:
+    t_h = run.t / scale
+    under, over = trace_styles(2)
+    if ref is not None:  # drawn first and wider: the bench run, the main trace, on top
         ax.semilogy(
-            *envelope(ref.t / 3600, np.maximum(ref.error_deg, 1e-6)),
-            lw=0.8,
-            alpha=0.8,
+            *envelope(ref.t / scale, np.maximum(ref.error_deg, 1e-6)),
+            color="C1",
             label="simulation (physics wheel)",
+            **under,
         )
+    ax.semilogy(*envelope(t_h, np.maximum(run.error_deg, 1e-6)), color="C0", label="bench", **over)
     ax.axhline(req, color="k", ls="--", lw=1, label=f"±{req:g}°")
-    ax.axvline(run.steady_from_s / 3600, color="grey", ls=":", lw=1, label="steady window")
+    ax.axvline(run.steady_from_s / scale, color="grey", ls=":", lw=1, label="steady window")
     ax.set_ylabel("pointing error [°]")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
@@ -129,7 +143,7 @@ def _pointing_figure(page: Page, run, ref, req: float) -> None:
         axes[1, 0].plot(*envelope(t_h, diff), lw=0.6, color="k")
         axes[1, 0].set_ylabel("bench − simulation [°]")
         axes[1, 0].grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("t [h]")
+    axes[-1, 0].set_xlabel(f"t [{unit}]")
     page.figure(
         fig,
         "fig-hil-pointing",
@@ -140,24 +154,28 @@ def _pointing_figure(page: Page, run, ref, req: float) -> None:
 
 def _wheel_figure(page: Page, result) -> None:
     run, ref = result.run, result.reference
+    scale, unit = _time_unit(run.t)
     n = run.wheel_speed_rpm.shape[1]
     fig, axes = figure(10, 1.8 * n + 0.6, n, 1, sharex=True, squeeze=False)
     for i in range(n):
         ax = axes[i, 0]
-        ax.plot(*envelope(run.t / 3600, run.wheel_speed_rpm[:, i]), lw=0.8, label="bench")
+        under, over = trace_styles(2)
         if ref is not None:
             ax.plot(
-                *envelope(ref.t / 3600, ref.wheel_speed_rpm[:, i]), lw=0.8, alpha=0.8,
-                label="simulation",
+                *envelope(ref.t / scale, ref.wheel_speed_rpm[:, i]), color="C1",
+                label="simulation", **under,
             )  # fmt: skip
+        ax.plot(
+            *envelope(run.t / scale, run.wheel_speed_rpm[:, i]), color="C0", label="bench", **over
+        )
         ax.set_ylabel(f"node {result.metrics['config']['nodes'][i]} [rpm]")
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8, loc="upper right")
-    axes[-1, 0].set_xlabel("t [h]")
+    axes[-1, 0].set_xlabel(f"t [{unit}]")
     for e in result.events:
         if e["kind"] in ("alarm", "fault_injected", "reallocate"):
             for ax in axes[:, 0]:
-                ax.axvline(e["t"] / 3600, color="r", lw=0.8, ls=":")
+                ax.axvline(e["t"] / scale, color="r", lw=0.8, ls=":")
     page.figure(
         fig,
         "fig-hil-wheels",
@@ -212,14 +230,15 @@ def _measurement(page: Page, m: dict, result, sc) -> None:
         rows,
         table_id="table-measurement",
     )
+    scale, unit = _time_unit(result.run.t)
     fig, ax = figure(10, 3.0)
     for node, log in result.wheel_log.items():
         if log["speed_rpm"].size < 3:
             continue
         realised = np.diff(log["speed_rpm"]) / sc.run.dt
         err = (realised - log["command_rpm_s"][1:]) * sc.wheels.inertia * np.pi / 30
-        ax.plot(*envelope(log["t"][1:] / 3600, err), lw=0.5, label=f"node {node}")
-    ax.set_xlabel("t [h]")
+        ax.plot(*envelope(log["t"][1:] / scale, err), lw=0.5, label=f"node {node}")
+    ax.set_xlabel(f"t [{unit}]")
     ax.set_ylabel("realised − commanded [N·m]")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt
 
 from rwlab._io import atomic_write_bytes
 
-__all__ = ["Page", "figure", "png_uri"]
+__all__ = ["Page", "figure", "png_uri", "signed", "trace_styles"]
 
 _STYLE = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;
@@ -31,6 +31,9 @@ th{background:#f3f3f3}tr.chosen{background:#eef7ee;font-weight:600}
 figure{margin:1.2em 0}figure img{max-width:100%}figcaption{font-size:.9em;color:#555}
 .note{background:#fff8e1;padding:.6em 1em;border-left:4px solid #f0c040}
 code{background:#f4f4f4;padding:0 .2em}
+.verdict{padding:.7em 1em;border-left:5px solid;font-size:1.05em}
+.verdict.ok{background:#eef7ee;border-color:#4a4}.verdict.bad{background:#fdecea;border-color:#c33}
+.verdict.open{background:#fff8e1;border-color:#f0c040}
 """
 
 
@@ -52,6 +55,43 @@ def figure(width: float = 8.0, height: float = 3.2, nrows: int = 1, ncols: int =
     ax : matplotlib.axes.Axes or numpy.ndarray of them
     """
     return plt.subplots(nrows, ncols, figsize=(width, height), constrained_layout=True, **kw)
+
+
+def trace_styles(n: int) -> list[dict]:
+    """Line widths and stacking for ``n`` traces drawn in order, the last the main one.
+
+    Each trace is drawn narrower than the one before and above it, so the main trace
+    is on top and a trace it covers still shows as a rim around it.
+
+    Parameters
+    ----------
+    n : int
+        Number of traces.
+
+    Returns
+    -------
+    list of dict
+        ``lw`` and ``zorder`` for each trace, keyword arguments of ``Axes.plot``.
+    """
+    return [{"lw": 0.9 + 0.8 * (n - 1 - i), "zorder": 2 + i} for i in range(n)]
+
+
+def signed(value: float, digits: int = 3) -> str:
+    """A signed number with ``digits`` significant digits (never "+0.0000" for 2e-5).
+
+    Parameters
+    ----------
+    value : float
+        The number.
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        E.g. ``"+1.94e-05"``, ``"-0.0123"``, ``"+0"``.
+    """
+    return f"{value:+.{digits}g}"
 
 
 def png_uri(fig) -> str:
@@ -93,6 +133,12 @@ class Page:
     def text(self, text: str, *, note: bool = False) -> None:
         cls = ' class="note"' if note else ""
         self.parts.append(f"<p{cls}>{html.escape(text)}</p>")
+
+    def verdict(self, text: str, ok: bool | None) -> None:
+        """The report's answer first after the title: green when ``ok``, red when not, yellow
+        when undecided (``None``: met by the estimate but not demonstrated)."""
+        cls = {True: "ok", False: "bad", None: "open"}[ok]
+        self.parts.append(f'<p class="verdict {cls}" id="verdict">{html.escape(text)}</p>')
 
     def html(self, raw: str) -> None:
         """Insert trusted HTML written by rwlab itself."""

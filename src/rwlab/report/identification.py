@@ -8,9 +8,9 @@ and ``table3-others``.
 
 from __future__ import annotations
 
-import html
 import json
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,8 @@ from matplotlib.ticker import MaxNLocator
 from rwlab._io import atomic_write_bytes
 from rwlab.ident.model_file import WheelModelFile
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
-from rwlab.report.html import Page, figure
+from rwlab.report.html import Page, figure, trace_styles
+from rwlab.report.model_choice import choice_section
 
 __all__ = ["FIGURES", "write_study"]
 
@@ -85,14 +86,14 @@ def _compare_figure(
     val = result.val
     t = val.time - val.time[0]
     fig, ax = figure(9, 3.2)
-    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
-    for name in names:
-        m = result.models[name]
-        if not m.is_stable():
-            continue
-        ax.plot(t, m.simulate(val, initial=INITIAL), lw=1, label=name)
+    stable = [name for name in names if result.models[name].is_stable()]
+    styles = trace_styles(len(stable) + 1)  # the measured output widest, underneath
+    ax.plot(t, val.y[:, 0], color="0.45", label="measured", **styles[0])
+    for name, style in zip(stable, styles[1:], strict=True):
+        ax.plot(t, result.models[name].simulate(val, initial=INITIAL), label=name, **style)
     ax.set_xlabel("time in validation record [s]")
-    ax.set_ylabel(_preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess))
+    label = _preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess)
+    ax.set_ylabel(textwrap.fill(label, 28))  # a long label on two lines, not cut off
     ax.legend(loc="best", fontsize=8)
     page.figure(fig, fig_id, caption)
 
@@ -181,6 +182,8 @@ def _reference_text(model_info: dict) -> str:
 def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
     d = study["data"]
     page = Page(f"Identification study — {d['name'] or 'record'}")
+    choice_section(page, study)
+    page.heading("The record", "record")
     page.text(
         f"Record: {d['N']} samples at Ts = {d['Ts']:g} s "
         f"(input {d['input']}, output {d['output']}), preprocessed: {d['preprocess']}; "
@@ -201,17 +204,6 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
             note=True,
         )
     ch = study["chosen"]
-    page.html(
-        f'<p class="note"><b>Chosen model: {ch["structure"]}</b>, validation fit '
-        f"{ch['fit_percent']:.2f} %. {html.escape(ch['reason'])}.</p>"
-    )
-    if study.get("no_model_fits"):
-        page.text(
-            f"No model fits: the best validation fit is {study['best_fit_percent']:.2f} %, "
-            "worse than the validation output's mean (rwlab identify exits 1). The tables "
-            "below show what was tried.",
-            note=True,
-        )
     note = (study.get("parts") or {}).get("note")
     if note:
         page.text(f"Estimation and validation parts differ: {note}.", note=True)
