@@ -17,8 +17,13 @@ from jsonschema import Draft202012Validator
 from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, profile_fit
-from rwlab.diagnose.features import REFERENCE_LAG_S, STEADY_SHARE, WheelScales, compute_features
-from rwlab.diagnose.noise import channel_mask
+from rwlab.diagnose.features import (
+    REFERENCE_LAG_S,
+    STEADY_SHARE,
+    WheelScales,
+    channel_mask,
+    compute_features,
+)
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,

@@ -53,6 +53,7 @@ __all__ = [
     "REFERENCE_LAG_S",
     "Features",
     "WheelScales",
+    "channel_mask",
     "compute_features",
     "current_nuisance",
 ]
@@ -323,12 +324,30 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
     return replace(out, current_nuisance_a=current_nuisance(out))
 
 
+def channel_mask(features: Features, name: str) -> np.ndarray:
+    """The samples a channel is read on, bool, shape (N,): fresh, not a repeated reading;
+    for the current channel also a turning wheel that kept its direction over the sample.
+    At rest (a zero reading: below what the sensor measures) and through a reversal the
+    bearing's friction is static, anywhere within its breakaway band, and the loop's
+    integrator holds whatever current it last needed: the current there says nothing of
+    the friction or the torque constant, and a healthy wheel's current at rest sits
+    ±(breakaway friction)/k_t off the balance for minutes (measured: ±9 mA on an RW90)."""
+    ok = features.usable & ~features.repeated
+    if name.startswith("current"):
+        w = features.speed_rpm
+        before = np.concatenate([w[:1], w[:-1]])
+        ok = ok & (w != 0) & (np.sign(w) == np.sign(before))
+    if name == "current_steady":
+        ok = ok & features.steady(STEADY_SHARE)
+    return ok
+
+
 def current_nuisance(features: Features) -> np.ndarray:
     """The unit's own deviation from the reference current balance, per sample, A, shape (N,).
 
     At sample k: the least-squares fit of the current residual on an offset and the
     balance's viscous and Coulomb currents, over the current channel's
-    samples (:func:`rwlab.diagnose.noise.channel_mask`) older than ``REFERENCE_LAG_S``,
+    samples (:func:`channel_mask`) older than ``REFERENCE_LAG_S``,
     evaluated at k; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
     past has not excited (no motion yet: the friction and the offset alike) takes the
     least-norm solution, i.e. the reference's value.
@@ -341,8 +360,6 @@ def current_nuisance(features: Features) -> np.ndarray:
     -------
     numpy.ndarray
     """
-    from rwlab.diagnose.noise import channel_mask
-
     f = features
     # regressors of comparable size (A): the offset's column is the friction current's scale
     unit = max(float(np.max(np.abs(f.friction_current_a))), 1e-12)

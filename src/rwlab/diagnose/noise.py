@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rwlab.diagnose.features import STEADY_SHARE, Features
+from rwlab.diagnose.features import Features, channel_mask
 from rwlab.errors import DataError
 
-__all__ = ["CHANNELS", "NoiseModel", "channel_mask"]
+__all__ = ["CHANNELS", "NoiseModel"]
 
 # channel name → the Features attribute it reads
 CHANNELS = {
@@ -41,24 +41,6 @@ def jerk(features: Features) -> np.ndarray:
     """|Δ demand acceleration| / Ts per sample, rpm/s², shape (N,)."""
     d = np.abs(np.diff(features.demand_accel_rpm_s, prepend=features.demand_accel_rpm_s[0]))
     return d / features.scales.Ts
-
-
-def channel_mask(features: Features, name: str) -> np.ndarray:
-    """The samples a channel is read on, bool, shape (N,): fresh, not a repeated reading;
-    for the current channel also a turning wheel that kept its direction over the sample.
-    At rest (a zero reading: below what the sensor measures) and through a reversal the
-    bearing's friction is static, anywhere within its breakaway band, and the loop's
-    integrator holds whatever current it last needed: the current there says nothing of
-    the friction or the torque constant, and a healthy wheel's current at rest sits
-    ±(breakaway friction)/k_t off the balance for minutes (measured: ±9 mA on an RW90)."""
-    ok = features.usable & ~features.repeated
-    if name.startswith("current"):
-        w = features.speed_rpm
-        before = np.concatenate([w[:1], w[:-1]])
-        ok = ok & (w != 0) & (np.sign(w) == np.sign(before))
-    if name == "current_steady":
-        ok = ok & features.steady(STEADY_SHARE)
-    return ok
 
 
 def bins(features: Features) -> np.ndarray:

@@ -50,7 +50,7 @@ from typing import TypeVar
 
 import numpy as np
 from numba import njit
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
@@ -345,7 +345,7 @@ def servo_fit(
     # (delay 0.17 s, offset +2.9 rpm, rate limit 315.5 rpm/s), a model that then raised
     # false speed-bias alarms on 10 of the tune set's 11 healthy chirps; the best of
     # several starts is kept
-    def start(share: float):
+    def start(share: float) -> OptimizeResult:
         x = x0.copy()
         x[5] = share * Ts
         return least_squares(residuals, x, bounds=(lower, upper), x_scale=typical)
