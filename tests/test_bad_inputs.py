@@ -373,6 +373,8 @@ def cases() -> list[tuple[str, list[str]]]:
             ["diagnose", "run", *dia[1:], "--calibration", "{D}/other.json"],
         )
     )
+    twin = ["diagnose", "twin-calibration", "--out", "{D}/c.json", "--model"]
+    c.append(("diagnose twin-calibration --model binary.json", [*twin, "{D}/binary.json"]))
     # attitude
     cmp_ = ["attitude", "compare", *out]
     c += _numbers(cmp_, "--duration", ALL)
