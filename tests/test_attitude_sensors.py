@@ -381,3 +381,18 @@ def test_the_fast_gyro_filter_follows_the_dense_reference_over_a_short_run():
     assert np.all(np.abs(np.diag(P) - np.diag(Pr)) < 1e-12 * np.diag(Pr))
     assert np.max(np.abs(w - wr)) < 1e-12 * np.max(np.abs(wr))
     assert np.max(np.abs(q - qr)) < 1e-12
+
+
+def test_the_cubesat_flies_cubesat_grade_sensors():
+    """geo-cubesat's sun and earth sensors are a CubeSat's (datasheet classes cited in the
+    scenario module), not the comsat's five times finer ones."""
+    import inspect
+
+    from rwlab.attitude import scenario
+
+    cube, comsat = SCENARIOS["geo-cubesat"].sensors, SCENARIOS["geo-comsat"].sensors
+    assert (cube.sun_noise_deg, cube.earth_noise_deg) == (0.1, 0.33)
+    assert cube.sun_noise_deg >= 5 * comsat.sun_noise_deg
+    assert cube.earth_noise_deg >= 5 * comsat.earth_noise_deg
+    text = inspect.getsource(scenario)
+    assert "NFSS-411" in text and "10.1109/AERO.2004.1368068" in text

@@ -20,6 +20,10 @@ from rwlab.interrupts import check_stop, clear, stop, uninterrupted
 #: How the library names a parameter in a message → the flag the command line has for it.
 FLAGS = {
     "force=True": "--force",
+    "force_wheel=True": "--force-wheel",
+    # testbed.record.SALVAGE_ADVICE (a test holds them equal)
+    "pass salvage=True to read up to the damage (a workflow: call it within "
+    "rwlab.testbed.record.salvaging())": "pass --salvage to read up to the damage",
     "max_gap=": "--max-gap",
     "node=": "--node",
     "input_columns=": "--input",
