@@ -423,6 +423,9 @@ def test_the_console_opens_with_requirement_interpretation_and_verdict(tmp_path)
     assert not any("meet" in x and "%" in x for x in lines[1:])
     b = json.loads((tmp_path / "mc" / "budget.json").read_text())
     assert b["interpretation"]["name"] == "mixed" and b["steady_window"]["start_s"] == 60.0
+    html = (tmp_path / "mc" / "report.html").read_text()
+    assert "of the runs meet" not in html  # the share is in the verdict, with its bound
+    assert html.index(b["verdict"]["text"][:40]) < html.index("What these runs support")
     bad = CliRunner().invoke(main, [*args[:-1], str(tmp_path / "x"), "--steady-after", "120"])
     assert (
         bad.exit_code == 2
