@@ -21,7 +21,7 @@ window (t ≥ 1 h) per seed and pooled, and the state count:
   term, so that the filter's bias random walk (whose PSD adds 2σ_b²/τ_b for
   that term) is the truth's model exactly.
 
-Measured (seeds 0–2, 4 h, this machine): see docs/workflows/campaigns.md.
+Measured (4 h, seeds 0–7; the last case seeds 0–2): see docs/tutorials/attitude.md.
 """
 
 from __future__ import annotations
