@@ -35,7 +35,7 @@ from threadpoolctl import threadpool_limits
 from rwlab.attitude.scenario import load_scenario
 from rwlab.campaign.dispersions import load_dispersions
 from rwlab.campaign.engine import WORKER_PRELOAD, batches, dask_client, map_batches
-from rwlab.campaign.montecarlo import Campaign, fly_run, run_seeds
+from rwlab.campaign.runs import Campaign, fly_run, run_seeds
 
 
 def timed_batch(items, campaign):

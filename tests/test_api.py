@@ -20,6 +20,18 @@ def test_every_workflow_is_reached_from_rwlab():
         rwlab.simulatee  # noqa: B018
 
 
+def test_dir_lists_the_public_names_only():
+    """dir(rwlab) is the API (tab completion): the workflows before their first use, and
+    not the modules rwlab imports for itself (it listed importlib, sys, types)."""
+    names = dir(rwlab)
+    assert names == sorted(rwlab.__all__)
+    assert not {"importlib", "sys", "types", "lazy_exports", "errors"} & set(names)
+    assert {"montecarlo", "simulate", "WheelSpec"} <= set(names)
+    code = "import rwlab; print(' '.join(dir(rwlab)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == sorted(rwlab.__all__)  # in a fresh interpreter too
+
+
 def test_diagnose_and_hil_are_the_workflows_and_still_their_packages():
     import rwlab.diagnose
     import rwlab.hil.run  # binds the packages on rwlab
@@ -34,6 +46,22 @@ def test_import_rwlab_loads_no_workflow():
     code = "import sys, rwlab; print(any(m.startswith('rwlab.workflows') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_python_errors_name_python_arguments_and_the_cli_its_flags():
+    """A Python caller is told force_wheel=True / salvage=True, not the command line's
+    --force-wheel / --salvage; the command line translates them (cli._common.FLAGS)."""
+    from rwlab.cli._common import _flags
+    from rwlab.testbed.record import SALVAGE_ADVICE
+
+    with pytest.raises(ConfigError) as err:
+        rwlab.simulate("geo-comsat", "lqr", duration=60.0, wheel="rw90")
+    assert "force_wheel=True" in str(err.value) and "--" not in str(err.value)
+    assert _flags(str(err.value)).endswith("or fly it with --force-wheel")
+    assert "--" not in SALVAGE_ADVICE and "salvage=True" in SALVAGE_ADVICE
+    assert _flags(f"x: {SALVAGE_ADVICE} (every output") == (
+        "x: pass --salvage to read up to the damage (every output"
+    )
 
 
 def test_simulate_flies_the_scenarios_wheel_and_refuses_a_misfit():

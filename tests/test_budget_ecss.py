@@ -17,12 +17,13 @@ import pytest
 
 from rwlab import schemas
 from rwlab.attitude.scenario import load_scenario
-from rwlab.campaign.budget import interpretations, read_budget
+from rwlab.campaign.budget import budget, interpretations, read_budget
 from rwlab.campaign.dispersions import load_dispersions
 from rwlab.campaign.engine import _lost_workers
 from rwlab.campaign.indices import PointingRequirement, run_indices
-from rwlab.campaign.montecarlo import Campaign, Execution, budget, dispersed, fly_run, run_seeds
+from rwlab.campaign.montecarlo import Execution
 from rwlab.campaign.quantiles import clopper_pearson_lower, order_statistic_bound, runs_needed
+from rwlab.campaign.runs import Campaign, dispersed, fly_run, run_seeds
 from rwlab.errors import ConfigError, FileFormatError
 
 SMALLSAT = load_scenario("geo-smallsat")
@@ -80,6 +81,16 @@ def test_only_the_steady_window_counts():
     assert row["settled_s"] == 100.0
     early = run_indices(t, e, e, x, 0.0, REQ, 0.1)
     assert early["steady_max_error_x_deg"] == pytest.approx(2.0)
+
+
+def test_acquisition_is_the_first_entry_and_settling_the_end_of_the_last_miss():
+    x = np.concatenate([np.full(100, 2.0), np.full(400, 0.01), np.full(10, 0.3), np.full(90, 0.01)])
+    t, e = _trace(x)
+    row = run_indices(t, e, e, x, 200.0, REQ, 0.1)
+    assert row["acquired_s"] == 100.0  # acquisition ends before the window (200 s)
+    assert row["settled_s"] == 510.0  # a miss in steady state, not a late acquisition
+    never = run_indices(t, e, e, np.full(t.size, 0.5), 200.0, REQ, 0.1)
+    assert never["acquired_s"] is None and never["settled_s"] is None
 
 
 def test_a_drift_window_longer_than_the_steady_window_is_none_not_zero():
@@ -165,6 +176,7 @@ def _full_rows(n=40):
             "torque_peak_Nm": 0.1,
             "wheel_momentum_peak_fraction": 0.2,
             "torque_saturated_fraction": 0.0,
+            "acquired_s": 10.0 * i,
             "settled_s": 10.0 * i,
             "filter_converged_s": 5.0,
         }
@@ -180,7 +192,7 @@ def test_budget_json_opens_with_the_verdict_and_validates_against_its_schema():
     b = json.loads(json.dumps(budget(_full_rows(), c)))  # what the file holds
     jsonschema.validate(b, schemas.schema("budget"), cls=jsonschema.Draft202012Validator)
     assert list(b)[:5] == ["format", "requirement", "interpretation", "verdict", "steady_window"]
-    assert b["format"] == "rwlab.Budget/2"
+    assert b["format"] == "rwlab.Budget/3"
     assert (
         b["interpretation"]["name"] == "ensemble"
         and "ECSS-E-ST-60-10C" in (b["interpretation"]["reference"])
@@ -188,20 +200,92 @@ def test_budget_json_opens_with_the_verdict_and_validates_against_its_schema():
     v = b["verdict"]
     assert v["met"] and not v["demonstrated"] and v["runs_needed"] == 59
     assert v["lower_bound"] == pytest.approx(0.9278424754944854)
-    assert "not demonstrated" in v["text"] and v["worst_runs"][0]["run"] == 39
+    assert v["text"].startswith("APE ≤ 0.1° for 0.95 of the runs (ensemble): NOT DEMONSTRATED")
+    assert "40 of 40 runs" in v["text"] and "92.8%" in v["text"]
+    assert v["worst_runs"][0]["run"] == 39
     assert b["steady_window"]["start_s"] == 300.0
-    assert b["steady_window"]["runs_converged_after_start"] == list(range(31, 40))
+    assert b["steady_window"]["runs_acquired_after_start"] == list(range(31, 40))
+    assert b["steady_window"]["runs_filter_converged_after_start"] == []
     for name in ("APE", "MPE", "RPE", "PDE", "AKE", "MKE", "KDE"):
         entry = b["indices"][name]["z"]
         assert entry["max"] == max(r[f"{_col(name)}_z_deg"] for r in _full_rows())
         assert {q["p"] for q in entry["quantiles"]} >= {0.5, 0.95}
     assert "60 s" in b["indices"]["RPE"]["definition"]
-    # version 1's fields are still there
-    assert b["meets_requirement_fraction"] == 1.0 and b["APE"]["x"]["max"] > 0
+    assert set(b["other_interpretations"]) == {"temporal", "mixed"}
+
+
+def _leaves(value, path=()):
+    """(path, number) for every number in a parsed JSON value."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _leaves(v, (*path, k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _leaves(v, (*path, i))
+    elif isinstance(value, float):
+        yield path, value
+
+
+def test_each_number_of_the_budget_is_in_one_place():
+    """Version 2 held the verdict's share under four names (verdict, interpretations,
+    meets_requirement, meets_requirement_fraction), the bound twice, the per-axis maxima
+    twice: version 3 says each once (a worst run's value repeats its index's max, by
+    design: "the runs that set it")."""
+    rows = _full_rows()
+    for r in rows:  # distinct values for distinct quantities (no coincidences)
+        r["torque_peak_Nm"], r["settled_s"] = 0.123, r["acquired_s"] + 1.0
+    rows[0]["time_quantile_error_deg"] = 0.15
+    req = PointingRequirement(probability=0.9)
+    c = Campaign(SMALLSAT, (), 1000.0, steady_after=300.0, requirement=req)
+    b = json.loads(json.dumps(budget(rows, c)))
+    places: dict[float, list] = {}
+    for path, value in _leaves(b):
+        if "worst_runs" in path or "quantiles" in path or value in (0.0, 1.0):
+            continue
+        places.setdefault(value, []).append(path)
+    twice = {v: p for v, p in places.items() if len(p) > 1}
+    assert not twice
+    for gone in (
+        "meets_requirement",
+        "meets_requirement_fraction",
+        "requirement_deg",
+        "APE",
+        "pointing_error_deg",
+        "worst_seeds",
+        "runs",
+        "quantiles",
+        "interpretations",
+    ):
+        assert gone not in b
+    assert "confidence" not in b["verdict"] and "runs" not in b["verdict"]
 
 
 def _col(name):
     return {"APE": "steady_max_error", "AKE": "knowledge_error"}.get(name, name.lower())
+
+
+def test_the_late_warnings_name_only_the_runs_that_were_late():
+    """Run 4 acquired at 10 s and missed at 790–800 s, in steady state (the verdict counts
+    it); run 7 first came within the bound at 500 s; run 2's filter converged at 400 s.
+    With the window from 300 s, version 2 named all three as "settled or converged after
+    the window's start (their statistics include acquisition)"; each warning now names
+    only the runs that did what it says."""
+    from rwlab.cli.montecarlo import late_warnings
+
+    rows = _full_rows(10)
+    for r in rows:
+        r["acquired_s"] = r["settled_s"] = 10.0
+    rows[4]["settled_s"], rows[4]["steady_max_error_deg"] = 800.0, 0.2
+    rows[7]["acquired_s"] = rows[7]["settled_s"] = 500.0
+    rows[2]["filter_converged_s"] = 400.0
+    window = budget(rows, Campaign(SMALLSAT, (), 1000.0, steady_after=300.0))["steady_window"]
+    assert window["runs_acquired_after_start"] == [7]
+    assert window["runs_filter_converged_after_start"] == [2]
+    assert window["settled"] == {"max_s": 800.0, "run": 4, "never_runs": []}
+    acquired, filtered = late_warnings(window)
+    assert "first came within the bound" in acquired and acquired.count("runs 7;") == 1
+    assert "filter converge" in filtered and filtered.count("runs 2;") == 1
+    assert "4" not in acquired.replace("(300 s)", "") and "4" not in filtered
 
 
 def test_the_interpretation_and_rpe_bound_chosen_are_the_verdicts():
@@ -214,13 +298,29 @@ def test_the_interpretation_and_rpe_bound_chosen_are_the_verdicts():
     assert rpe["bound_deg"] == 0.01 and not rpe["met"]  # uniform(0, 0.05) RPEs on 3 axes
 
 
-def test_a_version_1_budget_reads_as_version_2_and_a_newer_one_is_refused():
+def test_older_budgets_read_as_version_3_and_a_newer_one_is_refused():
     old = {"runs": 3, "requirement_deg": 0.1, "meets_requirement_fraction": 1.0}
     up = read_budget(old)
-    assert up["format"] == "rwlab.Budget/2" and up["interpretation"]["name"] == "ensemble"
+    assert up["format"] == "rwlab.Budget/3" and up["interpretation"]["name"] == "ensemble"
     assert up["requirement"]["ape_deg"] == 0.1 and "format" not in old
+    assert up["campaign"]["runs"] == 3 and "meets_requirement_fraction" not in up
+    v2 = {
+        "format": "rwlab.Budget/2",
+        "interpretation": {"name": "temporal", "statement": "s", "reference": "r"},
+        "verdict": {"met": True, "estimate": 0.05, "confidence": 0.95, "runs": 4},
+        "interpretations": {"ensemble": {"estimate": 1.0}, "temporal": {"estimate": 0.05}},
+        "pointing_error_deg": {"total": {"mean": 0.01, "std": 0.002, "max": 0.02}},
+        "quantiles": [],
+        "runs": 4,
+        "torque_peak_Nm": {"max": 0.1, "seed": 9},
+    }
+    up = read_budget(v2)
+    assert up["verdict"] == {"met": True, "estimate": 0.05}
+    assert up["other_interpretations"] == {"ensemble": {"estimate": 1.0}}
+    assert up["total_error"]["max"] == 0.02 and up["campaign"]["runs"] == 4
+    assert up["peaks"]["torque_peak_Nm"] == {"max": 0.1, "seed": 9}
     with pytest.raises(FileFormatError, match="update rwlab"):
-        read_budget({"format": "rwlab.Budget/3"})
+        read_budget({"format": "rwlab.Budget/4"})
 
 
 # -- the campaign's steady window and start ------------------------------------------------
@@ -286,8 +386,9 @@ def test_execution_counts_silent_recomputations_as_retries():
         ],
     )
     d = ex.to_dict()
-    # ours (runs 4–5), the scheduler's recomputed results (0, 1) and its own retry (8)
-    assert d["retries"] == 1 + 2 + 1
+    # in runs: ours (4 and 5), the scheduler's recomputed results (0, 1) and its own
+    # retry (8); one batch resubmitted by this process
+    assert d["runs_flown_again"] == 2 + 2 + 1 and d["batches_resubmitted"] == 1
     assert d["retried_runs"] == [0, 1, 4, 5, 8] and d["recomputed_runs"] == [0, 1]
     assert len(d["lost_workers"]) == 2
 
@@ -314,10 +415,17 @@ def test_the_console_opens_with_requirement_interpretation_and_verdict(tmp_path)
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 0, r.output
     lines = [x for x in r.stdout.splitlines() if x.strip()]
-    assert lines[0].startswith("requirement: APE ≤ 0.1°") and "t ≥ 60 s" in lines[0]
-    assert lines[1].startswith("interpretation (mixed):") and lines[2].startswith("verdict:")
+    # the verdict first, with its confidence; no share of runs before it
+    assert lines[0].startswith("verdict: APE ≤ 0.1°") and "95% confidence" in lines[0]
+    assert lines[1].startswith("  set by: run ")
+    assert lines[2].startswith("requirement: APE ≤ 0.1°") and "t ≥ 60 s" in lines[2]
+    assert lines[3].startswith("interpretation (mixed):")
+    assert not any("meet" in x and "%" in x for x in lines[1:])
     b = json.loads((tmp_path / "mc" / "budget.json").read_text())
     assert b["interpretation"]["name"] == "mixed" and b["steady_window"]["start_s"] == 60.0
+    html = (tmp_path / "mc" / "report.html").read_text()
+    assert "of the runs meet" not in html  # the share is in the verdict, with its bound
+    assert html.index(b["verdict"]["text"][:40]) < html.index("What these runs support")
     bad = CliRunner().invoke(main, [*args[:-1], str(tmp_path / "x"), "--steady-after", "120"])
     assert (
         bad.exit_code == 2

@@ -48,6 +48,7 @@ def test_64_zeroed_bytes_mid_file_are_refused_with_the_offset_and_what_is_readab
     text = str(info.value)
     offset = info.value.offset
     assert f"damaged at byte {offset} of {size}" in text
+    assert "salvage=True" in text and "--" not in text  # Python's words (the CLI: --salvage)
     assert size // 2 - 40_000 < offset <= size // 2  # the chunk the zeros fell in (≤ 32 kB)
     seconds = float(re.search(r"the first ([0-9.]+) s are readable", text).group(1))
     samples = int(re.search(r"\((\d+) samples at Ts = 0.5 s", text).group(1))

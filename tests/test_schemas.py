@@ -87,7 +87,7 @@ def test_attitude_simulate_and_ltr_write_valid_metrics_and_sigma(tmp_path):
 def test_montecarlo_writes_a_valid_budget(tmp_path):
     _rwlab("attitude", "montecarlo", "--scenario", "geo-smallsat", "--runs", 2,
            "--duration", 120, "--workers", 1, "--seed", 3, "--out", tmp_path)  # fmt: skip
-    assert _valid(tmp_path / "budget.json", "budget")["runs"] == 2
+    assert _valid(tmp_path / "budget.json", "budget")["campaign"]["runs"] == 2
 
 
 def test_diagnose_writes_a_valid_diagnosis(study_out, tmp_path):

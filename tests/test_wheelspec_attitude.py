@@ -70,7 +70,7 @@ def test_a_mismatch_is_one_line_naming_both_numbers(tmp_path):
         check_wheel_fit(sc)
     text = str(err.value)
     assert "\n" not in text and "0.1 N·m" in text and "0.02 N·m" in text
-    assert "rw90 spec" in text and "geo-comsat" in text and "--force-wheel" in text
+    assert "rw90 spec" in text and "geo-comsat" in text and "force_wheel=True" in text
     forced = check_wheel_fit(sc, force=True)
     assert [f.split(" ")[0] for f in forced] == ["FORCED:"] * 3
 

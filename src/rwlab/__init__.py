@@ -15,7 +15,7 @@ import importlib
 import sys
 import types
 
-from rwlab._lazy import lazy_exports
+from rwlab._lazy import lazy_exports, public_dir
 from rwlab._version import __version__
 from rwlab.errors import (
     ConfigError,
@@ -114,3 +114,5 @@ __all__ = [
     "montecarlo",
     "simulate",
 ]
+
+__dir__ = public_dir(__all__)

@@ -33,3 +33,25 @@ def lazy_exports(package: str, sources: dict[str, str]) -> Callable[[str], Any]:
         return value
 
     return __getattr__
+
+
+def public_dir(names: list[str]) -> Callable[[], list[str]]:
+    """A module ``__dir__`` (PEP 562) that lists the public names only: ``names`` (the
+    module's ``__all__``), lazy ones included before their first use, and not the
+    modules the package imports for itself (``sys``, ``importlib`` …).
+
+    Parameters
+    ----------
+    names : list of str
+        The public names.
+
+    Returns
+    -------
+    callable
+        ``__dir__()``, the names sorted.
+    """
+
+    def __dir__() -> list[str]:
+        return sorted(names)
+
+    return __dir__

@@ -140,17 +140,23 @@ def montecarlo(out: str | os.PathLike, **options: Any):
     out : str or os.PathLike
         The output folder.
     **options
-        As :func:`rwlab.report.montecarlo.montecarlo` (``scenario``, ``runs``,
-        ``duration`` …).
+        The fields of :class:`rwlab.report.montecarlo.CampaignOptions` (``scenario``,
+        ``runs``, ``duration`` …) and the keywords of
+        :func:`rwlab.report.montecarlo.montecarlo` (``workers``, ``force`` …).
 
     Returns
     -------
     summary : dict
     paths : dict of str to Path
     """
+    from dataclasses import fields
+
+    from rwlab.report.montecarlo import CampaignOptions
     from rwlab.report.montecarlo import montecarlo as run
 
-    return run(out, **options)
+    names = {f.name for f in fields(CampaignOptions)}
+    spec = CampaignOptions(**{k: v for k, v in options.items() if k in names})
+    return run(out, spec, **{k: v for k, v in options.items() if k not in names})
 
 
 def hil(

@@ -10,13 +10,16 @@ Three built-ins:
   Basilisk peer scenario) with four NRWA-T6-class wheels in a pyramid (spec
   ``nrwa-t6``: ~6 N·m·s, 0.31 N·m, 5000 rpm) and 30 m² of arrays;
 - ``geo-cubesat`` — a 12U CubeSat (J = diag(0.25, 0.22, 0.12) kg·m²) with three
-  orthogonal RW-0.01 wheels (spec ``rw-0.01``: 18 mN·m·s, 1 mN·m) and 0.3 m² of arrays.
+  orthogonal RW-0.01 wheels (spec ``rw-0.01``: 18 mN·m·s, 1 mN·m), 0.3 m² of arrays
+  and CubeSat-grade sensors: sun 0.1°, earth 0.33° (1σ; datasheet classes cited at
+  ``_CUBESAT_SENSORS``).
 
 Each wheel section names its wheel model (``wheels.spec``) and what the mission
 needs of it (``wheels.required_torque_nm``, ``wheels.required_momentum_nms``); a
 wheel model that cannot deliver that is refused (:mod:`rwlab.attitude.wheel_fit`).
 
-Sensors: sun sensor 0.02°, earth sensor 0.05° (1σ, typical units); the filter
+Sensors: sun sensor 0.02°, earth sensor 0.05° (1σ, comsat units; the CubeSat's are
+coarser); the filter
 assumes 30 % more (paper B). Two more built-ins fly the sensors real GEO comsats
 carry through the eclipses (``rwlab.attitude.sensors``): ``geo-comsat-gyro``
 (gyros drive the filter: the Lefferts–Markley–Shuster MEKF) and
@@ -252,6 +255,15 @@ _CUBESAT_WHEELS = Wheels(
         "geo-cubesat: SRP 4.56e-6 × 0.3 m² × 1.3 × 0.037 m for 21600 s, 40 % margin"
     ),
 )
+# CubeSat-grade sensors (the comsat's 0.02° / 0.05° are flight units of a 3-t comsat):
+# - sun: a CubeSat fine sun sensor, NewSpace Systems NFSS-411 class (datasheet: accuracy
+#   < 0.1° RMS over its 140° field, 5 Hz); heads enough for the whole sky, as that
+#   datasheet's "four sensors achieve full sky coverage";
+# - earth: a thermopile horizon sensor for small satellites, Optical Energy Technologies
+#   class (G. Falbel, "A low weight/power/cost infrared Earth sensor", IEEE Aerospace
+#   Conference 2004, doi:10.1109/AERO.2004.1368068: ±1° readout accuracy, read as 3σ).
+# geo-cubesat flies no gyro (its filter is the dynamics-model EKF): no gyro noise to set.
+_CUBESAT_SENSORS = Sensors(sun_noise_deg=0.1, earth_noise_deg=0.33)
 SCENARIOS = {
     "geo-smallsat": Scenario(
         name="geo-smallsat",
@@ -287,6 +299,7 @@ SCENARIOS = {
             disturbances=DisturbanceModel(srp_area=0.3, srp_offset=(0.02, -0.01, 0.03)),
         ),
         wheels=_CUBESAT_WHEELS,
+        sensors=_CUBESAT_SENSORS,
         # the same ~0.25 rad/s bandwidth as the smallsat's for the 2 Hz sensors
         control=ControlDesign(lqr_torque_fraction=0.03),
         momentum=Momentum(thruster_torque=2e-4),  # a 1 mN cold-gas thruster at 0.2 m

@@ -148,5 +148,7 @@ def check_wheel_fit(sc, *, force: bool = False) -> list[str]:
     wheels = f"{sc.n_wheels} × {what} ({w.axes})"
     lines = [s.line(sc.name, wheels) for s in shortfalls(sc)]
     if lines and not force:
-        raise ConfigError(f"{lines[0]}; pick a wheel model that fits, or fly it with --force-wheel")
+        raise ConfigError(
+            f"{lines[0]}; pick a wheel model that fits, or fly it with force_wheel=True"
+        )
     return [f"FORCED: {line}" for line in lines]

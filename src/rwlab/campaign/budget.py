@@ -28,6 +28,10 @@ without a miss would demonstrate it.
 Every index (APE, MPE, RPE, PDE, AKE, MKE, KDE; :mod:`rwlab.campaign.indices`)
 gets, per axis, its maximum over runs, the runs that set it and its quantiles
 with their bounds.
+
+:func:`budget` assembles ``budget.json`` (version 3): each number in one place
+(version 2 held the verdict's share of runs under four names and the per-axis
+maxima under two); :func:`read_budget` reads versions 1 and 2 as version 3.
 """
 
 from __future__ import annotations
@@ -45,14 +49,17 @@ from rwlab.campaign.quantiles import (
     quantile_table,
     runs_needed,
 )
+from rwlab.campaign.runs import Campaign, steady_from
 from rwlab.errors import ConfigError
 from rwlab.schemas import format_tag, read_versioned
 
-__all__ = ["FORMAT", "VERSION", "interpretations", "read_budget", "statements"]
+__all__ = ["FORMAT", "VERSION", "budget", "interpretations", "read_budget", "statements"]
 
-VERSION = 2
+VERSION = 3
 FORMAT = format_tag("Budget", VERSION)
 WORST_RUNS = 3  # runs named for each index
+STATISTIC = "steady_max_error_deg"  # the results.parquet column of the total error's table
+PEAKS = ("torque_peak_Nm", "wheel_momentum_peak_fraction", "torque_saturated_fraction")
 
 REFERENCE = (
     "ECSS-E-ST-60-10C (Space engineering: control performance), statistical "
@@ -174,8 +181,9 @@ def index_table(rows: list[dict], req: PointingRequirement) -> dict[str, Any]:
     Returns
     -------
     dict
-        Index name → ``{"definition", <axis>: {...}}``; an axis whose runs all lack the
-        index (no filter; a window too short for a drift) is None.
+        Index name → ``{"definition", <axis>: {runs, mean, std (ddof 1), max, worst_runs,
+        quantiles}}``; an axis whose runs all lack the index (no filter; a window too
+        short for a drift) is None.
     """
     probabilities = tuple(sorted({*PROBABILITIES, req.probability}))
     out: dict[str, Any] = {}
@@ -190,6 +198,8 @@ def index_table(rows: list[dict], req: PointingRequirement) -> dict[str, Any]:
             values = np.array([v for _, v in pairs], dtype=float)
             entry[a] = {
                 "runs": len(pairs),
+                "mean": float(np.mean(values)),
+                "std": float(np.std(values, ddof=1)) if values.size > 1 else 0.0,
                 "max": float(np.max(values)),
                 "worst_runs": _worst([r for r, _ in pairs], values),
                 "quantiles": quantile_table(values, req.confidence, probabilities),
@@ -260,6 +270,197 @@ def _worst(rows: list[dict], values: np.ndarray) -> list[dict]:
     ]
 
 
+def budget(rows: list[dict], campaign: Campaign) -> dict[str, Any]:
+    """The pointing budget of a campaign's rows (``budget.json``, format ``rwlab.Budget/3``).
+
+    It opens with what a reviewer signs: ``requirement`` (the APE bound, P,
+    confidence, the RPE window and bound), ``interpretation`` (ECSS-E-ST-60-10C:
+    ensemble, temporal or mixed, as a sentence), ``verdict`` (that interpretation
+    checked: estimate, bound, met, demonstrated, runs needed, the runs that set it,
+    one sentence, and the RPE bound's check) and ``steady_window`` (where the
+    statistics start, how the runs started, when they acquired and converged).
+    Then ``other_interpretations`` (the requirement under the two others),
+    ``indices`` (APE, MPE, RPE, PDE, AKE, MKE, KDE per axis: mean, std, max, worst
+    runs, quantiles with their order-statistic bounds), ``total_error`` (each run's
+    steady maximum of the total error over runs), ``campaign`` (what was flown),
+    ``shadow_s`` and ``peaks``. Each number is in one place.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per run (:func:`rwlab.campaign.runs.fly_run`'s rows with their ``run``).
+    campaign : Campaign
+        The campaign flown.
+
+    Returns
+    -------
+    dict
+        ``budget.json``'s content (schema ``budget``).
+    """
+    if not rows:
+        raise ConfigError("a budget needs at least one run")
+    req = campaign.requirement
+    bound = req.bound_deg(campaign.scenario.control.pointing_requirement_deg)
+    others = interpretations(rows, req, bound)
+    chosen = others.pop(req.interpretation)
+    statement = chosen.pop("statement")
+    return {
+        "format": FORMAT,
+        "requirement": {
+            "ape_deg": bound,
+            "applies_to": "the total pointing error (the rotation angle), steady window",
+            "probability": req.probability,
+            "confidence": req.confidence,
+            "rpe_deg": req.rpe_deg,
+            "rpe_window_s": req.rpe_window_s,
+            "drift_window_s": req.drift_window_s,
+            "drift_separation_s": req.drift_separation_s,
+        },
+        "interpretation": {
+            "name": req.interpretation,
+            "statement": statement,
+            "reference": REFERENCE,
+        },
+        "verdict": {
+            **chosen,
+            "text": verdict_text(chosen, req, bound, len(rows)),
+            "rpe": rpe_verdict(rows, req),
+        },
+        "steady_window": _steady_window(rows, campaign),
+        "other_interpretations": others,
+        "indices": index_table(rows, req),
+        "total_error": _total_error(rows, req),
+        "campaign": {
+            "scenario": campaign.scenario.name,
+            "controller": campaign.controller,
+            "runs": len(rows),
+            "duration_s": campaign.duration,
+            "campaign_seed": campaign.seed,
+            "epoch": campaign.epoch or campaign.scenario.sky.epoch,
+            "epoch_spread_days": campaign.epoch_spread_days,
+            "dispersed": [d.field for d in campaign.dispersions],
+        },
+        "shadow_s": {
+            "min": float(np.min(_column(rows, "eclipse_s"))),
+            "max": float(np.max(_column(rows, "eclipse_s"))),
+        },
+        "peaks": {key: _peak(rows, key) for key in PEAKS},
+    }
+
+
+def verdict_text(chosen: dict, req: PointingRequirement, bound_deg: float, n: int) -> str:
+    """The verdict in one sentence, its confidence in the same breath: what is demonstrated
+    first, the estimate after (a share of a few runs is no result on its own).
+
+    Parameters
+    ----------
+    chosen : dict
+        The interpretation checked (an entry of :func:`interpretations`).
+    req : PointingRequirement
+        The requirement.
+    bound_deg : float
+        The APE bound, degrees.
+    n : int
+        Runs.
+
+    Returns
+    -------
+    str
+    """
+    conf = f"{req.confidence:.0%} confidence"
+    if chosen["demonstrated"]:
+        word = f"MET, demonstrated at {conf}"
+    elif chosen["met"]:
+        word = (
+            f"NOT DEMONSTRATED at {conf} (the estimate meets it; {n} runs are too few: "
+            f"{chosen['runs_needed']} runs without a miss would demonstrate it)"
+        )
+    else:
+        word = "NOT MET"
+    p = f"{req.probability:.4g}"
+    if req.interpretation == "temporal":
+        return (
+            f"APE ≤ {bound_deg:g}° for {p} of the time in the worst run (temporal): {word}; the "
+            f"worst run's {p}-quantile is {chosen['estimate']:.4g}°; "
+            f"{chosen['share_of_runs']:.1%} of {n} runs meet it, at {conf} at least "
+            f"{chosen['lower_bound']:.1%}"
+        )
+    if req.interpretation == "mixed":
+        return (
+            f"APE ≤ {bound_deg:g}° for {p} of the time of the runs (mixed): {word}; "
+            f"{chosen['estimate']:.2%} of the time within it, at {conf} at least "
+            f"{chosen['lower_bound']:.2%} (Hoeffding, {n} runs)"
+        )
+    inside = round(chosen["estimate"] * n)
+    return (
+        f"APE ≤ {bound_deg:g}° for {p} of the runs (ensemble): {word}; {inside} of {n} runs "
+        f"within it, at {conf} at least {chosen['lower_bound']:.1%} of runs would be"
+    )
+
+
+def _total_error(rows: list[dict], req: PointingRequirement) -> dict[str, Any]:
+    """Each run's steady maximum of the total error, over runs."""
+    x = _column(rows, STATISTIC)
+    probabilities = tuple(sorted({*PROBABILITIES, req.probability}))
+    return {
+        "column": STATISTIC,
+        "definition": "per run: the steady window's maximum of the total error (the rotation "
+        "angle, every step); over runs: mean, std (ddof 1), max and quantiles with their "
+        "order-statistic upper bounds",
+        "mean": float(np.mean(x)),
+        "std": float(np.std(x, ddof=1)) if x.size > 1 else 0.0,
+        "max": float(np.max(x)),
+        "quantiles": quantile_table(x, req.confidence, probabilities),
+    }
+
+
+def _peak(rows: list[dict], key: str) -> dict[str, Any]:
+    """The largest value of a column over runs, and the run that reached it."""
+    values = _column(rows, key)
+    i = int(np.argmax(values))
+    return {"max": float(values[i]), "run": rows[i].get("run"), "seed": rows[i]["seed"]}
+
+
+def _steady_window(rows: list[dict], campaign: Campaign) -> dict[str, Any]:
+    """Where the statistics start, how the runs started, and when each acquired and converged.
+
+    A run whose acquisition (its first time within the bound) or filter convergence came
+    after the window's start has acquisition in its steady statistics; a run that acquired
+    before and left the bound later (its ``settled_s`` after the start) had a miss in
+    steady state, not a late acquisition, and is not named here as one."""
+    start = steady_from(campaign)
+
+    def latest(key: str) -> dict:
+        known = [r for r in rows if r.get(key) is not None]
+        never = [r.get("run") for r in rows if r.get(key) is None]
+        if not known:
+            return {"max_s": None, "run": None, "never_runs": never}
+        worst = max(known, key=lambda r: r[key])
+        return {"max_s": float(worst[key]), "run": worst.get("run"), "never_runs": never}
+
+    return {
+        "start_s": start,
+        "source": "steady_after"
+        if campaign.steady_after is not None
+        else "default: half the run, at most its first hour",
+        "start": campaign.start,
+        "acquired": latest("acquired_s"),
+        "settled": latest("settled_s"),
+        "filter_converged": latest("filter_converged_s"),
+        "runs_acquired_after_start": [
+            r.get("run") for r in rows if r.get("acquired_s") is None or r["acquired_s"] > start
+        ],
+        "runs_filter_converged_after_start": [
+            r.get("run") for r in rows if (r.get("filter_converged_s") or 0.0) > start
+        ],
+        "definition": "acquired: the first time the total error is within the APE bound; "
+        "settled: the time after which it stays within the bound to the end (after a "
+        "steady-state miss, the miss's end); filter converged: the first time every σ the "
+        "filter logs (attitude, and rate or gyro bias) is within 1.5× its median over the "
+        "run's second half; never_runs: the runs that never did",
+    }
+
+
 def _upgrade_1(d: Mapping[str, Any]) -> dict[str, Any]:
     """Version 1 → 2: version 1 was the ensemble interpretation over each run's steady
     maximum (the default window), with no probability stated."""
@@ -281,6 +482,48 @@ def _upgrade_1(d: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _upgrade_2(d: Mapping[str, Any]) -> dict[str, Any]:
+    """Version 2 → 3: each number once, under version 3's names (version 2's copies of the
+    verdict's share, of the per-axis maxima and of the campaign's description dropped; its
+    ``steady_window`` kept as it was)."""
+    name = (d.get("interpretation") or {}).get("name", "ensemble")
+    verdict = d.get("verdict")
+    if isinstance(verdict, dict):
+        verdict = {k: v for k, v in verdict.items() if k not in ("confidence", "runs")}
+    total = (d.get("pointing_error_deg") or {}).get("total") or {}
+    out = {
+        "format": d.get("format"),
+        "requirement": d.get("requirement"),
+        "interpretation": d.get("interpretation"),
+        "verdict": verdict,
+        "steady_window": d.get("steady_window"),
+        "other_interpretations": {
+            k: v for k, v in (d.get("interpretations") or {}).items() if k != name
+        },
+        "indices": d.get("indices"),
+        "total_error": {
+            "column": d.get("statistic_column", STATISTIC),
+            **{k: total.get(k) for k in ("mean", "std", "max")},
+            "quantiles": d.get("quantiles"),
+        },
+        "campaign": {
+            "scenario": d.get("scenario"),
+            "controller": d.get("controller"),
+            "runs": d.get("runs"),
+            "duration_s": d.get("duration_s"),
+            "campaign_seed": d.get("campaign_seed"),
+            "epoch": d.get("epoch"),
+            "epoch_spread_days": d.get("epoch_spread_days"),
+            "dispersed": d.get("dispersed"),
+        },
+        "shadow_s": d.get("shadow_s"),
+        "peaks": {k: d.get(k) for k in PEAKS},
+    }
+    if "execution" in d:
+        out["execution"] = d["execution"]
+    return out
+
+
 def read_budget(d: Any, source: str = "budget.json") -> dict[str, Any]:
     """A parsed ``budget.json`` of any version, as version :data:`VERSION`.
 
@@ -296,4 +539,4 @@ def read_budget(d: Any, source: str = "budget.json") -> dict[str, Any]:
     dict
         The budget (a new dict).
     """
-    return read_versioned(d, "Budget", VERSION, {1: _upgrade_1}, source=source)
+    return read_versioned(d, "Budget", VERSION, {1: _upgrade_1, 2: _upgrade_2}, source=source)

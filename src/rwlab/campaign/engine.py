@@ -40,7 +40,7 @@ MAX_RETRIES = 3  # times one batch is submitted again after its worker died
 
 # What every local worker imports before it is forked (see ``_fork_workers_from``): the
 # campaign's modules pull in numba, scipy and python-control, ~1.3 s of CPU per process.
-WORKER_PRELOAD = ("distributed", "rwlab.campaign.montecarlo")
+WORKER_PRELOAD = ("distributed", "rwlab.campaign.runs")
 
 
 @contextlib.contextmanager

@@ -18,7 +18,8 @@ error, 2 (q ⊗ q̂⁻¹)_v), each per run:
 For the statistical interpretations (see :mod:`rwlab.campaign.budget`) each run
 also gives, for the total error |e|: the fraction of its steady time within the
 requirement and the ``probability``-quantile of |e| over its steady time. And
-how the run converged: the time it settled inside the requirement for good, and
+how the run converged: the time it first came within the requirement (acquired), the
+time after which it stayed within it (settled: after a later miss, the miss's end), and
 the time every σ the filter logs (attitude, and rate or gyro bias) first came
 within 1.5× of its median over the run's second half.
 
@@ -163,7 +164,7 @@ def run_indices(
     dict
         Every :data:`COLUMNS` entry per axis, ``steady_rms_error_<axis>_deg`` and
         ``steady_mean_error_<axis>_deg``; ``time_within_requirement_fraction``,
-        ``time_quantile_error_deg``, ``settled_s``, ``filter_converged_s``.
+        ``time_quantile_error_deg``, ``acquired_s``, ``settled_s``, ``filter_converged_s``.
     """
     steady = t >= steady_from_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
@@ -195,6 +196,7 @@ def run_indices(
     out["time_quantile_error_deg"] = (
         float(np.quantile(total, req.probability, method="inverted_cdf")) if total.size else 0.0
     )
+    out["acquired_s"] = _acquired(t, total_error_deg, bound_deg)
     out["settled_s"] = _settled(t, total_error_deg, bound_deg)
     out["filter_converged_s"] = _filter_converged(t, filter_sigma)
     return out
@@ -229,6 +231,12 @@ def _drift(x: np.ndarray, width: int, separation: int) -> float | None:
         return None
     mean = _moving_mean(x, width)
     return float(np.max(np.abs(mean[separation:] - mean[:-separation])))
+
+
+def _acquired(t: np.ndarray, total: np.ndarray, bound: float) -> float | None:
+    """The first time the total error is within ``bound`` (None: never)."""
+    inside = np.flatnonzero(total <= bound)
+    return float(t[inside[0]]) if inside.size else None
 
 
 def _settled(t: np.ndarray, total: np.ndarray, bound: float) -> float | None:

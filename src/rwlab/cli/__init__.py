@@ -7,6 +7,7 @@ from rwlab.cli import (  # noqa: F401
     fdi,
     hil,
     ident,
+    montecarlo,
     nonparametric,
     study,
     testbed,

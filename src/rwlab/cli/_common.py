@@ -20,6 +20,10 @@ from rwlab.interrupts import check_stop, clear, stop, uninterrupted
 #: How the library names a parameter in a message → the flag the command line has for it.
 FLAGS = {
     "force=True": "--force",
+    "force_wheel=True": "--force-wheel",
+    # testbed.record.SALVAGE_ADVICE (a test holds them equal)
+    "pass salvage=True to read up to the damage (a workflow: call it within "
+    "rwlab.testbed.record.salvaging())": "pass --salvage to read up to the damage",
     "max_gap=": "--max-gap",
     "node=": "--node",
     "input_columns=": "--input",
@@ -248,7 +252,9 @@ POSITIVE = Number(0, 1e6, low_open=True)
 
 @contextlib.contextmanager
 def _steps_progress(steps: int, label: str, unit: str = "steps"):
-    """A progress callback k ↦ …: a bar on a terminal, a line every 10 % otherwise."""
+    """A progress callback k ↦ … (k: steps done so far): a bar on a terminal, otherwise a
+    line each time k passes another tenth of ``steps``, with k's own percentage (2 of 12
+    is 16 %, not the tenth's 10 %)."""
     if sys.stderr.isatty():
         with click.progressbar(length=max(steps, 1), label=label, file=sys.stderr) as bar:
             done = [0]
@@ -267,7 +273,7 @@ def _steps_progress(steps: int, label: str, unit: str = "steps"):
         tenth = 10 * k // max(steps, 1)
         if tenth > shown[0]:
             shown[0] = tenth
-            click.echo(f"{label}: {10 * tenth} % ({k} of {steps} {unit})", err=True)
+            click.echo(f"{label}: {100 * k // max(steps, 1)} % ({k} of {steps} {unit})", err=True)
 
     yield report
 

@@ -11,9 +11,6 @@ from rwlab.cli._common import (
     POSITIVE,
     SECONDS,
     Number,
-    _check_folder,
-    _engine_options,
-    _flags,
     _friendly_errors,
     _imports_uninterrupted,
     _only_with,
@@ -41,7 +38,7 @@ def single_thread_blas() -> None:
     threadpool_limits(1, user_api="blas")
 
 
-_EPOCH = click.option(
+EPOCH_OPTION = click.option(
     "--epoch",
     help="UTC start, ISO 8601 (e.g. 2027-03-20T12:00:00Z): the real Sun, Moon and eclipses "
     "instead of the scenario's fixed vectors.",
@@ -70,7 +67,7 @@ _EPOCH = click.option(
     default=None,
     help="Re-design the LQR about the current state every this many seconds (paper B).",
 )
-@_EPOCH
+@EPOCH_OPTION
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
 @click.option(
     "--force-wheel",
@@ -85,7 +82,7 @@ def attitude_compare(
     """Run LQR, LQG and LQG/LTR on one scenario with the same noise; write report + metrics."""
     if not (math.isfinite(rho) and rho > 0):
         raise ConfigError(f"--rho must be a positive number, got {rho:g}")
-    _check_run(duration, relinearize)
+    check_run(duration, relinearize)
     # the folder is locked before the loop is loaded: a second run on it is refused at once
     with _output(out, ["report.html", "metrics.json", "sigma.json"], force, "comparison") as stage:
         with _imports_uninterrupted():
@@ -192,7 +189,7 @@ def _check_steps(duration: float, sc) -> int:
     return steps
 
 
-def _check_run(duration: float, relinearize: float | None) -> None:
+def check_run(duration: float, relinearize: float | None) -> None:
 
     if not (math.isfinite(duration) and duration > 0):
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration:g}")
@@ -276,7 +273,7 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
 @click.option(
     "--relinearize", type=SECONDS, default=None, help="Re-design the LQR every this many seconds."
 )
-@_EPOCH
+@EPOCH_OPTION
 @click.option(
     "--steady-after",
     type=float,
@@ -327,7 +324,7 @@ def attitude_simulate(
     _only_with(
         "relinearize", controller != "pd", "with an LQR design (--controller lqr, lqg, lqg_ltr)"
     )
-    _check_run(duration, relinearize)
+    check_run(duration, relinearize)
     if steady_after is not None and not (
         math.isfinite(steady_after) and 0 <= steady_after < duration
     ):
@@ -379,259 +376,3 @@ def attitude_simulate(
     ):
         click.echo(f"{key:<40} {metrics[key]:.6g}")
     click.echo(_wrote(out, paths.values()))
-
-
-def _requirement_options(func):
-    """The requirement the budget checks, its statistical interpretation and its windows."""
-    options = [
-        click.option(
-            "--requirement",
-            type=Number(0, 180, low_open=True),
-            default=None,
-            help="APE bound on the total error, degrees [default: the scenario's].",
-        ),
-        click.option(
-            "--probability",
-            type=Number(0, 1, low_open=True, high_open=True),
-            default=0.95,
-            show_default=True,
-            help="P_C: the share of runs, of time, or of both that must meet it.",
-        ),
-        click.option(
-            "--confidence",
-            type=Number(0, 1, low_open=True, high_open=True),
-            default=0.95,
-            show_default=True,
-            help="Confidence level of every bound.",
-        ),
-        click.option(
-            "--interpretation",
-            type=click.Choice(["ensemble", "temporal", "mixed"]),
-            default="ensemble",
-            show_default=True,
-            help="ECSS-E-ST-60-10C statistical interpretation of the verdict.",
-        ),
-        click.option(
-            "--rpe-requirement",
-            type=Number(0, 180, low_open=True),
-            default=None,
-            help="RPE bound per axis, degrees [default: reported, no verdict].",
-        ),
-        click.option(
-            "--rpe-window",
-            type=SECONDS,
-            default=60.0,
-            show_default=True,
-            help="The RPE's window, s.",
-        ),
-        click.option(
-            "--drift-window",
-            type=SECONDS,
-            default=600.0,
-            show_default=True,
-            help="PDE/KDE averaging window, s.",
-        ),
-        click.option(
-            "--drift-separation",
-            type=SECONDS,
-            default=3600.0,
-            show_default=True,
-            help="Time between the PDE/KDE windows, s.",
-        ),
-    ]
-    for option in reversed(options):
-        func = option(func)
-    return func
-
-
-@attitude.command("montecarlo")
-@click.option("--scenario", default="geo-comsat", show_default=True)
-@click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
-@click.option("--duration", type=SECONDS, required=True, help="Seconds per run.")
-@click.option(
-    "--controller",
-    type=click.Choice(["pd", "lqr", "lqg", "lqg_ltr"]),
-    default="lqg",
-    show_default=True,
-)
-@click.option(
-    "--dispersions",
-    type=click.Path(dir_okay=False),
-    help="Dispersion TOML file [default: rwlab's GEO set].",
-)
-@_engine_options
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
-@_EPOCH
-@click.option(
-    "--epoch-spread-days",
-    type=float,
-    default=0.0,
-    show_default=True,
-    help="Each run starts at --epoch plus a uniform draw of up to this many days "
-    "(e.g. 30 for an eclipse season, 365 for a year).",
-)
-@click.option(
-    "--steady-after",
-    type=Number(0, 1e9),
-    default=None,
-    help="Seconds from which the budget counts (t ≥ this) [default: half the run, at most "
-    "its first hour].",
-)
-@click.option(
-    "--start",
-    type=click.Choice(["acquisition", "converged"]),
-    default="acquisition",
-    show_default=True,
-    help="converged: every run starts on target at the orbital rate with the filter's "
-    "attitude at the truth (gyro bias and disturbance estimates still converge).",
-)
-@_requirement_options
-@click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out (and start over).")
-@click.option(
-    "--resume",
-    is_flag=True,
-    help="Continue the interrupted campaign kept in OUT.partial (same options).",
-)
-@_friendly_errors
-def attitude_montecarlo(
-    scenario,
-    runs,
-    duration,
-    controller,
-    dispersions,
-    workers,
-    scheduler,
-    seed,
-    epoch,
-    epoch_spread_days,
-    steady_after,
-    start,
-    requirement,
-    probability,
-    confidence,
-    interpretation,
-    rpe_requirement,
-    rpe_window,
-    drift_window,
-    drift_separation,
-    out,
-    force,
-    resume,
-):
-    """A Monte Carlo campaign on Dask: results.parquet, budget.json, report.html.
-
-    Every run flies the controller (designed on the nominal scenario) on a
-    scenario dispersed from its own seed, a child of --seed: a run is the same
-    whatever the number of workers.
-
-    Finished runs are kept in OUT.partial as they finish: an interrupted
-    campaign (Ctrl-C, SIGTERM, SIGHUP, a lost cluster) continues with --resume,
-    computing only the runs it lacks, with the results of an uninterrupted one.
-
-    The budget checks the requirement (--requirement, --probability) under one
-    ECSS-E-ST-60-10C statistical interpretation (--interpretation) at
-    --confidence, over t ≥ --steady-after.
-    """
-    from rwlab.campaign.indices import PointingRequirement
-    from rwlab.report.montecarlo import montecarlo
-
-    req = PointingRequirement(
-        ape_deg=requirement,
-        rpe_deg=rpe_requirement,
-        rpe_window_s=rpe_window,
-        probability=probability,
-        confidence=confidence,
-        interpretation=interpretation,
-        drift_window_s=drift_window,
-        drift_separation_s=drift_separation,
-    )
-
-    _check_run(duration, None)
-    _check_folder(Path(out).absolute().parent)
-    with _steps_progress(runs, f"{controller} campaign", unit="runs") as progress:
-        stats, paths = montecarlo(
-            out,
-            scenario=scenario,
-            runs=runs,
-            duration=duration,
-            controller=controller,
-            dispersions=dispersions,
-            seed=seed,
-            epoch=epoch,
-            epoch_spread_days=epoch_spread_days,
-            steady_after=steady_after,
-            start=start,
-            requirement=req,
-            workers=workers,
-            scheduler=scheduler,
-            force=force,
-            resume=resume,
-            progress=progress,
-            echo=lambda text: click.echo(_flags(text), err=True),
-        )
-    _echo_verdict(stats)
-    click.echo(f"{'axis':<6} {'mean [°]':>10} {'std [°]':>10} {'99.73% [°]':>11} {'max [°]':>10}")
-    for axis, s in stats["pointing_error_deg"].items():
-        click.echo(
-            f"{axis:<6} {s['mean']:10.4g} {s['std']:10.4g} {s['p99_73']:11.4g} {s['max']:10.4g}"
-        )
-    met = stats["meets_requirement"]
-    click.echo(
-        f"meeting ±{stats['requirement_deg']:g}°: {met['fraction']:.1%} of runs "
-        f"(≥ {met['lower_bound_95']:.1%} with 95 % confidence)"
-    )
-    for q in stats["quantiles"]:
-        bound = (
-            f"≤ {q['upper_bound']:.4g}° ({q['confidence']:.0%})"
-            if q["upper_bound"] is not None
-            else f"no {q['confidence']:.0%} bound: needs {q['runs_needed']} runs"
-        )
-        click.echo(
-            f"  {q['p']:.2%} quantile of {stats['statistic_column']}: {q['estimate']:.4g}°, {bound}"
-        )
-    _echo_indices(stats)
-    click.echo(_wrote(out, paths.values()))
-
-
-def _echo_verdict(stats: dict) -> None:
-    """The requirement, the interpretation and the verdict: the first lines printed."""
-    req, verdict = stats["requirement"], stats["verdict"]
-    window = stats["steady_window"]
-    click.echo(
-        f"requirement: APE ≤ {req['ape_deg']:g}° on the total error, P = {req['probability']:g}, "
-        f"confidence {req['confidence']:.0%}; steady window t ≥ {window['start_s']:g} s "
-        f"({window['start']} start)"
-    )
-    click.echo(
-        f"interpretation ({stats['interpretation']['name']}): "
-        f"{stats['interpretation']['statement']}"
-    )
-    click.echo(f"verdict: {verdict['text']}")
-    worst = ", ".join(f"run {w['run']} ({w['value']:.4g})" for w in verdict["worst_runs"])
-    click.echo(f"  set by: {worst}")
-    if verdict["rpe"] is not None:
-        r = verdict["rpe"]
-        state = "met" if r["met"] else "NOT MET"
-        click.echo(
-            f"RPE ≤ {r['bound_deg']:g}° ({r['window_s']:g} s window, every axis): {state}, "
-            f"{r['estimate']:.1%} of runs (≥ {r['lower_bound']:.1%} at {req['confidence']:.0%})"
-        )
-    late = window["runs_converged_after_start"]
-    if late:
-        click.echo(
-            f"warning: {len(late)} run(s) settled or converged after the steady window's start "
-            f"(runs {late[:10]}{' …' if len(late) > 10 else ''}); see steady_window in budget.json",
-            err=True,
-        )
-
-
-def _echo_indices(stats: dict) -> None:
-    """The ECSS indices per axis: max over runs and the run that set it."""
-    click.echo(f"{'index':<6} {'x [°]':>10} {'y [°]':>10} {'z [°]':>10}   (max over runs)")
-    for name, entry in stats["indices"].items():
-        cells = [
-            f"{entry[a]['max']:10.4g}" if entry[a] is not None else f"{'n/a':>10}"
-            for a in ("x", "y", "z")
-        ]
-        click.echo(f"{name:<6} {' '.join(cells)}")

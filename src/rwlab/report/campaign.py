@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rwlab._io import atomic_write_bytes
-from rwlab.campaign.montecarlo import AXES, Campaign, axis_errors_deg
+from rwlab.campaign.runs import AXES, Campaign, axis_errors_deg
 from rwlab.report.attitude import check_outputs
 from rwlab.report.html import Page, figure
 
@@ -64,7 +64,7 @@ def write_campaign(
     rows : list of dict
         One per run.
     budget : dict
-        :func:`rwlab.campaign.montecarlo.budget` of the rows.
+        :func:`rwlab.campaign.budget.budget` of the rows.
     campaign : Campaign
         The campaign flown.
     worst : SimResult
@@ -91,19 +91,16 @@ def write_campaign(
 
 
 def _confidence_section(page: Page, budget: dict, req: float) -> None:
-    """What the runs support, in words and a table: quantile bounds, the requirement's
-    lower bound, the ECSS indices per axis."""
+    """What the runs support, in words and a table: quantile bounds of the total error,
+    the ECSS indices per axis (the verdict's share of runs is in the verdict, once)."""
     page.heading("What these runs support", "confidence")
-    met = budget["meets_requirement"]
-    n = budget["runs"]
-    words = [
-        f"{met['fraction']:.1%} of the {n} runs meet ±{req:g}°; with 95 % confidence the "
-        f"true share is at least {met['lower_bound_95']:.1%} (Clopper–Pearson)."
-    ]
-    for q in budget["quantiles"]:
+    n = budget["campaign"]["runs"]
+    total = budget["total_error"]
+    words = []
+    for q in total["quantiles"]:
         if q["upper_bound"] is None:
             words.append(
-                f"The {q['p']:.2%} quantile of {budget['statistic_column']} is estimated at "
+                f"The {q['p']:.2%} quantile of {total['column']} is estimated at "
                 f"{q['estimate']:.4g}° but {n} runs cannot bound it at "
                 f"{q['confidence']:.0%} confidence: that needs {q['runs_needed']} runs."
             )
@@ -113,10 +110,10 @@ def _confidence_section(page: Page, budget: dict, req: float) -> None:
                 f"{q['confidence']:.0%} confidence (order statistic "
                 f"{q['upper_bound_rank']} of {n}; estimate {q['estimate']:.4g}°)."
             )
-    if budget.get("epoch"):
-        spread = budget.get("epoch_spread_days") or 0
+    if budget["campaign"].get("epoch"):
+        spread = budget["campaign"].get("epoch_spread_days") or 0
         words.append(
-            f"Real sky from {budget['epoch']}"
+            f"Real sky from {budget['campaign']['epoch']}"
             + (f", starts spread over {spread:g} days" if spread else "")
             + f"; time in shadow per run {budget['shadow_s']['min']:.0f}–"
             f"{budget['shadow_s']['max']:.0f} s."
@@ -187,8 +184,8 @@ def _verdict_section(page: Page, budget: dict) -> None:
         [
             "steady window",
             f"t ≥ {window['start_s']:g} s ({window['source']}); runs start "
-            f"from {window['start']}; settled by {_at(window['settled'])}, filter converged by "
-            f"{_at(window['filter_converged'])}",
+            f"from {window['start']}; acquired by {_at(window['acquired'])}, settled by "
+            f"{_at(window['settled'])}, filter converged by {_at(window['filter_converged'])}",
         ],
     ]
     if verdict.get("rpe"):
@@ -202,12 +199,19 @@ def _verdict_section(page: Page, budget: dict) -> None:
             ]
         )
     page.table(["", "this campaign"], rows, table_id="table-verdict")
-    late = window["runs_converged_after_start"]
-    if late:
+    acquired = window["runs_acquired_after_start"]
+    if acquired:
         page.text(
-            f"{len(late)} run(s) settled inside the bound or had their filter converge after "
-            f"the steady window's start: runs {late}. Their steady statistics include "
-            "acquisition; start the window later (--steady-after).",
+            f"{len(acquired)} run(s) first came within the bound after the steady window's "
+            f"start: runs {acquired}. Their steady statistics include acquisition; start the "
+            "window later (--steady-after).",
+            note=True,
+        )
+    filtered = window["runs_filter_converged_after_start"]
+    if filtered:
+        page.text(
+            f"The filter of {len(filtered)} run(s) converged after the steady window's start: "
+            f"runs {filtered}.",
             note=True,
         )
 
@@ -215,7 +219,7 @@ def _verdict_section(page: Page, budget: dict) -> None:
 def _at(entry: dict) -> str:
     if entry["max_s"] is None:
         return "never"
-    never = entry["not_converged_runs"]
+    never = entry["never_runs"]
     tail = f"; never: runs {never}" if never else ""
     return f"{entry['max_s']:.0f} s (run {entry['run']}){tail}"
 
@@ -231,10 +235,10 @@ def _execution_note(page: Page, execution: dict | None) -> None:
             "resumed (each run depends only on its seed, so the rows are those of an "
             "uninterrupted campaign)"
         )
-    if execution.get("retries"):
+    if execution.get("runs_flown_again"):
         parts.append(
-            f"{execution['retries']} batch(es) were computed again after their worker was "
-            f"lost: runs {execution['retried_runs']}"
+            f"{execution['runs_flown_again']} run execution(s) were repeated after a worker "
+            f"was lost: runs {execution['retried_runs']}"
         )
     if parts:
         page.html(f'<p class="note" id="execution">{"; ".join(parts)}.</p>')
@@ -242,44 +246,41 @@ def _execution_note(page: Page, execution: dict | None) -> None:
 
 def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
     sc = campaign.scenario
-    req = budget["requirement_deg"]
+    req = budget["requirement"]["ape_deg"]
     page = Page(f"Monte Carlo pointing budget — {campaign.controller} on {sc.name}")
     verdict = budget["verdict"]
     shown = True if verdict["demonstrated"] else (None if verdict["met"] else False)
     page.verdict(verdict["text"][:1].upper() + verdict["text"][1:], shown)
     page.text(
-        f"{budget['runs']} runs of {campaign.duration:g} s, campaign seed {campaign.seed}; each "
+        f"{budget['campaign']['runs']} runs of {campaign.duration:g} s, campaign seed "
+        f"{campaign.seed}; each "
         "run's seed is a child of numpy's SeedSequence(campaign seed), and from it alone come "
         "the run's dispersions and noise. The controller is designed on the nominal scenario "
         "and flown on the dispersed one; the filter keeps the nominal inertia (its model "
-        f"error) and uses the dispersed sensor noise. Requirement ±{req:g}°. "
-        f"{budget['meets_requirement_fraction']:.1%} of the runs meet it in steady state."
+        f"error) and uses the dispersed sensor noise. Requirement ±{req:g}°."
     )
     _verdict_section(page, budget)
     _confidence_section(page, budget, req)
     _execution_note(page, budget.get("execution"))
     page.heading("Pointing budget", "budget")
-    stats = ["mean", "std", "p99_73", "mean_plus_3std", "max"]
-    rows_b = [
-        [axis, *[budget["pointing_error_deg"][axis][s] for s in stats]] for axis in (*AXES, "total")
-    ]
+    ape = budget["indices"]["APE"]
+    spread = [*((a, ape[a]) for a in AXES), ("total", budget["total_error"])]
     page.table(
-        ["axis", "mean [°]", "std [°]", "99.73 % [°]", "mean + 3σ [°]", "max [°]"],
-        rows_b,
+        ["axis", "mean [°]", "std [°]", "max [°]"],
+        [[axis, s["mean"], s["std"], s["max"]] for axis, s in spread],
         table_id="table-budget",
     )
     page.text(
         "Statistics over runs of each run's steady-state maximum |error| (total: every step; "
-        f"axes: the logged trace, the rotation vector's components). With "
-        f"{budget['runs']} runs the 99.73rd percentile is an interpolation between the largest "
-        "values (it needs ~370 runs to be observed); mean + 3σ assumes a normal spread.",
+        "axes: the logged trace, the rotation vector's components); its quantiles with their "
+        "distribution-free bounds are above.",
         note=True,
     )
-    peaks = [
-        [key, budget[key]["max"], budget[key]["seed"]]
-        for key in ("torque_peak_Nm", "wheel_momentum_peak_fraction", "torque_saturated_fraction")
-    ]
-    page.table(["maximum over runs", "value", "seed"], peaks, table_id="table-peaks")
+    page.table(
+        ["maximum over runs", "value", "run", "seed"],
+        [[key, p["max"], p["run"], str(p["seed"])] for key, p in budget["peaks"].items()],
+        table_id="table-peaks",
+    )
     data = {a: np.array([r[f"steady_max_error_{a}_deg"] for r in rows]) for a in AXES}
     data["total"] = np.array([r["steady_max_error_deg"] for r in rows])
     fig, axes = figure(10, 5.0, 2, 2)
@@ -303,16 +304,17 @@ def _campaign_page(rows, budget, campaign: Campaign, worst) -> Page:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     page.figure(fig, "fig-cdf", "Empirical CDF of each run's steady-state maximum error.")
-    w = budget["worst_seeds"][0]
-    page.heading(f"Worst run: seed {w['seed']}", "worst")
+    w = budget["verdict"]["worst_runs"][0]
+    page.heading(f"Worst run: run {w['run']}, seed {w['seed']}", "worst")
     _worst_figure(page, worst, req)
     by_seed = {r["seed"]: r for r in rows}
     fields = [d.field for d in campaign.dispersions]
     page.table(
-        ["seed", "steady max error [°]", *fields],
+        ["run", "seed", "steady max error [°]", *fields],
         [
-            [str(s["seed"]), s["steady_max_error_deg"], *[by_seed[s["seed"]][f] for f in fields]]
-            for s in budget["worst_seeds"]
+            [s["run"], str(s["seed"]), by_seed[s["seed"]]["steady_max_error_deg"]]
+            + [by_seed[s["seed"]][f] for f in fields]
+            for s in budget["verdict"]["worst_runs"]
         ],
         table_id="table-worst",
     )

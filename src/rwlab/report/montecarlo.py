@@ -1,7 +1,9 @@
 """The ``rwlab attitude montecarlo`` workflow, callable from Python with the command's arguments.
 
 :func:`montecarlo` runs a pointing campaign on Dask and writes its folder
-(``results.parquet``, ``budget.json``, ``report.html``). Finished runs are kept
+(``results.parquet``, ``budget.json``, ``report.html``) for the
+:class:`CampaignOptions` given; ``rwlab.montecarlo(out, scenario=..., runs=...)``
+takes the same as keywords. Finished runs are kept
 in ``OUT.partial`` as they finish, so that an interrupted campaign continues
 with ``resume=True``, computing only the runs it lacks.
 """
@@ -11,6 +13,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from rwlab._io import output_folder
@@ -18,40 +21,20 @@ from rwlab.campaign.indices import PointingRequirement
 from rwlab.errors import ConfigError, RwlabError
 from rwlab.interrupts import stopped
 
-__all__ = ["montecarlo"]
+__all__ = ["CampaignOptions", "montecarlo"]
 
 # write_campaign's files (report.campaign.CAMPAIGN_FILES, a test holds them equal), named
 # here so that the folder is locked before the loop is loaded
 _FILES = ("results.parquet", "budget.json", "report.html")
 
 
-def montecarlo(
-    out: str | os.PathLike,
-    *,
-    scenario: str = "geo-comsat",
-    runs: int = 100,
-    duration: float = 3600.0,
-    controller: str = "lqg",
-    dispersions: str | os.PathLike | None = None,
-    seed: int = 0,
-    epoch: str | None = None,
-    epoch_spread_days: float = 0.0,
-    steady_after: float | None = None,
-    start: str = "acquisition",
-    requirement: PointingRequirement | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    force: bool = False,
-    resume: bool = False,
-    progress: Callable[[int], None] | None = None,
-    echo: Callable[[str], None] | None = None,
-) -> tuple[dict, dict[str, Path]]:
-    """A Monte Carlo pointing campaign, written into the folder ``out``.
+@dataclass(frozen=True)
+class CampaignOptions:
+    """What a campaign computes, as the command's options name it (files and names, not
+    yet loaded: :func:`montecarlo` loads and checks them).
 
-    Parameters
+    Attributes
     ----------
-    out : str or os.PathLike
-        The output folder (locked first; written whole or not at all).
     scenario : str
         A built-in scenario or a scenario TOML file.
     runs : int
@@ -71,10 +54,69 @@ def montecarlo(
     steady_after : float, optional
         Seconds from which the budget counts (default: half the run, at most an hour).
     start : {'acquisition', 'converged'}
-        How each run starts (see :class:`rwlab.campaign.montecarlo.Campaign`).
-    requirement : PointingRequirement, optional
+        How each run starts (see :class:`rwlab.campaign.runs.Campaign`).
+    requirement : PointingRequirement
         What the budget checks, its interpretation and windows (default: the
         scenario's APE bound, P = 0.95 of the runs, 95 % confidence, ensemble).
+    """
+
+    scenario: str = "geo-comsat"
+    runs: int = 100
+    duration: float = 3600.0
+    controller: str = "lqg"
+    dispersions: str | os.PathLike | None = None
+    seed: int = 0
+    epoch: str | None = None
+    epoch_spread_days: float = 0.0
+    steady_after: float | None = None
+    start: str = "acquisition"
+    requirement: PointingRequirement = field(default_factory=PointingRequirement)
+
+    def campaign(self):
+        """The :class:`~rwlab.campaign.runs.Campaign`: scenario and dispersions loaded.
+
+        Returns
+        -------
+        Campaign
+        """
+        from rwlab.attitude.scenario import load_scenario
+        from rwlab.campaign.dispersions import load_dispersions
+        from rwlab.campaign.runs import Campaign
+
+        return Campaign(
+            load_scenario(self.scenario),
+            load_dispersions(self.dispersions),
+            self.duration,
+            self.controller,
+            self.seed,
+            self.runs,
+            epoch=self.epoch,
+            epoch_spread_days=self.epoch_spread_days,
+            steady_after=self.steady_after,
+            start=self.start,
+            requirement=self.requirement,
+        )
+
+
+def montecarlo(
+    out: str | os.PathLike,
+    options: CampaignOptions | None = None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    resume: bool = False,
+    progress: Callable[[int], None] | None = None,
+    echo: Callable[[str], None] | None = None,
+) -> tuple[dict, dict[str, Path]]:
+    """A Monte Carlo pointing campaign, written into the folder ``out``.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder (locked first; written whole or not at all).
+    options : CampaignOptions, optional
+        What the campaign computes (default: ``CampaignOptions()``).
     workers : int, optional
         Processes of a new local Dask cluster (default: the cores).
     scheduler : str, optional
@@ -85,7 +127,7 @@ def montecarlo(
     resume : bool
         Continue the interrupted campaign kept in ``OUT.partial`` (same arguments).
     progress : callable, optional
-        ``progress(done)``: runs finished so far.
+        ``progress(done)``: runs finished so far (kept ones included), after each batch.
     echo : callable, optional
         ``echo(line)`` for what the campaign says on the way (where it runs,
         resuming, stopped, retried batches).
@@ -97,6 +139,8 @@ def montecarlo(
     paths : dict of str to Path
         The files written, by name (in ``out``).
     """
+    options = options if options is not None else CampaignOptions()
+    runs, duration = options.runs, options.duration
     say = echo or (lambda _text: None)
     if resume and force:
         raise ConfigError(
@@ -105,35 +149,14 @@ def montecarlo(
     if workers is not None and scheduler is not None:  # before anything is kept
         raise ConfigError("workers= and scheduler= both given: give one of them")
     with output_folder(out, _FILES, force=force, what="Monte Carlo campaign") as stage:
-        from rwlab.attitude.scenario import load_scenario
-        from rwlab.campaign.dispersions import load_dispersions
+        from rwlab.campaign.budget import budget
         from rwlab.campaign.engine import dask_client
-        from rwlab.campaign.montecarlo import (
-            Campaign,
-            Execution,
-            budget,
-            check_runs,
-            check_size,
-            fly_run,
-            run_campaign,
-        )
+        from rwlab.campaign.montecarlo import Execution, run_campaign
+        from rwlab.campaign.runs import check_runs, check_size, fly_run
         from rwlab.report.campaign import write_campaign
 
         check_size(runs)
-        sc = load_scenario(scenario)
-        campaign = Campaign(
-            sc,
-            load_dispersions(dispersions),
-            duration,
-            controller,
-            seed,
-            runs,
-            epoch=epoch,
-            epoch_spread_days=epoch_spread_days,
-            steady_after=steady_after,
-            start=start,
-            requirement=requirement or PointingRequirement(),
-        )
+        campaign = options.campaign()
         check_runs(campaign)  # before the cluster starts and anything is kept
         store = _run_store(out, campaign, force=force, resume=resume, say=say)
         where = scheduler or f"a local Dask cluster of {workers or 'one per core'} worker processes"
@@ -162,13 +185,14 @@ def montecarlo(
             )
             raise
         stats = {**budget(rows, campaign), "execution": execution.to_dict()}
-        worst, _ = fly_run(campaign, stats["worst_seeds"][0]["seed"])
+        worst, _ = fly_run(campaign, stats["verdict"]["worst_runs"][0]["seed"])
         paths = write_campaign(rows, stats, campaign, worst, stage, force=force)
     shutil.rmtree(store.folder, ignore_errors=True)  # the campaign is complete in OUT
     ex = stats["execution"]
-    if ex["retries"] or ex["lost_workers"]:
+    if ex["runs_flown_again"] or ex["lost_workers"]:
         say(
-            f"{len(ex['lost_workers'])} worker(s) lost, {ex['retries']} re-execution(s): runs "
+            f"{len(ex['lost_workers'])} worker(s) lost, {ex['runs_flown_again']} run(s) flown "
+            "again: runs "
             f"{ex['retried_runs']} computed again (each run depends only on its seed: the "
             "rows are those of an undisturbed campaign); see execution in budget.json"
         )
@@ -177,7 +201,7 @@ def montecarlo(
 
 def _run_store(out, campaign, *, force: bool, resume: bool, say: Callable[[str], None]):
     """The campaign's kept runs (OUT.partial): resumed, started over, or new."""
-    from rwlab.campaign.montecarlo import RunStore
+    from rwlab.campaign.store import RunStore
 
     base = Path(os.path.abspath(out))
     store = RunStore(base.with_name(base.name + ".partial"), campaign)

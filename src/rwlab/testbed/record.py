@@ -343,6 +343,11 @@ class RecordDamage:
 # Salvaging is a choice of the reader's caller; the command line's --salvage sets it for
 # every record a command reads, however deep in a workflow (see :func:`salvaging`).
 _SALVAGE: ContextVar[bool] = ContextVar("rwlab_salvage_records", default=False)
+#: How to read a damaged record anyway, in Python's words (the command line says --salvage).
+SALVAGE_ADVICE = (
+    "pass salvage=True to read up to the damage (a workflow: call it within "
+    "rwlab.testbed.record.salvaging())"
+)
 
 
 @contextlib.contextmanager
@@ -534,8 +539,8 @@ def read_record(path: str | os.PathLike, *, salvage: bool | None = None) -> Reco
     readable = _readable(record)
     if not (_SALVAGE.get() if salvage is None else salvage):
         raise RecordDamagedError(
-            f"{path}: {damage.text()}; before it, {readable}: pass --salvage to read "
-            "up to the damage (every output then says it was salvaged), or copy the record again",
+            f"{path}: {damage.text()}; before it, {readable}: {SALVAGE_ADVICE} (every output "
+            "then says it was salvaged), or copy the record again",
             offset=damage.offset,
             readable_s=readable_seconds(record),
         )
