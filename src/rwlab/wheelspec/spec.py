@@ -38,7 +38,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 from rwlab.errors import ConfigError
 
@@ -364,6 +364,8 @@ class WheelSpec:
     )
     sources: MappingProxyType[str, str] = field(default_factory=lambda: MappingProxyType({}))
     origin: str = field(default="", compare=False)
+    # the files module builds a spec's tolerances with it (it does not import this one)
+    tolerance_class: ClassVar[type] = Tolerance
 
     def __post_init__(self) -> None:
         # a plain dict given by a caller becomes read-only, like the rest
