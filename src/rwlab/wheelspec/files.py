@@ -40,8 +40,6 @@ def load(cls: Any, name_or_path: str | os.PathLike) -> WheelSpec:
 
     Parameters
     ----------
-    cls : type
-        :class:`~rwlab.wheelspec.WheelSpec`.
     name_or_path : str or path-like
         A preset name (:func:`preset_names`) or a spec file.
 
@@ -71,8 +69,6 @@ def load_text(
 
     Parameters
     ----------
-    cls : type
-        :class:`~rwlab.wheelspec.WheelSpec`.
     text : str
         The TOML.
     where : str
@@ -103,8 +99,6 @@ def from_dict(
 
     Parameters
     ----------
-    cls : type
-        :class:`~rwlab.wheelspec.WheelSpec`.
     raw : dict
         ``format``, ``name``, ``title``, ``documents``, the sections, ``tolerances``.
     where : str
@@ -238,8 +232,6 @@ def preset(cls: Any, name: str) -> WheelSpec:
 
     Parameters
     ----------
-    cls : type
-        :class:`~rwlab.wheelspec.WheelSpec`.
     name : str
         One of :func:`preset_names`.
 
