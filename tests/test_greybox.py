@@ -316,7 +316,7 @@ def test_a_coulomb_the_fit_cannot_see_is_unidentified_not_a_key_error(monkeypatc
         return sol
 
     monkeypatch.setattr(gb, "least_squares", blind_coulomb)
-    data, current = _record(IDEAL.for_unit(4), 1, minutes=4.0)
+    data, current = _record(RW90.for_unit(4), 1, minutes=4.0)  # stiction: breakaway seen
     model = greybox_fit(data, kp=0.4, ki=0.08, current=current, **DATASHEET)
     assert {"coulomb", "breakaway"} <= set(model.unidentified)
     assert "coulomb" not in model.std and model.breakaway == model.coulomb
