@@ -230,7 +230,8 @@ def check_wheel_fit(sc, *, force: bool = False) -> list[str]:
     w = sc.wheels
     what = f"model.json ({w.model_file})" if w.model == "identified" else w.wheel_spec.name
     wheels = f"{sc.n_wheels} × {what} ({w.axes})"
-    lines = [s.line(sc.name, wheels) for s in (*shortfalls(sc), *oversizes(sc))]
+    lines = [s.line(sc.name, wheels) for s in shortfalls(sc)]
+    lines += [o.line(sc.name, wheels) for o in oversizes(sc)]
     if lines and not force:
         raise ConfigError(f"{lines[0]}; pick a wheel model that fits, or fly it with --force-wheel")
     return [f"FORCED: {line}" for line in lines]
