@@ -96,6 +96,12 @@ def _model(**changes) -> str:
     return json.dumps(m)
 
 
+def _rw90_spec_text() -> str:
+    from rwlab.wheelspec import WheelSpec
+
+    return WheelSpec.load("rw90").to_toml()
+
+
 FILES = {
     # models
     "refmodel.json": _model(healthy_reference=REFERENCE),
@@ -127,6 +133,8 @@ FILES = {
     "exp-nan.toml": "[experiment]\nduration = nan\n",
     "exp-huge.toml": "[experiment]\nTs = 1e300\n",
     "exp-unknown.toml": "[experiment]\ncolour = 1\n",
+    "spec-typo.toml": _rw90_spec_text().replace("inertia_kg_m2 = {", "inertai_kg_m2 = {", 1),
+    "cube-t6.toml": '[scenario]\nbase = "geo-cubesat"\n[wheels]\nspec = "nrwa-t6"\n',
     "params-nan.toml": "inertia = nan\n",
     # data
     "binary.csv": bytes(range(256)) * 4,
@@ -231,6 +239,11 @@ def cases() -> list[tuple[str, list[str]]]:
         ("experiment --config empty file", [*exp, "--config", "{D}/empty.toml"]),
         ("experiment --config binary", [*exp, "--config", "{D}/binary.toml"]),
         ("experiment --config unknown key", [*exp, "--config", "{D}/exp-unknown.toml"]),
+        ("experiment --wheel spec with a typo", [*exp, "--wheel", "{D}/spec-typo.toml"]),
+        (
+            "experiment --wheel nrwa-t6 --protocol rwlab (its DBC would clip)",
+            [*exp, "--wheel", "nrwa-t6", "--protocol", "rwlab"],
+        ),
         ("experiment --config seed = -1", [*exp, "--config", "{D}/exp-seed.toml"]),
         ("experiment --config duration = nan", [*exp, "--config", "{D}/exp-nan.toml"]),
         ("experiment --config Ts = 1e300", [*exp, "--config", "{D}/exp-huge.toml"]),
@@ -412,6 +425,7 @@ def cases() -> list[tuple[str, list[str]]]:
     c += _numbers(sim, "--rho", ("nan", "inf", "neg", "zero"), ("--controller", "lqg_ltr"))
     c.append(("attitude simulate --seed -1", [*sim, "--seed", "-1"]))
     c.append(("attitude simulate --scenario empty.toml", [*sim, "--scenario", "{D}/empty.toml"]))
+    c.append(("attitude simulate nrwa-t6 on geo-cubesat", [*sim, "--scenario", "{D}/cube-t6.toml"]))
     mc = ["attitude", "montecarlo", "--duration", "60", *out]
     c += [
         ("attitude montecarlo --runs 1e9", [*mc, "--runs", "1e9"]),

@@ -300,3 +300,23 @@ def test_a_wheel_model_without_its_own_envelope_gets_the_widest_and_says_so(grey
     widest, _ = greybox_std.structure_error("nrwa-t6")
     kp = other.std_budget["kp"]["structure"]
     assert kp == pytest.approx(widest["kp"] * abs(other.kp))
+
+
+def test_a_coulomb_the_fit_cannot_see_is_unidentified_not_a_key_error(monkeypatch):
+    # a record whose current is clipped (a protocol's signal range) can leave Coulomb
+    # friction without a Jacobian column at the optimum: it and the breakaway's excess
+    # over it are unidentified, without a σ; before, std["coulomb"] raised KeyError
+    import rwlab.ident.greybox as gb
+
+    real = gb.least_squares
+
+    def blind_coulomb(*args, **kwargs):
+        sol = real(*args, **kwargs)
+        sol.jac[:, gb.ESTIMATED.index("coulomb")] = 0.0
+        return sol
+
+    monkeypatch.setattr(gb, "least_squares", blind_coulomb)
+    data, current = _record(RW90.for_unit(4), 1, minutes=4.0)  # stiction: breakaway seen
+    model = greybox_fit(data, kp=0.4, ki=0.08, current=current, **DATASHEET)
+    assert {"coulomb", "breakaway"} <= set(model.unidentified)
+    assert "coulomb" not in model.std and model.breakaway == model.coulomb

@@ -73,9 +73,13 @@ def _edit(name: str, old: str, new: str, tmp_path):
 @pytest.mark.parametrize(
     ("old", "new", "words"),
     [
-        ('{ value = 0.015, source = "paper A, Table 1 (nominal torque)" }', "0.015", "max_torque"),
-        ("max_torque_nm = { value = 0.015", 'max_torque_nm = { value = "x"', "max_torque_nm"),
-        ("max_torque_nm = { value = 0.015", "max_torque_nm = { value = 0.5", "current limit"),
+        (
+            'max_torque_nm = { value = 0.0138, source = "',
+            'max_torque_nm = 0.0138  # "',
+            "max_torque",
+        ),
+        ("max_torque_nm = { value = 0.0138", 'max_torque_nm = { value = "x"', "max_torque_nm"),
+        ("max_torque_nm = { value = 0.0138", "max_torque_nm = { value = 0.5", "current limit"),
         ("[thermal]", '[thermal]\nfan_speed = { value = 1.0, source = "x y z" }', "fan_speed"),
         ("inertia_kg_m2 = { value = 4.2e-4", "inertia_kg_m2 = { value = -4.2e-4", "inertia_kg_m2"),
         ('controller_mode = { value = "speed"', 'controller_mode = { value = "pwm"', "pwm"),
@@ -111,3 +115,104 @@ def test_schema_is_the_loader_shape():
         import jsonschema
 
         jsonschema.validate(tomllib.loads(_text(name)), schema("wheelspec"))
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "words"),
+    [
+        (
+            "inertia_kg_m2 = {",
+            "inertai_kg_m2 = {",
+            "unknown key 'inertai_kg_m2' in \\[rotor\\]; did you mean 'inertia_kg_m2'",
+        ),
+        (
+            "max_speed_rpm = { value = 7800.0, source",
+            "max_speed_rpm = { valeu = 7800.0, source",
+            "unknown key 'valeu' in limits.max_speed_rpm; did you mean 'value'",
+        ),
+        (
+            'format = "rwlab.WheelSpec/1"',
+            'format = "rwlab.WheelSpec/1"\ntitel = "x"',
+            "unknown key 'titel' at the top level; did you mean 'title'",
+        ),
+        (
+            "[thermal]",
+            '[thermal]\nbus_voltage_v = { value = 24.0, source = "x" }',
+            "bus_voltage_v belongs in \\[supply\\]",
+        ),
+        (
+            "inertia_kg_m2 = { relative",
+            "inertia_kg_m2 = { relatve",
+            "unknown key 'relatve' in tolerances.inertia_kg_m2; did you mean 'relative'",
+        ),
+    ],
+)
+def test_an_unknown_key_is_named_with_the_key_it_likely_meant(old, new, words, tmp_path):
+    path = _edit("rw90", old, new, tmp_path)
+    with pytest.raises(ConfigError, match=words):
+        WheelSpec.load(path)
+
+
+@pytest.mark.parametrize(
+    ("name", "old", "new", "words"),
+    [  # the emulator spec's k_t: 27.96 V of back-EMF at 5000 rpm > 0.9785 × 28 V
+        (
+            "nrwa-t6",
+            "torque_constant_nm_a = { value = 0.0518",
+            "torque_constant_nm_a = { value = 0.0534",
+            r"max_speed_rpm \(5000\) is out of the motor's reach.*27\.96 V.*27\.40 V",
+        ),
+        (
+            "rw90",
+            "bus_voltage_v = { value = 24.0",
+            "bus_voltage_v = { value = 12.0",
+            r"max_speed_rpm \(7800\) is out of the motor's reach",
+        ),
+        # the T6's first acceleration limit: 250 rpm/s × 0.0115 kg·m² is 0.301 N·m < 0.31
+        (
+            "nrwa-t6",
+            "max_accel_rpm_s = { value = 260.0",
+            "max_accel_rpm_s = { value = 250.0",
+            r"max_torque_nm \(0\.31 N·m\) cannot reach the spacecraft.*0\.3011 N·m",
+        ),
+        (
+            "rw90",
+            "max_torque_nm = { value = 0.0138",
+            "max_torque_nm = { value = 0.015",
+            r"max_accel_rpm_s 314 × inertia_kg_m2 0\.00042 gives 0\.01381 N·m",
+        ),
+    ],
+)
+def test_a_wheel_that_cannot_reach_its_speed_or_deliver_its_torque_is_refused(
+    name, old, new, words, tmp_path
+):
+    path = _edit(name, old, new, tmp_path)
+    with pytest.raises(ConfigError, match=words):
+        WheelSpec.load(path)
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_every_preset_reaches_its_speed_and_delivers_its_torque(name):
+    spec = WheelSpec.load(name)
+    assert spec.accel_torque_nm >= spec.max_torque_nm
+    drive = spec.driver_max_duty * spec.bus_voltage_v
+    assert spec.torque_constant_nm_a * spec.max_speed_rad_s < drive
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_to_toml_is_a_whole_file_that_reads_back_to_the_same_spec(name, tmp_path):
+    spec = WheelSpec.load(name)
+    path = tmp_path / "mine.toml"
+    path.write_text(spec.to_toml(), encoding="utf-8")
+    again = WheelSpec.load(path)
+    assert again == spec and again.hash == spec.hash
+    edited = spec.to_toml().replace(f'name = "{name}"', 'name = "my-wheel"')
+    path.write_text(edited, encoding="utf-8")
+    assert WheelSpec.load(path).name == "my-wheel"
+
+
+def test_a_spec_carried_by_a_record_is_not_refused_for_its_physics():
+    # a record or model.json keeps the wheel as it was configured, even one the physics
+    # check now refuses as a file (the T6 preset before it was made one motor)
+    old = WheelSpec.load("nrwa-t6").with_(torque_constant_nm_a=0.0534, current_limit_a=5.81)
+    assert WheelSpec.from_dict(old.to_dict()) == old

@@ -69,7 +69,9 @@ def test_a_mismatch_is_one_line_naming_both_numbers(tmp_path):
     with pytest.raises(ConfigError) as err:
         check_wheel_fit(sc)
     text = str(err.value)
-    assert "\n" not in text and "0.1 N·m" in text and "0.02 N·m" in text
+    assert (
+        "\n" not in text and "0.1 N·m" in text and "0.0184 N·m" in text
+    )  # 0.0138 / 0.75 (pyramid)
     assert "rw90 spec" in text and "geo-comsat" in text and "force_wheel=True" in text
     forced = check_wheel_fit(sc, force=True)
     assert [f.split(" ")[0] for f in forced] == ["FORCED:"] * 3
@@ -85,7 +87,9 @@ def test_an_old_scenario_file_with_its_own_torque_reads_with_a_warning(tmp_path)
     new.write_text('[scenario]\nbase = "geo-comsat"\n[wheels]\nspec = "rw90"\naxes = "pyramid"\n')
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert load_scenario(str(new)).wheels.max_torque == 0.015
+        assert (
+            load_scenario(str(new)).wheels.max_torque == 0.0138
+        )  # the rw90 spec's: 314 rpm/s × 4.2e-4 kg·m²
 
 
 @pytest.mark.slow
@@ -111,3 +115,19 @@ def test_an_rw90_model_on_geo_comsat_exits_2_and_force_flies_it(tmp_path):
     assert config["wheel_forced"] and config["wheel_spec"]["name"] == "rw90"
     html = (tmp_path / "b" / "report.html").read_text()
     assert html.index("FORCED") < html.index("table-metrics")
+
+
+def test_a_far_too_large_wheel_is_refused_too():
+    # a T6 on the 12U cubesat: 0.31 N·m against the 0.2 mN·m it needs (1550×), and its
+    # 3 mN·m Coulomb drag above that need; flown, it pointed 180° off without a word
+    from rwlab.attitude.scenario import load_scenario
+    from rwlab.attitude.wheel_fit import check_wheel_fit
+    from rwlab.errors import ConfigError
+
+    sc = load_scenario("geo-cubesat").with_(**{"wheels.spec": "nrwa-t6"})
+    with pytest.raises(ConfigError, match=r"far too large for geo-cubesat.*1550× the 0\.0002 N·m"):
+        check_wheel_fit(sc)
+    forced = check_wheel_fit(sc, force=True)
+    assert len(forced) == 2 and all(line.startswith("FORCED:") for line in forced)
+    for spec, scenario in SIZED.items():  # each scenario flies its own class
+        assert check_wheel_fit(load_scenario(scenario).with_(**{"wheels.spec": spec})) == []

@@ -65,3 +65,21 @@ def test_a_spec_file_flies_as_the_simulated_wheel(tmp_path):
     meta = read_record(out).metadata
     assert meta["wheel_spec"]["name"] == "my-wheel"
     assert meta["driver_settings"]["max_speed_rpm"] == 6000.0
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_wheel_models_name_prints_a_whole_spec_that_loads_back(name, tmp_path):
+    r = CliRunner().invoke(main, ["wheel", "models", name])
+    assert r.exit_code == 0, r.output
+    path = tmp_path / "mine.toml"
+    path.write_text(r.output.replace(f'name = "{name}"', 'name = "mine"'), encoding="utf-8")
+    mine = WheelSpec.load(path)
+    assert mine.name == "mine"
+    spec = WheelSpec.load(name)
+    assert mine.to_dict() | {"name": name} == spec.to_dict()
+
+
+def test_help_texts_name_the_wheel_model_not_only_the_rw90():
+    for cmd in (["experiment", "--help"], ["wheel", "--help"]):
+        r = CliRunner().invoke(main, cmd)
+        assert r.exit_code == 0 and "simulated RW90" not in r.output, r.output

@@ -220,14 +220,14 @@ def _identify_and_fly(out: Path, cfg: DemoConfig, echo) -> tuple:
     """Paper A's study on the PRBS record, then the attitude comparison with its model."""
     from rwlab.attitude.control import compare, ltr_study
     from rwlab.attitude.scenario import SCENARIOS
-    from rwlab.ident.study import identification_study, physical_model
+    from rwlab.ident.study import identification_study
     from rwlab.report.attitude import write_comparison
     from rwlab.report.identification import write_study
     from rwlab.testbed import load_record
 
     echo("[identify] paper A's study on the PRBS record")
     study = identification_study(load_record(out / "records" / "prbs.mcap"))
-    model = physical_model(study, saturation_source="the record's driver settings")
+    model = demo_model(study)
     write_study(study, model, out / "identification", force=True)
     chosen = study.to_dict()["chosen"]
     echo(f"[identify] chosen {chosen['structure']}, validation fit {chosen['fit_percent']:.2f} %")
@@ -245,6 +245,40 @@ def _identify_and_fly(out: Path, cfg: DemoConfig, echo) -> tuple:
     )
     write_comparison(comparison, out / "attitude", force=True, ltr_result=ltr_study(scenario))
     return study, comparison
+
+
+def demo_model(study) -> dict:
+    """``model.json`` of the demo's study, as ``rwlab identify`` writes it: with the wheel
+    model the record names (its spec, hash and limits, so that a scenario whose wheels it
+    cannot replace refuses it) and the record's driver limits as its saturations.
+
+    Parameters
+    ----------
+    study : StudyResult
+        The study of a testbed record.
+
+    Returns
+    -------
+    dict
+        ``model.json``'s content (schema ``model``).
+    """
+    from rwlab.ident.study import physical_model
+    from rwlab.wheelspec import WheelSpec
+
+    source = study.data.source
+    spec = None
+    if isinstance(source.get("wheel_spec"), dict):
+        spec = WheelSpec.from_dict(source["wheel_spec"], "the PRBS record's wheel_spec")
+    driver = source.get("driver_settings") or {}
+    limits = {}
+    if "max_speed_rpm" in driver:
+        limits = {
+            "speed_limit_rpm": float(driver["max_speed_rpm"]),
+            "accel_limit_rpm_s": float(driver["max_accel_rpm_s"]),
+        }
+    return physical_model(
+        study, saturation_source="the record's driver settings", wheel_spec=spec, **limits
+    )
 
 
 def _side_by_side(cfg: DemoConfig) -> bool:

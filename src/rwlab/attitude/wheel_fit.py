@@ -1,5 +1,8 @@
 """Can the scenario's wheels deliver what its mission needs? A mismatch is refused, not flown.
 
+Both ways: wheels too small (:func:`shortfalls`) and wheels far too large
+(:func:`oversizes`: a torque over 100× the need, or a friction above it).
+
 A scenario's wheel section names the torque and stored momentum the mission needs
 about any body axis (``wheels.required_torque_nm``, ``wheels.required_momentum_nms``,
 with their sources). The wheel set delivers, about its weakest body
@@ -25,9 +28,14 @@ import numpy as np
 
 from rwlab.errors import ConfigError
 
-__all__ = ["Shortfall", "check_wheel_fit", "shortfalls"]
+__all__ = ["Oversize", "Shortfall", "check_wheel_fit", "oversizes", "shortfalls"]
 
 RPM = math.pi / 30  # rad/s per rpm
+# a wheel set whose torque is more than this many times the largest the mission needs is
+# refused: the mission's torques are then under 1 % of the wheel's range, where its
+# friction, cogging and speed quantum (which an identified linear model does not carry)
+# are the torque it gives; the shipped scenarios fly their own class at 3-5×
+FAR_OFF = 100.0
 
 
 @dataclass(frozen=True)
@@ -71,6 +79,81 @@ class Shortfall:
             f"({self.needed_source}), but {wheels} give {self.available:.4g} {self.unit} "
             f"({self.available_source})"
         )
+
+
+@dataclass(frozen=True)
+class Oversize:
+    """One way the wheels are far too large for the mission (refused as a shortfall is).
+
+    Attributes
+    ----------
+    what : str
+        The wheels' number, in words with its unit and source.
+    why : str
+        Why it does not fit.
+    """
+
+    what: str
+    why: str
+
+    def line(self, scenario: str, wheels: str) -> str:
+        """The refusal, one line.
+
+        Parameters
+        ----------
+        scenario, wheels : str
+            The scenario's name and a description of its wheels.
+
+        Returns
+        -------
+        str
+        """
+        return f"{wheels} are far too large for {scenario}: {self.what}; {self.why}"
+
+
+def oversizes(sc) -> list[Oversize]:
+    """How the scenario's wheels are far too large for what its mission needs (empty: not).
+
+    A wheel set is refused when its torque about the weakest axis exceeds the largest
+    torque the mission needs by more than :data:`FAR_OFF`, or when one wheel's own
+    Coulomb friction (its spec) exceeds that torque.
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its wheels and their requirements.
+
+    Returns
+    -------
+    list of Oversize
+    """
+    w = sc.wheels
+    need = w.required_torque_nm
+    if need is None:
+        return []
+    spec = w.wheel_spec
+    source = w.required_torque_source or f"{sc.name}'s requirement"
+    out = []
+    torque = w.max_torque / _allocation(sc)
+    if torque > FAR_OFF * need:
+        out.append(
+            Oversize(
+                f"they give {torque:.4g} N·m about any axis ({spec.source('max_torque_nm')}), "
+                f"{torque / need:.0f}× the {need:.4g} N·m it needs ({source})",
+                f"its torques would be under {100 / FAR_OFF:g} % of the wheels' range, where "
+                "their friction and speed quantum are the torque they give",
+            )
+        )
+    if spec.coulomb_friction_nm > need:
+        out.append(
+            Oversize(
+                f"one wheel's Coulomb friction, {spec.coulomb_friction_nm:.4g} N·m "
+                f"({spec.source('coulomb_friction_nm')}), exceeds the {need:.4g} N·m the "
+                f"mission needs ({source})",
+                "every torque it asks for is below the wheel's own drag",
+            )
+        )
+    return out
 
 
 def _allocation(sc) -> float:
@@ -124,7 +207,8 @@ def shortfalls(sc) -> list[Shortfall]:
 
 
 def check_wheel_fit(sc, *, force: bool = False) -> list[str]:
-    """Refuse wheels that cannot deliver the scenario's requirements, unless forced.
+    """Refuse wheels that cannot deliver the scenario's requirements, or are far too large
+    for them (:func:`oversizes`), unless forced.
 
     Parameters
     ----------
@@ -147,6 +231,7 @@ def check_wheel_fit(sc, *, force: bool = False) -> list[str]:
     what = f"model.json ({w.model_file})" if w.model == "identified" else w.wheel_spec.name
     wheels = f"{sc.n_wheels} × {what} ({w.axes})"
     lines = [s.line(sc.name, wheels) for s in shortfalls(sc)]
+    lines += [o.line(sc.name, wheels) for o in oversizes(sc)]
     if lines and not force:
         raise ConfigError(
             f"{lines[0]}; pick a wheel model that fits, or fly it with force_wheel=True"

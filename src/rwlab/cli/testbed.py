@@ -134,8 +134,9 @@ class _ExperimentCommand(click.Command):
 def experiment(config_file, out, monitor, port, force, profile, **settings):
     """Play a test signal into a wheel and record every command and telemetry frame.
 
-    With the default virtual interface a simulated RW90 answers, on a simulated
-    clock (a 20-minute experiment takes seconds) unless --realtime is given.
+    With the default virtual interface a simulated wheel of the --wheel model (rw90 by
+    default) answers, on a simulated clock (a 20-minute experiment takes seconds) unless
+    --realtime is given.
     Ctrl-C or any error leaves the wheel idle and the record closed.
     """
     from rwlab.testbed import ExperimentConfig, run_experiment

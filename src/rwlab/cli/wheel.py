@@ -48,7 +48,8 @@ def _bus_options(func):
 
 @main.group()
 def wheel() -> None:
-    """The reaction wheel: run a simulated RW90, or command a wheel on a bus."""
+    """The reaction wheel: run a simulated wheel (any wheel model, `rwlab wheel models`), or
+    command a wheel on a bus."""
 
 
 @wheel.command("serve")
@@ -77,7 +78,7 @@ def wheel() -> None:
 @click.option(
     "--params",
     type=click.Path(exists=True, dir_okay=False),
-    help="Wheel parameters as TOML (default RW90).",
+    help="Wheel parameters as TOML (default: the --wheel model's, rw90).",
 )
 @click.option(
     "--wheel",
@@ -313,18 +314,26 @@ def wheel_protocols():
 
 
 @wheel.command("models")
+@click.argument("name", required=False)
 @click.option("--json", "as_json", is_flag=True, help="A JSON list of objects, one per model.")
 @_friendly_errors
-def wheel_models(as_json):
-    """List the shipped wheel models (presets) with their limits.
+def wheel_models(name, as_json):
+    """List the shipped wheel models (presets) with their limits; with NAME, print that
+    one whole as a wheel spec TOML to copy into your own file and edit.
 
     Each is a wheel spec file (rwlab/wheelspec/presets/NAME.toml) whose every number
     says where it comes from; pass NAME or your own spec file to --wheel.
     """
     import json
 
+    from rwlab.errors import ConfigError
     from rwlab.wheelspec import WheelSpec, preset_names
 
+    if name is not None:
+        if as_json:
+            raise ConfigError("--json lists every model; leave it out to print NAME's TOML")
+        click.echo(WheelSpec.load(name).to_toml(), nl=False)
+        return
     rows = [WheelSpec.load(name).limits() for name in preset_names()]
     if as_json:
         click.echo(json.dumps(rows, indent=2, ensure_ascii=False))

@@ -511,6 +511,9 @@ def greybox_fit(
 
     b, c = names.index("breakaway"), names.index("coulomb")
     cov, lags, std, ratios, budget = spread(~blind)
+    if not blind[b] and blind[c]:  # no Coulomb level to exceed: the excess is not seen either
+        blind[b] = True
+        cov, lags, std, ratios, budget = spread(~blind)
     if not blind[b]:
         diff_var = std["breakaway"] ** 2 + std["coulomb"] ** 2 - 2.0 * cov[b, c]
         if fitted["breakaway"] - fitted["coulomb"] <= 2.0 * math.sqrt(max(diff_var, 0.0)):

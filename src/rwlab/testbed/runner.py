@@ -95,6 +95,8 @@ class ExperimentConfig:
     protocol : str
         The wheel protocol (``rwlab``, ``canopen``, ``nsp`` or a registered one); on
         the virtual interface a byte-stream protocol's twin answers over a pty pair.
+        ``"auto"`` (default): ``rwlab``, or ``nsp`` for a simulated wheel whose numbers
+        rwlab's DBC cannot carry (an NRWA-T6's 6 A, an RW-0.01's 5 V bus).
     faults : tuple of str
         Faults injected into the simulated wheel, each ``NAME[=VALUE]@SECONDS``
         (:mod:`rwlab.wheel.faults`); each is recorded as a ``fault_injected`` event.
@@ -143,10 +145,12 @@ class ExperimentConfig:
     model: str | None = None
     wheel: str = "rw90"
     unit: int | None = None
-    protocol: str = "rwlab"
+    protocol: str = "auto"
     late_tolerance: float | None = None
 
     def __post_init__(self) -> None:
+        if self.protocol == "auto" and isinstance(self.wheel, str):
+            object.__setattr__(self, "protocol", self._own_protocol())
         if self.amplitude is None and isinstance(self.wheel, str):  # the wheel model's own
             p = self.nominal_wheel()
             default = p.nominal_speed_rpm if self.mode == "speed" else p.max_accel_rpm_s
@@ -298,8 +302,24 @@ class ExperimentConfig:
         """The faults, parsed (``ConfigError`` for a bad one)."""
         return [parse_fault(text) for text in self.faults]
 
+    def _own_protocol(self) -> str:
+        """``protocol = "auto"``: rwlab's DBC, unless its signals cannot carry the simulated
+        wheel (then rwlab's NSP profile, whose floats carry any value); on a real bus the
+        DBC, which :meth:`check_limits` refuses for a wheel it cannot carry."""
+        from rwlab.wheel.link import get_protocol
+        from rwlab.wheel.signal_fit import WIDE_PROTOCOL, misfits
+
+        if self.interface != "virtual":
+            return "rwlab"
+        fits = not misfits(get_protocol("rwlab").signal_ranges(), self.nominal_wheel())
+        return "rwlab" if fits else WIDE_PROTOCOL
+
     def check_limits(self, params: WheelParams) -> None:
-        """Refuse amplitudes beyond the wheel's limits."""
+        """Refuse amplitudes beyond the wheel's limits, and a protocol whose signals cannot
+        carry the wheel's numbers (:mod:`rwlab.wheel.signal_fit`)."""
+        from rwlab.wheel.signal_fit import check_carries
+
+        check_carries(self.protocol, params, self.wheel)
         limit, unit = (
             (params.max_speed_rpm, "rpm")
             if self.mode == "speed"

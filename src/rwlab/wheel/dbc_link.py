@@ -156,3 +156,28 @@ class RwlabProtocol(WheelProtocol):
 
     def identity(self) -> str:
         return f"rwlab dbc sha256 {proto.dbc_sha256()}"
+
+    def signal_ranges(self) -> dict[str, tuple[float, float, str]]:
+        """The DBC's signal ranges (as cantools reads them), by the quantity each carries.
+
+        Returns
+        -------
+        dict
+            Quantity → (lowest, highest, ``rw.dbc Message.Signal``).
+        """
+        db = proto.database()
+        where = {
+            "speed_rpm": ("RW_Telemetry", "Speed"),
+            "current_a": ("RW_Telemetry", "Current"),
+            "bus_voltage_v": ("RW_Heartbeat", "BusVoltage"),
+            "temperature_c": ("RW_Heartbeat", "Temperature"),
+            "setpoint": ("RW_Command", "Setpoint"),
+        }
+        out = {}
+        for quantity, (message, name) in where.items():
+            signal = db.get_message_by_name(message).get_signal_by_name(name)
+            low, high = signal.minimum, signal.maximum
+            if low is None or high is None:  # rw.dbc gives every range; a bare one: unchecked
+                continue
+            out[quantity] = (float(low), float(high), f"rw.dbc {message}.{name}")
+        return out

@@ -270,6 +270,18 @@ class WheelProtocol(abc.ABC):
         """
         return self.name
 
+    def signal_ranges(self) -> dict[str, tuple[float, float, str]]:
+        """The ranges its fixed-width signals carry (:mod:`rwlab.wheel.signal_fit` checks a
+        wheel against them); a protocol that declares none is not checked.
+
+        Returns
+        -------
+        dict
+            Quantity (``speed_rpm``, ``current_a``, ``bus_voltage_v``, ``temperature_c``,
+            ``setpoint``) → (lowest, highest, the signal's name).
+        """
+        return {}
+
     def addresses(self, node_id: int) -> str:
         """What the twin of wheel ``node_id`` answers on, in the protocol's terms (for ``serve``).
 

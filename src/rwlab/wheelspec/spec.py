@@ -1,4 +1,4 @@
-"""The datasheet of a reaction-wheel model: :class:`WheelSpec`, its TOML file and loader.
+"""The datasheet of a reaction-wheel model: :class:`WheelSpec`, the record every layer reads.
 
 One TOML file per wheel model (``presets/<name>.toml`` for the shipped ones, or a
 lab's own file). Every number is an inline table with its value and where it comes
@@ -15,10 +15,10 @@ from::
     [tolerances]
     inertia_kg_m2 = { relative = 0.02, source = "rotor machining, ±2 %" }
 
-A ``source`` is a datasheet or ICD page, or ``"assumed, because …"``. The file's
-structure is the JSON Schema ``rwlab/schemas/wheelspec.schema.json`` (checked with
-``jsonschema``); the values' ranges and their consistency (a torque the current
-limit can give, faults above limits) are checked here. Every failure is a
+A ``source`` is a datasheet or ICD page, or ``"assumed, because …"``. The files are
+read and written by :mod:`rwlab.wheelspec.files` (keys, JSON Schema), the numbers
+checked by :mod:`rwlab.wheelspec.checks` (ranges, and whether they make a wheel that
+reaches its speed and delivers its torque). Every failure is a
 :class:`~rwlab.errors.ConfigError` naming the file and the key.
 
 The spec sits at the bottom layer so that every layer reads the same numbers:
@@ -30,178 +30,17 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
-import tomllib
-from dataclasses import dataclass, field, fields, replace
-from functools import cache
-from importlib import resources
-from pathlib import Path
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 from rwlab.errors import ConfigError
+from rwlab.wheelspec import files
+from rwlab.wheelspec.checks import check_ranges
+from rwlab.wheelspec.fields import FORMAT, KINDS, OPTIONAL, RPM, SECTIONS, TWIN_NAMES
 
-__all__ = [
-    "FORMAT",
-    "SECTIONS",
-    "TWIN_NAMES",
-    "Tolerance",
-    "WheelSpec",
-    "preset_names",
-]
-
-KIND = "WheelSpec"
-VERSION = 1
-FORMAT = f"rwlab.{KIND}/{VERSION}"
-RPM = 2 * math.pi / 60  # rad/s per rpm
-
-# section → (field, kind); the order of a spec file and of the dataclass
-SECTIONS: dict[str, tuple[tuple[str, type], ...]] = {
-    "rotor": (
-        ("inertia_kg_m2", float),
-        ("static_imbalance_kg_m", float),
-        ("dynamic_imbalance_kg_m2", float),
-    ),
-    "limits": (
-        ("max_speed_rpm", float),
-        ("nominal_speed_rpm", float),
-        ("max_torque_nm", float),
-        ("max_accel_rpm_s", float),
-        ("current_limit_a", float),
-        ("overspeed_fault_rpm", float),
-        ("overcurrent_fault_a", float),
-        ("overtemp_fault_c", float),
-    ),
-    "motor": (
-        ("torque_constant_nm_a", float),
-        ("winding_resistance_ohm", float),
-        ("pole_pairs", int),
-        ("torque_constant_temp_coeff", float),
-        ("resistance_temp_coeff", float),
-        ("cogging_torque_nm", float),
-        ("cogging_periods", int),
-        ("torque_ripple", float),
-        ("back_emf", bool),
-    ),
-    "supply": (
-        ("bus_voltage_v", float),
-        ("bus_source_resistance_ohm", float),
-        ("driver_max_duty", float),
-    ),
-    "friction": (
-        ("coulomb_friction_nm", float),
-        ("viscous_friction_nm_s", float),
-        ("stiction", bool),
-        ("breakaway_friction_nm", float),
-        ("stribeck_speed_rpm", float),
-        ("viscous_temp_coeff", float),
-        ("friction_drift", float),
-    ),
-    "controller": (
-        ("controller_mode", str),
-        ("speed_kp", float),
-        ("speed_ki", float),
-        ("speed_setpoint_weight", float),
-        ("control_rate_hz", float),
-    ),
-    "telemetry": (
-        ("telemetry_rate_hz", float),
-        ("speed_resolution_rpm", float),
-        ("speed_noise_rpm", float),
-        ("min_measurable_rpm", float),
-        ("current_noise_a", float),
-        ("current_lsb_a", float),
-        ("current_offset_a", float),
-        ("bus_voltage_noise_v", float),
-        ("hall_speed", bool),
-        ("hall_misalignment_deg", float),
-        ("hall_jitter_s", float),
-        ("hall_timer_hz", float),
-        ("hall_window_s", float),
-        ("telemetry_jitter_s", float),
-        ("frame_loss_rate", float),
-    ),
-    "thermal": (
-        ("thermal_resistance_k_w", float),
-        ("thermal_time_constant_s", float),
-        ("ambient_c", float),
-    ),
-}
-_KINDS = {name: kind for section in SECTIONS.values() for name, kind in section}
-_SECTION_OF = {name: s for s, section in SECTIONS.items() for name, _ in section}
-
-# spec field → the twin's (WheelParams) field; fields of the same name map to themselves,
-# the spec-only ones (imbalance, controller mode and rate, telemetry rate) are absent
-TWIN_NAMES: MappingProxyType[str, str] = MappingProxyType(
-    {
-        **{
-            name: name
-            for name in _KINDS
-            if name
-            not in {
-                "static_imbalance_kg_m",
-                "dynamic_imbalance_kg_m2",
-                "controller_mode",
-                "control_rate_hz",
-                "telemetry_rate_hz",
-            }
-        },
-        "inertia_kg_m2": "inertia",
-        "max_torque_nm": "nominal_torque",
-        "current_limit_a": "current_limit",
-        "overcurrent_fault_a": "overcurrent_fault",
-        "torque_constant_nm_a": "torque_constant",
-        "winding_resistance_ohm": "winding_resistance",
-        "cogging_torque_nm": "cogging_torque",
-        "bus_voltage_v": "bus_voltage",
-        "bus_source_resistance_ohm": "bus_source_resistance",
-        "coulomb_friction_nm": "coulomb_friction",
-        "viscous_friction_nm_s": "viscous_friction",
-        "breakaway_friction_nm": "breakaway_friction",
-        "thermal_resistance_k_w": "thermal_resistance",
-        "thermal_time_constant_s": "thermal_time_constant",
-    }
-)
-
-# may be ≤ 0 (an offset, a temperature); every other number must be ≥ 0
-_SIGNED = {"current_offset_a", "ambient_c", "overtemp_fault_c"}
-# fields a spec file written before them may lack: the value they had implicitly then
-OPTIONAL: MappingProxyType[str, dict[str, Any]] = MappingProxyType(
-    {
-        "speed_setpoint_weight": {
-            "value": 1.0,
-            "source": "assumed, because the file states none: a plain PI (setpoint weight 1)",
-        },
-    }
-)
-_ZERO_ALLOWED = {  # physical zeros a datasheet may state: none, off, perfect
-    "static_imbalance_kg_m",
-    "dynamic_imbalance_kg_m2",
-    "torque_constant_temp_coeff",
-    "resistance_temp_coeff",
-    "cogging_torque_nm",
-    "torque_ripple",
-    "bus_source_resistance_ohm",
-    "viscous_friction_nm_s",
-    "coulomb_friction_nm",
-    "breakaway_friction_nm",
-    "viscous_temp_coeff",
-    "friction_drift",
-    "speed_ki",
-    "speed_setpoint_weight",
-    "speed_resolution_rpm",
-    "speed_noise_rpm",
-    "min_measurable_rpm",
-    "current_noise_a",
-    "current_lsb_a",
-    "bus_voltage_noise_v",
-    "hall_misalignment_deg",
-    "hall_jitter_s",
-    "telemetry_jitter_s",
-    "frame_loss_rate",
-}
-CONTROLLER_MODES = ("speed", "torque")
+__all__ = ["Tolerance", "WheelSpec"]
 
 
 @dataclass(frozen=True)
@@ -364,13 +203,15 @@ class WheelSpec:
     )
     sources: MappingProxyType[str, str] = field(default_factory=lambda: MappingProxyType({}))
     origin: str = field(default="", compare=False)
+    # the files module builds a spec's tolerances with it (it does not import this one)
+    tolerance_class: ClassVar[type] = Tolerance
 
     def __post_init__(self) -> None:
         # a plain dict given by a caller becomes read-only, like the rest
         object.__setattr__(self, "tolerances", MappingProxyType(dict(self.tolerances)))
         object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
         object.__setattr__(self, "documents", tuple(self.documents))
-        _check(self)
+        check_ranges(self)
 
     # -- derived limits --------------------------------------------------------------
     @property
@@ -436,31 +277,20 @@ class WheelSpec:
         Parameters
         ----------
         name_or_path : str or path-like
-            A preset name (:func:`preset_names`) or a spec file.
+            A preset name (:func:`rwlab.wheelspec.preset_names`) or a spec file.
 
         Returns
         -------
         WheelSpec
+            Checked: ranges, structure and physics (:mod:`rwlab.wheelspec.checks`).
         """
-        if isinstance(name_or_path, str) and name_or_path in preset_names():
-            return _preset(name_or_path)
-        path = Path(name_or_path)
-        if not path.is_file():
-            raise ConfigError(
-                f"unknown wheel model {str(name_or_path)!r}: not one of {list(preset_names())} "
-                "and no such file (a wheel spec TOML; see `rwlab wheel models`)"
-            )
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path}: cannot read the wheel spec ({exc})") from None
-        return replace(cls.from_toml_text(text, str(path)), origin=str(path))
+        return files.load(cls, name_or_path)
 
     @classmethod
     def from_toml_text(
         cls, text: str, where: str = "the wheel spec", *, validate: bool = True
     ) -> WheelSpec:
-        """Parse and check a spec file's text.
+        """Parse and check a spec file's text (:func:`rwlab.wheelspec.files.load_text`).
 
         Parameters
         ----------
@@ -469,24 +299,20 @@ class WheelSpec:
         where : str
             The file's name, for messages.
         validate : bool
-            Check the structure against the JSON Schema (the shipped presets are
-            checked by the tests instead, to keep ``import rwlab.wheel`` fast).
+            Check the keys and the structure against the JSON Schema.
 
         Returns
         -------
         WheelSpec
         """
-        try:
-            raw = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{where}: not valid TOML ({exc})") from None
-        return cls.from_dict(raw, where, validate=validate)
+        return files.load_text(cls, text, where, validate=validate)
 
     @classmethod
     def from_dict(
         cls, raw: Any, where: str = "the wheel spec", *, validate: bool = True
     ) -> WheelSpec:
-        """A spec from its file's parsed form (or :meth:`to_dict`'s output).
+        """A spec from its file's parsed form (or :meth:`to_dict`'s output), as carried by a
+        record or ``model.json``: ranges checked, the physics not (the wheel as it was).
 
         Parameters
         ----------
@@ -495,42 +321,22 @@ class WheelSpec:
         where : str
             The file's name, for messages.
         validate : bool
-            Check the structure against the JSON Schema first.
+            Check the keys and the structure against the JSON Schema first.
 
         Returns
         -------
         WheelSpec
         """
-        if validate:
-            _validate_schema(raw, where)
-        values: dict[str, Any] = {}
-        sources: dict[str, str] = {}
-        for section, items in SECTIONS.items():
-            table = raw[section]
-            for name, kind in items:
-                entry = table.get(name, OPTIONAL.get(name))
-                if entry is None:  # the schema passed it (or validate=False): say which
-                    raise ConfigError(f"{where}: [{section}] has no {name}")
-                value = entry["value"]
-                if kind is float and isinstance(value, int) and not isinstance(value, bool):
-                    value = float(value)
-                values[name] = value
-                sources[name] = entry["source"]
-        tolerances = {
-            name: Tolerance(float(t.get("relative", 0)), float(t.get("absolute", 0)), t["source"])
-            for name, t in raw.get("tolerances", {}).items()
-        }
-        try:
-            return cls(
-                name=raw["name"],
-                title=raw["title"],
-                documents=tuple(raw["documents"]),
-                tolerances=MappingProxyType(tolerances),
-                sources=MappingProxyType(sources),
-                **values,
-            )
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+        return files.from_dict(cls, raw, where, validate=validate)
+
+    def to_toml(self) -> str:
+        """The spec as a whole TOML file that :meth:`load` reads back to the same spec.
+
+        Returns
+        -------
+        str
+        """
+        return files.to_toml(self)
 
     def to_dict(self) -> dict:
         """The file's form: what :meth:`from_dict` reads back (and ``model.json`` carries).
@@ -610,116 +416,10 @@ class WheelSpec:
         -------
         WheelSpec
         """
-        unknown = sorted(set(changes) - set(_KINDS))
+        unknown = sorted(set(changes) - set(KINDS))
         if unknown:
-            raise ConfigError(f"unknown wheel spec field(s) {unknown}; known: {sorted(_KINDS)}")
+            raise ConfigError(f"unknown wheel spec field(s) {unknown}; known: {sorted(KINDS)}")
         sources = dict(self.sources)
         for name in changes:
             sources[name] = f"changed from {getattr(self, name)!r} ({sources[name]})"
         return replace(self, sources=MappingProxyType(sources), **changes)
-
-
-@cache
-def _preset(name: str) -> WheelSpec:
-    text = (resources.files(__package__) / "presets" / f"{name}.toml").read_text(encoding="utf-8")
-    spec = WheelSpec.from_toml_text(text, f"wheel preset {name!r}", validate=False)
-    return replace(spec, origin=name)
-
-
-@cache
-def preset_names() -> tuple[str, ...]:
-    """The shipped wheel models, sorted.
-
-    Returns
-    -------
-    tuple of str
-    """
-    folder = resources.files(__package__) / "presets"
-    return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
-
-
-@cache
-def _validator() -> Any:
-    import jsonschema
-
-    from rwlab.schemas import schema
-
-    return jsonschema.Draft202012Validator(schema("wheelspec"))
-
-
-def _validate_schema(raw: Any, where: str) -> None:
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{where}: a wheel spec is a TOML table")
-    tag = raw.get("format")
-    if isinstance(tag, str) and tag.startswith(f"rwlab.{KIND}/") and tag != FORMAT:
-        raise ConfigError(f"{where}: {tag} is not {FORMAT}, the version this rwlab reads")
-    validator = _validator()
-    errors = sorted(validator.iter_errors(raw), key=lambda e: list(e.absolute_path))
-    if errors:
-        first = errors[0]
-        path = ".".join(str(p) for p in first.absolute_path) or "(top level)"
-        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-        raise ConfigError(
-            f"{where}: {path}: {first.message}{more}; every number is "
-            '{ value = ..., source = "..." } in its section (see rwlab/wheelspec/presets/rw90.toml)'
-        )
-
-
-def _check(spec: WheelSpec) -> None:
-    """The ranges and the consistency of a spec's numbers, each failure a ConfigError."""
-    for f in fields(spec):
-        kind = _KINDS.get(f.name)
-        if kind is None:
-            continue
-        value = getattr(spec, f.name)
-        if kind is bool:
-            if not isinstance(value, bool):
-                raise ConfigError(f"{f.name} must be true or false, got {value!r}")
-            continue
-        if kind is str:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{f.name} must be a number, got {value!r}")
-        if kind is int and not isinstance(value, int):
-            raise ConfigError(f"{f.name} must be an integer, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{f.name} must be finite, got {value!r}")
-        if f.name in _SIGNED:
-            continue
-        if value < 0 or (value == 0 and f.name not in _ZERO_ALLOWED):
-            raise ConfigError(f"{f.name} must be > 0, got {value!r}")
-    if spec.controller_mode not in CONTROLLER_MODES:
-        raise ConfigError(
-            f"controller_mode must be one of {CONTROLLER_MODES}, got {spec.controller_mode!r}"
-        )
-    pairs = (
-        ("max_speed_rpm", "overspeed_fault_rpm", "the overspeed fault must be above the limit"),
-        ("current_limit_a", "overcurrent_fault_a", "the overcurrent fault must be above the limit"),
-        ("nominal_speed_rpm", "max_speed_rpm", "the nominal speed must not exceed the limit"),
-    )
-    for low, high, why in pairs:
-        if getattr(spec, low) > getattr(spec, high) or (
-            low != "nominal_speed_rpm" and getattr(spec, low) == getattr(spec, high)
-        ):
-            lo, hi = getattr(spec, low), getattr(spec, high)
-            raise ConfigError(f"{low} ({lo}) vs {high} ({hi}): {why}")
-    if spec.max_torque_nm > spec.motor_torque_nm * (1 + 1e-9):
-        raise ConfigError(
-            f"max_torque_nm ({spec.max_torque_nm}) exceeds what the current limit gives, "
-            f"torque_constant_nm_a × current_limit_a = {spec.motor_torque_nm:.4g} N·m"
-        )
-    if spec.stiction and spec.breakaway_friction_nm < spec.coulomb_friction_nm:
-        raise ConfigError(
-            f"breakaway_friction_nm ({spec.breakaway_friction_nm}) must be ≥ "
-            f"coulomb_friction_nm ({spec.coulomb_friction_nm})"
-        )
-    if spec.driver_max_duty > 1 or spec.frame_loss_rate >= 1:
-        raise ConfigError("driver_max_duty must be ≤ 1 and frame_loss_rate < 1")
-    missing = sorted(set(_KINDS) - set(spec.sources))
-    if spec.sources and missing:
-        raise ConfigError(f"no source for {missing}: every number says where it comes from")
-    for name, tol in spec.tolerances.items():
-        if name not in TWIN_NAMES or _KINDS[name] is not float:
-            raise ConfigError(f"tolerance for {name!r}: not a numeric field of the twin")
-        if not (0 <= tol.relative < 1 and tol.absolute >= 0):
-            raise ConfigError(f"tolerance for {name!r}: relative must be in [0, 1), absolute ≥ 0")
