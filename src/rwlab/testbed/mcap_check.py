@@ -49,7 +49,13 @@ class RecordDamage:
     why: str
 
     def text(self) -> str:
-        """``damaged at byte N of M (why)``."""
+        """The damage in words.
+
+        Returns
+        -------
+        str
+            ``damaged at byte N of M (why)``.
+        """
         return f"damaged at byte {self.offset} of {self.size} ({self.why})"
 
 
