@@ -339,6 +339,9 @@ def test_served_nrwa_t6_prints_its_address_and_answers_a_hand_built_ping():
     try:
         path = serve.stderr.readline().split("serial:")[1].split(";")[0]
         assert "NSP address 0x02 (redundant port 0x82)" in serve.stderr.readline()
+        # the NRWA-T6's own wheel model, named, unless --wheel says otherwise
+        assert serve.stderr.readline().startswith("wheel model nrwa-t6 (nsp/nrwa-t6's default")
+        assert f"--channel {path} --node-id 2" in serve.stderr.readline()
         import serial
 
         port = serial.serial_for_url(path, baudrate=460800, timeout=0)
@@ -495,3 +498,26 @@ def test_any_well_framed_request_is_answered_never_raised(protocol, poll, comman
         assert reply.acked != (link.nacked == 1)
     if link.nacked == 0:  # what the twin ACKs, the wheel may obey (a NACKed one it refuses)
         assert all(setpoint_allowed(RW90, c.mode, c.setpoint) for _, c in commands)
+
+
+# -- a command's echo comes in one round trip, not at the next poll ---------------------------
+@pytest.mark.parametrize("protocol", ["nsp/nrwa-t6", "nsp/rw4-12", "nsp"])
+def test_an_acked_command_is_echoed_at_once_not_at_the_next_poll(protocol):
+    from rwlab.wheel import SimClock, WheelClient
+
+    clock = SimClock()
+    twin_port, host_port = open_pty()
+    node = WheelNode(twin_port, 0, clock=clock, protocol=protocol, watchdog=0)
+    client = WheelClient(host_port, 0, clock=clock, protocol=protocol)
+    try:
+        clock.sleep(0.01)  # the first poll is done: the next is a poll period (0.1 s) away
+        assert client.poll()
+        sent = clock.now()
+        seq = client.set_speed(300.0)
+        assert client.wait_ack(seq).sequence_echo == seq
+        assert clock.now() - sent < 1e-3  # was up to 0.1 s: `wheel cmd` printed ~100 ms
+    finally:
+        client.link.close()
+        node.stop()
+        twin_port.close()
+        host_port.close()

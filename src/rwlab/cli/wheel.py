@@ -9,16 +9,26 @@ from rwlab.cli._common import SECONDS, Number, _friendly_errors, _stop_signals, 
 # -- the wheel ------------------------------------------------------------------------
 
 
-def _bus_options(func):
+INTERFACE_HELP = (
+    "virtual, socketcan, udp_multicast, serial (RS-232), or one added by "
+    "an entry point (`rwlab wheel protocols` lists them)."
+)
+SERVE_INTERFACE_HELP = (
+    "socketcan, udp_multicast, serial (RS-232), or one added by an entry point. Default: "
+    "udp_multicast for a CAN protocol, serial with --channel pty for a byte-stream one "
+    "(both reachable from other processes; virtual is not, and is refused)."
+)
+
+
+def _bus_options(func, serving: bool = False):
+    interface = (
+        click.option("--interface", default=None, help=SERVE_INTERFACE_HELP)
+        if serving
+        else click.option("--interface", default="virtual", show_default=True, help=INTERFACE_HELP)
+    )
     for option in reversed(
         [
-            click.option(
-                "--interface",
-                default="virtual",
-                show_default=True,
-                help="virtual, socketcan, udp_multicast, serial (RS-232), or one added by "
-                "an entry point (`rwlab wheel protocols` lists them).",
-            ),
+            interface,
             click.option(
                 "--channel",
                 default=None,
@@ -53,7 +63,7 @@ def wheel() -> None:
 
 
 @wheel.command("serve")
-@_bus_options
+@lambda func: _bus_options(func, serving=True)
 @click.option(
     "--telemetry-rate",
     type=Number(0, 10_000, low_open=True),
@@ -78,13 +88,14 @@ def wheel() -> None:
 @click.option(
     "--params",
     type=click.Path(exists=True, dir_okay=False),
-    help="Wheel parameters as TOML (default: the --wheel model's, rw90).",
+    help="Wheel parameters as TOML (default: the protocol's own wheel, see --wheel).",
 )
 @click.option(
     "--wheel",
     "wheel_model",
     metavar="NAME|FILE",
-    help="Wheel model: a preset (`rwlab wheel models`) or a wheel spec file (default rw90).",
+    help="Wheel model: a preset (`rwlab wheel models`) or a wheel spec file (default: the "
+    "protocol's own wheel, nrwa-t6 for nsp/nrwa-t6; rw90 for the others).",
 )
 @click.option(
     "--unit",
@@ -116,17 +127,18 @@ def wheel_serve(
     import time
 
     from rwlab.errors import ConfigError
-    from rwlab.wheel import RW90, WheelNode, WheelParams
+    from rwlab.wheel import WheelNode, WheelParams
     from rwlab.wheel.bus import DEFAULT_CHANNELS, open_transport, transport_names
     from rwlab.wheel.link import get_protocol, resolve_protocol
 
     protocol = resolve_protocol(protocol, profile)
     if params and wheel_model:
         raise ConfigError("give the wheel once: --params FILE or --wheel NAME|FILE")
-    wheel_params = WheelParams.load(params or wheel_model) if params or wheel_model else RW90
+    wheel_name = params or wheel_model or get_protocol(protocol).wheel
+    wheel_params = WheelParams.load(wheel_name)
     if unit is not None:
         wheel_params = wheel_params.for_unit(unit)
-    get_protocol(protocol)  # an unknown name fails before the bus opens
+    interface, channel = _served_interface(protocol, interface, channel)
     if interface not in transport_names():
         raise ConfigError(
             f"unknown interface {interface!r}; choose from {', '.join(transport_names())}"
@@ -158,6 +170,12 @@ def wheel_serve(
             err=True,
         )
         click.echo(f"answering as {get_protocol(protocol).addresses(node_id)}", err=True)
+        click.echo(_wheel_line(wheel_name, protocol, params, wheel_model, unit), err=True)
+        click.echo(
+            f"reach it with: rwlab wheel cmd --protocol {protocol} --interface {interface} "
+            f"--channel {channel} --node-id {node_id} speed 300",
+            err=True,
+        )
         start = time.monotonic()
         with _stop_signals():
             while duration is None or time.monotonic() - start < duration:
@@ -171,6 +189,42 @@ def wheel_serve(
         _close(bus)
         if keep_open is not None:
             keep_open.close()
+
+
+def _served_interface(protocol: str, interface: str | None, channel: str | None):
+    """The interface and channel to serve on: one other processes reach.
+
+    python-can's ``virtual`` bus lives inside one process, so a wheel served on it
+    answers nobody: refused. Without ``--interface``, a CAN protocol is served on
+    ``udp_multicast`` and a byte-stream one on a fresh pty.
+    """
+    from rwlab.errors import ConfigError
+    from rwlab.wheel.link import get_protocol
+
+    stream = "can" not in get_protocol(protocol).transports
+    if interface == "virtual":
+        other = "serial --channel pty" if stream else "udp_multicast"
+        raise ConfigError(
+            "the virtual interface lives inside one process: a wheel served on it cannot be "
+            "reached by `rwlab wheel cmd`, `rwlab experiment` or any other process; serve it "
+            f"on --interface {other} (between processes on this machine, the default), "
+            + ("or a serial port" if stream else "socketcan (vcan0, a CAN adapter) or serial")
+        )
+    if interface is None:
+        return ("serial", channel or "pty") if stream else ("udp_multicast", channel)
+    return interface, channel
+
+
+def _wheel_line(wheel_name: str, protocol: str, params, wheel_model, unit) -> str:
+    """The start-up line that names the wheel model served, and why that one."""
+    if params:
+        why = "--params"
+    elif wheel_model:
+        why = "--wheel"
+    else:
+        why = f"{protocol}'s default; --wheel NAME|FILE for another"
+    drawn = f", unit {unit}" if unit is not None else ""
+    return f"wheel model {wheel_name}{drawn} ({why})"
 
 
 def _close(transport) -> None:
@@ -231,19 +285,29 @@ def _status(node) -> str:
     help="Seconds to print telemetry after the command.",
 )
 @click.option("--timeout", type=Number(0, 3600, low_open=True), default=0.5, show_default=True)
+@click.option(
+    "--wheel",
+    "wheel_model",
+    metavar="NAME|FILE",
+    help="The wheel's model, for its limits and inertia (a preset or a wheel spec file; "
+    "default: the protocol's own wheel, as `rwlab wheel serve` uses).",
+)
 @_friendly_errors
-def wheel_cmd(interface, channel, node_id, protocol, profile, action, value, watch, timeout):
+def wheel_cmd(
+    interface, channel, node_id, protocol, profile, action, value, watch, timeout, wheel_model
+):
     """Send one command (speed rpm, accel rpm/s, idle, clear) and print telemetry.
 
     On the virtual interface an in-process simulated wheel answers. The wheel is
     idled when the command ends unless the action was idle or clear.
     """
-    from rwlab.wheel import WheelClient, WheelNode
+    from rwlab.wheel import WheelClient, WheelNode, WheelParams
     from rwlab.wheel.bus import open_transport
     from rwlab.wheel.link import get_protocol, resolve_protocol
     from rwlab.wheel.serial import open_pty
 
     protocol = resolve_protocol(protocol, profile)
+    params = WheelParams.load(wheel_model or get_protocol(protocol).wheel)
     node = None
     if interface == "virtual" and "can" not in get_protocol(protocol).transports:
         node_bus, bus = open_pty()  # a serial protocol's twin answers over a pty pair
@@ -251,8 +315,8 @@ def wheel_cmd(interface, channel, node_id, protocol, profile, action, value, wat
         bus = open_transport(protocol, interface, channel)
         node_bus = open_transport(protocol, interface, channel) if interface == "virtual" else None
     if node_bus is not None:
-        node = WheelNode(node_bus, node_id, latency=0.02, protocol=protocol).start()
-    client = WheelClient(bus, node_id, timeout=timeout, protocol=protocol)
+        node = WheelNode(node_bus, node_id, params, latency=0.02, protocol=protocol).start()
+    client = WheelClient(bus, node_id, params, timeout=timeout, protocol=protocol)
     with _stop_signals():  # SIGTERM too ends in the finally: the wheel idles
         try:
             send = {

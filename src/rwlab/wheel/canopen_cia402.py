@@ -101,6 +101,7 @@ from rwlab.wheel.canopen_common import (
     TpdoSchedule,
     canopen_id,
     cob_ids,
+    nmt_heartbeat_byte,
     send_frame,
     setpoint_abort,
 )
@@ -122,7 +123,6 @@ PROFILE_VELOCITY, PROFILE_TORQUE = 3, 4
 SUPPORTED_MODES = {0, PROFILE_VELOCITY, PROFILE_TORQUE}
 MILLI = 1000  # 0.001 rpm per rpm; ‰ per unit
 NMT_OPERATIONAL = 0x05
-NMT_CODES = {"INITIALISING": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE-OPERATIONAL": 0x7F}
 REJECTED_BIT = 0x10  # 0x2005: a setpoint was refused since the last fault reset
 ERROR_CODES = {  # CiA 301 error code classes, as in the ``canopen`` profile
     Fault.OVERSPEED: 0x8400,
@@ -344,7 +344,7 @@ class Cia402NodeLink(CanopenNodeBase):
         )
         self._rejected = self._rejected or frame.command_rejected
         tpdo, cid = self.local.tpdo, self.cid
-        nmt = NMT_CODES.get(self.local.nmt.state, NMT_OPERATIONAL)
+        nmt = nmt_heartbeat_byte(self.local)
         send_frame(self.bus, 0x700 + cid, bytes([nmt]), t)
         if nmt != NMT_OPERATIONAL:
             return  # CiA 301: PDOs only in operational

@@ -37,6 +37,7 @@ from importlib import resources
 
 import can
 import canopen
+from canopen.nmt import NMT_STATES
 from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError
 
@@ -54,6 +55,7 @@ __all__ = [
     "SdoPumpNetwork",
     "checked_sdo_request",
     "cob_ids",
+    "nmt_heartbeat_byte",
     "send_frame",
     "setpoint_abort",
 ]
@@ -124,6 +126,25 @@ class ShippedEds:
         canopen.ObjectDictionary
         """
         return canopen.import_od(self.path(), node_id=cid)
+
+
+_NMT_CODES = {name: code for code, name in NMT_STATES.items()}  # the canopen package's table
+
+
+def nmt_heartbeat_byte(node: canopen.LocalNode) -> int:
+    """The state byte a heartbeat carries for ``node``'s NMT state (CiA 301: 0x04 stopped,
+    0x05 operational, 0x7F pre-operational), as an NMT master's commands left it.
+
+    Parameters
+    ----------
+    node : canopen.LocalNode
+        The twin's node.
+
+    Returns
+    -------
+    int
+    """
+    return _NMT_CODES.get(node.nmt.state, _NMT_CODES["OPERATIONAL"])
 
 
 def send_frame(bus: can.BusABC, cob_id: int, data: bytes, t: float) -> None:

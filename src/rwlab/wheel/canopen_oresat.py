@@ -80,6 +80,7 @@ from rwlab.wheel.canopen_common import (
     ShippedEds,
     TpdoSchedule,
     cob_ids,
+    nmt_heartbeat_byte,
     send_frame,
     setpoint_abort,
 )
@@ -107,7 +108,6 @@ ERROR_BITS = {  # the twin's faults in 0x4000:3; bits 24.. are rwlab's (OreSat a
 REJECTED_ERROR_BIT = 1 << 27  # rwlab's: a setpoint was refused since the last clear errors
 EMCY_CODES = {Fault.OVERSPEED: 0x8400, Fault.OVERCURRENT: 0x2300, Fault.WATCHDOG: 0x8130}
 EMCY_CODES[Fault.OVERTEMP] = 0x4200
-NMT_OPERATIONAL = 0x05
 HOUSEKEEPING_MS = 1000  # TPDO3/4 (bus, temperatures): the driver asks for them at 1 Hz
 
 
@@ -321,7 +321,7 @@ class OresatNodeLink(CanopenNodeBase):
         temperature = max(-32768, min(32767, round(frame.temperature * 100)))
         v.update({(0x4003, k): temperature for k in (1, 2, 3)})
         v.update({(0x4002, 1): frame.bus_voltage, (0x3003, 5): frame.uptime})
-        send_frame(self.bus, 0x700 + self.cid, bytes([NMT_OPERATIONAL]), t)
+        send_frame(self.bus, 0x700 + self.cid, bytes([nmt_heartbeat_byte(self.local)]), t)
         self._transmit((3, 4), t)
         for fault, code in EMCY_CODES.items():
             if new & fault:

@@ -61,6 +61,7 @@ from rwlab.wheel.canopen_common import (
     ShippedEds,
     canopen_id,
     cob_ids,
+    nmt_heartbeat_byte,
     send_frame,
     setpoint_abort,
 )
@@ -78,7 +79,6 @@ _TO_STATE = {
     Mode.CLEAR_FAULT: CLEAR_ERRORS,
 }
 _FROM_STATE = {v: k for k, v in _TO_STATE.items()}
-NMT_OPERATIONAL = 0x05
 EMCY_CODES = {  # CiA 301 error code classes
     Fault.OVERSPEED: 0x8400,  # velocity / speed controller
     Fault.OVERCURRENT: 0x2300,  # current, device output side
@@ -151,6 +151,8 @@ class CanopenNodeLink(CanopenNodeBase):
         return out
 
     def _on_rpdo(self, pdo_map: Any) -> None:
+        if self.local.nmt.state != "OPERATIONAL":
+            return  # CiA 301: RPDOs only in operational
         if len(pdo_map.data) != 6:
             self.bad_frames += 1
             return
@@ -223,6 +225,7 @@ class CanopenNodeLink(CanopenNodeBase):
             return
         self.network.stamp = t
         tpdo, cid = self.local.tpdo, self.cid
+        operational = self.local.nmt.state == "OPERATIONAL"  # CiA 301: PDOs only then
         if isinstance(frame, proto.Telemetry):
             state = _TO_STATE.get(frame.mode, IDLE)
             values = {
@@ -236,10 +239,11 @@ class CanopenNodeLink(CanopenNodeBase):
             flags = int(self._values.get(0x400C, 0)) & ~1
             values[0x400C] = flags | int(frame.speed_limited)
             self._values.update(values)
-            self._fill(tpdo[2])
-            send_frame(self.bus, 0x280 + cid, tpdo[2].data, t)
-            self._fill(tpdo[1])
-            send_frame(self.bus, 0x180 + cid, tpdo[1].data, t)
+            if operational:
+                self._fill(tpdo[2])
+                send_frame(self.bus, 0x280 + cid, tpdo[2].data, t)
+                self._fill(tpdo[1])
+                send_frame(self.bus, 0x180 + cid, tpdo[1].data, t)
             return
         new = frame.faults & ~self._faults
         self._faults = frame.faults
@@ -254,9 +258,10 @@ class CanopenNodeLink(CanopenNodeBase):
                 0x400C: flags | (2 if frame.command_rejected else 0),
             }
         )
-        self._fill(tpdo[3])
-        send_frame(self.bus, 0x380 + cid, tpdo[3].data, t)
-        send_frame(self.bus, 0x700 + cid, bytes([NMT_OPERATIONAL]), t)
+        if operational:
+            self._fill(tpdo[3])
+            send_frame(self.bus, 0x380 + cid, tpdo[3].data, t)
+        send_frame(self.bus, 0x700 + cid, bytes([nmt_heartbeat_byte(self.local)]), t)
         for fault, code in EMCY_CODES.items():
             if new & fault:
                 self.local.emcy.send(code, 0x01, struct.pack("<B", int(frame.faults)))

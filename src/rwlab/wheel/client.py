@@ -256,6 +256,7 @@ class WheelClient:
         if the wheel reports a fault meanwhile (unless the command was IDLE or CLEAR).
         """
         deadline = self.clock.now() + (self.timeout if timeout is None else timeout)
+        self.link.poll_now(self.clock.now())  # a polled wheel: ask now, not at the next poll
         while True:
             for _, frame in self.poll():
                 if frame.sequence_echo == sequence:

@@ -120,6 +120,16 @@ class HostLink(abc.ABC):
         (a protocol whose wheel streams only once configured, e.g. OreSat's TPDO event
         timers, does it here; otherwise it does on its first command)."""
 
+    def poll_now(self, now: float) -> None:  # noqa: B027 - streaming links need nothing
+        """Ask the wheel for its state at once, off the polling schedule (a polled
+        protocol polls now; a streaming one already sends it unasked).
+
+        Parameters
+        ----------
+        now : float
+            Clock time, s.
+        """
+
     @abc.abstractmethod
     def send(self, cmd: Command, now: float) -> None:
         """Send a command to the wheel.
@@ -226,6 +236,9 @@ class WheelProtocol(abc.ABC):
     description: ClassVar[str] = ""
     transports: ClassVar[tuple[str, ...]] = ("can",)
     baudrate: ClassVar[int] = 115_200  # a serial line's speed, bit/s, unless the user sets one
+    # the wheel model (a preset of `rwlab wheel models`) a twin of this protocol is unless
+    # told otherwise: the family's own wheel where rwlab ships one, else paper A's RW90
+    wheel: ClassVar[str] = "rw90"
 
     @abc.abstractmethod
     def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:

@@ -433,6 +433,7 @@ class NrwaT6Protocol(WheelProtocol):
     transports = ("stream",)
     baudrate = 460_800
     poll_rate = 10.0
+    wheel = "nrwa-t6"
 
     def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> NrwaT6HostLink:
         return NrwaT6HostLink(transport, node_id, clock, self.poll_rate)

@@ -48,7 +48,7 @@ from typing import Any
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink
 from rwlab.wheel.physics import RW90, Mode, WheelParams
-from rwlab.wheel.serial import END, slip_decode, slip_encode
+from rwlab.wheel.serial import MAX_BYTES_PER_READ, SlipReader, slip_decode, slip_encode
 
 __all__ = [
     "ACK",
@@ -68,7 +68,6 @@ __all__ = [
 
 POLL, B_BIT, ACK = 0x80, 0x40, 0x20
 MAX_DATA_BYTES = 260  # NRWA-T6 ICD §11.3: a longer message is dropped unanswered
-MAX_BYTES_PER_READ = 1 << 16  # a flood is read in bounded bites
 
 
 def crc16_nsp(data: bytes, crc: int = 0xFFFF) -> int:
@@ -183,45 +182,6 @@ def decode_packet(body: bytes, crc: Any = crc16_nsp) -> NspPacket:
     if crc(raw[:-2]) != int.from_bytes(raw[-2:], "little"):
         raise proto.ProtocolError("NSP frame fails its CRC")
     return NspPacket(raw[0], raw[1], raw[2], bytes(raw[3:-2]))
-
-
-class SlipReader:
-    """Cuts a byte stream into SLIP frame bodies; bytes outside frames are dropped."""
-
-    def __init__(self) -> None:
-        self._buffer = bytearray()
-
-    def feed(self, data: bytes) -> list[bytes]:
-        """Add bytes; return the bodies of the frames they completed (empty ones skipped).
-
-        Parameters
-        ----------
-        data : bytes
-            What the port delivered.
-
-        Returns
-        -------
-        list of bytes
-            Escaped frame bodies, oldest first.
-        """
-        self._buffer += data
-        bodies = []
-        while True:
-            start = self._buffer.find(END)
-            if start < 0:
-                self._buffer.clear()
-                break
-            end = self._buffer.find(END, start + 1)
-            if end < 0:
-                del self._buffer[:start]
-                break
-            body = bytes(self._buffer[start + 1 : end])
-            del self._buffer[:end]  # the closing FEND may open the next frame
-            if body:
-                bodies.append(body)
-        if len(self._buffer) > MAX_BYTES_PER_READ:  # a frame that never ends: drop it
-            self._buffer.clear()
-        return bodies
 
 
 def read_port(port: Any) -> bytes:
@@ -548,6 +508,17 @@ class NspHostLinkBase(HostLink):
         """Poll the wheel ``rate`` times per second, Hz."""
         self.period = 1.0 / rate
         self._next_poll = self.clock.now()
+
+    def poll_now(self, now: float) -> None:
+        """Poll the wheel now, keeping the schedule: a driver waiting for the telemetry that
+        echoes an ACKed command gets it in one round trip, not at the next poll (up to a
+        poll period, 100 ms at 10 Hz, later)."""
+        if self._busy:
+            return
+        if now >= self._next_poll - 1e-12:
+            self._tick(now)  # a scheduled poll is due anyway
+        else:
+            self._poll(now)
 
     def _tick(self, now: float) -> float:
         if not self._busy and now >= self._next_poll - 1e-12:

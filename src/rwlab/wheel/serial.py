@@ -16,9 +16,10 @@ import time
 
 import can
 
-__all__ = ["SlipSerialBus", "crc16_ccitt", "slip_decode", "slip_encode"]
+__all__ = ["SlipReader", "SlipSerialBus", "crc16_ccitt", "slip_decode", "slip_encode"]
 
 END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
+MAX_BYTES_PER_READ = 1 << 16  # a flood is read in bounded bites
 
 
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
@@ -90,6 +91,45 @@ def slip_decode(body: bytes) -> bytes:
         else:
             out.append(byte)
     return bytes(out)
+
+
+class SlipReader:
+    """Cuts a byte stream into SLIP frame bodies; bytes outside frames are dropped."""
+
+    def __init__(self) -> None:
+        self._buffer = bytearray()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        """Add bytes; return the bodies of the frames they completed (empty ones skipped).
+
+        Parameters
+        ----------
+        data : bytes
+            What the port delivered.
+
+        Returns
+        -------
+        list of bytes
+            Escaped frame bodies, oldest first.
+        """
+        self._buffer += data
+        bodies = []
+        while True:
+            start = self._buffer.find(END)
+            if start < 0:
+                self._buffer.clear()
+                break
+            end = self._buffer.find(END, start + 1)
+            if end < 0:
+                del self._buffer[:start]
+                break
+            body = bytes(self._buffer[start + 1 : end])
+            del self._buffer[:end]  # the closing FEND may open the next frame
+            if body:
+                bodies.append(body)
+        if len(self._buffer) > MAX_BYTES_PER_READ:  # a frame that never ends: drop it
+            self._buffer.clear()
+        return bodies
 
 
 def pack(msg: can.Message) -> bytes:
