@@ -1,7 +1,7 @@
 """Wall time of ``rwlab identify`` against ``rwlab ident arx`` on one record, and of ``rwlab demo``.
 
 Run:  python bench/bench_identify.py [--record FILE.mcap] [--repeats 5] [--quick]
-          [--baseline SRC] [--no-demo | --demo-only]
+          [--baseline SRC] [--no-demo | --demo-only] [--demo-repeats 3]
 
 Makes a 25-minute PRBS record of the RW90 twin (simulated clock, seed 3) unless
 ``--record`` names one, then runs, ``--repeats`` times and back to back (so a busy
@@ -12,9 +12,10 @@ also times ``identify`` from another source tree (e.g. ``git archive 96f5310 src
 tar -x -C /tmp/base`` and ``--baseline /tmp/base/src``), in the same rounds. The
 table gives the median wall and CPU time (this process's children) with the spread
 (min–max) and the ratio of the medians; the target (issue 45) is identify ≤ 2×
-ident arx. Then ``rwlab demo`` (``--quick``: its quick version) twice with a fresh
-numba cache: cold (every kernel compiled) and warm (the cache filled), target
-≤ 20 s warm on a quiet machine.
+ident arx. Then ``rwlab demo`` (``--quick``: its quick version) with a fresh
+numba cache: once cold (every kernel compiled), then ``--demo-repeats`` times warm
+(the cache filled; with ``--baseline``, that tree's demo too, in the same rounds),
+target ≤ 20 s warm on a quiet machine.
 
 The machine's load average is printed with each table: on a shared machine the
 numbers are an upper bound, and the spread says how far to trust them. A
@@ -96,15 +97,24 @@ def bench_identify(record: Path, repeats: int, baseline: Path | None, out: Path)
     print(f"target: identify ≤ 2× ident arx ({load()} at end)")
 
 
-def bench_demo(quick: bool, out: Path) -> None:
-    cache = out / "numba-cache"  # fresh: the first run compiles every kernel
-    env = {"NUMBA_CACHE_DIR": str(cache)}
+def bench_demo(quick: bool, out: Path, repeats: int = 1, baseline: Path | None = None) -> None:
     args = ["demo", "--out", str(out / "demo"), "--force", *(["--quick"] if quick else [])]
+    trees = {"demo": SRC} | ({"demo (baseline)": baseline} if baseline is not None else {})
+    # a fresh numba cache per tree: the first run compiles every kernel
+    envs = {n: {"NUMBA_CACHE_DIR": str(out / f"numba-cache-{i}")} for i, n in enumerate(trees)}
     print(f"\nrwlab demo{' --quick' if quick else ''} ({load()} at start)")
     print(f"{'run':<34} {'wall s':>8} {'CPU s':>8}")
-    for label in ("cold (numba cache empty)", "warm (numba cache filled)"):
-        wall, cpu = run(args, env=env)
-        print(f"{label:<34} {wall:8.1f} {cpu:8.1f}")
+    for name, src in trees.items():
+        wall, cpu = run(args, src, env=envs[name])
+        print(f"{name + ', cold (numba cache empty)':<34} {wall:8.1f} {cpu:8.1f}")
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in trees}
+    for _ in range(repeats):  # back to back, so a busy machine slows both alike
+        for name, src in trees.items():
+            times[name].append(run(args, src, env=envs[name]))
+    print(f"warm (numba cache filled), {repeats} rounds: wall s and CPU s, median (min–max)")
+    for name, rows in times.items():
+        wall, cpu = [r[0] for r in rows], [r[1] for r in rows]
+        print(f"{name:<22} {spread(wall):>26} {spread(cpu):>26}")
     print(f"target: ≤ 20 s warm on a quiet machine, the full demo ({load()} at end)")
 
 
@@ -116,6 +126,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="3 rounds, the quick demo")
     parser.add_argument("--no-demo", action="store_true", help="skip the demo")
     parser.add_argument("--demo-only", action="store_true", help="only the demo")
+    parser.add_argument("--demo-repeats", type=int, default=1, help="warm demo runs")
     args = parser.parse_args()
     repeats = 3 if args.quick else args.repeats
     with tempfile.TemporaryDirectory(prefix="bench_identify_") as tmp:
@@ -124,7 +135,7 @@ def main() -> None:
             record = args.record or make_record(out, 1500.0)
             bench_identify(record, repeats, args.baseline, out)
         if not args.no_demo:
-            bench_demo(args.quick, out)
+            bench_demo(args.quick, out, args.demo_repeats, args.baseline)
 
 
 if __name__ == "__main__":

@@ -120,9 +120,10 @@ def identified_prbs(tmp_path_factory) -> tuple[str, Path, Path]:
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels(tmp_path_factory) -> None:
-    """Under pytest-xdist, the attitude loop's numba kernels compile in one worker while
-    the others wait, then load from numba's cache (``cache=True``) instead of compiling
-    the same code again. A no-op in one process (``-p no:xdist``, ``-o addopts=""``)."""
+    """Under pytest-xdist, the attitude loop's and the wheel twin's numba kernels compile
+    in one worker while the others wait, then load from numba's cache (``cache=True``)
+    instead of compiling the same code again. A no-op in one process (``-p no:xdist``,
+    ``-o addopts=""``)."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
 
@@ -131,5 +132,8 @@ def compiled_kernels(tmp_path_factory) -> None:
 
         for controller in ("lqr", "lqg"):
             rwlab.simulate("geo-smallsat", controller, duration=2.0)
+        from rwlab.wheel import WheelPhysics  # the twin's step (rwlab.wheel.kernel)
+
+        WheelPhysics().run(1e-3, 10)
 
     _once_per_session(tmp_path_factory, "compiled-kernels", make)

@@ -18,7 +18,6 @@ the wheel TOML); this module holds the pieces that are more than one line:
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping
 from dataclasses import Field, replace
 from typing import Any, ClassVar, Protocol, TypeVar
@@ -174,70 +173,40 @@ class HallSpeedSensor:
     """
 
     def __init__(self, params: HallParams) -> None:
+        from rwlab.wheel import kernel_layout as K
+
         self.edges_per_rev = 6 * int(params.pole_pairs)
         self.pitch = 2 * math.pi / self.edges_per_rev  # rad between nominal edges
         rng = np.random.default_rng([int(params.hall_pattern_seed), 0x48414C4C])
         misplace = math.radians(params.hall_misalignment_deg) / params.pole_pairs  # mechanical
         offsets = misplace * rng.standard_normal(self.edges_per_rev)
-        self.offsets = (offsets - offsets.mean()).tolist()  # a pattern around nominal edges
-        self.jitter = (params.hall_jitter_s * rng.standard_normal(4096)).tolist()  # per edge
+        self.offsets = offsets - offsets.mean()  # a pattern around nominal edges, rad
+        self.jitter = params.hall_jitter_s * rng.standard_normal(4096)  # per edge, s
         self.tick = 1.0 / params.hall_timer_hz
         self.window = params.hall_window_s
         min_speed = params.min_measurable_rpm * 2 * math.pi / 60
         self.timeout = self.pitch / min_speed if min_speed > 0 else math.inf
-        self._edges: deque[float] = deque(maxlen=self.edges_per_rev + 1)  # captured times
-        self._direction = 0.0
-        self._k: int | None = None  # the last edge at or below the rotor angle
-        self._t = 0.0
-        self._theta = 0.0
-        self._estimate = 0.0  # rad/s, at the last edge
-        self._last_edge = -math.inf
-
-    def _edge_angle(self, k: int) -> float:
-        return k * self.pitch + self.offsets[k % self.edges_per_rev]
+        # the firmware's state, in the compiled step's layout (rwlab.wheel.kernel.H_*):
+        # the last edges' captured times (a ring of a revolution and one), the direction,
+        # the last edge at or below the rotor angle, the last record's time and angle,
+        # the estimate at the last edge (rad/s) and that edge's time
+        self.edges = np.zeros(self.edges_per_rev + 1)
+        self.state = np.zeros(K.N_HALL)
+        self.state[K.H_LAST_EDGE] = -math.inf
+        self.state[K.H_EDGES_PER_REV] = self.edges_per_rev
+        self.state[K.H_PITCH] = self.pitch
+        self.state[K.H_TICK] = self.tick
+        self.state[K.H_WINDOW] = self.window
+        self.state[K.H_TIMEOUT] = self.timeout
 
     def record(self, t: float, theta: float) -> None:
         """Log the rotor angle ``theta`` (rad, unwrapped) at time ``t`` (s), every step."""
-        k = self._k
-        if k is None:
-            k = math.floor(theta / self.pitch)
-            k = k if self._edge_angle(k) <= theta else k - 1
-        else:
-            while self._edge_angle(k + 1) <= theta:  # edges passed going forward
-                k += 1
-                self._edge(k, 1.0, t, theta)
-            while self._edge_angle(k) > theta:  # going backward
-                self._edge(k, -1.0, t, theta)
-                k -= 1
-        self._k, self._t, self._theta = k, t, theta
+        from rwlab.wheel.kernel import hall_record
 
-    def _edge(self, k: int, direction: float, t: float, theta: float) -> None:
-        a = self._edge_angle(k)
-        frac = (a - self._theta) / (theta - self._theta)
-        exact = self._t + frac * (t - self._t)
-        captured = round((exact + self.jitter[k % 4096]) / self.tick) * self.tick
-        if direction != self._direction:
-            self._edges.clear()  # a reversal: intervals across it mean nothing
-            self._direction = direction
-        edges = self._edges
-        edges.append(captured)
-        self._last_edge = captured
-        if len(edges) < 2:
-            self._estimate = 0.0
-            return
-        n = len(edges) - 1
-        if n < self.edges_per_rev or captured - edges[0] > self.window:
-            n = 1  # fewer edges: those within the window, at least one interval
-            while n + 1 < len(edges) and captured - edges[-n - 2] <= self.window:
-                n += 1
-        span = max(captured - edges[-n - 1], self.tick)
-        self._estimate = direction * n * self.pitch / span
+        hall_record(self.state, self.edges, self.offsets, self.jitter, float(t), float(theta))
 
     def read(self) -> float:
         """The firmware's speed now, rad/s (0 when no edge came within the timeout)."""
-        since = self._t - self._last_edge
-        if since > self.timeout:
-            return 0.0
-        if abs(self._estimate) * since > 1.5 * self.pitch:  # an edge is well overdue:
-            return math.copysign(self.pitch / since, self._estimate)  # slower than it was
-        return self._estimate
+        from rwlab.wheel.kernel import hall_read
+
+        return float(hall_read(self.state))

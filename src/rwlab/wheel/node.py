@@ -242,9 +242,7 @@ class WheelNode:
         span = t_next - self.t
         if span > 0:
             steps = max(1, math.ceil(span / self.physics_dt - 1e-9))
-            h = span / steps
-            for _ in range(steps):
-                self.wheel.step(h)
+            self.wheel.run(span / steps, steps)
         self.t = t_next
 
     def _handle_events(self) -> None:

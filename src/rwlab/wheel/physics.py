@@ -26,14 +26,15 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
 from rwlab.errors import ConfigError
-from rwlab.wheel.imperfections import stribeck_friction
+from rwlab.wheel import kernel_layout as K
 from rwlab.wheelspec import TWIN_NAMES, WheelSpec, preset_names
 
 __all__ = [
@@ -564,8 +565,41 @@ def _clip(x: float, limit: float) -> float:
     return -limit if x < -limit else (limit if x > limit else x)
 
 
+T = TypeVar("T")
+
+
+class _Column(Generic[T]):
+    """An attribute of :class:`WheelPhysics` kept in its state vector, the compiled
+    step's layout (:mod:`rwlab.wheel.kernel`), read back as ``kind``."""
+
+    def __init__(self, index: int, kind: Callable[[float], T]) -> None:
+        self.index, self.kind = index, kind
+
+    def __get__(self, wheel: WheelPhysics, owner: type | None = None) -> T:
+        return self.kind(wheel._x[self.index])
+
+    def __set__(self, wheel: WheelPhysics, value: T) -> None:
+        wheel._x[self.index] = float(value)  # type: ignore[arg-type]
+
+
+def _optional(value: float) -> float | None:
+    return None if math.isnan(value) else value
+
+
+def _float(value: float) -> float:
+    return float(value)
+
+
+class _OptionalColumn(_Column[float | None]):
+    def __set__(self, wheel: WheelPhysics, value: float | None) -> None:
+        wheel._x[self.index] = math.nan if value is None else float(value)
+
+
 class WheelPhysics:
     """One wheel's state over time, stepped with a fixed time step.
+
+    The steps run compiled (:mod:`rwlab.wheel.kernel`, the same numbers as the
+    equations interpreted); the state lives in one vector, each part an attribute.
 
     Parameters
     ----------
@@ -574,6 +608,27 @@ class WheelPhysics:
         For the measurement noise and the friction drift.
     """
 
+    time = _Column(K.X_TIME, _float)  # s since start
+    angle = _Column(K.X_ANGLE, _float)  # rotor angle, rad (unwrapped)
+    bus_voltage = _Column(K.X_BUS_VOLTAGE, _float)  # at the driver, after the source's drop, V
+    _drift = _Column(K.X_DRIFT, _float)  # log of the friction factor's random walk
+    _drift_clock = _Column(K.X_DRIFT_CLOCK, _float)
+    speed = _Column(K.X_SPEED, _float)  # rad/s
+    current = _Column(K.X_CURRENT, _float)  # A
+    temperature = _Column(K.X_TEMPERATURE, _float)  # °C
+    mode = _Column(K.X_MODE, lambda v: Mode(int(v)))
+    setpoint = _Column(K.X_SETPOINT, _float)  # rad/s (speed mode) or rad/s² (acceleration)
+    faults = _Column(K.X_FAULTS, lambda v: Fault(int(v)))
+    speed_limited = _Column(K.X_SPEED_LIMITED, bool)
+    _integral = _Column(K.X_INTEGRAL, _float)
+    # fault injection: a stalled/shorted driver's current, A
+    forced_current = _OptionalColumn(K.X_FORCED_CURRENT, _optional)
+    # Degradations of the rotor and driver (fault injection). The wheel's own
+    # controller does not know them: it keeps computing with ``params``.
+    friction_factor = _Column(K.X_FRICTION_FACTOR, _float)  # bearing wear: true = this × nominal
+    torque_constant_factor = _Column(K.X_TORQUE_CONSTANT_FACTOR, _float)  # a weakened motor
+    current_limit = _Column(K.X_CURRENT_LIMIT, _float)  # the driver's current clamp, A
+
     def __init__(self, params: WheelParams = RW90, seed=0) -> None:
         from rwlab.wheel.imperfections import HallSpeedSensor
 
@@ -581,26 +636,21 @@ class WheelPhysics:
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         # a stream of its own, so that the ideal twin's speed noise is what it was
         self._imp_rng = self.rng.spawn(1)[0]
-        self.time = 0.0  # s since start
-        self.angle = 0.0  # rotor angle, rad (unwrapped)
-        self.bus_voltage = params.bus_voltage  # at the driver, after the source's drop, V
-        self._drift = 0.0  # log of the friction factor's random walk
-        self._drift_clock = 0.0
+        self._x = np.zeros(K.N_STATE)
+        self._p = K.params_vector(params)
+        self.bus_voltage = params.bus_voltage
+        self.temperature = params.ambient_c
+        self.forced_current = None
+        self.friction_factor = 1.0
+        self.torque_constant_factor = 1.0
+        self.current_limit = params.current_limit
         self.hall = HallSpeedSensor(params) if params.hall_speed else None
-        self.speed = 0.0  # rad/s
-        self.current = 0.0  # A
-        self.temperature = params.ambient_c  # °C
-        self.mode = Mode.IDLE
-        self.setpoint = 0.0  # rad/s (speed mode) or rad/s² (acceleration mode)
-        self.faults = Fault.NONE
-        self.speed_limited = False
-        self._integral = 0.0
-        self.forced_current: float | None = None  # fault injection: a stalled/shorted driver
-        # Degradations of the rotor and driver (fault injection). The wheel's own
-        # controller does not know them: it keeps computing with ``params``.
-        self.friction_factor = 1.0  # bearing wear: the true friction is this × the nominal
-        self.torque_constant_factor = 1.0  # a weakened motor: the true k_t is this × nominal
-        self.current_limit = params.current_limit  # the driver's current clamp, A
+        # the compiled step's Hall arrays (unused placeholders without a Hall sensor)
+        self._hall_arrays = (
+            (self.hall.state, self.hall.edges, self.hall.offsets, self.hall.jitter)
+            if self.hall is not None
+            else (np.zeros(K.N_HALL), np.zeros(1), np.zeros(1), np.zeros(1))
+        )
 
     # -- commands ----------------------------------------------------------------
     def command(self, mode: Mode, setpoint_rpm: float) -> None:
@@ -633,17 +683,11 @@ class WheelPhysics:
         return self.hall.read() if self.hall is not None else self.speed
 
     def _accel_request(self, dt: float, speed: float) -> float:
-        p = self.params
-        if self.mode == Mode.SPEED:
-            target = _clip(self.setpoint, p.max_speed)
-            error = target - speed
-            request = p.speed_kp * (p.speed_setpoint_weight * target - speed) + self._integral
-            if abs(request) < p.max_accel:  # anti-windup: integrate only when unsaturated
-                self._integral += p.speed_ki * error * dt
-            return _clip(request, p.max_accel)
-        if self.mode == Mode.ACCELERATION:
-            return _clip(self.setpoint, p.max_accel)
-        return 0.0
+        """The inner loop's acceleration request at the sensed ``speed`` (rad/s), rad/s²;
+        integrates the speed loop over ``dt`` s."""
+        from rwlab.wheel.kernel import accel_request
+
+        return float(accel_request(self._x, self._p, float(dt), float(speed)))
 
     def friction_torque(self, speed: float) -> float:
         """Nominal friction torque opposing the rotation, N·m (the controller's feed-forward)."""
@@ -659,23 +703,9 @@ class WheelPhysics:
         stiction on, else Coulomb + viscous; the viscous part falls with
         temperature; both scaled by the drift and any injected wear.
         """
-        p = self.params
-        viscous = p.viscous_friction * math.exp(
-            -p.viscous_temp_coeff * (self.temperature - p.ambient_c)
-        )
-        if p.stiction:
-            law = stribeck_friction(
-                speed,
-                p.coulomb_friction,
-                p.breakaway_friction,
-                rpm_to_rad_s(p.stribeck_speed_rpm),
-                viscous,
-            )
-        else:
-            law = viscous * speed + p.coulomb_friction * math.copysign(1.0, speed) * (
-                abs(speed) > 1e-9
-            )
-        return self.friction_factor * math.exp(self._drift) * law
+        from rwlab.wheel.kernel import bearing_friction
+
+        return float(bearing_friction(self._x, self._p, float(speed)))
 
     def _torque_constant(self) -> float:
         """The true k_t now (injected weakening, magnet temperature), N·m/A."""
@@ -683,111 +713,29 @@ class WheelPhysics:
         warm = 1 - p.torque_constant_temp_coeff * (self.temperature - p.ambient_c)
         return self.torque_constant_factor * p.torque_constant * warm
 
-    def _resistance(self) -> float:
-        p = self.params
-        rise = self.temperature - p.ambient_c
-        return p.winding_resistance * (1 + p.resistance_temp_coeff * rise)
-
-    def _supply_limit(self, current: float) -> float:
-        """Clip the current to what the bus voltage drives against the back-EMF."""
-        p = self.params
-        if not p.back_emf:
-            return current
-        volts = p.driver_max_duty * self.bus_voltage
-        emf = self._torque_constant() * self.speed
-        r = self._resistance()
-        return min(max(current, (-volts - emf) / r), (volts - emf) / r)
-
-    def _ripple_mean(self, periods: float, dt: float) -> tuple[float, float]:
-        """Means of sin(nθ) and cos(nθ) over the step (exact for a constant speed)."""
-        a0 = periods * self.angle
-        span = periods * self.speed * dt
-        if abs(span) < 1e-6:
-            return math.sin(a0), math.cos(a0)
-        return (
-            (math.cos(a0) - math.cos(a0 + span)) / span,
-            (math.sin(a0 + span) - math.sin(a0)) / span,
-        )
-
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (use ≤ 1 ms for the inner loop's accuracy)."""
-        p = self.params
-        sensed = self.feedback_speed()
-        alpha = self._accel_request(dt, sensed)
-        if self.mode == Mode.IDLE:
-            current = 0.0
-        else:
-            torque = p.inertia * alpha + self.friction_torque(sensed)
-            current = _clip(torque / p.torque_constant, self.current_limit)
-        # speed limit: never drive further beyond the maximum speed
-        self.speed_limited = abs(self.speed) >= p.max_speed and current * self.speed > 0
-        if self.speed_limited:
-            current = _clip(
-                self.friction_torque(self.speed) / p.torque_constant, self.current_limit
-            )
-        current = self._supply_limit(current)
-        if self.forced_current is not None:
-            current = self.forced_current
-        self.current = current
-        motor = self._torque_constant() * current  # the true motor, not the model
-        if p.torque_ripple:
-            motor *= 1 + p.torque_ripple * self._ripple_mean(6 * p.pole_pairs, dt)[1]
-        if p.cogging_torque:
-            motor += p.cogging_torque * self._ripple_mean(p.cogging_periods, dt)[0]
-        if p.stiction:
-            new_speed = self._stick_slip(motor, dt)
-        else:
-            net = motor - self.bearing_friction(self.speed)
-            new_speed = self.speed + net / p.inertia * dt
-            if self.mode == Mode.IDLE and self.speed != 0 and new_speed * self.speed < 0:
-                new_speed = 0.0  # friction stops the wheel; it does not reverse it
-        self.angle += 0.5 * (self.speed + new_speed) * dt
-        self.speed = new_speed
-        self.time += dt
-        if self.hall is not None:
-            self.hall.record(self.time, self.angle)
-        self._update_supply_and_heat(current, dt)
-        self._check_faults()
+        self.run(dt, 1)
 
-    def _stick_slip(self, motor: float, dt: float) -> float:
-        """New speed under breakaway friction: stuck at 0 until |motor| > τ_brk."""
-        p = self.params
-        if self.speed == 0.0:
-            breakaway = self.friction_factor * math.exp(self._drift) * p.breakaway_friction
-            if abs(motor) <= breakaway:
-                return 0.0
-            return (motor - math.copysign(breakaway, motor)) / p.inertia * dt
-        new_speed = self.speed + (motor - self.bearing_friction(self.speed)) / p.inertia * dt
-        return 0.0 if new_speed * self.speed < 0 else new_speed  # stops; breakaway decides
+    def run(self, dt: float, steps: int) -> None:
+        """Advance by ``steps`` steps of ``dt`` seconds each, compiled.
 
-    def _update_supply_and_heat(self, current: float, dt: float) -> None:
+        Parameters
+        ----------
+        dt : float
+            Step, s (≤ 1 ms for the inner loop's accuracy).
+        steps : int
+            Number of steps (0: nothing).
+        """
+        from rwlab.wheel.kernel import advance
+
         p = self.params
-        r = self._resistance()
-        heat = r * current**2
-        self.temperature += (
-            dt
-            / p.thermal_time_constant
-            * (p.ambient_c + p.thermal_resistance * heat - self.temperature)
-        )
-        if p.back_emf:  # the supply current sags the bus through its source resistance
-            power = (r * current + self._torque_constant() * self.speed) * current
-            drop = p.bus_source_resistance * max(power, 0.0) / p.bus_voltage
-            self.bus_voltage = p.bus_voltage - drop
-        if p.friction_drift:
-            self._drift_clock += dt
+        state, edges, offsets, jitter = self._hall_arrays
+        while steps > 0:
+            steps -= advance(self._x, self._p, state, edges, offsets, jitter, float(dt), int(steps))
             while self._drift_clock >= 1.0:  # a random walk in 1 s steps
                 self._drift_clock -= 1.0
                 self._drift += p.friction_drift / 60 * self._imp_rng.standard_normal()
-
-    def _check_faults(self) -> None:
-        p = self.params
-        if abs(rad_s_to_rpm(self.speed)) > p.overspeed_fault_rpm:
-            self.latch(Fault.OVERSPEED)
-        if abs(self.current) > p.overcurrent_fault:
-            self.latch(Fault.OVERCURRENT)
-            self.current = 0.0
-        if self.temperature > p.overtemp_fault_c:
-            self.latch(Fault.OVERTEMP)
 
     # -- measurement -----------------------------------------------------------------
     def measured_speed_rpm(self) -> float:
@@ -853,6 +801,5 @@ def simulate_speed_command(
     for k, c in enumerate(np.asarray(command_rpm, dtype=float)):
         out[k] = wheel.measured_speed_rpm()
         wheel.command(mode, c)
-        for _ in range(substeps):
-            wheel.step(h)
+        wheel.run(h, substeps)
     return out
