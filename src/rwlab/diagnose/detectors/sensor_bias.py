@@ -9,11 +9,10 @@ from rwlab.diagnose.features import STEADY_SHARE, Features
 
 
 class SensorBias(Detector):
-    """Bias b: the speed residual b (the loop closes on the true speed), read at
-    every sample with its motion's σ (a chirp holds no constant speed for minutes);
-    the loop's catch-up read from the reported speed is off by kp·b, so the
-    acceleration residual is +kp·b, read only at constant speed (measured and
-    model |α| under ``STEADY_SHARE`` of the acceleration limit): in a speed change
+    """Bias b: the speed residual b (the loop closes on the true speed); the
+    loop's catch-up read from the reported speed is off by kp·b, so the
+    acceleration residual is +kp·b. Both are read only at constant speed
+    (measured and model |α| under ``STEADY_SHARE`` of the acceleration limit): in a speed change
     a weak motor, worn bearings or a clamp make the wheel lag, which a constant
     offset would otherwise absorb."""
 
@@ -27,9 +26,9 @@ class SensorBias(Detector):
     def gains(self, features, weights, grid):
         n = features.N
         quiet = features.steady(STEADY_SHARE)
+        weights = {k: v * quiet for k, v in weights.items()}
         p_speed = np.broadcast_to(grid[None, :], (n, grid.size))
         gain = self.channel_gain(features.speed_residual_rpm, weights["speed"], p_speed)
-        weights = {k: v * quiet for k, v in weights.items()}
         kp = features.scales.loop_gain_per_s
         if kp > 0:
             gain = gain + self.channel_gain(
