@@ -24,14 +24,14 @@ import numpy as np
 from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import Features
-from rwlab.diagnose.noise import NoiseModel
+from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
 __all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit"]
 
 # design choices, not measurements: a decision every 5 s; onsets 1, 2.5 and 5 min
 # back (5 min is the longest detection delay the lab accepts)
 EVERY_S = 5.0
-WINDOWS_S = (60.0, 150.0, 300.0)
+WINDOWS_S = (BLOCK_S, 150.0, 300.0)
 PAST_MIN_S = 120.0  # the record's own past counts once it spans this much
 SUPPORT = 2 * HALF_CHI2_95  # a past consistent with a size: within this log-likelihood
 
@@ -73,6 +73,15 @@ def _relative(fit: Fit, before: Fit) -> Fit:
         mid = fit.size - before.size
         return replace(fit, size=mid, ci95=(mid - half, mid + half))
     return fit
+
+
+def _away(size: float, before: float, healthy: float) -> bool:
+    """A change from ``before`` to ``size`` moves away from the healthy size: a fault makes
+    a wheel worse, never better (a chirp's slow start fits a clamp far below the spec's
+    that its fast end refutes: a move back toward the healthy clamp is no fault)."""
+    if np.isinf(healthy):
+        return size < before if healthy > 0 else size > before
+    return abs(size - healthy) > abs(before - healthy)
 
 
 def _widened(fit: Fit, zone: tuple[float, float]) -> Fit:
@@ -172,8 +181,8 @@ class Bank:
             ok = self.grid[name][past >= past.max() - SUPPORT * phi_own]
             own = self._between(name, ok[0] - drift, ok[-1] + drift)
             change = profile_fit(det.fault, det.unit, self.grid[name], ll_own, own, phi_own)
-            if change.log_lr > best.log_lr:
-                before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi_own)
+            before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi_own)
+            if change.log_lr > best.log_lr and _away(change.size, before.size, det.healthy_size):
                 best, against = _relative(change, before), "own past"
         if against == "population":
             best = _widened(best, self.zone_bounds[name])
@@ -184,9 +193,10 @@ class Bank:
         fits = [self.fit(name, max(0, k - w), k) for w in self.windows if k - max(0, k - w) >= 2]
         return max(fits, key=lambda f: f.fit.log_lr)
 
-    def tiles(self) -> list[tuple[int, int]]:
-        """Back-to-back windows of the longest length over the record: (start, end)."""
-        w = self.windows[-1]
+    def tiles(self, shortest: bool = False) -> list[tuple[int, int]]:
+        """Back-to-back windows of the longest (or the ``shortest``) length over the
+        record: (start, end)."""
+        w = self.windows[0] if shortest else self.windows[-1]
         return [(a, a + w) for a in range(0, self.features.N - w + 1, w)]
 
     def ends(self) -> range:

@@ -226,9 +226,13 @@ class Features:
 
     @property
     def saturated(self) -> np.ndarray:
-        """The loop demands its acceleration limit, bool, shape (N,)."""
+        """The loop demands its acceleration limit, within ``STEADY_SHARE`` of it, bool,
+        shape (N,). Not only the clipped samples: the demand of a slew's first samples sits
+        just under the limit while the wheel is still ramping into it, and its misfit
+        there is the slew's, not a quiet sample's (a healthy PRBS's slew entry otherwise
+        gave one sample a log-LR of 860 for a weak motor)."""
         limit = self.scales.accel_limit_rpm_s
-        return np.abs(self.demand_accel_rpm_s) >= limit * (1 - 1e-9)
+        return np.abs(self.demand_accel_rpm_s) >= limit * (1 - STEADY_SHARE)
 
 
 def _columns(data: IOData, Ts: float) -> dict[str, np.ndarray]:

@@ -4,8 +4,8 @@ A healthy residual is not white: the identified model misses the wheel most
 where the commanded acceleration changes fast (a chirp's fast end, a PRBS
 step). The model measured here says, per residual channel, the σ of the
 healthy residual in bins of the demand's jerk |Δα_demand|/Ts (rpm/s²), and an
-inflation κ: the variance of means of ``BLOCK`` consecutive standardised
-residuals over 1/``BLOCK``, so a log-likelihood over correlated samples counts
+inflation κ: the variance of means of ``BLOCK_S`` of consecutive standardised
+residuals over 1/(their number), so a log-likelihood over correlated samples counts
 them as N/κ independent ones. Both are measured on healthy records
 (:meth:`NoiseModel.measure`): the twin's for the shipped calibration, the lab's
 own for ``rwlab diagnose calibrate``.
@@ -31,7 +31,12 @@ CHANNELS = {
     # misfit between units that the moving samples carry
     "current_steady": "current_residual_a",
 }
-BLOCK = 20  # samples per block mean for κ: longer than the residuals' correlation
+# the block for κ, s: the decisions' shortest window (bank.WINDOWS_S[0]). κ is the
+# variance of a window's mean over what white noise gives it, so a log-LR over a window
+# counts its samples as N/κ independent ones at the length decisions are taken on: with
+# 20-sample blocks (10 s) κ missed the model's slow misfit (a speed residual's minutes-long
+# wander after a slew) and 60-s windows reached log-LRs of 320 on healthy records
+BLOCK_S = 60.0
 # jerk bin edges, rpm/s²: spaced by ×5 between a held speed and a chirp's fast end
 JERK_EDGES = (1.0, 5.0, 25.0, 125.0, 625.0)
 MIN_SAMPLES = 30  # a bin with fewer healthy samples takes its neighbour's σ
@@ -149,9 +154,10 @@ class NoiseModel:
                     for f in group
                 ]
             )
-            n = z.size // BLOCK
-            means = z[: n * BLOCK].reshape(n, BLOCK).mean(axis=1)
-            inflation[key] = max(1.0, float(means.var() * BLOCK / max(z.var(), 1e-300)))
+            block = max(2, round(BLOCK_S / group[0].scales.Ts))
+            n = z.size // block
+            means = z[: n * block].reshape(n, block).mean(axis=1)
+            inflation[key] = max(1.0, float(means.var() * block / max(z.var(), 1e-300)))
         return cls(sigma, inflation)
 
     def to_dict(self) -> dict:

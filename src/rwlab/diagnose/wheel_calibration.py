@@ -5,11 +5,14 @@
 everything the pipeline decides with:
 
 - the noise model (:class:`~rwlab.diagnose.noise.NoiseModel`);
-- per model-based fault, the *population zone*: the union of each record's
-  profile-likelihood 95 % interval of the fault's size (a unit of another
-  friction or k_t than the reference's is healthy);
-- per fault, the *drift*: the largest change of the size between a healthy
-  record's halves;
+- per model-based fault, the *population zone*: the narrowest interval that
+  every healthy window's profile-likelihood 95 % interval of the fault's size
+  meets (a unit of another friction or k_t than the reference's is healthy;
+  a window that hardly constrains the size, a chirp's fast end for friction,
+  widens nothing), the windows back-to-back at the decisions' shortest length;
+- per fault, the *drift*: the largest gap between consecutive such windows'
+  intervals (0 where they overlap), against the population and the record's
+  own past;
 - per fault, the peaks of its statistic's excursions above χ²₁(0.95)/2 on every
   record (restarted detectors: each excursion is one false alarm). A rate r per
   hour maps to the threshold exceeded r·hours times; below one such peak per
@@ -102,6 +105,16 @@ def excursion_peaks(stat: np.ndarray, floor: float = HALF_CHI2_95) -> list[float
     return peaks
 
 
+def _mids(intervals: list[tuple[float, float]]) -> list[float]:
+    """Each interval's middle."""
+    return [(lo + hi) / 2 for lo, hi in intervals]
+
+
+def _gaps(intervals: list[tuple[float, float]]) -> list[float]:
+    """How far apart consecutive intervals lie (0 where they overlap)."""
+    return [max(0.0, b[0] - a[1], a[0] - b[1]) for a, b in itertools.pairwise(intervals)]
+
+
 @dataclass(frozen=True)
 class DiagnosisCalibration:
     """What the pipeline decides with, measured on healthy records (module docstring).
@@ -179,15 +192,27 @@ class DiagnosisCalibration:
         zones: dict[str, tuple[float, float]] = {}
         drift: dict[str, float] = {}
         for name in MODEL_BASED:
-            sizes, moves, moves_own = [point[name]], [0.0], [0.0]
+            # a tile's size is known only to its interval (a chirp's fast end holds a few
+            # steady samples: friction anywhere in 0.25-8): the zone holds the narrowest
+            # one every healthy tile's interval meets and the sizes of the better-known
+            # half of the tiles (interval at most the median width); a drift is the gap
+            # between consecutive tiles' intervals, not the spread of their point estimates
+            lows, highs, moves, moves_own = [point[name]], [point[name]], [0.0], [0.0]
+            known: list[tuple[float, float]] = []
             for f in records:
                 bank = Bank(f, noise, {name: (point[name],) * 2}, none, dispersion, faults=(name,))
-                tiles = [bank.fit(name, a, b).fit.size for a, b in bank.tiles()]
-                sizes += tiles
-                moves += list(np.abs(np.diff(tiles)))
+                tiles = cls._population_sizes(bank, name, point[name], dispersion[name])
+                lows += [hi for _, hi in tiles]
+                highs += [lo for lo, _ in tiles]
+                known += tiles
+                moves += _gaps(tiles)
                 own = cls._own_sizes(bank, name, point[name], dispersion.get(f"{name}@own", 1.0))
-                moves_own += list(np.abs(np.diff(own)))
-            zones[name] = (float(min(sizes)), float(max(sizes)))
+                moves_own += [abs(b - a) for a, b in itertools.pairwise(_mids(own))]
+            if known:
+                width = np.median([hi - lo for lo, hi in known])
+                mids = [(lo + hi) / 2 for lo, hi in known if hi - lo <= width]
+                lows, highs = lows + mids, highs + mids
+            zones[name] = (float(min(lows)), float(max(highs)))
             drift[name] = float(max(moves))
             drift[f"{name}@own"] = float(max(moves_own))
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
@@ -218,17 +243,31 @@ class DiagnosisCalibration:
         )
 
     @staticmethod
-    def _own_sizes(bank: Bank, name: str, point: float, phi: float) -> list[float]:
-        """The size each longest window of a record fits against the record's own past
-        (windows whose own reference is fitted on every sample only)."""
+    def _population_sizes(
+        bank: Bank, name: str, point: float, phi: float
+    ) -> list[tuple[float, float]]:
+        """The size's 95 % interval on each shortest window of a record, against the
+        reference (the population's view: no own past)."""
+        zone = bank._between(name, point, point)
+        return [
+            profile_fit(
+                name, "", bank.grid[name], bank.cum[name][b] - bank.cum[name][a], zone, phi
+            ).ci95
+            for a, b in bank.tiles(shortest=True)
+        ]
+
+    @staticmethod
+    def _own_sizes(bank: Bank, name: str, point: float, phi: float) -> list[tuple[float, float]]:
+        """The size's 95 % interval each longest window of a record fits against the
+        record's own past (windows whose own reference is fitted on every sample only)."""
         out = []
         ready = bank.own_ready
-        for a, b in bank.tiles():
+        for a, b in bank.tiles(shortest=True):
             if a < bank.past_min or not ready[a:b].all():
                 continue
             ll = bank.cum_own[name][b] - bank.cum_own[name][a]
             zone = bank._between(name, point, point)
-            out.append(profile_fit(name, "", bank.grid[name], ll, zone, phi).size)
+            out.append(profile_fit(name, "", bank.grid[name], ll, zone, phi).ci95)
         return out
 
     @staticmethod
