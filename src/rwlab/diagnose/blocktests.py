@@ -3,7 +3,11 @@ CUSUM (:class:`BlockCusum`), and the tests that compare a record with its own pa
 (:class:`FrictionChange`, :class:`SlewChange`, :class:`HoldChange`,
 :class:`ClampedFriction`, :class:`FrozenMotor`) or count lost frames (:class:`Dropout`).
 :class:`~rwlab.diagnose.diagnoser.Diagnoser` feeds them each sample; its module docstring
-says what each test takes and alarms on."""
+says what each test takes and alarms on.
+
+Why this module is long: the block tests share one CUSUM of block means and one
+own-past comparison; each class is short. The GLR pipeline (``pipeline``) is to replace them.
+"""
 
 from __future__ import annotations
 

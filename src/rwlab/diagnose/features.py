@@ -335,7 +335,20 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
     bearing's friction is static, anywhere within its breakaway band, and the loop's
     integrator holds whatever current it last needed: the current there says nothing of
     the friction or the torque constant, and a healthy wheel's current at rest sits
-    ±(breakaway friction)/k_t off the balance for minutes (measured: ±9 mA on an RW90)."""
+    ±(breakaway friction)/k_t off the balance for minutes (measured: ±9 mA on an RW90).
+
+    Parameters
+    ----------
+    features : Features
+        The record's features.
+    name : str
+        The channel (:data:`rwlab.diagnose.noise.CHANNELS`), e.g. ``"current"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        bool, shape (N,): True where the channel is read.
+    """
     ok = features.usable & ~features.repeated
     if name.startswith("current"):
         w = features.speed_rpm

@@ -59,6 +59,10 @@ held-out twin units: |z| up to 25):
 
 No library offers this model; the simulation is written here and compiled with
 numba, the fit is ``scipy.optimize.least_squares`` on the simulation error.
+
+Why this module is long: the model, its compiled simulation and its estimation share
+one parameter vector and its bounds; the standard deviations already live apart
+(``greybox_std``).
 """
 
 from __future__ import annotations
@@ -345,6 +349,9 @@ class WheelGreyBox:
             raise ModelError(f"bad grey-box model: {exc}") from None
 
 
+FIT_SUBSTEPS = 50  # Euler steps per sample in the fit (the model's own default)
+
+
 def greybox_fit(
     data: IOData,
     *,
@@ -358,7 +365,6 @@ def greybox_fit(
     kp: float = 0.5,
     ki: float = 0.1,
     stribeck_speed_rpm: float = 10.0,
-    substeps: int = 50,
     current=None,
     uncertainty: Uncertainty | None = None,
     estimate_current_limit: bool | None = None,
@@ -380,8 +386,6 @@ def greybox_fit(
         Start values of the PI gains, 1/s and 1/s².
     stribeck_speed_rpm : float
         ωs, fixed.
-    substeps : int
-        Euler steps per sample.
     current : array_like, shape (N,), optional
         The measured motor current (A) at the speed's instants: a second
         output that makes kt, τc and b observable (module docstring). Speed
@@ -429,7 +433,7 @@ def greybox_fit(
         coulomb,
         viscous,
         max_speed_rpm * RPM,
-        substeps,
+        FIT_SUBSTEPS,
     )
     i_meas = None
     if current is not None:

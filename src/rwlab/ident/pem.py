@@ -33,6 +33,9 @@ filters start in that equilibrium and shifts pad with the first value. Under
 either convention the gradient formulas above are exact. ε is formed over
 every sample. The covariance is
 λ·(ψᵀψ)⁻¹ with λ = Σε²/(N − d), evaluated at the optimum.
+
+Why this module is long: ARMAX, OE and BJ share one prediction-error search (its
+residual, Jacobian and step control); split by model, each part would re-state it.
 """
 
 from __future__ import annotations
