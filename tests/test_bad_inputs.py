@@ -499,6 +499,7 @@ def cases() -> list[tuple[str, list[str]]]:
         ("monitor --port 70000", ["monitor", "{D}/rec.mcap", "--port", "70000"]),
         ("monitor --speed nan", ["monitor", "{D}/rec.mcap", "--replay", "--speed", "nan"]),
         ("monitor --speed inf", ["monitor", "{D}/rec.mcap", "--replay", "--speed", "inf"]),
+        ("wheel models an unknown model", ["wheel", "models", "no-such-wheel"]),
         ("wheel cmd speed nan", ["wheel", "cmd", "speed", "nan"]),
         ("wheel cmd speed inf", ["wheel", "cmd", "speed", "inf"]),
         ("wheel cmd speed 1e300", ["wheel", "cmd", "speed", "1e300"]),
