@@ -33,7 +33,7 @@ def heldout(tmp_path_factory):
     }
     for name, options in records.items():
         _cli("experiment", "--out", str(root / f"{name}.mcap"), *options)
-    _cli("identify", str(root / "a.mcap"), "--out", str(root / "a"))
+    _cli("identify", str(root / "a.mcap"), "--out", str(root / "a"), "--nonlinear-models")
     model = root / "a" / "model.json"
     scores = {
         name: json.loads(_cli("compare", str(model), str(root / f"{name}.mcap"), "--json"))
