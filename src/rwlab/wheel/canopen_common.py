@@ -67,6 +67,7 @@ ABORT_TOO_LOW = 0x06090032  # value of parameter written too low
 ABORT_DEVICE_STATE = 0x08000022  # cannot be transferred or stored: present device state
 SDO_FRAME_BYTES = 8
 BLOCK_DOWNLOAD = 0xC0  # client command specifier 6, in bits 5..7
+SEGMENTS = (0x00, 0x60)  # client command specifiers 0 and 3: a segment of an open transfer
 SDO_RX, SDO_TX = 0x600, 0x580
 
 
@@ -254,9 +255,9 @@ class CanopenNodeBase(NodeLink):
 def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearray) -> bool:
     """True when ``data`` is an SDO request for the package's server; otherwise answer its abort.
 
-    A request that is not 8 bytes, and a block download (which the package's
-    server refuses with the same abort, but logs as an error), are answered
-    0x05040001 here.
+    A request that is not 8 bytes, a block download, and a segment with no segmented
+    transfer open (which the package's server refuses too, but logs as an
+    error) are answered 0x05040001 here.
 
     Parameters
     ----------
@@ -272,11 +273,19 @@ def checked_sdo_request(network: BusNetwork, cob_id: int, data: bytes | bytearra
     bool
     """
     if len(data) == SDO_FRAME_BYTES and data[0] & 0xE0 != BLOCK_DOWNLOAD:
-        return True
+        if data[0] & 0xE0 not in SEGMENTS or _transfer_open(network, cob_id - SDO_RX):
+            return True
     head = bytes(data[1:4]).ljust(3, b"\0")  # index and subindex, as far as they came
     abort = bytes([0x80]) + head + struct.pack("<I", ABORT_UNKNOWN_COMMAND)
     network.send_message(cob_id - SDO_RX + SDO_TX, abort)
     return False
+
+
+def _transfer_open(network: BusNetwork, node_id: int) -> bool:
+    # the canopen package's SdoServer keeps an open segmented transfer's bytes in
+    # ``_buffer`` (None otherwise) and offers no public way to ask
+    node = network.nodes.get(node_id)
+    return getattr(getattr(node, "sdo", None), "_buffer", None) is not None
 
 
 def setpoint_abort(value: float, limit: float) -> None:
