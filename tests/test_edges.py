@@ -274,18 +274,24 @@ def test_sigterm_mid_experiment_idles_the_wheel_and_closes_the_record(tmp_path):
         "--port",
         port,
     )
-    deadline = time.monotonic() + 30
-    while not (partial_path(out).exists() and partial_path(out).stat().st_size > 2000):
+    from rwlab.testbed.record import RecordFollower
+
+    follower, commands = RecordFollower(out), 0
+    deadline = time.monotonic() + 60
+    while commands < 10:  # one second of the experiment proper, however slow its start
         assert time.monotonic() < deadline and child.poll() is None
         time.sleep(0.1)
-    time.sleep(1.0)
+        commands += len(follower.poll().get("/command", []))
     child.send_signal(signal.SIGTERM)
     output, _ = child.communicate(timeout=30)
     assert child.returncode == 130 and "idle" in output and "Traceback" not in output
     rec = read_record(out)
     assert rec.complete and rec.topic("/event")[-1]["message"] == "interrupted"
     assert rec.topic("/telemetry")[-1]["mode"] == "IDLE"
-    assert cli("export", out, "--format", "csv", "--out", tmp_path / "t.csv").exit_code == 0
+    # a loaded machine stalls a realtime loop for ~0.1 s, which the gap check rightly reports
+    # at --Ts 0.1; this test is about the interrupted record being whole, not about stalls
+    exported = cli("export", out, "--format", "csv", "--out", tmp_path / "t.csv", "--max-gap", 1)
+    assert exported.exit_code == 0, exported.output
     check_port("127.0.0.1", port)  # the monitor child is gone and its port free
 
 
