@@ -518,3 +518,26 @@ def test_local_workers_are_forked_with_the_campaign_modules_imported():
     with dask_client(2) as client:
         held = client.run(_imported, "rwlab.campaign.runs")
     assert len(held) == 2 and all(held.values())
+
+
+def _raised(fn) -> tuple:
+    try:
+        fn()
+    except Exception as exc:
+        return type(exc), exc, exc.__traceback__
+    raise AssertionError("nothing raised")
+
+
+def test_the_fork_servers_hook_hides_only_a_worker_orphaned_by_its_closing_cluster(capsys):
+    import multiprocessing.synchronize as sync
+
+    from rwlab.campaign.forkserver_quiet import _excepthook
+
+    def rebuild_a_freed_semaphore():  # what a worker forked as its cluster closes meets
+        lock = object.__new__(sync.SemLock)
+        lock.__setstate__((0, 1, 1, "/rwlab-test-no-such-semaphore"))
+
+    _excepthook(*_raised(rebuild_a_freed_semaphore))
+    assert capsys.readouterr().err == ""
+    _excepthook(*_raised(lambda: open("/no/such/file")))
+    assert "FileNotFoundError" in capsys.readouterr().err

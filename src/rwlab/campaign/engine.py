@@ -39,8 +39,9 @@ MAX_RETRIES = 3  # times one batch is submitted again after its worker died
 
 
 # What every local worker imports before it is forked (see ``_fork_workers_from``): the
-# campaign's modules pull in numba, scipy and python-control, ~1.3 s of CPU per process.
-WORKER_PRELOAD = ("distributed", "rwlab.campaign.runs")
+# campaign's modules pull in numba, scipy and python-control, ~1.3 s of CPU per process;
+# forkserver_quiet keeps a worker forked while its cluster closes from printing a traceback.
+WORKER_PRELOAD = ("distributed", "rwlab.campaign.runs", "rwlab.campaign.forkserver_quiet")
 
 
 @contextlib.contextmanager
