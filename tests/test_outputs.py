@@ -300,3 +300,33 @@ def test_a_fleet_killed_with_sigterm_leaves_no_folder(tmp_path):
     assert child.returncode == 130, err
     assert "Traceback" not in err.split("interrupted")[-1]
     assert not out.exists() and _leftovers(out) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("group", [False, True], ids=["kill-the-demo", "ctrl-c-the-group"])
+def test_a_stopped_demo_stops_its_record_workers_at_once(tmp_path, group):
+    """A signal to the demo alone (kill, a supervisor) once waited for its worker processes
+    to finish their 20-minute records (10–23 s); Ctrl-C (the whole group) once printed
+    an OSError traceback from a worker given a second stop signal."""
+    out = tmp_path / "demo"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "rwlab.cli", "demo", "--out", str(out)],
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    _wait_for(lambda: list(tmp_path.glob(f".{out.name}.partial-*/records/*")))
+    time.sleep(1.0)  # the workers are writing their records
+    stopped = time.monotonic()
+    if group:
+        os.killpg(child.pid, signal.SIGINT)
+    else:
+        child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 130, err
+    if not group:  # measured: 0.5 s now, 6.3 s when the workers finished their records
+        assert time.monotonic() - stopped < 4.0, "the workers ran on after the stop"
+    assert "Traceback" not in err and "Error" not in err, err
+    assert not out.exists() and _leftovers(out) == []

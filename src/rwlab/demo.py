@@ -319,22 +319,40 @@ def _run_side_by_side(out: Path, cfg: DemoConfig, echo, t_start: float) -> dict:
     # longest of the rest): more workers than cores would share the PRBS's core
     workers = min(len(experiments) + 1, os.cpu_count() or 2)
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
-        jobs = {}
-        for name, title, exp in sorted(experiments, key=lambda e: e[0] != "prbs"):
-            echo(f"[testbed] {title}: {round(exp.duration / exp.Ts)} commands")
-            jobs[name] = pool.submit(_record_job, exp, out / "records" / f"{name}.mcap")
-            if name == "prbs":
-                hil_job = pool.submit(_hil_job, out, cfg)
-        jobs["prbs"].result()
-        study, comparison = _identify_and_fly(out, cfg, echo)
-        records = [
-            {"name": name, "title": title, "file": f"records/{name}.mcap", **jobs[name].result()}
-            for name, title, _ in experiments
-        ]
-        hil, lines = hil_job.result()
+        try:
+            jobs = {}
+            for name, title, exp in sorted(experiments, key=lambda e: e[0] != "prbs"):
+                echo(f"[testbed] {title}: {round(exp.duration / exp.Ts)} commands")
+                jobs[name] = pool.submit(_record_job, exp, out / "records" / f"{name}.mcap")
+                if name == "prbs":
+                    hil_job = pool.submit(_hil_job, out, cfg)
+            jobs["prbs"].result()
+            study, comparison = _identify_and_fly(out, cfg, echo)
+            records = [
+                {"name": n, "title": t, "file": f"records/{n}.mcap", **jobs[n].result()}
+                for n, t, _ in experiments
+            ]
+            hil, lines = hil_job.result()
+        except BaseException:
+            _stop_workers(pool)
+            raise
     for line in lines:
         echo(line)
     return _finish(out, cfg, study, comparison, records, hil, t_start)
+
+
+def _stop_workers(pool) -> None:
+    """Stop the workers' runs now: a stop signal sent to this process alone (``kill``, a
+    supervisor's SIGTERM, a test) would otherwise wait for every record to finish. Each
+    worker, forked with this process's stop handlers, idles its wheel and closes its
+    record as this process does (SIGTERM: a second one is ignored, unlike SIGINT)."""
+    import multiprocessing
+    import signal
+
+    for child in multiprocessing.active_children():
+        if child.pid is not None:
+            os.kill(child.pid, signal.SIGTERM)
+    pool.shutdown(wait=True, cancel_futures=True)  # their files closed before ours are removed
 
 
 def _finish(out: Path, cfg, study, comparison, records, hil, t_start: float) -> dict:

@@ -188,10 +188,13 @@ def _stop_signals():
     stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     clear()
 
+    def ignore(signum, frame):
+        """Not SIG_IGN: a signal already pending when the handler changes to SIG_IGN
+        raises OSError ("ignored due to race condition") wherever the run then is."""
+
     def interrupt(signum, frame):
         for s in stops:
-            later = signal.default_int_handler if s == signal.SIGINT else signal.SIG_IGN
-            signal.signal(s, later)
+            signal.signal(s, signal.default_int_handler if s == signal.SIGINT else ignore)
         stop(signal.Signals(signum).name)
 
     if threading.current_thread() is not threading.main_thread():
