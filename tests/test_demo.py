@@ -27,6 +27,7 @@ def demo_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"
     r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(out)])
     assert r.exit_code == 0, r.output
+    (out.parent / "console.txt").write_text(r.stdout)
     return out
 
 
@@ -91,3 +92,10 @@ def test_demo_pages_open_offline_in_headless_chromium(demo_dir, browser):
             "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"
         )
         assert len(widths) >= 5 and min(widths) > 100, page
+
+
+@pytest.mark.slow
+def test_the_console_says_which_controller_is_the_ideal_bound(demo_dir):
+    lines = (demo_dir.parent / "console.txt").read_text().splitlines()
+    flagged = [line.split()[0] for line in lines if "the ideal bound" in line]
+    assert flagged == ["lqr"]  # the only one fed the true state; the LQGs fly on sensors

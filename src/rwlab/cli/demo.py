@@ -50,4 +50,5 @@ def demo(out, realtime, monitor, quick, force):
     cm = summary["chosen_model"]
     click.echo(f"wheel model: {cm['structure']} (validation fit {cm['fit_percent']:.2f} %)")
     for name, m in summary["controllers"].items():
-        click.echo(f"  {name:<24} steady max error {m['steady_max_error_deg']:.3g} deg")
+        ideal = "  (fed the true state, no sensors: the ideal bound)" if name == "lqr" else ""
+        click.echo(f"  {name:<24} steady max error {m['steady_max_error_deg']:.3g} deg{ideal}")
