@@ -95,6 +95,7 @@ import math
 import warnings
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.stats import poisson
@@ -121,6 +122,8 @@ from rwlab.diagnose.detect import RunTest, arl_to_samples, cusum_threshold, run_
 from rwlab.diagnose.isolate import (
     SPEED_UNIT_SD,
     Z95,
+    BlockName,
+    Evidence,
     isolate,
 )
 from rwlab.diagnose.motion import (
@@ -186,6 +189,8 @@ DECIDES_ON = {
     "dropout": "10-s blocks",
 }
 ROTOR_FAULTS = ("friction", "torque_constant", "current_limit")
+# the tests whose values since their change isolation reads
+EVIDENCE_BLOCKS: tuple[BlockName, ...] = ("friction", "motor", "speed", "lag", "offset", "slew")
 LOAD_SETTLE_S = 30.0  # a held-speed error the loop rejects (a load step) is gone by then, s
 DROPOUT_BLOCK_S = 10.0
 
@@ -232,6 +237,36 @@ class Alarm:
         }
 
 
+class SpeedModel(Protocol):
+    """What the diagnoser runs beside the telemetry: an identified wheel
+    (:class:`~rwlab.wheel.IdentifiedWheel`) or a stand-in with its sample time, its
+    acceleration limit, ``reset`` and ``step``."""
+
+    @property
+    def Ts(self) -> float: ...
+
+    @property
+    def accel_limit_rpm_s(self) -> float: ...
+
+    def reset(self, speed_rpm: float) -> None: ...
+
+    def step(self, command_rpm: float) -> float: ...
+
+
+class _ChangeValues(FrictionChange):
+    """The friction-change test's values, collected and never tested (measuring a
+    reference: the values after its baseline go to ``values``)."""
+
+    def __init__(self, values: list[float], spec: WheelSpec) -> None:
+        probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
+        super().__init__(probe, 0.0, math.inf, 6, (0.0,) * 4, spec=spec)
+        self.values = values
+
+    def add(self, t_s: float, value: float, allowance: float = 0.0) -> bool:
+        self.values.append(value)
+        return False
+
+
 @dataclass
 class _Sample:
     """What one sample gives the tests."""
@@ -276,7 +311,7 @@ class Diagnoser:
 
     def __init__(
         self,
-        wheel,
+        wheel: SpeedModel,
         reference: HealthyReference | None,
         *,
         false_alarms_per_hour: float = 1e-3,
@@ -304,9 +339,11 @@ class Diagnoser:
         self._trace = trace
         self.stuck_runs: list[int] = []  # runs of repeated readings while moving (trace)
         self._stuck_run = 0
-        if calibration is True:
-            calibration = ThresholdCalibration.load() if reference is not None else False
-        self.calibration = calibration or None
+        self.calibration: ThresholdCalibration | None = None
+        if isinstance(calibration, ThresholdCalibration):
+            self.calibration = calibration
+        elif calibration and reference is not None:
+            self.calibration = ThresholdCalibration.load()
         self.collected: dict[str, list[float]] = {
             name: [] for name in (*BLOCKS, "friction_change", "offset", "slew")
         }
@@ -321,8 +358,9 @@ class Diagnoser:
                 *(f"stat_{b}" for b in CUSUM_TESTS),
             )
         }
-        self._detectors: dict = {}
-        self._lag_currents: deque = deque(maxlen=1200)
+        # each test's state, by its name: the block tests' classes, RunTest, Dropout, ...
+        self._detectors: dict[str, Any] = {}
+        self._lag_currents: deque[tuple[float, float]] = deque(maxlen=1200)
         self._friction_allowance = 0.0
         self._friction_sample = (0.0, 0.0, 0.0)
         self._hold_sample: tuple[float, float] | None = None  # (command rpm, current A)
@@ -330,14 +368,16 @@ class Diagnoser:
         self._moved = False  # a non-zero command came (the rest after it holds the loop's
         # integrator: up to a few mA on the twin's units)
         self._offset_sums = [0.0, 0.0, 0, 0]  # friction samples' residual: sums, counts (±)
-        self._lag_excess: deque = deque(maxlen=1200)  # the motor test's value while lagging
-        self._recent_speed: deque = deque(maxlen=8)
+        self._lag_excess: deque[tuple[float, float]] = deque(
+            maxlen=1200
+        )  # the motor test's value while lagging
+        self._recent_speed: deque[float] = deque(maxlen=8)
         self._offset_window: list[tuple[float, float, float, float]] = []
         self._offset_command = math.nan
         self._slews = Slews(self.accel_limit, SLEW_SHARE)
         self._clamped_slews = Slews(self.accel_limit, CLAMP_SHARE)
         self._slew_gain = 1.0
-        self._slew_gains: deque = deque(maxlen=400)  # each slew value's friction gain
+        self._slew_gains: deque[float] = deque(maxlen=400)  # each slew value's friction gain
         self._slew_scale = None if reference is None else reference.slew_scale_rpm_s
         self._prev: dict[str, float] = {}
         self._last_speed: float | None = None
@@ -349,11 +389,9 @@ class Diagnoser:
         self._lost: float | None = None
         self._command: tuple[float, float] = (math.nan, -math.inf)
         self._still_since = math.inf  # since when wheel and model are quiet, s
-        self._still_speeds: deque = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
+        self._still_speeds: deque[float] = deque(maxlen=max(2, round(STILL_SPAN_S / self.Ts) + 1))
         if reference is None:  # measuring a reference: collect the change test's values
-            probe = BlockStats(0.0, 1.0, BLOCKS["friction"], 1.0, 0, "")
-            self._change_probe = FrictionChange(probe, 0.0, math.inf, 6, (0.0,) * 4, spec=self.spec)
-            self._change_probe.add = lambda t, v: self.collected["friction_change"].append(v)  # type: ignore[method-assign]
+            self._change_probe = _ChangeValues(self.collected["friction_change"], self.spec)
         else:
             if not math.isclose(reference.Ts, self.Ts, rel_tol=1e-6):
                 raise ConfigError(
@@ -386,10 +424,10 @@ class Diagnoser:
                 # change values, which the plain friction test's σ does not hold)
                 change = ref.tests.get("friction_change", stats)
                 change = BlockStats(0.0, change.sigma, change.block, stats.fraction, 0, "")
-                det = FrictionChange(change, tol, h_analytic, 6, ref.current_model, spec=self.spec)
-                det.h = self._calibrated("friction_change", h_analytic, det)
-                self._detectors["friction_change"] = det
-                self.thresholds["friction_change"] = det.h
+                law = FrictionChange(change, tol, h_analytic, 6, ref.current_model, spec=self.spec)
+                law.h = self._calibrated("friction_change", h_analytic, law)
+                self._detectors["friction_change"] = law
+                self.thresholds["friction_change"] = law.h
         # the speed offset on a continuously changing command: its σ is the tune set's
         # (the identification record, a stepped PRBS, has no window that qualifies)
         stats = BlockStats(0.0, OFFSET_SIGMA_RPM, 1, 1 / OFFSET_WINDOW, 0, "tune set")
@@ -406,14 +444,14 @@ class Diagnoser:
             det = BlockCusum(stats, tol, h_analytic, "up")
             det.h = self.thresholds["slew"] = self._calibrated("slew", h_analytic, det)
             self._detectors["slew"] = det
-            change = SlewChange(SLEW_SIGMA, stats.fraction, h_analytic)
-            change.h = self._calibrated("slew_change", h_analytic, change)
-            self.thresholds["slew_change"] = change.h
-            self._detectors["slew_change"] = change
+            slew_change = SlewChange(SLEW_SIGMA, stats.fraction, h_analytic)
+            slew_change.h = self._calibrated("slew_change", h_analytic, slew_change)
+            self.thresholds["slew_change"] = slew_change.h
+            self._detectors["slew_change"] = slew_change
         h_analytic = cusum_threshold(max(self.arl0 / (BLOCKS["friction"] / 0.05), 1.5), CUSUM_K)
-        det = HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
-        det.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, det)
-        self._detectors["hold"] = det
+        hold = HoldChange(h_analytic, BLOCKS["friction"], self.Ts)
+        hold.h = self.thresholds["hold"] = self._calibrated("hold", h_analytic, hold)
+        self._detectors["hold"] = hold
         self._detectors["rest"] = RestReading()
         clamped = ClampedFriction(ref.current_model, CLAMP_EXCESS, spec=self.spec)
         self._detectors["clamped"] = clamped
@@ -477,7 +515,7 @@ class Diagnoser:
             stats.mean, SLEW_SIGMA, stats.block, stats.fraction, stats.samples, "tune set"
         )
 
-    def _calibrated(self, name: str, analytic: float, det=None) -> float:
+    def _calibrated(self, name: str, analytic: float, det: BlockCusum | None = None) -> float:
         """The threshold whose measured false-alarm rate is the requested one, where the
         calibration holds this detector at this sample time: a CUSUM's with all of its
         tolerance between units, or the largest share of it that delivers that rate. Where
@@ -583,7 +621,7 @@ class Diagnoser:
         self._last_speed = speed_rpm
         self._recent_speed.append(speed_rpm)
         self._hold_sample = None
-        self._rest_current: float | None = None
+        self._rest_current = None
         values = self._values(t_s, r, speed_rpm, current_a) if usable else {}
         offset = self._offset(r, command_rpm, usable)
         if offset is not None:
@@ -641,7 +679,7 @@ class Diagnoser:
         self._record(t_s, r, values)
         return new
 
-    def _frozen_motor(self, t_s: float, r: dict, current_a: float) -> list[Alarm]:
+    def _frozen_motor(self, t_s: float, r: dict[str, float], current_a: float) -> list[Alarm]:
         """A settled speed change's charge (:class:`FrozenMotor`): the unit's own level
         until a stuck alarm, a weak motor's test on the changes begun after its reading
         froze."""
@@ -654,7 +692,7 @@ class Diagnoser:
         self.thresholds["charge"] = test.h
         return self._fire(t_s, "charge")
 
-    def _offset(self, r: dict, command_rpm: float, usable: bool) -> float | None:
+    def _offset(self, r: dict[str, float], command_rpm: float, usable: bool) -> float | None:
         """Collect a window of usable samples; its speed offset when it is full."""
         if not usable:
             return None
@@ -669,7 +707,7 @@ class Diagnoser:
         return speed_offset(window)
 
     def _slew_value(
-        self, t_s: float, r: dict, speed_rpm: float, current_a: float, usable: bool
+        self, t_s: float, r: dict[str, float], speed_rpm: float, current_a: float, usable: bool
     ) -> float | None:
         """Collect one slew's samples (at the telemetry's own time); its asymmetry when
         it ends."""
@@ -689,11 +727,11 @@ class Diagnoser:
             self.stuck_runs.append(self._stuck_run)
             self._stuck_run = 0
 
-    def traces(self) -> dict:
+    def traces(self) -> dict[str, list[float] | list[int]]:
         """What a calibration counts: each block test's standardised block means, the
         runs of repeated readings while moving, the lost frames per dropout block."""
         self._trace_run(False)
-        out: dict = {
+        out: dict[str, list[float] | list[int]] = {
             name: list(det.trace)
             for name, det in self._detectors.items()
             if isinstance(det, (BlockCusum, Dropout)) and det.trace is not None
@@ -701,7 +739,9 @@ class Diagnoser:
         out["stuck"] = list(self.stuck_runs)
         return out
 
-    def _values(self, t_s: float, r: dict, speed_rpm: float, current_a: float) -> dict:
+    def _values(
+        self, t_s: float, r: dict[str, float], speed_rpm: float, current_a: float
+    ) -> dict[str, float]:
         """The qualifying test values of a usable sample."""
         out: dict[str, float] = {}
         accel, model_accel = r["accel_rpm_s"], r["accel_rpm_s"] - r["acceleration"]
@@ -822,7 +862,7 @@ class Diagnoser:
             return None
         return 0.5 * (sums[0] / sums[2] + sums[1] / sums[3])
 
-    def _lagging(self, model_accel: float, model_rpm: float, prev: dict) -> bool:
+    def _lagging(self, model_accel: float, model_rpm: float, prev: dict[str, float]) -> bool:
         """The model ran at its acceleration limit, one way, over this and the last sample.
 
         Not a sample in which the model reverses (a triangle's corner: its mean rate is
@@ -843,7 +883,7 @@ class Diagnoser:
             and min(abs(model_rpm), abs(before_rpm)) >= LAG_MIN_RPM
         )
 
-    def _record(self, t_s: float, r: dict, values: dict) -> None:
+    def _record(self, t_s: float, r: dict[str, float], values: dict[str, float]) -> None:
         h = self.history
         h["t_s"].append(t_s)
         for name in ("speed", "acceleration", "current"):
@@ -913,7 +953,7 @@ class Diagnoser:
         times = self.history["t_s"]
         since = times[-1] - HISTORY_S if times else -math.inf
 
-        def mean_ci(name: str):
+        def mean_ci(name: str) -> tuple[float, float, float] | None:
             # the record's latest HISTORY_S, not the test's: a test that last decided
             # long ago would mix the values before a fault's onset in
             det = self._detectors.get(name)
@@ -981,13 +1021,12 @@ class Diagnoser:
             self._frozen_s = self._reading_since
         return alarms
 
-    def _evidence(self, detector: str) -> dict:
+    def _evidence(self, detector: str) -> Evidence:
         """What isolation reads: each block test's recent block means, and more."""
-        ev: dict = {
-            name: self._detectors[name].since_change()
-            for name in (*BLOCKS, "offset", "slew")
-            if name in self._detectors and self._detectors[name].raw
-        }
+        ev: Evidence = {}
+        for name in EVIDENCE_BLOCKS:
+            if name in self._detectors and self._detectors[name].raw:
+                ev[name] = self._detectors[name].since_change()
         change = self._detectors.get("friction_change")
         if detector == "friction_change" and change is not None and change.raw:
             # the size relative to the record's start, not to the reference's unit
@@ -1037,19 +1076,23 @@ class Diagnoser:
         ev["hold"] = hold.since_change_sizes()
         if detector == "hold" and motor is not None:  # the motor test since the change
             ev["motor"] = np.array([x for t, x in motor.raw if t > hold.onset()])
-        weak = [a for a in self.alarms if a.kind == "torque_constant" and a.ci is not None]
+        weak = [
+            (a.magnitude, a.ci)
+            for a in self.alarms
+            if a.kind == "torque_constant" and a.magnitude is not None and a.ci is not None
+        ]
         if weak:  # a weak motor named before: its share of a held current's rise
-            ev["torque_constant"] = (weak[-1].magnitude, weak[-1].ci)
+            ev["torque_constant"] = weak[-1]
         ev["rest_value"] = self._detectors["rest"].value
         if detector == "clamped":
             ev["clamped"] = self._detectors["clamped"].recent()
         if detector == "charge":
             ev["charge"] = self._detectors["charge"].recent()
         if detector in ("motor", "friction"):
-            for name in ("friction", "motor"):  # the other test's latest blocks too
-                det = self._detectors.get(name)
-                if det is not None and det.raw and name != detector:
-                    ev[name] = np.array([x for _, x in list(det.raw)[-60:]])
+            other: BlockName = "motor" if detector == "friction" else "friction"
+            det = self._detectors.get(other)  # the other test's latest blocks too
+            if det is not None and det.raw:
+                ev[other] = np.array([x for _, x in list(det.raw)[-60:]])
         return ev
 
     @property

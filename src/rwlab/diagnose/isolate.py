@@ -55,13 +55,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal, TypedDict
 
 import numpy as np
 from scipy.stats import chi2
 
 from rwlab.diagnose.motion import REST_BAND_RPM
 
-__all__ = ["Finding", "combine", "isolate"]
+__all__ = ["BlockName", "Evidence", "Finding", "combine", "isolate"]
 
 Z95 = 1.959964
 # σ of the friction ratio between two healthy units: viscous and Coulomb each uniform
@@ -106,6 +107,80 @@ CHARGE_SD = 0.015  # σ of one speed change's charge relative to the unit's own 
 LAG_BEFORE_MIN = 20  # samples at the limit before the change that give the unit's own current
 
 
+# the tests whose single values since their change isolation reads, by name
+BlockName = Literal["friction", "motor", "speed", "lag", "offset", "slew"]
+
+
+class Evidence(TypedDict, total=False):
+    """What isolation reads (:meth:`rwlab.diagnose.Diagnoser._evidence` gathers it); each
+    key only where the record has it.
+
+    Attributes
+    ----------
+    friction, motor, speed, lag, offset, slew : ndarray, shape (n,)
+        Each test's single values since its statistic last left zero (the test's unit).
+    friction_model_sd : float
+        σ of the baseline friction law's prediction (a friction-change alarm), relative.
+    sigma, ref_mean, tolerance : dict of str to float
+        Per test: σ of one value, the reference's mean, the tolerance between units.
+    slew_gain : ndarray, shape (n,)
+        Each slew value's friction at its speeds over the Coulomb friction.
+    slew_before : ndarray, shape (m,)
+        The record's slew values before the change (the unit's own level).
+    motor_before, motor_after : ndarray
+        The motor test's values before and after the lag test's change.
+    recent_speed : ndarray, shape (8,)
+        The latest speed readings, rpm.
+    held_command_rpm : float
+        The command held now, rpm.
+    moving_repeats : float
+        The current run of identical readings while moving (inf after a stuck alarm).
+    lag_currents, lag_currents_before : ndarray
+        |current| at the acceleration limit since and before the lag change, A.
+    lag_excess : ndarray
+        The motor test's value at the limit since the lag change.
+    lost : int
+        Frames lost in the last dropout block.
+    hold : ndarray, shape (n, 3)
+        The hold test's (v, σ of v, σ common to all blocks) since its change.
+    torque_constant : (float, (float, float))
+        A weak motor named before: k_t factor and its 95 % interval.
+    rest_value : float
+        The latest counted reading near zero speed, rpm.
+    clamped : (ndarray, float)
+        The clamped slews' excesses and the own friction law's relative σ.
+    charge : (ndarray, int)
+        Speed changes' charge over the unit's own level, and how many own values it rests on.
+    """
+
+    friction: np.ndarray
+    motor: np.ndarray
+    speed: np.ndarray
+    lag: np.ndarray
+    offset: np.ndarray
+    slew: np.ndarray
+    friction_model_sd: float
+    sigma: dict[str, float]
+    ref_mean: dict[str, float]
+    tolerance: dict[str, float]
+    slew_gain: np.ndarray
+    slew_before: np.ndarray
+    motor_before: np.ndarray
+    motor_after: np.ndarray
+    recent_speed: np.ndarray
+    held_command_rpm: float
+    moving_repeats: float
+    lag_currents: np.ndarray
+    lag_currents_before: np.ndarray
+    lag_excess: np.ndarray
+    lost: int
+    hold: np.ndarray
+    torque_constant: tuple[float, tuple[float, float]]
+    rest_value: float
+    clamped: tuple[np.ndarray, float]
+    charge: tuple[np.ndarray, int]
+
+
 @dataclass(frozen=True)
 class Finding:
     """A named fault with its estimated size and 95 % confidence interval.
@@ -139,7 +214,7 @@ def _mean_ci(x: np.ndarray, sigma: float) -> tuple[float, float]:
     return float(np.mean(x)), Z95 * sigma / math.sqrt(len(x))
 
 
-def _motor(ev: dict) -> tuple[float, float] | None:
+def _motor(ev: Evidence) -> tuple[float, float] | None:
     if len(ev.get("motor", ())) == 0:
         return None
     return _mean_ci(ev["motor"], ev["sigma"]["motor"])
@@ -151,7 +226,7 @@ def _torque_constant(e: float, half: float) -> Finding:
     return Finding("torque_constant", 1 / (1 + e), (lo, hi), "factor")
 
 
-def _rotor(ev: dict, detector: str) -> list[Finding]:
+def _rotor(ev: Evidence, detector: str) -> list[Finding]:
     """Friction, weak motor, or both, from the friction and motor tests' excesses.
 
     The motor test's own alarm is the weak motor's signature (the current under
@@ -189,7 +264,7 @@ def _rotor(ev: dict, detector: str) -> list[Finding]:
     return findings or [Finding("friction", None, None, "factor")]
 
 
-def _slew(ev: dict) -> Finding:
+def _slew(ev: Evidence) -> Finding:
     """A slew faster towards zero speed than away from it: friction beyond the
     feed-forward's, F ≈ 1 + Δ/(2g) (Δ in Coulomb decelerations over the reference's level,
     g the nominal friction at the slews' speeds over the Coulomb friction: worn bearings
@@ -240,7 +315,7 @@ def _charge(values: np.ndarray, own: int) -> Finding:
     return Finding("torque_constant", 1 / mid, ci, "factor")
 
 
-def _hold(ev: dict) -> Finding:
+def _hold(ev: Evidence) -> Finding:
     """The current's rise at a held speed over this record's own earlier current there:
     a weak motor when the motor test is in excess since (1/F_k − 1 under acceleration
     too), or when a weak motor named before explains it; else friction, F ≈ 1 + v (v
@@ -262,14 +337,14 @@ def _hold(ev: dict) -> Finding:
     return Finding("friction", factor, (lo, hi), "factor")
 
 
-def isolate(detector: str, ev: dict) -> list[Finding]:
+def isolate(detector: str, ev: Evidence) -> list[Finding]:
     """The faults that explain an alarm of ``detector``, sized.
 
     Parameters
     ----------
     detector : {'dropout', 'stuck', 'rest', 'friction', 'friction_change', 'hold', 'motor',
         'speed', 'offset', 'slew', 'lag'}
-    ev : dict
+    ev : Evidence
         The evidence (see the module docstring).
 
     Returns
