@@ -273,7 +273,7 @@ def _worst(rows: list[dict], values: np.ndarray) -> list[dict]:
 def budget(rows: list[dict], campaign: Campaign) -> dict[str, Any]:
     """The pointing budget of a campaign's rows (``budget.json``, format ``rwlab.Budget/3``).
 
-    It opens with what a reviewer signs: ``requirement`` (the APE bound, P,
+    It opens with what the budget's approver signs: ``requirement`` (the APE bound, P,
     confidence, the RPE window and bound), ``interpretation`` (ECSS-E-ST-60-10C:
     ensemble, temporal or mixed, as a sentence), ``verdict`` (that interpretation
     checked: estimate, bound, met, demonstrated, runs needed, the runs that set it,

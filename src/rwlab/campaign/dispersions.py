@@ -15,8 +15,8 @@ component with ``.x``, ``.y``, ``.z``; the flat names of the old scenario format
 (``wheel_max_torque``, ``inertia.xx``) are still read, with a ``FormatWarning``.
 Products of inertia (``spacecraft.inertia.xy``, ``.xz``, ``.yz``) with
 ``relative = true`` are fractions of √(J_ii·J_jj) of the nominal inertia. The default
-set (``default_dispersions.toml``, package data) is what a reviewer of a GEO comsat's
-pointing budget expects.
+set (``default_dispersions.toml``, package data) is what a GEO comsat's
+pointing-budget review expects.
 
 Each field draws from its own stream, seeded by the run's seed and the field's
 name (its flat name of the old format, so the draws did not change when the fields

@@ -37,7 +37,7 @@ that crosses zero a few times).
 
 Standard deviations (``std``, itemised in ``std_budget``) are the root sum of
 squares of these terms, because λ·(JᵀJ)⁻¹ alone was far too small (measured on
-held-out twin units: |z| up to 25):
+twin units whose parameters are known, none of them used in tuning it: |z| up to 25):
 
 - statistical: the sandwich H⁻¹SH⁻¹ of the simulation error with S the
   Newey–West long-run covariance of the scores (Andrews' bandwidth): the errors

@@ -135,11 +135,12 @@ others (a different loop, a different sensor) needs its own calibration against 
 whose parameters are measured.
 
 ``breakaway`` is calibrated on its own records: the PRBS leaves it unidentified, and on
-slow reversals through zero (``python bench/greybox_breakaway.py --units 3 7 11 --seed
-1``) its raw estimate reads high by up to +0.87 (RMS 0.56), with or without stiction in
-the unit: at rest the Hall speed and the drive's zero-speed behaviour dwell like
-stiction. On units 20, 25, 30 (``--seed 2``): RMS 0.83, up to +1.31. With this term no
-record shows a breakaway beyond 2 σ of Coulomb: it is reported unidentified."""
+slow reversals through zero (``python bench/greybox_breakaway.py``; the units and the
+numbers are the ``breakaway`` entry of ``greybox_structure.json``'s measurement) its raw
+estimate reads high by up to +0.87 (RMS 0.56), with or without stiction in the unit: at
+rest the Hall speed and the drive's zero-speed behaviour dwell like stiction; on a
+second set of units RMS 0.83, up to +1.31. With this term no record shows a breakaway
+beyond 2 σ of Coulomb: it is reported unidentified."""
 
 
 def uncertainty_budget(

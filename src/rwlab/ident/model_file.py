@@ -104,7 +104,7 @@ class WheelModelFile(SavedAsJson):
         The other nonlinear models' JSON forms (``"greybox"``, ``"nlarx"``), each
         with its ``validation_fit_percent``.
     nonlinear_chosen, nonlinear_choice : str, optional
-        Which nonlinear model the study chose on held-out data, and why.
+        Which nonlinear model the study chose on validation data, and why.
     healthy_reference : dict, optional
         What the fault detectors need of the healthy identification record
         (:class:`rwlab.diagnose.HealthyReference`'s JSON form).

@@ -207,7 +207,7 @@ def nlarx(
         Candidate numbers of knots; the one whose model simulates best on the
         last ``holdout`` share of ``data`` (fitted on the rest) is refitted on all of it.
     holdout : float
-        Share of ``data`` held out to choose the number of knots.
+        Share of ``data`` (its end) kept out of the fit to choose the number of knots.
 
     Returns
     -------

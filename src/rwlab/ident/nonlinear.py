@@ -341,10 +341,9 @@ def servo_fit(
     typical = np.abs(x0) + np.array([abs(g0) or 1.0, scale, 1.0 / Ts, 1.0 / Ts**2, 1.0, Ts]) * 1e-3
 
     # the delay makes the cost multimodal (it trades against the rate limit and the
-    # offset): a single start at 0.25·Ts settled on twin unit 187 at 16× the best cost
+    # offset): a single start at 0.25·Ts settled on one twin unit at 16× the best cost
     # (delay 0.17 s, offset +2.9 rpm, rate limit 315.5 rpm/s), a model that then raised
-    # false speed-bias alarms on 10 of the tune set's 11 healthy chirps; the best of
-    # several starts is kept
+    # false speed-bias alarms on 10 of 11 healthy chirps; the best of several starts is kept
     def start(share: float) -> OptimizeResult:
         x = x0.copy()
         x[5] = share * Ts

@@ -23,7 +23,7 @@ Each saturation comes, first found, from (:func:`resolve_saturation`):
 
 A plain data file (CSV…) carries no metadata, so a wheel whose driver limits the
 current differently from the identified one is simulated with the wrong clamp
-unless the limit is given: the grey box's held-out fit depends on it. Each
+unless the limit is given: the grey box's fit on validation data depends on it. Each
 model's score says which saturations it applied and where each came from.
 
 Initial state: at rest at the record's first measured speed (the records start

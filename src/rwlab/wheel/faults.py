@@ -24,8 +24,8 @@ not of the sensor the loop closes on. That choice decides what diagnosis can
 see: a bias inside the loop's own sensor is hidden by the loop (the wheel runs
 at command − bias and reports the command), so no test on command, speed and
 current alone separates it from a healthy wheel; it needs an independent speed
-reference (the satellite's gyros, a bench tachometer). An independent reviewer
-moved the bias into the loop: 1 of 4 biases of 15–20 rpm was then detected.
+reference (the satellite's gyros, a bench tachometer). With the bias moved into the
+loop (an independent check), 1 of 4 biases of 15–20 rpm was detected.
 """
 
 from __future__ import annotations
