@@ -24,7 +24,7 @@ go to ``--out`` (default: src/rwlab/diagnose/thresholds.json). Simulated clock:
 ~10 s per record to make (cached in ``--cache``); about 10 min to count with 16 models
 (records cached, two cores).
 ``--offset-sigma`` also prints the σ of the offset test's window intercepts on
-these records (the constant ``OFFSET_SIGMA_RPM`` of rwlab.diagnose.diagnoser).
+these records (``OFFSET_SIGMA_RPM`` in src/rwlab/diagnose/detector_constants.toml).
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ from collections import deque
 
 import numpy as np
 
+from rwlab.diagnose.constants import measured
 from rwlab.diagnose.isolate import (
     CURRENT_OFFSET_SD_A,
 )
@@ -29,17 +30,16 @@ from rwlab.wheelspec import WheelSpec
 CUSUM_K = 0.5
 # σ of the ridge prior of a unit's friction law about the reference's, in nominal friction
 # currents: two units each within ±30 % of nominal differ by σ ≈ 0.25, and the reference's
-# identified Coulomb/viscous split errs by up to 0.35 of nominal (units 0, 100, 300)
-CHANGE_PRIOR = 0.5
+# identified Coulomb/viscous split errs on top of that
+CHANGE_PRIOR = measured("CHANGE_PRIOR")
 GUARD_S = 300.0  # the change test's baseline: samples at least this old, s
 CHANGE_MIN_RPM = 1500.0  # ... and its change within a record (below, the excess of a unit's
 # friction over the reference's varies with speed beyond its viscous + Coulomb law)
 # The change test compares a sample only where its baseline law interpolates: the law's
 # excess over the reference is fitted mostly on the other sign's or other speeds' samples
-# elsewhere, and the reference's own Coulomb/viscous/offset split errs (unit 1534's
-# reference: +4.3 mA offset, viscous ×1.28): a PRBS baseline that held −5500 rpm alone
-# at its negative sign read unit 1372's healthy −2000 rpm holds 7 σ high (a false
-# friction alarm at the default rate, eval4), and the tune set's tail reached 28 σ
+# elsewhere, and the reference's own Coulomb/viscous/offset split errs (mA of offset, tens
+# of % of viscous friction), so a law extrapolated from one held speed to another of its
+# sign reads a healthy unit's holds many σ high: a false friction alarm
 SIGN_MIN = 20  # baseline samples at the sample's sign of speed
 SPAN_MARGIN_RPM = 300.0  # ... whose |ω| span reaches the sample's within this
 BLOCK_OWN = 20  # samples per independent value of the own friction samples (as a block)
@@ -48,8 +48,7 @@ HOLD_TOLERANCE = 0.1  # friction rise a healthy unit shows within a record (drif
 # the bearing's warm-up), relative to its own friction current
 HOLD_DRIFT_SD = 0.05  # relative drift of a unit's friction between two holds (the twin's
 # random walk is 5 %/√h; a record's holds are minutes apart)
-HOLD_SIGN_SD = 0.03  # relative σ between a unit's friction at +ω and −ω (tune set's healthy
-# step records, 10 units: |i(+6000) − off| and |i(−6000) − off| within 0.3–3 %)
+HOLD_SIGN_SD = measured("HOLD_SIGN_SD")  # relative σ between a unit's friction at +ω and −ω
 REST_CURRENT_SD_A = 0.5e-3  # the current of a wheel resting since power-up at a 0-rpm
 # command is the sense offset (the loop's integrator has not moved); after a motion the
 # rest holds the integrator's residue (up to ~4 mA on the twin's units)
@@ -63,11 +62,11 @@ CLAMP_RECENT = 6  # it decides on the median of the latest this many
 CLAMP_EXCESS = 0.2  # ... and alarms where it exceeds this
 CLAMP_SLEW_RPM = 500.0  # a slew's halves at least this fast on average: slower ones (a
 # fast chirp's) are a few samples a half, and read up to +0.3–0.6 on healthy bearings
-CHARGE_EXCESS = 0.08  # a step's charge over the unit's own level before the freeze: healthy
-# step and PRBS records' later values over their earlier ones read 0.955–1.027 (σ 0.012;
-# 114 records of tune, eval, eval2, eval3, models of units 0 and 587)
-CHARGE_MARGIN = 0.04  # ... over the reference's, beyond the datasheet's I/k_t headroom (the
-# same records: at most 0.023 below that bound with either model)
+# a step's charge over the unit's own level before the freeze that alarms (a healthy
+# unit's later charges scatter a few % about its earlier ones) ...
+CHARGE_EXCESS = measured("CHARGE_EXCESS")
+# ... or, without an own level, over the reference's, beyond the datasheet's I/k_t headroom
+CHARGE_MARGIN = measured("CHARGE_MARGIN")
 HISTORY_S = 600.0  # block means kept for estimating a fault's size, s
 # The slew-change test's baseline: the record's slews at least SLEW_GUARD_S old, the
 # latest SLEW_BASE_MAX of them, at least SLEW_BASE_MIN. A chirp's slews through zero
@@ -227,10 +226,10 @@ class FrictionChange(BlockCusum):
         (:data:`rwlab.wheel.imperfections.TOLERANCES`); one independent value per block
         (the samples of a hold are correlated). The noise is the samples' scatter about
         the law (a second pass), not about their mean: that counted the law's own change
-        with speed and sign as noise (a unit 10 mA off its reference in sense offset
-        scatters ±10 mA between its holds), the prior then outweighed the data, and the
-        law missed its own baseline by 7 mA (unit 1604's healthy PRBS with unit 1832's
-        model: +1700 rpm held at 18.6 mA, the law 11.5 at +1950: a friction alarm)."""
+        with speed and sign as noise (a unit whose sense offset is 10 mA off its
+        reference's scatters ±10 mA between its holds), the prior then outweighed the
+        data, and the law missed its own baseline by 7 mA (a healthy PRBS's +1700 rpm
+        held at 18.6 mA, the law 11.5 at +1950: a friction alarm)."""
         n, s1, s2 = self._r
         var = max(s2 / n - (s1 / n) ** 2, 0.0)
         _, prior = _law_prior(self.spec)
@@ -296,14 +295,15 @@ class SlewChange(BlockCusum):
     old or more): friction smaller than the spread between units, on a profile the
     reference's level does not describe. A default chirp's later, shorter slews read about
     −1.1 nominal Coulomb decelerations on healthy units, its earlier ones −0.85, the
-    references' PRBS −0.64 to −0.81 (units 2810–2829; models of units 2800, 2801, 2950,
-    2951), so the reference test, with the tolerance between units, found friction ×1.5
-    from 600 s on 16 of 20 of those chirps, in the 7 slews after the onset; against its
-    own slews the step is about +1 (3 σ) each."""
+    references' PRBS −0.64 to −0.81 (20 healthy units' chirps, 4 reference models), so
+    the reference test, with the tolerance between units, found friction ×1.5 from
+    600 s on 16 of those 20 chirps, in the 7 slews after the onset;
+    against its own slews the step is about +1 (3 σ) each."""
 
     def __init__(self, sigma: float, fraction: float, h: float) -> None:
         """``sigma``: one slew's σ within a record; ``fraction``: slews per sample."""
-        super().__init__(BlockStats(0.0, sigma, 1, fraction, 0, "tune set"), 0.0, h, "up")
+        stats = BlockStats(0.0, sigma, 1, fraction, 0, "detector_constants.toml")
+        super().__init__(stats, 0.0, h, "up")
         self._pending: deque = deque()  # (t_s, value) younger than SLEW_GUARD_S
         self._base: deque = deque(maxlen=SLEW_BASE_MAX)
 

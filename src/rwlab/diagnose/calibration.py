@@ -10,8 +10,8 @@ of healthy records of units other than the identified ones, with the models of
 several units.
 
 A CUSUM's reference value k is the model's own: 0.5 σ plus the tolerance
-between units over the model's σ (4.3 σ for unit 587's friction test, 11.6 σ for
-unit 0's). What carries from one model to another is not k but the share of
+between units over the model's σ (4.3 σ and 11.6 σ for two reference models' friction
+tests). What carries from one model to another is not k but the share of
 that tolerance kept in it: a reference unit's block means sit off the other
 units' by where it lies in the spread, and the tolerance is sized for that
 spread, so the CUSUM's increment z − k, not z, is alike between models. Each

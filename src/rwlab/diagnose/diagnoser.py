@@ -428,9 +428,11 @@ class Diagnoser:
                 law.h = self._calibrated("friction_change", h_analytic, law)
                 self._detectors["friction_change"] = law
                 self.thresholds["friction_change"] = law.h
-        # the speed offset on a continuously changing command: its σ is the tune set's
+        # the speed offset on a continuously changing command: its σ is the measured one
         # (the identification record, a stepped PRBS, has no window that qualifies)
-        stats = BlockStats(0.0, OFFSET_SIGMA_RPM, 1, 1 / OFFSET_WINDOW, 0, "tune set")
+        stats = BlockStats(
+            0.0, OFFSET_SIGMA_RPM, 1, 1 / OFFSET_WINDOW, 0, "detector_constants.toml"
+        )
         h_analytic = cusum_threshold(max(self.arl0 / stats.block_s * 2, 1.5), CUSUM_K)
         det = BlockCusum(stats, 0.0, h_analytic, "both")
         det.h = self.thresholds["offset"] = self._calibrated("offset", h_analytic, det)
@@ -477,9 +479,9 @@ class Diagnoser:
         """Telemetry frames a healthy bus loses per sample: the reference record's rate
         where its losses are more than the calibration's hours of the bus would give it by
         chance (p < 0.01), else the calibration's rate (its blocks with a lost frame). A
-        20-minute record's few losses are a poor rate: one that lost 3 frames (unit 1812's
-        and 2744's, against 1.3 expected) set the count at 4 frames a block, and a 0.3-s
-        dropout loses 3, so the model never saw one."""
+        20-minute record's few losses are a poor rate: a reference record that lost 3 frames
+        against 1.3 expected set the count at 4 frames a block, and a 0.3-s dropout loses
+        3, so the model never saw one."""
         cal = self.calibration
         same_ts = cal is not None and math.isclose(cal.Ts, self.Ts, rel_tol=1e-6)
         curve = cal.curves.get("dropout") if cal is not None and same_ts else None
@@ -497,22 +499,28 @@ class Diagnoser:
         −5 % give 1.074 × nominal) over the
         reference's identified one (within 0.5 % of its unit's on the twin). The constant
         tolerance (0.15, two units at opposite bounds) made the rate a requested 1/h
-        delivers depend on where the reference unit sits: 0 to 4.5/h over the tune set's
-        model units (a reference at 1.056 × nominal leaves healthy units 2 % of room)."""
+        delivers depend on where the reference unit sits: 0 to 4.5/h over the calibration's
+        reference models (a reference at 1.056 × nominal leaves a healthy unit only 2 % of
+        room)."""
         nominal = nominal_inertial_current(self.spec)
         return max(self.bounds.motor_upper * nominal / ref.current_model[0] - 1.0, 0.0)
 
     @staticmethod
     def _slew_stats(ref: HealthyReference) -> BlockStats:
         """The slew test's healthy statistics: the reference's level, and the larger of its
-        σ and the tune set's (:data:`~rwlab.diagnose.motion.SLEW_SIGMA`), where the values
-        are in nominal Coulomb decelerations: 9–10 slews of one record put σ anywhere in
-        0.13–0.46 (unit 300's 0.13 alarmed on a healthy unit's PRBS)."""
+        σ and the one pooled over many records (:data:`~rwlab.diagnose.motion.SLEW_SIGMA`),
+        where the values are in nominal Coulomb decelerations: 9–10 slews of one record put
+        σ anywhere in 0.13–0.46, and a reference's low σ alarmed on a healthy unit's PRBS."""
         stats = ref.tests["slew"]
         if ref.slew_scale_rpm_s is None or stats.sigma >= SLEW_SIGMA:
             return stats
         return BlockStats(
-            stats.mean, SLEW_SIGMA, stats.block, stats.fraction, stats.samples, "tune set"
+            stats.mean,
+            SLEW_SIGMA,
+            stats.block,
+            stats.fraction,
+            stats.samples,
+            "detector_constants.toml",
         )
 
     def _calibrated(self, name: str, analytic: float, det: BlockCusum | None = None) -> float:
@@ -797,8 +805,8 @@ class Diagnoser:
         if self._detectors["hold"].load_change(t0, self._command[0]) and t_s - t0 < LOAD_SETTLE_S:
             return []
         # a load step that comes as (or just after) the wheel settles at a hold leaves no
-        # earlier current there to compare (friction x1.5 on unit 10, 1.5 s after its hold
-        # settled, read a 4.5 rpm bias; x2 on unit 13 while it slewed to the hold, -15 rpm):
+        # earlier current there to compare (friction x1.5 starting 1.5 s after a hold settled
+        # read a 4.5 rpm bias; x2 starting while the wheel slewed to the hold, -15 rpm):
         # an error that is not a step (it rises, or decays as the loop rejects the load)
         # waits LOAD_SETTLE_S from its change point too
         t1 = det.change_point()
@@ -835,8 +843,8 @@ class Diagnoser:
         the reference's, less the tolerance the CUSUM already holds. A reference from a
         low-friction unit (or one whose identified viscous part is low) makes the bound
         a larger excess than the constant tolerance (×1.86, a reference at exactly the
-        lower bound), most at high speeds: unit 100's model read healthy units ×2.0–2.4
-        there and alarmed."""
+        lower bound), most at high speeds: a low-friction reference model read healthy units
+        ×2.0–2.4 there and alarmed."""
         ref = self.reference
         if ref is None:
             return 0.0
@@ -1056,7 +1064,7 @@ class Diagnoser:
             ev["motor_after"] = np.array([x for t, x in motor.raw if t >= t_change])
         ev["tolerance"] = dict(ref.tolerance)
         # a weak motor is named on the motor test's own tolerance (the datasheet's headroom):
-        # on the constant one, unit 7's model called its own k_t x 0.8 alarms friction
+        # on the constant one, a unit's k_t x 0.8, read with its own model, was named friction
         ev["tolerance"]["motor"] = min(
             ev["tolerance"].get("motor", DEFAULT_TOLERANCE["motor"]), self._motor_headroom(ref)
         )

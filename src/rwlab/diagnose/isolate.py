@@ -60,6 +60,7 @@ from typing import Literal, TypedDict
 import numpy as np
 from scipy.stats import chi2
 
+from rwlab.diagnose.constants import measured
 from rwlab.diagnose.motion import REST_BAND_RPM
 
 __all__ = ["BlockName", "Evidence", "Finding", "combine", "isolate"]
@@ -72,38 +73,31 @@ Z95 = 1.959964
 FRICTION_UNIT_SD = math.sqrt(2) * 0.3 / math.sqrt(3)
 # ... and of the inertial current I/k_t between two units: I ±2 %, k_t ±5 %, uniform
 MOTOR_UNIT_SD = math.sqrt(2 * (0.02**2 + 0.05**2) / 3)
-# σ of the held-speed error between two healthy units (Hall reading at a hold; the
-# tune set's healthy units sit within about ±1 rpm of each other), rpm
-SPEED_UNIT_SD = 0.5
+# σ of the held-speed error between two healthy units (Hall reading at a hold), rpm
+SPEED_UNIT_SD = measured("SPEED_UNIT_SD")
 # σ of the offset test's record-mean between healthy units beyond its windows' noise
-# (the model's mismatch with a unit persists over a record): tune set's healthy records,
-# 21 records with ≥ 3 windows, σ of the record means 1.22 rpm where independent windows
-# would give 0.85
-OFFSET_UNIT_SD_RPM = 0.9
+# (the model's mismatch with a unit persists over a record), rpm
+OFFSET_UNIT_SD_RPM = measured("OFFSET_UNIT_SD_RPM")
 CURRENT_OFFSET_SD_A = 0.005 / math.sqrt(3)  # a unit's current-sense offset, ±5 mA uniform
 SLEW_SCALE_SD = 0.25  # relative σ of the slew asymmetry's scale to 2(F − 1)
 SLEW_OWN_MIN = 4  # slews before a change that give the unit's own healthy level
-# ... which moves along one profile: a default chirp's healthy slews at 610–680 s read
-# 0.3 below its 480–600 s ones (units 2810–2829, unit 2800's model: −1.15 against −0.85),
-# so a level from the earlier slews sizes a later change up to that much low
-SLEW_PROFILE_SD = 0.15
+# ... which moves along one profile (a default chirp's later, shorter slews read lower
+# than its earlier ones), so a level from the earlier slews sizes a later change low
+SLEW_PROFILE_SD = measured("SLEW_PROFILE_SD")
 REST_RPM = 0.1  # the no-edge reading is the bias to the telemetry's quantum (RW90: 0.1 rpm)
 LAG_EXCESS_MIN = 3  # current-balance samples at the limit that tell a weak motor from a clamp
 LAG_SPLIT = 0.1  # excess under acceleration between a clamp's 0 and a k_t × 0.8's 0.25
-# the current at the limit over the unit's own before the change: a clamp at 0.45 A reads
-# 0.78–0.86, a weak motor (k_t × 0.8, × 0.9) 0.95–1.03 (tune set's units 41–65 and the
-# held-out 700s, unit 7's and 725's models); a clamp above ~0.9 of the unit's own current
-# at its acceleration limit is then named a weak motor
-CLAMP_RATIO = 0.9
-# the clamped test's values on healthy units behind a 0.45 A clamp (units 410–429 and the
-# tune/eval sets' clamps, models of units 0 and 587): within a record σ ≈ 0.03–0.1 per
-# slew; the records' medians −0.44 to +0.07 (mean −0.2, σ 0.12): the clamped slews read
-# the unit's friction lower than its slow samples before, by an amount that varies
-# between units (why is not measured; the twin's viscous friction falls as it warms)
-CLAMP_SLEW_SD = 0.1
-CLAMP_LEVEL_SD = 0.12
-CHARGE_SD = 0.015  # σ of one speed change's charge relative to the unit's own level (healthy
-# step and PRBS records: 0.012, 119 values of 114 records)
+# the current at the limit over the unit's own before the change: a clamp lowers it, a
+# weak motor leaves it (the controller's open-loop current); a clamp above this share of
+# the unit's own current at its acceleration limit is then named a weak motor
+CLAMP_RATIO = measured("CLAMP_RATIO")
+# the clamped test's values on healthy units: their scatter within a record, and the
+# records' medians, which sit below 0: the clamped slews read the unit's friction lower
+# than its slow samples before, by an amount that varies between units (why is not
+# measured; the twin's viscous friction falls as it warms)
+CLAMP_SLEW_SD = measured("CLAMP_SLEW_SD")
+CLAMP_LEVEL_SD = measured("CLAMP_LEVEL_SD")
+CHARGE_SD = measured("CHARGE_SD")  # σ of one speed change's charge over the unit's own level
 LAG_BEFORE_MIN = 20  # samples at the limit before the change that give the unit's own current
 
 
@@ -232,7 +226,7 @@ def _rotor(ev: Evidence, detector: str) -> list[Finding]:
     The motor test's own alarm is the weak motor's signature (the current under
     acceleration, which friction hardly moves): where its interval does not yet clear the
     tolerance and no friction excess is there, it names the weak motor, sized, not an
-    unsized friction (held-out unit 769, k_t × 0.9 on a chirp, named both)."""
+    unsized friction as well (a k_t × 0.9 on a chirp was named both)."""
     motor = _motor(ev)
     weak = motor is not None and motor[0] - motor[1] > ev["tolerance"].get("motor", 0.0)
     findings = []

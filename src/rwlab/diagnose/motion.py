@@ -35,6 +35,7 @@ from collections import deque
 
 import numpy as np
 
+from rwlab.diagnose.constants import measured
 from rwlab.wheelspec import WheelSpec
 
 __all__ = [
@@ -58,11 +59,9 @@ OFFSET_WINDOW = 120  # samples of one speed-offset regression (60 s at 0.5 s)
 OFFSET_SWING_RPM = 200.0  # the model's speed reaches ± this within the window
 OFFSET_SE_RPM = 1.5  # the intercept's standard error must be below this, rpm
 OFFSET_CONTINUOUS = 0.9  # share of samples at which the command changes (no holds)
-# σ of one window's intercept on healthy units of the twin (model mismatch, not noise):
-# measured on the tune set's healthy records (units 1–6, 101–136: 295 windows, σ 3.44, on
-# chirps and multisines; `bench/calibrate_thresholds.py --offset-sigma`), never on the
-# eval sets
-OFFSET_SIGMA_RPM = 3.5
+# σ of one window's intercept on healthy units of the twin (model mismatch, not noise),
+# measured on healthy chirps and multisines, rpm
+OFFSET_SIGMA_RPM = measured("OFFSET_SIGMA_RPM")
 REST_BAND_RPM = 30.0  # a reading within this of zero may be the no-edge reading, rpm
 REST_MODEL_RPM = 60.0  # ... taken where the model passes this close to zero speed, rpm
 REST_STEP_RPM = 50.0  # ... or where the reading moved this much since the last sample, rpm
@@ -71,19 +70,15 @@ REST_COUNT = 4  # the same non-zero value this often, no 0 between: a bias (heal
 # at most 3 over 30 h of the bench's healthy records, 90 records, with 0 between)
 # A reading this close to a counted value, but not equal, restarts that value's count: a
 # motion that repeats (a chirp's fast end rocking the wheel through zero at one amplitude)
-# reads nearly the same low speed at each pass, now and then exactly (unit 1305's healthy
-# chirp, eval4: −11.8 rpm five times among −11.7 to −12.2, a false bias alarm with unit
-# 1502's model). Next to a bias b, the other readings near zero are b plus a speed the Hall
+# reads nearly the same low speed at each pass, now and then exactly, and would count as
+# a bias. Next to a bias b, the other readings near zero are b plus a speed the Hall
 # edges measured, at least the firmware's lowest (the twin's min_measurable_rpm, 5 rpm),
-# never within this of b: the bias cases' readings never came closer than 5 rpm after onset
-REST_NEAR_RPM = 2.0
+# never within this of b, rpm
+REST_NEAR_RPM = measured("REST_NEAR_RPM")
 # σ of one slew's asymmetry on healthy units (nominal Coulomb decelerations) on the
-# identification's signal, a stepped PRBS: pooled over the tune set's healthy PRBS records
-# (units 1–6, 101–136 with unit 0's model: 125 slews, within-record σ 0.29; chirps 0.40,
-# multisines 0.46, whose larger scatter is in the calibration's measured rates). One
-# identification record has 9–10 slews, whose σ reads 0.13–0.46 by chance (unit 300's 0.13
-# alarmed on a healthy unit): the detector takes the larger of the two
-SLEW_SIGMA = 0.3
+# identification's signal, a stepped PRBS, pooled over many records: one identification
+# record has 9–10 slews, too few for its own σ, so the detector takes the larger of the two
+SLEW_SIGMA = measured("SLEW_SIGMA")
 SLEW_SHARE = 0.8  # a slew: |measured α| ≥ this share of the acceleration limit
 SLEW_SPEED_RPM = (100.0, 3000.0)  # |ω| in a slew's halves: beyond the Hall sensor's and
 # the Stribeck band's low speeds, below the back-EMF's supply limit
