@@ -519,12 +519,8 @@ class Cia402Protocol(CanopenProfile):
         "statusword state machine, profile velocity 0x60FF/0x606C in 0.001 rpm, profile torque"
     )
     eds = EDS
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> Cia402HostLink:
-        return Cia402HostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> Cia402NodeLink:
-        return Cia402NodeLink(transport, node_id, clock)
+    host_class = Cia402HostLink
+    node_class = Cia402NodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen node ``node_id + 1`` and its COB-IDs."""

@@ -543,10 +543,19 @@ class CanopenProfile(WheelProtocol):
     """A CANopen profile of the twin, on any python-can bus, named in records by its
     shipped object dictionary's hash.
 
-    Subclasses set ``name``, ``description`` and ``eds``, and build the two links.
+    Subclasses set ``name``, ``description``, ``eds`` and the classes of their two links,
+    ``host_class`` and ``node_class`` (each built from the bus, node id and clock).
     """
 
     eds: ClassVar[ShippedEds]
+    host_class: Callable[[can.BusABC, int, Clock], HostLink]
+    node_class: Callable[[can.BusABC, int, Clock], NodeLink]
+
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
+        return self.host_class(transport, node_id, clock)
+
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
+        return self.node_class(transport, node_id, clock)
 
     def identity(self) -> str:
         return f"{self.name} eds sha256 {self.eds.sha256}"

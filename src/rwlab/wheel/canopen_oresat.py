@@ -467,12 +467,8 @@ class OresatProtocol(CanopenProfile):
         "commands, TPDO 0x4000-0x4003 telemetry, ids 0x3C + 4n"
     )
     eds = EDS
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> OresatHostLink:
-        return OresatHostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> OresatNodeLink:
-        return OresatNodeLink(transport, node_id, clock)
+    host_class = OresatHostLink
+    node_class = OresatNodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen id ``0x3C + 4 node_id`` (OreSat1's rw_1..rw_4 for 0..3) and its COB-IDs."""

@@ -367,12 +367,8 @@ class CanopenProtocol(CanopenProfile):
     name = "canopen"
     description = "CANopen CiA 301 (canopen package): RPDO setpoints, TPDO telemetry, SDO, NMT"
     eds = EDS
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> CanopenHostLink:
-        return CanopenHostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> CanopenNodeLink:
-        return CanopenNodeLink(transport, node_id, clock)
+    host_class = CanopenHostLink
+    node_class = CanopenNodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen node ``node_id + 1`` (CANopen ids start at 1) and its COB-IDs."""
