@@ -125,10 +125,8 @@ class Heartbeat:
 
     Parameters
     ----------
-    node_id : int
-        The wheel that sent it.
-    mode : Mode
-        The mode the wheel is in.
+    node_id, mode
+        As for :class:`Telemetry`.
     faults : Fault
         The latched faults.
     temperature : float
