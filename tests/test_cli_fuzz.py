@@ -22,6 +22,7 @@ from rwlab.cli import main
 from rwlab.data import IOData
 from rwlab.testbed import ExperimentConfig, run_experiment
 from rwlab.wheel import WheelParams
+from tests.test_bad_inputs import MODEL
 
 BUDGET_S = 2.0
 
@@ -70,21 +71,7 @@ POLY_KEYS = ["A", "B", "C", "D", "F", "nk", "nb", "nf", "Ts", "structure", "nois
 @st.composite
 def model_json(draw):
     """A wheel model file: a plausible one with some fields replaced by anything."""
-    model = {
-        "format": "rwlab.WheelModel/1",
-        "structure": "ARX221",
-        "Ts": 0.5,
-        "input": {"name": "command", "unit": "rpm", "offset": 0.0},
-        "output": {"name": "speed_rpm", "unit": "rpm", "offset": 0.0},
-        "model": {
-            "format": "rwlab.PolyModel/1",
-            "structure": "ARX221",
-            "Ts": 0.5,
-            **{"A": [1.0, -0.9, 0.0], "B": [0.0, 0.1, 0.0], "C": [1.0], "D": [1.0], "F": [1.0]},
-            **{"nk": [1], "nb": [2], "nf": [0], "noise_variance": 1.0, "covariance": None},
-        },
-        "saturation": {"speed_rpm": 7800.0, "accel_rpm_s": 314.0, "source": "fuzz"},
-    }
+    model = json.loads(json.dumps(MODEL))
     for key in draw(st.lists(st.sampled_from(MODEL_KEYS), max_size=2)):
         model[key] = draw(json_value)
     if isinstance(model.get("model"), dict):

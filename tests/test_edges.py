@@ -361,14 +361,14 @@ def test_a_wheel_client_ignores_commands_read_back_from_the_bus():
 
     from rwlab.wheel import WheelClient
     from rwlab.wheel.physics import Mode
-    from rwlab.wheel.protocol import Command, encode_command
+    from rwlab.wheel.protocol import Command, encode
 
     with (
         can.Bus(interface="virtual", channel="edge-echo") as mine,
         can.Bus(interface="virtual", channel="edge-echo") as other,
     ):
         client = WheelClient(mine, 0)
-        other.send(encode_command(Command(0, Mode.SPEED, 100.0, 7)))
+        other.send(encode(Command(0, Mode.SPEED, 100.0, 7)))
         time.sleep(0.05)
         assert client.drain() == [] and client.heartbeat is None
 

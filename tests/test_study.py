@@ -271,15 +271,24 @@ def test_steady_state_gain_reads_a_known_static_map_from_settled_holds_only():
     assert steady_state_gain(IOData(np.sin(np.arange(500.0)), np.ones(500), 0.5)) is None
 
 
+def _row(structure, n_params, fit_percent, dc_gain, error_percent, **more):
+    """One candidate model's row of the study's table, as _choose reads it."""
+    return {
+        "structure": structure,
+        "n_params": n_params,
+        "fit_percent": fit_percent,
+        "dc_gain": dc_gain,
+        "dc_gain_error_percent": error_percent,
+        **more,
+    }
+
+
 def test_the_choice_passes_over_a_model_whose_dc_gain_is_off_and_says_so():
     rows = [
-        {"structure": "ARX221", "n_params": 4, "fit_percent": 70.0, "dc_gain": 0.92,
-         "dc_gain_error_percent": -8.0},
-        {"structure": "OE221", "n_params": 4, "fit_percent": 71.0, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.0},
-        {"structure": "ARX551", "n_params": 10, "fit_percent": 72.0, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.0},
-    ]  # fmt: skip
+        _row("ARX221", 4, 70.0, 0.92, -8.0),
+        _row("OE221", 4, 71.0, 1.0, 0.0),
+        _row("ARX551", 10, 72.0, 1.0, 0.0),
+    ]
     steady = {"gain": 1.0, "holds": 9}
     pick, why = _choose(rows, 3.0, 0.02, steady)
     assert pick["structure"] == "OE221" and "ARX221 (0.9200, -8.0 %)" in why
@@ -299,13 +308,10 @@ def test_the_choice_passes_over_a_model_whose_dc_gain_is_off_and_says_so():
 
 def test_the_reason_says_why_paper_a_s_arx221_was_not_chosen():
     rows = [
-        {"structure": "ARX221", "n_params": 4, "fit_percent": 64.9, "dc_gain": 0.90,
-         "dc_gain_error_percent": -10.0},
-        {"structure": "ARX221+K", "n_params": 4, "fit_percent": 65.1, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.1, "gain_constrained": True},
-        {"structure": "OE221+K", "n_params": 4, "fit_percent": 69.2, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.1, "gain_constrained": True},
-    ]  # fmt: skip
+        _row("ARX221", 4, 64.9, 0.90, -10.0),
+        _row("ARX221+K", 4, 65.1, 1.0, 0.1, gain_constrained=True),
+        _row("OE221+K", 4, 69.2, 1.0, 0.1, gain_constrained=True),
+    ]
     steady = {"gain": 1.0, "holds": 20}
     pick, why = _choose(rows, 3.0, 0.02, steady)
     assert pick["structure"] == "OE221+K"
@@ -365,15 +371,11 @@ def test_rwlab_compare_refuses_what_is_not_a_model(tmp_path, study_dir):
 def test_the_choice_looks_beyond_the_fit_window_for_a_passing_gain_before_falling_back():
     # a held-out review record: ARMAX2211 best at -7.6 % gain, ARX221+K exact 3.5 points lower
     rows = [
-        {"structure": "ARMAX2211", "n_params": 5, "fit_percent": 80.0, "dc_gain": 0.924,
-         "dc_gain_error_percent": -7.6},
-        {"structure": "ARX221", "n_params": 4, "fit_percent": 77.5, "dc_gain": 0.93,
-         "dc_gain_error_percent": -7.0},
-        {"structure": "ARX221+K", "n_params": 4, "fit_percent": 76.5, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.0, "gain_constrained": True},
-        {"structure": "OE221+K", "n_params": 4, "fit_percent": 40.0, "dc_gain": 1.0,
-         "dc_gain_error_percent": 0.0, "gain_constrained": True},
-    ]  # fmt: skip
+        _row("ARMAX2211", 5, 80.0, 0.924, -7.6),
+        _row("ARX221", 4, 77.5, 0.93, -7.0),
+        _row("ARX221+K", 4, 76.5, 1.0, 0.0, gain_constrained=True),
+        _row("OE221+K", 4, 40.0, 1.0, 0.0, gain_constrained=True),
+    ]
     steady = {"gain": 1.0, "holds": 12}
     pick, why = _choose(rows, 3.0, 0.02, steady)
     assert pick["structure"] == "ARX221+K"

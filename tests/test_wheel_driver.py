@@ -298,7 +298,7 @@ def test_driver_and_wheel_talk_over_rs232_slip():
         host.shutdown()
         node.bus.shutdown()
         os.close(slave)
-    assert proto.decode(proto.encode_command(proto.Command(0, Mode.IDLE, 0.0, 1))).mode == Mode.IDLE
+    assert proto.decode(proto.encode(proto.Command(0, Mode.IDLE, 0.0, 1))).mode == Mode.IDLE
 
 
 def _vcan_available():

@@ -42,7 +42,7 @@ def test_an_all_zero_frame_fails_the_check(base, node):
     bit=st.integers(0, 63),
 )
 def test_every_single_bit_error_is_caught(node, setpoint, seq, bit):
-    msg = proto.encode_command(proto.Command(node, Mode.SPEED, setpoint, seq))
+    msg = proto.encode(proto.Command(node, Mode.SPEED, setpoint, seq))
     data = bytearray(msg.data)
     data[bit // 8] ^= 1 << (bit % 8)
     damaged = can.Message(arbitration_id=msg.arbitration_id, data=data, is_extended_id=False)
@@ -52,7 +52,7 @@ def test_every_single_bit_error_is_caught(node, setpoint, seq, bit):
 
 @given(node=st.integers(0, 15), other=st.integers(0, 15), seq=st.integers(0, 255))
 def test_a_frame_replayed_under_another_node_id_fails(node, other, seq):
-    msg = proto.encode_command(proto.Command(node, Mode.SPEED, 100.0, seq))
+    msg = proto.encode(proto.Command(node, Mode.SPEED, 100.0, seq))
     moved = can.Message(arbitration_id=0x100 + other, data=msg.data, is_extended_id=False)
     if other == node:
         assert proto.decode(moved) == proto.Command(node, Mode.SPEED, 100.0, seq)
@@ -120,7 +120,7 @@ def test_telemetry_beyond_physical_limits_is_an_event_not_the_state(bench, speed
     truth = client.latest
     spoof = proto.Telemetry(2, speed, current, Mode.SPEED, False, False, truth.sequence_echo, 0)
     client.drain()
-    rogue.send(proto.encode_telemetry(spoof))
+    rogue.send(proto.encode(spoof))
     events = client.drain()
     flagged = [f for _, f in events if isinstance(f, Implausible)]
     assert len(flagged) == 1 and f"{speed:g}" in flagged[0].reason

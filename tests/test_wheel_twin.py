@@ -178,7 +178,7 @@ def test_heartbeat_carries_the_bus_voltage_to_half_a_volt(volts, temp):
     from rwlab.wheel import protocol as proto
 
     beat = proto.Heartbeat(3, Mode.SPEED, proto.Fault.NONE, temp, 12, 7, volts)
-    back = proto.decode(proto.encode_heartbeat(beat))
+    back = proto.decode(proto.encode(beat))
     assert abs(back.bus_voltage - volts) <= 0.25 + 1e-9
     assert abs(back.temperature - temp) <= 0.25 + 1e-9 and back.commands_seen == 7
 

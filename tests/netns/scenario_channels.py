@@ -92,7 +92,7 @@ def channels() -> dict:
     result["rx_bound_to"] = on_a._rx.getsockname()[0]
     sender = LoopbackMulticastBus(B)
     for k in range(20):
-        sender.send(proto.encode_command(proto.Command(0, proto.Mode.SPEED, 100.0, k)))
+        sender.send(proto.encode(proto.Command(0, proto.Mode.SPEED, 100.0, k)))
     time.sleep(0.2)
     result["a_got"] = sum(1 for _ in iter(lambda: on_a.recv(timeout=0.05), None))
     result["b_got"] = sum(1 for _ in iter(lambda: on_b.recv(timeout=0.05), None))

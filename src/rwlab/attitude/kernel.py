@@ -74,7 +74,6 @@ __all__ = [
     "Sensors",
     "Sky",
     "State",
-    "Wheels",
     "Work",
     "command_step",
     "control_torque",
@@ -293,22 +292,6 @@ class State(NamedTuple):
     stats: np.ndarray
     wheel_sign: np.ndarray
     wheel_angle: np.ndarray
-
-
-class Wheels(NamedTuple):
-    """The wheel model as the kernel reads it (``wheels.WheelArrays``'s fields)."""
-
-    kind: int
-    healthy: np.ndarray
-    faulty: np.ndarray
-    fault_s: np.ndarray
-    state: np.ndarray
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    ident: np.ndarray
-    servo: np.ndarray
-    nominal: np.ndarray
 
 
 def new_stats() -> np.ndarray:

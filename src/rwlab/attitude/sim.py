@@ -826,7 +826,7 @@ class Loop:
             wheel_angle=np.zeros(hw0.size),
         )
         self.work = kernel.new_work(self.plant, self.filt, P.shape[0])
-        self.wheels = kernel.Wheels(*astuple_shallow(wheel_setup(sc, hw0)))
+        self.wheels = wheel_setup(sc, hw0)
         period = controller.update_period
         self.block_steps = (
             BLOCK_STEPS if not period else max(1, min(BLOCK_STEPS, round(period / sc.run.dt)))
@@ -892,13 +892,6 @@ def _fly_blocks(loop: Loop, progress) -> SimResult:
         if progress is not None:
             progress(min(k, loop.steps))
     return loop.result(log_k)
-
-
-def astuple_shallow(obj) -> tuple:
-    """A dataclass's field values in order, not copied (``dataclasses.astuple`` deep-copies)."""
-    from dataclasses import fields
-
-    return tuple(getattr(obj, f.name) for f in fields(obj))
 
 
 def _assemble(sc, log, log_k, saturated, stats, steady_from, mode) -> SimResult:

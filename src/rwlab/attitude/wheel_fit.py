@@ -21,6 +21,7 @@ report's first screen.
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass
 
@@ -28,7 +29,7 @@ import numpy as np
 
 from rwlab.errors import ConfigError
 
-__all__ = ["Oversize", "Shortfall", "check_wheel_fit", "oversizes", "shortfalls"]
+__all__ = ["Misfit", "Oversize", "Shortfall", "check_wheel_fit", "oversizes", "shortfalls"]
 
 RPM = math.pi / 30  # rad/s per rpm
 # a wheel set whose torque is more than this many times the largest the mission needs is
@@ -38,8 +39,26 @@ RPM = math.pi / 30  # rad/s per rpm
 FAR_OFF = 100.0
 
 
+class Misfit(abc.ABC):
+    """A way the wheels do not fit the mission: a :class:`Shortfall` or an :class:`Oversize`."""
+
+    @abc.abstractmethod
+    def line(self, scenario: str, wheels: str) -> str:
+        """The refusal, one line.
+
+        Parameters
+        ----------
+        scenario, wheels : str
+            The scenario's name and a description of its wheels.
+
+        Returns
+        -------
+        str
+        """
+
+
 @dataclass(frozen=True)
-class Shortfall:
+class Shortfall(Misfit):
     """One thing the wheels cannot deliver.
 
     Attributes
@@ -62,17 +81,6 @@ class Shortfall:
     available_source: str
 
     def line(self, scenario: str, wheels: str) -> str:
-        """The refusal, one line.
-
-        Parameters
-        ----------
-        scenario, wheels : str
-            The scenario's name and a description of its wheels.
-
-        Returns
-        -------
-        str
-        """
         about = "a wheel's speed" if self.quantity == "speed" else f"{self.quantity} about any axis"
         return (
             f"{scenario} needs {self.needed:.4g} {self.unit} of {about} "
@@ -82,7 +90,7 @@ class Shortfall:
 
 
 @dataclass(frozen=True)
-class Oversize:
+class Oversize(Misfit):
     """One way the wheels are far too large for the mission (refused as a shortfall is).
 
     Attributes
@@ -97,17 +105,6 @@ class Oversize:
     why: str
 
     def line(self, scenario: str, wheels: str) -> str:
-        """The refusal, one line.
-
-        Parameters
-        ----------
-        scenario, wheels : str
-            The scenario's name and a description of its wheels.
-
-        Returns
-        -------
-        str
-        """
         return f"{wheels} are far too large for {scenario}: {self.what}; {self.why}"
 
 

@@ -31,7 +31,8 @@ hold each model equal to the Python class it compiles.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -64,9 +65,8 @@ S_CMD, S_CLOCK, S_SPEED, S_TORQUE, S_X = range(5)
 I_D, I_U0, I_Y0, I_TS, I_SPEED, I_ACCEL, I_INERTIA, I_SERVO = range(8)
 
 
-@dataclass
-class WheelArrays:
-    """A scenario's wheel model as the kernel reads it.
+class WheelArrays(NamedTuple):
+    """A scenario's wheel model as the kernel reads it (a named tuple: numba compiles it).
 
     Attributes
     ----------

@@ -332,6 +332,23 @@ def _wrote(out, paths) -> str:
     return "wrote " + ", ".join(str(Path(out) / Path(p).name) for p in paths)
 
 
+#: --force-wheel, for the commands that fly a scenario's wheels (refused when they do not fit).
+FORCE_WHEEL_OPTION = click.option(
+    "--force-wheel",
+    is_flag=True,
+    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
+    "(else refused, exit 2); the report's first screen says what it lacks.",
+)
+
+
+def _flight_output_options(func):
+    """--out, --force, --force-wheel: the folder a flight's outputs go to, whether they may
+    replace what is there, and whether wheels that do not fit the scenario fly anyway."""
+    func = FORCE_WHEEL_OPTION(func)
+    func = click.option("--force", is_flag=True, help="Overwrite outputs in --out.")(func)
+    return click.option("--out", type=click.Path(file_okay=False), required=True)(func)
+
+
 def _salvage_option(func):
     """--salvage: a damaged record is read up to its damage instead of refused
     (:func:`rwlab.testbed.record.salvaging`, for every record the command reads)."""

@@ -8,9 +8,11 @@ from pathlib import Path
 import click
 
 from rwlab.cli._common import (
+    FORCE_WHEEL_OPTION,
     POSITIVE,
     SECONDS,
     Number,
+    _flight_output_options,
     _friendly_errors,
     _imports_uninterrupted,
     _only_with,
@@ -69,12 +71,7 @@ EPOCH_OPTION = click.option(
 )
 @EPOCH_OPTION
 @click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
-@click.option(
-    "--force-wheel",
-    is_flag=True,
-    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
-    "(else refused, exit 2); the report's first screen says what it lacks.",
-)
+@FORCE_WHEEL_OPTION
 @_friendly_errors
 def attitude_compare(
     scenario, out, duration, wheel_model, rho, seed, relinearize, epoch, force, force_wheel
@@ -293,14 +290,7 @@ def _simulation_config(sc, controller, estimator, seed, duration, rho, relineari
     "spin rate (needs --dt of about 0.5 / top wheel speed in rad/s) [default: the "
     "scenario's wheels.jitter, off in the shipped ones].",
 )
-@click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
-@click.option(
-    "--force-wheel",
-    is_flag=True,
-    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
-    "(else refused, exit 2); the report's first screen says what it lacks.",
-)
+@_flight_output_options
 @_friendly_errors
 def attitude_simulate(
     scenario,

@@ -9,6 +9,7 @@ import click
 from rwlab.cli._common import (
     SECONDS,
     Number,
+    _flight_output_options,
     _friendly_errors,
     _only_with,
     _output,
@@ -135,19 +136,11 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     help="With --realtime: run the loop under SCHED_FIFO at this priority (needs CAP_SYS_NICE).",
 )
 @click.option("--no-reference", is_flag=True, help="Do not fly the simulation beside it.")
-@click.option("--out", type=click.Path(file_okay=False), required=True)
-@click.option("--force", is_flag=True, help="Overwrite outputs in --out.")
-@click.option(
-    "--force-wheel",
-    is_flag=True,
-    help="Fly a wheel model that cannot deliver the scenario's torque, momentum or speed "
-    "(else refused, exit 2); the report's first screen says what it lacks.",
-)
+@_flight_output_options
 @_friendly_errors
 def hil(
     out,
     force,
-    force_wheel,
     nodes,
     faults,
     wheels_running,
@@ -181,7 +174,6 @@ def hil(
         twins=False if wheels_running else None,
         calibration_s=calibration,
         reference=not no_reference,
-        force_wheel=force_wheel,
         **settings,
     )
     scenario, duration, controller = cfg.scenario, cfg.duration, cfg.controller

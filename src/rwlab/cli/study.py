@@ -80,22 +80,7 @@ from rwlab.errors import ConfigError, NoModelFitsError, RwlabError, RwlabWarning
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_salvage_option
 @_friendly_errors
-def identify(
-    file,
-    out,
-    Ts,
-    input_col,
-    output_col,
-    preprocess,
-    split,
-    tolerance,
-    gaps,
-    gain_tolerance,
-    nonlinear_models,
-    workers,
-    scheduler,
-    force,
-):
+def identify(file, out, workers, scheduler, force, **options):
     """Run paper A's whole identification study on a record or data file.
 
     Writes OUT/report.html (tables and figures, opens offline), OUT/study.json
@@ -112,17 +97,6 @@ def identify(
     """
     from rwlab.report.identify import identify as run_study
 
-    options = dict(
-        Ts=Ts,
-        input_col=input_col,
-        output_col=output_col,
-        preprocess=preprocess,
-        split=split,
-        tolerance=tolerance,
-        gaps=gaps,
-        gain_tolerance=gain_tolerance,
-        nonlinear_models=nonlinear_models,
-    )
     if Path(file).is_dir():
         _identify_fleet(Path(file), Path(out), options, workers, scheduler, force)
         return

@@ -1141,14 +1141,8 @@ def physical_model(
 
     Parameters
     ----------
-    result : StudyResult
-        The study.
-    speed_limit_rpm, accel_limit_rpm_s : float
-        The wheel's saturations, rpm and rpm/s.
-    saturation_source : str
-        Where they come from.
-    wheel_spec : WheelSpec, optional
-        The wheel model the record came from (travels with the model).
+    result, speed_limit_rpm, accel_limit_rpm_s, saturation_source, wheel_spec
+        As for :func:`wheel_model`.
 
     Returns
     -------

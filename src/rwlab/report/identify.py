@@ -100,20 +100,23 @@ def identify(
         When even the best model's validation fit is negative: the folder is written
         all the same, and the error carries ``study`` and ``paths``.
     """
-    options = dict(
-        Ts=Ts,
-        input_col=input_col,
-        output_col=output_col,
-        preprocess=preprocess,
-        split=split,
-        tolerance=tolerance,
-        gaps=gaps,
-        gain_tolerance=gain_tolerance,
-        nonlinear_models=nonlinear_models,
-        force=force,
-    )
     with output_folder(out, STUDY_FILES, force=force, what="identification study") as stage:
-        study, paths = identify_into(file, stage, progress=progress, echo=echo, **options)
+        study, paths = identify_into(
+            file,
+            stage,
+            progress=progress,
+            echo=echo,
+            Ts=Ts,
+            input_col=input_col,
+            output_col=output_col,
+            preprocess=preprocess,
+            split=split,
+            tolerance=tolerance,
+            gaps=gaps,
+            gain_tolerance=gain_tolerance,
+            nonlinear_models=nonlinear_models,
+            force=force,
+        )
     paths = {name: Path(out) / Path(p).name for name, p in paths.items()}
     if study.get("no_model_fits"):
         raise NoModelFitsError(

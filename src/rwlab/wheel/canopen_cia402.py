@@ -86,7 +86,6 @@ import struct
 from typing import Any
 
 import can
-import canopen
 from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError
 from canopen.sdo.exceptions import SdoError
@@ -94,9 +93,9 @@ from canopen.sdo.exceptions import SdoError
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
-    BusNetwork,
+    CanopenHostBase,
     CanopenNodeBase,
-    SdoPumpNetwork,
+    CanopenProfile,
     ShippedEds,
     TpdoSchedule,
     canopen_id,
@@ -106,7 +105,7 @@ from rwlab.wheel.canopen_common import (
     setpoint_abort,
 )
 from rwlab.wheel.cia402_state import DriveState, S, next_state, statusword
-from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
+from rwlab.wheel.link import Clock, Incoming
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = [
@@ -163,41 +162,23 @@ class Cia402NodeLink(CanopenNodeBase):
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
-        super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
-        self.network = BusNetwork(bus)
-        self.cid = canopen_id(node_id)
-        self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
-        self.network.add_node(self.local)
-        self.local.tpdo.read(from_od=True)
+        super().__init__(bus, node_id, clock, canopen_id(node_id), object_dictionary(node_id))
         self.local.rpdo.read(from_od=True)
         for number in (1, 2):
             self.local.rpdo[number].add_callback(self._on_rpdo)
-        self.local.add_write_callback(self._on_sdo_write)
-        self.local.add_read_callback(self._on_sdo_read)
-        self.local.nmt.state = "OPERATIONAL"
         self.schedule = TpdoSchedule(self.local)
-        self._params = RW90
         self.state = S.SWITCH_ON_DISABLED
         self.mode = 0  # modes of operation in force (0x6061)
         self._controlword = 0
         self._target_velocity = 0  # 0.001 rpm
         self._target_torque = 0  # ‰ of rated torque
         self._values: dict[int, int] = {}
-        self._commands: list[tuple[float, proto.Command]] = []
-        self._arrival = 0.0
-        self._sequence = 0
-        self._faults = Fault.NONE
         self._rejected = False
         self._limited = False
         self._speed_rpm = 0.0
-        self._twin: str | None = None
         self._ids = {0x000, 0x200 + self.cid, 0x300 + self.cid, 0x600 + self.cid}
         self._rpdo_bytes = {0x200 + self.cid: 7, 0x300 + self.cid: 4}  # RPDO1, RPDO2 maps
         self._own = {0x180 + self.cid, 0x280 + self.cid, 0x380 + self.cid, 0x480 + self.cid}
-
-    def configure(self, params: WheelParams) -> None:
-        self._params = params
 
     # -- units ------------------------------------------------------------------------------
     def _rated_torque_mnm(self) -> int:
@@ -397,7 +378,7 @@ class Cia402NodeLink(CanopenNodeBase):
             var.raw = self._values.get(var.index, 0)
 
 
-class Cia402HostLink(HostLink):
+class Cia402HostLink(CanopenHostBase):
     """rwlab's driver of a CiA 402 drive: confirmed SDO writes out, TPDOs in.
 
     Every command is SDO downloads (each confirmed by the drive, or aborted):
@@ -416,16 +397,8 @@ class Cia402HostLink(HostLink):
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
-        super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
-        self.cid = canopen_id(node_id)
-        self.network = SdoPumpNetwork(bus, clock, self.cid)
-        self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))
-        self.network.add_node(self.remote)
-        self.remote.tpdo.read(from_od=True)
-        self.inertia = RW90.inertia
+        super().__init__(bus, node_id, clock, canopen_id(node_id), object_dictionary(node_id))
         self._rated_ma_configured = RW90.current_limit * 1000
-        self.network.on_frame = self._record
         self._rated: tuple[int, int] | None = None  # (mN·m, mA) read from the drive
         self._enabled_mode: int | None = None  # the mode of operation enabled, as we know
         self._acked = 0
@@ -483,30 +456,9 @@ class Cia402HostLink(HostLink):
                 self._download(0x6040, word)
             self._enabled_mode = mode
 
-    def _record(self, t: float, cob: int, data: bytes, direction: str) -> None:
-        if self.raw_listener:
-            self.raw_listener(t, cob, data, direction)
-
     def receive(self, now: float) -> list[Incoming]:
         out: list[Incoming] = []
-        tpdo, cid = self.remote.tpdo, self.cid
-        for msg in self.network.take():
-            t = msg.timestamp if self.clock.simulated else now
-            cob, data = msg.arbitration_id, bytes(msg.data)
-            self._record(t, cob, data, "rx")
-            source = str(msg.channel) if getattr(self.bus, "reports_sources", False) else None
-            number = {0x180 + cid: 1, 0x280 + cid: 2, 0x380 + cid: 3, 0x480 + cid: 4}.get(cob)
-            if number is None:
-                if cob == 0x700 + cid and len(data) != 1:
-                    self.bad_frames += 1
-                elif cob not in (0x700 + cid, 0x80 + cid):
-                    self.foreign_frames += 1  # SDO, other nodes, other protocols
-                continue
-            pdo_map = tpdo[number]
-            if len(data) != len(pdo_map.data):
-                self.bad_frames += 1
-                continue
-            pdo_map.on_message(cob, bytearray(data), t)
+        for t, number, pdo_map, source in self._tpdos(now):
             values = {var.index: int(var.raw) for var in pdo_map}
             if number == 1:
                 self._status = (values[0x6041], values[0x6061], values[0x606C])
@@ -558,7 +510,7 @@ class Cia402HostLink(HostLink):
         )
 
 
-class Cia402Protocol(WheelProtocol):
+class Cia402Protocol(CanopenProfile):
     """CiA 402 drive profile (profile velocity and torque) on CiA 301, any python-can bus."""
 
     name = "canopen/cia402"
@@ -566,19 +518,12 @@ class Cia402Protocol(WheelProtocol):
         "CANopen CiA 402 drive (canopen package's BaseNode402 semantics): controlword/"
         "statusword state machine, profile velocity 0x60FF/0x606C in 0.001 rpm, profile torque"
     )
-    transports = ("can",)
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> Cia402HostLink:
-        return Cia402HostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> Cia402NodeLink:
-        return Cia402NodeLink(transport, node_id, clock)
+    eds = EDS
+    host_class = Cia402HostLink
+    node_class = Cia402NodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen node ``node_id + 1`` and its COB-IDs."""
         cid = canopen_id(node_id)
         tpdos = (0x180 + cid, 0x280 + cid, 0x380 + cid, 0x480 + cid)
         return cob_ids(cid, tpdos, (0x200 + cid, 0x300 + cid))
-
-    def identity(self) -> str:
-        return f"canopen/cia402 eds sha256 {EDS.sha256}"

@@ -27,13 +27,15 @@ CiA 301 abort codes as ``canopen.sdo.exceptions.SdoAbortedError.CODES`` lists th
 
 from __future__ import annotations
 
+import abc
 import functools
 import hashlib
 import math
 import struct
 import time
-from collections.abc import Callable, Container, Mapping
+from collections.abc import Callable, Container, Iterator, Mapping
 from importlib import resources
+from typing import Any, ClassVar
 
 import can
 import canopen
@@ -44,7 +46,8 @@ from canopen.sdo import SdoAbortedError
 from rwlab.interrupts import uninterrupted
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock, NodeLink
+from rwlab.wheel.link import Clock, HostLink, NodeLink, WheelProtocol
+from rwlab.wheel.physics import RW90, Fault, WheelParams
 
 __all__ = [
     "ABORT_RANGE_EXCEEDED",
@@ -52,6 +55,8 @@ __all__ = [
     "ABORT_TOO_LOW",
     "ABORT_UNKNOWN_COMMAND",
     "BusNetwork",
+    "CanopenHostBase",
+    "CanopenProfile",
     "SdoPumpNetwork",
     "checked_sdo_request",
     "cob_ids",
@@ -194,19 +199,54 @@ class BusNetwork(canopen.Network):
 
 
 class CanopenNodeBase(NodeLink):
-    """What the twin's end of every CANopen profile does with the frames it receives.
+    """The twin's end of every CANopen profile: its ``canopen.LocalNode`` on a
+    :class:`BusNetwork`, operational, and what it does with the frames it receives.
 
-    Subclasses set ``bus``, ``clock``, ``cid`` (the CANopen id), ``network`` and
-    ``_twin`` (None) in their constructor, and call :meth:`_route_frames` from
-    ``receive``.
+    Subclasses answer SDO writes and reads (:meth:`_on_sdo_write`, :meth:`_on_sdo_read`)
+    and call :meth:`_route_frames` from ``receive``.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    node_id : int
+        The wheel's node id, 0..15.
+    clock : WallClock or SimClock
+    cid : int
+        The wheel's CANopen node id.
+    dictionary : canopen.ObjectDictionary
+        The wheel's object dictionary.
     """
 
-    bus: can.BusABC
-    clock: Clock
-    cid: int
-    network: BusNetwork
-    _twin: str | None
-    _arrival: float
+    def __init__(
+        self, bus: can.BusABC, node_id: int, clock: Clock, cid: int, dictionary: ObjectDictionary
+    ) -> None:
+        super().__init__()
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
+        self.network = BusNetwork(bus)
+        self.cid = cid
+        self.local = canopen.LocalNode(cid, dictionary)
+        self.network.add_node(self.local)
+        self.local.tpdo.read(from_od=True)
+        self.local.add_write_callback(self._on_sdo_write)
+        self.local.add_read_callback(self._on_sdo_read)
+        self.local.nmt.state = "OPERATIONAL"
+        self._params = RW90
+        self._commands: list[tuple[float, proto.Command]] = []
+        self._arrival = 0.0  # s, when the frame being handled came
+        self._sequence = 0
+        self._faults = Fault.NONE
+        self._twin: str | None = None
+
+    def configure(self, params: WheelParams) -> None:
+        self._params = params
+
+    @abc.abstractmethod
+    def _on_sdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        """Apply a write the package's SDO server received (raise its abort to refuse it)."""
+
+    @abc.abstractmethod
+    def _on_sdo_read(self, index: int, subindex: int, od: Any) -> float | int | None:
+        """The value of an object the node keeps itself (None: the dictionary's)."""
 
     def _route_frames(
         self, now: float, own: Container[int], wanted: Container[int], sizes: Mapping[int, int]
@@ -426,3 +466,96 @@ class TpdoSchedule:
             return False
         self._booked[number] = (t, period, due + period if due + period > t else t + period)
         return True
+
+
+class CanopenHostBase(HostLink):
+    """What rwlab's driver of every SDO-commanded CANopen profile does: the remote node on
+    an :class:`SdoPumpNetwork`, the raw record, and the wheel's TPDOs read from the bus.
+
+    Parameters
+    ----------
+    bus, node_id, clock, cid, dictionary
+        As for :class:`CanopenNodeBase`.
+    """
+
+    def __init__(
+        self, bus: can.BusABC, node_id: int, clock: Clock, cid: int, dictionary: ObjectDictionary
+    ) -> None:
+        super().__init__()
+        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
+        self.cid = cid
+        self.network = SdoPumpNetwork(bus, clock, cid)
+        self.network.on_frame = self._record
+        self.remote = canopen.RemoteNode(cid, dictionary)
+        self.network.add_node(self.remote)
+        self.remote.tpdo.read(from_od=True)
+        self.inertia = RW90.inertia
+
+    def _record(self, t: float, cob: int, data: bytes, direction: str) -> None:
+        if self.raw_listener:
+            self.raw_listener(t, cob, data, direction)
+
+    def _tpdos(self, now: float) -> Iterator[tuple[float, int, Any, str | None]]:
+        """Each TPDO 1..4 of the wheel received since the last call, decoded into its map.
+
+        Every frame read is recorded; a heartbeat that is not 1 byte or a TPDO of the
+        wrong length counts as bad, any other frame (SDO, other nodes) as foreign.
+
+        Parameters
+        ----------
+        now : float
+            Clock time, s (the frames' time on a wall clock).
+
+        Yields
+        ------
+        t : float
+            The frame's time, s.
+        number : int
+            The TPDO's number, 1..4.
+        pdo_map : canopen.pdo.PdoMap
+            The TPDO, its variables holding the values received.
+        source : str or None
+            The bus channel it came from, where the bus reports one.
+        """
+        cid = self.cid
+        numbers = {0x180 + cid: 1, 0x280 + cid: 2, 0x380 + cid: 3, 0x480 + cid: 4}
+        for msg in self.network.take():
+            t = msg.timestamp if self.clock.simulated else now
+            cob, data = msg.arbitration_id, bytes(msg.data)
+            self._record(t, cob, data, "rx")
+            source = str(msg.channel) if getattr(self.bus, "reports_sources", False) else None
+            number = numbers.get(cob)
+            if number is None:
+                if cob == 0x700 + cid and len(data) != 1:
+                    self.bad_frames += 1
+                elif cob not in (0x700 + cid, 0x80 + cid):
+                    self.foreign_frames += 1  # SDO, other nodes, other protocols
+                continue
+            pdo_map = self.remote.tpdo[number]
+            if len(data) != len(pdo_map.data):
+                self.bad_frames += 1
+                continue
+            pdo_map.on_message(cob, bytearray(data), t)
+            yield t, number, pdo_map, source
+
+
+class CanopenProfile(WheelProtocol):
+    """A CANopen profile of the twin, on any python-can bus, named in records by its
+    shipped object dictionary's hash.
+
+    Subclasses set ``name``, ``description``, ``eds`` and the classes of their two links,
+    ``host_class`` and ``node_class`` (each built from the bus, node id and clock).
+    """
+
+    eds: ClassVar[ShippedEds]
+    host_class: Callable[[can.BusABC, int, Clock], HostLink]
+    node_class: Callable[[can.BusABC, int, Clock], NodeLink]
+
+    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> HostLink:
+        return self.host_class(transport, node_id, clock)
+
+    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> NodeLink:
+        return self.node_class(transport, node_id, clock)
+
+    def identity(self) -> str:
+        return f"{self.name} eds sha256 {self.eds.sha256}"

@@ -66,7 +66,6 @@ import struct
 from typing import Any
 
 import can
-import canopen
 from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError
 from canopen.sdo.exceptions import SdoError
@@ -74,9 +73,9 @@ from canopen.sdo.exceptions import SdoError
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
-    BusNetwork,
+    CanopenHostBase,
     CanopenNodeBase,
-    SdoPumpNetwork,
+    CanopenProfile,
     ShippedEds,
     TpdoSchedule,
     cob_ids,
@@ -84,8 +83,8 @@ from rwlab.wheel.canopen_common import (
     send_frame,
     setpoint_abort,
 )
-from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
-from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
+from rwlab.wheel.link import Clock, Incoming
+from rwlab.wheel.physics import Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["OresatHostLink", "OresatNodeLink", "OresatProtocol", "canopen_id", "eds_path"]
 
@@ -189,31 +188,13 @@ class OresatNodeLink(CanopenNodeBase):
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
-        super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
-        self.network = BusNetwork(bus)
-        self.cid = canopen_id(node_id)
-        self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
-        self.network.add_node(self.local)
-        self.local.tpdo.read(from_od=True)
-        self.local.add_write_callback(self._on_sdo_write)
-        self.local.add_read_callback(self._on_sdo_read)
-        self.local.nmt.state = "OPERATIONAL"
+        super().__init__(bus, node_id, clock, canopen_id(node_id), object_dictionary(node_id))
         self.schedule = TpdoSchedule(self.local)
-        self._params = RW90
         self._values: dict[tuple[int, int], float | int] = {(0x4000, 1): IDLE}
-        self._commands: list[tuple[float, proto.Command]] = []
-        self._arrival = 0.0
-        self._sequence = 0
         self._requested = IDLE
         self._setpoint = 0.0
-        self._faults = Fault.NONE
         self._rejected = False
-        self._twin: str | None = None
         self._own = {0x180 + self.cid, 0x280 + self.cid, 0x380 + self.cid, 0x480 + self.cid}
-
-    def configure(self, params: WheelParams) -> None:
-        self._params = params
 
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
         self._route_frames(now, self._own, (0x000, 0x600 + self.cid), {})
@@ -338,7 +319,7 @@ class OresatNodeLink(CanopenNodeBase):
                 send_frame(self.bus, pdo_map.cob_id, pdo_map.data, t)
 
 
-class OresatHostLink(HostLink):
+class OresatHostLink(CanopenHostBase):
     """rwlab's driver of OreSat's wheel card: SDO writes of 0x4005/0x4004, TPDOs in.
 
     On its first command it writes TPDO1/2's event timers to the telemetry
@@ -357,15 +338,7 @@ class OresatHostLink(HostLink):
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
-        super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
-        self.cid = canopen_id(node_id)
-        self.network = SdoPumpNetwork(bus, clock, self.cid)
-        self.network.on_frame = self._record
-        self.remote = canopen.RemoteNode(self.cid, object_dictionary(node_id))
-        self.network.add_node(self.remote)
-        self.remote.tpdo.read(from_od=True)
-        self.inertia = RW90.inertia
+        super().__init__(bus, node_id, clock, canopen_id(node_id), object_dictionary(node_id))
         self.period_ms = 100  # 10 Hz until told
         self._timers_set = False
         self._state: int | None = None  # the requested state, as we last wrote it
@@ -401,10 +374,6 @@ class OresatHostLink(HostLink):
             sdo[index][5].raw = HOUSEKEEPING_MS
         self._timers_set = True
 
-    def _record(self, t: float, cob: int, data: bytes, direction: str) -> None:
-        if self.raw_listener:
-            self.raw_listener(t, cob, data, direction)
-
     def send(self, cmd: proto.Command, now: float) -> None:
         state = _TO_STATE[cmd.mode]
         if cmd.mode == Mode.SPEED:
@@ -438,24 +407,7 @@ class OresatHostLink(HostLink):
 
     def receive(self, now: float) -> list[Incoming]:
         out: list[Incoming] = []
-        cid = self.cid
-        for msg in self.network.take():
-            t = msg.timestamp if self.clock.simulated else now
-            cob, data = msg.arbitration_id, bytes(msg.data)
-            self._record(t, cob, data, "rx")
-            source = str(msg.channel) if getattr(self.bus, "reports_sources", False) else None
-            number = {0x180 + cid: 1, 0x280 + cid: 2, 0x380 + cid: 3, 0x480 + cid: 4}.get(cob)
-            if number is None:
-                if cob == 0x700 + cid and len(data) != 1:
-                    self.bad_frames += 1
-                elif cob not in (0x700 + cid, 0x80 + cid):
-                    self.foreign_frames += 1  # SDO, other nodes, other protocols
-                continue
-            pdo_map = self.remote.tpdo[number]
-            if len(data) != len(pdo_map.data):
-                self.bad_frames += 1
-                continue
-            pdo_map.on_message(cob, bytearray(data), t)
+        for t, number, pdo_map, source in self._tpdos(now):
             values = {(var.index, var.subindex): var.raw for var in pdo_map}
             if number == 1:
                 self._status = (int(values[0x4000, 1]), int(values[0x4000, 3]))
@@ -506,7 +458,7 @@ class OresatHostLink(HostLink):
         )
 
 
-class OresatProtocol(WheelProtocol):
+class OresatProtocol(CanopenProfile):
     """OreSat's reaction-wheel card (oresat-configs 1.2.0) on CiA 301, any python-can bus."""
 
     name = "canopen/oresat"
@@ -514,18 +466,11 @@ class OresatProtocol(WheelProtocol):
         "CANopen, OreSat's reaction-wheel dictionary (oresat-configs 1.2.0): SDO 0x4004/0x4005 "
         "commands, TPDO 0x4000-0x4003 telemetry, ids 0x3C + 4n"
     )
-    transports = ("can",)
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> OresatHostLink:
-        return OresatHostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> OresatNodeLink:
-        return OresatNodeLink(transport, node_id, clock)
+    eds = EDS
+    host_class = OresatHostLink
+    node_class = OresatNodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen id ``0x3C + 4 node_id`` (OreSat1's rw_1..rw_4 for 0..3) and its COB-IDs."""
         cid = canopen_id(node_id)
         return cob_ids(cid, (0x180 + cid, 0x280 + cid, 0x380 + cid, 0x480 + cid), ())
-
-    def identity(self) -> str:
-        return f"canopen/oresat eds sha256 {EDS.sha256}"

@@ -58,6 +58,7 @@ from rwlab.wheel.canopen_common import (
     ABORT_RANGE_EXCEEDED,
     BusNetwork,
     CanopenNodeBase,
+    CanopenProfile,
     ShippedEds,
     canopen_id,
     cob_ids,
@@ -66,7 +67,7 @@ from rwlab.wheel.canopen_common import (
     setpoint_abort,
 )
 from rwlab.wheel.dbc_link import read_frames
-from rwlab.wheel.link import Clock, HostLink, Incoming, WheelProtocol
+from rwlab.wheel.link import Clock, HostLink, Incoming
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["CanopenHostLink", "CanopenNodeLink", "CanopenProtocol", "eds_path", "object_dictionary"]
@@ -120,29 +121,11 @@ class CanopenNodeLink(CanopenNodeBase):
     """
 
     def __init__(self, bus: can.BusABC, node_id: int, clock: Clock) -> None:
-        super().__init__()
-        self.bus, self.node_id, self.clock = bus, proto.check_node(node_id), clock
-        self.network = BusNetwork(bus)
-        self.cid = canopen_id(node_id)
-        self.local = canopen.LocalNode(self.cid, object_dictionary(node_id))
-        self.network.add_node(self.local)
-        self.local.tpdo.read(from_od=True)
+        super().__init__(bus, node_id, clock, canopen_id(node_id), object_dictionary(node_id))
         self.local.rpdo.read(from_od=True)
         self.local.rpdo[1].add_callback(self._on_rpdo)
-        self.local.add_write_callback(self._on_sdo_write)
-        self.local.add_read_callback(self._on_sdo_read)
-        self.local.nmt.state = "OPERATIONAL"
-        self._params = RW90
         self._values: dict[int, float] = {}
-        self._commands: list[tuple[float, proto.Command]] = []
-        self._arrival = 0.0
-        self._sequence = 0
-        self._faults = Fault.NONE
-        self._twin: str | None = None
         self._ids = {0x000, 0x200 + self.cid, 0x600 + self.cid}
-
-    def configure(self, params: WheelParams) -> None:
-        self._params = params
 
     # -- receiving ------------------------------------------------------------------------
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
@@ -378,23 +361,16 @@ class CanopenHostLink(HostLink):
         )
 
 
-class CanopenProtocol(WheelProtocol):
+class CanopenProtocol(CanopenProfile):
     """CANopen (CiA 301) with the shipped object dictionary, on any python-can bus."""
 
     name = "canopen"
     description = "CANopen CiA 301 (canopen package): RPDO setpoints, TPDO telemetry, SDO, NMT"
-    transports = ("can",)
-
-    def host_link(self, transport: Any, node_id: int, *, clock: Clock) -> CanopenHostLink:
-        return CanopenHostLink(transport, node_id, clock)
-
-    def node_link(self, transport: Any, node_id: int, *, clock: Clock) -> CanopenNodeLink:
-        return CanopenNodeLink(transport, node_id, clock)
+    eds = EDS
+    host_class = CanopenHostLink
+    node_class = CanopenNodeLink
 
     def addresses(self, node_id: int) -> str:
         """CANopen node ``node_id + 1`` (CANopen ids start at 1) and its COB-IDs."""
         cid = canopen_id(node_id)
         return cob_ids(cid, (0x180 + cid, 0x280 + cid, 0x380 + cid), (0x200 + cid,))
-
-    def identity(self) -> str:
-        return f"canopen eds sha256 {EDS.sha256}"

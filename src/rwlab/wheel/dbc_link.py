@@ -61,7 +61,7 @@ class RwlabHostLink(HostLink):
         self.bus, self.node_id, self.simulated = bus, proto.check_node(node_id), simulated
 
     def send(self, cmd: proto.Command, now: float) -> None:
-        msg = proto.encode_command(cmd)
+        msg = proto.encode(cmd)
         msg.timestamp = now
         with uninterrupted():
             self.bus.send(msg)
@@ -125,10 +125,7 @@ class RwlabNodeLink(NodeLink):
     def send(
         self, frame: proto.Telemetry | proto.Heartbeat, t: float, corrupt: int | None = None
     ) -> None:
-        if isinstance(frame, proto.Telemetry):
-            msg = proto.encode_telemetry(frame)
-        else:
-            msg = proto.encode_heartbeat(frame)
+        msg = proto.encode(frame)
         if corrupt is not None:
             data = bytearray(msg.data)
             data[corrupt % 7] ^= 0xA5

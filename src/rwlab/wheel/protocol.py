@@ -36,9 +36,7 @@ __all__ = [
     "Telemetry",
     "dbc_sha256",
     "decode",
-    "encode_command",
-    "encode_heartbeat",
-    "encode_telemetry",
+    "encode",
 ]
 
 COMMAND_ID, TELEMETRY_ID, HEARTBEAT_ID = 0x100, 0x180, 0x700
@@ -127,10 +125,8 @@ class Heartbeat:
 
     Parameters
     ----------
-    node_id : int
-        The wheel that sent it.
-    mode : Mode
-        The mode the wheel is in.
+    node_id, mode
+        As for :class:`Telemetry`.
     faults : Fault
         The latched faults.
     temperature : float
@@ -219,92 +215,59 @@ def frame_crc(arbitration_id: int, data: bytes | bytearray) -> int:
     return crc8_sae_j1850(arbitration_id.to_bytes(2, "little") + bytes(data[:7]))
 
 
-def _frame(base: int, node_id: int, name: str, signals: dict[str, float]) -> can.Message:
-    """One frame of ``rw.dbc`` with its check byte."""
-    data = bytearray(database().get_message_by_name(name).encode({**signals, "Checksum": 0}))
-    data[7] = frame_crc(base + check_node(node_id), bytes(data))
-    return can.Message(arbitration_id=base + check_node(node_id), data=data, is_extended_id=False)
+MESSAGES = {COMMAND_ID: "RW_Command", TELEMETRY_ID: "RW_Telemetry", HEARTBEAT_ID: "RW_Heartbeat"}
 
 
-def encode_command(cmd: Command) -> can.Message:
-    """CAN frame for a command; raises ProtocolError for values the frame cannot carry.
+def encode(message: Command | Telemetry | Heartbeat) -> can.Message:
+    """CAN frame for a command, telemetry (speed and current clipped to their fields) or a
+    heartbeat; raises ProtocolError for values the frame cannot carry.
 
     Parameters
     ----------
-    cmd : Command
-        The command.
+    message : Command, Telemetry or Heartbeat
+        What to send.
 
     Returns
     -------
     can.Message
     """
-    if not math.isfinite(cmd.setpoint) or abs(cmd.setpoint) > 1e6:
-        raise ProtocolError(f"setpoint must be finite and within ±1e6, got {cmd.setpoint}")
-    return _frame(
-        COMMAND_ID,
-        cmd.node_id,
-        "RW_Command",
-        {
-            "Setpoint": float(cmd.setpoint),
-            "Mode": int(cmd.mode),
-            "Sequence": cmd.sequence & 0xFF,
-        },
+    m = message
+    if isinstance(m, Command):
+        if not math.isfinite(m.setpoint) or abs(m.setpoint) > 1e6:
+            raise ProtocolError(f"setpoint must be finite and within ±1e6, got {m.setpoint}")
+        base = COMMAND_ID
+        signals = {
+            "Setpoint": float(m.setpoint),
+            "Mode": int(m.mode),
+            "Sequence": m.sequence & 0xFF,
+        }
+    elif isinstance(m, Telemetry):
+        base = TELEMETRY_ID
+        signals = {
+            "Speed": max(-83886.08, min(83886.07, round(m.speed_rpm, 2))),
+            "Current": max(-2.048, min(2.047, round(m.current, 3))),
+            "Mode": int(m.mode) & 0x3,
+            "FaultActive": int(m.fault_active),
+            "SpeedLimited": int(m.speed_limited),
+            "SequenceEcho": m.sequence_echo & 0xFF,
+            "Counter": m.counter & 0xFF,
+        }
+    else:
+        base = HEARTBEAT_ID
+        signals = {
+            "Mode": int(m.mode) & 0x3,
+            "BusVoltage": max(10.0, min(41.5, round(m.bus_voltage * 2) / 2)),
+            "Faults": (int(m.faults) & 0xF) | (REJECTED_BIT if m.command_rejected else 0),
+            "Temperature": max(-40.0, min(87.5, round(m.temperature * 2) / 2)),
+            "Uptime": min(int(m.uptime), 0xFFFF),
+            "CommandsSeen": int(m.commands_seen) & 0xFFFF,
+        }
+    frame_id = base + check_node(m.node_id)
+    data = bytearray(
+        database().get_message_by_name(MESSAGES[base]).encode({**signals, "Checksum": 0})
     )
-
-
-def encode_telemetry(t: Telemetry) -> can.Message:
-    """CAN frame for telemetry (speed clipped to the field's range).
-
-    Parameters
-    ----------
-    t : Telemetry
-        The telemetry.
-
-    Returns
-    -------
-    can.Message
-    """
-    return _frame(
-        TELEMETRY_ID,
-        t.node_id,
-        "RW_Telemetry",
-        {
-            "Speed": max(-83886.08, min(83886.07, round(t.speed_rpm, 2))),
-            "Current": max(-2.048, min(2.047, round(t.current, 3))),
-            "Mode": int(t.mode) & 0x3,
-            "FaultActive": int(t.fault_active),
-            "SpeedLimited": int(t.speed_limited),
-            "SequenceEcho": t.sequence_echo & 0xFF,
-            "Counter": t.counter & 0xFF,
-        },
-    )
-
-
-def encode_heartbeat(h: Heartbeat) -> can.Message:
-    """CAN frame for a heartbeat.
-
-    Parameters
-    ----------
-    h : Heartbeat
-        The status.
-
-    Returns
-    -------
-    can.Message
-    """
-    return _frame(
-        HEARTBEAT_ID,
-        h.node_id,
-        "RW_Heartbeat",
-        {
-            "Mode": int(h.mode) & 0x3,
-            "BusVoltage": max(10.0, min(41.5, round(h.bus_voltage * 2) / 2)),
-            "Faults": (int(h.faults) & 0xF) | (REJECTED_BIT if h.command_rejected else 0),
-            "Temperature": max(-40.0, min(87.5, round(h.temperature * 2) / 2)),
-            "Uptime": min(int(h.uptime), 0xFFFF),
-            "CommandsSeen": int(h.commands_seen) & 0xFFFF,
-        },
-    )
+    data[7] = frame_crc(frame_id, bytes(data))
+    return can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
 
 
 def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
@@ -322,15 +285,14 @@ def decode(msg: can.Message) -> Command | Telemetry | Heartbeat | None:
     if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return None
     base, node = msg.arbitration_id & ~0xF, msg.arbitration_id & 0xF
-    names = {COMMAND_ID: "RW_Command", TELEMETRY_ID: "RW_Telemetry", HEARTBEAT_ID: "RW_Heartbeat"}
-    if base not in names:
+    if base not in MESSAGES:
         return None
     data = bytes(msg.data)
     if len(data) != 8:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} has {len(data)} bytes, expected 8")
     if frame_crc(msg.arbitration_id, data) != data[7]:
         raise ProtocolError(f"frame 0x{msg.arbitration_id:03X} fails its checksum")
-    decoded = database().get_message_by_name(names[base]).decode(data, decode_choices=False)
+    decoded = database().get_message_by_name(MESSAGES[base]).decode(data, decode_choices=False)
     s = cast(Mapping[str, float], decoded)  # numbers only: choices are not decoded
     try:
         if base == COMMAND_ID:
