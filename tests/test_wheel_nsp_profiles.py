@@ -207,6 +207,85 @@ def test_an_nrwa_t6_ping_gets_an_ack_whose_crc_checks(twin):
 
 
 @pytest.mark.parametrize("twin", [("nsp/nrwa-t6", 1)], indirect=True)
+def test_the_nrwa_t6_twin_latches_slip_and_crc_errors_in_their_own_bits(twin):
+    _, port = twin
+    assert exchange(port, b"\xc0\x01\x11\x80\xdb\x01\x00\x00\xc0", wait=0.3) is None
+    faults = t6_standard(port, 0x01)[1]
+    assert faults & 1 << 11 and not faults & 1 << 12  # SLIP frame error (ICD Table 12-15)
+    old = request(port, 0x01, 0x80, crc=lambda body: binascii.crc_hqx(body, 0xFFFF))
+    assert exchange(port, old, wait=0.3) is None
+    assert t6_standard(port, 0x01)[1] & 1 << 12  # CRC error
+
+
+@pytest.mark.parametrize("twin", [("nsp/nrwa-t6", 1)], indirect=True)
+def test_the_nrwa_t6_twin_configures_only_the_protections_it_can_do_without(twin):
+    _, port = twin
+    protection = lambda bits: request(port, 1, 0x8A, bits.to_bytes(4, "little"))  # noqa: E731
+    # EDAC scrub and braking load (Table 12-29 bits 3, 4): ACK, shown in status bits 20, 21
+    check(exchange(port, protection(0b11000)), 1, 0x0A)
+    assert t6_standard(port, 1)[0] >> 17 & 0x1F == 0b11000
+    # the overspeed fault, the overspeed limit, the current limit: the twin keeps them: NACK
+    for bit in range(3):
+        check(exchange(port, protection(1 << bit)), 1, 0x0A, ack=False)
+    assert t6_standard(port, 1)[0] >> 17 & 0x1F == 0b11000
+    check(exchange(port, protection(0)), 1, 0x0A)  # all enabled again
+    assert t6_standard(port, 1)[0] >> 17 & 0x1F == 0
+
+
+@pytest.mark.parametrize("twin", [("nsp/nrwa-t6", 1)], indirect=True)
+def test_the_nrwa_t6_twin_holds_the_icd_defaults_in_its_parameter_words(twin):
+    node, port = twin
+    peek = lambda address: int.from_bytes(  # noqa: E731
+        check(exchange(port, request(port, 1, 0x82, bytes([address]))), 1, 0x02), "little"
+    )
+    assert peek(0x05) / (1 << 16) == 36.0  # +30 V drive overvoltage limit, V (§9.5.1.1)
+    assert peek(0x08) / (1 << 14) == 100e3  # motor power limit, mW (§9.5.1.4)
+    assert peek(0x20) / (1 << 16) == 31.0  # braking overvoltage load setpoint, V (§9.5.2.1)
+    params = node.wheel.params
+    assert peek(0x06) / (1 << 8) == params.overspeed_fault_rpm
+    assert peek(0x09) / (1 << 14) == pytest.approx(params.current_limit * 1000, abs=1e-4)
+
+
+class _CannedWheel:
+    """A port that answers every request with one reply frame (built by hand here)."""
+
+    def __init__(self, reply: bytes) -> None:
+        self.reply, self.inbox = reply, b""
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.inbox)
+
+    def read(self, size: int) -> bytes:
+        data, self.inbox = self.inbox[:size], self.inbox[size:]
+        return data
+
+    def write(self, data: bytes) -> int:
+        self.inbox += self.reply
+        return len(data)
+
+
+@pytest.mark.parametrize(
+    ("faults", "fault_active"),
+    [(1 << 6 | 1 << 7 | 1 << 8 | 1 << 12, False), (1 << 5, True), (1 << 0, True)],
+)
+def test_the_nrwa_t6_driver_reads_only_faults_as_faults(faults, fault_active):
+    """Overspeed-, overpower- and current-limited (Table 12-15 bits 6-8) latch on every
+    saturated manoeuvre of a real NRWA-T6: flags, not faults; the overspeed and drive faults
+    (bits 5, 0) are."""
+    block = struct.pack("<IIBihhii", 1, faults, 0x04, 0, 0, 0, 0, 300 << 8)
+    body = bytes([0x11, 0x01, 0x27]) + block
+    raw = body + Crc16Mcrf4Xx.calc(body).to_bytes(2, "little")
+    port = _CannedWheel(
+        b"\xc0" + raw.replace(b"\xdb", b"\xdb\xdd").replace(b"\xc0", b"\xdb\xdc") + b"\xc0"
+    )
+    link = get_protocol("nsp/nrwa-t6").host_link(port, 1, clock=WallClock())
+    telemetry = link.read_telemetry()
+    assert telemetry is not None and telemetry.speed_rpm == 300.0
+    assert telemetry.fault_active is fault_active
+
+
+@pytest.mark.parametrize("twin", [("nsp/nrwa-t6", 1)], indirect=True)
 def test_the_nrwa_t6_twin_follows_app_command_and_refuses_what_it_cannot_do(twin):
     node, port = twin
     speed_300 = bytes([0x02]) + (300 << 18).to_bytes(4, "little")  # SPEED, Q14.18 rpm
@@ -421,6 +500,10 @@ def test_the_nrwa_t6_twin_answers_the_open_nss_host_driver_unchanged(monkeypatch
             with pytest.raises(nsp.NspNackError):
                 session.app_command(nsp.ControlMode.SPEED, 8191.0)  # beyond the twin's limit
             assert session.peek(0x07) / (1 << 18) == node.wheel.params.max_speed_rpm
+            session.config_protection(0b11000)  # EDAC scrub, braking load: the twin has neither
+            with pytest.raises(nsp.NspNackError):
+                session.config_protection(0b1)  # the overspeed fault: the twin keeps it
+            session.config_protection(0)
             session.clear_fault()
             session.app_command(nsp.ControlMode.IDLE)
     finally:

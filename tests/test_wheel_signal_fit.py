@@ -24,8 +24,8 @@ def test_the_dbc_ranges_are_cantools_reading_of_rw_dbc():
 
 @pytest.mark.parametrize(
     ("wheel", "words"),
-    [  # the T6's 6.2 A overcurrent fault; the RW-0.01's 5 V bus (the DBC read 10.00 V)
-        ("nrwa-t6", r"overcurrent_fault 6\.2 A is outside the rw\.dbc RW_Telemetry\.Current"),
+    [  # the T6's 11 A overcurrent trip; the RW-0.01's 5 V bus (the DBC read 10.00 V)
+        ("nrwa-t6", r"overcurrent_fault 11 A is outside the rw\.dbc RW_Telemetry\.Current"),
         ("rw-0.01", r"bus_voltage 5 V is outside the rw\.dbc RW_Heartbeat\.BusVoltage"),
     ],
 )

@@ -56,7 +56,11 @@ def test_the_presets_differ_where_a_wheel_model_does():
 def test_published_numbers():
     t6 = WheelSpec.load("nrwa-t6")
     assert (t6.max_torque_nm, t6.max_speed_rpm, t6.controller_mode) == (0.31, 5000.0, "torque")
-    assert t6.motor_torque_nm == pytest.approx(0.31, rel=2e-3)
+    # NRWA-T6 ICD N2-A2a-DD0021 rev 10.02: 6 A (§8.1) × 53.4 mN·m/A (§9.1) at the motor, 30 V
+    # drive rail (§8.1); 5000 rpm holds Fig 8-1's back-EMF knee, 7.1 N·m·s
+    assert (t6.current_limit_a, t6.torque_constant_nm_a, t6.bus_voltage_v) == (6.0, 0.0534, 30.0)
+    assert t6.motor_torque_nm == pytest.approx(0.3204)
+    assert t6.momentum_capacity_nms == pytest.approx(7.1, rel=5e-3)
     cube = WheelSpec.load("rw-0.01")
     assert cube.momentum_capacity_nms == pytest.approx(0.018, rel=1e-3)
     assert cube.max_torque_nm == 0.001
@@ -155,11 +159,11 @@ def test_an_unknown_key_is_named_with_the_key_it_likely_meant(old, new, words, t
 
 @pytest.mark.parametrize(
     ("name", "old", "new", "words"),
-    [  # the emulator spec's k_t: 27.96 V of back-EMF at 5000 rpm > 0.9785 × 28 V
+    [  # the T6 driven from its 28 V input, not its +30 V rail: 27.96 V of back-EMF > 27.40 V
         (
             "nrwa-t6",
-            "torque_constant_nm_a = { value = 0.0518",
-            "torque_constant_nm_a = { value = 0.0534",
+            "bus_voltage_v = { value = 30.0",
+            "bus_voltage_v = { value = 28.0",
             r"max_speed_rpm \(5000\) is out of the motor's reach.*27\.96 V.*27\.40 V",
         ),
         (
@@ -168,12 +172,12 @@ def test_an_unknown_key_is_named_with_the_key_it_likely_meant(old, new, words, t
             "bus_voltage_v = { value = 12.0",
             r"max_speed_rpm \(7800\) is out of the motor's reach",
         ),
-        # the T6's first acceleration limit: 250 rpm/s × 0.0115 kg·m² is 0.301 N·m < 0.31
+        # an acceleration limit just under the T6's torque: 210 rpm/s × 0.0136 kg·m² < 0.31 N·m
         (
             "nrwa-t6",
-            "max_accel_rpm_s = { value = 260.0",
-            "max_accel_rpm_s = { value = 250.0",
-            r"max_torque_nm \(0\.31 N·m\) cannot reach the spacecraft.*0\.3011 N·m",
+            "max_accel_rpm_s = { value = 220.0",
+            "max_accel_rpm_s = { value = 210.0",
+            r"max_torque_nm \(0\.31 N·m\) cannot reach the spacecraft.*0\.2991 N·m",
         ),
         (
             "rw90",
@@ -213,6 +217,7 @@ def test_to_toml_is_a_whole_file_that_reads_back_to_the_same_spec(name, tmp_path
 
 def test_a_spec_carried_by_a_record_is_not_refused_for_its_physics():
     # a record or model.json keeps the wheel as it was configured, even one the physics
-    # check now refuses as a file (the T6 preset before it was made one motor)
-    old = WheelSpec.load("nrwa-t6").with_(torque_constant_nm_a=0.0534, current_limit_a=5.81)
+    # check now refuses as a file (the T6 preset before it was made one motor: the ICD's
+    # k_t on the 28 V input instead of the +30 V drive rail)
+    old = WheelSpec.load("nrwa-t6").with_(bus_voltage_v=28.0, current_limit_a=5.81)
     assert WheelSpec.from_dict(old.to_dict()) == old

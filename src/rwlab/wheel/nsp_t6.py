@@ -23,13 +23,18 @@ github.com/ryan-rbw/nsrw_emu and its host github.com/ryan-rbw/nsrw_test
   (Q10.22 mN·m), PWM 0b1000; any other value means IDLE (Table 12-25). The
   reply carries the control-mode register.
 - CLEAR-FAULT 0x09 ``[mask uint32]`` clears the latched fault bits in the mask.
+- CONFIGURE-PROTECTION 0x0A ``[bits uint32]``: 1 disables a protection; the
+  status register's bits 17-21 show them.
 - Little-endian throughout; Q formats in AMD notation (the sign bit counted in
   the integer bits).
 
 Where the ICD is open or the twin differs, the choice is in
-``docs/wheels/nsp.md``: the twin NACKs CURRENT and PWM (it has no current loop
-or open PWM), INIT, CRC, CONFIGURE-PROTECTION and TRIP-LCL; a setpoint beyond
-the twin's limits is NACKed and never applied.
+``docs/wheels/nsp.md`` (with the item-by-item comparison): the twin NACKs
+CURRENT and PWM (it has no current loop or open PWM), INIT and CRC (not
+implemented by the NRWA-T6 either), TRIP-LCL (it cannot cut its own power) and
+a CONFIGURE-PROTECTION that would disable the overspeed fault, the overspeed
+limit or the current limit (its physics always applies them); a setpoint beyond
+the twin's limits is NACKed and never applied (an NRWA-T6 would limit it).
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ from rwlab.wheel.physics import Fault, Mode, rad_s_to_rpm, rpm_to_rad_s
 __all__ = ["NrwaT6HostLink", "NrwaT6NodeLink", "NrwaT6Protocol", "q_decode", "q_encode"]
 
 PING, INIT, PEEK, POKE, CRC = 0x00, 0x01, 0x02, 0x03, 0x06
-APP_TELEMETRY, APP_COMMAND, CLEAR_FAULT = 0x07, 0x08, 0x09
+APP_TELEMETRY, APP_COMMAND, CLEAR_FAULT, CONFIGURE_PROTECTION = 0x07, 0x08, 0x09, 0x0A
 IDLE, CURRENT, SPEED, TORQUE, PWM = 0x0, 0x1, 0x2, 0x4, 0x8
 STANDARD, TEMPERATURES, VOLTAGES, CURRENTS = 0x00, 0x01, 0x02, 0x03
 DIAG_GENERAL, DIAG_EDAC, DIAG_SCIA, DIAG_SCIB = 0x04, 0x05, 0x06, 0x07
@@ -65,13 +70,21 @@ FIRMWARE = (1, 0, 0)
 # Status register (Table 12-14)
 ST_RAM_BOOT, ST_OVERSPEED_LIMITED, ST_DIRECTION, ST_DRIVE_ON = 1 << 0, 1 << 4, 1 << 8, 1 << 9
 ST_POWER_GOOD = 0x7F << 22  # the seven PGOOD flags, 1 = ok
-# Fault register (Table 12-15); bit 31 is reserved in the ICD: the twin's command watchdog
+ST_PROTECTION_SHIFT = 17  # bits 17-21: CONFIGURE-PROTECTION's bits 0-4, 1 = disabled
+# CONFIGURE-PROTECTION (Table 12-29): bits 0-2 disable the overspeed fault, the overspeed
+# limit and the current limit, which the twin's physics always applies; bits 3-4 the EDAC
+# scrub and the braking load, which the twin does not model
+PROTECTIONS_KEPT, PROTECTION_BITS = 0x07, 0x1F
+# Fault register (Table 12-15); bits 30 and 31 are reserved in the ICD: the twin's
+# over-current trip (the NRWA-T6 limits its current, §9.5, and has no such fault) and
+# command watchdog
 FT_DRIVE_FAULT, FT_OVERSPEED, FT_OVERSPEED_LIMITED = 1 << 0, 1 << 5, 1 << 6
-FT_CURRENT_LIMITED, FT_SLIP_ERROR, FT_CRC_ERROR, FT_WATCHDOG = 1 << 8, 1 << 11, 1 << 12, 1 << 31
+FT_SLIP_ERROR, FT_CRC_ERROR = 1 << 11, 1 << 12
+FT_OVERCURRENT, FT_WATCHDOG = 1 << 30, 1 << 31
 _FAULT_BITS = {
     Fault.OVERTEMP: FT_DRIVE_FAULT,  # "an overtemperature shutdown event"
     Fault.OVERSPEED: FT_OVERSPEED,
-    Fault.OVERCURRENT: FT_CURRENT_LIMITED,
+    Fault.OVERCURRENT: FT_OVERCURRENT,
     Fault.WATCHDOG: FT_WATCHDOG,
 }
 # NTC conversion parameters (Table 12-16): (Rs, Rp, R25, beta), T25 = 298.15 K
@@ -243,14 +256,15 @@ class NrwaT6NodeLink(NspNodeLinkBase):
                 0x07: _clamped_q(params.max_speed_rpm, 18, signed=False),
                 0x08: q_encode(100e3, 14, signed=False),  # motor power limit, mW
                 0x09: _clamped_q(params.current_limit * 1000, 14, signed=False),
+                0x20: q_encode(31.0, 16),  # braking overvoltage load setpoint, V (§9.5.2.1)
             }
         )
 
     def addresses(self) -> tuple[int, ...]:
         return (self.address, self.address | REDUNDANT_PORT)
 
-    def note_bad_frame(self) -> None:
-        self.faults |= FT_CRC_ERROR  # port A CRC (or SLIP) error, latched till cleared
+    def note_bad_frame(self, slip_error: bool) -> None:
+        self.faults |= FT_SLIP_ERROR if slip_error else FT_CRC_ERROR  # port A, latched
 
     def handle(self, packet: NspPacket) -> Verdict:
         data, code = packet.payload, packet.command
@@ -268,7 +282,9 @@ class NrwaT6NodeLink(NspNodeLinkBase):
             return self._app_command(data[0], int.from_bytes(data[1:], "little", signed=True))
         if code == CLEAR_FAULT and len(data) == 4:
             return self._clear(int.from_bytes(data, "little"))
-        return NACK  # INIT, CRC, CONFIGURE-PROTECTION, TRIP-LCL, reserved, malformed
+        if code == CONFIGURE_PROTECTION and len(data) == 4:
+            return self._configure_protection(int.from_bytes(data, "little"))
+        return NACK  # INIT, CRC, TRIP-LCL, reserved, malformed
 
     def _app_command(self, register: int, word: int) -> Verdict:
         mode_id = register & 0x0F
@@ -287,11 +303,25 @@ class NrwaT6NodeLink(NspNodeLinkBase):
         return Verdict(True, bytes([register]), command)
 
     def _clear(self, mask: int) -> Verdict:
-        wheel_bits = FT_DRIVE_FAULT | FT_OVERSPEED | FT_CURRENT_LIMITED | FT_WATCHDOG
+        wheel_bits = FT_DRIVE_FAULT | FT_OVERSPEED | FT_OVERCURRENT | FT_WATCHDOG
         latched = self.faults & wheel_bits & mask
         self.faults &= ~mask
         # the twin clears all its latched faults at once; only when one is asked for
         return Verdict(True, b"", self.command(Mode.CLEAR_FAULT, 0.0) if latched else None)
+
+    def _configure_protection(self, bits: int) -> Verdict:
+        if bits & PROTECTIONS_KEPT:  # the twin cannot fly without them: not executed
+            return NACK
+        kept = self.status & ~(PROTECTION_BITS << ST_PROTECTION_SHIFT)
+        self.status = kept | (bits & PROTECTION_BITS) << ST_PROTECTION_SHIFT
+        return Verdict(True)
+
+    def _rail_current(self) -> float:
+        """The +30 V rail's current, A: the motor's electrical power over the rail voltage."""
+        p = self.params
+        emf = p.torque_constant * rpm_to_rad_s(self.speed_rpm)
+        power = (p.winding_resistance * self.current_a + emf) * self.current_a
+        return max(power, 0.0) / self.bus_voltage if self.bus_voltage > 0 else 0.0
 
     def _block(self, block: int) -> bytes | None:
         if block == STANDARD:
@@ -312,8 +342,8 @@ class NrwaT6NodeLink(NspNodeLinkBase):
             rails = (*_NOMINAL_RAILS, self.bus_voltage, 2.5)
             return b"".join(_clamped_q(v, 16, signed=False).to_bytes(4, "little") for v in rails)
         if block == CURRENTS:
-            motor = _signed(_clamped_q(abs(self.current_a), 16))
-            return struct.pack("<5Ii", 0, 0, 0, 0, 0, motor)
+            rail = _signed(_clamped_q(self._rail_current(), 16))
+            return struct.pack("<5Ii", 0, 0, 0, 0, 0, rail)
         if block == DIAG_GENERAL:
             uptime = _clamped_q(self.uptime, 2, signed=False)
             return struct.pack("<5I", uptime, int(self.revolutions) & 0xFFFFFFFF, 0, 0, 0)
@@ -335,7 +365,8 @@ class NrwaT6NodeLink(NspNodeLinkBase):
                 self.revolutions += abs(frame.speed_rpm) / 60 * (t - self._last_telemetry_t)
             self._last_telemetry_t = t
             self.speed_rpm, self.current_a = frame.speed_rpm, frame.current
-            status = ST_RAM_BOOT | ST_POWER_GOOD
+            status = self.status & (PROTECTION_BITS << ST_PROTECTION_SHIFT)
+            status |= ST_RAM_BOOT | ST_POWER_GOOD
             status |= ST_OVERSPEED_LIMITED if frame.speed_limited else 0
             status |= ST_DIRECTION if frame.speed_rpm < 0 else 0
             status |= ST_DRIVE_ON if frame.mode != Mode.IDLE else 0

@@ -58,6 +58,7 @@ __all__ = [
     "NspHostLinkBase",
     "NspNodeLinkBase",
     "NspPacket",
+    "SlipError",
     "SlipReader",
     "Verdict",
     "crc16_nsp",
@@ -152,6 +153,10 @@ def encode_packet(packet: NspPacket, crc: Any = crc16_nsp) -> bytes:
     return slip_encode(body + crc(body).to_bytes(2, "little"))
 
 
+class SlipError(proto.ProtocolError):
+    """A frame whose SLIP framing is wrong (FESC followed by neither TFEND nor TFESC)."""
+
+
 def decode_packet(body: bytes, crc: Any = crc16_nsp) -> NspPacket:
     """A packet from one SLIP frame's body (the bytes between two FENDs).
 
@@ -174,7 +179,7 @@ def decode_packet(body: bytes, crc: Any = crc16_nsp) -> NspPacket:
     try:
         raw = slip_decode(body)
     except ValueError:
-        raise proto.ProtocolError("NSP frame: FESC not followed by TFEND or TFESC") from None
+        raise SlipError("NSP frame: FESC not followed by TFEND or TFESC") from None
     if len(raw) < 5:
         raise proto.ProtocolError(f"NSP frame of {len(raw)} bytes; at least 5 expected")
     if len(raw) - 5 > MAX_DATA_BYTES:
@@ -287,8 +292,14 @@ class NspNodeLinkBase(NodeLink):
         """The wheel's inertia (SI units) and limits (what is NACKed)."""
         self.params = params
 
-    def note_bad_frame(self) -> None:
-        """Called for each frame dropped for SLIP, length or CRC."""
+    def note_bad_frame(self, slip_error: bool) -> None:
+        """Called for each frame dropped for SLIP, length or CRC.
+
+        Parameters
+        ----------
+        slip_error : bool
+            The SLIP framing was wrong (a bad escape); else the length or the CRC.
+        """
 
     def receive(self, now: float) -> list[tuple[float, proto.Command]]:
         data = read_port(self.port)
@@ -297,9 +308,9 @@ class NspNodeLinkBase(NodeLink):
         for body in self._reader.feed(data):
             try:
                 packet = decode_packet(body)
-            except proto.ProtocolError:
+            except proto.ProtocolError as error:
                 self.bad_frames += 1
-                self.note_bad_frame()
+                self.note_bad_frame(isinstance(error, SlipError))
                 continue
             if packet.dst not in self.addresses() or packet.dst == packet.src:
                 self.foreign_frames += 1  # another device's request, or a reply
