@@ -696,77 +696,87 @@ def aligned_update_into(q, w, P, b_meas, ref, sigma, gate, at, W):
     in the state from w[at − 3] (3 values): the sensor reports (I + [φ×]) A(q) r, so
     H = [[b×], 0, …, −[b×] at column ``at``, …]. In place on q, w, P like
     :func:`gated_update_into` (which is this with no φ); returns whether it was applied.
-    ``W`` is a (4, n, n) scratch (n ≥ 6). φ about the measured vector's own direction is
+    ``W`` is a (4, n, n) scratch (n ≥ 9). φ about the measured vector's own direction is
     unobservable at any instant and, with only this sensor fixing yaw, its component along
     the axis that sensor alone observes stays at its prior: the filter then carries that
     misalignment as the uncertainty it is (a consider state)."""
     nx = P.shape[0]
-    PHt, K, X, Y = W[0], W[1], W[2], W[3]
-    A, H = K[:3, 3:6], Y[6:9, :]  # scratch views (n ≥ 9), free until K and Y are written
+    A = W[1][:3, 3:6]  # scratch, free until K is written
     _dcm_rows_into(q, A)
     b0 = A[0, 0] * ref[0] + A[0, 1] * ref[1] + A[0, 2] * ref[2]
     b1 = A[1, 0] * ref[0] + A[1, 1] * ref[1] + A[1, 2] * ref[2]
     b2 = A[2, 0] * ref[0] + A[2, 1] * ref[1] + A[2, 2] * ref[2]
     f0, f1, f2 = w[at - 3], w[at - 2], w[at - 1]  # predicted report: b + φ × b
     p0, p1, p2 = b0 + f1 * b2 - f2 * b1, b1 + f2 * b0 - f0 * b2, b2 + f0 * b1 - f1 * b0
-    H[:, :] = 0.0
-    H[0, 1], H[0, 2], H[1, 0], H[1, 2], H[2, 0], H[2, 1] = -b2, b1, b2, -b0, -b1, b0  # [b×]
-    for i in range(3):
-        for j in range(3):
-            H[i, at + j] = -H[i, j]
-    cols = (0, 1, 2, at, at + 1, at + 2)  # H's non-zero columns, ascending: the sums below
-    for i in range(nx):  # skip only exact zeros, so they equal the full ones bit for bit
-        for j in range(3):
-            acc = 0.0
-            for k in cols:
-                acc += P[i, k] * H[j, k]
-            PHt[i, j] = acc
+    # P Hᵀ, K and V = M Hᵀ (n, 3) are kept column by column, each a row of W
+    T0, T1, T2, K0, K1, K2 = W[0, 0], W[0, 1], W[0, 2], W[1, 0], W[1, 1], W[1, 2]
+    for i in range(nx):
+        T0[i], T1[i], T2[i] = _times_ht(P[i], b0, b1, b2, at, 0.0, 0.0, 0.0)
     r = sigma * sigma
-    S, L = Y[:3, :3], Y[3:6, :3]
-    for i in range(3):
-        for j in range(3):
-            acc = r if i == j else 0.0
-            for k in cols:
-                acc += H[i, k] * PHt[k, j]
-            S[i, j] = acc
+    S, L = W[3][:3, :3], W[3][3:6, :3]
+    for j in range(3):  # S = H P Hᵀ + r I, column j = H (P Hᵀ)[:, j]
+        S[0, j], S[1, j], S[2, j] = _times_ht(
+            W[0, j],
+            b0,
+            b1,
+            b2,
+            at,
+            r if j == 0 else 0.0,
+            r if j == 1 else 0.0,
+            r if j == 2 else 0.0,
+        )
     _cholesky3_into(S, L)
     nu0, nu1, nu2 = b_meas[0] - p0, b_meas[1] - p1, b_meas[2] - p2
     if gate > 0:
         z0, z1, z2 = _forward3(L, nu0, nu1, nu2)
         if z0 * z0 + z1 * z1 + z2 * z2 > gate:
             return False
-    dx = X[:, 0]
-    for i in range(nx):
-        z0, z1, z2 = _forward3(L, PHt[i, 0], PHt[i, 1], PHt[i, 2])
-        K[i, 0], K[i, 1], K[i, 2] = _backward3(L, z0, z1, z2)
-        dx[i] = K[i, 0] * nu0 + K[i, 1] * nu1 + K[i, 2] * nu2
+    dx = W[3, 6]
+    for i in range(nx):  # row i of K = S⁻¹ (P Hᵀ)[i], δx = K ν
+        z0, z1, z2 = _forward3(L, T0[i], T1[i], T2[i])
+        K0[i], K1[i], K2[i] = _backward3(L, z0, z1, z2)
+        dx[i] = K0[i] * nu0 + K1[i] * nu1 + K2[i] * nu2
     d0, d1, d2 = dx[0], dx[1], dx[2]
     for i in range(nx - 3):
         w[i] += dx[3 + i]
-    # Joseph form (I − K H) P (I − K H)ᵀ + r K Kᵀ through H's six columns, never forming
-    # I − K H: M = P − K (H P), V = M Hᵀ (n, 3), P⁺ = M − V Kᵀ + r K Kᵀ, with H P = (P Hᵀ)ᵀ
-    # (P is kept exactly symmetric). The same terms as the dense products, summed in
-    # another order (equal to round-off, tested).
-    M, V = X, K[:, 3:6]  # X and K's spare columns are free by now
-    for i in range(nx):
-        for j in range(nx):
-            M[i, j] = P[i, j] - (K[i, 0] * PHt[j, 0] + K[i, 1] * PHt[j, 1] + K[i, 2] * PHt[j, 2])
-    for i in range(nx):
-        for a in range(3):
-            acc = 0.0
-            for c in cols:
-                acc += M[i, c] * H[a, c]
-            V[i, a] = acc
-    for i in range(nx):
-        for j in range(i, nx):
-            kk = r * (K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2])
-            v_ij = M[i, j] - (V[i, 0] * K[j, 0] + V[i, 1] * K[j, 1] + V[i, 2] * K[j, 2])
-            v_ji = M[j, i] - (V[j, 0] * K[i, 0] + V[j, 1] * K[i, 1] + V[j, 2] * K[i, 2])
-            v = 0.5 * (v_ij + v_ji) + kk
-            P[i, j] = v
-            P[j, i] = v
+    _joseph_aligned(P, T0, T1, T2, K0, K1, K2, b0, b1, b2, at, r, W[2])
     _reset_attitude(q, d0, d1, d2)
     return True
+
+
+@njit(cache=True, inline="always")
+def _times_ht(R, b0, b1, b2, at, s0, s1, s2):
+    """s + R Hᵀ for a row R (n,) and H = [[b×], 0, −[b×] at column ``at``]: H's exact zeros
+    skipped, the other terms in column order, so each sum equals the dense one bit for bit."""
+    a1, a2 = at + 1, at + 2
+    return (
+        s0 + R[1] * -b2 + R[2] * b1 + R[a1] * b2 + R[a2] * -b1,
+        s1 + R[0] * b2 + R[2] * -b0 + R[at] * -b2 + R[a2] * b0,
+        s2 + R[0] * -b1 + R[1] * b0 + R[at] * b1 + R[a1] * -b0,
+    )
+
+
+@njit(cache=True, inline="always")
+def _joseph_aligned(P, T0, T1, T2, K0, K1, K2, b0, b1, b2, at, r, Z):
+    """P ← (I − K H) P (I − K H)ᵀ + r K Kᵀ for :func:`aligned_update_into`, never forming
+    I − K H: M = P − K (H P), V = M Hᵀ, Z = M − V Kᵀ row by row (Z: (n, n) scratch),
+    P⁺ = (Z + Zᵀ)/2 + r K Kᵀ, with H P = (P Hᵀ)ᵀ (P is kept exactly symmetric). T, K, V:
+    the columns of P Hᵀ, K and V. The same terms as the dense products, summed in another
+    order (equal to round-off, tested)."""
+    nx = P.shape[0]
+    for i in range(nx):
+        Zi, k0, k1, k2 = Z[i], K0[i], K1[i], K2[i]
+        for j in range(nx):
+            Zi[j] = P[i, j] - (k0 * T0[j] + k1 * T1[j] + k2 * T2[j])
+        v0, v1, v2 = _times_ht(Zi, b0, b1, b2, at, 0.0, 0.0, 0.0)
+        for j in range(nx):
+            Zi[j] -= v0 * K0[j] + v1 * K1[j] + v2 * K2[j]
+    for i in range(nx):
+        k0, k1, k2 = K0[i], K1[i], K2[i]
+        for j in range(i, nx):
+            v = 0.5 * (Z[i, j] + Z[j, i]) + r * (k0 * K0[j] + k1 * K1[j] + k2 * K2[j])
+            P[i, j] = v
+            P[j, i] = v
 
 
 @njit(cache=True, inline="always")

@@ -148,6 +148,10 @@ ZERO_CROSS = _AT["wheel_zero_crossings"]
 # otherwise cost an atomic increment and decrement (three quarters of the step's time when
 # measured). Nothing in them allocates; the functions they call keep the runtime.
 _LEAN: dict[str, Any] = {"cache": True, "_nrt": False, "error_model": "numpy"}
+# ``command_step`` and ``finish_step`` are also inlined into ``run_block`` (HIL calls them
+# from Python as they are): a compiled call passes every record's arrays field by field,
+# hundreds of words a call: inlined, the compiled step went from 1.5 to 0.8 µs (measured).
+_INLINED: dict[str, Any] = _LEAN | {"inline": "always"}
 
 # the filter's modes (``Filter.mode``)
 TRUTH, DYNAMICS, GYRO = 0, 1, 2
@@ -920,7 +924,7 @@ def _account_stage(state, work, plant, unload, k, j, t, steady_from):
     _copy_into(hw_cmd, work.hw_prev)
 
 
-@njit(**_LEAN)
+@njit(**_INLINED)
 def command_step(state, work, k, j, plant, law, sky, sensors, filt, noise, steady_from):
     """The first half of step ``k`` (row ``j`` of the block's noise): sky, gyros, sensors
     and the filter's updates, thruster unloading, the control law and the wheel commands
@@ -1174,7 +1178,7 @@ def _propagate_stage(state, work, plant, process_noise, h_reported):
     _count_zero_crossings(state.stats, x, plant.h_max, state.wheel_sign)
 
 
-@njit(**_LEAN)
+@njit(**_INLINED)
 def finish_step(state, work, k, j, log_k, plant, sensors, filt, noise, log, h_reported):
     """The second half of step ``k``, after the wheels realised ``work.hw_real`` (N,) N·m:
     the log row (every ``log.every`` steps), the filter's prediction and the plant's
