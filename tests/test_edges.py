@@ -377,7 +377,8 @@ def test_a_wheel_client_ignores_commands_read_back_from_the_bus():
 
 
 def test_report_labels_fold_signs_and_name_the_preprocessing():
-    from rwlab.report.identification import _minus, _preprocessed_label
+    from rwlab.report.identification import _minus
+    from rwlab.report.study_figures import _preprocessed_label
 
     assert _minus("output", -4772.0) == "output + 4772"
     assert _minus("input", 31.4) == "input − 31.4" and _minus("input", 0.0) == "input"

@@ -34,6 +34,7 @@ LAYERS: list[set[str]] = [
         "interrupts",
         "_toml",
         "_io",
+        "_forked",
         "_display",
         "_optional",
         "schemas",

@@ -55,7 +55,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import control
 import numpy as np
@@ -78,6 +78,7 @@ from rwlab.wheelspec import WheelSpec
 __all__ = [
     "StudyResult",
     "identification_study",
+    "nonlinear_stage",
     "physical_model",
     "steady_state_gain",
     "wheel_model",
@@ -154,6 +155,9 @@ class StudyResult(ShortRepr):
         ``run`` (whether the servo and grey-box wheel models were fitted) and ``why``.
     best_fit_percent : float or None
         The best validation fit of every linear model, %; ``no_model_fits`` when negative.
+    nonlinear_range : (int, int) or None
+        ``[i0, i1)``, the samples of the record the nonlinear stage fits (the longest
+        gap-free piece of a record split at its gaps); None: the whole record.
     """
 
     data: IOData
@@ -183,6 +187,7 @@ class StudyResult(ShortRepr):
     parts: dict | None = None
     wheel_stages: dict | None = None
     best_fit_percent: float | None = None
+    nonlinear_range: tuple[int, int] | None = field(default=None, repr=False)
 
     @property
     def no_model_fits(self) -> bool:
@@ -407,16 +412,13 @@ def identification_study(
     prepared = _preprocessed(data, preprocess, split, pieces)
     est, val = prepared.split(split)
     fit_data: IOData | list[IOData] = est
-    physical, scan, cur = data, est, current
+    scan = est
     if pieces is not None:
         est_parts = [prepared[a:b] for a, b in pieces["est"]]
         fit_data = est_parts if len(est_parts) > 1 else est_parts[0]
         scan = max(est_parts, key=len)
         a, b = pieces["val"]
         val = prepared[a:b]
-        a, b = pieces["longest"]  # the nonlinear stage: one gap-free experiment
-        physical = data[a:b]
-        cur = None if current is None else np.asarray(current, dtype=float)[a:b]
     total, done = len(orders) + 6 + int(nonlinear), 0
 
     def step(label: str) -> None:
@@ -474,20 +476,8 @@ def identification_study(
     new_u = _new_input(rng, scan, val.N)
     continuous = _continuous(chosen, new_u)
     step("validation")
-    servo, nl, grey, black = None, None, None, None
     stages = _wheel_stages(data, wheel)
-    if nonlinear:
-        if stages["run"]:
-            servo, nl = _nonlinear_stage(physical, split, chosen, prepared.trend, limits_rpm)
-        else:
-            nl = {"structure": "servo", "skipped": stages["why"]}
-        if nonlinear_models:
-            sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
-            grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
-        else:
-            nl["not_fitted"] = NOT_FITTED
-        step("nonlinear")
-    return StudyResult(
+    result = StudyResult(
         data=prepared,
         est=est,
         val=val,
@@ -502,10 +492,6 @@ def identification_study(
         continuous=continuous,
         acceleration=_acceleration(chosen, val),
         new_input={"u": new_u},
-        servo=servo,
-        nonlinear=nl,
-        greybox=grey,
-        nlarx=black,
         physical_val=data.split(split)[1] if pieces is None else data[slice(*pieces["val"])],
         segments=None if pieces is None else _segment_times(data, pieces["all"]),
         steady_state=steady,
@@ -515,7 +501,71 @@ def identification_study(
         parts=_parts(chosen, scan, val),
         wheel_stages=stages,
         best_fit_percent=max(r["fit_percent"] for r in candidates),
+        nonlinear_range=None if pieces is None else pieces["longest"],
     )
+    if not nonlinear:
+        return result
+    result = nonlinear_stage(
+        result,
+        data,
+        split=split,
+        limits_rpm=limits_rpm,
+        datasheet=datasheet,
+        current=current,
+        nonlinear_models=nonlinear_models,
+    )
+    step("nonlinear")
+    return result
+
+
+def nonlinear_stage(
+    result: StudyResult,
+    data: IOData,
+    *,
+    split: float = 0.7,
+    limits_rpm: tuple[float, float] = (math.inf, math.inf),
+    datasheet: dict | None = None,
+    current=None,
+    nonlinear_models: bool = False,
+) -> StudyResult:
+    """The study's step 8 on a study run with ``nonlinear=False``: the servo model of a
+    wheel's record and, with ``nonlinear_models``, the grey box and the NLARX.
+
+    :func:`identification_study` runs it last; ``rwlab identify`` runs it itself, to draw
+    the report's figures of the linear study meanwhile.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study of ``data`` without its nonlinear stage.
+    data : IOData
+        The raw record the study was run on.
+    split, limits_rpm, datasheet, current, nonlinear_models
+        As given to :func:`identification_study`.
+
+    Returns
+    -------
+    StudyResult
+        ``result`` with ``servo``, ``nonlinear``, ``greybox`` and ``nlarx``.
+    """
+    physical, cur = data, current
+    if result.nonlinear_range is not None:  # a record with gaps: one gap-free experiment
+        a, b = result.nonlinear_range
+        physical = data[a:b]
+        cur = None if current is None else np.asarray(current, dtype=float)[a:b]
+    servo, nl, grey, black = None, None, None, None
+    stages = result.wheel_stages or _wheel_stages(data, None)  # a result made elsewhere
+    if stages["run"]:
+        trend = result.data.trend
+        servo, nl = _nonlinear_stage(physical, split, result.chosen, trend, limits_rpm)
+    else:
+        nl = {"structure": "servo", "skipped": stages["why"]}
+    if nonlinear_models:
+        sheet = None if datasheet is None or not stages["run"] else {**DATASHEET, **datasheet}
+        grey, black = _wheel_models(physical, split, servo, nl, sheet, cur)
+    else:
+        nl["not_fitted"] = NOT_FITTED
+    return replace(result, servo=servo, nonlinear=nl, greybox=grey, nlarx=black)
 
 
 NOT_FITTED = (

@@ -1,15 +1,20 @@
 """A tiny HTML page builder for reports that open offline (no scripts, no links out).
 
 Figures are matplotlib figures rendered to PNG and embedded as base64 data
-URIs, each in a ``<figure id=...>`` so tests and readers can find them.
+URIs, each in a ``<figure id=...>`` so tests and readers can find them. A page
+renders its figures when it is rendered, shares of them in forked processes
+(:func:`render_pngs`): drawing is most of a report's time.
 """
 
 from __future__ import annotations
 
 import base64
+import contextlib
+import functools
 import html
 import io
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -17,9 +22,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from rwlab._forked import Forked
 from rwlab._io import atomic_write_bytes
 
-__all__ = ["Page", "figure", "png_uri", "signed", "trace_styles"]
+__all__ = ["Page", "figure", "png_uri", "render_pngs", "signed", "trace_styles"]
+
+DPI = 110  # the reports' figures: 8 × 3.2 in → 880 × 352 pixels
 
 _STYLE = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;
@@ -107,10 +115,68 @@ def png_uri(fig) -> str:
     str
         ``data:image/png;base64,...``.
     """
+    return _uri(render_pngs([fig], processes=1)[0])
+
+
+def _uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode()
+
+
+def _png(fig) -> bytes:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
+
+
+def render_pngs(figs: Sequence, processes: int | None = None) -> list[bytes]:
+    """Each figure as PNG bytes, every figure closed after; shares drawn side by side.
+
+    The figures are dealt out in turn to ``processes`` processes: this one and forked
+    children (:class:`rwlab._forked.Forked`), each drawing its share. The bytes are
+    those this process would draw (a child is a copy of it).
+
+    Parameters
+    ----------
+    figs : sequence of matplotlib.figure.Figure
+        The figures.
+    processes : int, optional
+        How many processes draw. Default: one per core the process may use, at most
+        one per figure. Where no child can be forked (:func:`rwlab._forked.forkable`),
+        this process draws every share.
+
+    Returns
+    -------
+    list of bytes
+        The PNG files, in the order of ``figs``.
+    """
+    n = max(1, min(len(figs), _cores() if processes is None else processes))
+    shares = [range(i, len(figs), n) for i in range(n)]
+    pngs = [b""] * len(figs)
+    try:
+        with contextlib.ExitStack() as stack:
+            children = [
+                stack.enter_context(Forked(functools.partial(_pngs, figs, share)))
+                for share in shares[1:]
+            ]
+            for i, png in zip(shares[0], _pngs(figs, shares[0]), strict=True):
+                pngs[i] = png
+            for share, child in zip(shares[1:], children, strict=True):
+                for i, png in zip(share, child.result(), strict=True):
+                    pngs[i] = png
+    finally:
+        for fig in figs:
+            plt.close(fig)
+    return pngs
+
+
+def _pngs(figs: Sequence, share: range) -> list[bytes]:
+    return [_png(figs[i]) for i in share]
+
+
+def _cores() -> int:
+    """The cores this process may run on."""
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    return len(cores) if cores else os.cpu_count() or 1
 
 
 class Page:
@@ -125,6 +191,7 @@ class Page:
     def __init__(self, title: str) -> None:
         self.title = title
         self.parts: list[str] = [f"<h1>{html.escape(title)}</h1>"]
+        self._figures: list[tuple] = []  # (figure, its part's index, id, caption), not drawn
 
     def heading(self, text: str, anchor: str | None = None) -> None:
         ident = f' id="{anchor}"' if anchor else ""
@@ -162,12 +229,21 @@ class Page:
         self.parts.append(f"<table{ident}><tr>{head}</tr>{''.join(body)}</table>")
 
     def figure(self, fig, fig_id: str, caption: str) -> None:
-        self.parts.append(
-            f'<figure id="{fig_id}"><img alt="{html.escape(caption)}" src="{png_uri(fig)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-        )
+        """Add a figure: a matplotlib figure (drawn, and closed, when the page is
+        rendered, :func:`render_pngs`) or its PNG bytes, drawn already."""
+        self._figures.append((fig, len(self.parts), fig_id, caption))
+        self.parts.append("")
 
     def render(self) -> str:
+        todo = [fig for fig, *_ in self._figures if not isinstance(fig, bytes)]
+        drawn = iter(render_pngs(todo))
+        for fig, i, fig_id, caption in self._figures:
+            png = fig if isinstance(fig, bytes) else next(drawn)
+            self.parts[i] = (
+                f'<figure id="{fig_id}"><img alt="{html.escape(caption)}" src="{_uri(png)}">'
+                f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+            )
+        self._figures = []
         return (
             '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
             f"<title>{html.escape(self.title)}</title><style>{_STYLE}</style></head><body>"

@@ -10,19 +10,19 @@ from __future__ import annotations
 
 import json
 import os
-import textwrap
 from pathlib import Path
 
 import numpy as np
-from matplotlib.ticker import MaxNLocator
 
 from rwlab._io import atomic_write_bytes
 from rwlab.ident.model_file import WheelModelFile
-from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
-from rwlab.report.html import Page, figure, trace_styles
+from rwlab.ident.study import INITIAL, StudyResult
+from rwlab.report.html import Page, figure
 from rwlab.report.model_choice import choice_section
+from rwlab.report.study_figures import SIGMAS, armax_name, linear_plots, resid_plot
 
 __all__ = ["FIGURES", "write_study"]
+
 
 FIGURES = (
     "fig16-delay",
@@ -56,58 +56,15 @@ def _poly(row: dict, letter: str) -> str:
     return " ".join(out)
 
 
-def _resid_figure(page: Page, res: dict, fig_id: str, name: str) -> None:
-    fig, (a1, a2) = figure(9, 3.0, 1, 2)
-    a1.stem(res["lags"], res["acf"], basefmt=" ")
-    for sign in (1, -1):
-        a1.axhline(sign * res["acf_bound"], color="r", ls="--", lw=1)
-    a1.set_title(f"residual autocorrelation, {name}")
-    a1.set_xlabel("lag [samples]")
-    a2.stem(res["ccf_lags"], res["ccf"], basefmt=" ")
-    for sign in (1, -1):
-        a2.axhline(sign * res["ccf_bound"], color="r", ls="--", lw=1)
-    a2.set_title("input–residual cross-correlation")
-    a2.set_xlabel("lag [samples]")
+def _resid_caption(res: dict, name: str) -> str:
     verdict = (
         "white" if res["white"] else "not white"
     ) + f" (Ljung–Box p = {res['whiteness_p']:.3g})"
-    page.figure(
-        fig,
-        fig_id,
+    return (
         f"Residuals of {name} on validation data with "
         f"{res['confidence']:.0%} bounds: {verdict}; independence p = "
-        f"{res['independence_p']:.3g}.",
+        f"{res['independence_p']:.3g}."
     )
-
-
-def _compare_figure(
-    page: Page, result: StudyResult, names: list[str], fig_id: str, caption: str
-) -> None:
-    val = result.val
-    t = val.time - val.time[0]
-    fig, ax = figure(9, 3.2)
-    stable = [name for name in names if result.models[name].is_stable()]
-    styles = trace_styles(len(stable) + 1)  # the measured output widest, underneath
-    ax.plot(t, val.y[:, 0], color="0.45", label="measured", **styles[0])
-    for name, style in zip(stable, styles[1:], strict=True):
-        ax.plot(t, result.models[name].simulate(val, initial=INITIAL), label=name, **style)
-    ax.set_xlabel("time in validation record [s]")
-    label = _preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess)
-    ax.set_ylabel(textwrap.fill(label, 28))  # a long label on two lines, not cut off
-    ax.legend(loc="best", fontsize=8)
-    page.figure(fig, fig_id, caption)
-
-
-def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
-    """An axis label that says what the plotted numbers are."""
-    unit = f" [{unit}]" if unit else ""
-    if preprocess == "normalize":
-        return f"{name}, normalised to [0, 1] over the estimation part"
-    if preprocess == "detrend":
-        return f"{name} − its estimation-part mean{unit}"
-    if preprocess == "scale":
-        return f"{name} / its estimation-part peak"
-    return f"{name}{unit}"
 
 
 def _minus(name: str, offset: float) -> str:
@@ -123,6 +80,7 @@ def write_study(
     out_dir: str | os.PathLike,
     *,
     force: bool = False,
+    drawn: dict[str, bytes] | None = None,
 ) -> dict[str, Path]:
     """Write ``report.html``, ``study.json`` and ``model.json`` into ``out_dir``.
 
@@ -136,6 +94,9 @@ def write_study(
         The folder.
     force : bool
         Replace existing files.
+    drawn : dict of str to bytes, optional
+        The figures of the linear study, drawn already (:func:`linear_figures`); by
+        default drawn here.
 
     Returns
     -------
@@ -159,7 +120,7 @@ def write_study(
             tmp.write_text(text)
 
         atomic_write_bytes(targets[name], write)
-    _page(result, study, model_info).save(targets["report.html"])
+    _page(result, study, model_info, drawn).save(targets["report.html"])
     return targets
 
 
@@ -179,8 +140,11 @@ def _reference_text(model_info: dict) -> str:
     )
 
 
-def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
+def _page(
+    result: StudyResult, study: dict, model_info: dict, drawn: dict[str, bytes] | None
+) -> Page:
     d = study["data"]
+    figs = linear_plots(result, study) if drawn is None else drawn
     page = Page(f"Identification study — {d['name'] or 'record'}")
     choice_section(page, study)
     page.heading("The record", "record")
@@ -238,17 +202,8 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
 
     page.heading("1. Input delay (paper Fig. 16)", "delay")
     nk = study["delay"]["nk"]
-    losses = {int(k): v for k, v in study["delay"]["losses"].items()}
-    fig, ax = figure(7, 2.8)
-    ax.bar(
-        list(losses),
-        list(losses.values()),
-        color=["#d62728" if k == nk else "#1f77b4" for k in losses],
-    )
-    ax.set_xlabel("delay nk [samples]")
-    ax.set_ylabel("ARX(2,2,nk) loss")
     page.figure(
-        fig,
+        figs["fig16-delay"],
         "fig16-delay",
         f"Loss of ARX(2,2,nk) per delay; minimum at nk = {nk} ({nk * d['Ts']:g} s).",
     )
@@ -272,32 +227,21 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         table_id="table2-orders",
         highlight=next((i for i, r in enumerate(rows) if r["structure"] == ch["structure"]), None),
     )
-    fig, ax = figure(7, 2.8)
-    ax.plot([r["na"] for r in rows], [r["mse"] for r in rows], "o-")
-    ax.set_xlabel("na = nb")
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # orders are whole numbers
-    ax.set_ylabel("validation MSE")
-    page.figure(fig, "fig17-orders", "Validation error per ARX order.")
-    fig, ax = figure(8, 3.0)
-    n_step = max(40, int(60 / d["Ts"]))
-    for r in rows:
-        m = result.models[r["structure"]]
-        ax.plot(np.arange(n_step) * d["Ts"], m.step_response(n_step), label=r["structure"])
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("step response")
-    ax.legend(fontsize=8)
-    page.figure(fig, "fig18-steps", "Unit-step responses of the ARX models.")
+    page.figure(figs["fig17-orders"], "fig17-orders", "Validation error per ARX order.")
+    page.figure(figs["fig18-steps"], "fig18-steps", "Unit-step responses of the ARX models.")
 
     page.heading("3. Validation of the chosen model (paper Fig. 19, Fig. 20)", "validation")
-    _resid_figure(page, study["residuals"][ch["structure"]], "fig19-resid", ch["structure"])
-    _compare_figure(
-        page,
-        result,
-        [ch["structure"]],
+    res = study["residuals"][ch["structure"]]
+    page.figure(figs["fig19-resid"], "fig19-resid", _resid_caption(res, ch["structure"]))
+    page.figure(
+        figs["fig20-compare"],
         "fig20-compare",
         f"Simulated vs measured output of {ch['structure']} on validation data.",
     )
-    _uncertainty_figure(page, result.chosen, ch["structure"])
+    if "fig-uncertainty" in figs:
+        page.figure(figs["fig-uncertainty"], "fig-uncertainty", _uncertainty_caption(ch))
+    else:
+        page.text(f"{ch['structure']} has no parameter covariance: no confidence bands.", note=True)
 
     page.heading("4. ARMAX, OE and BJ (paper Table 3, Fig. 21, Fig. 22)", "others")
     others = study["others"]
@@ -320,25 +264,18 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         ],
         table_id="table3-others",
     )
-    armax = next((r["structure"] for r in others if r["structure"].startswith("ARMAX")), None)
-    if armax and armax in study["residuals"]:
-        _resid_figure(page, study["residuals"][armax], "fig21-resid-armax", armax)
-        _compare_figure(
-            page,
-            result,
-            [armax],
+    armax = armax_name(study)
+    if armax is not None:
+        res = study["residuals"][armax]
+        page.figure(figs["fig21-resid-armax"], "fig21-resid-armax", _resid_caption(res, armax))
+        page.figure(
+            figs["fig22-compare-armax"],
             "fig22-compare-armax",
             f"Simulated vs measured output of {armax} on validation data.",
         )
     else:
         page.text("ARMAX(2,2,1) could not be estimated from these data.", note=True)
-    _compare_figure(
-        page,
-        result,
-        [r["structure"] for r in others],
-        "fig-oe-bj",
-        "All prediction-error models on validation data.",
-    )
+    page.figure(figs["fig-oe-bj"], "fig-oe-bj", "All prediction-error models on validation data.")
 
     _constrained_section(page, study)
 
@@ -366,34 +303,16 @@ def _page(result: StudyResult, study: dict, model_info: dict) -> Page:
         f"Converted with the record's real sample time Ts = {d['Ts']:g} s (paper A's "
         "eq. 14 used MATLAB's default Ts = 1 s by mistake)."
     )
-    fig, ax = figure(9, 3.0)
-    t = np.arange(len(cont["discrete"])) * d["Ts"]
-    ax.plot(t, cont["discrete"], color="k", lw=1.5, label="discrete")
-    for method, info in cont["methods"].items():
-        if "y" in info:
-            ax.plot(info["t"], info["y"], lw=1, ls="--", label=method)
-    ax.set_xlabel("t [s]")
-    ax.legend(fontsize=8)
     page.figure(
-        fig,
+        figs["fig23-continuous"],
         "fig23-continuous",
         "Discrete and continuous models driven by a new piecewise-constant input.",
     )
 
     page.heading("6. Acceleration check (paper Fig. 24)", "acceleration")
     acc = study["acceleration"]
-    val = result.val
-    measured, simulated = acceleration_pair(result.chosen, val)
-    fig, ax = figure(9, 3.0)
-    tt = (val.time - val.time[0])[1:]
-    ax.plot(tt, measured, color="k", lw=1, label="measured")
-    ax.plot(tt, simulated, lw=1, label=ch["structure"])
-    ax.set_xlabel("time in validation record [s]")
-    unit = val.output_units[0]
-    ax.set_ylabel(f"{val.output_names[0]} change [{unit}/s]" if unit else "change per s")
-    ax.legend(fontsize=8)
     page.figure(
-        fig,
+        figs["fig24-acceleration"],
         "fig24-acceleration",
         f"Speed change per second, model vs measured: correlation {acc['correlation']:.3f}.",
     )
@@ -462,7 +381,9 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         f"A step of {level:.4g} from rest: the linear model jumps, the servo ramps at its "
         "estimated rate limit and settles.",
     )
-    _resid_figure(page, nl["residuals"], "fig-nonlinear-resid", "servo (simulation error)")
+    name = "servo (simulation error)"
+    fig = resid_plot(nl["residuals"], name)
+    page.figure(fig, "fig-nonlinear-resid", _resid_caption(nl["residuals"], name))
 
 
 def _nonlinear_notes(nl: dict, stages: dict | None) -> list[str]:
@@ -536,33 +457,8 @@ def _tf_text(num, den) -> str:
     return f"({poly(num)}) / ({poly(den)})"
 
 
-def _uncertainty_figure(page: Page, model, name: str, k: float = 3.0) -> None:
-    """Step response and Bode magnitude of the chosen model with ±kσ bands (first order)."""
-    from rwlab.ident.uncertainty import bode_band, step_band
-
-    if model.covariance is None:
-        page.text(f"{name} has no parameter covariance: no confidence bands.", note=True)
-        return
-    n = max(40, int(60 / model.Ts))
-    step = step_band(model, n)
-    omega = np.logspace(-2, 0, 100) * np.pi / model.Ts
-    mag, _ = bode_band(model, omega)
-    fig, (a1, a2) = figure(9, 3.0, 1, 2)
-    a1.plot(step.x, step.value[:, 0, 0], color="k", lw=1.2, label=name)
-    a1.fill_between(step.x, step.lower(k)[:, 0, 0], step.upper(k)[:, 0, 0], alpha=0.3,
-                    label=f"±{k:g}σ")  # fmt: skip
-    a1.set_xlabel("t [s]")
-    a1.set_ylabel("step response")
-    a1.legend(fontsize=8)
-    db = lambda x: 20 * np.log10(np.maximum(x, 1e-300))  # noqa: E731
-    a2.semilogx(omega, db(mag.value[:, 0, 0]), color="k", lw=1.2)
-    low = np.maximum(mag.lower(k), mag.value * 1e-3)  # a band through zero: floor at −60 dB
-    a2.fill_between(omega, db(low[:, 0, 0]), db(mag.upper(k)[:, 0, 0]), alpha=0.3)
-    a2.set_xlabel("ω [rad/s]")
-    a2.set_ylabel("|G| [dB]")
-    page.figure(
-        fig,
-        "fig-uncertainty",
-        f"Step response and Bode magnitude of {name} with ±{k:g}σ bands from its parameter "
-        "covariance (first-order propagation, rwlab.ident.uncertainty).",
+def _uncertainty_caption(chosen: dict) -> str:
+    return (
+        f"Step response and Bode magnitude of {chosen['structure']} with ±{SIGMAS:g}σ bands "
+        "from its parameter covariance (first-order propagation, rwlab.ident.uncertainty)."
     )

@@ -11,6 +11,7 @@ folder whole or not at all, and refuse a second run on it at once
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -18,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from rwlab._forked import Forked
 from rwlab._io import output_folder
 from rwlab.errors import ConfigError, NoModelFitsError, RwlabError
 
@@ -166,13 +168,16 @@ def identify_into(
     # BLAS threads only wait for each other; on a busy machine one SVD of the fits took
     # 250 ms threaded against 2 ms on one thread (measured), and the numbers agree to
     # round-off (1 ulp in one standard deviation of study.json)
-    with threadpool_limits(1, user_api="blas"):
-        return _identify_into(file, folder, progress=progress, echo=echo, **options)
+    with threadpool_limits(1, user_api="blas"), contextlib.ExitStack() as stack:
+        return _identify_into(file, folder, stack, progress=progress, echo=echo, **options)
 
 
-def _identify_into(file, folder, *, progress, echo, **options) -> tuple[dict, dict[str, Path]]:
-    """:func:`identify_into`'s work."""
-    from rwlab.ident.study import identification_study, load_current, load_study_data
+def _identify_into(
+    file, folder, stack, *, progress, echo, **options
+) -> tuple[dict, dict[str, Path]]:
+    """:func:`identify_into`'s work (``stack`` ends the child that draws figures, on an
+    error)."""
+    from rwlab.ident.study import load_current, load_study_data
     from rwlab.ident.study import wheel_model as make_wheel_model
     from rwlab.report.identification import write_study
 
@@ -205,14 +210,15 @@ def _identify_into(file, folder, *, progress, echo, **options) -> tuple[dict, di
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
         }
-    result = identification_study(
+    result, drawn = _study_while_drawing(
         data,
+        stack,
+        progress,
         preprocess=options["preprocess"],
         split=options["split"],
         tolerance=options["tolerance"],
         gain_tolerance=options.get("gain_tolerance", 2.0) / 100.0,
         limits_rpm=(saturation["speed_limit_rpm"],) * 2,
-        progress=progress,
         datasheet=datasheet,
         current=load_current(file, Ts, gaps=gaps, reader=reader),
         segments=segments,
@@ -238,7 +244,7 @@ def _identify_into(file, folder, *, progress, echo, **options) -> tuple[dict, di
             f"warning: no healthy reference for fault diagnosis ({reference}); rwlab "
             f"diagnose refuses this model: {advice}"
         )
-    paths = write_study(result, model, folder, force=options["force"])
+    paths = write_study(result, model, folder, force=options["force"], drawn=drawn.result())
     study = result.to_dict()
     study["data"]["output_unit"] = data.output_units[0]  # for the messages only
     study["healthy_reference"] = (  # for the messages only: model.json holds the reference
@@ -249,6 +255,43 @@ def _identify_into(file, folder, *, progress, echo, **options) -> tuple[dict, di
     return study, paths
 
 
+def _study_while_drawing(data, stack, progress, **options):
+    """The study, its nonlinear stage run while a forked child draws the report's figures
+    of the linear study (:class:`rwlab._forked.Forked`): the servo fit is most of the
+    stage's time and drawing most of the report's, side by side on two cores.
+
+    Returns the study and the drawing child (in ``stack``, which ends it on an error);
+    ``options`` are :func:`rwlab.ident.study.identification_study`'s, and ``progress``
+    is told of the same stages.
+    """
+    from threadpoolctl import threadpool_limits
+
+    from rwlab.ident.study import identification_study, nonlinear_stage
+    from rwlab.report.study_figures import linear_figures
+
+    keys = ("limits_rpm", "datasheet", "current", "nonlinear_models")
+    later = {key: options.pop(key) for key in keys}
+    total: list[int] = []
+
+    def linear_progress(done: int, stages: int, label: str) -> None:  # one stage to come
+        total[:] = [stages + 1]
+        if progress is not None:
+            progress(done, stages + 1, label)
+
+    linear = identification_study(data, nonlinear=False, progress=linear_progress, **options)
+    # SciPy's own OpenBLAS loads with the study's imports, after identify_into's limit, so
+    # it runs a thread per core: from here on one, as the servo fit's threads and the
+    # drawing child need the cores (measured: 1–1.5 s less CPU, the same bytes written;
+    # the linear study keeps them, as one thread there moves one standard deviation of
+    # study.json by 1 ulp)
+    stack.enter_context(threadpool_limits(1, user_api="blas"))
+    drawn = stack.enter_context(Forked(functools.partial(linear_figures, linear)))
+    result = nonlinear_stage(linear, data, split=options["split"], **later)
+    if progress is not None:
+        progress(total[0], total[0], "nonlinear")
+    return result, drawn
+
+
 def _read_once(file: str):
     """A testbed record decoded once, and a reader that samples it (for
     :func:`rwlab.ident.study.load_study_data`); (None, None) for any other file. The
@@ -256,8 +299,8 @@ def _read_once(file: str):
     sample the one decoded record: decoding is most of a record's read."""
     if Path(file).suffix.lower() != ".mcap" or not Path(file).is_file():
         return None, None  # a missing file is refused by load_study_data, as any file
-    from rwlab.testbed import read_record
     from rwlab.testbed.load import read_mcap
+    from rwlab.testbed.record import read_record
 
     record = read_record(file)
     return record, functools.partial(read_mcap, record)
@@ -286,7 +329,7 @@ def _healthy_reference(file, model, record=None) -> dict | str:
     import numpy as np
 
     from rwlab.diagnose import healthy_reference
-    from rwlab.testbed import load_record
+    from rwlab.testbed.load import load_record
     from rwlab.wheel import IdentifiedWheel
 
     if Path(file).suffix.lower() != ".mcap":

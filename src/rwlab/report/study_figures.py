@@ -1,0 +1,238 @@
+"""The identification report's figures of the linear study (sections 1–6, paper A's).
+
+Drawn apart from the page's text so that ``rwlab identify`` can draw them in a child
+process while it fits the servo model (:func:`linear_figures`); the page
+(:mod:`rwlab.report.identification`) takes them by figure id.
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+from matplotlib.ticker import MaxNLocator
+
+from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
+from rwlab.report.html import figure, render_pngs, trace_styles
+
+__all__ = ["SIGMAS", "armax_name", "linear_figures", "linear_plots", "resid_plot"]
+
+SIGMAS = 3.0  # the chosen model's confidence bands: ± this many standard deviations
+
+
+def resid_plot(res: dict, name: str):
+    """Residual autocorrelation and input–residual cross-correlation with their bounds.
+
+    Parameters
+    ----------
+    res : dict
+        A residual test (``ResidResult.to_dict()``).
+    name : str
+        The model's name for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    fig, (a1, a2) = figure(9, 3.0, 1, 2)
+    a1.stem(res["lags"], res["acf"], basefmt=" ")
+    for sign in (1, -1):
+        a1.axhline(sign * res["acf_bound"], color="r", ls="--", lw=1)
+    a1.set_title(f"residual autocorrelation, {name}")
+    a1.set_xlabel("lag [samples]")
+    a2.stem(res["ccf_lags"], res["ccf"], basefmt=" ")
+    for sign in (1, -1):
+        a2.axhline(sign * res["ccf_bound"], color="r", ls="--", lw=1)
+    a2.set_title("input–residual cross-correlation")
+    a2.set_xlabel("lag [samples]")
+    return fig
+
+
+def _compare_plot(result: StudyResult, names: list[str]):
+    """The measured validation output and each stable model's simulation of it."""
+    val = result.val
+    t = val.time - val.time[0]
+    fig, ax = figure(9, 3.2)
+    stable = [name for name in names if result.models[name].is_stable()]
+    styles = trace_styles(len(stable) + 1)  # the measured output widest, underneath
+    ax.plot(t, val.y[:, 0], color="0.45", label="measured", **styles[0])
+    for name, style in zip(stable, styles[1:], strict=True):
+        ax.plot(t, result.models[name].simulate(val, initial=INITIAL), label=name, **style)
+    ax.set_xlabel("time in validation record [s]")
+    label = _preprocessed_label(val.output_names[0], val.output_units[0], result.preprocess)
+    ax.set_ylabel(textwrap.fill(label, 28))  # a long label on two lines, not cut off
+    ax.legend(loc="best", fontsize=8)
+    return fig
+
+
+def linear_figures(result: StudyResult) -> dict[str, bytes]:
+    """The report's figures of the linear study (sections 1–6), drawn.
+
+    ``rwlab identify`` draws them in a child process while it fits the servo model
+    (:class:`rwlab._forked.Forked`), and hands them to :func:`write_study`.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study; only its linear part is read (the nonlinear stage may not have run).
+
+    Returns
+    -------
+    dict of str to bytes
+        Figure id → PNG, as :func:`linear_plots` draws them.
+    """
+    figs = linear_plots(result, result.to_dict())
+    return dict(zip(figs, render_pngs(list(figs.values()), processes=1), strict=True))
+
+
+def linear_plots(result: StudyResult, study: dict) -> dict:
+    """The figures of sections 1–6, not drawn yet.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    study : dict
+        ``result.to_dict()``.
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        By figure id, in the page's order: those of ``FIGURES`` the study has (no
+        uncertainty bands without a covariance, no ARMAX figures without its model).
+    """
+    ch = study["chosen"]["structure"]
+    figs = {
+        "fig16-delay": _delay_plot(study["delay"]),
+        "fig17-orders": _orders_plot(study["orders"]),
+        "fig18-steps": _steps_plot(result, study),
+        "fig19-resid": resid_plot(study["residuals"][ch], ch),
+        "fig20-compare": _compare_plot(result, [ch]),
+    }
+    if result.chosen.covariance is not None:
+        figs["fig-uncertainty"] = _uncertainty_plot(result.chosen, ch)
+    armax = armax_name(study)
+    if armax is not None:
+        figs["fig21-resid-armax"] = resid_plot(study["residuals"][armax], armax)
+        figs["fig22-compare-armax"] = _compare_plot(result, [armax])
+    figs["fig-oe-bj"] = _compare_plot(result, [r["structure"] for r in study["others"]])
+    figs["fig23-continuous"] = _continuous_plot(study)
+    figs["fig24-acceleration"] = _acceleration_plot(result, study)
+    return figs
+
+
+def armax_name(study: dict) -> str | None:
+    """The ARMAX row's name, where it was estimated and its residuals tested.
+
+    Parameters
+    ----------
+    study : dict
+        ``study.json``'s content.
+
+    Returns
+    -------
+    str or None
+    """
+    others = study["others"]
+    armax = next((r["structure"] for r in others if r["structure"].startswith("ARMAX")), None)
+    return armax if armax and armax in study["residuals"] else None
+
+
+def _delay_plot(delay: dict):
+    nk = delay["nk"]
+    losses = {int(k): v for k, v in delay["losses"].items()}
+    fig, ax = figure(7, 2.8)
+    ax.bar(
+        list(losses),
+        list(losses.values()),
+        color=["#d62728" if k == nk else "#1f77b4" for k in losses],
+    )
+    ax.set_xlabel("delay nk [samples]")
+    ax.set_ylabel("ARX(2,2,nk) loss")
+    return fig
+
+
+def _orders_plot(rows: list[dict]):
+    fig, ax = figure(7, 2.8)
+    ax.plot([r["na"] for r in rows], [r["mse"] for r in rows], "o-")
+    ax.set_xlabel("na = nb")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # orders are whole numbers
+    ax.set_ylabel("validation MSE")
+    return fig
+
+
+def _steps_plot(result: StudyResult, study: dict):
+    Ts = study["data"]["Ts"]
+    fig, ax = figure(8, 3.0)
+    n_step = max(40, int(60 / Ts))
+    for r in study["orders"]:
+        m = result.models[r["structure"]]
+        ax.plot(np.arange(n_step) * Ts, m.step_response(n_step), label=r["structure"])
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("step response")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _continuous_plot(study: dict):
+    cont = study["continuous"]
+    fig, ax = figure(9, 3.0)
+    t = np.arange(len(cont["discrete"])) * study["data"]["Ts"]
+    ax.plot(t, cont["discrete"], color="k", lw=1.5, label="discrete")
+    for method, info in cont["methods"].items():
+        if "y" in info:
+            ax.plot(info["t"], info["y"], lw=1, ls="--", label=method)
+    ax.set_xlabel("t [s]")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _acceleration_plot(result: StudyResult, study: dict):
+    val = result.val
+    measured, simulated = acceleration_pair(result.chosen, val)
+    fig, ax = figure(9, 3.0)
+    tt = (val.time - val.time[0])[1:]
+    ax.plot(tt, measured, color="k", lw=1, label="measured")
+    ax.plot(tt, simulated, lw=1, label=study["chosen"]["structure"])
+    ax.set_xlabel("time in validation record [s]")
+    unit = val.output_units[0]
+    ax.set_ylabel(f"{val.output_names[0]} change [{unit}/s]" if unit else "change per s")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _preprocessed_label(name: str, unit: str, preprocess: str) -> str:
+    """An axis label that says what the plotted numbers are."""
+    unit = f" [{unit}]" if unit else ""
+    if preprocess == "normalize":
+        return f"{name}, normalised to [0, 1] over the estimation part"
+    if preprocess == "detrend":
+        return f"{name} − its estimation-part mean{unit}"
+    if preprocess == "scale":
+        return f"{name} / its estimation-part peak"
+    return f"{name}{unit}"
+
+
+def _uncertainty_plot(model, name: str):
+    """Step response and Bode magnitude of the chosen model with ±kσ bands (first order)."""
+    from rwlab.ident.uncertainty import bode_band, step_band
+
+    k = SIGMAS
+    n = max(40, int(60 / model.Ts))
+    step = step_band(model, n)
+    omega = np.logspace(-2, 0, 100) * np.pi / model.Ts
+    mag, _ = bode_band(model, omega)
+    fig, (a1, a2) = figure(9, 3.0, 1, 2)
+    a1.plot(step.x, step.value[:, 0, 0], color="k", lw=1.2, label=name)
+    a1.fill_between(step.x, step.lower(k)[:, 0, 0], step.upper(k)[:, 0, 0], alpha=0.3,
+                    label=f"±{k:g}σ")  # fmt: skip
+    a1.set_xlabel("t [s]")
+    a1.set_ylabel("step response")
+    a1.legend(fontsize=8)
+    db = lambda x: 20 * np.log10(np.maximum(x, 1e-300))  # noqa: E731
+    a2.semilogx(omega, db(mag.value[:, 0, 0]), color="k", lw=1.2)
+    low = np.maximum(mag.lower(k), mag.value * 1e-3)  # a band through zero: floor at −60 dB
+    a2.fill_between(omega, db(low[:, 0, 0]), db(mag.upper(k)[:, 0, 0]), alpha=0.3)
+    a2.set_xlabel("ω [rad/s]")
+    a2.set_ylabel("|G| [dB]")
+    return fig

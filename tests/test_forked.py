@@ -1,0 +1,87 @@
+"""Work in a forked child (rwlab._forked) and the report figures drawn side by side
+(rwlab.report.html.render_pngs): the same bytes as one process drawing them all."""
+
+import os
+import time
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from rwlab._forked import Forked, forkable
+from rwlab.report.html import Page, figure, render_pngs
+
+needs_fork = pytest.mark.skipif(not forkable(), reason="no fork here (or another thread runs)")
+
+
+@needs_fork
+def test_the_value_comes_from_a_child_process():
+    parent = os.getpid()
+    with Forked(lambda: (os.getpid(), np.arange(3.0))) as child:
+        pid, values = child.result()
+    assert pid != parent
+    assert values.tolist() == [0.0, 1.0, 2.0]
+
+
+@needs_fork
+def test_a_child_that_fails_leaves_the_work_to_this_process():
+    parent = os.getpid()
+
+    def work():
+        if os.getpid() != parent:
+            raise RuntimeError("the child fails")
+        return "computed here"
+
+    assert Forked(work).result() == "computed here"
+
+
+def test_an_error_of_the_work_is_raised_here():
+    def work():
+        raise ValueError("bad input")
+
+    with pytest.raises(ValueError, match="bad input"):
+        Forked(work).result()
+
+
+@needs_fork
+def test_leaving_the_block_before_the_result_ends_the_child():
+    t0 = time.perf_counter()
+    with Forked(lambda: time.sleep(60)) as child:
+        pid = child._child[0]
+    assert time.perf_counter() - t0 < 10
+    with pytest.raises(ChildProcessError):  # reaped: no zombie left behind
+        os.waitpid(pid, 0)
+
+
+def _figures(n: int) -> list:
+    figs = []
+    for i in range(n):
+        fig, ax = figure(6, 2.5)
+        ax.plot(np.sin(np.linspace(0, 10 + i, 500)), label=f"trace {i}")
+        ax.set_title(f"figure {i}")
+        ax.legend()
+        figs.append(fig)
+    return figs
+
+
+@pytest.mark.parametrize("processes", [2, 3])
+def test_figures_drawn_side_by_side_are_the_bytes_one_process_draws(processes):
+    alone = render_pngs(_figures(5), processes=1)
+    figs = _figures(5)
+    shared = render_pngs(figs, processes=processes)
+    assert shared == alone
+    assert len(set(alone)) == 5  # five different figures, in their order
+    assert all(png.startswith(b"\x89PNG") for png in shared)
+    assert not any(plt.fignum_exists(fig.number) for fig in figs)  # every one closed
+
+
+def test_a_page_takes_a_figure_drawn_already_and_draws_the_others():
+    drawn, todo = _figures(2)
+    png = render_pngs([drawn], processes=1)[0]
+    page = Page("t")
+    page.figure(png, "fig-a", "drawn already")
+    page.figure(todo, "fig-b", "drawn by the page")
+    html = page.render()
+    assert html.index('id="fig-a"') < html.index('id="fig-b"')
+    assert html.count("data:image/png;base64,") == 2
+    assert not plt.fignum_exists(todo.number)
