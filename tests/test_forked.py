@@ -2,20 +2,39 @@
 (rwlab.report.html.render_pngs): the same bytes as one process drawing them all."""
 
 import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from rwlab._forked import Forked, forkable
+from rwlab._forked import Forked
 from rwlab.report.html import Page, figure, render_pngs
 
-needs_fork = pytest.mark.skipif(not forkable(), reason="no fork here (or another thread runs)")
+needs_fork = pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this system")
+
+
+def _in_a_fresh_process(check) -> None:
+    """Run ``check`` in a new interpreter, where :func:`forkable` holds: a test worker may
+    still run threads that an earlier test left behind, and then nothing is forked."""
+    code = (
+        "import tests.test_forked as t, rwlab._forked as f; "
+        f"assert f.forkable(); t.{check.__name__}()"
+    )
+    root = Path(__file__).parent.parent
+    done = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
 
 
 @needs_fork
 def test_the_value_comes_from_a_child_process():
+    _in_a_fresh_process(_value_from_a_child)
+
+
+def _value_from_a_child():
     parent = os.getpid()
     with Forked(lambda: (os.getpid(), np.arange(3.0))) as child:
         pid, values = child.result()
@@ -25,6 +44,10 @@ def test_the_value_comes_from_a_child_process():
 
 @needs_fork
 def test_a_child_that_fails_leaves_the_work_to_this_process():
+    _in_a_fresh_process(_work_left_to_this_process)
+
+
+def _work_left_to_this_process():
     parent = os.getpid()
 
     def work():
@@ -45,6 +68,10 @@ def test_an_error_of_the_work_is_raised_here():
 
 @needs_fork
 def test_leaving_the_block_before_the_result_ends_the_child():
+    _in_a_fresh_process(_child_ended_on_leaving)
+
+
+def _child_ended_on_leaving():
     t0 = time.perf_counter()
     with Forked(lambda: time.sleep(60)) as child:
         pid = child._child[0]

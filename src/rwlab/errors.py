@@ -55,6 +55,10 @@ class ProtocolError(RwlabError):
     """A frame that is not a valid wheel message (bad length, checksum or value)."""
 
 
+class SlipError(ProtocolError):
+    """An NSP frame whose SLIP framing is wrong (FESC followed by neither TFEND nor TFESC)."""
+
+
 class DesignError(RwlabError, ValueError):
     """Weights or a plant for which the requested design does not exist."""
 

@@ -45,6 +45,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from rwlab.errors import SlipError
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.link import Clock, HostLink, Incoming, NodeLink
 from rwlab.wheel.physics import RW90, Mode, WheelParams
@@ -151,10 +152,6 @@ def encode_packet(packet: NspPacket, crc: Any = crc16_nsp) -> bytes:
         )
     body = bytes([packet.dst, packet.src, packet.mcf]) + bytes(packet.payload)
     return slip_encode(body + crc(body).to_bytes(2, "little"))
-
-
-class SlipError(proto.ProtocolError):
-    """A frame whose SLIP framing is wrong (FESC followed by neither TFEND nor TFESC)."""
 
 
 def decode_packet(body: bytes, crc: Any = crc16_nsp) -> NspPacket:
