@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from filelock import FileLock
+from filelock import FileLock, Timeout
 from scipy.signal import lfilter
 
 from rwlab.data import IOData
@@ -121,19 +121,23 @@ def identified_prbs(tmp_path_factory) -> tuple[str, Path, Path]:
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels(tmp_path_factory) -> None:
     """Under pytest-xdist, the attitude loop's and the wheel twin's numba kernels compile
-    in one worker while the others wait, then load from numba's cache (``cache=True``)
-    instead of compiling the same code again. A no-op in one process (``-p no:xdist``,
-    ``-o addopts=""``)."""
+    in the first worker at its start, into numba's cache (``cache=True``); the others do
+    not wait for it (a cold compile is ~50 s, an idle core on two): a test of theirs that
+    runs the kernel before the cache is written compiles it too. A no-op in one process
+    (``-p no:xdist``, ``-o addopts=""``)."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
-
-    def make(folder: Path) -> None:
+    lock = FileLock(str(tmp_path_factory.getbasetemp().parent / "compiled-kernels.lock"))
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        return  # another worker compiles them
+    try:
         import rwlab
+        from rwlab.wheel import WheelPhysics  # the twin's step (rwlab.wheel.kernel)
 
         for controller in ("lqr", "lqg"):
             rwlab.simulate("geo-smallsat", controller, duration=2.0)
-        from rwlab.wheel import WheelPhysics  # the twin's step (rwlab.wheel.kernel)
-
         WheelPhysics().run(1e-3, 10)
-
-    _once_per_session(tmp_path_factory, "compiled-kernels", make)
+    finally:
+        lock.release()
