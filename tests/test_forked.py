@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rwlab._forked import Forked
-from rwlab.report.html import Page, figure, render_pngs
+from rwlab.report.html import FigureQueue, Page, figure, render_pngs
 
 needs_fork = pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this system")
 
@@ -112,3 +112,49 @@ def test_a_page_takes_a_figure_drawn_already_and_draws_the_others():
     assert html.index('id="fig-a"') < html.index('id="fig-b"')
     assert html.count("data:image/png;base64,") == 2
     assert not plt.fignum_exists(todo.number)
+
+
+def _makers(n: int, fail_in_child_from: int | None = None) -> dict:
+    """Figure id → maker of ``_figures``' i-th figure; from ``fail_in_child_from`` on the
+    makers raise in any process but this one (a child that fails half-way)."""
+    here = os.getpid()
+
+    def make(i: int):
+        if fail_in_child_from is not None and i >= fail_in_child_from and os.getpid() != here:
+            raise RuntimeError("the child fails")
+        fig, ax = figure(6, 2.5)
+        ax.plot(np.sin(np.linspace(0, 10 + i, 500)), label=f"trace {i}")
+        ax.set_title(f"figure {i}")
+        ax.legend()
+        return fig
+
+    return {f"fig-{i}": (lambda i=i: make(i)) for i in range(n)}
+
+
+def _check_queue_draws_each_figure_once_in_order(fail_in_child_from=None) -> None:
+    alone = render_pngs(_figures(6), processes=1)
+    with FigureQueue(_makers(6, fail_in_child_from)) as queue:
+        time.sleep(0.2)  # the child takes some figures before this process joins in
+        drawn = queue.result()
+    assert list(drawn) == [f"fig-{i}" for i in range(6)]
+    assert list(drawn.values()) == alone
+    assert plt.get_fignums() == []  # every figure closed here
+
+
+@needs_fork
+def test_a_figure_queue_draws_every_figure_once_shared_with_a_child():
+    _in_a_fresh_process(_check_queue_draws_each_figure_once_in_order)
+
+
+def _check_queue_child_failing() -> None:
+    _check_queue_draws_each_figure_once_in_order(fail_in_child_from=1)
+
+
+@needs_fork
+def test_the_figures_a_failed_child_took_are_drawn_here():
+    _in_a_fresh_process(_check_queue_child_failing)
+
+
+def test_without_a_child_the_queue_draws_everything_here(monkeypatch):
+    monkeypatch.setattr("rwlab._forked.forkable", lambda: False)
+    _check_queue_draws_each_figure_once_in_order()

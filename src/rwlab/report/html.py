@@ -14,18 +14,19 @@ import functools
 import html
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
 
 from rwlab._forked import Forked
 from rwlab._io import atomic_write_bytes
 
-__all__ = ["Page", "figure", "png_uri", "render_pngs", "signed", "trace_styles"]
+__all__ = ["FigureQueue", "Page", "figure", "png_uri", "render_pngs", "signed", "trace_styles"]
 
 DPI = 110  # the reports' figures: 8 × 3.2 in → 880 × 352 pixels
 
@@ -167,6 +168,70 @@ def render_pngs(figs: Sequence, processes: int | None = None) -> list[bytes]:
         for fig in figs:
             plt.close(fig)
     return pngs
+
+
+class FigureQueue:
+    """Figures drawn from one queue by a forked child at once and by this process later.
+
+    Each figure is a maker (``make()`` returns it). Their numbers wait in a pipe that
+    both processes read one byte at a time (one read of a pipe is atomic: each number
+    reaches one process). The child (:class:`rwlab._forked.Forked`) starts drawing at
+    once; :meth:`result` has this process draw what is left beside it. So a process
+    that has other work first (``rwlab identify``'s servo fit) takes over the figures
+    the child has not reached. A figure the child took and did not return (it failed)
+    is drawn here. Hand-written: a pool's task queue would need a feeder thread, and
+    :class:`~rwlab._forked.Forked` forks only a process without threads.
+
+    Parameters
+    ----------
+    makers : mapping of str to callable
+        Figure id → ``make()``, returning a matplotlib figure (at most 256).
+    """
+
+    def __init__(self, makers: Mapping[str, Callable[[], Figure]]) -> None:
+        if len(makers) > 256:
+            raise ValueError(f"a FigureQueue holds at most 256 figures, got {len(makers)}")
+        self._ids, self._makers = list(makers), list(makers.values())
+        self._numbers, write = os.pipe()
+        os.write(write, bytes(range(len(self._makers))))
+        os.close(write)
+        self._child = Forked(self._drain)
+
+    def _drain(self) -> dict[int, bytes]:
+        drawn = {}
+        while number := os.read(self._numbers, 1):
+            fig = self._makers[number[0]]()
+            drawn[number[0]] = _png(fig)
+            plt.close(fig)
+        return drawn
+
+    def result(self) -> dict[str, bytes]:
+        """Every figure's PNG, by id, in the makers' order.
+
+        Returns
+        -------
+        dict of str to bytes
+        """
+        drawn = self._drain()
+        drawn |= self._child.result()
+        self.close()
+        for i, make in enumerate(self._makers):
+            if i not in drawn:
+                drawn[i] = render_pngs([make()], processes=1)[0]
+        return {fig_id: drawn[i] for i, fig_id in enumerate(self._ids)}
+
+    def close(self) -> None:
+        """End the child if it still draws; close the queue."""
+        self._child.close()
+        if self._numbers >= 0:
+            os.close(self._numbers)
+            self._numbers = -1
+
+    def __enter__(self) -> FigureQueue:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def _pngs(figs: Sequence, share: range) -> list[bytes]:

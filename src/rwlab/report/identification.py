@@ -95,7 +95,7 @@ def write_study(
     force : bool
         Replace existing files.
     drawn : dict of str to bytes, optional
-        The figures of the linear study, drawn already (:func:`linear_figures`); by
+        The figures of the linear study, drawn already (:class:`~rwlab.report.html.FigureQueue`); by
         default drawn here.
 
     Returns

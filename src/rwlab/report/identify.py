@@ -19,7 +19,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from rwlab._forked import Forked
 from rwlab._io import output_folder
 from rwlab.errors import ConfigError, NoModelFitsError, RwlabError
 
@@ -257,17 +256,19 @@ def _identify_into(
 
 def _study_while_drawing(data, stack, progress, **options):
     """The study, its nonlinear stage run while a forked child draws the report's figures
-    of the linear study (:class:`rwlab._forked.Forked`): the servo fit is most of the
-    stage's time and drawing most of the report's, side by side on two cores.
+    of the linear study (:class:`rwlab.report.html.FigureQueue`): the servo fit is most
+    of the stage's time and drawing most of the report's, side by side on two cores;
+    this process draws the figures the child has not reached once its own work is done.
 
-    Returns the study and the drawing child (in ``stack``, which ends it on an error);
+    Returns the study and the figures' queue (in ``stack``, which ends it on an error);
     ``options`` are :func:`rwlab.ident.study.identification_study`'s, and ``progress``
     is told of the same stages.
     """
     from threadpoolctl import threadpool_limits
 
     from rwlab.ident.study import identification_study, nonlinear_stage
-    from rwlab.report.study_figures import linear_figures
+    from rwlab.report.html import FigureQueue
+    from rwlab.report.study_figures import linear_makers
 
     keys = ("limits_rpm", "datasheet", "current", "nonlinear_models")
     later = {key: options.pop(key) for key in keys}
@@ -285,7 +286,7 @@ def _study_while_drawing(data, stack, progress, **options):
     # the linear study keeps them, as one thread there moves one standard deviation of
     # study.json by 1 ulp)
     stack.enter_context(threadpool_limits(1, user_api="blas"))
-    drawn = stack.enter_context(Forked(functools.partial(linear_figures, linear)))
+    drawn = stack.enter_context(FigureQueue(linear_makers(linear, linear.to_dict())))
     result = nonlinear_stage(linear, data, split=options["split"], **later)
     if progress is not None:
         progress(total[0], total[0], "nonlinear")

@@ -1,21 +1,22 @@
 """The identification report's figures of the linear study (sections 1–6, paper A's).
 
 Drawn apart from the page's text so that ``rwlab identify`` can draw them in a child
-process while it fits the servo model (:func:`linear_figures`); the page
+process while it fits the servo model (:func:`linear_makers`); the page
 (:mod:`rwlab.report.identification`) takes them by figure id.
 """
 
 from __future__ import annotations
 
 import textwrap
+from functools import partial
 
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
-from rwlab.report.html import figure, render_pngs, trace_styles
+from rwlab.report.html import figure, trace_styles
 
-__all__ = ["SIGMAS", "armax_name", "linear_figures", "linear_plots", "resid_plot"]
+__all__ = ["SIGMAS", "armax_name", "linear_makers", "linear_plots", "resid_plot"]
 
 SIGMAS = 3.0  # the chosen model's confidence bands: ± this many standard deviations
 
@@ -65,26 +66,6 @@ def _compare_plot(result: StudyResult, names: list[str]):
     return fig
 
 
-def linear_figures(result: StudyResult) -> dict[str, bytes]:
-    """The report's figures of the linear study (sections 1–6), drawn.
-
-    ``rwlab identify`` draws them in a child process while it fits the servo model
-    (:class:`rwlab._forked.Forked`), and hands them to :func:`write_study`.
-
-    Parameters
-    ----------
-    result : StudyResult
-        The study; only its linear part is read (the nonlinear stage may not have run).
-
-    Returns
-    -------
-    dict of str to bytes
-        Figure id → PNG, as :func:`linear_plots` draws them.
-    """
-    figs = linear_plots(result, result.to_dict())
-    return dict(zip(figs, render_pngs(list(figs.values()), processes=1), strict=True))
-
-
 def linear_plots(result: StudyResult, study: dict) -> dict:
     """The figures of sections 1–6, not drawn yet.
 
@@ -98,27 +79,48 @@ def linear_plots(result: StudyResult, study: dict) -> dict:
     Returns
     -------
     dict of str to matplotlib.figure.Figure
-        By figure id, in the page's order: those of ``FIGURES`` the study has (no
-        uncertainty bands without a covariance, no ARMAX figures without its model).
+        By figure id, in the page's order (:func:`linear_makers`).
+    """
+    return {fig_id: make() for fig_id, make in linear_makers(result, study).items()}
+
+
+def linear_makers(result: StudyResult, study: dict) -> dict:
+    """What makes each figure of sections 1–6: ``rwlab identify`` draws them from a
+    :class:`~rwlab.report.html.FigureQueue` while it fits the servo model.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study; only its linear part is read (the nonlinear stage may not have run).
+    study : dict
+        ``result.to_dict()``.
+
+    Returns
+    -------
+    dict of str to callable
+        By figure id, in the page's order, ``make()`` returning the figure: those of
+        ``FIGURES`` the study has (no uncertainty bands without a covariance, no ARMAX
+        figures without its model).
     """
     ch = study["chosen"]["structure"]
-    figs = {
-        "fig16-delay": _delay_plot(study["delay"]),
-        "fig17-orders": _orders_plot(study["orders"]),
-        "fig18-steps": _steps_plot(result, study),
-        "fig19-resid": resid_plot(study["residuals"][ch], ch),
-        "fig20-compare": _compare_plot(result, [ch]),
+    makers = {
+        "fig16-delay": partial(_delay_plot, study["delay"]),
+        "fig17-orders": partial(_orders_plot, study["orders"]),
+        "fig18-steps": partial(_steps_plot, result, study),
+        "fig19-resid": partial(resid_plot, study["residuals"][ch], ch),
+        "fig20-compare": partial(_compare_plot, result, [ch]),
     }
     if result.chosen.covariance is not None:
-        figs["fig-uncertainty"] = _uncertainty_plot(result.chosen, ch)
+        makers["fig-uncertainty"] = partial(_uncertainty_plot, result.chosen, ch)
     armax = armax_name(study)
     if armax is not None:
-        figs["fig21-resid-armax"] = resid_plot(study["residuals"][armax], armax)
-        figs["fig22-compare-armax"] = _compare_plot(result, [armax])
-    figs["fig-oe-bj"] = _compare_plot(result, [r["structure"] for r in study["others"]])
-    figs["fig23-continuous"] = _continuous_plot(study)
-    figs["fig24-acceleration"] = _acceleration_plot(result, study)
-    return figs
+        makers["fig21-resid-armax"] = partial(resid_plot, study["residuals"][armax], armax)
+        makers["fig22-compare-armax"] = partial(_compare_plot, result, [armax])
+    others = [r["structure"] for r in study["others"]]
+    makers["fig-oe-bj"] = partial(_compare_plot, result, others)
+    makers["fig23-continuous"] = partial(_continuous_plot, study)
+    makers["fig24-acceleration"] = partial(_acceleration_plot, result, study)
+    return makers
 
 
 def armax_name(study: dict) -> str | None:
