@@ -1,5 +1,5 @@
 """``python -m rwlab``: the ``rwlab`` command line."""
 
-from rwlab.cli import main
+from rwlab.cli import run
 
-main(prog_name="rwlab")
+run()

@@ -13,6 +13,6 @@ from rwlab.cli import (  # noqa: F401
     testbed,
     wheel,
 )
-from rwlab.cli._common import main
+from rwlab.cli._common import main, run
 
-__all__ = ["main"]
+__all__ = ["main", "run"]

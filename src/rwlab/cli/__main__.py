@@ -1,3 +1,3 @@
-from rwlab.cli import main
+from rwlab.cli import run
 
-main()
+run()
