@@ -118,6 +118,23 @@ def identified_prbs(tmp_path_factory) -> tuple[str, Path, Path]:
     return (folder / "output.txt").read_text(), folder / "study", folder / "prbs.mcap"
 
 
+@pytest.fixture(scope="session")
+def quick_demo(tmp_path_factory) -> Path:
+    """``rwlab demo --quick`` run once per session: its output folder, with the console's
+    text beside it (``../console.txt``). Read-only."""
+
+    def make(folder: Path) -> None:
+        from click.testing import CliRunner
+
+        from rwlab.cli import main
+
+        result = CliRunner().invoke(main, ["demo", "--quick", "--out", str(folder / "out")])
+        assert result.exit_code == 0, result.output
+        (folder / "console.txt").write_text(result.stdout)
+
+    return _once_per_session(tmp_path_factory, "quick-demo", make) / "out"
+
+
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels(tmp_path_factory) -> None:
     """Under pytest-xdist, the attitude loop's and the wheel twin's numba kernels compile

@@ -22,13 +22,9 @@ class _Links(HTMLParser):
             self.links.append(href)
 
 
-@pytest.fixture(scope="module")
-def demo_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("demo") / "out"
-    r = CliRunner().invoke(main, ["demo", "--quick", "--out", str(out)])
-    assert r.exit_code == 0, r.output
-    (out.parent / "console.txt").write_text(r.stdout)
-    return out
+@pytest.fixture
+def demo_dir(quick_demo):
+    return quick_demo
 
 
 @pytest.mark.slow

@@ -98,13 +98,12 @@ def test_diagnose_writes_a_valid_diagnosis(study_out, tmp_path):
 
 
 @pytest.mark.slow
-def test_the_demo_writes_valid_files_everywhere(tmp_path):
-    _rwlab("demo", "--quick", "--out", tmp_path)
-    _valid(tmp_path / "summary.json", "demo")
-    _valid(tmp_path / "identification" / "model.json", "model")
-    _valid(tmp_path / "identification" / "study.json", "study")
-    _valid(tmp_path / "attitude" / "metrics.json", "compare")
-    _valid(tmp_path / "attitude" / "sigma.json", "sigma")
+def test_the_demo_writes_valid_files_everywhere(quick_demo):
+    _valid(quick_demo / "summary.json", "demo")
+    _valid(quick_demo / "identification" / "model.json", "model")
+    _valid(quick_demo / "identification" / "study.json", "study")
+    _valid(quick_demo / "attitude" / "metrics.json", "compare")
+    _valid(quick_demo / "attitude" / "sigma.json", "sigma")
 
 
 # -- the reading rule ------------------------------------------------------------------
