@@ -229,10 +229,10 @@ def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force, calibrat
         )
     else:
         with _output(out, _DIAGNOSIS_FILES, force, "diagnosis") as stage:
-            result, events = _diagnose_one(
+            result, rec = _diagnose_one(
                 Path(record), stage, wheel, reference, false_alarms_per_hour
             )
-        for line in diagnosis_lines(result, events):
+        for line in diagnosis_lines(result, rec.topic("/event")):
             click.echo(line)
         click.echo(_wrote(out, _DIAGNOSIS_FILES))
         results = [result]
@@ -325,7 +325,8 @@ def _count(n: int, unit: str) -> str:
 
 def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_hour):
     """Diagnose ``record`` into the folder ``into`` (a staging folder); the result and
-    the record's events. An error names the record."""
+    the record, decoded once (:func:`rwlab.testbed.read_record`). An error names the
+    record."""
     import numpy as np
 
     from rwlab.diagnose import diagnose
@@ -333,10 +334,10 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
     from rwlab.testbed import load_record, read_record
 
     try:
-        data = load_record(
-            record, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
-        )
         rec = read_record(record)
+        data = load_record(
+            rec, wheel.Ts, outputs=("speed", "current", "age", "lost"), max_gap=np.inf
+        )
         result = diagnose(data, wheel, reference, false_alarms_per_hour=false_alarms_per_hour)
     except RwlabError as exc:
         if str(record) in str(exc) or record.name in str(exc):
@@ -352,7 +353,7 @@ def _diagnose_one(record: Path, into: Path, wheel, reference, false_alarms_per_h
         )
     into.mkdir(parents=True, exist_ok=True)
     write_diagnosis(result, into, title=record.name, events=events, record_note=truncated)
-    return result, events
+    return result, rec
 
 
 def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> list:
@@ -360,7 +361,6 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     folder appears whole or not at all (a record that fails leaves nothing, and is named).
     Returns each record's diagnosis."""
     from rwlab.report.diagnosis import trend_point, write_trend
-    from rwlab.testbed import read_record
 
     records = sorted(
         p for p in folder.iterdir() if p.suffix == ".mcap" and not p.name.endswith(".partial.mcap")
@@ -372,9 +372,9 @@ def _diagnose_folder(folder: Path, out: Path, wheel, reference, rate, force) -> 
     with _output(out, names, force, "diagnosis trend") as stage:
         points, results = [], []
         for path in records:
-            result, _ = _diagnose_one(path, stage / path.stem, wheel, reference, rate)
+            result, rec = _diagnose_one(path, stage / path.stem, wheel, reference, rate)
             results.append(result)
-            start = read_record(path).metadata.get("start_utc", "")
+            start = rec.metadata.get("start_utc", "")
             points.append(trend_point(path.name, start, result))
             named = ", ".join(f"{_finding_text(a)} ({a.detector})" for a in result.alarms) or (
                 "no alarm" if result.model_tested() else "no alarm (nothing tested)"
