@@ -5,6 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rwlab.cli import main
 from rwlab.data import IOData
@@ -150,3 +152,27 @@ def test_compare_scores_the_servo_like_a_linear_model():
     y = TRUTH.simulate(u, 0.0) + 0.5 * np.random.default_rng(0).standard_normal(u.size)
     cmp = compare(TRUTH, IOData(u, y, 0.5), initial="steady")
     assert cmp.fit_percent > 99.9 and math.isfinite(cmp.mse)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 8))
+def test_simulations_side_by_side_are_each_rows_own_to_the_bit(seed, rows):
+    """The fit's finite differences simulate their perturbed parameters together
+    (_simulate_many): each row must be exactly the simulation of that row alone."""
+    from rwlab.ident.nonlinear import _simulate, _simulate_many
+
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-3000.0, 3000.0, 300)
+    P = np.empty((rows, 12))
+    P[:, 0] = rng.uniform(0.5, 1.5, rows)  # g
+    P[:, 1] = rng.uniform(-5.0, 5.0, rows)  # c
+    P[:, 2] = rng.uniform(0.1, 4.0, rows)  # kp
+    P[:, 3] = rng.uniform(0.0, 2.0, rows)  # ki
+    P[:, 4] = rng.uniform(10.0, 400.0, rows)  # alpha: often binding
+    P[:, 5] = rng.uniform(0.0, 0.499, rows)  # tau, within Ts
+    P[:, 6:8] = (0.5, int(rng.integers(1, 40)))  # Ts, substeps: shared by the rows
+    P[:, 8:10] = (-2500.0, 2500.0)
+    P[:, 10:12] = (-2000.0, 2000.0)
+    together = _simulate_many(u, 10.0, 0.5, P)
+    for row, p in zip(together, P, strict=True):
+        assert np.array_equal(row, _simulate(u, 10.0, 0.5, p))

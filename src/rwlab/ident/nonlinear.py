@@ -72,23 +72,51 @@ def servo_advance(
 ) -> tuple[float, float]:
     """One sample of the servo model: ``(w, I, u[k−1], u[k]) → (w, I)`` at the next sample.
 
-    The single definition of the model's simulation (``IdentifiedWheel.step``
-    and the fit both call it). ``p`` = (g, c, kp, ki, α, τ, Ts, substeps,
-    u_lo, u_hi, y_lo, y_hi), float64 array of shape (12,).
+    The model's simulation (``IdentifiedWheel.step`` and the fit call it; the fit's
+    finite differences run the same sub-steps, :func:`_substep`, side by side). ``p`` =
+    (g, c, kp, ki, α, τ, Ts, substeps, u_lo, u_hi, y_lo, y_hi), float64 array of shape (12,).
     """
-    g, c, kp, ki, alpha, tau, Ts = p[0], p[1], p[2], p[3], p[4], p[5], p[6]
     m = int(p[7])
-    h = Ts / m
-    r_old = g * min(max(u_prev, p[8]), p[9]) + c
-    r_new = g * min(max(u, p[8]), p[9]) + c
+    h = p[6] / m
+    r_old, r_new = _reference(u_prev, p), _reference(u, p)
     for j in range(m):
-        f = min(max((tau - j * h) / h, 0.0), 1.0)
-        e = f * r_old + (1.0 - f) * r_new - w
-        z = kp * e + integral
-        if abs(z) < alpha:
-            integral += ki * e * h
-        w = min(max(w + h * min(max(z, -alpha), alpha), p[10]), p[11])
+        f = _share(p[5], j, h)
+        w, integral = _substep(w, integral, r_old, r_new, f, p[2], p[3], p[4], h, p[10], p[11])
     return w, integral
+
+
+@njit(cache=True, nogil=True)
+def _reference(u: float, p: np.ndarray) -> float:
+    """The loop's reference for the input ``u``: g·sat(u) + c."""
+    return p[0] * min(max(u, p[8]), p[9]) + p[1]
+
+
+@njit(cache=True, nogil=True)
+def _share(tau: float, j: int, h: float) -> float:
+    """f: the share of sub-step ``j`` (of length ``h``) still on the previous input."""
+    return min(max((tau - j * h) / h, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _substep(
+    w: float,
+    integral: float,
+    r_old: float,
+    r_new: float,
+    f: float,
+    kp: float,
+    ki: float,
+    alpha: float,
+    h: float,
+    lo: float,
+    hi: float,
+) -> tuple[float, float]:
+    """One sub-step (the module docstring's loop body): ``(w, I)`` after it."""
+    e = f * r_old + (1.0 - f) * r_new - w
+    z = kp * e + integral
+    if abs(z) < alpha:
+        integral += ki * e * h
+    return min(max(w + h * min(max(z, -alpha), alpha), lo), hi), integral
 
 
 @njit(cache=True, nogil=True)  # nogil: the fit's starts run in threads
@@ -101,6 +129,35 @@ def _simulate(u: np.ndarray, w0: float, i0: float, p: np.ndarray) -> np.ndarray:
         w, integral = servo_advance(w, integral, u[k - 1] if k else u[0], u[k], p)
         y[k + 1] = w
     return y
+
+
+@njit(cache=True, nogil=True)
+def _simulate_many(u: np.ndarray, w0: float, i0: float, P: np.ndarray) -> np.ndarray:
+    """:func:`_simulate` for each row of ``P`` (K, 12), shape (K, N): the rows' sub-steps
+    interleaved, so that K independent chains of arithmetic fill the processor's pipeline
+    (one simulation waits on each sub-step's result). Every row's numbers are its own
+    simulation's, operation for operation. The rows share Ts and the sub-step count."""
+    K, n = P.shape[0], u.size
+    m = int(P[0, 7])
+    h = P[0, 6] / m
+    Q = np.ascontiguousarray(P.T)  # parameter by parameter: Q[i] holds every row's p[i]
+    Y = np.empty((K, n))
+    w, integral = np.full(K, w0), np.full(K, i0)
+    r_old, r_new = np.empty(K), np.empty(K)
+    Y[:, 0] = w0
+    for k in range(n - 1):
+        for q in range(K):
+            r_old[q] = _reference(u[k - 1] if k else u[0], P[q])
+            r_new[q] = _reference(u[k], P[q])
+        for j in range(m):
+            for q in range(K):
+                f = _share(Q[5, q], j, h)
+                w[q], integral[q] = _substep(
+                    w[q], integral[q], r_old[q], r_new[q], f,
+                    Q[2, q], Q[3, q], Q[4, q], h, Q[10, q], Q[11, q],
+                )  # fmt: skip
+        Y[:, k + 1] = w
+    return Y
 
 
 @dataclass(frozen=True)
@@ -344,10 +401,19 @@ def servo_fit(
     # offset): a single start at 0.25·Ts settled on one twin unit at 16× the best cost
     # (delay 0.17 s, offset +2.9 rpm, rate limit 315.5 rpm/s), a model that then raised
     # false speed-bias alarms on 10 of 11 healthy chirps; the best of several starts is kept
+    def side_by_side(_fun: object, points: Iterable[np.ndarray]) -> list[np.ndarray]:
+        """``map(residuals, points)`` for the finite-difference Jacobian (scipy's
+        ``workers`` hook hands it its wrapper of ``residuals``): the perturbed parameter
+        vectors simulated together (:func:`_simulate_many`), the same numbers."""
+        P = np.array([np.concatenate([x, fixed]) for x in points])
+        return list((_simulate_many(u, y[0], 0.0, P) - y) / scale)
+
     def start(share: float) -> OptimizeResult:
         x = x0.copy()
         x[5] = share * Ts
-        return least_squares(residuals, x, bounds=(lower, upper), x_scale=typical)
+        return least_squares(
+            residuals, x, bounds=(lower, upper), x_scale=typical, workers=side_by_side
+        )
 
     fits = in_threads(start, DELAY_STARTS)  # the simulation releases the GIL
     sol = min(fits, key=lambda f: f.cost if np.all(np.isfinite(f.x)) else math.inf)
