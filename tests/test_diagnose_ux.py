@@ -39,6 +39,14 @@ def wheel(model_file):
     return IdentifiedWheel.from_json(model_file)
 
 
+@pytest.fixture(scope="module")
+def record_60s(tmp_path_factory):
+    """A fault-free 60-s PRBS (seed 3), made once: the refusals below read it."""
+    path = tmp_path_factory.mktemp("ux-60s") / "r.mcap"
+    run_experiment(ExperimentConfig(duration=60, seed=3), path)
+    return path
+
+
 def _cli(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
@@ -55,16 +63,16 @@ def _diagnosed(path, seed, model_file, wheel):
 # -- refusals that say what to do ---------------------------------------------------------
 
 
-def test_the_speed_alone_is_refused_with_how_to_load_the_current(tmp_path, model_file, wheel):
-    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
-    speed_only = load_record(tmp_path / "r.mcap", wheel.Ts)  # load_record's default
+def test_the_speed_alone_is_refused_with_how_to_load_the_current(record_60s, model_file, wheel):
+    speed_only = load_record(record_60s, wheel.Ts)  # load_record's default
     with pytest.raises(DataError, match=r"current.*outputs=\('speed', 'current', 'age', 'lost'\)"):
         diagnose(speed_only, wheel, HealthyReference.from_model_file(model_file))
 
 
-def test_without_lost_frames_the_dropout_test_says_it_decided_nothing(tmp_path, model_file, wheel):
-    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
-    data = load_record(tmp_path / "r.mcap", wheel.Ts, outputs=("speed", "current"))
+def test_without_lost_frames_the_dropout_test_says_it_decided_nothing(
+    record_60s, model_file, wheel
+):
+    data = load_record(record_60s, wheel.Ts, outputs=("speed", "current"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RwlabWarning)
         d = diagnose(data, wheel, HealthyReference.from_model_file(model_file))
@@ -74,9 +82,8 @@ def test_without_lost_frames_the_dropout_test_says_it_decided_nothing(tmp_path, 
     assert "dropout" in d.untested() and "telemetry_dropout" in d.unseen()
 
 
-def test_another_sample_time_says_how_to_resample(tmp_path, model_file, wheel):
-    run_experiment(ExperimentConfig(duration=60, seed=3), tmp_path / "r.mcap")
-    other = load_record(tmp_path / "r.mcap", wheel.Ts / 5, outputs=OUTPUTS, max_gap=np.inf)
+def test_another_sample_time_says_how_to_resample(record_60s, model_file, wheel):
+    other = load_record(record_60s, wheel.Ts / 5, outputs=OUTPUTS, max_gap=np.inf)
     with pytest.raises(DataError, match=rf"load_record\(path, {wheel.Ts:g}, outputs="):
         diagnose(other, wheel, HealthyReference.from_model_file(model_file))
 

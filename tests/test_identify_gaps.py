@@ -40,9 +40,18 @@ def _identify(*args):
     return CliRunner().invoke(main, ["identify", *map(str, args)])
 
 
-def test_a_record_with_a_2s_dropout_is_refused_with_the_reason(records, tmp_path):
-    clean, dropout = records
-    assert _identify(clean, "--out", tmp_path / "clean").exit_code == 0
+@pytest.fixture(scope="module")
+def clean_study(records, tmp_path_factory):
+    """The clean record identified (once: two tests read it), its study folder."""
+    out = tmp_path_factory.mktemp("gaps-clean") / "c"
+    result = _identify(records[0], "--out", out)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_a_record_with_a_2s_dropout_is_refused_with_the_reason(records, clean_study, tmp_path):
+    _, dropout = records
+    assert (clean_study / "study.json").exists()  # the clean record is identified
     r = _identify(dropout, "--out", tmp_path / "d")
     assert r.exit_code == 2
     errors = [line for line in r.output.splitlines() if line.startswith("error:")]
@@ -59,17 +68,16 @@ def test_a_sample_time_finer_than_the_telemetry_is_refused(records, tmp_path):
     assert not (tmp_path / "fine").exists()
 
 
-def test_split_at_the_gap_gives_the_clean_records_model(records, tmp_path):
+def test_split_at_the_gap_gives_the_clean_records_model(records, clean_study, tmp_path):
     """--gaps split: the two gap-free parts identified as one merged multi-experiment
     data set choose the clean record's structure, every parameter within its σ."""
     import json
 
-    clean, dropout = records
-    assert _identify(clean, "--out", tmp_path / "c").exit_code == 0
+    _, dropout = records
     r = _identify(dropout, "--gaps", "split", "--out", tmp_path / "s")
     assert r.exit_code == 0, r.output
     assert "split at telemetry gaps into 2 experiments" in r.output
-    a = json.loads((tmp_path / "c" / "study.json").read_text())
+    a = json.loads((clean_study / "study.json").read_text())
     b = json.loads((tmp_path / "s" / "study.json").read_text())
     assert a["segments"] is None
     [(s0, e0), (s1, e1)] = b["segments"]

@@ -15,6 +15,7 @@ name under ``rwlab``.
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -63,6 +64,18 @@ def modules(src: Path = SRC) -> dict[str, Path]:
     return out
 
 
+@functools.cache
+def _parsed(path: Path, mtime_ns: int, size: int) -> ast.Module:
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+def _tree(path: Path) -> ast.Module:
+    """The module's syntax tree, parsed once per version of the file (its modification time
+    and size): the layering tests read every module several times. Read, never changed."""
+    stat = path.stat()
+    return _parsed(path, stat.st_mtime_ns, stat.st_size)
+
+
 def _import_module_call(node: ast.AST) -> str | None:
     """The module named by ``importlib.import_module("rwlab.x")`` (a constant name), else None."""
     if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)):
@@ -83,10 +96,18 @@ def imports(src: Path = SRC) -> dict[str, set[str]]:
     constant rwlab name: an import by name is still an import.
     """
     mods = modules(src)
+    versions = tuple((path, path.stat().st_mtime_ns, path.stat().st_size) for path in mods.values())
+    return {name: set(targets) for name, targets in _imports(src, versions).items()}
+
+
+@functools.cache
+def _imports(src: Path, versions: tuple) -> dict[str, set[str]]:
+    """:func:`imports` once per version of the source files (read, never changed)."""
+    mods = modules(src)
     graph: dict[str, set[str]] = defaultdict(set)
     for name, path in mods.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
@@ -126,7 +147,7 @@ def private_imports(src: Path = SRC) -> list[tuple[str, str]]:
     found: set[tuple[str, str]] = set()
     for name, path in mods.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         bound: dict[str, str] = {}  # local name → the rwlab module it is
         taken: list[tuple[str, str]] = []  # (module, private name)
         for node in ast.walk(tree):

@@ -185,9 +185,15 @@ class DiagnosisCalibration:
         noise = NoiseModel.measure(records)
         point = {n: cls._healthy_point(n, records[0]) for n in MODEL_BASED}
         none = dict.fromkeys(MODEL_BASED, 0.0)
-        dispersion = {n: cls._dispersion(n, records, noise, point[n]) for n in MODEL_BASED}
+        # one bank per record for every fault (its gains are what costs), read into the
+        # windows' log-likelihoods the dispersions and the zones are measured on
+        tiles = [
+            cls._tiles(Bank(f, noise, {n: (point[n],) * 2 for n in MODEL_BASED}, none))
+            for f in records
+        ]
+        dispersion = {n: cls._dispersion([t[n]["longest"] for t in tiles]) for n in MODEL_BASED}
         dispersion |= {
-            f"{n}@own": cls._dispersion(n, records, noise, point[n], own=True) for n in MODEL_BASED
+            f"{n}@own": cls._dispersion([t[n]["longest@own"] for t in tiles]) for n in MODEL_BASED
         }
         zones: dict[str, tuple[float, float]] = {}
         drift: dict[str, float] = {}
@@ -199,14 +205,21 @@ class DiagnosisCalibration:
             # between consecutive tiles' intervals, not the spread of their point estimates
             lows, highs, moves, moves_own = [point[name]], [point[name]], [0.0], [0.0]
             known: list[tuple[float, float]] = []
-            for f in records:
-                bank = Bank(f, noise, {name: (point[name],) * 2}, none, dispersion, faults=(name,))
-                tiles = cls._population_sizes(bank, name, point[name], dispersion[name])
-                lows += [hi for _, hi in tiles]
-                highs += [lo for lo, _ in tiles]
-                known += tiles
-                moves += _gaps(tiles)
-                own = cls._own_sizes(bank, name, point[name], dispersion.get(f"{name}@own", 1.0))
+            phi_own = dispersion.get(f"{name}@own", 1.0)
+            for t in tiles:
+                grid, zone = t[name]["grid"], t[name]["zone"]
+                sizes = [
+                    profile_fit(name, "", grid, ll, zone, dispersion[name]).ci95
+                    for ll in t[name]["shortest"]
+                ]
+                lows += [hi for _, hi in sizes]
+                highs += [lo for lo, _ in sizes]
+                known += sizes
+                moves += _gaps(sizes)
+                own = [
+                    profile_fit(name, "", grid, ll, zone, phi_own).ci95
+                    for ll in t[name]["shortest@own"]
+                ]
                 moves_own += [abs(b - a) for a, b in itertools.pairwise(_mids(own))]
             if known:
                 width = np.median([hi - lo for lo, hi in known])
@@ -243,54 +256,43 @@ class DiagnosisCalibration:
         )
 
     @staticmethod
-    def _population_sizes(
-        bank: Bank, name: str, point: float, phi: float
-    ) -> list[tuple[float, float]]:
-        """The size's 95 % interval on each shortest window of a record, against the
-        reference (the population's view: no own past)."""
-        zone = bank._between(name, point, point)
-        return [
-            profile_fit(
-                name, "", bank.grid[name], bank.cum[name][b] - bank.cum[name][a], zone, phi
-            ).ci95
-            for a, b in bank.tiles(shortest=True)
-        ]
+    def _tiles(bank: Bank) -> dict[str, dict]:
+        """Per fault of a record's bank: its grid, the reference's zone, and the
+        log-likelihood over the grid of each back-to-back window, longest and shortest,
+        against the reference and (``@own``) against the record's own past (the windows
+        whose own reference is fitted on every sample only)."""
 
-    @staticmethod
-    def _own_sizes(bank: Bank, name: str, point: float, phi: float) -> list[tuple[float, float]]:
-        """The size's 95 % interval each longest window of a record fits against the
-        record's own past (windows whose own reference is fitted on every sample only)."""
-        out = []
-        ready = bank.own_ready
-        for a, b in bank.tiles(shortest=True):
-            if a < bank.past_min or not ready[a:b].all():
-                continue
-            ll = bank.cum_own[name][b] - bank.cum_own[name][a]
-            zone = bank._between(name, point, point)
-            out.append(profile_fit(name, "", bank.grid[name], ll, zone, phi).ci95)
+        def fitted(a: int, b: int) -> bool:
+            return a >= bank.past_min and bool(bank.own_ready[a:b].all())
+
+        out = {}
+        for name in bank.detectors:
+            cum, cum_own = bank.cum[name], bank.cum_own[name]
+            point = bank.zone_bounds[name][0]
+            out[name] = {
+                "grid": bank.grid[name],
+                "zone": bank._between(name, point, point),
+                "longest": [cum[b] - cum[a] for a, b in bank.tiles()],
+                "longest@own": [cum_own[b] - cum_own[a] for a, b in bank.tiles() if fitted(a, b)],
+                "shortest": [cum[b] - cum[a] for a, b in bank.tiles(shortest=True)],
+                "shortest@own": [
+                    cum_own[b] - cum_own[a] for a, b in bank.tiles(shortest=True) if fitted(a, b)
+                ],
+            }
         return out
 
     @staticmethod
-    def _dispersion(
-        name: str, records: list[Features], noise: NoiseModel, point: float, own: bool = False
-    ) -> float:
+    def _dispersion(records: list[list[np.ndarray]]) -> float:
         """φ: twice the log-likelihood by which each longest window prefers its own size to
-        its record's, whose median is χ²₁'s (0.455) for a true likelihood, over 0.455
-        (``own``: the gains against the record's own past, on its fitted windows)."""
+        its record's, whose median is χ²₁'s (0.455) for a true likelihood, over 0.455.
+        ``records``: per record, its longest windows' log-likelihoods over the grid (against
+        the reference, or against the record's own past on its fitted windows)."""
         twice = []
-        for f in records:
-            bank = Bank(f, noise, {name: (point, point)}, {name: 0.0}, faults=(name,))
-            cum = bank.cum_own[name] if own else bank.cum[name]
-            tiles = [
-                (a, b)
-                for a, b in bank.tiles()
-                if not own or (a >= bank.past_min and bank.own_ready[a:b].all())
-            ]
+        for tiles in records:
             if not tiles:
                 continue
-            whole = int(np.argmax(sum(cum[b] - cum[a] for a, b in tiles)))
-            for a, b in tiles:
-                ll = cum[b] - cum[a]
+            whole = int(np.argmax(sum(tiles)))
+            for ll in tiles:
                 twice.append(2 * float(ll.max() - ll[whole]))
         if len(twice) < 3:
             return 1.0

@@ -88,10 +88,20 @@ def crc16_nsp(data: bytes, crc: int = 0xFFFF) -> int:
         The CRC, 0..65535; sent low byte first.
     """
     for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+        crc = (crc >> 8) ^ _NSP_TABLE[(crc ^ byte) & 0xFF]
     return crc
+
+
+def _nsp_shifts(crc: int) -> int:
+    """The NSP CRC register's 8 shifts of one byte (0x8408, LSB first)."""
+    for _ in range(8):
+        crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+    return crc
+
+
+# the 8 shifts of each byte value, so a byte costs one look-up (the register's higher
+# bits only shift down: the shifts are linear)
+_NSP_TABLE = tuple(_nsp_shifts(i) for i in range(256))
 
 
 @dataclass(frozen=True)

@@ -38,11 +38,21 @@ def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
         The CRC, 0..65535.
     """
     for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
+        crc = ((crc << 8) & 0xFFFF) ^ _CCITT_TABLE[((crc >> 8) ^ byte) & 0xFF]
     return crc
+
+
+def _ccitt_shifts(high: int) -> int:
+    """The CRC-16/CCITT register's 8 shifts of a byte in its high half (0x1021, MSB first)."""
+    crc = high << 8
+    for _ in range(8):
+        crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
+        crc &= 0xFFFF
+    return crc
+
+
+# the 8 shifts of each high byte, so a byte costs one look-up (the low byte only shifts up)
+_CCITT_TABLE = tuple(_ccitt_shifts(i) for i in range(256))
 
 
 def slip_encode(payload: bytes) -> bytes:
