@@ -61,7 +61,6 @@ import control
 import numpy as np
 
 from rwlab._display import ShortRepr
-from rwlab._forked import Forked
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
@@ -441,20 +440,24 @@ def identification_study(
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
         step(m.structure)
-    anchor = _estimation_gain(data, split, pieces)
-    gain = None
-    if anchor is not None:  # in the prepared data's units
-        trend = prepared.trend
-        gain = anchor["gain"] * float(trend.input_scale[0] / trend.output_scale[0])
-    pem = _pem_fits(fit_data, max(nk, 1), gain)
     others = []
-    for name in ("ARMAX", "OE", "BJ"):
-        m = pem[name, None]
+    nk_pem = max(nk, 1)
+    for name, estimate, args in (
+        ("ARMAX", armax, (2, 2, 1, nk_pem)),
+        ("OE", oe, (2, 2, nk_pem)),
+        ("BJ", bj, (2, 1, 1, 2, nk_pem)),
+    ):
+        m = _try(estimate, fit_data, *args)
         if m is not None:
             models[m.structure] = m
             others.append(_row(m, val))
         step(name)
-    fixed = [] if gain is None else _constrained_rows(fit_data, val, nk, orders, gain, models, pem)
+
+    anchor = _estimation_gain(data, split, pieces)
+    fixed: list[dict] = []
+    if anchor is not None:
+        scale = float(prepared.trend.input_scale[0] / prepared.trend.output_scale[0])
+        fixed = _constrained_rows(fit_data, val, nk, orders, anchor["gain"] * scale, models)
     step("gain-constrained models")
     candidates = [r for r in rows + others + fixed if r["fit_percent"] is not None]
     if not candidates:
@@ -675,40 +678,18 @@ def _simplicity(r: dict) -> tuple:
     return (r["n_params"], kind, bool(r.get("gain_constrained")), -r["fit_percent"])
 
 
-PEM_FITS = {"ARMAX": (armax, (2, 2, 1)), "OE": (oe, (2, 2)), "BJ": (bj, (2, 1, 1, 2))}
-"""The study's prediction-error models: estimator and orders before the delay."""
-
-
-def _pem_fits(fit_data: IOData | list[IOData], nk: int, gain: float | None) -> dict:
-    """ARMAX, OE and BJ by prediction error, and again with the static gain ``gain``
-    imposed where one is given: ``{(name, gain or None): model or None}``.
-
-    The two BJ fits, the costliest, run in a forked child (:class:`rwlab._forked.Forked`)
-    while this process fits the others: the same estimates, on the core a study
-    otherwise leaves idle (where no child can be forked, all are fitted here).
-    """
-    jobs = [(name, g) for g in dict.fromkeys((None, gain)) for name in PEM_FITS]
-
-    def fit(name: str, g: float | None) -> PolyModel | None:
-        estimate, orders = PEM_FITS[name]
-        options = {} if g is None else {"dc_gain": g}
-        return _try(estimate, fit_data, *orders, nk, **options)
-
-    apart = [job for job in jobs if job[0] == "BJ"]
-    with Forked(lambda: [fit(*job) for job in apart]) as child:
-        here = {job: fit(*job) for job in jobs if job not in apart}
-        return here | dict(zip(apart, child.result(), strict=True))
-
-
-def _constrained_rows(
-    fit_data, val: IOData, nk: int, orders, gain: float, models, pem: dict
-) -> list[dict]:
+def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, models) -> list[dict]:
     """Every ARX order, ARMAX, OE and BJ again with the static gain ``gain`` (the data's
-    units) imposed (:mod:`rwlab.ident.gain_constraint`); their rows, named ``…+K``
-    (``pem``: the prediction-error fits, as :func:`_pem_fits` gives them)."""
-    fitted = [arx(fit_data, n, n, nk, dc_gain=gain) for n in orders]
+    units) imposed (:mod:`rwlab.ident.gain_constraint`); their rows, named ``…+K``."""
+    nk_pem = max(nk, 1)
+    fits: list[tuple[Callable[..., PolyModel], tuple]] = [(arx, (n, n, nk)) for n in orders]
+    fits += [(armax, (2, 2, 1, nk_pem)), (oe, (2, 2, nk_pem)), (bj, (2, 1, 1, 2, nk_pem))]
     out = []
-    for m in fitted + [pem[name, gain] for name in PEM_FITS]:
+    for estimate, args in fits:
+        if estimate is arx:
+            m = arx(fit_data, *args, dc_gain=gain)
+        else:
+            m = _try(estimate, fit_data, *args, dc_gain=gain)
         if m is None:
             continue
         name = study_name(m)
