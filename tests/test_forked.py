@@ -133,12 +133,13 @@ def _makers(n: int, fail_in_child_from: int | None = None) -> dict:
 
 def _check_queue_draws_each_figure_once_in_order(fail_in_child_from=None) -> None:
     alone = render_pngs(_figures(6), processes=1)
+    open_before = set(plt.get_fignums())  # a test worker may hold other tests' figures
     with FigureQueue(_makers(6, fail_in_child_from)) as queue:
         time.sleep(0.2)  # the child takes some figures before this process joins in
         drawn = queue.result()
     assert list(drawn) == [f"fig-{i}" for i in range(6)]
     assert list(drawn.values()) == alone
-    assert plt.get_fignums() == []  # every figure closed here
+    assert set(plt.get_fignums()) <= open_before  # every figure made here closed
 
 
 @needs_fork
