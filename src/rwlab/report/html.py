@@ -200,10 +200,15 @@ class FigureQueue:
     def _drain(self) -> dict[int, bytes]:
         drawn = {}
         while number := os.read(self._numbers, 1):
-            fig = self._makers[number[0]]()
-            drawn[number[0]] = _png(fig)
-            plt.close(fig)
+            drawn[number[0]] = self._draw(number[0])
         return drawn
+
+    def _draw(self, i: int) -> bytes:
+        fig = self._makers[i]()
+        try:
+            return _png(fig)
+        finally:
+            plt.close(fig)
 
     def result(self) -> dict[str, bytes]:
         """Every figure's PNG, by id, in the makers' order.
@@ -215,9 +220,9 @@ class FigureQueue:
         drawn = self._drain()
         drawn |= self._child.result()
         self.close()
-        for i, make in enumerate(self._makers):
+        for i in range(len(self._makers)):
             if i not in drawn:
-                drawn[i] = render_pngs([make()], processes=1)[0]
+                drawn[i] = self._draw(i)
         return {fig_id: drawn[i] for i, fig_id in enumerate(self._ids)}
 
     def close(self) -> None:
