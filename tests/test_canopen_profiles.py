@@ -119,7 +119,9 @@ def test_base_node_402_enables_the_cia402_twin_and_the_velocity_follows_0x60ff()
         assert drive.state == "OPERATION ENABLED"
         assert drive.sdo[0x60A9].raw == 0xFDB44700  # 0.001 rpm
         drive.sdo[0x60FF].raw = 300_000  # 300 rpm
-        end = time.monotonic() + 6.0
+        # ~1 s at the acceleration limit; the twin runs on the wall clock, so a loaded
+        # machine slows it (once 230 000 at 6 s): the wait ends as soon as it follows
+        end = time.monotonic() + 20.0
         while time.monotonic() < end and abs(drive.tpdo_values[0x606C] - 300_000) > 3_000:
             time.sleep(0.05)
         assert abs(drive.tpdo_values[0x606C] - 300_000) <= 3_000  # followed, within 1 %
