@@ -159,3 +159,34 @@ def test_the_figures_a_failed_child_took_are_drawn_here():
 def test_without_a_child_the_queue_draws_everything_here(monkeypatch):
     monkeypatch.setattr("rwlab._forked.forkable", lambda: False)
     _check_queue_draws_each_figure_once_in_order()
+
+
+def _check_queue_first_work_in_the_child(first_fails_in_child: bool = False) -> None:
+    here = os.getpid()
+
+    def first():
+        if first_fails_in_child and os.getpid() != here:
+            raise RuntimeError("the child fails")
+        return os.getpid(), np.arange(3.0)
+
+    alone = render_pngs(_figures(4), processes=1)
+    with FigureQueue(_makers(4), first=first) as queue:
+        drawn = queue.result()
+    pid, values = queue.first
+    assert (pid == here) is first_fails_in_child  # computed where it could be
+    assert values.tolist() == [0.0, 1.0, 2.0]
+    assert list(drawn.values()) == alone
+
+
+def _check_queue_first_failing_in_the_child() -> None:
+    _check_queue_first_work_in_the_child(first_fails_in_child=True)
+
+
+@needs_fork
+def test_a_figure_queues_first_work_is_done_in_the_child_and_its_value_returned():
+    _in_a_fresh_process(_check_queue_first_work_in_the_child)
+
+
+@needs_fork
+def test_a_first_work_the_child_failed_is_done_here():
+    _in_a_fresh_process(_check_queue_first_failing_in_the_child)

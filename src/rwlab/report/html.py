@@ -16,6 +16,7 @@ import io
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -171,31 +172,48 @@ def render_pngs(figs: Sequence, processes: int | None = None) -> list[bytes]:
 
 
 class FigureQueue:
-    """Figures drawn from one queue by a forked child at once and by this process later.
+    """Figures drawn from one queue by a forked child and by this process.
 
     Each figure is a maker (``make()`` returns it). Their numbers wait in a pipe that
     both processes read one byte at a time (one read of a pipe is atomic: each number
-    reaches one process). The child (:class:`rwlab._forked.Forked`) starts drawing at
-    once; :meth:`result` has this process draw what is left beside it. So a process
-    that has other work first (``rwlab identify``'s servo fit) takes over the figures
-    the child has not reached. A figure the child took and did not return (it failed)
-    is drawn here. Hand-written: a pool's task queue would need a feeder thread, and
+    reaches one process). The child (:class:`rwlab._forked.Forked`) first computes
+    ``first()``, if given, then draws; :meth:`result` has this process draw what is left
+    beside it. So the work that must come first is done in one process while the other
+    draws (``rwlab identify``: the servo fit in the child, the figures of the linear
+    study here), and each then draws what the other has not reached. A figure the child
+    took and did not return (it failed) is drawn here, and ``first()`` computed here.
+    Hand-written: a pool's task queue would need a feeder thread, and
     :class:`~rwlab._forked.Forked` forks only a process without threads.
 
     Parameters
     ----------
     makers : mapping of str to callable
         Figure id → ``make()``, returning a matplotlib figure (at most 256).
+    first : callable, optional
+        Work for the child before it draws: ``first()``, returning a picklable value,
+        :attr:`first` once :meth:`result` returns.
+
+    Attributes
+    ----------
+    first : object
+        ``first()``'s value (None before :meth:`result`, or without ``first``).
     """
 
-    def __init__(self, makers: Mapping[str, Callable[[], Figure]]) -> None:
+    def __init__(
+        self, makers: Mapping[str, Callable[[], Figure]], first: Callable[[], Any] | None = None
+    ) -> None:
         if len(makers) > 256:
             raise ValueError(f"a FigureQueue holds at most 256 figures, got {len(makers)}")
         self._ids, self._makers = list(makers), list(makers.values())
+        self._first, self.first = first, None
         self._numbers, write = os.pipe()
         os.write(write, bytes(range(len(self._makers))))
         os.close(write)
-        self._child = Forked(self._drain)
+        self._child = Forked(self._first_then_drain)
+
+    def _first_then_drain(self) -> tuple[Any, dict[int, bytes]]:
+        value = None if self._first is None else self._first()
+        return value, self._drain()
 
     def _drain(self) -> dict[int, bytes]:
         drawn = {}
@@ -211,14 +229,15 @@ class FigureQueue:
             plt.close(fig)
 
     def result(self) -> dict[str, bytes]:
-        """Every figure's PNG, by id, in the makers' order.
+        """Every figure's PNG, by id, in the makers' order (and :attr:`first` set).
 
         Returns
         -------
         dict of str to bytes
         """
         drawn = self._drain()
-        drawn |= self._child.result()
+        self.first, by_child = self._child.result()
+        drawn |= by_child
         self.close()
         for i in range(len(self._makers)):
             if i not in drawn:

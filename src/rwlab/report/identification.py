@@ -12,14 +12,19 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-
 from rwlab._io import atomic_write_bytes
 from rwlab.ident.model_file import WheelModelFile
-from rwlab.ident.study import INITIAL, StudyResult
-from rwlab.report.html import Page, figure
+from rwlab.ident.study import StudyResult
+from rwlab.report.html import Page
 from rwlab.report.model_choice import choice_section
-from rwlab.report.study_figures import SIGMAS, armax_name, linear_plots, resid_plot
+from rwlab.report.study_figures import (
+    NONLINEAR_FIGURES,
+    SIGMAS,
+    armax_name,
+    linear_plots,
+    nonlinear_plots,
+    step_level,
+)
 
 __all__ = ["FIGURES", "write_study"]
 
@@ -37,7 +42,6 @@ FIGURES = (
     "fig24-acceleration",
     "fig-uncertainty",
 )
-NONLINEAR_FIGURES = ("fig-nonlinear-validation", "fig-nonlinear-step", "fig-nonlinear-resid")
 
 
 def _poly(row: dict, letter: str) -> str:
@@ -328,16 +332,18 @@ def _page(
         "is linear only inside them (paper A, section 5)."
     )
     if result.servo is not None:
-        _nonlinear_section(page, result, study["nonlinear"])
+        ids = NONLINEAR_FIGURES
+        nl_figs = {i: figs[i] for i in ids} if set(ids) <= set(figs) else nonlinear_plots(result)
+        _nonlinear_section(page, result, study["nonlinear"], nl_figs)
     return page
 
 
-def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
-    """Beyond the paper: the servo model next to the chosen linear one, in physical units."""
-    servo, chosen, val = result.servo, result.chosen, result.physical_val
+def _nonlinear_section(page: Page, result: StudyResult, nl: dict, figs: dict) -> None:
+    """Beyond the paper: the servo model next to the chosen linear one, in physical units
+    (``figs``: :data:`NONLINEAR_FIGURES` by id, figures or their PNG bytes)."""
+    servo, val = result.servo, result.physical_val
     if servo is None or val is None:  # the caller checked: a study with a servo model has both
         raise ValueError("the nonlinear section needs the study's servo model and data")
-    trend = result.data.trend
     ch = result.chosen_name
     page.heading("8. Nonlinear model: rate-limited servo (beyond the paper)", "nonlinear")
     par = nl["parameters"]
@@ -349,41 +355,20 @@ def _nonlinear_section(page: Page, result: StudyResult, nl: dict) -> None:
         f"{nl['fit_percent']:.2f} % against {ch}'s {_study_fit(result):.2f} %. The speed limit "
         f"is {nl['speed_limit_note']}."
     )
-    t = val.time - val.time[0]
-    y_lin = trend.output_to_physical(chosen.simulate(result.val, initial=INITIAL), result.val.time)
-    fig, ax = figure(9, 3.2)
-    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
-    ax.plot(t, y_lin, lw=1, label=f"{ch} (linear)")
-    ax.plot(t, servo.predict(val, initial=INITIAL), lw=1, ls="--", label="servo (nonlinear)")
-    ax.set_xlabel("time in validation record [s]")
-    ax.set_ylabel(f"{val.output_names[0]} [{val.output_units[0] or 'output unit'}]")
-    ax.legend(fontsize=8)
-    page.figure(fig, "fig-nonlinear-validation", "Both models on the validation data (simulation).")
-
-    # a large step from rest to 80 % of the largest level in the record
-    level = 0.8 * float(np.max(np.abs(val.u[:, 0]))) or 1.0
-    n = max(20, int(4 * level / max(nl["accel_limit_rpm_s"], 1e-12) / servo.Ts))
-    u = np.full(n, level)
-    u_p = (u - trend.input_offset[0]) / trend.input_scale[0]
-    rest_p = (0 - trend.input_offset[0]) / trend.input_scale[0]
-    y_lin = trend.output_to_physical(chosen.simulate(np.r_[rest_p, u_p], "steady"), np.zeros(n + 1))
-    y_nl = servo.simulate(np.r_[-servo.offset / servo.gain, u], 0.0)
-    tt = np.arange(n + 1) * servo.Ts
-    fig, ax = figure(9, 3.0)
-    ax.plot(tt, y_lin, lw=1, label=f"{ch} (linear, no limit)")
-    ax.plot(tt, y_nl, lw=1.5, label="servo (nonlinear)")
-    ax.plot(tt, np.minimum(tt * nl["accel_limit_rpm_s"], level), "k:", lw=1, label="±α ramp")
-    ax.set_xlabel("t [s]")
-    ax.legend(fontsize=8)
     page.figure(
-        fig,
+        figs["fig-nonlinear-validation"],
+        "fig-nonlinear-validation",
+        "Both models on the validation data (simulation).",
+    )
+    page.figure(
+        figs["fig-nonlinear-step"],
         "fig-nonlinear-step",
-        f"A step of {level:.4g} from rest: the linear model jumps, the servo ramps at its "
-        "estimated rate limit and settles.",
+        f"A step of {step_level(val):.4g} from rest: the linear model jumps, the servo ramps "
+        "at its estimated rate limit and settles.",
     )
     name = "servo (simulation error)"
-    fig = resid_plot(nl["residuals"], name)
-    page.figure(fig, "fig-nonlinear-resid", _resid_caption(nl["residuals"], name))
+    page.figure(figs["fig-nonlinear-resid"], "fig-nonlinear-resid",
+                _resid_caption(nl["residuals"], name))  # fmt: skip
 
 
 def _nonlinear_notes(nl: dict, stages: dict | None) -> list[str]:

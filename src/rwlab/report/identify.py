@@ -209,10 +209,17 @@ def _identify_into(
             "max_speed_rpm": saturation["speed_limit_rpm"],
             "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
         }
-    result, drawn = _study_while_drawing(
+    model_options = {
+        "speed_limit_rpm": saturation["speed_limit_rpm"],
+        "accel_limit_rpm_s": saturation["accel_limit_rpm_s"],
+        "saturation_source": saturation["saturation_source"],
+        "wheel_spec": spec,
+    }
+    result, reference, drawn = _study_while_drawing(
         data,
         stack,
         progress,
+        lambda result: _healthy_reference(file, make_wheel_model(result, **model_options), record),
         preprocess=options["preprocess"],
         split=options["split"],
         tolerance=options["tolerance"],
@@ -223,14 +230,7 @@ def _identify_into(
         segments=segments,
         nonlinear_models=options.get("nonlinear_models", False),
     )
-    model = make_wheel_model(  # the owner class: the healthy reference is added below
-        result,
-        speed_limit_rpm=saturation["speed_limit_rpm"],
-        accel_limit_rpm_s=saturation["accel_limit_rpm_s"],
-        saturation_source=saturation["saturation_source"],
-        wheel_spec=spec,
-    )
-    reference = _healthy_reference(file, model, record)
+    model = make_wheel_model(result, **model_options)  # the owner class
     if isinstance(reference, dict):
         model = dataclasses.replace(model, healthy_reference=reference)
     elif echo is not None:
@@ -243,7 +243,7 @@ def _identify_into(
             f"warning: no healthy reference for fault diagnosis ({reference}); rwlab "
             f"diagnose refuses this model: {advice}"
         )
-    paths = write_study(result, model, folder, force=options["force"], drawn=drawn.result())
+    paths = write_study(result, model, folder, force=options["force"], drawn=drawn)
     study = result.to_dict()
     study["data"]["output_unit"] = data.output_units[0]  # for the messages only
     study["healthy_reference"] = (  # for the messages only: model.json holds the reference
@@ -254,21 +254,23 @@ def _identify_into(
     return study, paths
 
 
-def _study_while_drawing(data, stack, progress, **options):
-    """The study, its nonlinear stage run while a forked child draws the report's figures
-    of the linear study (:class:`rwlab.report.html.FigureQueue`): the servo fit is most
-    of the stage's time and drawing most of the report's, side by side on two cores;
-    this process draws the figures the child has not reached once its own work is done.
+def _study_while_drawing(data, stack, progress, reference_of, **options):
+    """The study, its nonlinear stage run in a forked child while this process draws the
+    report's figures of the linear study (:class:`rwlab.report.html.FigureQueue`): the
+    servo fit is most of the stage's time and drawing most of the report's, side by side
+    on two cores. The child then measures the healthy reference
+    (``reference_of(result)``) and draws the servo model's figures, and each process
+    draws the linear figures the other has not reached.
 
-    Returns the study and the figures' queue (in ``stack``, which ends it on an error);
-    ``options`` are :func:`rwlab.ident.study.identification_study`'s, and ``progress``
-    is told of the same stages.
+    Returns the study, the healthy reference (or why there is none) and every figure's
+    PNG by id; ``options`` are :func:`rwlab.ident.study.identification_study`'s, and
+    ``progress`` is told of the same stages. ``stack`` ends the child on an error.
     """
     from threadpoolctl import threadpool_limits
 
     from rwlab.ident.study import identification_study, nonlinear_stage
-    from rwlab.report.html import FigureQueue
-    from rwlab.report.study_figures import linear_makers
+    from rwlab.report.html import FigureQueue, render_pngs
+    from rwlab.report.study_figures import linear_makers, nonlinear_makers
 
     keys = ("limits_rpm", "datasheet", "current", "nonlinear_models")
     later = {key: options.pop(key) for key in keys}
@@ -280,17 +282,29 @@ def _study_while_drawing(data, stack, progress, **options):
             progress(done, stages + 1, label)
 
     linear = identification_study(data, nonlinear=False, progress=linear_progress, **options)
+
+    def nonlinear_part():
+        result = nonlinear_stage(linear, data, split=options["split"], **later)
+        makers = {} if result.servo is None else nonlinear_makers(result)
+        figures = [make() for make in makers.values()]
+        pngs = dict(zip(makers, render_pngs(figures, processes=1), strict=True))
+        stages = (result.servo, result.nonlinear, result.greybox, result.nlarx)
+        return stages, reference_of(result), pngs
+
     # SciPy's own OpenBLAS loads with the study's imports, after identify_into's limit, so
-    # it runs a thread per core: from here on one, as the servo fit's threads and the
-    # drawing child need the cores (measured: 1–1.5 s less CPU, the same bytes written;
-    # the linear study keeps them, as one thread there moves one standard deviation of
-    # study.json by 1 ulp)
+    # it runs a thread per core: from here on one, as the servo fit and the drawing need
+    # the cores (measured: 1–1.5 s less CPU, the same bytes written; the linear study
+    # keeps them, as one thread there moves one standard deviation of study.json by 1 ulp)
     stack.enter_context(threadpool_limits(1, user_api="blas"))
-    drawn = stack.enter_context(FigureQueue(linear_makers(linear, linear.to_dict())))
-    result = nonlinear_stage(linear, data, split=options["split"], **later)
+    queue = stack.enter_context(
+        FigureQueue(linear_makers(linear, linear.to_dict()), first=nonlinear_part)
+    )
+    drawn = queue.result()
+    (servo, nl, grey, black), reference, nonlinear_pngs = queue.first
     if progress is not None:
         progress(total[0], total[0], "nonlinear")
-    return result, drawn
+    result = dataclasses.replace(linear, servo=servo, nonlinear=nl, greybox=grey, nlarx=black)
+    return result, reference, drawn | nonlinear_pngs
 
 
 def _read_once(file: str):

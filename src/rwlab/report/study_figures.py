@@ -13,12 +13,25 @@ from functools import partial
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
+from rwlab.data import IOData
+from rwlab.ident.nonlinear import ServoModel
 from rwlab.ident.study import INITIAL, StudyResult, acceleration_pair
 from rwlab.report.html import figure, trace_styles
 
-__all__ = ["SIGMAS", "armax_name", "linear_makers", "linear_plots", "resid_plot"]
+__all__ = [
+    "NONLINEAR_FIGURES",
+    "SIGMAS",
+    "armax_name",
+    "linear_makers",
+    "linear_plots",
+    "nonlinear_makers",
+    "nonlinear_plots",
+    "resid_plot",
+    "step_level",
+]
 
 SIGMAS = 3.0  # the chosen model's confidence bands: ± this many standard deviations
+NONLINEAR_FIGURES = ("fig-nonlinear-validation", "fig-nonlinear-step", "fig-nonlinear-resid")
 
 
 def resid_plot(res: dict, name: str):
@@ -121,6 +134,104 @@ def linear_makers(result: StudyResult, study: dict) -> dict:
     makers["fig23-continuous"] = partial(_continuous_plot, study)
     makers["fig24-acceleration"] = partial(_acceleration_plot, result, study)
     return makers
+
+
+def nonlinear_plots(result: StudyResult) -> dict:
+    """The figures of section 8 (the servo model), not drawn yet.
+
+    Parameters
+    ----------
+    result : StudyResult
+        A study with its servo model.
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        By figure id, :data:`NONLINEAR_FIGURES` (:func:`nonlinear_makers`).
+    """
+    return {fig_id: make() for fig_id, make in nonlinear_makers(result).items()}
+
+
+def nonlinear_makers(result: StudyResult) -> dict:
+    """What makes each figure of section 8: the servo model against the chosen linear
+    one on the validation data and on a large step, and its residual tests.
+
+    Parameters
+    ----------
+    result : StudyResult
+        A study with its servo model (``result.servo`` and ``result.nonlinear``).
+
+    Returns
+    -------
+    dict of str to callable
+        By figure id, :data:`NONLINEAR_FIGURES`, ``make()`` returning the figure.
+    """
+    residuals = _servo_parts(result)[2]["residuals"]
+    return {
+        "fig-nonlinear-validation": partial(_nonlinear_validation_plot, result),
+        "fig-nonlinear-step": partial(_nonlinear_step_plot, result),
+        "fig-nonlinear-resid": partial(resid_plot, residuals, "servo (simulation error)"),
+    }
+
+
+def step_level(val) -> float:
+    """The step of section 8's figure: from rest to 80 % of the record's largest input
+    level (1 where the input is all zero).
+
+    Parameters
+    ----------
+    val : IOData
+        The validation data in physical units.
+
+    Returns
+    -------
+    float
+    """
+    return 0.8 * float(np.max(np.abs(val.u[:, 0]))) or 1.0
+
+
+def _servo_parts(result: StudyResult) -> tuple[ServoModel, IOData, dict]:
+    """The servo model, the physical validation data and the nonlinear row of a study."""
+    servo, val, nl = result.servo, result.physical_val, result.nonlinear
+    if servo is None or val is None or nl is None:
+        raise ValueError("the nonlinear figures need the study's servo model and data")
+    return servo, val, nl
+
+
+def _nonlinear_validation_plot(result: StudyResult):
+    (servo, val, _), ch = _servo_parts(result), result.chosen_name
+    chosen_sim = result.chosen.simulate(result.val, initial=INITIAL)
+    y_lin = result.data.trend.output_to_physical(chosen_sim, result.val.time)
+    t = val.time - val.time[0]
+    fig, ax = figure(9, 3.2)
+    ax.plot(t, val.y[:, 0], color="k", lw=1.2, label="measured")
+    ax.plot(t, y_lin, lw=1, label=f"{ch} (linear)")
+    ax.plot(t, servo.predict(val, initial=INITIAL), lw=1, ls="--", label="servo (nonlinear)")
+    ax.set_xlabel("time in validation record [s]")
+    ax.set_ylabel(f"{val.output_names[0]} [{val.output_units[0] or 'output unit'}]")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _nonlinear_step_plot(result: StudyResult):
+    servo, val, nl = _servo_parts(result)
+    trend, ch, accel = result.data.trend, result.chosen_name, nl["accel_limit_rpm_s"]
+    level = step_level(val)
+    n = max(20, int(4 * level / max(accel, 1e-12) / servo.Ts))
+    u = np.full(n, level)
+    u_p = (u - trend.input_offset[0]) / trend.input_scale[0]
+    rest_p = (0 - trend.input_offset[0]) / trend.input_scale[0]
+    y_steady = result.chosen.simulate(np.r_[rest_p, u_p], "steady")
+    y_lin = trend.output_to_physical(y_steady, np.zeros(n + 1))
+    y_nl = servo.simulate(np.r_[-servo.offset / servo.gain, u], 0.0)
+    tt = np.arange(n + 1) * servo.Ts
+    fig, ax = figure(9, 3.0)
+    ax.plot(tt, y_lin, lw=1, label=f"{ch} (linear, no limit)")
+    ax.plot(tt, y_nl, lw=1.5, label="servo (nonlinear)")
+    ax.plot(tt, np.minimum(tt * accel, level), "k:", lw=1, label="±α ramp")
+    ax.set_xlabel("t [s]")
+    ax.legend(fontsize=8)
+    return fig
 
 
 def armax_name(study: dict) -> str | None:
