@@ -52,15 +52,18 @@ paper's order; they are kept together in that order.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import control
 import numpy as np
 
 from rwlab._display import ShortRepr
+from rwlab._forked import Forked
 from rwlab.data import IOData
 from rwlab.errors import DataError, EstimationError, ModelError
 from rwlab.ident.arx import arx
@@ -440,24 +443,29 @@ def identification_study(
         models[m.structure] = m
         rows.append({**_row(m, val), "na": n, "nb": n, "nk": nk, "loss": m.report["loss"]})
         step(m.structure)
-    others = []
-    nk_pem = max(nk, 1)
-    for name, estimate, args in (
-        ("ARMAX", armax, (2, 2, 1, nk_pem)),
-        ("OE", oe, (2, 2, nk_pem)),
-        ("BJ", bj, (2, 1, 1, 2, nk_pem)),
-    ):
-        m = _try(estimate, fit_data, *args)
-        if m is not None:
-            models[m.structure] = m
-            others.append(_row(m, val))
-        step(name)
-
     anchor = _estimation_gain(data, split, pieces)
-    fixed: list[dict] = []
-    if anchor is not None:
-        scale = float(prepared.trend.input_scale[0] / prepared.trend.output_scale[0])
-        fixed = _constrained_rows(fit_data, val, nk, orders, anchor["gain"] * scale, models)
+    with contextlib.ExitStack() as stack:
+        constrained = None
+        if anchor is not None:  # refitted in a forked child while this process fits below
+            scale = float(prepared.trend.input_scale[0] / prepared.trend.output_scale[0])
+            refits = partial(_constrained_fits, fit_data, val, nk, orders, anchor["gain"] * scale)
+            constrained = stack.enter_context(Forked(refits))
+        others = []
+        nk_pem = max(nk, 1)
+        for name, estimate, args in (
+            ("ARMAX", armax, (2, 2, 1, nk_pem)),
+            ("OE", oe, (2, 2, nk_pem)),
+            ("BJ", bj, (2, 1, 1, 2, nk_pem)),
+        ):
+            m = _try(estimate, fit_data, *args)
+            if m is not None:
+                models[m.structure] = m
+                others.append(_row(m, val))
+            step(name)
+        fixed: list[dict] = []
+        if constrained is not None:
+            fixed, refitted = constrained.result()
+            models.update(refitted)
     step("gain-constrained models")
     candidates = [r for r in rows + others + fixed if r["fit_percent"] is not None]
     if not candidates:
@@ -678,13 +686,14 @@ def _simplicity(r: dict) -> tuple:
     return (r["n_params"], kind, bool(r.get("gain_constrained")), -r["fit_percent"])
 
 
-def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, models) -> list[dict]:
+def _constrained_fits(fit_data, val: IOData, nk: int, orders, gain: float):
     """Every ARX order, ARMAX, OE and BJ again with the static gain ``gain`` (the data's
-    units) imposed (:mod:`rwlab.ident.gain_constraint`); their rows, named ``…+K``."""
+    units) imposed (:mod:`rwlab.ident.gain_constraint`): their rows, named ``…+K``, and
+    their models by those names."""
     nk_pem = max(nk, 1)
     fits: list[tuple[Callable[..., PolyModel], tuple]] = [(arx, (n, n, nk)) for n in orders]
     fits += [(armax, (2, 2, 1, nk_pem)), (oe, (2, 2, nk_pem)), (bj, (2, 1, 1, 2, nk_pem))]
-    out = []
+    rows, models = [], {}
     for estimate, args in fits:
         if estimate is arx:
             m = arx(fit_data, *args, dc_gain=gain)
@@ -695,8 +704,8 @@ def _constrained_rows(fit_data, val: IOData, nk: int, orders, gain: float, model
         name = study_name(m)
         models[name] = m
         row = {**_row(m, val), "structure": name, "gain_constrained": True}
-        out.append({**row, "n_params": m.n_params, "n_free": m.n_params - 1})
-    return out
+        rows.append({**row, "n_params": m.n_params, "n_free": m.n_params - 1})
+    return rows, models
 
 
 def _choose(
