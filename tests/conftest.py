@@ -139,7 +139,7 @@ def quick_demo(tmp_path_factory) -> Path:
 def compiled_kernels(tmp_path_factory) -> None:
     """Under pytest-xdist, the attitude loop's and the wheel twin's numba kernels compile
     in the first worker at its start, into numba's cache (``cache=True``); the others do
-    not wait for it (a cold compile is ~50 s, an idle core on two): a test of theirs that
+    not wait for it (a cold compile is ~35 s, an idle core on two): a test of theirs that
     runs the kernel before the cache is written compiles it too. A no-op in one process
     (``-p no:xdist``, ``-o addopts=""``)."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):

@@ -101,7 +101,8 @@ def test_ekf_state_jacobian_matches_finite_differences():
     hw = np.array([10.0, -5.0, 3.0])
     dist = DisturbanceModel(True, False, False, False).vector()
     dt, eps = 0.2, 1e-7
-    F = error_jacobian(q, w, G @ hw, J, J_INV, GEO_RATE, 3 * GEO_RATE**2)
+    # every argument given, as the kernel's twin test gives them: one compiled signature
+    F = error_jacobian(q, w, G @ hw, J, J_INV, GEO_RATE, 3 * GEO_RATE**2, None)
     ref = _run(np.concatenate([q, w, hw]), 20, dt / 20, dist=dist)
     Phi_num = np.zeros((6, 6))
     for i in range(6):
@@ -118,7 +119,7 @@ def test_ekf_state_jacobian_matches_finite_differences():
 def test_vector_measurement_jacobian_matches_finite_differences():
     q = from_axis_angle([1, 0.2, -0.4], 0.9)
     r = np.array([0.3, -0.5, 0.81])
-    b, H = vector_jacobian(q, r)
+    b, H = vector_jacobian(q, r, 6)  # dim given, as the filter gives it: one signature
     for i in range(3):
         e = np.zeros(3)
         e[i] = 1e-7
@@ -518,7 +519,7 @@ def test_the_scalar_update_holds_on_ill_conditioned_innovations():
     turn = dcm(from_axis_angle([0.2, 1, 0], 0.08))
     for ref in ([0.0, 0, 1], [0.6, -0.48, 0.64], [0.0, 0, 1]):
         ref = np.array(ref)
-        exact = _exact_joseph(P, vector_jacobian(q, ref)[1], 2e-7)
+        exact = _exact_joseph(P, vector_jacobian(q, ref, 6)[1], 2e-7)
         q2, w2, P2 = q.copy(), w.copy(), P.copy()
         gated_update_into(q2, w2, P2, turn @ ref, ref, 2e-7, 0.0, np.empty((4, 6, 6)))
         block = np.max(np.abs(exact[:3, :3]))

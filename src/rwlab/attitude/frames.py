@@ -50,10 +50,21 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def dcm(q: np.ndarray) -> np.ndarray:
-    """A(q): orbital → body direction-cosine matrix of a scalar-last unit quaternion."""
+    """A(q): orbital → body direction-cosine matrix of a scalar-last unit quaternion,
+    (q4² − e·e) I + 2 e eᵀ − 2 q4 [e×] with e = q[:3].
+
+    Written element by element: the same operations in the same order as the matrix
+    expression (equal bit for bit), without numpy's outer product and array expressions,
+    which cost numba seconds to compile on a first run.
+    """
     e = q[:3].copy()
     q4 = q[3]
-    return (q4 * q4 - e @ e) * np.eye(3) + 2.0 * np.outer(e, e) - 2.0 * q4 * skew(e)
+    s, c, S = q4 * q4 - e @ e, 2.0 * q4, skew(e)
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = s * (1.0 if i == j else 0.0) + 2.0 * (e[i] * e[j]) - c * S[i, j]
+    return out
 
 
 @njit(cache=True)
@@ -70,8 +81,10 @@ def qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Quaternion product p ⊗ q with ``A(p ⊗ q) = A(p) A(q)`` (scalar last)."""
     pv, p4 = p[:3].copy(), p[3]
     qv, q4 = q[:3].copy(), q[3]
-    out = np.empty(4)
-    out[:3] = p4 * qv + q4 * pv - np.cross(pv, qv)
+    out = np.empty(4)  # p4 qv + q4 pv − pv × qv, element by element (as in :func:`dcm`)
+    out[0] = p4 * qv[0] + q4 * pv[0] - (pv[1] * qv[2] - pv[2] * qv[1])
+    out[1] = p4 * qv[1] + q4 * pv[1] - (pv[2] * qv[0] - pv[0] * qv[2])
+    out[2] = p4 * qv[2] + q4 * pv[2] - (pv[0] * qv[1] - pv[1] * qv[0])
     out[3] = p4 * q4 - pv @ qv
     return out
 

@@ -150,8 +150,18 @@ ZERO_CROSS = _AT["wheel_zero_crossings"]
 _LEAN: dict[str, Any] = {"cache": True, "_nrt": False, "error_model": "numpy"}
 # ``command_step`` and ``finish_step`` are also inlined into ``run_block`` (HIL calls them
 # from Python as they are): a compiled call passes every record's arrays field by field,
-# hundreds of words a call: inlined, the compiled step went from 1.5 to 0.8 µs (measured).
+# hundreds of words a call: inlined, the compiled step went from 1.0 to 0.32 µs
+# (geo-smallsat, LQR) and from 2.25 to 1.53 µs (geo-comsat, LQG) (measured).
 _INLINED: dict[str, Any] = _LEAN | {"inline": "always"}
+# Numba's own inlining (``inline="always"``) copies, types and lowers a function again at
+# every call site and at every level it is inlined through: it made most of the first
+# run's compile (a cold ``simulate`` took a minute). It is kept for what takes the records,
+# the stages and the two halves (compiled one by one, each unpacks every record it takes
+# and LLVM optimises each again in its caller: measured slower to compile). The
+# ``_FORCED`` helpers are compiled once each and inlined by LLVM instead (``forceinline``:
+# the same results bit for bit, the same step time; left as plain calls, LLVM kept them
+# calls and the step was up to 16 % slower).
+_FORCED: dict[str, Any] = _LEAN | {"forceinline": True}
 
 # the filter's modes (``Filter.mode``)
 TRUTH, DYNAMICS, GYRO = 0, 1, 2
@@ -311,7 +321,7 @@ def new_stats() -> np.ndarray:
     return s
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _sky_at(sky, u, sun, moon):
     """Sun and Moon unit vectors (into ``sun``, ``moon``) and (sunlit, earth_lit,
     moon_visible, srp_scale) at row position ``u`` of the sky table (linear interpolation,
@@ -338,7 +348,7 @@ def _sky_at(sky, u, sun, moon):
     )
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _dcm_into(q, C):
     """C = frames.dcm(q[:4]), element by element (tested equal)."""
     q1, q2, q3, q4 = q[0], q[1], q[2], q[3]
@@ -372,7 +382,7 @@ def _nees(q, q_hat, e, P, L, z):
     return total
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _srp_map_into(q, s_orb, sunlit, C, s_body, out):
     """out = ν [ŝ×], ŝ = A(q) s_orb the Sun in body axes: SRP's torque per unit lever arm
     (C (3, 3) and s_body (3,) are scratch)."""
@@ -391,7 +401,7 @@ def _noisy_into(b, sigma, e0, e1, e2, out):
     out[0], out[1], out[2] = v0 / norm, v1 / norm, v2 / norm
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _matvec(M, v, out):
     """out = M @ v by loops: numba's ``@`` calls BLAS, which costs microseconds on 3×3."""
     for i in range(M.shape[0]):
@@ -401,7 +411,7 @@ def _matvec(M, v, out):
         out[i] = acc
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _state_into(qw, n, s):
     """s = [2 q_v sign(q4), ω_bo] for qw = [q, ω] (ω_bo = ω − A(q) (0, −n, 0))."""
     q1, q2, q3, q4 = qw[0], qw[1], qw[2], qw[3]
@@ -438,7 +448,7 @@ def _control_into(K_w, M, w_max, s, work, tau):
         tau[i] = -tau[i]
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, tau_thr):
     """Momentum unloading: thruster pulses (into ``tau_thr``) against the wheels' body
     momentum off its target G·``hw_target`` (the body momentum into ``h_body``); returns the
@@ -481,7 +491,7 @@ def _unload_step(stats, unload, hw_target, x, G, h_max, err, t, k, dt, h_body, t
     return h_frac
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _count_zero_crossings(stats, x, h_max, sign):
     """Count the wheels whose spin changed sign since their last non-zero speed (a wheel
     within 1e-9 of its momentum limit of zero is at rest: no sign)."""
@@ -494,7 +504,7 @@ def _count_zero_crossings(stats, x, h_max, sign):
             sign[i] = s
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _steady_stats(stats, err, hw_cmd, hw_prev, x, wheel_inertia, at_limit, in_desat, earth_lit):
     """The steady window's statistics of one step."""
     nw = hw_cmd.shape[0]
@@ -699,7 +709,7 @@ def new_work(plant: Plant, filt: Filter, nx: int) -> Work:
     )
 
 
-@njit(cache=True, inline="always")
+@njit(**_FORCED)
 def _copy_into(a, out):
     """out[:] = a by a loop (a slice assignment needs numba's runtime: see ``_LEAN``)."""
     for i in range(a.shape[0]):
@@ -1022,7 +1032,7 @@ def _disturbance_into(q, J, dist, srp_scale, sun_orb, moon_orb, C, out):
     out[2] -= p * (dist[2] * s1 - dist[3] * s0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _add_gradient(out, gain, J, a0, a1, a2):
     """out += gain · a × (J a): a gradient torque along the unit vector a (body axes)."""
     j0 = J[0, 0] * a0 + J[0, 1] * a1 + J[0, 2] * a2

@@ -629,7 +629,11 @@ def sensor_alignment(bias_deg, misalignment_deg, transverse: tuple[int, int]) ->
     rot = np.radians(np.asarray(misalignment_deg, float))
     rot[list(transverse)] += np.radians(np.asarray(bias_deg, float))
     angle = float(np.linalg.norm(rot))
-    return dcm(from_axis_angle(rot, angle)).T if angle > 0 else np.eye(3)
+    if angle > 0:
+        # C-ordered like every array the kernel takes: a transposed (F-ordered) one is
+        # another numba type, and ``run_block`` would be compiled again for it
+        return np.ascontiguousarray(dcm(from_axis_angle(rot, angle)).T)
+    return np.eye(3)
 
 
 def _plant_record(sc: Scenario) -> kernel.Plant:
