@@ -134,7 +134,8 @@ def _makers(n: int, fail_in_child_from: int | None = None) -> dict:
 def _check_queue_draws_each_figure_once_in_order(fail_in_child_from=None) -> None:
     alone = render_pngs(_figures(6), processes=1)
     open_before = set(plt.get_fignums())  # a test worker may hold other tests' figures
-    with FigureQueue(_makers(6, fail_in_child_from)) as queue:
+    with FigureQueue(lambda n: _makers(n, fail_in_child_from)) as queue:
+        queue.start(6)
         time.sleep(0.2)  # the child takes some figures before this process joins in
         drawn = queue.result()
     assert list(drawn) == [f"fig-{i}" for i in range(6)]
@@ -163,19 +164,31 @@ def test_without_a_child_the_queue_draws_everything_here(monkeypatch):
 
 def _check_queue_first_work_in_the_child(first_fails_in_child: bool = False) -> None:
     here = os.getpid()
+    warmed: list[int] = []
 
-    def first():
+    def first(value):
         if first_fails_in_child and os.getpid() != here:
             raise RuntimeError("the child fails")
-        return os.getpid(), np.arange(3.0)
+        return os.getpid(), warmed, value["values"]
 
     alone = render_pngs(_figures(4), processes=1)
-    with FigureQueue(_makers(4), first=first) as queue:
+    value = {"n": 4, "values": np.arange(100_000.0)}  # more than a pipe holds at once
+    with FigureQueue(
+        lambda v: _makers(v["n"]), first=first, warm=lambda: warmed.append(os.getpid())
+    ) as queue:
+        time.sleep(0.1)  # the child warms while this process computes the value
+        queue.start(value)
         drawn = queue.result()
-    pid, values = queue.first
+    pid, warmed_in, values = queue.first
     assert (pid == here) is first_fails_in_child  # computed where it could be
-    assert values.tolist() == [0.0, 1.0, 2.0]
+    assert warmed_in == ([] if first_fails_in_child else [pid])  # warm ran in the child first
+    np.testing.assert_array_equal(values, value["values"])
     assert list(drawn.values()) == alone
+
+
+def test_a_queues_result_before_its_value_is_refused():
+    with FigureQueue(_makers) as queue, pytest.raises(RuntimeError, match="start"):
+        queue.result()
 
 
 def _check_queue_first_failing_in_the_child() -> None:

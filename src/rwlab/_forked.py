@@ -57,6 +57,11 @@ class Forked(Generic[T]):
             except OSError:  # no process to be had: result() computes it here
                 pass
 
+    @property
+    def forked(self) -> bool:
+        """Whether a child computes ``fn()`` (until :meth:`result` or :meth:`close`)."""
+        return self._child is not None
+
     def result(self) -> T:
         """``fn()``'s value, from the child or computed here.
 

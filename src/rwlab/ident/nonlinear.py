@@ -59,7 +59,7 @@ from rwlab.ident.models import PolyModel
 T = TypeVar("T")
 R = TypeVar("R")
 
-__all__ = ["ServoModel", "servo_advance", "servo_fit"]
+__all__ = ["ServoModel", "load_kernels", "servo_advance", "servo_fit"]
 
 STRUCTURE = "servo"
 INITIAL = ("steady", "estimate")
@@ -158,6 +158,17 @@ def _simulate_many(u: np.ndarray, w0: float, i0: float, P: np.ndarray) -> np.nda
                 )  # fmt: skip
         Y[:, k + 1] = w
     return Y
+
+
+def load_kernels() -> None:
+    """Load the servo fit's compiled simulation now (from numba's cache, else compiled).
+
+    A process's first compiled call also starts numba itself (≈ 0.2 s, measured): a
+    process that waits for its work (``rwlab identify``'s figure child) pays it first.
+    """
+    p = np.array([1.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, -np.inf, np.inf, -np.inf, np.inf])
+    _simulate(np.zeros(2), 0.0, 0.0, p)
+    _simulate_many(np.zeros(2), 0.0, 0.0, p[None, :].copy())
 
 
 @dataclass(frozen=True)

@@ -1147,10 +1147,9 @@ def _continuous(model: PolyModel, u: np.ndarray) -> dict:
             out["methods"][method] = {"error": str(exc)}
             continue
         t = np.arange(len(u)) * model.Ts
-        sub = 20
-        t_fine = np.arange(len(u) * sub) * model.Ts / sub
-        u_fine = np.repeat(u, sub)
-        y_c = control.forced_response(g, t_fine, u_fine).outputs[::sub]
+        # the held input's exact response at the samples: the continuous model
+        # discretized by ZOH, whatever method made it
+        y_c = control.forced_response(control.c2d(g, model.Ts, "zoh"), U=u).outputs
         out["tf"][method] = g
         out["methods"][method] = {
             "num": np.asarray(g.num[0][0]).tolist(),

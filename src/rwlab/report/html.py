@@ -14,6 +14,7 @@ import functools
 import html
 import io
 import os
+import pickle
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -172,48 +173,95 @@ def render_pngs(figs: Sequence, processes: int | None = None) -> list[bytes]:
 
 
 class FigureQueue:
-    """Figures drawn from one queue by a forked child and by this process.
+    """The figures of one value, drawn from one queue by a forked child and by this process.
 
-    Each figure is a maker (``make()`` returns it). Their numbers wait in a pipe that
-    both processes read one byte at a time (one read of a pipe is atomic: each number
-    reaches one process). The child (:class:`rwlab._forked.Forked`) first computes
-    ``first()``, if given, then draws; :meth:`result` has this process draw what is left
-    beside it. So the work that must come first is done in one process while the other
-    draws (``rwlab identify``: the servo fit in the child, the figures of the linear
-    study here), and each then draws what the other has not reached. A figure the child
-    took and did not return (it failed) is drawn here, and ``first()`` computed here.
+    The child is forked at once and does ``warm()`` (imports, compiled code loaded)
+    while this process computes the value the figures show; :meth:`start` hands it
+    the value (pickled, through a pipe) and the figures' numbers. The child computes
+    ``first(value)``, then draws; :meth:`result` has this process draw beside it.
+    The numbers wait in a pipe that both processes read one byte at a time (one read
+    of a pipe is atomic: each number reaches one process), so each draws what the
+    other has not reached (``rwlab identify``: the servo fit in the child while the
+    figures of the linear study are drawn here). A figure the child took and did not
+    return (it failed) is drawn here, and ``first(value)`` computed here.
     Hand-written: a pool's task queue would need a feeder thread, and
     :class:`~rwlab._forked.Forked` forks only a process without threads.
 
     Parameters
     ----------
-    makers : mapping of str to callable
-        Figure id → ``make()``, returning a matplotlib figure (at most 256).
+    makers_of : callable
+        ``makers_of(value)``: figure id → ``make()``, returning a matplotlib figure (at
+        most 256); each process calls it on its copy of the value.
     first : callable, optional
-        Work for the child before it draws: ``first()``, returning a picklable value,
-        :attr:`first` once :meth:`result` returns.
+        ``first(value)``: work for the child before it draws, returning a picklable
+        value, :attr:`first` once :meth:`result` returns.
+    warm : callable, optional
+        ``warm()``: what the child does while it waits for the value.
 
     Attributes
     ----------
     first : object
-        ``first()``'s value (None before :meth:`result`, or without ``first``).
+        ``first(value)``'s value (None before :meth:`result`, or without ``first``).
     """
 
     def __init__(
-        self, makers: Mapping[str, Callable[[], Figure]], first: Callable[[], Any] | None = None
+        self,
+        makers_of: Callable[[Any], Mapping[str, Callable[[], Figure]]],
+        *,
+        first: Callable[[Any], Any] | None = None,
+        warm: Callable[[], None] | None = None,
     ) -> None:
+        self._makers_of, self._first, self._warm = makers_of, first, warm
+        self.first: Any = None
+        self._ids: list[str] = []
+        self._makers: list[Callable[[], Figure]] = []
+        self._value: Any = None
+        self._parent = os.getpid()
+        self._numbers, self._numbers_in = os.pipe()
+        self._values, self._values_in = os.pipe()  # the value's way to the child
+        self._child = Forked(self._in_child)
+        os.close(self._values)
+
+    def _in_child(self) -> tuple[Any, dict[int, bytes]]:
+        """The child's work (``Forked`` also calls it here where the child failed)."""
+        value = self._value
+        if os.getpid() != self._parent:
+            os.close(self._numbers_in)  # else the queue's pipe never ends
+            os.close(self._values_in)
+            if self._warm is not None:
+                self._warm()
+            with os.fdopen(self._values, "rb") as pipe:
+                value = pickle.load(pipe)
+            self._take(value)
+        first = None if self._first is None else self._first(value)
+        return first, self._drain()
+
+    def _take(self, value: Any) -> None:
+        makers = self._makers_of(value)
         if len(makers) > 256:
             raise ValueError(f"a FigureQueue holds at most 256 figures, got {len(makers)}")
         self._ids, self._makers = list(makers), list(makers.values())
-        self._first, self.first = first, None
-        self._numbers, write = os.pipe()
-        os.write(write, bytes(range(len(self._makers))))
-        os.close(write)
-        self._child = Forked(self._first_then_drain)
 
-    def _first_then_drain(self) -> tuple[Any, dict[int, bytes]]:
-        value = None if self._first is None else self._first()
-        return value, self._drain()
+    def start(self, value: Any) -> None:
+        """Hand the child ``value``: it computes ``first(value)``, then both processes draw.
+
+        Parameters
+        ----------
+        value : object
+            What the figures show (picklable).
+        """
+        self._take(value)
+        self._value = value
+        os.write(self._numbers_in, bytes(range(len(self._makers))))  # < a pipe's buffer
+        os.close(self._numbers_in)
+        self._numbers_in = -1
+        values_in, self._values_in = self._values_in, -1
+        try:
+            with os.fdopen(values_in, "wb") as pipe:
+                if self._child.forked:
+                    pickle.dump(value, pipe, protocol=pickle.HIGHEST_PROTOCOL)
+        except BrokenPipeError:  # the child ended: result() does its work here
+            pass
 
     def _drain(self) -> dict[int, bytes]:
         drawn = {}
@@ -234,7 +282,14 @@ class FigureQueue:
         Returns
         -------
         dict of str to bytes
+
+        Raises
+        ------
+        RuntimeError
+            Before :meth:`start`.
         """
+        if self._numbers_in >= 0:
+            raise RuntimeError("FigureQueue.result() before start(): the child has no value")
         drawn = self._drain()
         self.first, by_child = self._child.result()
         drawn |= by_child
@@ -245,11 +300,12 @@ class FigureQueue:
         return {fig_id: drawn[i] for i, fig_id in enumerate(self._ids)}
 
     def close(self) -> None:
-        """End the child if it still draws; close the queue."""
+        """End the child if it still works; close the pipes."""
         self._child.close()
-        if self._numbers >= 0:
-            os.close(self._numbers)
-            self._numbers = -1
+        for name in ("_numbers", "_numbers_in", "_values_in"):
+            if getattr(self, name) >= 0:
+                os.close(getattr(self, name))
+                setattr(self, name, -1)
 
     def __enter__(self) -> FigureQueue:
         return self

@@ -305,7 +305,10 @@ def _page(
     )
     page.text(
         f"Converted with the record's real sample time Ts = {d['Ts']:g} s (paper A's "
-        "eq. 14 used MATLAB's default Ts = 1 s by mistake)."
+        "eq. 14 used MATLAB's default Ts = 1 s by mistake). Each continuous model is driven "
+        "by the held input exactly (discretized by ZOH at Ts), so the ZOH conversion "
+        "returns the discrete model to round-off (a fractional delay: to its Padé "
+        "approximation) and Tustin's difference is its frequency warping."
     )
     page.figure(
         figs["fig23-continuous"],

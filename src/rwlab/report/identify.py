@@ -258,7 +258,8 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
     """The study, its nonlinear stage run in a forked child while this process draws the
     report's figures of the linear study (:class:`rwlab.report.html.FigureQueue`): the
     servo fit is most of the stage's time and drawing most of the report's, side by side
-    on two cores. The child then measures the healthy reference
+    on two cores. The child is forked before the linear study, to start meanwhile what
+    its work will need (:func:`_warm_child`); it then measures the healthy reference
     (``reference_of(result)``) and draws the servo model's figures, and each process
     draws the linear figures the other has not reached.
 
@@ -281,9 +282,7 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
         if progress is not None:
             progress(done, stages + 1, label)
 
-    linear = identification_study(data, nonlinear=False, progress=linear_progress, **options)
-
-    def nonlinear_part():
+    def nonlinear_part(linear):
         result = nonlinear_stage(linear, data, split=options["split"], **later)
         makers = {} if result.servo is None else nonlinear_makers(result)
         figures = [make() for make in makers.values()]
@@ -291,20 +290,40 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
         stages = (result.servo, result.nonlinear, result.greybox, result.nlarx)
         return stages, reference_of(result), pngs
 
+    queue = stack.enter_context(
+        FigureQueue(
+            lambda linear: linear_makers(linear, linear.to_dict()),
+            first=nonlinear_part,
+            warm=_warm_child,
+        )
+    )
+    linear = identification_study(data, nonlinear=False, progress=linear_progress, **options)
     # SciPy's own OpenBLAS loads with the study's imports, after identify_into's limit, so
     # it runs a thread per core: from here on one, as the servo fit and the drawing need
     # the cores (measured: 1–1.5 s less CPU, the same bytes written; the linear study
     # keeps them, as one thread there moves one standard deviation of study.json by 1 ulp)
     stack.enter_context(threadpool_limits(1, user_api="blas"))
-    queue = stack.enter_context(
-        FigureQueue(linear_makers(linear, linear.to_dict()), first=nonlinear_part)
-    )
+    queue.start(linear)
     drawn = queue.result()
     (servo, nl, grey, black), reference, nonlinear_pngs = queue.first
     if progress is not None:
         progress(total[0], total[0], "nonlinear")
     result = dataclasses.replace(linear, servo=servo, nonlinear=nl, greybox=grey, nlarx=black)
     return result, reference, drawn | nonlinear_pngs
+
+
+def _warm_child() -> None:
+    """What :func:`_study_while_drawing`'s child does while the linear study runs here:
+    BLAS on one thread (as :func:`_study_while_drawing` sets it here), the healthy
+    reference's imports, and numba's start, which a process's first compiled call pays
+    (≈ 0.2 s, measured), with the servo fit's compiled simulation."""
+    from threadpoolctl import threadpool_limits
+
+    import rwlab.diagnose  # noqa: F401  (the healthy reference's)
+    from rwlab.ident.nonlinear import load_kernels
+
+    threadpool_limits(1, user_api="blas")
+    load_kernels()
 
 
 def _read_once(file: str):
