@@ -4,10 +4,11 @@ on top, numbers with the digits they need (issue 45)."""
 from types import SimpleNamespace
 
 import pytest
+from matplotlib.ticker import LogFormatterMathtext
 
 from rwlab.report import attitude as attitude_report
 from rwlab.report import diagnosis as diagnosis_report
-from rwlab.report.html import Page, signed, trace_styles
+from rwlab.report.html import Page, PlainLogLabels, figure, render_pngs, signed, trace_styles
 from rwlab.report.model_choice import reason_clauses
 
 # study.json's chosen.reason of `rwlab demo` (seed 1): the ~1000-character sentence
@@ -108,3 +109,68 @@ def test_the_diagnosis_verdict_names_each_fault_first_seen_and_thresholds_are_a_
     page = Page("q")
     diagnosis_report._verdict(page, quiet)
     assert "No alarm in this 900-s record." in page.render()
+
+
+def _log_axis_labels(scale: str, values) -> tuple[list[str], list[str]]:
+    import matplotlib.pyplot as plt
+
+    fig, ax = figure()
+    ax.plot([0, 1], values)
+    ax.set_yscale(scale, **({"linthresh": 0.1} if scale == "symlog" else {}))
+    for axis in (ax.xaxis, ax.yaxis):
+        if isinstance(axis.get_major_formatter(), LogFormatterMathtext):
+            axis.set_major_formatter(PlainLogLabels(axis.get_major_formatter()))
+            axis.set_minor_formatter(PlainLogLabels(axis.get_minor_formatter()))
+    fig.canvas.draw()
+    major = [t.get_text() for t in ax.yaxis.get_majorticklabels()]
+    minor = [t.get_text() for t in ax.yaxis.get_minorticklabels() if t.get_text()]
+    plt.close(fig)
+    return major, minor
+
+
+def test_log_axes_are_labelled_in_plain_superscripts_as_matplotlib_labels_them():
+    major, _ = _log_axis_labels("log", [1e-5, 10.0])
+    assert major[1:-1] == ["10⁻⁵", "10⁻⁴", "10⁻³", "10⁻²", "10⁻¹", "10⁰", "10¹"]
+    _, minor = _log_axis_labels("log", [0.002, 0.004])  # under a decade: minor labels too
+    assert minor[:3] == ["2×10⁻³", "3×10⁻³", "4×10⁻³"]
+    major, _ = _log_axis_labels("symlog", [-100.0, 100.0])
+    assert major == ["−10²", "−10¹", "−10⁰", "−10⁻¹", "0", "10⁻¹", "10⁰", "10¹", "10²"]
+
+
+class _Labelled(LogFormatterMathtext):
+    """A log formatter that writes one given label."""
+
+    def __init__(self, label: str) -> None:
+        super().__init__()
+        self.label = label
+
+    def __call__(self, x, pos=None) -> str:
+        return self.label
+
+
+@pytest.mark.parametrize(
+    "label, text",
+    [
+        (r"$\mathdefault{2\times10^{-3}}$", "2×10⁻³"),
+        (r"$\mathdefault{-10^{12}}$", "−10¹²"),
+        (r"$\mathdefault{e^{2}}$", "e²"),
+        (r"$\mathdefault{10^{0.30}}$", r"$\mathdefault{10^{0.30}}$"),  # stays mathtext
+        (r"$\mathdefault{\sqrt{2}}$", r"$\mathdefault{\sqrt{2}}$"),
+        ("1e-3", "1e-3"),
+    ],
+)
+def test_a_log_label_is_plain_text_where_it_can_be_and_mathtext_where_not(label, text):
+    assert PlainLogLabels(_Labelled(label))(1.0) == text
+
+
+def test_report_figures_with_log_axes_are_drawn_without_mathtext(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("mathtext parsed")
+
+    monkeypatch.setattr("matplotlib.mathtext.MathTextParser.parse", refuse)
+    fig, axes = figure(nrows=2)
+    axes[0].semilogy([1.0, 2.0], [1e-3, 10.0])
+    axes[1].set_yscale("symlog", linthresh=0.1)
+    axes[1].plot([0.0, 1.0], [-50.0, 50.0])
+    (png,) = render_pngs([fig], processes=1)
+    assert png.startswith(b"\x89PNG")
