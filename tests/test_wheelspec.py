@@ -47,6 +47,18 @@ def test_round_trip_and_hash(name, tmp_path):
     assert spec.with_(max_torque_nm=spec.max_torque_nm / 2).hash != spec.hash
 
 
+@pytest.mark.parametrize("name", PRESETS)
+def test_a_spec_pickles_whole_and_stays_read_only(name):
+    import pickle
+
+    spec = WheelSpec.load(name)
+    again = pickle.loads(pickle.dumps(spec))
+    assert again == spec and again.hash == spec.hash
+    assert dict(again.sources) == dict(spec.sources) and again.origin == spec.origin
+    with pytest.raises(TypeError):
+        again.sources["inertia_kg_m2"] = "changed"  # type: ignore[index]
+
+
 def test_the_presets_differ_where_a_wheel_model_does():
     specs = [WheelSpec.load(n) for n in PRESETS]
     for field in ("inertia_kg_m2", "max_speed_rpm", "max_torque_nm", "speed_kp", "current_limit_a"):

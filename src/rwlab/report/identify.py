@@ -178,8 +178,14 @@ def _identify_into(
     error)."""
     from rwlab.ident.study import load_current, load_study_data
     from rwlab.ident.study import wheel_model as make_wheel_model
+    from rwlab.report.html import FigureQueue
     from rwlab.report.identification import write_study
 
+    # the child that fits the servo model and draws, forked first: it starts what its
+    # work needs (_warm_child) while this process reads the record
+    queue = stack.enter_context(
+        FigureQueue(_linear_makers, first=_nonlinear_part, warm=_warm_child)
+    )
     Ts, gaps = options["Ts"], options.get("gaps", "refuse")
     file = str(file)
     record, reader = _read_once(file)
@@ -216,10 +222,11 @@ def _identify_into(
         "wheel_spec": spec,
     }
     result, reference, drawn = _study_while_drawing(
+        queue,
         data,
         stack,
         progress,
-        lambda result: _healthy_reference(file, make_wheel_model(result, **model_options), record),
+        {"reference_data": _reference_data(file, record, data.Ts), "model_options": model_options},
         preprocess=options["preprocess"],
         split=options["split"],
         tolerance=options["tolerance"],
@@ -254,14 +261,14 @@ def _identify_into(
     return study, paths
 
 
-def _study_while_drawing(data, stack, progress, reference_of, **options):
-    """The study, its nonlinear stage run in a forked child while this process draws the
-    report's figures of the linear study (:class:`rwlab.report.html.FigureQueue`): the
-    servo fit is most of the stage's time and drawing most of the report's, side by side
-    on two cores. The child is forked before the linear study, to start meanwhile what
-    its work will need (:func:`_warm_child`); it then measures the healthy reference
-    (``reference_of(result)``) and draws the servo model's figures, and each process
-    draws the linear figures the other has not reached.
+def _study_while_drawing(queue, data, stack, progress, job, **options):
+    """The study, its nonlinear stage run in the child of ``queue``
+    (:class:`rwlab.report.html.FigureQueue`) while this process draws the report's
+    figures of the linear study: the servo fit is most of the stage's time and drawing
+    most of the report's, side by side on two cores. The child gets the linear study
+    and ``job`` (the record's samples and what the wheel model needs), fits the servo model,
+    draws its figures and measures the healthy reference (:func:`_nonlinear_part`);
+    then each process draws the linear figures the other has not reached.
 
     Returns the study, the healthy reference (or why there is none) and every figure's
     PNG by id; ``options`` are :func:`rwlab.ident.study.identification_study`'s, and
@@ -269,9 +276,7 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
     """
     from threadpoolctl import threadpool_limits
 
-    from rwlab.ident.study import identification_study, nonlinear_stage
-    from rwlab.report.html import FigureQueue, render_pngs
-    from rwlab.report.study_figures import linear_makers, nonlinear_makers
+    from rwlab.ident.study import identification_study
 
     keys = ("limits_rpm", "datasheet", "current", "nonlinear_models")
     later = {key: options.pop(key) for key in keys}
@@ -282,28 +287,13 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
         if progress is not None:
             progress(done, stages + 1, label)
 
-    def nonlinear_part(linear):
-        result = nonlinear_stage(linear, data, split=options["split"], **later)
-        makers = {} if result.servo is None else nonlinear_makers(result)
-        figures = [make() for make in makers.values()]
-        pngs = dict(zip(makers, render_pngs(figures, processes=1), strict=True))
-        stages = (result.servo, result.nonlinear, result.greybox, result.nlarx)
-        return stages, reference_of(result), pngs
-
-    queue = stack.enter_context(
-        FigureQueue(
-            lambda linear: linear_makers(linear, linear.to_dict()),
-            first=nonlinear_part,
-            warm=_warm_child,
-        )
-    )
     linear = identification_study(data, nonlinear=False, progress=linear_progress, **options)
     # SciPy's own OpenBLAS loads with the study's imports, after identify_into's limit, so
     # it runs a thread per core: from here on one, as the servo fit and the drawing need
     # the cores (measured: 1–1.5 s less CPU, the same bytes written; the linear study
     # keeps them, as one thread there moves one standard deviation of study.json by 1 ulp)
     stack.enter_context(threadpool_limits(1, user_api="blas"))
-    queue.start(linear)
+    queue.start({**job, "linear": linear, "data": data, "split": options["split"], "later": later})
     drawn = queue.result()
     (servo, nl, grey, black), reference, nonlinear_pngs = queue.first
     if progress is not None:
@@ -312,14 +302,41 @@ def _study_while_drawing(data, stack, progress, reference_of, **options):
     return result, reference, drawn | nonlinear_pngs
 
 
+def _linear_makers(job: dict) -> dict:
+    """The makers of the linear study's figures (``job`` as :func:`_nonlinear_part`'s)."""
+    from rwlab.report.study_figures import linear_makers
+
+    return linear_makers(job["linear"], job["linear"].to_dict())
+
+
+def _nonlinear_part(job: dict) -> tuple[tuple, dict | str, dict[str, bytes]]:
+    """The child's work: the study's nonlinear stage, the servo model's figures and the
+    healthy reference. ``job``: the linear study, its data and split, the nonlinear
+    stage's options, the record sampled for the reference and the wheel model's
+    options."""
+    from rwlab.ident.study import nonlinear_stage
+    from rwlab.ident.study import wheel_model as make_wheel_model
+    from rwlab.report.html import render_pngs
+    from rwlab.report.study_figures import nonlinear_makers
+
+    result = nonlinear_stage(job["linear"], job["data"], split=job["split"], **job["later"])
+    makers = {} if result.servo is None else nonlinear_makers(result)
+    figures = [make() for make in makers.values()]
+    pngs = dict(zip(makers, render_pngs(figures, processes=1), strict=True))
+    stages = (result.servo, result.nonlinear, result.greybox, result.nlarx)
+    model = make_wheel_model(result, **job["model_options"])
+    return stages, _healthy_reference(job["reference_data"], model), pngs
+
+
 def _warm_child() -> None:
-    """What :func:`_study_while_drawing`'s child does while the linear study runs here:
-    BLAS on one thread (as :func:`_study_while_drawing` sets it here), the healthy
-    reference's imports, and numba's start, which a process's first compiled call pays
-    (≈ 0.2 s, measured), with the servo fit's compiled simulation."""
+    """What the figure child does while this process reads the record and runs the
+    linear study: BLAS on one thread (as :func:`_study_while_drawing` sets it here), the
+    healthy reference's imports, and numba's start, which a process's first compiled
+    call pays (≈ 0.2 s, measured), with the servo fit's compiled simulation."""
     from threadpoolctl import threadpool_limits
 
-    import rwlab.diagnose  # noqa: F401  (the healthy reference's)
+    import rwlab.diagnose
+    import rwlab.ident.study  # noqa: F401  (SciPy's BLAS loaded, to be limited)
     from rwlab.ident.nonlinear import load_kernels
 
     threadpool_limits(1, user_api="blas")
@@ -357,25 +374,32 @@ def _after_first(progress, first: Callable[[], None]):
 NOT_A_RECORD = "not a testbed record (.mcap with motor current)"
 
 
-def _healthy_reference(file, model, record=None) -> dict | str:
-    """The healthy reference measured on a testbed record (``record``: the record
-    decoded already, else read from ``file``), or why there is none."""
+def _reference_data(file: str, record, Ts: float):
+    """The record sampled for the healthy reference (``record``: decoded already, else
+    read from ``file``) at the study's ``Ts``, or why there is none."""
     import numpy as np
 
-    from rwlab.diagnose import healthy_reference
     from rwlab.testbed.load import load_record
-    from rwlab.wheel import IdentifiedWheel
 
     if Path(file).suffix.lower() != ".mcap":
         return NOT_A_RECORD
+    outputs = ("speed", "current", "age", "lost")
+    try:
+        return load_record(file if record is None else record, Ts, outputs=outputs, max_gap=np.inf)
+    except RwlabError as exc:
+        return _message(exc)
+
+
+def _healthy_reference(data, model) -> dict | str:
+    """The healthy reference measured on ``data`` (:func:`_reference_data`) with the
+    wheel model ``model``, or why there is none."""
+    from rwlab.diagnose import healthy_reference
+    from rwlab.wheel import IdentifiedWheel
+
+    if isinstance(data, str):
+        return data
     try:
         wheel = IdentifiedWheel.from_file(model)
-        data = load_record(
-            file if record is None else record,
-            wheel.Ts,
-            outputs=("speed", "current", "age", "lost"),
-            max_gap=np.inf,
-        )
         # the data's name: the file's, and says so where the record was salvaged
         return healthy_reference(data, wheel, source=data.name).to_dict()
     except RwlabError as exc:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 from typing import Any, ClassVar
 
@@ -212,6 +212,13 @@ class WheelSpec:
         object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
         object.__setattr__(self, "documents", tuple(self.documents))
         check_ranges(self)
+
+    def __reduce__(self) -> tuple:
+        # pickled by its fields, the read-only mappings as dicts (a mappingproxy does not
+        # pickle): a spec travels to Dask workers and to forked children
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values |= {"tolerances": dict(self.tolerances), "sources": dict(self.sources)}
+        return _from_fields, (type(self), values)
 
     # -- derived limits --------------------------------------------------------------
     @property
@@ -423,3 +430,8 @@ class WheelSpec:
         for name in changes:
             sources[name] = f"changed from {getattr(self, name)!r} ({sources[name]})"
         return replace(self, sources=MappingProxyType(sources), **changes)
+
+
+def _from_fields(cls: type, values: dict) -> WheelSpec:
+    """A pickled spec rebuilt (:meth:`WheelSpec.__reduce__`)."""
+    return cls(**values)
