@@ -7,7 +7,8 @@ Makes a 25-minute PRBS record of the RW90 twin (simulated clock, seed 3) unless
 ``--record`` names one, then runs, ``--repeats`` times and back to back (so a busy
 machine slows both alike), ``rwlab identify`` and ``rwlab ident arx FILE 2 2 1`` on it
 as the command line does (a fresh process each: imports and the record's read
-included), after one round not counted (numba's cache filled). ``--baseline SRC``
+included), after one round not counted (numba's cache and Python's compiled modules
+filled, even where PYTHONDONTWRITEBYTECODE is set). ``--baseline SRC``
 also times ``identify`` from another source tree (e.g. ``git archive 96f5310 src |
 tar -x -C /tmp/base`` and ``--baseline /tmp/base/src``), in the same rounds. The
 table gives the median wall and CPU time (this process's children) with the spread
@@ -40,6 +41,9 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 def run(args: list[str], src: Path = SRC, env: dict | None = None) -> tuple[float, float]:
     """Wall and CPU seconds of ``python -m rwlab.cli ARGS`` with ``src`` first on the path."""
     env = {**os.environ, **(env or {}), "PYTHONPATH": str(src)}
+    # as on a user's machine, compiled modules are cached (the uncounted round writes
+    # them): a tree without them compiles every module it imports, each run (~0.1 s)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     done = subprocess.run(
