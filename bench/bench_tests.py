@@ -1,11 +1,12 @@
 """The test suite's time per lane, against issue 45's targets, and its slowest steps.
 
-Run:  python bench/bench_tests.py [--workers 2] [--lane quick|full|both] [--cold]
+Run:  python bench/bench_tests.py [--workers auto] [--lane quick|full|both] [--cold]
 
 Rows: the quick lane (``python -m pytest -m "not slow"``, target ≤ 2 min) and the
 whole suite (the README's ``python -m pytest``, target ≤ 5 min on a fresh clone, which
-includes the install this script does not time), each with ``-n WORKERS`` (the targets
-are for 2 cores), wall time of the pytest process. ``--cold`` first removes numba's
+includes the install this script does not time), each with ``-n WORKERS`` (default
+``auto``, as the suite runs: one worker more than the cores; the targets are for 2
+cores), wall time of the pytest process. ``--cold`` first removes numba's
 cache (the ``__pycache__/*.nbi``/``*.nbc`` files under src/), as on a fresh clone.
 Then the 25 slowest steps (setup, call or teardown) of the last lane, with whether the
 test is marked ``slow``: a step of more than ~20 s in the quick lane is a candidate
@@ -36,10 +37,10 @@ def clear_numba_cache() -> int:
     return len(files)
 
 
-def run_lane(name: str, workers: int) -> tuple[float, int, list[tuple[float, str, str]]]:
+def run_lane(name: str, workers: str) -> tuple[float, int, list[tuple[float, str, str]]]:
     """Run one lane; its wall time (s), pytest's exit status and its slowest steps."""
     extra, _ = LANES[name]
-    args = [sys.executable, "-m", "pytest", "-q", "-n", str(workers), "--durations=25", *extra]
+    args = [sys.executable, "-m", "pytest", "-q", "-n", workers, "--durations=25", *extra]
     env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
     start = time.perf_counter()
     done = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True)
@@ -66,7 +67,7 @@ def slow_marked(nodeid: str) -> bool:
 def main() -> None:
     """Print the lanes' table and the slowest steps."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", default="auto", help="pytest-xdist's -n (default: auto)")
     parser.add_argument("--lane", choices=("quick", "full", "both"), default="both")
     parser.add_argument("--cold", action="store_true", help="remove numba's cache first")
     opts = parser.parse_args()
