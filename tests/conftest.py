@@ -146,24 +146,65 @@ def pytest_xdist_auto_num_workers(config) -> int:
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels(tmp_path_factory) -> None:
-    """Under pytest-xdist, the attitude loop's and the wheel twin's numba kernels compile
-    in the first worker at its start, into numba's cache (``cache=True``); the others do
-    not wait for it (a cold compile is ~35 s, an idle core on two): a test of theirs that
-    runs the kernel before the cache is written compiles it too. A no-op in one process
-    (``-p no:xdist``, ``-o addopts=""``)."""
+    """Under pytest-xdist, the slowest numba kernels to compile, into numba's cache
+    (``cache=True``), each by one worker at its start: the attitude loop
+    (``kernel.run_block``, with the wheel twin's step) by the first, HIL's two halves
+    of a step by the next, side by side. Every other worker goes on with its tests, and
+    the first of theirs that needs one of those kernels waits for its cache instead of
+    compiling it too (:func:`_wait_for`): the loop is ~30 s of a core cold, and three
+    workers compiling it at once on two cores cost a fresh clone's quick lane ~30 s
+    (measured). A no-op in one process (``-p no:xdist``, ``-o addopts=""``)."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
-    lock = FileLock(str(tmp_path_factory.getbasetemp().parent / "compiled-kernels.lock"))
-    try:
-        lock.acquire(timeout=0)
-    except Timeout:
-        return  # another worker compiles them
-    try:
-        import rwlab
-        from rwlab.wheel import WheelPhysics  # the twin's step (rwlab.wheel.kernel)
+    from rwlab.attitude import kernel
 
-        for controller in ("lqr", "lqg"):
-            rwlab.simulate("geo-smallsat", controller, duration=2.0)
-        WheelPhysics().run(1e-3, 10)
-    finally:
-        lock.release()
+    shared = tmp_path_factory.getbasetemp().parent
+    for name, compile_them, kernels in (
+        ("loop", _compile_the_loop, (kernel.run_block,)),
+        ("hil-step", _compile_hils_step, (kernel.command_step, kernel.finish_step)),
+    ):
+        lock = FileLock(str(shared / f"compiled-{name}.lock"))
+        try:
+            lock.acquire(timeout=0)
+        except Timeout:  # another worker compiles them
+            for dispatcher in kernels:
+                _wait_for(lock, dispatcher)
+            continue
+        try:
+            compile_them()
+        finally:
+            lock.release()
+
+
+def _compile_the_loop() -> None:
+    import rwlab
+    from rwlab.wheel import WheelPhysics  # the twin's step (rwlab.wheel.kernel)
+
+    for controller in ("lqr", "lqg"):
+        rwlab.simulate("geo-smallsat", controller, duration=2.0)
+    WheelPhysics().run(1e-3, 10)
+
+
+def _compile_hils_step() -> None:
+    from rwlab.attitude.control import LQRController
+    from rwlab.attitude.scenario import SCENARIOS
+    from rwlab.hil.satellite import Satellite
+
+    scenario = SCENARIOS["geo-smallsat"]
+    satellite = Satellite(scenario, LQRController(scenario), duration=1.0, seed=0)
+    torques = satellite.wheel_torques()
+    satellite.advance(satellite.x[7:] + torques * scenario.run.dt)
+
+
+def _wait_for(lock: FileLock, kernel) -> None:
+    """Have ``kernel`` (a numba dispatcher) wait for ``lock`` before it first compiles:
+    numba then finds what the worker holding the lock cached, and loads it."""
+    compile_here = kernel.compile
+
+    def compile_once_cached(signature):
+        with lock:  # free once the other worker has compiled and cached the kernels
+            pass
+        del kernel.compile  # numba's own again
+        return compile_here(signature)
+
+    kernel.compile = compile_once_cached
