@@ -50,6 +50,9 @@ def run_lane(name: str, workers: str) -> tuple[float, int, list[tuple[float, str
     ]
     if done.returncode not in (0, 1):
         sys.stderr.write(done.stdout[-3000:] + done.stderr[-3000:])
+    for line in done.stdout.splitlines():  # a failing test named, whatever the lane's time
+        if line.startswith(("FAILED", "ERROR")):
+            sys.stderr.write(line + "\n")
     return wall, done.returncode, steps
 
 
