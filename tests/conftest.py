@@ -168,7 +168,7 @@ def compiled_kernels(tmp_path_factory) -> None:
             lock.acquire(timeout=0)
         except Timeout:  # another worker compiles them
             for dispatcher in kernels:
-                _wait_for(lock, dispatcher)
+                _wait_for(lock.lock_file, dispatcher)
             continue
         try:
             compile_them()
@@ -196,13 +196,15 @@ def _compile_hils_step() -> None:
     satellite.advance(satellite.x[7:] + torques * scenario.run.dt)
 
 
-def _wait_for(lock: FileLock, kernel) -> None:
-    """Have ``kernel`` (a numba dispatcher) wait for ``lock`` before it first compiles:
-    numba then finds what the worker holding the lock cached, and loads it."""
+def _wait_for(lock_file: str, kernel) -> None:
+    """Have ``kernel`` (a numba dispatcher) wait for the lock ``lock_file`` before it
+    first compiles: numba then finds what the worker holding the lock cached, and loads
+    it. A new lock each time: a process forked from this one (a demo's flights) may be
+    the one that waits, and a lock does not cross a fork."""
     compile_here = kernel.compile
 
     def compile_once_cached(signature):
-        with lock:  # free once the other worker has compiled and cached the kernels
+        with FileLock(lock_file):  # free once the other worker has compiled and cached them
             pass
         del kernel.compile  # numba's own again
         return compile_here(signature)
