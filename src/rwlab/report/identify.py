@@ -335,8 +335,7 @@ def _warm_child() -> None:
     call pays (≈ 0.2 s, measured), with the servo fit's compiled simulation."""
     from threadpoolctl import threadpool_limits
 
-    import rwlab.diagnose
-    import rwlab.ident.study  # noqa: F401  (SciPy's BLAS loaded, to be limited)
+    import rwlab.diagnose  # noqa: F401  (SciPy's BLAS is loaded already: the study's imports)
     from rwlab.ident.nonlinear import load_kernels
 
     threadpool_limits(1, user_api="blas")

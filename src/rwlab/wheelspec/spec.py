@@ -215,7 +215,7 @@ class WheelSpec:
 
     def __reduce__(self) -> tuple:
         # pickled by its fields, the read-only mappings as dicts (a mappingproxy does not
-        # pickle): a spec travels to Dask workers and to forked children
+        # pickle): rwlab identify hands a record's spec to its forked child this way
         values = {f.name: getattr(self, f.name) for f in fields(self)}
         values |= {"tolerances": dict(self.tolerances), "sources": dict(self.sources)}
         return _from_fields, (type(self), values)
