@@ -327,6 +327,35 @@ def test_dead_motor_in_a_pyramid_is_named_idled_and_survived(tmp_path):
     assert kinds.index("reallocate") < kinds.index("stop")
 
 
+@pytest.mark.parametrize(
+    ("scenario", "fault"),
+    [
+        ("geo-smallsat-pyramid", "3:current_limit=0.42@250"),
+        ("geo-comsat", "2:current_limit=3.6@250"),
+    ],
+)
+def test_a_clamp_the_loop_never_reaches_is_named_by_the_next_capacity_probe(
+    scenario, fault, tmp_path
+):
+    """A current clamp at 60 % of the wheel's (RW90, NRWA-T6): the calm loop draws a few
+    percent of it, so only the probe that follows (at 300 s, after three healthy ones)
+    reaches it; it is named a clamp by its missing current, and it is the only alarm."""
+    cfg = HilConfig(
+        scenario=scenario,
+        duration=320.0,
+        seed=4,
+        channel=_channel(),
+        calibration_s=150.0,
+        faults=(parse_node_fault(fault),),
+        reference=False,
+    )
+    m = run_hil(cfg, tmp_path / "out").metrics
+    [alarm] = m["wheel_faults"]
+    assert alarm["node"] == int(fault[0]) and alarm["named_kind"] == "current_limit"
+    assert "capacity probe" in alarm["detector"]
+    assert 300.0 < alarm["detected_s"] <= 301.2  # the end of the probe's push
+
+
 @pytest.mark.slow
 def test_a_healthy_pyramid_raises_no_alarm_and_the_excitation_costs_no_pointing(tmp_path):
     """Another seed than the fault's, no fault: the command-tracking tests (calibrated on
@@ -673,6 +702,30 @@ def test_hil_flies_its_wheels_through_a_canopen_profile(protocol, tmp_path):
     steps = result.run.stats["steps"]
     for n in (1, 2, 3):
         assert len(rec.topic(f"/wheel{n}/telemetry")) >= steps
+
+
+def test_a_wheel_rwlabs_dbc_would_clip_flies_on_canopen_and_rwlab_is_refused(tmp_path):
+    """The comsat's NRWA-T6-class wheels draw up to 6 A, beyond rw.dbc's ±2.048 A current:
+    by default their twins speak CANopen (mA in 16 bits) and a push that draws more than
+    2.048 A is read as drawn; asked for rwlab's protocol, hil refuses before anything
+    starts and names the signal and the way out."""
+    res = CliRunner().invoke(
+        main,
+        [
+            *("hil", "--scenario", "geo-comsat", "--duration", "2", "--protocol", "rwlab"),
+            *("--out", str(tmp_path / "refused")),
+        ],
+    )
+    assert res.exit_code == 2 and "Current" in res.output and "--protocol canopen" in res.output
+    assert not (tmp_path / "refused").exists()
+    cfg = HilConfig(
+        scenario="geo-comsat", duration=70.0, seed=2, channel=_channel(), reference=False
+    )
+    m = run_hil(cfg, tmp_path / "out").metrics
+    assert m["config"]["protocol"] == "canopen"
+    rec = read_record(tmp_path / "out" / "record.mcap")
+    peak = max(abs(f["current_a"]) for f in rec.topic("/wheel1/telemetry") if f["t"] > 0)
+    assert 2.1 < peak < 6.0  # the first capacity probe (60 s), read beyond rw.dbc's range
 
 
 def test_hil_refuses_a_serial_profile_in_one_line(tmp_path):

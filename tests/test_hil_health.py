@@ -11,7 +11,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from rwlab.attitude.scenario import load_scenario
-from rwlab.hil.health import NullSpaceDither, TrackingTest, name_fault, null_vector
+from rwlab.hil.health import (
+    PROBE_CALIBRATION,
+    NullSpaceDither,
+    TrackingTest,
+    name_fault,
+    null_vector,
+)
 from rwlab.wheel.physics import RW90, rad_s_to_rpm
 
 PYRAMID = load_scenario("geo-smallsat-pyramid").wheel_matrix
@@ -31,11 +37,12 @@ def test_null_vector_of_a_pyramid_and_none_for_three_axes():
     idle=st.sampled_from([None, 0, 1, 2, 3]),
 )
 def test_the_dither_puts_no_torque_on_the_body(t, idle):
-    """Physics invariant: the excitation lies in the null space of the wheels it drives."""
+    """Physics invariant: the excitation, probes included, lies in the null space of the
+    wheels it drives."""
     active = np.ones(4, bool)
     if idle is not None:
         active[idle] = False
-    tau = NullSpaceDither(PYRAMID, 4.2e-4).torques(t, active)
+    tau = NullSpaceDither(PYRAMID, 4.2e-4, probe_rpm_s=280.0).torques(t, active)
     np.testing.assert_allclose(PYRAMID @ tau, 0, atol=1e-15)
     if idle is not None:  # three wheels left: no null space, no excitation
         assert not np.any(tau)
@@ -51,17 +58,77 @@ def test_the_dither_is_zero_mean_with_the_stated_amplitude():
     np.testing.assert_allclose(accel_rpm_s.mean(axis=0), 0, atol=1e-9)
 
 
-def _wheel(test, rng, steps, follow, drag_rpm_s=0.0, speed=1000.0, dt=0.1, t0=0.0):
+def test_a_probe_pushes_and_returns_whole_control_periods_and_leaves_the_speeds():
+    """Each probe is ten 0.1-s periods out and ten back, on k·dt times as the loop computes
+    them (floats a hair off the boundaries): the speeds it moves come back exactly."""
+    inertia, dt = 4.2e-4, 0.1
+    d = NullSpaceDither(PYRAMID, inertia, amplitude_rpm_s=0.0, probe_rpm_s=280.0)
+    active = np.ones(4, bool)
+    d.torques(0.0, active)
+    phases = np.array([d.probe_phase(k * dt) for k in range(3600)])
+    speed = sum(rad_s_to_rpm(d.torques(k * dt, active) / inertia) * dt for k in range(3600))
+    starts = np.flatnonzero((phases[1:] == 1) & (phases[:-1] == 0)) + 1
+    np.testing.assert_allclose(starts * dt, [60, 120, 180, 240, 300], atol=1e-9)
+    assert np.sum(phases == 1) == np.sum(phases == -1) == 50
+    np.testing.assert_allclose(speed, 0, atol=1e-9)
+    d.torques(0.0, np.array([True, True, False, True]))  # three wheels: no null space
+    assert d.probe_phase(60.0) == 0
+
+
+def _wheel(
+    test, rng, steps, follow, drag_rpm_s=0.0, speed=1000.0, dt=0.1, t0=0.0, probe=None, clamp=1.0
+):
     """A synthetic wheel under the dither: the speed it reports (0.5 rpm noise and quantum)
-    follows ``follow`` × the command, less a drag; returns the first alarm or None."""
+    follows ``follow`` × the command, less a drag; returns the first alarm or None.
+
+    With ``probe`` (a ``NullSpaceDither`` of one wheel) its probes are flown too: the drive
+    asks 0.002 A per rpm/s and delivers at most ``clamp`` A; a clamped wheel's acceleration
+    is what the clamp allows."""
     for k in range(steps):
-        cmd = 10.0 * math.cos(2 * math.pi * (t0 + k * dt) / 4.0)
-        speed += (follow * cmd - drag_rpm_s) * dt
+        t = t0 + k * dt
+        cmd = 10.0 * math.cos(2 * math.pi * t / 4.0)
+        phase = 0
+        if probe is not None:
+            phase = probe.probe_phase(t)
+            cmd += phase * 280.0
+        current = min(0.02 + 0.002 * abs(cmd), clamp)
+        moved = follow * math.copysign(min(abs(cmd), (clamp - 0.02) / 0.002), cmd)
+        speed += (moved - drag_rpm_s) * dt
         reading = round((speed + rng.normal(0, 0.5)) * 2) / 2
-        found = test.update(cmd, reading, 0.02)
+        found = test.update(cmd, reading, current, phase)
         if found is not None:
             return k, found
     return None
+
+
+def _probed(seed):
+    """A calibrating test, its noise and a probe schedule (two opposed wheels: a null space)."""
+    probe = NullSpaceDither(np.array([[1.0, 1.0], [0, 0], [0, 0]]), 4.2e-4, probe_rpm_s=280.0)
+    probe.torques(0.0, np.ones(2, bool))
+    test = TrackingTest(0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3)
+    return np.random.default_rng(seed), test, probe
+
+
+def test_a_probe_finds_a_clamp_the_dither_never_reaches_and_names_it():
+    """A clamp at 0.4 A: the dither asks 0.04 A, so only the probe (0.58 A) reaches it. A
+    healthy hour of probes raises nothing; the first probe after the clamp names it."""
+    rng, test, probe = _probed(3)
+    assert _wheel(test, rng, 3000 + 36_000, follow=1.0, probe=probe) is None
+    assert len(test.healthy_probes) == PROBE_CALIBRATION
+    k, alarm = _wheel(test, rng, 1200, follow=1.0, t0=3930.0, probe=probe, clamp=0.4)
+    assert alarm.test == "capacity probe" and alarm.kind == "current_limit"
+    assert alarm.statistic > alarm.threshold
+    assert 3930.0 + k * 0.1 == pytest.approx(3961.0)  # the end of the next probe's push
+
+
+def test_a_probe_names_a_weak_motor_by_the_current_it_still_draws():
+    """k_t × 0.8 (the wheel follows 80 % of its command, its drive delivers the current it
+    asks): the probe's shortfall with a full current is the motor, not a clamp."""
+    rng, test, probe = _probed(4)
+    assert _wheel(test, rng, 3000, follow=1.0, probe=probe) is None
+    found = _wheel(test, rng, 1200, follow=0.8, t0=300.0, probe=probe)
+    assert found is not None and found[1].test == "capacity probe"
+    assert found[1].kind == "torque_constant"
 
 
 def test_a_healthy_wheel_raises_no_alarm_and_a_dead_one_is_named_in_seconds():
@@ -70,9 +137,9 @@ def test_a_healthy_wheel_raises_no_alarm_and_a_dead_one_is_named_in_seconds():
     assert _wheel(test, rng, 3000 + 36_000, follow=1.0) is None  # calibration + 1 h healthy
     assert test.healthy_spread_rpm_s() == pytest.approx(0.5 * math.sqrt(2), rel=0.2)
     # the motor dies: the wheel coasts against its friction and ignores its command
-    k, (kind, stat, h) = _wheel(test, rng, 600, follow=0.0, drag_rpm_s=6.8, t0=3900.0)
-    assert k * 0.1 <= 10.0 and stat > h
-    assert kind == "torque_constant"
+    k, alarm = _wheel(test, rng, 600, follow=0.0, drag_rpm_s=6.8, t0=3900.0)
+    assert k * 0.1 <= 10.0 and alarm.statistic > alarm.threshold
+    assert alarm.test == "CUSUM" and alarm.kind == "torque_constant"
 
 
 def test_extra_friction_is_told_from_a_dead_motor():
@@ -80,7 +147,7 @@ def test_extra_friction_is_told_from_a_dead_motor():
     test = TrackingTest(0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3)
     assert _wheel(test, rng, 3000, follow=1.0) is None
     found = _wheel(test, rng, 600, follow=1.0, drag_rpm_s=6.8, t0=300.0)
-    assert found is not None and found[1][0] == "friction"
+    assert found is not None and found[1].kind == "friction"
 
 
 def test_name_fault_reads_a_clamped_current():

@@ -95,14 +95,23 @@ def test_the_attitude_verdict_names_a_failing_run_and_the_lag_cost_has_its_digit
 
 
 def test_the_diagnosis_verdict_names_each_fault_first_seen_and_thresholds_are_a_table():
-    alarm = SimpleNamespace(t_s=611.5, kind="friction", detector="friction")
-    later = SimpleNamespace(t_s=637.5, kind="friction", detector="slew")
+    alarm = SimpleNamespace(
+        t_s=611.5,
+        kind="friction",
+        detector="friction",
+        magnitude=2.13,
+        ci=(1.8, 2.4),
+        unit="factor",
+    )
+    later = SimpleNamespace(
+        t_s=637.5, kind="friction", detector="slew", magnitude=None, ci=None, unit="factor"
+    )
     found = SimpleNamespace(alarms=[later, alarm], model_tested=lambda: True, duration_s=1200.0)
     page = Page("d")
     diagnosis_report._verdict(page, found)
     diagnosis_report._threshold_table(page, ["friction: with 100% of its tolerance", "plain"])
     html = page.render()
-    assert "2 alarms, first of each fault: friction at 611.5 s (friction test)" in html
+    assert "2 alarms, first of each fault: friction ×2.13 (95 % CI 1.8 … 2.4) at 611.5 s" in html
     assert 'class="verdict bad"' in html and 'id="threshold-notes"' in html
     assert "<td>friction</td><td>with 100% of its tolerance</td>" in html
     quiet = SimpleNamespace(alarms=[], model_tested=lambda: True, duration_s=900.0)

@@ -64,10 +64,10 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 @click.option("--channel", default=None, help="Bus channel (the interface's default).")
 @click.option(
     "--protocol",
-    default="rwlab",
-    show_default=True,
+    default=None,
     help="Wheel protocol on the bus: rwlab, canopen, or a registered CAN one (`rwlab wheel "
-    "protocols`); serial NSP wheels cannot share one bus and are refused.",
+    "protocols`); serial NSP wheels cannot share one bus and are refused [default: rwlab, "
+    "or canopen for twins whose currents rwlab's DBC cannot carry].",
 )
 @click.option(
     "--profile",
@@ -165,7 +165,8 @@ def hil(
     from rwlab.wheel.link import resolve_protocol
 
     _only_with("calibration", settings["diagnosis"] is not False, "with the diagnosis on")
-    settings["protocol"] = resolve_protocol(settings["protocol"], profile)
+    if settings["protocol"] is not None or profile is not None:
+        settings["protocol"] = resolve_protocol(settings["protocol"] or "rwlab", profile)
     single_thread_blas()
     # the options not named here are named after their HilConfig field
     cfg = HilConfig(

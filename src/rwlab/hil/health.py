@@ -30,6 +30,19 @@ lose their null-space bias, cross zero and dwell there ~10 s, which the CUSUM
 took for friction). At three Stribeck speeds the Stribeck excess is e⁻⁹ of
 itself: outside the band the test sees the wheel as calibrated.
 
+A current clamp that the calm loop never reaches is invisible to that test (a
+wheel 1000 rpm from zero draws a few percent of its clamp) and harmless until
+the loop needs the torque. So every :data:`PROBE_EVERY_S` the excitation adds
+a **capacity probe**: a null-space push at :data:`PROBE_SHARE` of the wheel's
+rated acceleration for :data:`PROBE_S`, then the same back (the speeds return,
+the body feels nothing while every wheel follows). The speed change over the
+push is compared with the command, against the wheel's own first
+:data:`PROBE_CALIBRATION` probes; a shortfall beyond the false-alarm rate's
+threshold is named by the push's mean current against the healthy probes': a
+clamp's missing current explains at least half its missing speed change
+(``current_limit``); a motor that drew its current and still fell short lost
+torque (``torque_constant``).
+
 Hand-written: no library offers a command-tracking monitor for a wheel drive.
 """
 
@@ -37,14 +50,16 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import norm
 
 from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
 from rwlab.errors import ConfigError
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
 
-__all__ = ["NullSpaceDither", "TrackingTest", "name_fault", "null_vector"]
+__all__ = ["NullSpaceDither", "TrackingAlarm", "TrackingTest", "name_fault", "null_vector"]
 
 DITHER_RPM_S = 10.0  # amplitude of the excitation's acceleration, rpm/s (±6 rpm of speed)
 DITHER_PERIOD_S = 4.0  # its period, s: a few periods fit in the time a fault must be named
@@ -54,6 +69,11 @@ MIN_NAMING_S = 2.0  # the excursion's samples that name a fault: at least this m
 FOLLOW_MAX = -0.3  # residual ∝ −command beyond this share: the wheel does not follow
 CURRENT_SHARE = 0.5  # delivered current below this share of the requested one: clamped
 STICTION_BAND = 3.0  # × the Stribeck speed (or the Hall dead zone): breakaway rules inside
+PROBE_SHARE = 0.9  # the probe's push, × the rated acceleration: a clamp costing more is seen
+PROBE_S = 1.0  # the push lasts this long, s, and the way back as long
+PROBE_EVERY_S = 60.0  # a probe starts every this many seconds of flight (the first at this)
+PROBE_SETTLE_S = 1.0  # the tracking test skips this long after a probe (the drive's lag)
+PROBE_CALIBRATION = 3  # a wheel's first probes in the loop are its healthy ones
 
 
 def null_vector(G: np.ndarray) -> np.ndarray | None:
@@ -93,6 +113,11 @@ class NullSpaceDither:
         Peak commanded acceleration of the wheel that moves most, rpm/s.
     period_s : float
         Period of the cosine, s (its speed swing, ``amplitude · period / 2π``, is zero-mean).
+    probe_rpm_s : float
+        The capacity probe's push, rpm/s (0: no probe); see :meth:`probe_phase`.
+    probe_every_s, probe_s : float
+        A probe starts every ``probe_every_s`` s (the first at ``probe_every_s``) and
+        pushes for ``probe_s`` s, then pulls back as long.
     """
 
     def __init__(
@@ -101,12 +126,18 @@ class NullSpaceDither:
         inertia: float,
         amplitude_rpm_s: float = DITHER_RPM_S,
         period_s: float = DITHER_PERIOD_S,
+        probe_rpm_s: float = 0.0,
+        probe_every_s: float = PROBE_EVERY_S,
+        probe_s: float = PROBE_S,
     ) -> None:
-        if not (amplitude_rpm_s >= 0 and period_s > 0 and inertia > 0):
-            raise ConfigError("the dither needs an amplitude ≥ 0, a period > 0 and an inertia > 0")
+        if not (amplitude_rpm_s >= 0 and period_s > 0 and inertia > 0 and probe_rpm_s >= 0):
+            raise ConfigError("the dither needs amplitudes ≥ 0, a period > 0 and an inertia > 0")
+        if probe_rpm_s > 0 and not 0 < 2 * probe_s < probe_every_s:
+            raise ConfigError("a probe's push and return must fit in its period")
         self.G = np.asarray(G, dtype=float)
         self.torque_amplitude = inertia * rpm_to_rad_s(amplitude_rpm_s)  # N·m
-        self.period_s = period_s
+        self.probe_torque = inertia * rpm_to_rad_s(probe_rpm_s)  # N·m
+        self.period_s, self.probe_every_s, self.probe_s = period_s, probe_every_s, probe_s
         self._active: tuple[bool, ...] | None = None
         self._n: np.ndarray | None = None
 
@@ -124,7 +155,17 @@ class NullSpaceDither:
                 self._n[mask] = n
         if self._n is None:
             return np.zeros(len(key))
-        return self.torque_amplitude * math.cos(2 * math.pi * t / self.period_s) * self._n
+        dither = self.torque_amplitude * math.cos(2 * math.pi * t / self.period_s)
+        return (dither + self.probe_phase(t) * self.probe_torque) * self._n
+
+    def probe_phase(self, t: float) -> int:
+        """+1 while a probe pushes at time ``t`` (s), −1 while it pulls back, else 0
+        (always 0 without a probe or once the active wheels have no null space)."""
+        t += 1e-6  # s: a time k·dt computed as a float may fall a hair short of a boundary
+        if self.probe_torque == 0.0 or self._n is None or t < self.probe_every_s:
+            return 0
+        into = t % self.probe_every_s
+        return 1 if into < self.probe_s else -1 if into < 2 * self.probe_s else 0
 
 
 def name_fault(
@@ -167,8 +208,51 @@ def name_fault(
     return "speed_sensor_bias"
 
 
+@dataclass(frozen=True)
+class TrackingAlarm:
+    """A wheel that does not follow its commands.
+
+    Attributes
+    ----------
+    kind : str
+        The fault named (:func:`name_fault`, or the probe's naming).
+    test : str
+        ``"CUSUM"`` (the command-tracking test) or ``"capacity probe"``.
+    statistic, threshold : float
+        The CUSUM statistic and its threshold, or the probe's shortfall in its healthy
+        σ and the threshold of the false-alarm rate per probe.
+    """
+
+    kind: str
+    test: str
+    statistic: float
+    threshold: float
+
+
+@dataclass
+class _Push:
+    """One probe's push as the wheel saw it: speeds in rpm, current in A."""
+
+    start_rpm: float
+    commanded_rpm: float = 0.0
+    end_rpm: float = math.nan
+    current_sum_a: float = 0.0
+    periods: int = 0
+
+    @property
+    def current_a(self) -> float:
+        """The mean |current| over the push, A."""
+        return self.current_sum_a / self.periods
+
+    @property
+    def shortfall_rpm(self) -> float:
+        """The speed change the wheel missed, rpm (positive: it fell short)."""
+        moved = self.end_rpm - self.start_rpm
+        return math.copysign(1.0, self.commanded_rpm) * (self.commanded_rpm - moved)
+
+
 class TrackingTest:
-    """One wheel's command-tracking test (see the module's docstring).
+    """One wheel's command-tracking test and capacity probe (see the module's docstring).
 
     Parameters
     ----------
@@ -182,6 +266,9 @@ class TrackingTest:
         Accepted false-alarm rate of this wheel's test.
     window_s : float
         The residual's window, s (a whole number of control periods).
+    probe_every_s : float
+        How often a capacity probe comes, s: its threshold gives each probe its share of
+        ``false_alarms_per_hour``.
     """
 
     def __init__(
@@ -191,16 +278,21 @@ class TrackingTest:
         calibration_s: float,
         false_alarms_per_hour: float,
         window_s: float = WINDOW_S,
+        probe_every_s: float = PROBE_EVERY_S,
     ) -> None:
         self.every = max(1, round(window_s / dt))
         self.dt, self.window_s, self.params = dt, self.every * dt, params
         self.calibration_windows = max(30, math.ceil(calibration_s / self.window_s))
         arl0 = arl_to_samples(false_alarms_per_hour, self.window_s)
         self.cusum = Cusum(cusum_threshold(arl0), clip=CLIP)
+        self.probe_z = float(norm.isf(false_alarms_per_hour * probe_every_s / 3600.0))
+        self.healthy_probes: list[_Push] = []
+        self._push: _Push | None = None
+        self._settle = 0  # periods the tracking test still skips after a probe
         self.mean = self.sigma = math.nan
         stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
         self.band_rpm = STICTION_BAND * max(stribeck, params.min_measurable_rpm)
-        self._in_band = False  # the current window touched the stiction band
+        self._skip = False  # the window touched the stiction band or a probe
         self.skipped_windows = 0
         self._calibration: list[float] = []
         self._last_speed: float | None = None
@@ -224,18 +316,29 @@ class TrackingTest:
         return max(-p.current_limit, min(p.current_limit, torque / p.torque_constant))
 
     def update(
-        self, accel_cmd_rpm_s: float, speed_rpm: float, current_a: float
-    ) -> tuple[str, float, float] | None:
-        """One control period: the acceleration commanded over it (rpm/s), and the speed
-        (rpm) and current (A) reported at its end.
+        self, accel_cmd_rpm_s: float, speed_rpm: float, current_a: float, probe: int = 0
+    ) -> TrackingAlarm | None:
+        """One control period: the acceleration commanded over it (rpm/s), the speed
+        (rpm) and current (A) reported at its end, and the probe's phase over it
+        (:meth:`NullSpaceDither.probe_phase`).
 
         Returns
         -------
-        tuple or None
-            ``(named kind, CUSUM statistic, threshold)`` at an alarm, else None.
+        TrackingAlarm or None
+            The alarm, if this period raised one.
         """
         last = speed_rpm if self._last_speed is None else self._last_speed
         self._last_speed = speed_rpm
+        found = self._probe(probe, accel_cmd_rpm_s, last, speed_rpm, current_a)
+        self._settle = round(PROBE_SETTLE_S / self.dt) if probe else max(self._settle - 1, 0)
+        self._skip |= probe != 0 or self._settle > 0
+        window = self._window(accel_cmd_rpm_s, last, speed_rpm, current_a)
+        return found or window
+
+    def _window(
+        self, accel_cmd_rpm_s: float, last: float, speed_rpm: float, current_a: float
+    ) -> TrackingAlarm | None:
+        """The command-tracking test's step: a window's residual into the CUSUM."""
         if self._start_speed is None:
             self._start_speed = last
         self._samples.append(
@@ -249,13 +352,13 @@ class TrackingTest:
         self._commanded += accel_cmd_rpm_s * self.dt
         self._n += 1
         self._excursion += 1
-        self._in_band |= abs(speed_rpm) < self.band_rpm or abs(last) < self.band_rpm
+        self._skip |= abs(speed_rpm) < self.band_rpm or abs(last) < self.band_rpm
         if self._n < self.every:
             return None
         residual = (speed_rpm - self._start_speed - self._commanded) / self.window_s
         self._start_speed, self._commanded, self._n = speed_rpm, 0.0, 0
-        if self._in_band:  # breakaway, not tracking, rules this window: no evidence
-            self._in_band = False
+        if self._skip:  # breakaway or a probe, not tracking, rules this window: no evidence
+            self._skip = False
             self.skipped_windows += 1
             return None
         if not self.calibrated:
@@ -277,8 +380,50 @@ class TrackingTest:
         k = min(len(self._samples), max(self._excursion, round(MIN_NAMING_S / self.dt)))
         rows = np.array(list(self._samples)[-k:])
         kind = name_fault(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], speed_rpm)
-        return kind, self.cusum.statistic, self.cusum.h
+        return TrackingAlarm(kind, "CUSUM", self.cusum.statistic, self.cusum.h)
+
+    def _probe(
+        self, phase: int, accel_cmd_rpm_s: float, last: float, speed_rpm: float, current_a: float
+    ) -> TrackingAlarm | None:
+        """Follow a probe's push; when it ends, judge it against the wheel's healthy ones."""
+        if phase == 1:
+            pushing = self._push = self._push or _Push(last)
+            pushing.commanded_rpm += accel_cmd_rpm_s * self.dt
+            pushing.end_rpm = speed_rpm
+            pushing.current_sum_a += abs(current_a)
+            pushing.periods += 1
+            return None
+        push, self._push = self._push, None
+        if push is None:
+            return None
+        if len(self.healthy_probes) < PROBE_CALIBRATION:
+            self.healthy_probes.append(push)
+            return None
+        if not self.calibrated:
+            return None
+        healthy = np.array([p.shortfall_rpm for p in self.healthy_probes])
+        # the window test's σ is the same reading noise over the same second
+        sigma = max(self.sigma * self.window_s, float(np.std(healthy, ddof=1)))
+        z = (push.shortfall_rpm - healthy.mean()) / (sigma * math.sqrt(1 + 1 / healthy.size))
+        if z <= self.probe_z:
+            return None
+        # a clamp's missing current explains its missing speed; a weak motor's does not
+        current = float(np.mean([p.current_a for p in self.healthy_probes]))
+        missing_rpm = max(0.0, 1.0 - push.current_a / current) * abs(push.commanded_rpm)
+        excess_rpm = push.shortfall_rpm - healthy.mean()
+        kind = "current_limit" if missing_rpm > excess_rpm / 2 else "torque_constant"
+        return TrackingAlarm(kind, "capacity probe", float(z), self.probe_z)
 
     def healthy_spread_rpm_s(self) -> float:
         """The calibrated σ of the window residual, rpm/s (NaN before calibration)."""
         return self.sigma
+
+    def healthy_probe_summary(self) -> dict | None:
+        """The healthy probes' mean shortfall (rpm) and mean current over a push (A);
+        None before."""
+        if len(self.healthy_probes) < PROBE_CALIBRATION:
+            return None
+        return {
+            "shortfall_rpm": float(np.mean([p.shortfall_rpm for p in self.healthy_probes])),
+            "current_a": float(np.mean([p.current_a for p in self.healthy_probes])),
+        }

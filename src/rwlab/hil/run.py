@@ -51,6 +51,9 @@ from rwlab.hil.bench import WheelBank
 from rwlab.hil.health import (
     DITHER_PERIOD_S,
     DITHER_RPM_S,
+    PROBE_EVERY_S,
+    PROBE_S,
+    PROBE_SHARE,
     WINDOW_S,
     NullSpaceDither,
     TrackingTest,
@@ -61,7 +64,7 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
-from rwlab.wheel.physics import rad_s_to_rpm
+from rwlab.wheel.physics import WheelParams, rad_s_to_rpm
 
 __all__ = [
     "HilConfig",
@@ -120,10 +123,12 @@ class HilConfig:
     controller : str
         ``pd``, ``lqr``, ``lqg`` or ``lqg_ltr`` (as ``attitude simulate``).
     interface, channel : the bus.
-    protocol : str
-        The wheel protocol's registry name: ``rwlab`` (default), ``canopen``,
+    protocol : str, optional
+        The wheel protocol's registry name: ``rwlab``, ``canopen``,
         ``canopen/oresat``, ``canopen/cia402`` or a registered CAN one; a serial (NSP)
-        profile is refused, since its wheels cannot share one bus.
+        profile is refused, since its wheels cannot share one bus, and so is one whose
+        signals would clip the wheel's numbers. Default: ``rwlab``, or ``canopen`` for
+        twins whose current rwlab's DBC cannot carry (±2.048 A: the NRWA-T6 class).
     nodes : tuple of int, optional
         Node id of each wheel in the scenario's order (default 1..N).
     duration : float
@@ -182,7 +187,7 @@ class HilConfig:
     controller: str = "lqg"
     interface: str = "virtual"
     channel: str | None = None
-    protocol: str = "rwlab"
+    protocol: str | None = None
     nodes: tuple[int, ...] | None = None
     duration: float = 600.0
     seed: int | None = None
@@ -433,9 +438,22 @@ def _write_frame(record, node: int, t: float, frame) -> None:
         )
 
 
+def _protocol(name: str | None, params: WheelParams, wheel: str, twins: bool) -> str:
+    """The protocol named, else rwlab's, else for twins that its DBC cannot carry CANopen;
+    a protocol whose signals would clip the wheel's numbers is refused."""
+    from rwlab.wheel.signal_fit import WIDE_CAN_PROTOCOL, check_carries, misfits
+
+    if name is None:
+        fits = not misfits(get_protocol("rwlab").signal_ranges(), params)
+        name = "rwlab" if fits or not twins else WIDE_CAN_PROTOCOL
+    check_carries(name, params, wheel, instead=WIDE_CAN_PROTOCOL)
+    return name
+
+
 def _check(cfg: HilConfig, sc: Scenario) -> tuple[int, ...]:
     from rwlab.hil.bench import check_multidrop
 
+    assert cfg.protocol is not None  # resolved by run_hil
     check_multidrop(cfg.protocol)  # before anything starts
     nodes = cfg.nodes or tuple(range(1, sc.n_wheels + 1))
     if len(nodes) != sc.n_wheels:
@@ -500,13 +518,16 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     from rwlab.attitude.wheel_fit import check_wheel_fit
 
     wheel_forced = check_wheel_fit(sc, force=cfg.force_wheel)
+    params = physics_params(sc)
+    twins = cfg.twins if cfg.twins is not None else cfg.interface in ("virtual", "udp_multicast")
+    protocol = _protocol(cfg.protocol, params, sc.wheels.wheel_spec.name, twins)
+    cfg = replace(cfg, protocol=protocol)
     nodes = _check(cfg, sc)
     redundant = null_vector(sc.wheel_matrix) is not None
     if cfg.wheel_bias_rpm is None:
         cfg = replace(cfg, wheel_bias_rpm=DEFAULT_BIAS_RPM if redundant else 0.0)
     seed = sc.run.seed if cfg.seed is None else cfg.seed
     ctl, estimator, sim_kw = build_controller(sc, cfg.controller)
-    twins = cfg.twins if cfg.twins is not None else cfg.interface in ("virtual", "udp_multicast")
     if cfg.faults and not twins:
         raise ConfigError("--fault is injected into twins; these wheels are not twins")
     out = Path(out_dir)
@@ -515,7 +536,6 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
     existing = [str(p) for p in [*targets.values(), out / "report.html"] if p.exists()]
     if existing and not force:
         raise FileExistsError(f"{', '.join(existing)} exist; pass force=True to overwrite them")
-    params = physics_params(sc)
     diagnosis = bool(cfg.wheel_bias_rpm) if cfg.diagnosis is None else cfg.diagnosis
     health = (diagnosis and redundant) if cfg.health_check is None else cfg.health_check
     if health and not redundant:
@@ -534,7 +554,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "duration_s": cfg.duration,
         "interface": cfg.interface,
         "channel": cfg.channel,
-        "protocol": cfg.protocol,
+        "protocol": protocol,
         "nodes": list(nodes),
         "clock": "wall" if cfg.realtime else "simulated",
         "twins": twins,
@@ -552,6 +572,9 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 "dither_rpm_s": DITHER_RPM_S,
                 "dither_period_s": DITHER_PERIOD_S,
                 "window_s": WINDOW_S,
+                "probe_rpm_s": PROBE_SHARE * params.max_accel_rpm_s,
+                "probe_s": PROBE_S,
+                "probe_every_s": PROBE_EVERY_S,
             }
             if health
             else None
@@ -571,7 +594,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         latency=cfg.latency_s,
         seed=seed,
         timeout=cfg.timeout_s,
-        protocol=cfg.protocol,
+        protocol=protocol,
     )
     record = None
     restore = _real_time(cfg.rt_priority) if cfg.realtime else None
@@ -584,8 +607,8 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
                 "kind": "rwlab.hil/1",
                 "config": config,
                 "dbc_sha256": proto.dbc_sha256(),
-                "protocol": cfg.protocol,
-                "protocol_identity": get_protocol(cfg.protocol).identity(),
+                "protocol": protocol,
+                "protocol_identity": get_protocol(protocol).identity(),
                 "Ts": sc.run.dt,  # what `rwlab export --node N` samples a wheel at
                 # every channel's t is flight time (the spin-up before 0): export keeps it
                 "time_axis": "flight",
@@ -856,7 +879,11 @@ class _Loop:
             self.event("fault_scheduled", f"node {node}: {fault}", t0)
         diag = self.diag = self._diagnosers(self.nodes) if self.diagnosis else {}
         if self.health:
-            self.dither = NullSpaceDither(sc.wheel_matrix, bank.params.inertia)
+            self.dither = NullSpaceDither(
+                sc.wheel_matrix,
+                bank.params.inertia,
+                probe_rpm_s=PROBE_SHARE * bank.params.max_accel_rpm_s,
+            )
             self.tracking = {
                 n: TrackingTest(
                     sc.run.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour
@@ -866,7 +893,8 @@ class _Loop:
             self.tracked = dict(self.tracking)
             self.event(
                 "health_check",
-                f"null-space excitation ±{DITHER_RPM_S:g} rpm/s over {DITHER_PERIOD_S:g} s; "
+                f"null-space excitation ±{DITHER_RPM_S:g} rpm/s over {DITHER_PERIOD_S:g} s, "
+                f"a {PROBE_SHARE:.0%} capacity probe every {PROBE_EVERY_S:g} s; "
                 f"command-tracking tests calibrate over {cfg.calibration_s:g} s",
                 t0,
             )
@@ -877,8 +905,10 @@ class _Loop:
             k = sat.k
             t_start = clock.now()
             torques = sat.wheel_torques()
+            probe = 0
             if self.dither is not None:  # no body torque: G·n = 0 over the active wheels
                 torques = torques + self.dither.torques(sat.t, sat.active)
+                probe = self.dither.probe_phase(sat.t)
             refused = bank.command(torques)
             for node, exc in refused.items():  # the wheel idled itself: it is lost
                 self._wheel_failed(node, "latched_fault", str(exc), t_start, hard=True)
@@ -904,7 +934,7 @@ class _Loop:
                 self._compute.append(sent - t_start)
                 self._wake.append(wake)
             if self.tracking:
-                self._track(readings, self._cmd[-1], wake)
+                self._track(readings, self._cmd[-1], probe, wake)
             if diag and (k + 1) % every == 0:
                 self._diagnose(diag, readings, acc_sum, every)
                 acc_sum = {n: 0.0 for n in self.nodes}
@@ -992,21 +1022,25 @@ class _Loop:
             for a in alarms:
                 self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
 
-    def _track(self, readings, cmd_rpm_s, now: float) -> None:
-        """Every active wheel's command-tracking test, each control period."""
+    def _track(self, readings, cmd_rpm_s, probe: int, now: float) -> None:
+        """Every active wheel's command-tracking test, each control period (``probe``:
+        the capacity probe's phase over it)."""
         for i, r in enumerate(readings):
             test = self.tracking.get(r.node)
             if test is None or not self.bank.active[r.node]:
                 continue
-            found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a)
+            found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a, probe)
             if found is not None:
                 del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
-                kind, stat, h = found
-                how = f"command-tracking test (CUSUM {stat:.1f} > {h:.1f})"
-                self._wheel_failed(r.node, kind, how, now)
+                how = (
+                    f"command-tracking test ({found.test} {found.statistic:.1f} > "
+                    f"{found.threshold:.1f})"
+                )
+                self._wheel_failed(r.node, found.kind, how, now)
 
     def health_summary(self) -> dict | None:
-        """Each tested wheel's calibrated healthy spread of the tracking residual, rpm/s."""
+        """Each tested wheel's calibrated healthy spread of the tracking residual, rpm/s,
+        and its healthy probes (:meth:`TrackingTest.healthy_probe_summary`)."""
         if not self.health:
             return None
         return {
@@ -1016,6 +1050,7 @@ class _Loop:
             "residual_sigma_rpm_s": {
                 str(n): t.healthy_spread_rpm_s() for n, t in self.tracked.items()
             },
+            "healthy_probes": {str(n): t.healthy_probe_summary() for n, t in self.tracked.items()},
         }
 
     def _wheel_failed(self, node: int, kind: str, how: str, t: float, hard: bool = False) -> None:

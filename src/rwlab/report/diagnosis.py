@@ -77,6 +77,17 @@ def _page(
     t = h["t_s"]
     page = Page(f"Fault diagnosis — {title}")
     _verdict(page, diagnosis)
+    if record_note:
+        page.html(f'<p class="note">{html.escape(record_note)}.</p>')
+    if not diagnosis.model_tested():
+        page.html(
+            '<p class="note" id="nothing-tested">No model-based test had anything to decide '
+            f"on in this {diagnosis.duration_s:g}-s record: no alarm says nothing of friction, "
+            "the motor, the current limit or a sensor bias.</p>"
+        )
+    page.heading("Alarms", "alarms-heading")
+    _alarm_table(page, diagnosis, injected)
+    page.heading("How it was decided", "method")
     page.text(
         f"The identified model ran beside the telemetry at Ts = {diagnosis.reference.Ts:g} s. "
         f"The detectors compare it with the healthy reference measured on the identification "
@@ -88,16 +99,6 @@ def _page(
         "approximation of ARL₀; frozen speed: the run-length ARL₀ of the reference's repeat "
         "probability; dropouts: Poisson counts of lost frames)."
     )
-    if record_note:
-        page.html(f'<p class="note">{html.escape(record_note)}.</p>')
-    if not diagnosis.model_tested():
-        page.html(
-            '<p class="note" id="nothing-tested">No model-based test had anything to decide '
-            f"on in this {diagnosis.duration_s:g}-s record: no alarm says nothing of friction, "
-            "the motor, the current limit or a sensor bias.</p>"
-        )
-    page.heading("Alarms", "alarms-heading")
-    _alarm_table(page, diagnosis, injected)
     _coverage_table(page, diagnosis)
     _threshold_table(page, diagnosis.notes)
     if diagnosis.estimates:
@@ -157,10 +158,12 @@ def _verdict(page: Page, diagnosis: Diagnosis) -> None:
     for a in sorted(diagnosis.alarms, key=lambda a: a.t_s):
         first.setdefault(a.kind, a)
     if first:
-        named = "; ".join(f"{kind} at {a.t_s:g} s ({a.detector} test)" for kind, a in first.items())
+        named = "; ".join(
+            f"{kind}{_size_text(a)} at {a.t_s:g} s ({a.detector} test)" for kind, a in first.items()
+        )
         page.verdict(
             f"{len(diagnosis.alarms)} alarm{'s' if len(diagnosis.alarms) != 1 else ''}, "
-            f"first of each fault: {named}. Sizes: the alarm table and the sizes below.",
+            f"first of each fault: {named}.",
             False,
         )
     elif diagnosis.model_tested():
@@ -171,6 +174,16 @@ def _verdict(page: Page, diagnosis: Diagnosis) -> None:
             f"{diagnosis.duration_s:g}-s record (see below).",
             False,
         )
+
+
+def _size_text(alarm: Alarm) -> str:
+    """`` ×2.1 (95 % CI 1.8 … 2.4)``: an alarm's size as the verdict gives it, or ``""``."""
+    if alarm.magnitude is None:
+        return ""
+    ci = "" if alarm.ci is None else f" (95 % CI {_interval(alarm.ci)})"
+    if alarm.unit == "factor":
+        return f" ×{alarm.magnitude:.3g}{ci}"
+    return f" {alarm.magnitude:.3g} {alarm.unit}{ci}"
 
 
 def _threshold_table(page: Page, notes: list[str]) -> None:

@@ -17,8 +17,10 @@ from rwlab.wheel.physics import WheelParams
 __all__ = ["check_carries", "misfits", "wheel_ranges"]
 
 # the protocol a simulated wheel that rwlab's DBC cannot carry is spoken to with by
-# default: rwlab's NSP profile sends speed and current as IEEE floats
+# default: rwlab's NSP profile sends speed and current as IEEE floats; where wheels share
+# one CAN bus (hil), CANopen (its current in mA as a 16-bit integer: ±32.8 A)
 WIDE_PROTOCOL = "nsp"
+WIDE_CAN_PROTOCOL = "canopen"
 
 
 def wheel_ranges(params: WheelParams) -> dict[str, tuple[float, float, str]]:
@@ -80,7 +82,9 @@ def misfits(ranges: dict[str, tuple[float, float, str]], params: WheelParams) ->
     return out
 
 
-def check_carries(protocol_name: str, params: WheelParams, wheel: str) -> None:
+def check_carries(
+    protocol_name: str, params: WheelParams, wheel: str, instead: str = WIDE_PROTOCOL
+) -> None:
     """Refuse a protocol whose signals would clip the wheel's readings or commands.
 
     Parameters
@@ -91,6 +95,8 @@ def check_carries(protocol_name: str, params: WheelParams, wheel: str) -> None:
         The wheel.
     wheel : str
         The wheel's name, for the message.
+    instead : str
+        The protocol the message suggests.
 
     Raises
     ------
@@ -104,6 +110,6 @@ def check_carries(protocol_name: str, params: WheelParams, wheel: str) -> None:
         raise ConfigError(
             f"protocol {protocol_name!r} cannot carry wheel {wheel}: {found[0]}"
             f"{f' (and {len(found) - 1} more)' if len(found) > 1 else ''}, so its readings "
-            f"would clip; choose a protocol that carries it (e.g. --protocol {WIDE_PROTOCOL}, "
-            "whose floats carry any value; `rwlab wheel protocols`)"
+            f"would clip; choose a protocol that carries it (e.g. --protocol {instead}; "
+            "`rwlab wheel protocols`)"
         )
