@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -132,6 +133,28 @@ def test_each_protocol_records_the_same_wheel(traces, name):
     assert max(ours.values()) > 1000  # it moved
     # one physics, one seed: the speeds agree within the DBC's 0.01 rpm and float32
     assert max(abs(ours[t] - theirs[t]) for t in common) < 0.02
+
+
+@pytest.mark.parametrize("name", ["rwlab", "canopen", "nsp", "nsp/nrwa-t6"])
+def test_a_telemetry_dropout_is_a_gap_on_every_protocol(name, tmp_path):
+    """A polled wheel (NSP) with its telemetry out answers nothing, as a streaming one
+    sends nothing: 0.3 s without telemetry, and the frames it missed are counted lost
+    (on NSP the twin used to go on answering polls, so the fault left no trace)."""
+    cfg = ExperimentConfig(
+        signal="step",
+        duration=20,
+        Ts=0.5,
+        seed=4,
+        protocol=name,
+        wheel="ideal",
+        faults=("telemetry_dropout=0.3@10",),
+    )
+    summary = run_experiment(cfg, tmp_path / "r.mcap")
+    t = np.array([f["t"] for f in read_record(tmp_path / "r.mcap").topic("/telemetry")])
+    gaps = np.diff(t)
+    assert 0.35 < gaps.max() < 0.45 and 9.9 < t[np.argmax(gaps)] <= 10.0  # the last before
+    assert np.sum(gaps > 0.15) == 1
+    assert summary.lost_frames >= 3
 
 
 # -- real clients ---------------------------------------------------------------------------

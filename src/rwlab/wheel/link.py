@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import abc
 import importlib
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
@@ -166,11 +167,19 @@ class HostLink(abc.ABC):
 
 
 class NodeLink(abc.ABC):
-    """The twin's end of a protocol on one transport."""
+    """The twin's end of a protocol on one transport.
+
+    Attributes
+    ----------
+    silent_until : float
+        Clock time, s, before which a wheel that answers polls sends no reply (the
+        ``telemetry_dropout`` fault: a streaming wheel's node just queues no frames).
+    """
 
     def __init__(self) -> None:
         self.bad_frames = 0
         self.foreign_frames = 0
+        self.silent_until = -math.inf
 
     def configure(self, params: WheelParams) -> None:  # noqa: B027 - most links need nothing
         """Learn the wheel's parameters (as :meth:`HostLink.configure`).

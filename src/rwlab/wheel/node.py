@@ -185,7 +185,7 @@ class WheelNode:
         elif fault.name == "speed_sensor_stuck":
             inject.stuck_speed = True
         elif fault.name == "telemetry_dropout":
-            inject.dropout_until = self.t + value
+            inject.dropout_until = self.link.silent_until = self.t + value
 
     # -- running -------------------------------------------------------------------
     def poll(self, now: float) -> None:

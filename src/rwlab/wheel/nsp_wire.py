@@ -339,6 +339,8 @@ class NspNodeLinkBase(NodeLink):
         return proto.Command(self.node_id, mode, float(setpoint), self._sequence)
 
     def _reply(self, packet: NspPacket) -> None:
+        if self.clock.now() < self.silent_until:  # a telemetry dropout: the line is silent
+            return
         data = bytearray(encode_packet(packet))
         if self._corrupt_next is not None:
             data[1 + self._corrupt_next % (len(data) - 2)] ^= 0x01
