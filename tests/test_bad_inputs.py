@@ -603,6 +603,10 @@ def cases() -> list[tuple[str, list[str]]]:
             "wheel serve --profile bogus",
             ["wheel", "serve", "--protocol", "canopen", "--profile", "x"],
         ),
+        (
+            "hil --scenario geo-comsat --protocol rwlab (its DBC would clip the wheels' current)",
+            ["hil", "--scenario", "geo-comsat", "--duration", "5", "--protocol", "rwlab", *out],
+        ),
     ]
     return c
 

@@ -142,8 +142,21 @@ class NullSpaceDither:
         self._n: np.ndarray | None = None
 
     def torques(self, t: float, active: np.ndarray) -> np.ndarray:
-        """The excitation's wheel torques (N,) at time ``t`` (s), N·m; zero on idle wheels
-        and everywhere once the active wheels have no null space left."""
+        """The excitation's wheel torques at a time, probes included.
+
+        Parameters
+        ----------
+        t : float
+            Flight time, s.
+        active : (N,) array of bool
+            The wheels being driven.
+
+        Returns
+        -------
+        (N,) array
+            Torques, N·m: zero on idle wheels, and everywhere once the active wheels have
+            no null space left.
+        """
         key = tuple(bool(a) for a in active)
         if key != self._active:
             self._active = key
@@ -159,8 +172,19 @@ class NullSpaceDither:
         return (dither + self.probe_phase(t) * self.probe_torque) * self._n
 
     def probe_phase(self, t: float) -> int:
-        """+1 while a probe pushes at time ``t`` (s), −1 while it pulls back, else 0
-        (always 0 without a probe or once the active wheels have no null space)."""
+        """Where a capacity probe is at a time.
+
+        Parameters
+        ----------
+        t : float
+            Flight time, s.
+
+        Returns
+        -------
+        int
+            +1 while a probe pushes, −1 while it pulls back, else 0 (always 0 without a
+            probe, or once the active wheels have no null space).
+        """
         t += 1e-6  # s: a time k·dt computed as a float may fall a hair short of a boundary
         if self.probe_torque == 0.0 or self._n is None or t < self.probe_every_s:
             return 0
@@ -318,9 +342,16 @@ class TrackingTest:
     def update(
         self, accel_cmd_rpm_s: float, speed_rpm: float, current_a: float, probe: int = 0
     ) -> TrackingAlarm | None:
-        """One control period: the acceleration commanded over it (rpm/s), the speed
-        (rpm) and current (A) reported at its end, and the probe's phase over it
-        (:meth:`NullSpaceDither.probe_phase`).
+        """One control period.
+
+        Parameters
+        ----------
+        accel_cmd_rpm_s : float
+            The acceleration commanded over the period, rpm/s.
+        speed_rpm, current_a : float
+            The speed (rpm) and current (A) reported at its end.
+        probe : int
+            The capacity probe's phase over it (:meth:`NullSpaceDither.probe_phase`).
 
         Returns
         -------
@@ -415,12 +446,24 @@ class TrackingTest:
         return TrackingAlarm(kind, "capacity probe", float(z), self.probe_z)
 
     def healthy_spread_rpm_s(self) -> float:
-        """The calibrated σ of the window residual, rpm/s (NaN before calibration)."""
+        """The calibrated spread of the window residual.
+
+        Returns
+        -------
+        float
+            σ, rpm/s (NaN before calibration).
+        """
         return self.sigma
 
     def healthy_probe_summary(self) -> dict | None:
-        """The healthy probes' mean shortfall (rpm) and mean current over a push (A);
-        None before."""
+        """What the wheel's healthy probes measured.
+
+        Returns
+        -------
+        dict or None
+            ``shortfall_rpm`` (mean speed change missed, rpm) and ``current_a`` (mean
+            current over a push, A); None before the healthy probes are in.
+        """
         if len(self.healthy_probes) < PROBE_CALIBRATION:
             return None
         return {

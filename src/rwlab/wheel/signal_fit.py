@@ -110,6 +110,6 @@ def check_carries(
         raise ConfigError(
             f"protocol {protocol_name!r} cannot carry wheel {wheel}: {found[0]}"
             f"{f' (and {len(found) - 1} more)' if len(found) > 1 else ''}, so its readings "
-            f"would clip; choose a protocol that carries it (e.g. --protocol {instead}; "
-            "`rwlab wheel protocols`)"
+            f"would clip; choose a protocol that carries it (e.g. --protocol {instead}, whose "
+            "signals do; `rwlab wheel protocols`)"
         )
