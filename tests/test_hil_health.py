@@ -105,7 +105,9 @@ def _probed(seed):
     """A calibrating test, its noise and a probe schedule (two opposed wheels: a null space)."""
     probe = NullSpaceDither(np.array([[1.0, 1.0], [0, 0], [0, 0]]), 4.2e-4, probe_rpm_s=280.0)
     probe.torques(0.0, np.ones(2, bool))
-    test = TrackingTest(0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3)
+    test = TrackingTest(
+        0.1, RW90, calibration_s=300.0, false_alarms_per_hour=1e-3, probe_every_s=60.0
+    )
     return np.random.default_rng(seed), test, probe
 
 
@@ -199,3 +201,16 @@ def test_a_healthy_wheel_dwelling_in_stiction_at_zero_raises_no_alarm(seed):
         outcomes.append(_through_zero(test, rng))
     assert outcomes[0] is None
     assert test.band_rpm == 0.0 and outcomes[1] is not None  # the old test's false alarm
+
+
+@pytest.mark.parametrize(
+    ("follow", "clamp", "kind"), [(1.0, 0.4, "current_limit"), (0.8, 1.0, "torque_constant")]
+)
+def test_a_wheel_faulty_from_power_up_is_named_by_its_first_probe(follow, clamp, kind):
+    """Its first probes cannot be its healthy ones: a push it misses by more than a healthy
+    drive's lag ever does is an alarm at once, named against the current its drive's
+    feed-forward asks for (the synthetic drive asks what the RW90's does, within 10 %)."""
+    rng, test, probe = _probed(6)
+    k, alarm = _wheel(test, rng, 3000, follow=follow, probe=probe, clamp=clamp)
+    assert alarm.test.startswith("capacity probe") and alarm.kind == kind
+    assert k * 0.1 == pytest.approx(61.0) and not test.healthy_probes  # the first push

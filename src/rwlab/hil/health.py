@@ -74,6 +74,9 @@ PROBE_S = 1.0  # the push lasts this long, s, and the way back as long
 PROBE_EVERY_S = 60.0  # a probe starts every this many seconds of flight (the first at this)
 PROBE_SETTLE_S = 1.0  # the tracking test skips this long after a probe (the drive's lag)
 PROBE_CALIBRATION = 3  # a wheel's first probes in the loop are its healthy ones
+# a drive that misses more of a push than this share is not a healthy one of its spec: a
+# healthy drive's lag costs ~2 % (RW90 4.5-6.6 rpm of 289, NRWA-T6 3.3-4.4 of 203)
+PROBE_LAG_MAX = 0.1
 
 
 def null_vector(G: np.ndarray) -> np.ndarray | None:
@@ -261,12 +264,24 @@ class _Push:
     commanded_rpm: float = 0.0
     end_rpm: float = math.nan
     current_sum_a: float = 0.0
+    requested_sum_a: float = 0.0
     periods: int = 0
 
     @property
     def current_a(self) -> float:
         """The mean |current| over the push, A."""
         return self.current_sum_a / self.periods
+
+    @property
+    def requested_a(self) -> float:
+        """The mean |current| the drive's feed-forward asked for over the push, A."""
+        return self.requested_sum_a / self.periods
+
+    def named(self, excess_rpm: float, current_a: float) -> str:
+        """``current_limit`` when the current missing against ``current_a`` (A) explains
+        at least half of ``excess_rpm``, the speed change missed; else ``torque_constant``."""
+        missing_rpm = max(0.0, 1.0 - self.current_a / current_a) * abs(self.commanded_rpm)
+        return "current_limit" if missing_rpm > excess_rpm / 2 else "torque_constant"
 
     @property
     def shortfall_rpm(self) -> float:
@@ -287,12 +302,12 @@ class TrackingTest:
     calibration_s : float
         Seconds of the wheel's own healthy residuals that calibrate the test.
     false_alarms_per_hour : float
-        Accepted false-alarm rate of this wheel's test.
+        Accepted false-alarm rate of this wheel's tests together: with probes, half is
+        the tracking test's and half the probes'.
     window_s : float
         The residual's window, s (a whole number of control periods).
-    probe_every_s : float
-        How often a capacity probe comes, s: its threshold gives each probe its share of
-        ``false_alarms_per_hour``.
+    probe_every_s : float, optional
+        How often a capacity probe comes, s (None: no probes).
     """
 
     def __init__(
@@ -302,18 +317,18 @@ class TrackingTest:
         calibration_s: float,
         false_alarms_per_hour: float,
         window_s: float = WINDOW_S,
-        probe_every_s: float = PROBE_EVERY_S,
+        probe_every_s: float | None = None,
     ) -> None:
         self.every = max(1, round(window_s / dt))
         self.dt, self.window_s, self.params = dt, self.every * dt, params
         self.calibration_windows = max(30, math.ceil(calibration_s / self.window_s))
-        arl0 = arl_to_samples(false_alarms_per_hour, self.window_s)
-        self.cusum = Cusum(cusum_threshold(arl0), clip=CLIP)
-        self.probe_z = float(norm.isf(false_alarms_per_hour * probe_every_s / 3600.0))
+        rate = false_alarms_per_hour / (1 if probe_every_s is None else 2)
+        self.cusum = Cusum(cusum_threshold(arl_to_samples(rate, self.window_s)), clip=CLIP)
+        self.probe_z = float(norm.isf(rate * (probe_every_s or math.inf) / 3600.0))
         self.healthy_probes: list[_Push] = []
         self._push: _Push | None = None
         self._settle = 0  # periods the tracking test still skips after a probe
-        self.mean = self.sigma = math.nan
+        self.mean = self.sigma = self.robust_sigma = math.nan
         stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
         self.band_rpm = STICTION_BAND * max(stribeck, params.min_measurable_rpm)
         self._skip = False  # the window touched the stiction band or a probe
@@ -399,6 +414,10 @@ class TrackingTest:
                 self.mean = float(np.mean(values))
                 floor = self.params.speed_resolution_rpm / self.window_s / math.sqrt(12)
                 self.sigma = max(float(np.std(values, ddof=1)), floor)
+                # the probe's: one transient in calibration (a wheel at its speed limit
+                # while the attitude is acquired) must not blunt every probe after it
+                mad = float(np.median(np.abs(values - np.median(values))))
+                self.robust_sigma = max(1.4826 * mad, floor)
             return None
         before = self.cusum.statistic
         alarm = self.cusum.update((residual - self.mean) / self.sigma)
@@ -422,27 +441,29 @@ class TrackingTest:
             pushing.commanded_rpm += accel_cmd_rpm_s * self.dt
             pushing.end_rpm = speed_rpm
             pushing.current_sum_a += abs(current_a)
+            pushing.requested_sum_a += abs(self._requested_current(accel_cmd_rpm_s, speed_rpm))
             pushing.periods += 1
             return None
         push, self._push = self._push, None
         if push is None:
             return None
         if len(self.healthy_probes) < PROBE_CALIBRATION:
+            share = push.shortfall_rpm / abs(push.commanded_rpm)
+            if share > PROBE_LAG_MAX:  # faulty from the start: not a healthy probe
+                kind = push.named(push.shortfall_rpm, push.requested_a)
+                return TrackingAlarm(kind, "capacity probe, share missed", share, PROBE_LAG_MAX)
             self.healthy_probes.append(push)
             return None
         if not self.calibrated:
             return None
         healthy = np.array([p.shortfall_rpm for p in self.healthy_probes])
         # the window test's σ is the same reading noise over the same second
-        sigma = max(self.sigma * self.window_s, float(np.std(healthy, ddof=1)))
+        sigma = max(self.robust_sigma * self.window_s, float(np.std(healthy, ddof=1)))
         z = (push.shortfall_rpm - healthy.mean()) / (sigma * math.sqrt(1 + 1 / healthy.size))
         if z <= self.probe_z:
             return None
-        # a clamp's missing current explains its missing speed; a weak motor's does not
         current = float(np.mean([p.current_a for p in self.healthy_probes]))
-        missing_rpm = max(0.0, 1.0 - push.current_a / current) * abs(push.commanded_rpm)
-        excess_rpm = push.shortfall_rpm - healthy.mean()
-        kind = "current_limit" if missing_rpm > excess_rpm / 2 else "torque_constant"
+        kind = push.named(push.shortfall_rpm - healthy.mean(), current)
         return TrackingAlarm(kind, "capacity probe", float(z), self.probe_z)
 
     def healthy_spread_rpm_s(self) -> float:

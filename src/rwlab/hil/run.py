@@ -886,7 +886,11 @@ class _Loop:
             )
             self.tracking = {
                 n: TrackingTest(
-                    sc.run.dt, bank.params, cfg.calibration_s, cfg.false_alarms_per_hour
+                    sc.run.dt,
+                    bank.params,
+                    cfg.calibration_s,
+                    cfg.false_alarms_per_hour,
+                    probe_every_s=PROBE_EVERY_S,
                 )
                 for n in self.nodes
             }
@@ -1033,8 +1037,8 @@ class _Loop:
             if found is not None:
                 del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
                 how = (
-                    f"command-tracking test ({found.test} {found.statistic:.1f} > "
-                    f"{found.threshold:.1f})"
+                    f"command-tracking test ({found.test} {found.statistic:.3g} > "
+                    f"{found.threshold:.3g})"
                 )
                 self._wheel_failed(r.node, found.kind, how, now)
 
