@@ -353,7 +353,30 @@ def test_a_clamp_the_loop_never_reaches_is_named_by_the_next_capacity_probe(
     [alarm] = m["wheel_faults"]
     assert alarm["node"] == int(fault[0]) and alarm["named_kind"] == "current_limit"
     assert "capacity probe" in alarm["detector"]
-    assert 300.0 < alarm["detected_s"] <= 301.2  # the end of the probe's push
+    assert 302.0 < alarm["detected_s"] <= 302.2  # the end of that probe (push and back)
+
+
+@pytest.mark.parametrize(
+    ("fault", "kind"),
+    [("4:torque_constant=0.7@250", "torque_constant"), ("1:friction=4@250", "friction")],
+)
+def test_a_drag_in_flight_is_named_by_a_probe_asked_for_at_once(fault, kind, tmp_path):
+    """A weak motor drags on the held speed as friction does, and the tracking test sees
+    the drag first (it named this weak motor friction): a probe asked for at once tells a
+    motor that lost torque (push and way back both short) from a drag (the push short,
+    the way back helped), before the next scheduled probe."""
+    cfg = HilConfig(
+        scenario="geo-smallsat-pyramid",
+        duration=300.0,
+        seed=42,
+        channel=_channel(),
+        calibration_s=150.0,
+        faults=(parse_node_fault(fault),),
+        reference=False,
+    )
+    [alarm] = run_hil(cfg, tmp_path / "out").metrics["wheel_faults"]
+    assert alarm["named_kind"] == kind and "named by a probe" in alarm["detector"]
+    assert alarm["detected_s"] < 300.0  # before the scheduled probe
 
 
 @pytest.mark.slow

@@ -98,6 +98,8 @@ def _wheel(
         found = test.update(cmd, reading, current, phase)
         if found is not None:
             return k, found
+        if probe is not None and test.wants_probe:
+            probe.probe_soon(t + dt)
     return None
 
 
@@ -120,7 +122,7 @@ def test_a_probe_finds_a_clamp_the_dither_never_reaches_and_names_it():
     k, alarm = _wheel(test, rng, 1200, follow=1.0, t0=3930.0, probe=probe, clamp=0.4)
     assert alarm.test == "capacity probe" and alarm.kind == "current_limit"
     assert alarm.statistic > alarm.threshold
-    assert 3930.0 + k * 0.1 == pytest.approx(3961.0)  # the end of the next probe's push
+    assert 3930.0 + k * 0.1 == pytest.approx(3962.0)  # the end of the next probe
 
 
 def test_a_probe_names_a_weak_motor_by_the_current_it_still_draws():
@@ -213,4 +215,19 @@ def test_a_wheel_faulty_from_power_up_is_named_by_its_first_probe(follow, clamp,
     rng, test, probe = _probed(6)
     k, alarm = _wheel(test, rng, 3000, follow=follow, probe=probe, clamp=clamp)
     assert alarm.test.startswith("capacity probe") and alarm.kind == kind
-    assert k * 0.1 == pytest.approx(61.0) and not test.healthy_probes  # the first push
+    assert k * 0.1 == pytest.approx(62.0) and not test.healthy_probes  # the first probe
+
+
+@pytest.mark.parametrize(
+    ("follow", "drag_rpm_s", "kind"), [(0.8, 1.5, "torque_constant"), (1.0, 3.0, "friction")]
+)
+def test_a_drag_on_the_held_speed_is_named_by_a_probe_asked_for_at_once(follow, drag_rpm_s, kind):
+    """A weak motor drags on the held speed (its drive's friction feed-forward falls short)
+    as extra friction does: the tracking test sees the drag first, and a probe asked for
+    at once names it: a motor that lost torque misses push and way back alike, a drag
+    costs the push away from zero and helps the way back."""
+    rng, test, probe = _probed(9)
+    assert _wheel(test, rng, 3000, follow=1.0, probe=probe) is None
+    k, alarm = _wheel(test, rng, 600, follow=follow, drag_rpm_s=drag_rpm_s, t0=310.0, probe=probe)
+    assert alarm.test == "CUSUM, named by a probe" and alarm.kind == kind
+    assert 310.0 + k * 0.1 < 359.0  # before the scheduled probe at 360 s

@@ -38,10 +38,14 @@ rated acceleration for :data:`PROBE_S`, then the same back (the speeds return,
 the body feels nothing while every wheel follows). The speed change over the
 push is compared with the command, against the wheel's own first
 :data:`PROBE_CALIBRATION` probes; a shortfall beyond the false-alarm rate's
-threshold is named by the push's mean current against the healthy probes': a
-clamp's missing current explains at least half its missing speed change
-(``current_limit``); a motor that drew its current and still fell short lost
-torque (``torque_constant``).
+threshold is named by the probe's signature (:meth:`_Probe.named`): a clamp's
+missing current explains at least half its missing speed change
+(``current_limit``); a motor that lost torque misses the push and the way back
+alike (``torque_constant``); a drag against the rotation costs the push away
+from zero and helps the way back (``friction``). A weak motor also drags on the
+held speed (its drive's friction feed-forward falls short), which the tracking
+test sees first: a tracking alarm that names a drag asks for a probe at once,
+and the probe names it.
 
 Hand-written: no library offers a command-tracking monitor for a wheel drive.
 """
@@ -74,6 +78,10 @@ PROBE_S = 1.0  # the push lasts this long, s, and the way back as long
 PROBE_EVERY_S = 60.0  # a probe starts every this many seconds of flight (the first at this)
 PROBE_SETTLE_S = 1.0  # the tracking test skips this long after a probe (the drive's lag)
 PROBE_CALIBRATION = 3  # a wheel's first probes in the loop are its healthy ones
+PROBE_WAIT_S = 3.0  # a tracking alarm waits this long for the probe that names it
+# a tracking alarm that names a drag may be friction or a motor that lost torque: the
+# probe tells them apart (a weak motor's drag on the held speed shows first)
+DRAG_NAMES = ("friction", "speed_sensor_bias")
 # a drive that misses more of a push than this share is not a healthy one of its spec: a
 # healthy drive's lag costs ~2 % (RW90 4.5-6.6 rpm of 289, NRWA-T6 3.3-4.4 of 203)
 PROBE_LAG_MAX = 0.1
@@ -141,6 +149,7 @@ class NullSpaceDither:
         self.torque_amplitude = inertia * rpm_to_rad_s(amplitude_rpm_s)  # N·m
         self.probe_torque = inertia * rpm_to_rad_s(probe_rpm_s)  # N·m
         self.period_s, self.probe_every_s, self.probe_s = period_s, probe_every_s, probe_s
+        self._extra_start: float | None = None  # s: a probe asked for off the schedule
         self._active: tuple[bool, ...] | None = None
         self._n: np.ndarray | None = None
 
@@ -189,10 +198,32 @@ class NullSpaceDither:
             probe, or once the active wheels have no null space).
         """
         t += 1e-6  # s: a time k·dt computed as a float may fall a hair short of a boundary
-        if self.probe_torque == 0.0 or self._n is None or t < self.probe_every_s:
+        if self.probe_torque == 0.0 or self._n is None:
+            return 0
+        if self._extra_start is not None and t >= self._extra_start:
+            into = t - self._extra_start
+            if into < 2 * self.probe_s:
+                return 1 if into < self.probe_s else -1
+            self._extra_start = None
+        if t < self.probe_every_s:
             return 0
         into = t % self.probe_every_s
         return 1 if into < self.probe_s else -1 if into < 2 * self.probe_s else 0
+
+    def probe_soon(self, t: float) -> None:
+        """Ask for a probe off the schedule, starting at ``t`` (s): none when one is under
+        way, or when the scheduled one comes before this one would have settled.
+
+        Parameters
+        ----------
+        t : float
+            Flight time, s: the next control period's start.
+        """
+        if self.probe_phase(t) != 0 or self._extra_start is not None:
+            return
+        scheduled = max(self.probe_every_s, (t // self.probe_every_s + 1) * self.probe_every_s)
+        if scheduled - t > 2 * self.probe_s + PROBE_SETTLE_S:
+            self._extra_start = t
 
 
 def name_fault(
@@ -257,8 +288,8 @@ class TrackingAlarm:
 
 
 @dataclass
-class _Push:
-    """One probe's push as the wheel saw it: speeds in rpm, current in A."""
+class _Half:
+    """One half of a probe (the push, or the way back) as the wheel saw it."""
 
     start_rpm: float
     commanded_rpm: float = 0.0
@@ -267,27 +298,72 @@ class _Push:
     requested_sum_a: float = 0.0
     periods: int = 0
 
-    @property
-    def current_a(self) -> float:
-        """The mean |current| over the push, A."""
-        return self.current_sum_a / self.periods
-
-    @property
-    def requested_a(self) -> float:
-        """The mean |current| the drive's feed-forward asked for over the push, A."""
-        return self.requested_sum_a / self.periods
-
-    def named(self, excess_rpm: float, current_a: float) -> str:
-        """``current_limit`` when the current missing against ``current_a`` (A) explains
-        at least half of ``excess_rpm``, the speed change missed; else ``torque_constant``."""
-        missing_rpm = max(0.0, 1.0 - self.current_a / current_a) * abs(self.commanded_rpm)
-        return "current_limit" if missing_rpm > excess_rpm / 2 else "torque_constant"
+    def add(self, commanded_rpm: float, speed_rpm: float, current_a: float, requested_a: float):
+        """One control period of it: speed change commanded and speed reached (rpm), the
+        current reported and the one the drive's feed-forward asked for (A)."""
+        self.commanded_rpm += commanded_rpm
+        self.end_rpm = speed_rpm
+        self.current_sum_a += abs(current_a)
+        self.requested_sum_a += abs(requested_a)
+        self.periods += 1
 
     @property
     def shortfall_rpm(self) -> float:
         """The speed change the wheel missed, rpm (positive: it fell short)."""
         moved = self.end_rpm - self.start_rpm
         return math.copysign(1.0, self.commanded_rpm) * (self.commanded_rpm - moved)
+
+    @property
+    def current_a(self) -> float:
+        """The mean |current| over the half, A."""
+        return self.current_sum_a / self.periods
+
+    @property
+    def requested_a(self) -> float:
+        """The mean |current| the drive's feed-forward asked for over the half, A."""
+        return self.requested_sum_a / self.periods
+
+
+@dataclass
+class _Probe:
+    """A probe's push and way back. Its signature splits the two shortfalls: a motor that
+    lost torque misses both alike (``symmetric_rpm``); a drag against the rotation costs
+    the half that moves away from zero and helps the other (``drag_rpm``)."""
+
+    out: _Half
+    back: _Half | None = None
+
+    @property
+    def complete(self) -> bool:
+        return self.back is not None and self.back.periods == self.out.periods
+
+    @property
+    def symmetric_rpm(self) -> float:
+        assert self.back is not None
+        return (self.out.shortfall_rpm + self.back.shortfall_rpm) / 2
+
+    @property
+    def drag_rpm(self) -> float:
+        assert self.back is not None
+        away = math.copysign(1.0, self.out.commanded_rpm) == math.copysign(1.0, self.out.end_rpm)
+        return (1 if away else -1) * (self.out.shortfall_rpm - self.back.shortfall_rpm) / 2
+
+    def named(self, healthy: list[_Probe]) -> str:
+        """The fault that explains this probe against the wheel's ``healthy`` probes (none
+        yet: against a drive without lag that draws what its feed-forward asks for):
+        ``current_limit`` when the missing current explains at least half of the push's
+        missed speed, else ``friction`` or ``torque_constant`` by the larger excess."""
+        # the current drawn per current asked: a probe off the schedule meets the dither
+        # in another phase, so it asks for a few percent more or less
+        drawn = float(np.mean([p.out.current_a / p.out.requested_a for p in healthy] or [1.0]))
+        excess = self.out.shortfall_rpm - np.mean([p.out.shortfall_rpm for p in healthy] or [0])
+        share = self.out.current_a / self.out.requested_a / drawn
+        missing_rpm = max(0.0, 1.0 - share) * abs(self.out.commanded_rpm)
+        if missing_rpm > excess / 2:
+            return "current_limit"
+        drag = self.drag_rpm - np.mean([p.drag_rpm for p in healthy] or [0])
+        symmetric = self.symmetric_rpm - np.mean([p.symmetric_rpm for p in healthy] or [0])
+        return "friction" if drag > symmetric else "torque_constant"
 
 
 class TrackingTest:
@@ -325,8 +401,12 @@ class TrackingTest:
         rate = false_alarms_per_hour / (1 if probe_every_s is None else 2)
         self.cusum = Cusum(cusum_threshold(arl_to_samples(rate, self.window_s)), clip=CLIP)
         self.probe_z = float(norm.isf(rate * (probe_every_s or math.inf) / 3600.0))
-        self.healthy_probes: list[_Push] = []
-        self._push: _Push | None = None
+        self.healthy_probes: list[_Probe] = []
+        self._probing: _Probe | None = None
+        # a tracking alarm whose drag a probe names (friction, or a motor that lost torque)
+        self._pending: TrackingAlarm | None = None
+        self._waited = 0  # periods the pending alarm has waited for its probe
+        self.wants_probe = False
         self._settle = 0  # periods the tracking test still skips after a probe
         self.mean = self.sigma = self.robust_sigma = math.nan
         stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
@@ -376,10 +456,30 @@ class TrackingTest:
         last = speed_rpm if self._last_speed is None else self._last_speed
         self._last_speed = speed_rpm
         found = self._probe(probe, accel_cmd_rpm_s, last, speed_rpm, current_a)
+        if self._pending is not None:
+            return found or self._still_pending(probe)
         self._settle = round(PROBE_SETTLE_S / self.dt) if probe else max(self._settle - 1, 0)
         self._skip |= probe != 0 or self._settle > 0
         window = self._window(accel_cmd_rpm_s, last, speed_rpm, current_a)
+        if window is not None and window.kind in DRAG_NAMES and self._named_by_probes:
+            self._pending, self.wants_probe = window, True  # a drag: friction or a motor?
+            return found
         return found or window
+
+    @property
+    def _named_by_probes(self) -> bool:
+        return len(self.healthy_probes) == PROBE_CALIBRATION
+
+    def _still_pending(self, probe: int) -> TrackingAlarm | None:
+        """The pending alarm as named by its probe once that probe is done; as the tracking
+        test named it if no probe came within :data:`PROBE_WAIT_S`."""
+        assert self._pending is not None
+        self.wants_probe = self.wants_probe and probe == 0
+        self._waited += 1
+        if self._probing is None and self._waited * self.dt > PROBE_WAIT_S:
+            pending, self._pending = self._pending, None
+            return pending
+        return None
 
     def _window(
         self, accel_cmd_rpm_s: float, last: float, speed_rpm: float, current_a: float
@@ -435,35 +535,40 @@ class TrackingTest:
     def _probe(
         self, phase: int, accel_cmd_rpm_s: float, last: float, speed_rpm: float, current_a: float
     ) -> TrackingAlarm | None:
-        """Follow a probe's push; when it ends, judge it against the wheel's healthy ones."""
+        """Follow a probe; when it is done, judge it against the wheel's healthy ones."""
+        requested = self._requested_current(accel_cmd_rpm_s, speed_rpm)
+        row = (accel_cmd_rpm_s * self.dt, speed_rpm, current_a, requested)
         if phase == 1:
-            pushing = self._push = self._push or _Push(last)
-            pushing.commanded_rpm += accel_cmd_rpm_s * self.dt
-            pushing.end_rpm = speed_rpm
-            pushing.current_sum_a += abs(current_a)
-            pushing.requested_sum_a += abs(self._requested_current(accel_cmd_rpm_s, speed_rpm))
-            pushing.periods += 1
+            self._probing = self._probing or _Probe(_Half(last))
+            self._probing.out.add(*row)
             return None
-        push, self._push = self._push, None
-        if push is None:
+        if phase == -1 and self._probing is not None:
+            self._probing.back = self._probing.back or _Half(last)
+            self._probing.back.add(*row)
             return None
-        if len(self.healthy_probes) < PROBE_CALIBRATION:
-            share = push.shortfall_rpm / abs(push.commanded_rpm)
+        done, self._probing = self._probing, None
+        if done is None or not done.complete:  # none, or cut short (a wheel was idled)
+            return None
+        if self._pending is not None:  # a tracking alarm: the probe names the drag
+            pending, self._pending = self._pending, None
+            kind, how = done.named(self.healthy_probes), "CUSUM, named by a probe"
+            return TrackingAlarm(kind, how, pending.statistic, pending.threshold)
+        if not self._named_by_probes:
+            share = done.out.shortfall_rpm / abs(done.out.commanded_rpm)
             if share > PROBE_LAG_MAX:  # faulty from the start: not a healthy probe
-                kind = push.named(push.shortfall_rpm, push.requested_a)
+                kind = done.named([])
                 return TrackingAlarm(kind, "capacity probe, share missed", share, PROBE_LAG_MAX)
-            self.healthy_probes.append(push)
+            self.healthy_probes.append(done)
             return None
         if not self.calibrated:
             return None
-        healthy = np.array([p.shortfall_rpm for p in self.healthy_probes])
+        healthy = np.array([p.out.shortfall_rpm for p in self.healthy_probes])
         # the window test's σ is the same reading noise over the same second
         sigma = max(self.robust_sigma * self.window_s, float(np.std(healthy, ddof=1)))
-        z = (push.shortfall_rpm - healthy.mean()) / (sigma * math.sqrt(1 + 1 / healthy.size))
+        z = (done.out.shortfall_rpm - healthy.mean()) / (sigma * math.sqrt(1 + 1 / healthy.size))
         if z <= self.probe_z:
             return None
-        current = float(np.mean([p.current_a for p in self.healthy_probes]))
-        kind = push.named(push.shortfall_rpm - healthy.mean(), current)
+        kind = done.named(self.healthy_probes)
         return TrackingAlarm(kind, "capacity probe", float(z), self.probe_z)
 
     def healthy_spread_rpm_s(self) -> float:
@@ -482,12 +587,15 @@ class TrackingTest:
         Returns
         -------
         dict or None
-            ``shortfall_rpm`` (mean speed change missed, rpm) and ``current_a`` (mean
-            current over a push, A); None before the healthy probes are in.
+            ``shortfall_rpm`` (mean speed change a push missed, rpm), ``drag_rpm`` (its
+            part that a drag explains, :class:`_Probe`) and ``current_a`` (mean current
+            over a push, A); None before the healthy probes are in.
         """
         if len(self.healthy_probes) < PROBE_CALIBRATION:
             return None
+        probes = self.healthy_probes
         return {
-            "shortfall_rpm": float(np.mean([p.shortfall_rpm for p in self.healthy_probes])),
-            "current_a": float(np.mean([p.current_a for p in self.healthy_probes])),
+            "shortfall_rpm": float(np.mean([p.out.shortfall_rpm for p in probes])),
+            "drag_rpm": float(np.mean([p.drag_rpm for p in probes])),
+            "current_a": float(np.mean([p.out.current_a for p in probes])),
         }

@@ -939,6 +939,8 @@ class _Loop:
                 self._wake.append(wake)
             if self.tracking:
                 self._track(readings, self._cmd[-1], probe, wake)
+                if self.dither is not None and any(t.wants_probe for t in self.tracking.values()):
+                    self.dither.probe_soon(sat.t)  # to name a drag: friction, or the motor
             if diag and (k + 1) % every == 0:
                 self._diagnose(diag, readings, acc_sum, every)
                 acc_sum = {n: 0.0 for n in self.nodes}
