@@ -38,7 +38,7 @@ rated acceleration for :data:`PROBE_S`, then the same back (the speeds return,
 the body feels nothing while every wheel follows). The speed change over the
 push is compared with the command, against the wheel's own first
 :data:`PROBE_CALIBRATION` probes; a shortfall beyond the false-alarm rate's
-threshold is named by the probe's signature (:meth:`_Probe.named`): a clamp's
+threshold is named by the probe's signature (:meth:`rwlab.hil.probe.Probe.named`): a clamp's
 missing current explains at least half its missing speed change
 (``current_limit``); a motor that lost torque misses the push and the way back
 alike (``torque_constant``); a drag against the rotation costs the push away
@@ -61,6 +61,7 @@ from scipy.stats import norm
 
 from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
 from rwlab.errors import ConfigError
+from rwlab.hil.probe import Half, Probe
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
 
 __all__ = ["NullSpaceDither", "TrackingAlarm", "TrackingTest", "name_fault", "null_vector"]
@@ -287,85 +288,6 @@ class TrackingAlarm:
     threshold: float
 
 
-@dataclass
-class _Half:
-    """One half of a probe (the push, or the way back) as the wheel saw it."""
-
-    start_rpm: float
-    commanded_rpm: float = 0.0
-    end_rpm: float = math.nan
-    current_sum_a: float = 0.0
-    requested_sum_a: float = 0.0
-    periods: int = 0
-
-    def add(self, commanded_rpm: float, speed_rpm: float, current_a: float, requested_a: float):
-        """One control period of it: speed change commanded and speed reached (rpm), the
-        current reported and the one the drive's feed-forward asked for (A)."""
-        self.commanded_rpm += commanded_rpm
-        self.end_rpm = speed_rpm
-        self.current_sum_a += abs(current_a)
-        self.requested_sum_a += abs(requested_a)
-        self.periods += 1
-
-    @property
-    def shortfall_rpm(self) -> float:
-        """The speed change the wheel missed, rpm (positive: it fell short)."""
-        moved = self.end_rpm - self.start_rpm
-        return math.copysign(1.0, self.commanded_rpm) * (self.commanded_rpm - moved)
-
-    @property
-    def current_a(self) -> float:
-        """The mean |current| over the half, A."""
-        return self.current_sum_a / self.periods
-
-    @property
-    def requested_a(self) -> float:
-        """The mean |current| the drive's feed-forward asked for over the half, A."""
-        return self.requested_sum_a / self.periods
-
-
-@dataclass
-class _Probe:
-    """A probe's push and way back. Its signature splits the two shortfalls: a motor that
-    lost torque misses both alike (``symmetric_rpm``); a drag against the rotation costs
-    the half that moves away from zero and helps the other (``drag_rpm``)."""
-
-    out: _Half
-    back: _Half | None = None
-
-    @property
-    def complete(self) -> bool:
-        return self.back is not None and self.back.periods == self.out.periods
-
-    @property
-    def symmetric_rpm(self) -> float:
-        assert self.back is not None
-        return (self.out.shortfall_rpm + self.back.shortfall_rpm) / 2
-
-    @property
-    def drag_rpm(self) -> float:
-        assert self.back is not None
-        away = math.copysign(1.0, self.out.commanded_rpm) == math.copysign(1.0, self.out.end_rpm)
-        return (1 if away else -1) * (self.out.shortfall_rpm - self.back.shortfall_rpm) / 2
-
-    def named(self, healthy: list[_Probe]) -> str:
-        """The fault that explains this probe against the wheel's ``healthy`` probes (none
-        yet: against a drive without lag that draws what its feed-forward asks for):
-        ``current_limit`` when the missing current explains at least half of the push's
-        missed speed, else ``friction`` or ``torque_constant`` by the larger excess."""
-        # the current drawn per current asked: a probe off the schedule meets the dither
-        # in another phase, so it asks for a few percent more or less
-        drawn = float(np.mean([p.out.current_a / p.out.requested_a for p in healthy] or [1.0]))
-        excess = self.out.shortfall_rpm - np.mean([p.out.shortfall_rpm for p in healthy] or [0])
-        share = self.out.current_a / self.out.requested_a / drawn
-        missing_rpm = max(0.0, 1.0 - share) * abs(self.out.commanded_rpm)
-        if missing_rpm > excess / 2:
-            return "current_limit"
-        drag = self.drag_rpm - np.mean([p.drag_rpm for p in healthy] or [0])
-        symmetric = self.symmetric_rpm - np.mean([p.symmetric_rpm for p in healthy] or [0])
-        return "friction" if drag > symmetric else "torque_constant"
-
-
 class TrackingTest:
     """One wheel's command-tracking test and capacity probe (see the module's docstring).
 
@@ -401,8 +323,8 @@ class TrackingTest:
         rate = false_alarms_per_hour / (1 if probe_every_s is None else 2)
         self.cusum = Cusum(cusum_threshold(arl_to_samples(rate, self.window_s)), clip=CLIP)
         self.probe_z = float(norm.isf(rate * (probe_every_s or math.inf) / 3600.0))
-        self.healthy_probes: list[_Probe] = []
-        self._probing: _Probe | None = None
+        self.healthy_probes: list[Probe] = []
+        self._probing: Probe | None = None
         # a tracking alarm whose drag a probe names (friction, or a motor that lost torque)
         self._pending: TrackingAlarm | None = None
         self._waited = 0  # periods the pending alarm has waited for its probe
@@ -539,11 +461,11 @@ class TrackingTest:
         requested = self._requested_current(accel_cmd_rpm_s, speed_rpm)
         row = (accel_cmd_rpm_s * self.dt, speed_rpm, current_a, requested)
         if phase == 1:
-            self._probing = self._probing or _Probe(_Half(last))
+            self._probing = self._probing or Probe(Half(last))
             self._probing.out.add(*row)
             return None
         if phase == -1 and self._probing is not None:
-            self._probing.back = self._probing.back or _Half(last)
+            self._probing.back = self._probing.back or Half(last)
             self._probing.back.add(*row)
             return None
         done, self._probing = self._probing, None
@@ -551,6 +473,8 @@ class TrackingTest:
             return None
         if self._pending is not None:  # a tracking alarm: the probe names the drag
             pending, self._pending = self._pending, None
+            if not self._probe_sees(done):  # nothing a probe can see: the test's name
+                return pending
             kind, how = done.named(self.healthy_probes), "CUSUM, named by a probe"
             return TrackingAlarm(kind, how, pending.statistic, pending.threshold)
         if not self._named_by_probes:
@@ -562,14 +486,28 @@ class TrackingTest:
             return None
         if not self.calibrated:
             return None
-        healthy = np.array([p.out.shortfall_rpm for p in self.healthy_probes])
-        # the window test's σ is the same reading noise over the same second
-        sigma = max(self.robust_sigma * self.window_s, float(np.std(healthy, ddof=1)))
-        z = (done.out.shortfall_rpm - healthy.mean()) / (sigma * math.sqrt(1 + 1 / healthy.size))
+        healthy = np.mean([p.out.shortfall_rpm for p in self.healthy_probes])
+        z = (done.out.shortfall_rpm - healthy) / self._probe_sigma_rpm()
         if z <= self.probe_z:
             return None
         kind = done.named(self.healthy_probes)
         return TrackingAlarm(kind, "capacity probe", float(z), self.probe_z)
+
+    def _probe_sigma_rpm(self) -> float:
+        """A probe half's shortfall noise against the healthy probes' mean, rpm."""
+        healthy = [p.out.shortfall_rpm for p in self.healthy_probes]
+        # the window test's σ is the same reading noise over the same second
+        sigma = max(self.robust_sigma * self.window_s, float(np.std(healthy, ddof=1)))
+        return sigma * math.sqrt(1 + 1 / len(healthy))
+
+    def _probe_sees(self, probe: Probe) -> bool:
+        """Whether the probe's drag or symmetric shortfall left the healthy probes' spread."""
+        if not self.calibrated:
+            return False
+        h = self.healthy_probes
+        drag = probe.drag_rpm - np.mean([p.drag_rpm for p in h])
+        symmetric = probe.symmetric_rpm - np.mean([p.symmetric_rpm for p in h])
+        return bool(max(abs(drag), abs(symmetric)) > self.probe_z * self._probe_sigma_rpm())
 
     def healthy_spread_rpm_s(self) -> float:
         """The calibrated spread of the window residual.
@@ -588,7 +526,7 @@ class TrackingTest:
         -------
         dict or None
             ``shortfall_rpm`` (mean speed change a push missed, rpm), ``drag_rpm`` (its
-            part that a drag explains, :class:`_Probe`) and ``current_a`` (mean current
+            part that a drag explains, :class:`Probe`) and ``current_a`` (mean current
             over a push, A); None before the healthy probes are in.
         """
         if len(self.healthy_probes) < PROBE_CALIBRATION:
