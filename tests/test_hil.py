@@ -430,16 +430,30 @@ def test_a_diagnosis_that_cannot_calibrate_leaves_the_flight_alone(tmp_path):
         channel=_channel(),
         wheel_bias_rpm=300.0,
         calibration_s=60.0,
+        health_check=False,  # with it on, the block tests do not run at all
         reference=False,
     )
     result = run_hil(cfg, tmp_path)
     off = result.metrics["diagnosis_off"]
     kinds = [e["kind"] for e in result.events]
     assert kinds[-1] != "error"
-    if off:  # refused: every refusal says why and the run went on to its end
-        assert all(isinstance(v, str) and v for v in off.values())
-        assert "diagnosis_off" in kinds
+    assert off  # refused (held speeds): every refusal says why, the run went on to its end
+    assert all(isinstance(v, str) and v for v in off.values())
+    assert "diagnosis_off" in kinds
     assert result.run.t[-1] == pytest.approx(200.0)
+
+
+def test_under_the_health_check_the_block_tests_stay_out_of_the_way(tmp_path):
+    """A held-speed pyramid gives the block tests nothing to calibrate on (they refused on
+    every wheel of every run, in four lines of metrics.json): the health check is the
+    diagnosis there, and nothing says the diagnosis is off."""
+    cfg = HilConfig(
+        scenario="geo-smallsat-pyramid", duration=200.0, channel=_channel(), reference=False
+    )
+    result = run_hil(cfg, tmp_path)
+    assert result.metrics["diagnosis_off"] == {}
+    assert "diagnosis_off" not in [e["kind"] for e in result.events]
+    assert result.metrics["health_check"] is not None
 
 
 # -- safety --------------------------------------------------------------------------------------

@@ -112,8 +112,9 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
 @click.option(
     "--health-check/--no-health-check",
     default=None,
-    help="Excite the wheels' null space (no body torque) and test that each wheel follows "
-    "its commanded acceleration [default: on with the diagnosis on a redundant set].",
+    help="Excite the wheels' null space (no body torque), probe their torque capacity and "
+    "test that each wheel follows its commanded acceleration; on a redundant set it is "
+    "the diagnosis [default: on with the diagnosis on a redundant set].",
 )
 @click.option(
     "--steady-after",
