@@ -76,14 +76,24 @@ def test_a_probe_pushes_and_returns_whole_control_periods_and_leaves_the_speeds(
 
 
 def _wheel(
-    test, rng, steps, follow, drag_rpm_s=0.0, speed=1000.0, dt=0.1, t0=0.0, probe=None, clamp=1.0
+    test,
+    rng,
+    steps,
+    follow,
+    drag_rpm_s=0.0,
+    speed=1000.0,
+    dt=0.1,
+    t0=0.0,
+    probe=None,
+    clamp=1.0,
+    frozen=None,
 ):
     """A synthetic wheel under the dither: the speed it reports (0.5 rpm noise and quantum)
     follows ``follow`` × the command, less a drag; returns the first alarm or None.
 
     With ``probe`` (a ``NullSpaceDither`` of one wheel) its probes are flown too: the drive
     asks 0.002 A per rpm/s and delivers at most ``clamp`` A; a clamped wheel's acceleration
-    is what the clamp allows."""
+    is what the clamp allows. A ``frozen`` reading (rpm) is reported whatever the speed."""
     for k in range(steps):
         t = t0 + k * dt
         cmd = 10.0 * math.cos(2 * math.pi * t / 4.0)
@@ -94,7 +104,7 @@ def _wheel(
         current = min(0.02 + 0.002 * abs(cmd), clamp)
         moved = follow * math.copysign(min(abs(cmd), (clamp - 0.02) / 0.002), cmd)
         speed += (moved - drag_rpm_s) * dt
-        reading = round((speed + rng.normal(0, 0.5)) * 2) / 2
+        reading = round((speed + rng.normal(0, 0.5)) * 2) / 2 if frozen is None else frozen
         found = test.update(cmd, reading, current, phase)
         if found is not None:
             return k, found
@@ -239,3 +249,15 @@ def test_a_drag_on_the_held_speed_is_named_by_a_probe_asked_for_at_once(
     k, alarm = _wheel(test, rng, 600, follow=follow, drag_rpm_s=drag_rpm_s, t0=310.0, probe=probe)
     assert alarm.test == how and alarm.kind == kind
     assert 310.0 + k * 0.1 < 359.0  # before the scheduled probe at 360 s
+
+
+def test_a_reading_that_does_not_move_under_a_probe_is_a_frozen_sensor():
+    """A frozen reading follows neither the dither (whose swings cancel in the tracking
+    test) nor the probe: the probe finds it, and a reading that did not change by one
+    quantum while the wheel was pushed at 90 % of its torque is the sensor, not the motor
+    (a dead motor's wheel still coasts)."""
+    rng, test, probe = _probed(11)
+    assert _wheel(test, rng, 3000, follow=1.0, probe=probe) is None
+    k, alarm = _wheel(test, rng, 1200, follow=1.0, t0=330.0, probe=probe, frozen=1000.5)
+    assert alarm.test == "capacity probe" and alarm.kind == "speed_sensor_stuck"
+    assert 330.0 + k * 0.1 == pytest.approx(362.0)

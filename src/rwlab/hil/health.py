@@ -42,7 +42,8 @@ threshold is named by the probe's signature (:meth:`rwlab.hil.probe.Probe.named`
 missing current explains at least half its missing speed change
 (``current_limit``); a motor that lost torque misses the push and the way back
 alike (``torque_constant``); a drag against the rotation costs the push away
-from zero and helps the way back (``friction``). A weak motor also drags on the
+from zero and helps the way back (``friction``); a reading that did not move
+over the whole probe is a frozen sensor (``speed_sensor_stuck``). A weak motor also drags on the
 held speed (its drive's friction feed-forward falls short), which the tracking
 test sees first: a tracking alarm that names a drag asks for a probe at once,
 and the probe names it.

@@ -10,7 +10,7 @@ Hand-written: no library models a reaction wheel drive's response to a torque pr
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,6 +34,8 @@ class Half:
         asked for, one term per period, A.
     periods : int
         Control periods so far.
+    readings : set of float
+        The distinct speeds reported over it, rpm.
     """
 
     start_rpm: float
@@ -42,6 +44,7 @@ class Half:
     current_sum_a: float = 0.0
     requested_sum_a: float = 0.0
     periods: int = 0
+    readings: set[float] = field(default_factory=set)
 
     def add(
         self, commanded_rpm: float, speed_rpm: float, current_a: float, requested_a: float
@@ -59,6 +62,7 @@ class Half:
         """
         self.commanded_rpm += commanded_rpm
         self.end_rpm = speed_rpm
+        self.readings.add(speed_rpm)
         self.current_sum_a += abs(current_a)
         self.requested_sum_a += abs(requested_a)
         self.periods += 1
@@ -124,6 +128,7 @@ class Probe:
         Returns
         -------
         str
+            ``speed_sensor_stuck`` when the reading did not change at all, else
             ``current_limit`` when the missing current (drawn per current asked)
             explains at least half of the push's missed speed change, else ``friction``
             or ``torque_constant``, whichever excess is larger: the drag's or the
@@ -135,6 +140,8 @@ class Probe:
         excess = self.out.shortfall_rpm - np.mean([p.out.shortfall_rpm for p in healthy] or [0])
         share = self.out.current_a / self.out.requested_a / drawn
         missing_rpm = max(0.0, 1.0 - share) * abs(self.out.commanded_rpm)
+        if self.back is not None and self.out.readings | self.back.readings == {self.out.start_rpm}:
+            return "speed_sensor_stuck"  # pushed at 90 % of its torque, not one quantum
         if missing_rpm > excess / 2:
             return "current_limit"
         drag = self.drag_rpm - np.mean([p.drag_rpm for p in healthy] or [0])
