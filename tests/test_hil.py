@@ -327,9 +327,9 @@ def test_dead_motor_in_a_pyramid_is_named_idled_and_survived(tmp_path):
     assert kinds.index("reallocate") < kinds.index("stop")
 
 
-def _short_flight_alarms(tmp_path, scenario: str, seed: int, fault: str, duration: float):
-    """The wheel faults of a short flight: 150 s of calibration (probes at 60, 120 and
-    180 s its healthy ones), ``fault`` injected."""
+def _short_flight(tmp_path, scenario: str, seed: int, fault: str, duration: float):
+    """A short flight: 150 s of calibration (probes at 60, 120 and 180 s its healthy
+    ones), ``fault`` injected."""
     cfg = HilConfig(
         scenario=scenario,
         duration=duration,
@@ -339,7 +339,7 @@ def _short_flight_alarms(tmp_path, scenario: str, seed: int, fault: str, duratio
         faults=(parse_node_fault(fault),),
         reference=False,
     )
-    return run_hil(cfg, tmp_path / "out").metrics["wheel_faults"]
+    return run_hil(cfg, tmp_path / "out")
 
 
 @pytest.mark.parametrize(
@@ -355,10 +355,16 @@ def test_a_clamp_the_loop_never_reaches_is_named_by_the_next_capacity_probe(
     """A current clamp at 60 % of the wheel's (RW90, NRWA-T6): the calm loop draws a few
     percent of it, so only the probe that follows (at 300 s, after three healthy ones)
     reaches it; it is named a clamp by its missing current, and it is the only alarm."""
-    [alarm] = _short_flight_alarms(tmp_path, scenario, 4, fault, 320.0)
+    from rwlab.report.hil import write_hil_report
+
+    result = _short_flight(tmp_path, scenario, 4, fault, 320.0)
+    [alarm] = result.metrics["wheel_faults"]
     assert alarm["node"] == int(fault[0]) and alarm["named_kind"] == "current_limit"
     assert "capacity probe" in alarm["detector"]
     assert 302.0 < alarm["detected_s"] <= 302.2  # the end of that probe (push and back)
+    page = write_hil_report(result, tmp_path / "out").read_text()
+    table = page[page.index('id="table-wheel-faults"') :]
+    assert "<td>302.1</td>" in table and "capacity probe" in table  # when, and by what
 
 
 @pytest.mark.parametrize(
@@ -370,7 +376,9 @@ def test_a_drag_in_flight_is_named_by_a_probe_asked_for_at_once(fault, kind, tmp
     the drag first (it named this weak motor friction): a probe asked for at once tells a
     motor that lost torque (push and way back both short) from a drag (the push short,
     the way back helped), before the next scheduled probe."""
-    [alarm] = _short_flight_alarms(tmp_path, "geo-smallsat-pyramid", 42, fault, 300.0)
+    [alarm] = _short_flight(tmp_path, "geo-smallsat-pyramid", 42, fault, 300.0).metrics[
+        "wheel_faults"
+    ]
     assert alarm["named_kind"] == kind and "named by a probe" in alarm["detector"]
     assert alarm["detected_s"] < 300.0  # before the scheduled probe
 

@@ -267,19 +267,25 @@ def _events(page: Page, result) -> None:
             [
                 f["node"],
                 f["kind"],
-                f["injected_s"],
-                f["detected_s"],
-                None if f["injected_s"] is None else f["detected_s"] - f["injected_s"],
+                _seconds(f["injected_s"]),
+                _seconds(f["detected_s"]),
+                None if f["injected_s"] is None else _seconds(f["detected_s"] - f["injected_s"]),
                 f["named_kind"],
+                f["detector"],
                 f["action"],
             ]
             for f in faults
         ]
         page.table(
-            ["node", "injected", "at [s]", "detected [s]", "delay [s]", "named", "action"],
+            ["node", "injected", "at [s]", "detected [s]", "delay [s]", "named", "by", "action"],
             rows,
             table_id="table-wheel-faults",
         )
+
+
+def _seconds(t: float | None) -> str | None:
+    """A time to the control loop's tenth of a second (its floats carry 1e-6 of drift)."""
+    return None if t is None else f"{t:.1f}"
 
 
 def _timing(page: Page, m: dict) -> None:
