@@ -208,7 +208,7 @@ def hil(
     for f in m["wheel_faults"]:
         click.echo(
             f"wheel {f['node']}: {f['named_kind']} detected at {f['detected_s']:.1f} s "
-            f"(injected {f['kind']} at {f['injected_s']} s); {f['action']}"
+            f"({f['detector']}; injected {f['kind']} at {f['injected_s']} s); {f['action']}"
         )
     t = m["timing"]
     if t["clock"] == "wall":
