@@ -153,7 +153,7 @@ def test_a_healthy_wheel_raises_no_alarm_and_a_dead_one_is_named_in_seconds():
     # the motor dies: the wheel coasts against its friction and ignores its command
     k, alarm = _wheel(test, rng, 600, follow=0.0, drag_rpm_s=6.8, t0=3900.0)
     assert k * 0.1 <= 10.0 and alarm.statistic > alarm.threshold
-    assert alarm.test == "CUSUM" and alarm.kind == "torque_constant"
+    assert alarm.test == "tracking CUSUM" and alarm.kind == "torque_constant"
 
 
 def test_extra_friction_is_told_from_a_dead_motor():
@@ -231,9 +231,9 @@ def test_a_wheel_faulty_from_power_up_is_named_by_its_first_probe(follow, clamp,
 @pytest.mark.parametrize(
     ("follow", "drag_rpm_s", "kind", "how"),
     [
-        (0.8, 1.5, "torque_constant", "CUSUM, named by a probe"),
-        (1.0, 6.0, "friction", "CUSUM, named by a probe"),
-        (1.0, 1.5, "friction", "CUSUM"),  # within the probes' spread: the test's own name
+        (0.8, 1.5, "torque_constant", "tracking CUSUM, named by a probe"),
+        (1.0, 6.0, "friction", "tracking CUSUM, named by a probe"),
+        (1.0, 1.5, "friction", "tracking CUSUM"),  # within the probes' spread: the test's own name
     ],
 )
 def test_a_drag_on_the_held_speed_is_named_by_a_probe_asked_for_at_once(

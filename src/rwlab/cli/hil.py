@@ -201,10 +201,26 @@ def hil(
         click.echo(str(exc), err=True)  # "interrupted (…); every wheel was idled …"
         raise SystemExit(130) from None  # as every command stopped by a signal
     m = result.metrics
+    if settings["protocol"] is None and m["config"]["protocol"] != "rwlab":
+        click.echo(
+            f"the wheels spoke {m['config']['protocol']}: rw.dbc cannot carry this wheel "
+            "model's current"
+        )
     for key in ("steady_max_error_deg", "steady_rms_error_deg", "max_error_deg"):
         ref = m["reference_simulation"]
         sim = f"   simulation {ref[key]:.4g}" if ref else ""
         click.echo(f"{key:<28} {m[key]:.4g}{sim}")
+    health = m["health_check"]
+    if health is not None:
+        windows, probes = (sum(health[k].values()) for k in ("windows_tested", "probes_tested"))
+        failed = sorted({str(f["node"]) for f in m["wheel_faults"]})
+        verdict = f"alarm on wheel {', '.join(failed)}" if failed else "no alarm"
+        if not (windows or probes or failed):
+            verdict = f"still calibrating at the end ({calibration:g} s): nothing tested"
+        click.echo(
+            f"health check: {windows} tracking windows and {probes} capacity probes tested "
+            f"on {len(health['windows_tested'])} wheels: {verdict}"
+        )
     for f in m["wheel_faults"]:
         click.echo(
             f"wheel {f['node']}: {f['named_kind']} detected at {f['detected_s']:.1f} s "

@@ -277,7 +277,9 @@ class TrackingAlarm:
     kind : str
         The fault named (:func:`name_fault`, or the probe's naming).
     test : str
-        ``"CUSUM"`` (the command-tracking test) or ``"capacity probe"``.
+        ``"tracking CUSUM"`` (the command-tracking test), ``"tracking CUSUM, named by a
+        probe"``, ``"capacity probe"`` or ``"capacity probe, share missed"`` (a calibration
+        probe).
     statistic, threshold : float
         The CUSUM statistic and its threshold, or the probe's shortfall in its healthy
         σ and the threshold of the false-alarm rate per probe.
@@ -336,6 +338,7 @@ class TrackingTest:
         self.band_rpm = STICTION_BAND * max(stribeck, params.min_measurable_rpm)
         self._skip = False  # the window touched the stiction band or a probe
         self.skipped_windows = 0
+        self.windows_tested = self.probes_tested = 0  # after calibration
         self._calibration: list[float] = []
         self._last_speed: float | None = None
         self._start_speed: float | None = None
@@ -443,6 +446,7 @@ class TrackingTest:
                 self.robust_sigma = max(1.4826 * mad, floor)
             return None
         before = self.cusum.statistic
+        self.windows_tested += 1
         alarm = self.cusum.update((residual - self.mean) / self.sigma)
         if before == 0.0:
             self._excursion = self.every  # the excursion starts with this window
@@ -453,7 +457,7 @@ class TrackingTest:
         k = min(len(self._samples), max(self._excursion, round(MIN_NAMING_S / self.dt)))
         rows = np.array(list(self._samples)[-k:])
         kind = name_fault(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], speed_rpm)
-        return TrackingAlarm(kind, "CUSUM", self.cusum.statistic, self.cusum.h)
+        return TrackingAlarm(kind, "tracking CUSUM", self.cusum.statistic, self.cusum.h)
 
     def _probe(
         self, phase: int, accel_cmd_rpm_s: float, last: float, speed_rpm: float, current_a: float
@@ -476,7 +480,7 @@ class TrackingTest:
             pending, self._pending = self._pending, None
             if not self._probe_sees(done):  # nothing a probe can see: the test's name
                 return pending
-            kind, how = done.named(self.healthy_probes), "CUSUM, named by a probe"
+            kind, how = done.named(self.healthy_probes), "tracking CUSUM, named by a probe"
             return TrackingAlarm(kind, how, pending.statistic, pending.threshold)
         if not self._named_by_probes:
             share = done.out.shortfall_rpm / abs(done.out.commanded_rpm)
@@ -488,6 +492,7 @@ class TrackingTest:
         if not self.calibrated:
             return None
         healthy = np.mean([p.out.shortfall_rpm for p in self.healthy_probes])
+        self.probes_tested += 1
         z = (done.out.shortfall_rpm - healthy) / self._probe_sigma_rpm()
         if z <= self.probe_z:
             return None

@@ -1044,10 +1044,7 @@ class _Loop:
             found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a, probe)
             if found is not None:
                 del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
-                how = (
-                    f"command-tracking test ({found.test} {found.statistic:.3g} > "
-                    f"{found.threshold:.3g})"
-                )
+                how = f"{found.test} {found.statistic:.3g} > {found.threshold:.3g}"
                 self._wheel_failed(r.node, found.kind, how, now)
 
     def health_summary(self) -> dict | None:
@@ -1063,6 +1060,8 @@ class _Loop:
                 str(n): t.healthy_spread_rpm_s() for n, t in self.tracked.items()
             },
             "healthy_probes": {str(n): t.healthy_probe_summary() for n, t in self.tracked.items()},
+            "windows_tested": {str(n): t.windows_tested for n, t in self.tracked.items()},
+            "probes_tested": {str(n): t.probes_tested for n, t in self.tracked.items()},
         }
 
     def _wheel_failed(self, node: int, kind: str, how: str, t: float, hard: bool = False) -> None:

@@ -57,9 +57,14 @@ def _page(result) -> Page:
     page = Page(f"Hardware in the loop — {cfg['controller']} on {sc.name}")
     ref_m = m.get("reference_simulation")
     beside = f" ({ref_m['steady_max_error_deg']:.3g}° in the simulation beside it)" if ref_m else ""
+    lost = "; ".join(
+        f"wheel {f['node']} failed at {f['detected_s']:.1f} s ({f['named_kind']}): {f['action']}"
+        for f in m["wheel_faults"]
+    )
     page.verdict(
         f"Requirement ±{req:g}° {'met' if m['meets_requirement'] else 'NOT met'} on the bus: "
-        f"steady-state maximum {m['steady_max_error_deg']:.3g}°{beside}.",
+        f"steady-state maximum {m['steady_max_error_deg']:.3g}°{beside}."
+        + (f" {lost}." if lost else ""),
         bool(m["meets_requirement"]),
     )
     if cfg.get("wheel_forced"):
