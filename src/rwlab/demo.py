@@ -407,8 +407,8 @@ def _hil_stage(out: Path, cfg: DemoConfig, echo) -> dict:
     m = result.metrics
     lost = sum(v or 0 for v in m["bench"]["lost_commands"].values())
     echo(
-        f"[hil] steady max {m['steady_max_error_deg']:.3g}° on the bus, "
-        f"{m['reference_simulation']['steady_max_error_deg']:.3g}° simulated; {lost} lost commands"
+        f"[hil] steady max {m['steady_max_error_deg']:#.3g}° on the bus, "
+        f"{m['reference_simulation']['steady_max_error_deg']:#.3g}° simulated; {lost} lost commands"
     )
     return {
         "steady_max_error_deg": m["steady_max_error_deg"],
