@@ -483,6 +483,14 @@ def test_the_console_ends_with_the_health_checks_account(tmp_path):
     assert "still calibrating at the end (300 s): nothing tested" in res.output
 
 
+def test_hil_help_names_every_built_in_scenario_and_fault():
+    from rwlab.attitude.scenario import SCENARIOS
+    from rwlab.wheel.faults import FAULTS
+
+    text = CliRunner().invoke(main, ["hil", "--help"], terminal_width=1000).output
+    assert all(name in text for name in [*SCENARIOS, *FAULTS])
+
+
 # -- safety --------------------------------------------------------------------------------------
 
 

@@ -40,7 +40,9 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     "--scenario",
     default="geo-smallsat",
     show_default=True,
-    help="geo-smallsat, geo-comsat, or a scenario TOML file.",
+    help="A built-in (geo-smallsat, geo-smallsat-pyramid, geo-comsat, geo-comsat-gyro, "
+    "geo-comsat-star, geo-cubesat) or a scenario TOML file; the health check needs a "
+    "redundant set (the pyramids: geo-smallsat-pyramid, geo-comsat).",
 )
 @click.option(
     "--wheel",
@@ -83,7 +85,9 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     "--fault",
     "faults",
     multiple=True,
-    help="NODE:NAME[=VALUE]@SECONDS injected into a twin, e.g. 2:torque_constant=0@1800.",
+    help="NODE:NAME[=VALUE]@SECONDS injected into a twin, e.g. 2:torque_constant=0@1800; "
+    "NAME: friction (factor), torque_constant (factor), current_limit (A), "
+    "speed_sensor_bias (rpm), speed_sensor_stuck, telemetry_dropout (s).",
 )
 @click.option(
     "--wheels-running",
