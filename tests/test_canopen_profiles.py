@@ -8,6 +8,7 @@ import time
 
 import can
 import canopen
+import numpy as np
 import pytest
 from canopen.profiles.p402 import BaseNode402, State402
 from hypothesis import given, settings
@@ -209,8 +210,13 @@ def test_a_remote_node_with_oresat_configs_dictionary_drives_the_oresat_twin():
         # the reading that ended the wait (2 %: the speed's noise, which a fresh reading
         # can exceed)
         assert velocity == pytest.approx(5.0, abs=0.1)
-        assert wheel.tpdo[2].wait_for_reception(0.5) is not None  # streaming at 20 ms
-        assert wheel.tpdo[2]["motor.velocity"].raw == pytest.approx(5.0, abs=0.15)  # noisy
+        streamed = []
+        for _ in range(10):  # streaming at 20 ms
+            assert wheel.tpdo[2].wait_for_reception(0.5) is not None
+            streamed.append(wheel.tpdo[2]["motor.velocity"].raw)
+        # the speed, not one noisy reading of it (a single one read 3 % low on a loaded
+        # machine while the loop still rang after the wait)
+        assert float(np.median(streamed)) == pytest.approx(5.0, abs=0.15)
         assert 23 < wheel.sdo["bus"]["voltage"].raw < 25
         for bad, code in ((math.nan, 0x06090030), (1e30, 0x06090031), (-1e30, 0x06090032)):
             with pytest.raises(canopen.SdoAbortedError) as err:
