@@ -327,6 +327,10 @@ def test_a_stopped_demo_stops_its_record_workers_at_once(tmp_path, group):
     _, err = child.communicate(timeout=120)
     assert child.returncode == 130, err
     if not group:  # measured: 0.5 s now, 6.3 s when the workers finished their records
-        assert time.monotonic() - stopped < 4.0, "the workers ran on after the stop"
+        # (quiet machine); a suite's other workers slow both: 9 s once under a load of 2
+        # per core, so the bound grows with the load
+        load = max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+        took = time.monotonic() - stopped
+        assert took < 4.0 * load, f"the workers ran on after the stop ({took:.1f} s)"
     assert "Traceback" not in err and "Error" not in err, err
     assert not out.exists() and _leftovers(out) == []
