@@ -5,7 +5,7 @@ Run:  python bench/bench_tests.py [--workers auto] [--lane quick|full|both] [--c
 Rows: the quick lane (``python -m pytest -m "not slow"``, target ≤ 2 min) and the
 whole suite (the README's ``python -m pytest``, target ≤ 5 min on a fresh clone, which
 includes the install this script does not time), each with ``-n WORKERS`` (default
-``auto``, as the suite runs: one worker more than the cores; the targets are for 2
+``auto``, as the suite runs: one worker per core; the targets are for 2
 cores), wall time of the pytest process. ``--cold`` first removes numba's
 cache (the ``__pycache__/*.nbi``/``*.nbc`` files under src/), as on a fresh clone.
 Then the 25 slowest steps (setup, call or teardown) of the last lane, with whether the
