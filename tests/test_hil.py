@@ -481,6 +481,14 @@ def test_the_console_ends_with_the_health_checks_account(tmp_path):
         main, [*args, _channel(), "--duration", "50", "--out", str(tmp_path / "b")]
     )
     assert "still calibrating at the end (300 s): nothing tested" in res.output
+    res = CliRunner().invoke(  # three orthogonal wheels, no bias: nothing watches them
+        main,
+        [
+            *("hil", "--scenario", "geo-cubesat", "--no-reference", "--channel", _channel()),
+            *("--duration", "20", "--out", str(tmp_path / "c")),
+        ],
+    )
+    assert res.exit_code == 0 and "wheel health: not watched in flight" in res.output
 
 
 def test_hil_help_names_every_built_in_scenario_and_fault():

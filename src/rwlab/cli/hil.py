@@ -215,6 +215,11 @@ def hil(
         sim = f"   simulation {ref[key]:.4g}" if ref else ""
         click.echo(f"{key:<28} {m[key]:.4g}{sim}")
     health = m["health_check"]
+    if health is None and not m["config"]["diagnosis"]:
+        click.echo(
+            "wheel health: not watched in flight (the health check needs a redundant wheel "
+            "set, the diagnosis a momentum bias; --diagnosis forces the block tests)"
+        )
     if health is not None:
         windows, probes = (sum(health[k].values()) for k in ("windows_tested", "probes_tested"))
         failed = sorted({str(f["node"]) for f in m["wheel_faults"]})
