@@ -389,6 +389,7 @@ class TrackingTest:
         window = self._window(accel_cmd_rpm_s, last, speed_rpm, current_a)
         if window is not None and window.kind in DRAG_NAMES and self._named_by_probes:
             self._pending, self.wants_probe = window, True  # a drag: friction or a motor?
+            self._waited = 0
             return found
         return found or window
 
