@@ -4,7 +4,8 @@ tests/data/identify_reference/ holds a 600-s twin PRBS record and the study.json
 model.json that ``rwlab identify`` wrote from it before the record was read once, BLAS
 pinned to one thread, the fits' starts run in threads and the grey box and NLARX made
 optional (tests/data/ORIGIN.md). Every number must agree to 1e-9 relative (a percent
-error of a gain: to 1e-7 percentage points, 1e-9 of the gain): only the grey box and the
+error of a gain: to 1e-7 percentage points, 1e-9 of the gain), but the servo fit's and
+what is computed from it (:data:`ITERATIVE`): only the grey box and the
 NLARX leave the default study, and ``--nonlinear-models`` brings them back with the same
 values. One change is deliberate: the continuous-time check now simulates the held
 input exactly, where the reference's fine grid ramped each step (:data:`REDONE`).
@@ -31,6 +32,12 @@ REDONE = re.compile(
     r"/continuous/methods/\w+/(y(\[\d+\])?|fit_to_discrete_percent|max_abs_difference)"
 )
 """The continuous-time check's simulation, made exact for the held input since."""
+ITERATIVE = re.compile(r"/(nonlinear|greybox|healthy_reference)/.*")
+"""The servo fit (``least_squares`` at its default ftol 1e-8), the grey box (ftol 1e-10)
+and the healthy reference measured with the servo model: on another CPU than the
+reference's, round-off takes the iterations elsewhere within the fit's tolerance,
+√ftol = 1e-4 of each value (an AMD EPYC: 2.5e-5 of the offset, 3e-5 on a residual
+correlation, 1e-9 on the linear study's numbers)."""
 
 
 def _differences(old, new, path: str = "") -> list[tuple[str, object, object]]:
@@ -55,6 +62,9 @@ def _differences(old, new, path: str = "") -> list[tuple[str, object, object]]:
     if isinstance(old, float) and isinstance(new, float):
         same = old == new or abs(old - new) <= 1e-9 * max(abs(old), abs(new))
         same |= path.endswith("error_percent") and abs(old - new) <= 1e-7
+        same |= bool(ITERATIVE.fullmatch(path)) and abs(old - new) <= 1e-4 * max(
+            abs(old), abs(new), 1.0
+        )
         return [] if same else [(path, old, new)]
     return [] if old == new else [(path, old, new)]
 
@@ -100,7 +110,7 @@ def test_default_identify_repeats_the_chosen_model_servo_and_reference_without_g
     assert _differences(old_study["chosen"], study["chosen"]) == []
     assert study["chosen"]["structure"] == old_study["chosen"]["structure"]
     for key in ("model", "nonlinear", "healthy_reference"):  # nonlinear: flown by IdentifiedWheel
-        assert _differences(old_model[key], model[key]) == [], key
+        assert _differences(old_model[key], model[key], f"/{key}") == [], key
 
 
 def test_the_zoh_continuous_model_driven_by_the_held_input_repeats_the_discrete_one(

@@ -197,10 +197,6 @@ class Detector(ABC):
         scale = HUBER_C / np.sqrt(np.where(w > 0, w, np.inf))[:, None]
         out[rows] = w[:, None] * (_huber(r[:, None], scale) - _huber(r[:, None] - p[rows], scale))
         return out
-        w, r = w[rows], r[rows]
-        scale = HUBER_C / np.sqrt(np.where(w > 0, w, np.inf))[:, None]
-        out[rows] = w[:, None] * (_huber(r[:, None], scale) - _huber(r[:, None] - p[rows], scale))
-        return out
 
 
 def _huber(x: np.ndarray, c: np.ndarray) -> np.ndarray:
