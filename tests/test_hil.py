@@ -488,7 +488,8 @@ def test_the_console_ends_with_the_health_checks_account(tmp_path):
             *("--duration", "20", "--out", str(tmp_path / "c")),
         ],
     )
-    assert res.exit_code == 0 and "wheel health: not watched in flight" in res.output
+    assert res.exit_code == 0 and "wheel torque: not watched in flight" in res.output
+    assert "telemetry check: 0 blocks of 10 s tested on 3 wheels: no dropout (still" in res.output
 
 
 def test_hil_help_names_every_built_in_scenario_and_fault():

@@ -215,14 +215,15 @@ def hil(
         sim = f"   simulation {ref[key]:.4g}" if ref else ""
         click.echo(f"{key:<28} {m[key]:.4g}{sim}")
     health = m["health_check"]
+    dropout = "telemetry_dropout"
     if health is None and not m["config"]["diagnosis"]:
         click.echo(
-            "wheel health: not watched in flight (the health check needs a redundant wheel "
+            "wheel torque: not watched in flight (the health check needs a redundant wheel "
             "set, the diagnosis a momentum bias; --diagnosis forces the block tests)"
         )
     if health is not None:
         windows, probes = (sum(health[k].values()) for k in ("windows_tested", "probes_tested"))
-        failed = sorted({str(f["node"]) for f in m["wheel_faults"]})
+        failed = sorted({str(f["node"]) for f in m["wheel_faults"] if f["named_kind"] != dropout})
         verdict = f"alarm on wheel {', '.join(failed)}" if failed else "no alarm"
         if not (windows or probes or failed):
             verdict = f"still calibrating at the end ({calibration:g} s): nothing tested"
@@ -230,6 +231,15 @@ def hil(
             f"health check: {windows} tracking windows and {probes} capacity probes tested "
             f"on {len(health['windows_tested'])} wheels: {verdict}"
         )
+    telemetry = m["telemetry_check"]
+    dropped = sorted({str(f["node"]) for f in m["wheel_faults"] if f["named_kind"] == dropout})
+    blocks = sum(telemetry["blocks_tested"].values())
+    click.echo(
+        f"telemetry check: {blocks} blocks of {telemetry['block_s']:g} s tested on "
+        f"{len(telemetry['blocks_tested'])} wheels: "
+        + (f"dropout on wheel {', '.join(dropped)}" if dropped else "no dropout")
+        + ("" if blocks else f" (still measuring the loss rate at the end, {calibration:g} s)")
+    )
     for f in m["wheel_faults"]:
         click.echo(
             f"wheel {f['node']}: {f['named_kind']} detected at {f['detected_s']:.1f} s "

@@ -60,6 +60,7 @@ from rwlab.hil.health import (
     null_vector,
 )
 from rwlab.hil.satellite import Satellite
+from rwlab.hil.telemetry import BLOCK_S, DropoutTest
 from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
@@ -664,6 +665,7 @@ def run_hil(cfg: HilConfig, out_dir, *, force: bool = False, progress=None) -> H
         "bench": {**loop.bench, "idle_problems": problems},
         "diagnosis_off": loop.diagnosis_off,
         "health_check": loop.health_summary(),
+        "telemetry_check": loop.telemetry_summary(),
         "measurement": measurement_effects(wheel_log, params, sc.run.dt, cfg.latency_s),
         "reference_simulation": ref_metrics,
         "config": config,
@@ -814,6 +816,10 @@ class _Loop:
         self.tracking: dict[int, TrackingTest] = {}
         self.tracked: dict[int, TrackingTest] = {}
         self.dither: NullSpaceDither | None = None
+        # every wheel's telemetry, on every wheel set
+        self.telemetry = {
+            n: DropoutTest(cfg.calibration_s, cfg.false_alarms_per_hour) for n in nodes
+        }
         self.diag: dict = {}
         self._recalibrate_when_still = False
         self.diagnosis_off: dict[int, str] = {}
@@ -943,6 +949,7 @@ class _Loop:
                 self._lateness.append(wake - target)
                 self._compute.append(sent - t_start)
                 self._wake.append(wake)
+            self._watch_telemetry(sat.t, wake)
             if self.tracking:
                 self._track(readings, self._cmd[-1], probe, wake)
                 if self.dither is not None and any(t.wants_probe for t in self.tracking.values()):
@@ -1047,6 +1054,28 @@ class _Loop:
                 how = f"{found.test} {found.statistic:.3g} > {found.threshold:.3g}"
                 self._wheel_failed(r.node, found.kind, how, now)
 
+    def _watch_telemetry(self, t: float, now: float) -> None:
+        """Every active wheel's dropout test, each control period (``t``: flight time)."""
+        lost = self.bank.lost_telemetry()
+        for node, test in self.telemetry.items():
+            if not self.bank.active[node]:
+                continue
+            found = test.update(t, lost[node])
+            if found is not None:
+                how = f"{found.test}: {found.statistic:g} frames lost in {BLOCK_S:g} s ≥ "
+                how += f"{found.threshold:g}"
+                self._wheel_failed(node, found.kind, how, now, keep=True)
+
+    def telemetry_summary(self) -> dict:
+        """Each wheel's healthy telemetry loss rate (frames/s; None while measuring) and
+        the blocks its dropout test judged."""
+        return {
+            "block_s": BLOCK_S,
+            "healthy_lost_per_s": {str(n): t.lost_per_s for n, t in self.telemetry.items()},
+            "alarm_count": {str(n): t.limit for n, t in self.telemetry.items()},
+            "blocks_tested": {str(n): t.blocks_tested for n, t in self.telemetry.items()},
+        }
+
     def health_summary(self) -> dict | None:
         """Each tested wheel's calibrated healthy spread of the tracking residual, rpm/s,
         and its healthy probes (:meth:`TrackingTest.healthy_probe_summary`)."""
@@ -1064,12 +1093,16 @@ class _Loop:
             "probes_tested": {str(n): t.probes_tested for n, t in self.tracked.items()},
         }
 
-    def _wheel_failed(self, node: int, kind: str, how: str, t: float, hard: bool = False) -> None:
+    def _wheel_failed(
+        self, node: int, kind: str, how: str, t: float, hard: bool = False, keep: bool = False
+    ) -> None:
         """An alarm: record it, idle the wheel and reallocate when the others span 3 axes.
 
         A diagnosis alarm on a wheel that cannot be spared is recorded and the wheel kept;
         a ``hard`` failure (the wheel latched a fault and idled itself) that cannot be
         spared stops the run (``WheelFault``): the satellite is no longer controlled.
+        ``keep``: a fault of the wheel's telemetry, not of its torque: recorded, and the
+        wheel flies on.
         """
         injected = [f for n, f in self.cfg.faults if n == node]
         entry = {
@@ -1082,6 +1115,11 @@ class _Loop:
             "action": None,
         }
         self.event("alarm", f"node {node}: {kind} ({how})", t)
+        if keep:
+            self.wheel_faults.append(
+                {**entry, "action": "kept in the loop: its telemetry failed, not its torque"}
+            )
+            return
         active = np.array([self.bank.active[n] and n != node for n in self.nodes])
         try:
             self.sat.set_active(active)

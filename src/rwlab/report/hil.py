@@ -299,4 +299,8 @@ def _timing(page: Page, m: dict) -> None:
     bench = m["bench"]
     for key in ("commands_sent", "lost_commands", "lost_telemetry_frames", "stale_telemetry_reads"):
         rows.append([key, ", ".join(f"{n}: {v}" for n, v in bench[key].items())])
+    telemetry = m["telemetry_check"]
+    for key in ("blocks_tested", "alarm_count"):  # the dropout test's, per wheel
+        values = ", ".join(f"{n}: {v}" for n, v in telemetry[key].items())
+        rows.append([f"dropout test {key}", values])
     page.table(["figure", "value"], rows, table_id="table-timing")

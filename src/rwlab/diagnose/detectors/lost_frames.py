@@ -13,6 +13,26 @@ from rwlab.diagnose.features import Features
 BLOCK_S = 10.0  # lost frames are counted per block this long: a dropout lasts well under it
 
 
+def alarm_count(mean: float, per_hour: float, block_s: float = BLOCK_S) -> int:
+    """The fewest frames lost in one block that raise a dropout alarm.
+
+    Parameters
+    ----------
+    mean : float
+        Frames a healthy link loses per block on average (Poisson), ≥ 0.
+    per_hour : float
+        False alarms per hour asked (> 0).
+    block_s : float
+        The block's length, s.
+
+    Returns
+    -------
+    int
+        The smallest count c with P(count ≥ c) ≤ the rate asked per block.
+    """
+    return int(poisson.isf(per_hour * block_s / 3600, mean)) + 1
+
+
 class LostFrames(Detector):
     """Dropouts: healthy losses are Poisson at the measured rate λ per sample; the
     alarm count per block is the smallest whose tail probability, per block, is
@@ -34,8 +54,7 @@ class LostFrames(Detector):
         """Index and fit of the first block whose losses reach the alarm count, or None."""
         block = max(1, round(BLOCK_S / features.scales.Ts))
         mean = lam * block
-        p_block = per_hour * BLOCK_S / 3600
-        limit = int(poisson.isf(p_block, mean)) + 1  # P(count ≥ limit) ≤ p_block
+        limit = alarm_count(mean, per_hour)
         counts = np.add.reduceat(features.lost_frames, np.arange(0, features.N, block))
         hits = np.flatnonzero(counts >= limit)
         if not hits.size:
