@@ -837,3 +837,27 @@ def test_force_overwrites_and_force_wheel_flies_a_mismatched_wheel(tmp_path):
     assert config["wheel_forced"]
     html = (out / "report.html").read_text()
     assert "--force-wheel" in html and html.index("FORCED") < html.index("flew")
+
+
+@pytest.mark.parametrize("protocol", ["rwlab", "canopen"])
+def test_a_wheel_held_at_its_acceleration_limit_obeys_every_command(protocol):
+    """The host clips a torque beyond a wheel's limit to that limit; the wire's float32 must
+    not round it past the limit, or the wheel refuses every command and its watchdog
+    latches (measured: a healthy wheel was lost after a second at 313.7626 rpm/s)."""
+    from dataclasses import replace
+
+    params = replace(RW90, max_accel_rpm_s=313.7626020954508)  # float32 rounds it up
+    clock = SimClock()
+    bank = WheelBank("virtual", _channel(), [1], params, clock=clock, twins=True, protocol=protocol)
+    try:
+        bank.preflight()
+        torque = 2 * params.inertia * rpm_to_rad_s(params.max_accel_rpm_s)
+        for _ in range(30):  # 3 s asked for twice the limit, at 10 Hz
+            bank.command(np.array([torque]))
+            clock.sleep_until(clock.now() + 0.1)
+            (reading,) = bank.read()
+        twin = bank.twins[0]
+        assert twin.rejected_commands == 0 and not twin.wheel.faults
+        assert reading.speed_rpm > 0.9 * 2.9 * params.max_accel_rpm_s  # it followed
+    finally:
+        bank.close()

@@ -14,6 +14,7 @@ from scipy.stats import poisson
 
 from rwlab.cli import main
 from rwlab.diagnose.detectors.lost_frames import alarm_count
+from rwlab.hil.run import parse_node_fault
 from rwlab.hil.telemetry import DropoutTest
 
 from .test_hil import _channel
@@ -45,7 +46,7 @@ def test_a_link_that_lost_nothing_alarms_on_five_frames_then_on_three_after_an_h
     test = DropoutTest(calibration_s=300.0, per_hour=1e-3)
     assert _fly(test, 0.0, 300.1, 0) == [] and test.limit == 5
     assert _fly(test, 300.1, 3600.1, 0) == [] and test.limit == 3
-    assert test.blocks_tested == 329
+    assert test.blocks_tested == 330  # (3600.1 - 300.1) s in blocks of 10 s
 
 
 @pytest.mark.parametrize("count, named", [(5, False), (6, True)])
@@ -97,3 +98,26 @@ def test_a_dropout_of_three_orthogonal_wheels_is_named_and_the_wheel_flies_on(tm
     assert "telemetry check:" in res.output and "dropout on wheel 1" in res.output
     assert m["config"]["nodes"] == [1, 2, 3]  # wheel 1 stayed in the allocation
     assert m["telemetry_check"]["blocks_tested"]["2"] >= 2
+
+
+def test_frames_lost_under_the_alarm_count_are_said_on_the_console(tmp_path):
+    """At 10 Hz a 0.3-s dropout loses 3 frames, under the 10 a flight 30 s old asks for:
+    not named, but the console says they were lost."""
+    args = ["hil", "--scenario", "geo-cubesat", "--no-reference", "--channel", _channel()]
+    args += ["--duration", "60", "--calibration", "30", "--seed", "12"]
+    args += ["--out", str(tmp_path / "out"), "--fault", "2:telemetry_dropout=0.3@40"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    assert "no dropout; frames lost under the alarm count: wheel 2: 3" in res.output
+
+
+def test_an_alarm_answers_the_injected_fault_it_names_else_the_latest_before_it():
+    from rwlab.hil.run import _injected
+
+    faults = [parse_node_fault(f) for f in ("1:telemetry_dropout=0.3@400", "1:friction=4@500")]
+    faults.append(parse_node_fault("2:friction=4@100"))
+    assert _injected(faults, 1, "friction", 504.0).name == "friction"
+    assert _injected(faults, 1, "torque_constant", 504.0).t_s == 500.0  # misnamed: the latest
+    assert _injected(faults, 1, "telemetry_dropout", 400.4).t_s == 400.0
+    assert _injected(faults, 1, "friction", 300.0).t_s == 400.0  # before any: the first
+    assert _injected(faults, 3, "friction", 300.0) is None

@@ -162,7 +162,9 @@ def hil(
     momentum from the speed it reports. Twins answer on the virtual and
     udp_multicast buses unless --wheels-running. Whatever ends the run (its end,
     a silent wheel, a broken bus, Ctrl-C, SIGTERM, an error), every wheel is
-    idled and the record closed with a stop event.
+    idled and the record closed with a stop event. Every flight counts each
+    wheel's lost telemetry frames and names a dropout (the wheel flies on); on
+    a redundant set the health check watches each wheel's torque.
     """
     from rwlab.cli.attitude import single_thread_blas
     from rwlab.hil.run import HilConfig, parse_node_fault, run_hil
@@ -234,11 +236,17 @@ def hil(
     telemetry = m["telemetry_check"]
     dropped = sorted({str(f["node"]) for f in m["wheel_faults"] if f["named_kind"] == dropout})
     blocks = sum(telemetry["blocks_tested"].values())
+    unnamed = [  # frames lost that no alarm named: the link's own, or a dropout too short
+        f"wheel {n}: {lost}"
+        for n, lost in m["bench"]["lost_telemetry_frames"].items()
+        if lost and str(n) not in dropped
+    ]
     click.echo(
         f"telemetry check: {blocks} blocks of {telemetry['block_s']:g} s tested on "
         f"{len(telemetry['blocks_tested'])} wheels: "
         + (f"dropout on wheel {', '.join(dropped)}" if dropped else "no dropout")
         + ("" if blocks else f" (still measuring the loss rate at the end, {calibration:g} s)")
+        + (f"; frames lost under the alarm count: {', '.join(unnamed)}" if unnamed else "")
     )
     for f in m["wheel_faults"]:
         click.echo(

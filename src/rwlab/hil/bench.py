@@ -269,7 +269,10 @@ class WheelBank:
         Returns the wheels that refused because they report a latched fault (node →
         the ``WheelFault``); they got no command.
         """
-        limit = self.params.max_accel_rpm_s
+        # a hair under the limit: the wire's float32 may round the limit itself up past
+        # it, and the wheel refuses that (measured: 313.7626021 rpm/s sent as 313.7626038;
+        # a second of refused commands latched the wheel's watchdog and lost the wheel)
+        limit = self.params.max_accel_rpm_s * (1 - 1e-6)
         refused = {}
         for c, tau in zip(self.clients, torques, strict=True):
             if not self.active[c.node_id]:

@@ -326,6 +326,17 @@ class _WheelWatch:
         return []
 
 
+def _injected(faults, node: int, named: str, t: float) -> ScheduledFault | None:
+    """The fault injected into ``node`` that an alarm at flight time ``t`` naming ``named``
+    answers: the one of that name, else the latest injected before ``t``, else the first."""
+    mine = sorted((f for n, f in faults if n == node), key=lambda f: f.t_s)
+    before = [f for f in mine if f.t_s <= t]
+    same = [f for f in before if f.name == named]
+    if same or before:
+        return (same or before)[-1]
+    return mine[0] if mine else None
+
+
 def _null_space_bias(sc: Scenario, bias_rpm: float) -> np.ndarray:
     """Wheel speeds (N,) rpm with no body momentum and |speed| = ``bias_rpm`` where possible."""
     n = null_vector(sc.wheel_matrix)
@@ -1104,11 +1115,11 @@ class _Loop:
         ``keep``: a fault of the wheel's telemetry, not of its torque: recorded, and the
         wheel flies on.
         """
-        injected = [f for n, f in self.cfg.faults if n == node]
+        injected = _injected(self.cfg.faults, node, kind, t - self.t0)
         entry = {
             "node": node,
-            "kind": injected[0].name if injected else None,
-            "injected_s": injected[0].t_s if injected else None,
+            "kind": injected.name if injected else None,
+            "injected_s": injected.t_s if injected else None,
             "detected_s": t - self.t0,
             "named_kind": kind,
             "detector": how,

@@ -58,7 +58,7 @@ def _page(result) -> Page:
     ref_m = m.get("reference_simulation")
     beside = f" ({ref_m['steady_max_error_deg']:.3g}° in the simulation beside it)" if ref_m else ""
     lost = "; ".join(
-        f"wheel {f['node']} failed at {f['detected_s']:.1f} s ({f['named_kind']}): {f['action']}"
+        f"wheel {f['node']}: {f['named_kind']} named at {f['detected_s']:.1f} s, {f['action']}"
         for f in m["wheel_faults"]
     )
     page.verdict(
