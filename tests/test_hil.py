@@ -375,17 +375,18 @@ def test_a_clamp_the_loop_never_reaches_is_named_by_the_next_capacity_probe(
         ("1:friction=4@250", "friction", 1),
     ],
 )
-def test_a_drag_in_flight_is_named_by_a_probe_asked_for_at_once(fault, kind, seed, tmp_path):
-    """A weak motor drags on the held speed as friction does, and the tracking test sees
-    the drag first (it named this weak motor friction); a drag the attitude loop fights
-    looks like a motor that does not follow (seed 1: the tracking test named this friction
-    torque_constant, as on 6 of seeds 1-11): a probe asked for at once tells a motor that
-    lost torque (push and way back both short) from a drag (the push short, the way back
-    helped), before the next scheduled probe."""
+def test_a_rotor_fault_is_isolated_at_once_and_named_by_its_coast_down(fault, kind, seed, tmp_path):
+    """The tracking test cannot tell a weak motor from a drag the attitude loop fights (it
+    named this weak motor friction, and on seed 1 this friction torque_constant, as on 6
+    of seeds 1-11): the wheel is idled at its alarm, and its coast-down names it (friction
+    × F coasts down F times faster than the wheel model; a motor fault, idled, at its
+    rate)."""
     [alarm] = _short_flight(tmp_path, "geo-smallsat-pyramid", seed, fault, 300.0).metrics[
         "wheel_faults"
     ]
-    assert alarm["named_kind"] == kind and "named by a probe" in alarm["detector"]
+    assert alarm["named_kind"] == kind and "named by its coast-down" in alarm["detector"]
+    drag = float(alarm["detector"].split("drag ")[1].split(" ")[0])
+    assert drag == pytest.approx(4.0 if kind == "friction" else 1.0, rel=0.05)
     assert alarm["detected_s"] < 300.0  # before the scheduled probe
 
 

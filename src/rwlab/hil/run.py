@@ -54,6 +54,7 @@ from rwlab.hil.health import (
     PROBE_EVERY_S,
     PROBE_S,
     PROBE_SHARE,
+    STICTION_BAND,
     WINDOW_S,
     NullSpaceDither,
     TrackingTest,
@@ -65,7 +66,7 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
-from rwlab.wheel.physics import WheelParams, rad_s_to_rpm
+from rwlab.wheel.physics import WheelParams, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = [
     "HilConfig",
@@ -324,6 +325,27 @@ class _WheelWatch:
                 self.model, reference, false_alarms_per_hour=self.fa_per_hour
             )
         return []
+
+
+# An idled wheel's coast-down names a rotor fault the tracking test saw: its drag against
+# the wheel model's (friction × F coasts down F times faster; a weak or dead motor, idled,
+# at the model's rate). Design choices: five seconds of a ~1000-rpm coast-down (~30 rpm
+# of a 6.6 rpm/s drag on the RW90, read to 0.1 rpm) and a unit's friction within ±25 % of
+# its model's. Measured on the twins: friction × 1.5, 2, 4 coast 1.51, 2.01, 4.00 × the
+# model's drag; k_t × 0.5, 0.7, 0 at 1.00. Hand-written: no library names wheel faults.
+COAST_S = 5.0
+COAST_FRICTION_RATIO = 1.25
+COAST_NAMES = ("friction", "torque_constant")
+
+
+@dataclass
+class _CoastDown:
+    """An idled wheel's coast-down being read: its fault entry, the flight time it was
+    idled, and (flight time s, speed rpm) since."""
+
+    entry: dict
+    t_s: float
+    samples: list[tuple[float, float]] = field(default_factory=list)
 
 
 def _injected(faults, node: int, named: str, t: float) -> ScheduledFault | None:
@@ -834,6 +856,7 @@ class _Loop:
         self.diag: dict = {}
         self._recalibrate_when_still = False
         self.diagnosis_off: dict[int, str] = {}
+        self._coasting: dict[int, _CoastDown] = {}  # idled wheels whose coast-down names them
         self._first_fault_s = min((f.t_s for _, f in cfg.faults), default=math.inf)
         self.max_error_from_fault = 0.0
         for c in bank.clients:
@@ -961,6 +984,8 @@ class _Loop:
                 self._compute.append(sent - t_start)
                 self._wake.append(wake)
             self._watch_telemetry(sat.t, wake)
+            if self._coasting:
+                self._name_by_coast_down(readings, sat.t, wake)
             if self.tracking:
                 self._track(readings, self._cmd[-1], probe, wake)
                 if self.dither is not None and any(t.wants_probe for t in self.tracking.values()):
@@ -1065,6 +1090,37 @@ class _Loop:
                 how = f"{found.test} {found.statistic:.3g} > {found.threshold:.3g}"
                 self._wheel_failed(r.node, found.kind, how, now)
 
+    def _name_by_coast_down(self, readings, t: float, now: float) -> None:
+        """Name each idled wheel's fault by its coast-down once ``COAST_S`` of it is read:
+        a drag over ``COAST_FRICTION_RATIO`` × the wheel model's is friction (its size that
+        ratio), else the motor (idled, a motor's torque no longer shows)."""
+        p = self.bank.params
+        for r in readings:
+            coast = self._coasting.get(r.node)
+            if coast is None:
+                continue
+            coast.samples.append((t, r.speed_rpm))
+            if t - coast.t_s < COAST_S:
+                continue
+            del self._coasting[r.node]
+            times, speeds = np.array(coast.samples).T
+            if np.any(np.abs(speeds) < STICTION_BAND * p.min_measurable_rpm) or np.ptp(times) <= 0:
+                continue  # at rest or near it: the drag there is breakaway, not the law
+            decel = -float(np.polyfit(times, speeds, 1)[0])
+            w = rpm_to_rad_s(float(np.mean(speeds)))
+            model = rad_s_to_rpm(
+                (p.viscous_friction * w + p.coulomb_friction * math.copysign(1.0, w)) / p.inertia
+            )
+            ratio = decel / model
+            named = "friction" if ratio > COAST_FRICTION_RATIO else "torque_constant"
+            entry = coast.entry
+            entry["detector"] += (
+                f"; named by its coast-down {COAST_S:g} s later: drag {ratio:.2f} × the model's"
+            )
+            if named != entry["named_kind"]:
+                entry["named_kind"] = named
+            self.event("named", f"node {r.node}: {named} (drag {ratio:.2f} × the model's)", now)
+
     def _watch_telemetry(self, t: float, now: float) -> None:
         """Every active wheel's dropout test, each control period (``t``: flight time)."""
         lost = self.bank.lost_telemetry()
@@ -1146,6 +1202,8 @@ class _Loop:
                 str(n) for n, a in zip(self.nodes, active, strict=True) if a
             )
             self.event("reallocate", f"node {node}: {entry['action']}", t)
+            if kind in COAST_NAMES and "probe" not in how:
+                self._coasting[node] = _CoastDown(entry, self.sat.t)
             if self.diag:  # the others now absorb its coast-down: a regime of its own
                 self._recalibrate_when_still = True
                 self.event(
