@@ -1104,7 +1104,9 @@ class _Loop:
                 continue
             del self._coasting[r.node]
             times, speeds = np.array(coast.samples).T
-            if np.any(np.abs(speeds) < STICTION_BAND * p.min_measurable_rpm) or np.ptp(times) <= 0:
+            stribeck = p.stribeck_speed_rpm if p.stiction else 0.0
+            band = STICTION_BAND * max(stribeck, p.min_measurable_rpm)  # as the tracking test's
+            if np.any(np.abs(speeds) < band) or np.ptp(times) <= 0:
                 continue  # at rest or near it: the drag there is breakaway, not the law
             decel = -float(np.polyfit(times, speeds, 1)[0])
             w = rpm_to_rad_s(float(np.mean(speeds)))
@@ -1117,8 +1119,7 @@ class _Loop:
             entry["detector"] += (
                 f"; named by its coast-down {COAST_S:g} s later: drag {ratio:.2f} × the model's"
             )
-            if named != entry["named_kind"]:
-                entry["named_kind"] = named
+            entry["named_kind"] = named
             self.event("named", f"node {r.node}: {named} (drag {ratio:.2f} × the model's)", now)
 
     def _watch_telemetry(self, t: float, now: float) -> None:
