@@ -1087,8 +1087,8 @@ class _Loop:
             found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a, probe)
             if found is not None:
                 del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
-                test, _, named = found.test.partition(", ")  # the statistic is the test's
-                how = f"{test} {found.statistic:.3g} > {found.threshold:.3g}"
+                label, _, named = found.test.partition(", ")  # the statistic is the test's
+                how = f"{label} {found.statistic:.3g} > {found.threshold:.3g}"
                 how += f", {named}" if named else ""
                 self._wheel_failed(r.node, found.kind, how, now)
 
