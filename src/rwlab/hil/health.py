@@ -68,7 +68,15 @@ from rwlab.errors import ConfigError
 from rwlab.hil.probe import Half, Probe
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
 
-__all__ = ["NullSpaceDither", "TrackingAlarm", "TrackingTest", "name_fault", "null_vector"]
+__all__ = [
+    "NullSpaceDither",
+    "TrackingAlarm",
+    "TrackingTest",
+    "name_fault",
+    "nominal_friction_nm",
+    "null_vector",
+    "stiction_band_rpm",
+]
 
 DITHER_RPM_S = 10.0  # amplitude of the excitation's acceleration, rpm/s (±6 rpm of speed)
 DITHER_PERIOD_S = 4.0  # its period, s: a few periods fit in the time a fault must be named
@@ -93,6 +101,21 @@ DRAG_NAMES = ("speed_sensor_bias",)
 # a drive that misses more of a push than this share is not a healthy one of its spec: a
 # healthy drive's lag costs ~2 % (RW90 4.5-6.6 rpm of 289, NRWA-T6 3.3-4.4 of 203)
 PROBE_LAG_MAX = 0.1
+
+
+def nominal_friction_nm(params: WheelParams, speed_rpm: float) -> float:
+    """The wheel model's friction torque against the rotation at ``speed_rpm``, N·m
+    (viscous and Coulomb: its drive's feed-forward)."""
+    w = rpm_to_rad_s(speed_rpm)
+    coulomb = params.coulomb_friction * math.copysign(1.0, w) * (abs(w) > 1e-9)
+    return params.viscous_friction * w + coulomb
+
+
+def stiction_band_rpm(params: WheelParams) -> float:
+    """|speed| under which the wheel's healthy law is breakaway, rpm: :data:`STICTION_BAND`
+    × its Stribeck speed or the speed sensor's dead zone, whichever is larger."""
+    stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
+    return STICTION_BAND * max(stribeck, params.min_measurable_rpm)
 
 
 def null_vector(G: np.ndarray) -> np.ndarray | None:
@@ -340,8 +363,7 @@ class TrackingTest:
         self.wants_probe = False
         self._settle = 0  # periods the tracking test still skips after a probe
         self.mean = self.sigma = self.robust_sigma = math.nan
-        stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
-        self.band_rpm = STICTION_BAND * max(stribeck, params.min_measurable_rpm)
+        self.band_rpm = stiction_band_rpm(params)
         self._skip = False  # the window touched the stiction band or a probe
         self.skipped_windows = 0
         self.windows_tested = self.probes_tested = 0  # after calibration
@@ -359,11 +381,8 @@ class TrackingTest:
         return math.isfinite(self.sigma)
 
     def _requested_current(self, accel_rpm_s: float, speed_rpm: float) -> float:
-        p, w = self.params, rpm_to_rad_s(speed_rpm)
-        friction = p.viscous_friction * w + p.coulomb_friction * math.copysign(1.0, w) * (
-            abs(w) > 1e-9
-        )
-        torque = p.inertia * rpm_to_rad_s(accel_rpm_s) + friction
+        p = self.params
+        torque = p.inertia * rpm_to_rad_s(accel_rpm_s) + nominal_friction_nm(p, speed_rpm)
         return max(-p.current_limit, min(p.current_limit, torque / p.torque_constant))
 
     def update(

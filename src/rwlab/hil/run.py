@@ -54,11 +54,12 @@ from rwlab.hil.health import (
     PROBE_EVERY_S,
     PROBE_S,
     PROBE_SHARE,
-    STICTION_BAND,
     WINDOW_S,
     NullSpaceDither,
     TrackingTest,
+    nominal_friction_nm,
     null_vector,
+    stiction_band_rpm,
 )
 from rwlab.hil.satellite import Satellite
 from rwlab.hil.telemetry import BLOCK_S, DropoutTest
@@ -66,7 +67,7 @@ from rwlab.wheel import protocol as proto
 from rwlab.wheel.clock import SimClock, WallClock
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
-from rwlab.wheel.physics import WheelParams, rad_s_to_rpm, rpm_to_rad_s
+from rwlab.wheel.physics import WheelParams, rad_s_to_rpm
 
 __all__ = [
     "HilConfig",
@@ -1091,6 +1092,9 @@ class _Loop:
                 how = f"{label} {found.statistic:.3g} > {found.threshold:.3g}"
                 how += f", {named}" if named else ""
                 self._wheel_failed(r.node, found.kind, how, now)
+                if found.test == "tracking CUSUM" and found.kind in COAST_NAMES:
+                    if not self.bank.active[r.node]:  # idled: its coast-down names it
+                        self._coasting[r.node] = _CoastDown(self.wheel_faults[-1], self.sat.t)
 
     def _name_by_coast_down(self, readings, t: float, now: float) -> None:
         """Name each idled wheel's fault by its coast-down once ``COAST_S`` of it is read:
@@ -1106,15 +1110,10 @@ class _Loop:
                 continue
             del self._coasting[r.node]
             times, speeds = np.array(coast.samples).T
-            stribeck = p.stribeck_speed_rpm if p.stiction else 0.0
-            band = STICTION_BAND * max(stribeck, p.min_measurable_rpm)  # as the tracking test's
-            if np.any(np.abs(speeds) < band) or np.ptp(times) <= 0:
+            if np.any(np.abs(speeds) < stiction_band_rpm(p)) or np.ptp(times) <= 0:
                 continue  # at rest or near it: the drag there is breakaway, not the law
             decel = -float(np.polyfit(times, speeds, 1)[0])
-            w = rpm_to_rad_s(float(np.mean(speeds)))
-            model = rad_s_to_rpm(
-                (p.viscous_friction * w + p.coulomb_friction * math.copysign(1.0, w)) / p.inertia
-            )
+            model = rad_s_to_rpm(nominal_friction_nm(p, float(np.mean(speeds))) / p.inertia)
             ratio = decel / model
             named = "friction" if ratio > COAST_FRICTION_RATIO else "torque_constant"
             entry = coast.entry
@@ -1205,8 +1204,6 @@ class _Loop:
                 str(n) for n, a in zip(self.nodes, active, strict=True) if a
             )
             self.event("reallocate", f"node {node}: {entry['action']}", t)
-            if kind in COAST_NAMES and "probe" not in how:
-                self._coasting[node] = _CoastDown(entry, self.sat.t)
             if self.diag:  # the others now absorb its coast-down: a regime of its own
                 self._recalibrate_when_still = True
                 self.event(
