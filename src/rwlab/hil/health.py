@@ -104,16 +104,40 @@ PROBE_LAG_MAX = 0.1
 
 
 def nominal_friction_nm(params: WheelParams, speed_rpm: float) -> float:
-    """The wheel model's friction torque against the rotation at ``speed_rpm``, N·m
-    (viscous and Coulomb: its drive's feed-forward)."""
+    """The wheel model's friction torque against the rotation, N·m (viscous and Coulomb:
+    its drive's feed-forward).
+
+    Parameters
+    ----------
+    params : WheelParams
+        The wheel model.
+    speed_rpm : float
+        The wheel's speed, rpm.
+
+    Returns
+    -------
+    float
+        Friction torque, N·m, with the sign of the speed.
+    """
     w = rpm_to_rad_s(speed_rpm)
     coulomb = params.coulomb_friction * math.copysign(1.0, w) * (abs(w) > 1e-9)
     return params.viscous_friction * w + coulomb
 
 
 def stiction_band_rpm(params: WheelParams) -> float:
-    """|speed| under which the wheel's healthy law is breakaway, rpm: :data:`STICTION_BAND`
-    × its Stribeck speed or the speed sensor's dead zone, whichever is larger."""
+    """The speed under which the wheel's healthy friction law is breakaway.
+
+    Parameters
+    ----------
+    params : WheelParams
+        The wheel model.
+
+    Returns
+    -------
+    float
+        :data:`STICTION_BAND` × its Stribeck speed or the speed sensor's dead zone,
+        whichever is larger, rpm (a magnitude).
+    """
     stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
     return STICTION_BAND * max(stribeck, params.min_measurable_rpm)
 
