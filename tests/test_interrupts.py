@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 
 import pytest
@@ -108,3 +109,27 @@ def test_a_python_can_virtual_bus_survives_stops_during_reads(sigint_stops):
         with interrupts.uninterrupted():
             a.send(can.Message(arbitration_id=1, data=b"\x02"))  # the clean-up's write
         assert any(m.data == b"\x02" for m in read_frames(b))
+
+
+def test_a_stop_inside_a_c_callback_prints_no_traceback_and_is_raised_at_next_check(monkeypatch):
+    """Numba's compiler calls back into Python through ctypes: a Ctrl-C landing there is
+    swallowed by ctypes and printed as "Exception ignored ... Traceback" (measured: a
+    demo stopped while its workers compiled the wheel's kernel)."""
+    import ctypes
+
+    from rwlab.cli._common import _stop_signals
+
+    def callback():
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(10**5):  # the handler runs here, inside the callback
+            pass
+
+    printed = []  # what Python's hook would print as "Exception ignored ..."
+    monkeypatch.setattr(sys, "unraisablehook", printed.append)
+    with _stop_signals():
+        ctypes.CFUNCTYPE(None)(callback)()
+        assert interrupts.stopped() == "SIGINT"
+        with pytest.raises(KeyboardInterrupt):
+            interrupts.check_stop()
+    interrupts.clear()
+    assert printed == []

@@ -15,7 +15,7 @@ import click
 
 from rwlab import __version__
 from rwlab.errors import ConfigError, RwlabError
-from rwlab.interrupts import check_stop, clear, stop, uninterrupted
+from rwlab.interrupts import check_stop, clear, stop, stopped, uninterrupted
 
 #: How the library names a parameter in a message → the flag the command line has for it.
 FLAGS = {
@@ -197,13 +197,22 @@ def _stop_signals():
             signal.signal(s, signal.default_int_handler if s == signal.SIGINT else ignore)
         stop(signal.Signals(signum).name)
 
+    def unraisable(info):
+        """A stop raised inside a C callback (numba's compiler calls back into Python) is
+        swallowed there and printed as a traceback: say nothing, the command's next
+        :func:`check_stop` raises it again."""
+        if not (isinstance(info.exc_value, KeyboardInterrupt) and stopped()):
+            hook(info)
+
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only be set from the main thread
         return
     previous = {s: signal.signal(s, interrupt) for s in stops}
+    hook, sys.unraisablehook = sys.unraisablehook, unraisable
     try:
         yield
     finally:
+        sys.unraisablehook = hook
         for s, handler in previous.items():
             signal.signal(s, handler)
 
