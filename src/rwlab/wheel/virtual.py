@@ -15,7 +15,7 @@ import queue
 import time
 
 import can
-from can.interfaces.virtual import VirtualBus
+from can.interfaces.virtual import VirtualBus, channels_lock
 
 __all__ = ["CopyingVirtualBus"]
 
@@ -43,6 +43,17 @@ class CopyingVirtualBus(VirtualBus):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._direct = all(hasattr(self, p) for p in _PARTS)
+        if self._direct and not kwargs.get("rx_queue_size"):
+            self._own_simple_queue()
+
+    def _own_simple_queue(self) -> None:
+        """Receive through a :class:`queue.SimpleQueue`: the same ``put``/``get`` and
+        ``queue.Empty`` as python-can's unbounded :class:`queue.Queue`, without its Python
+        lock and two conditions per call (measured: a 1000-s HIL flight, 5 buses on one
+        channel, 10.5 → 9.5 s, the same results)."""
+        with channels_lock:
+            at = next(i for i, q in enumerate(self.channel) if q is self.queue)
+            self.queue = self.channel[at] = queue.SimpleQueue()  # type: ignore[assignment]
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Put a copy of ``msg`` in every other bus's queue on the channel (as python-can).
