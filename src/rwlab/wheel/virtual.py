@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import queue
 import time
+from typing import Any
 
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock
@@ -53,7 +54,8 @@ class CopyingVirtualBus(VirtualBus):
         channel, 10.5 → 9.5 s, the same results)."""
         with channels_lock:
             at = next(i for i, q in enumerate(self.channel) if q is self.queue)
-            self.queue = self.channel[at] = queue.SimpleQueue()  # type: ignore[assignment]
+            simple: Any = queue.SimpleQueue()  # python-can types its queues queue.Queue
+            self.queue = self.channel[at] = simple
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Put a copy of ``msg`` in every other bus's queue on the channel (as python-can).
