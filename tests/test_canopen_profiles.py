@@ -98,6 +98,7 @@ def test_a_fault_is_left_only_on_a_rising_fault_reset_edge(words):
 
 
 # -- BaseNode402 (unchanged canopen package) drives the cia402 twin ------------------------------
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 def test_base_node_402_enables_the_cia402_twin_and_the_velocity_follows_0x60ff():
     channel = f"cia{next(_channels)}"
     twin_bus = can.Bus(interface="virtual", channel=channel)
@@ -185,6 +186,7 @@ def test_the_shipped_oresat_eds_agrees_with_what_oresat_configs_generates():
                 assert mine.default == var.default
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 def test_a_remote_node_with_oresat_configs_dictionary_drives_the_oresat_twin():
     od = _oresat_od()
     channel = f"ore{next(_channels)}"
@@ -440,6 +442,7 @@ def _heard(wheel, state: str, within_s: float) -> bool:
     return False
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize("name", ["canopen", "canopen/oresat", "canopen/cia402"])
 def test_canopens_nmt_master_stops_and_starts_each_twin_and_hears_it_in_the_heartbeat(name):
     from rwlab.wheel import canopen_wheel

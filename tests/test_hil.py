@@ -342,6 +342,7 @@ def _short_flight(tmp_path, scenario: str, seed: int, fault: str, duration: floa
     return run_hil(cfg, tmp_path / "out")
 
 
+@pytest.mark.slow  # a flight of minutes over the bus
 @pytest.mark.parametrize(
     ("scenario", "fault"),
     [
@@ -367,6 +368,7 @@ def test_a_clamp_the_loop_never_reaches_is_named_by_the_next_capacity_probe(
     assert "<td>302.1</td>" in table and "capacity probe" in table  # when, and by what
 
 
+@pytest.mark.slow  # a flight of minutes over the bus
 @pytest.mark.parametrize(
     ("fault", "kind", "seed"),
     [
@@ -436,6 +438,7 @@ def test_the_gyro_filter_flies_on_the_bus(tmp_path):
     )
 
 
+@pytest.mark.slow  # a flight of minutes over the bus
 def test_a_diagnosis_that_cannot_calibrate_leaves_the_flight_alone(tmp_path):
     """The diagnosis refusing its calibration must not stop the satellite: it is
     switched off for that wheel, said in the record and in metrics.json."""
@@ -458,6 +461,7 @@ def test_a_diagnosis_that_cannot_calibrate_leaves_the_flight_alone(tmp_path):
     assert result.run.t[-1] == pytest.approx(200.0)
 
 
+@pytest.mark.slow  # a flight of minutes over the bus
 def test_under_the_health_check_the_block_tests_stay_out_of_the_way(tmp_path):
     """A held-speed pyramid gives the block tests nothing to calibrate on (they refused on
     every wheel of every run, in four lines of metrics.json): the health check is the
@@ -471,6 +475,7 @@ def test_under_the_health_check_the_block_tests_stay_out_of_the_way(tmp_path):
     assert result.metrics["health_check"] is not None
 
 
+@pytest.mark.slow  # a flight of minutes over the bus
 def test_the_console_ends_with_the_health_checks_account(tmp_path):
     """How many windows and probes each flight tested and the verdict, on the console and
     in metrics.json; a flight shorter than the calibration says it tested nothing."""

@@ -23,6 +23,7 @@ def test_cmd_beyond_the_limit_is_refused_with_status_2():
     assert r.exit_code == 2 and "limit" in r.output
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 def test_serve_runs_for_a_set_duration_where_other_processes_reach_it():
     node = str(random.randrange(1, 16))  # apart from any other wheel on the default group
     r = run("wheel", "serve", "--node-id", node, "--duration", "1")

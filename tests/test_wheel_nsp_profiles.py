@@ -285,6 +285,7 @@ def test_the_nrwa_t6_driver_reads_only_faults_as_faults(faults, fault_active):
     assert telemetry.fault_active is fault_active
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize("twin", [("nsp/nrwa-t6", 1)], indirect=True)
 def test_the_nrwa_t6_twin_follows_app_command_and_refuses_what_it_cannot_do(twin):
     node, port = twin
@@ -322,6 +323,7 @@ def test_the_nrwa_t6_twin_follows_app_command_and_refuses_what_it_cannot_do(twin
     assert node.wheel.setpoint == pytest.approx(1e-3 / node.wheel.params.inertia)
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize("twin", [("nsp/rw4-12", 0)], indirect=True)
 def test_the_rw4_12_twin_answers_as_the_familys_drivers_expect(twin):
     node, port = twin
@@ -355,6 +357,7 @@ def test_the_rw4_12_twin_answers_as_the_familys_drivers_expect(twin):
 
 
 # -- rwlab's driver sends the frames built by hand above ------------------------------------
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize(
     ("protocol", "node_id", "expected"),
     [
@@ -433,6 +436,7 @@ def test_served_nrwa_t6_prints_its_address_and_answers_a_hand_built_ping():
         serve.communicate(timeout=20)
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize("protocol", ["nsp/nrwa-t6", "nsp/rw4-12"])
 def test_a_prbs_experiment_through_each_profile_loses_no_command(tmp_path, protocol):
     out = tmp_path / "r.mcap"

@@ -135,6 +135,7 @@ def test_each_protocol_records_the_same_wheel(traces, name):
     assert max(abs(ours[t] - theirs[t]) for t in common) < 0.02
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 @pytest.mark.parametrize("name", ["rwlab", "canopen", "nsp", "nsp/nrwa-t6"])
 def test_a_telemetry_dropout_is_a_gap_on_every_protocol(name, tmp_path):
     """A polled wheel (NSP) with its telemetry out answers nothing, as a streaming one
@@ -184,6 +185,7 @@ def _check_reply(reply: bytes, command: int) -> bytes:
     return reply[3:-2]
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 def test_the_nsp_twin_answers_hand_built_frames():
     twin_port, host_port = open_pty()
     node = WheelNode(twin_port, 1, telemetry_rate=100, protocol="nsp").start()
@@ -218,6 +220,7 @@ def test_the_nsp_twin_answers_hand_built_frames():
         host_port.close()
 
 
+@pytest.mark.slow  # against a twin on the wall clock (its seconds are real ones)
 def test_the_canopen_twin_answers_a_bare_canopen_client():
     import canopen
 
