@@ -37,8 +37,9 @@ discrete process noise (Van Loan). Updates use the Joseph form.
 
 Why this module is long: every step of the filter (Jacobian, covariance prediction,
 measurement updates with their gate, the reset) is here twice on purpose — a readable
-reference and the allocation-free twin the compiled loop calls, tested against each
-other — and the two only make sense side by side.
+reference in plain numpy and the allocation-free twin the compiled loop calls, tested
+against each other — and the two only make sense side by side. The references are not
+compiled: only the tests call them, and compiling them cost a fresh clone's suite ~9 s.
 """
 
 from __future__ import annotations
@@ -59,10 +60,31 @@ __all__ = [
 ]
 
 
-@njit(cache=True)
 def error_jacobian(q, w, h, J, J_inv, n, gg_gain, bias_map=None):
-    """F (n × n) of the error dynamics at (q̂, ω̂) with wheel momentum h (body axes): n = 6,
-    or 6 + m with a disturbance state acting as the torque ``bias_map`` (3, m) @ b̂."""
+    """F of the error dynamics at (q̂, ω̂) (the module docstring's equations).
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        q̂, orbital → body, scalar last.
+    w : ndarray, shape (3,)
+        ω̂, rad/s.
+    h : ndarray, shape (3,)
+        The wheels' momentum in body axes, N·m·s.
+    J, J_inv : ndarray, shape (3, 3)
+        The inertia without the wheels' spin inertia (kg·m²) and its inverse.
+    n : float
+        The orbit rate, rad/s (unused: the gradient's gain carries it).
+    gg_gain : float
+        The gravity gradient's gain 3n² (times 1 + the J2 correction), s⁻².
+    bias_map : ndarray, shape (3, m), optional
+        The disturbance state's torque map B; None: no disturbance state.
+
+    Returns
+    -------
+    ndarray, shape (d, d)
+        F, d = 6, or 6 + m with ``bias_map``.
+    """
     r = dcm(q)[:, 2].copy()
     dim = 6 if bias_map is None else 6 + bias_map.shape[1]
     F = np.zeros((dim, dim))
@@ -75,16 +97,31 @@ def error_jacobian(q, w, h, J, J_inv, n, gg_gain, bias_map=None):
     return F
 
 
-@njit(cache=True)
 def vector_jacobian(q, ref, dim=6):
-    """Predicted body vector A(q̂) r and its H (3 × dim)."""
+    """A vector sensor's prediction and its measurement matrix.
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        q̂, orbital → body, scalar last.
+    ref : ndarray, shape (3,)
+        The unit vector in orbital axes (the Sun, the nadir).
+    dim : int
+        The error state's size d.
+
+    Returns
+    -------
+    b : ndarray, shape (3,)
+        The predicted body vector A(q̂) ref.
+    H : ndarray, shape (3, d)
+        ∂b/∂δx: [b×] on δθ, zeros elsewhere.
+    """
     b = dcm(q) @ ref
     H = np.zeros((3, dim))
     H[:, :3] = skew(b)
     return b, H
 
 
-@njit(cache=True)
 def _update(q, w, P, b_meas, ref, sigma):
     """One vector-measurement update; returns q, w, P (Joseph form, symmetric).
     w: (n − 3,) the state after q, [ω̂] or [ω̂, b̂]."""
@@ -92,13 +129,36 @@ def _update(q, w, P, b_meas, ref, sigma):
     return q, w, P
 
 
-@njit(cache=True)
 def gated_update(q, w, P, b_meas, ref, sigma, gate):
-    """:func:`_update` behind an innovation gate: returns q, w, P and whether it was applied.
+    """One vector-measurement update (Joseph form) behind an innovation gate.
 
     The measurement is rejected (estimate and P unchanged) when its normalised
     innovation ν' S⁻¹ ν exceeds ``gate`` (a χ² bound; 0: no gate). The innovation
     of a unit vector has two degrees of freedom (its part along b is second order).
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        q̂, orbital → body, scalar last.
+    w : ndarray, shape (d − 3,)
+        The state after q: [ω̂] (rad/s) or [ω̂, b̂].
+    P : ndarray, shape (d, d)
+        The error state's covariance.
+    b_meas : ndarray, shape (3,)
+        The measured unit vector, body axes.
+    ref : ndarray, shape (3,)
+        The same vector in orbital axes.
+    sigma : float
+        The sensor's noise per axis (rad on a unit vector).
+    gate : float
+        The χ² bound on the normalised innovation; 0: no gate.
+
+    Returns
+    -------
+    q, w, P : ndarray
+        The updated estimate and covariance (symmetric), new arrays.
+    applied : bool
+        False when the gate rejected the measurement.
     """
     dim = P.shape[0]
     b, H = vector_jacobian(q, ref, dim)
@@ -121,10 +181,26 @@ def gated_update(q, w, P, b_meas, ref, sigma, gate):
     return q, w + dx[3:], P, True
 
 
-@njit(cache=True)
 def predict_covariance(P, F, Qc, T):
     """P⁺ = Φ P Φᵀ + Q_d over T, Φ and Q_d to third order in F·T (the δθ̇ = δω block
-    makes F·T of order 1 at a 0.5 s sensor period, so first order would not do)."""
+    makes F·T of order 1 at a 0.5 s sensor period, so first order would not do).
+
+    Parameters
+    ----------
+    P : ndarray, shape (d, d)
+        The error state's covariance.
+    F : ndarray, shape (d, d)
+        The error dynamics (:func:`error_jacobian`), s⁻¹.
+    Qc : ndarray, shape (d, d)
+        The continuous process noise's spectral density.
+    T : float
+        The prediction's span, s.
+
+    Returns
+    -------
+    ndarray, shape (d, d)
+        P⁺, symmetric.
+    """
     FT = F * T
     F2 = F @ F
     Phi = np.eye(P.shape[0]) + FT + 0.5 * FT @ FT + F2 @ FT * (T * T / 6.0)

@@ -97,9 +97,25 @@ class DisturbanceModel:
         )
 
 
-@njit(cache=True)
 def disturbance_torque(q, J, dist, sun_orb, moon_orb):
-    """τ_d in body axes, N·m (see the module docstring)."""
+    """The disturbance torque (see the module docstring).
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        Orbital → body, scalar last.
+    J : ndarray, shape (3, 3)
+        The inertia without the wheels' spin inertia, kg·m².
+    dist : ndarray, shape (10,)
+        :meth:`DisturbanceModel.vector`: the gains and the constant torque.
+    sun_orb, moon_orb : ndarray, shape (3,)
+        The Sun's and the Moon's unit vectors in orbital axes.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        τ_d in body axes, N·m.
+    """
     C = dcm(q)
     r = C[:, 2].copy()  # nadir (orbital z) in body axes
     tau = dist[0] * np.cross(r, J @ r)
@@ -111,13 +127,37 @@ def disturbance_torque(q, J, dist, sun_orb, moon_orb):
     return tau
 
 
-@njit(cache=True)
 def derivative(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
-    """ẋ for state x with wheel torques ``hw_dot`` (N·m each), all in SI units.
+    """ẋ for state x with wheel torques ``hw_dot``, all in SI units.
 
-    The readable reference; :func:`propagate` runs its scalar twin ``_derivative_into``.
+    The readable reference, in plain numpy (only the tests call it); :func:`propagate`
+    runs its compiled scalar twin ``_derivative_into``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (7 + N,)
+        [q (scalar last), ω (rad/s), h_w (N·m·s)].
+    hw_dot : ndarray, shape (N,)
+        The wheels' torques, N·m.
+    J, J_inv : ndarray, shape (3, 3)
+        The inertia without the wheels' spin inertia (kg·m²) and its inverse.
+    G : ndarray, shape (3, N)
+        The wheels' axes in body axes.
+    h_max : ndarray, shape (N,)
+        Each wheel's momentum limit, N·m·s.
+    n : float
+        The orbit rate, rad/s.
+    dist : ndarray, shape (10,)
+        :meth:`DisturbanceModel.vector`: the gains and the constant torque.
+    sun_orb, moon_orb : ndarray, shape (3,)
+        The Sun's and the Moon's unit vectors in orbital axes.
+
+    Returns
+    -------
+    ndarray, shape (7 + N,)
+        ẋ.
     """
-    q = x[:4].copy()  # contiguous copies: faster matrix products in numba
+    q = x[:4].copy()
     w = x[4:7].copy()
     hw = x[7:].copy()
     nw = hw.shape[0]
