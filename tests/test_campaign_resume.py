@@ -67,7 +67,7 @@ def test_a_campaign_killed_with_sigterm_then_resumed_is_the_uninterrupted_one(tm
     child.send_signal(signal.SIGTERM)
     _, err = child.communicate(timeout=120)
     assert child.returncode == 130, err
-    assert "campaign stopped:" in err and "--resume" in err and "Traceback" not in err
+    assert "campaign stopped:" in err and "--resume" in err and "Traceback" not in err, err
     said = [
         line
         for line in err.splitlines()
