@@ -116,8 +116,8 @@ def dask_client(
             yield client
     except BaseException:  # Ctrl-C or SIGTERM while it starts or runs: no noise at exit
         # a callback of the cluster's event loop cut by the stop is logged by tornado as an
-        # error with its traceback (once in a cold-cache suite run, after "campaign
-        # stopped"): after a stop, nothing it could say is news
+        # error with its traceback (seen once, in a fresh clone's suite run): after a
+        # stop, nothing it could say is news
         logging.getLogger("tornado.application").setLevel(logging.CRITICAL + 1)
         _close_quietly(set(SpecCluster._instances) - before)
         raise
