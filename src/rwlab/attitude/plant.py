@@ -147,10 +147,8 @@ def derivative(x, hw_dot, J, J_inv, G, h_max, n, dist, sun_orb, moon_orb):
         Each wheel's momentum limit, N·m·s.
     n : float
         The orbit rate, rad/s.
-    dist : ndarray, shape (10,)
-        :meth:`DisturbanceModel.vector`: the gains and the constant torque.
-    sun_orb, moon_orb : ndarray, shape (3,)
-        The Sun's and the Moon's unit vectors in orbital axes.
+    dist, sun_orb, moon_orb : ndarray
+        As :func:`disturbance_torque` takes them.
 
     Returns
     -------
