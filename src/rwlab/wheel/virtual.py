@@ -44,7 +44,7 @@ class CopyingVirtualBus(VirtualBus):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._direct = all(hasattr(self, p) for p in _PARTS)
-        if self._direct and not kwargs.get("rx_queue_size"):
+        if self._direct and self.queue.maxsize == 0:  # unbounded, as SimpleQueue is
             self._own_simple_queue()
 
     def _own_simple_queue(self) -> None:
