@@ -298,7 +298,7 @@ class WheelGreyBox:
         -------
         numpy.ndarray, shape (N,)
         """
-        u = np.asarray(u_rpm, dtype=float).ravel()
+        u = np.array(u_rpm, dtype=float).ravel()
         if u.size == 0 or not np.all(np.isfinite(u)):
             raise DataError("u must be a non-empty finite sequence")
         return _simulate(u, float(w0_rpm), self.vector)[0]
@@ -313,7 +313,7 @@ class WheelGreyBox:
         w0_rpm : float
             Initial speed, rpm.
         """
-        u = np.asarray(u_rpm, dtype=float).ravel()
+        u = np.array(u_rpm, dtype=float).ravel()
         if u.size == 0 or not np.all(np.isfinite(u)):
             raise DataError("u must be a non-empty finite sequence")
         return _simulate(u, float(w0_rpm), self.vector)[1]

@@ -111,8 +111,8 @@ class NLARXModel:
         -------
         numpy.ndarray, shape (N,)
         """
-        u2 = np.asarray(u, dtype=float).ravel()
-        y0 = np.atleast_1d(np.asarray(y_init, dtype=float)).ravel()
+        u2 = np.array(u, dtype=float).ravel()
+        y0 = np.array(y_init, dtype=float, ndmin=1).ravel()
         if u2.size == 0 or y0.size == 0 or not np.all(np.isfinite(u2)):
             raise DataError("u must be non-empty and finite, y_init non-empty")
         return _simulate(

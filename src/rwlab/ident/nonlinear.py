@@ -248,7 +248,7 @@ class ServoModel:
 
     def simulate(self, u: np.ndarray, w0: float, integral0: float = 0.0) -> np.ndarray:
         """Output from the state (w0, I0) at sample 0 for inputs ``u`` (N,); returns (N,)."""
-        u = np.asarray(u, dtype=float).ravel()
+        u = np.array(u, dtype=float).ravel()
         if u.size == 0 or not np.all(np.isfinite(u)):
             raise DataError("u must be a non-empty finite sequence")
         return _simulate(u, float(w0), float(integral0), self.vector)

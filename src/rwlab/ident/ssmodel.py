@@ -28,9 +28,20 @@ WEIGHTINGS = ("auto", "CVA", "MOESP", "N4SID", "SSARX")
 INITIAL = ("auto", "zero", "estimate", "steady")
 
 
+def _run(A, B, C, D, w, x0) -> np.ndarray:
+    """out(t) = C x(t) + D w(t), x(t+1) = A x(t) + B w(t), x(0) = x0; w is (N, m).
+
+    Numba compiles a kernel once per argument type, and a read-only array is another type
+    than a writable one: the matrices go in as writable C-contiguous float arrays (copies
+    where they are not), so one compiled version serves them all (eight had been compiled).
+    """
+    matrices = (np.require(m, dtype=float, requirements=("C", "W")) for m in (A, B, C, D, w))
+    return _run_compiled(*matrices, np.array(x0, dtype=float))
+
+
 @njit(cache=True)
-def _run(A, B, C, D, w, x0):  # pragma: no cover - compiled
-    """out(t) = C x(t) + D w(t), x(t+1) = A x(t) + B w(t), x(0) = x0; w is (N, m)."""
+def _run_compiled(A, B, C, D, w, x0):  # pragma: no cover - compiled
+    """:func:`_run` on read-only C-contiguous matrices and a writable ``x0``."""
     N = w.shape[0]
     n = A.shape[0]
     p = C.shape[0]
@@ -217,14 +228,7 @@ class SSModel(IdentifiedModel):
         """
         u2 = self._inputs(u)
         x0 = np.zeros(self.nx) if x0 is None else np.asarray(x0, float).reshape(self.nx)
-        return _run(
-            np.ascontiguousarray(self.A),
-            np.ascontiguousarray(self.B),
-            np.ascontiguousarray(self.C),
-            np.ascontiguousarray(self.D),
-            np.ascontiguousarray(u2),
-            x0,
-        )
+        return _run(self.A, self.B, self.C, self.D, u2, x0)
 
     def _predictor(self):
         """Matrices of the one-step predictor driven by w = [u, y]."""
@@ -443,9 +447,8 @@ class SSModel(IdentifiedModel):
 def predict_one_step(model: SSModel, u, y, initial) -> tuple[np.ndarray, np.ndarray]:
     """One-step prediction and the initial state used."""
     Ab, Bb, Db = model._predictor()
-    w = np.ascontiguousarray(np.hstack([u, y]))
-    C = np.ascontiguousarray(model.C)
-    Ab, Bb, Db = (np.ascontiguousarray(m) for m in (Ab, Bb, Db))
+    w = np.hstack([u, y])
+    C = model.C
     if isinstance(initial, str):
         if initial not in ("zero", "steady", "estimate"):
             raise DataError(f"initial must be 'zero', 'steady' or 'estimate', got {initial!r}")
@@ -483,7 +486,7 @@ def _simulate_from(model: SSModel, data: IOData, initial) -> np.ndarray:
         x0 = np.asarray(initial, float).reshape(model.nx)
     yhat = model.simulate(u, x0) if model.nu else np.zeros((data.N, model.ny))
     if isinstance(initial, str) and initial == "estimate" and model.nx:
-        free = free_responses(np.ascontiguousarray(model.A), np.ascontiguousarray(model.C), data.N)
+        free = free_responses(model.A, model.C, data.N)
         dx, *_ = np.linalg.lstsq(free, (data.y - yhat).ravel(), rcond=None)
         yhat = yhat + (free @ dx).reshape(yhat.shape)
     return yhat
@@ -494,16 +497,9 @@ def _k_step(model: SSModel, data: IOData, k: int, initial) -> np.ndarray:
     through ``x ← A x + B u``; the first samples, with no data k back, from the initial state."""
     # x̂(t | t−1) for every t: the predictor's state (its "output" with C = I)
     Ab, Bb, _ = model._predictor()
-    w = np.ascontiguousarray(np.hstack([data.u, data.y]))
+    w = np.hstack([data.u, data.y])
     x0 = predict_one_step(model, data.u, data.y, initial)[1]
-    states = _run(
-        np.ascontiguousarray(Ab),
-        np.ascontiguousarray(Bb),
-        np.eye(model.nx),
-        np.zeros((model.nx, w.shape[1])),
-        w,
-        np.ascontiguousarray(x0, dtype=float),
-    )
+    states = _run(Ab, Bb, np.eye(model.nx), np.zeros((model.nx, w.shape[1])), w, x0)
     u = data.u
     for _ in range(k - 1):
         nxt = np.empty_like(states)
