@@ -1,5 +1,6 @@
 """The live monitor in a real browser: headless Chromium (Debian's chromium + chromium-driver)."""
 
+import contextlib
 import threading
 import time
 from pathlib import Path
@@ -41,7 +42,17 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path, browser):
     cfg = ExperimentConfig(
         signal="step", duration=12, Ts=0.1, realtime=True, telemetry_rate=50, amplitude=3000
     )
-    run = threading.Thread(target=run_experiment, args=(cfg, record), daemon=True)
+    seen = threading.Event()  # the page has shown what it must: the experiment may stop
+
+    def stop_once_seen(k, n):
+        if seen.is_set():
+            raise KeyboardInterrupt  # as Ctrl-C: the wheel idled, the record closed
+
+    def experiment():
+        with contextlib.suppress(KeyboardInterrupt):
+            run_experiment(cfg, record, progress=stop_once_seen)
+
+    run = threading.Thread(target=experiment, daemon=True)
     run.start()
     while not (record.exists() or partial_path(record).exists()):  # written as .partial
         time.sleep(0.05)
@@ -58,6 +69,7 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path, browser):
         ARTIFACTS.mkdir(exist_ok=True)
         driver.save_screenshot(str(ARTIFACTS / "monitor.png"))
     finally:
+        seen.set()
         server.stop()
         run.join(timeout=20)
 

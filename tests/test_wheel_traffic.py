@@ -209,10 +209,12 @@ def test_a_burst_of_junk_leaves_the_served_wheel_and_the_experiment_running():
     # the burst costs no frame: the realistic twin loses ~1 in 1000 on purpose (frame_loss_rate)
     assert lost <= 3, r
     assert r["complete"] and ("stop", "completed") in [tuple(e) for e in r["events"]]
-    assert r["telemetry"] >= 0.95 * 50 * 10, r  # 50 Hz for the 10 s run, the burst included
+    assert r["telemetry"] >= 0.95 * 50 * 7, r  # 50 Hz for the 7 s run, the burst included
     assert r["max_speed"] < 700  # the 1e30 rpm requests were refused
     counts = r["serve_counts"]
-    assert counts["bad"] > 1000 and counts["rejected"] > 0 and counts["commands"] >= 20
+    assert (
+        counts["bad"] > 1000 and counts["rejected"] > 0 and counts["commands"] >= 14
+    )  # 7 s at 2 Hz
 
 
 @pytest.mark.slow

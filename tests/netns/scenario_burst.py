@@ -144,7 +144,7 @@ try:
             "--amplitude",
             "600",
             "--duration",
-            "10",
+            "7",  # still running through the burst (3 s on) and the second after it
             "--Ts",
             "0.5",
             "--out",
