@@ -66,7 +66,8 @@ HELD_POWER_UP = ("friction=1.5", "torque_constant=0.8", "current_limit=0.45")
 def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dict[str, tuple]:
     """name → spec of a per-wheel held-out set (``w5``: units 9001-9102; ``w6``: units
     9201-9302, made after the last change to judge it once; ``w7``: units 9401-9502,
-    made to judge the weak motor's torque cap), limits at 60-80 % of the
+    made to judge the weak motor's torque cap; ``w8``: units 9601-9702, made to judge the
+    driver's acceleration cap in the fault models once), limits at 60-80 % of the
     wheel's specified clamp ``current_limit_a`` (A)."""
     limit = current_limit_a
     faults = (
@@ -188,6 +189,7 @@ def main() -> None:
     limit = WheelSpec.load(args.wheel).current_limit_a
     specs = {**b.records("tune"), **held(), **held(7200, "fresh"), **wheel_set(limit)}
     specs |= wheel_set(limit, 9200, "w6") | wheel_set(limit, 9400, "w7")
+    specs |= wheel_set(limit, 9600, "w8")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

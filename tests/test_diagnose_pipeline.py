@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from dataclasses import replace
 
 import jsonschema
 import numpy as np
@@ -273,6 +274,25 @@ def test_a_weak_motor_or_more_friction_fall_short_only_where_the_clamp_binds():
     assert (
         binding.any() and (np.sign(weak[binding]) == -np.sign(f.demand_accel_rpm_s[binding])).all()
     )
+
+
+def test_at_the_acceleration_limit_a_motor_reaches_its_share_of_the_capped_request():
+    """The capped request drives the current a healthy wheel needs for the limit; a motor
+    of F·k_t turns it into F of the torque (the integrator holds), so the wheel reaches
+    F·α_limit less (1 − F) of friction's share; a clamp under that current cuts it to L."""
+    f = compute_features(*record(0), SCALES)
+    limit = SCALES.accel_limit_rpm_s
+    capped = replace(f, demand_accel_rpm_s=np.where(f.speed_rpm >= 0, limit, -limit))
+    assert capped.saturated.all()
+    factors = np.array([0.8, 1.0, 1.25])
+    p = Detector.shortfall(capped, SCALES.current_limit_a, torque_factor=factors)
+    friction_rpm_s = capped.friction_current_a / C[0]  # friction's share of the limit
+    d = np.sign(capped.demand_accel_rpm_s)
+    for j, factor in enumerate(factors):
+        assert np.allclose(p[:, j], (factor - 1) * (d * limit + friction_rpm_s), atol=1e-9)
+    clamp = 0.4  # under c₀·α_limit + friction: the clamp sets the current
+    q = Detector.shortfall(capped, clamp)[:, 0]
+    assert np.allclose(q, d * (clamp - C[3]) / C[0] - friction_rpm_s - d * limit, atol=1e-9)
 
 
 @pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])

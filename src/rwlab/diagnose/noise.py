@@ -74,7 +74,8 @@ class NoiseModel:
     inflation: dict[str, float]
 
     def weights(self, features: Features) -> dict[str, np.ndarray]:
-        """1/(σ²κ) per sample and channel (0 where a sample is unusable), shape (N,) each."""
+        """1/(σ²κ) per sample and channel (0 where a sample is unusable), shape (N,) each;
+        and ``current_level``: the current's 1/σ² alone, for a level the reading must hold."""
         where = bins(features)  # the same bins the σ were measured in
         out = {}
         for name in CHANNELS:
@@ -83,6 +84,10 @@ class NoiseModel:
             out[name] = np.where(
                 channel_mask(features, name), 1.0 / (sigma**2 * self.inflation[key]), 0.0
             )
+        # the current's level against a clamp: 1/σ² without κ, each sample its own evidence
+        # (a reading over the clamp is the reading, not the model's slow misfit)
+        key = self.key("current", features.against_own)
+        out["current_level"] = out["current"] * self.inflation[key]
         return out
 
     def key(self, name: str, against_own: bool) -> str:

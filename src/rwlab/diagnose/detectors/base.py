@@ -153,21 +153,50 @@ class Detector(ABC):
         torque_factor: np.ndarray | float = 1.0,
         friction_factor: np.ndarray | float = 1.0,
     ) -> np.ndarray:
-        """The acceleration residual a driver clamp makes, rpm/s, shape (N, G).
+        """The acceleration residual the driver's limits make, rpm/s, shape (N, G).
 
-        The loop's integrator makes up any loss of torque or added friction until the
-        driver's current clamp binds; only then does the wheel fall short of the loop's
-        demand: it reaches α = (±F_k·L − c₃ − F_f·friction current)/c₀ (current-balance
-        units). Each of ``clamp_a`` (L), ``torque_factor`` (F_k) and ``friction_factor``
-        (F_f) is a scalar or a row of candidate sizes, shape (G,).
+        Below its acceleration limit the loop's integrator makes up a lost torque or added
+        friction until the driver's current clamp binds: the wheel falls short only where
+        it would need more than L, reaching c₀·α = ±F_k·L − c₃ − F_f·friction current
+        (current-balance units). At the limit the loop's request is capped and its
+        integrator holds (anti-windup): the driver gives the current a healthy wheel needs
+        for the limit, i = c₀·α_limit + friction current + c₃, clamped at ±L, and the wheel
+        reaches c₀·α = F_k·(i − c₃) − F_f·friction current: short of the limit for a weak
+        motor or worn bearings, beyond it for a stronger motor. Each of ``clamp_a`` (L),
+        ``torque_factor`` (F_k) and ``friction_factor`` (F_f) is a scalar or a row of
+        candidate sizes, shape (G,).
         """
         c0, _, _, c3 = features.scales.current_model
         demand = features.demand_accel_rpm_s[:, None]
-        d = np.sign(demand)
-        available = d * np.asarray(torque_factor) * np.asarray(clamp_a)
         friction = np.asarray(friction_factor) * features.friction_current_a[:, None]
-        reach = (available - c3 - friction) / c0
-        return np.where(d * demand > d * reach, reach - demand, 0.0)
+        torque = np.asarray(torque_factor)
+        clamp = np.asarray(clamp_a)
+        d = np.sign(demand)
+        reach = (d * torque * clamp - c3 - friction) / c0
+        below = np.where(d * demand > d * reach, reach - demand, 0.0)
+        healthy = features.friction_current_a[:, None]
+        current = np.clip(c0 * demand + healthy + c3, -clamp, clamp)
+        at_limit = (torque * (current - c3) - friction) / c0 - demand
+        return np.where(features.saturated[:, None], at_limit, below)
+
+    @staticmethod
+    def level_cost(miss: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """−w·ρ(miss): what a reading off the level a fault holds it at costs, shape of ``miss``.
+
+        Parameters
+        ----------
+        miss : numpy.ndarray, shape (N, G)
+            The reading less the level, per sample and candidate size.
+        w : numpy.ndarray, shape (N,)
+            1/σ² of the reading (0: the sample is not read).
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, G)
+            ρ is Huber's loss at ``HUBER_C`` σ, as in :meth:`channel_gain`.
+        """
+        w = w[:, None]
+        return -w * _huber(miss, HUBER_C / np.sqrt(np.where(w > 0, w, np.inf)))
 
     @staticmethod
     def channel_gain(r: np.ndarray, w: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -18,8 +18,12 @@ class CurrentLimit(Detector):
     acceleration limit draws the full current: no clamp can explain it); where it
     binds, the current sits at L (a flat top), so a current below L there costs as
     much (a healthy wheel whose loop demand the model overstates, on a chirp's fast
-    end, draws less than L: the clamp must not explain its shortfall). Sizes
-    up to the specified clamp (``model.json``), which is the healthy one."""
+    end, draws less than L: the clamp must not explain its shortfall). The level is
+    the reading's, judged sample by sample at the reading's own scatter
+    (``current_level``, :meth:`Detector.level_cost`): a weak motor at the acceleration
+    limit falls as short as a clamp would, and only its current, over the clamp on
+    every such sample, tells them apart. Sizes up to the specified clamp
+    (``model.json``), which is the healthy one."""
 
     fault = "current_limit"
     unit = "A"
@@ -38,5 +42,5 @@ class CurrentLimit(Detector):
         # any current up to L: a shortfall of acceleration with the current below L is not
         # the clamp's, and a current over L never is
         miss = np.where(binding, level, np.maximum(level, 0.0))
-        beyond = -0.5 * weights["current"][:, None] * miss * miss
+        beyond = self.level_cost(miss, weights["current_level"])
         return self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p) + beyond

@@ -13,8 +13,9 @@ class Friction(Detector):
     constant speed (measured and model |α| under ``STEADY_SHARE`` of the acceleration
     limit: there the current is friction's alone, and the spread of inertia and
     k_t between units cannot pose as friction); the loop's integrator adds the
-    friction's current until the driver's clamp binds, and only then does the
-    acceleration fall short (:meth:`Detector.shortfall`)."""
+    friction's current until the driver's clamp binds, and then, or at the acceleration
+    limit (where the capped request holds), the acceleration falls short
+    (:meth:`Detector.shortfall`)."""
 
     fault = "friction"
     unit = "factor"

@@ -10,10 +10,10 @@ from rwlab.diagnose.features import Features
 
 class TorqueConstant(Detector):
     """k_t × F: the current residual (1/F − 1)·(c₀α + c₁ω + c₂ sign ω) at the
-    measured motion; the loop's integrator makes up the lost torque until the
-    driver's clamp L binds, so the acceleration falls short only where the demand
-    needs more than F·L (:meth:`Detector.shortfall`): a stronger motor (F > 1) is
-    never faster than the loop's demand."""
+    measured motion; below the acceleration limit the loop's integrator makes up the
+    lost torque until the driver's clamp L binds, and at the limit the capped request
+    drives F of it (:meth:`Detector.shortfall`): the acceleration falls short where
+    the demand needs more than F·L, and at the limit."""
 
     fault = "torque_constant"
     unit = "factor"
