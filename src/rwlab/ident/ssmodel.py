@@ -35,13 +35,13 @@ def _run(A, B, C, D, w, x0) -> np.ndarray:
     than a writable one: the matrices go in as writable C-contiguous float arrays (copies
     where they are not), so one compiled version serves them all (eight had been compiled).
     """
-    matrices = (np.require(m, dtype=float, requirements=("C", "W")) for m in (A, B, C, D, w))
-    return _run_compiled(*matrices, np.array(x0, dtype=float))
+    A, B, C, D, w = (np.require(m, dtype=float, requirements=("C", "W")) for m in (A, B, C, D, w))
+    return _run_compiled(A, B, C, D, w, np.array(x0, dtype=float))
 
 
 @njit(cache=True)
 def _run_compiled(A, B, C, D, w, x0):  # pragma: no cover - compiled
-    """:func:`_run` on read-only C-contiguous matrices and a writable ``x0``."""
+    """:func:`_run` on writable C-contiguous float matrices (one compiled version)."""
     N = w.shape[0]
     n = A.shape[0]
     p = C.shape[0]
