@@ -67,7 +67,8 @@ def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dic
     """name → spec of a per-wheel held-out set (``w5``: units 9001-9102; ``w6``: units
     9201-9302, made after the last change to judge it once; ``w7``: units 9401-9502,
     made to judge the weak motor's torque cap; ``w8``: units 9601-9702, made to judge the
-    driver's acceleration cap in the fault models once), limits at 60-80 % of the
+    driver's acceleration cap in the fault models once; ``w9``: units 9801-9902, made to
+    judge the clamp read off its flat top once), limits at 60-80 % of the
     wheel's specified clamp ``current_limit_a`` (A)."""
     limit = current_limit_a
     faults = (
@@ -189,7 +190,7 @@ def main() -> None:
     limit = WheelSpec.load(args.wheel).current_limit_a
     specs = {**b.records("tune"), **held(), **held(7200, "fresh"), **wheel_set(limit)}
     specs |= wheel_set(limit, 9200, "w6") | wheel_set(limit, 9400, "w7")
-    specs |= wheel_set(limit, 9600, "w8")
+    specs |= wheel_set(limit, 9600, "w8") | wheel_set(limit, 9800, "w9")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

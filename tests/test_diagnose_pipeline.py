@@ -17,7 +17,8 @@ from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
-from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, profile_fit
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
+from rwlab.diagnose.detectors.current_limit import CurrentLimit
 from rwlab.diagnose.features import (
     REFERENCE_LAG_S,
     STEADY_SHARE,
@@ -293,6 +294,25 @@ def test_at_the_acceleration_limit_a_motor_reaches_its_share_of_the_capped_reque
     clamp = 0.4  # under c₀·α_limit + friction: the clamp sets the current
     q = Detector.shortfall(capped, clamp)[:, 0]
     assert np.allclose(q, d * (clamp - C[3]) / C[0] - friction_rpm_s - d * limit, atol=1e-9)
+
+
+def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
+    """The GLR's clamp (here 2 % low, as a unit's own inertia/k_t pulls the reach) is read
+    again off the current where it binds: the interval holds the clamp, a few mA wide."""
+    clamp, rng = 0.25, np.random.default_rng(7)
+    f = compute_features(*record(0), SCALES)
+    binding = Detector.shortfall(f, clamp)[:, 0] != 0
+    level = np.sign(f.demand_accel_rpm_s) * clamp + SIGMA_A * rng.standard_normal(f.N)
+    f = replace(f, current_a=np.where(binding, level, f.current_a))
+    weights = {"current_level": np.full(f.N, SIGMA_A**-2)}
+    detector = CurrentLimit()
+    grid = detector.grid(f)
+    glr = Fit("current_limit", 0.245, (0.244, 0.246), 100.0, "A")
+    refined = detector.refine(f, weights, grid, glr, 0, f.N)
+    assert binding.sum() > 100
+    assert refined.ci95[0] <= clamp <= refined.ci95[1]
+    assert refined.ci95[1] - refined.ci95[0] < 4 * 1.96 * SIGMA_A / np.sqrt(binding.sum())
+    assert (refined.log_lr, refined.fault) == (glr.log_lr, glr.fault)  # the evidence is kept
 
 
 @pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])

@@ -157,6 +157,8 @@ class Bank:
     def _cumulative(self, features: Features, noise: NoiseModel) -> dict[str, np.ndarray]:
         """Per detector, the cumulative per-sample gains, shape (N + 1, G)."""
         weights = noise.weights(features)
+        if not features.against_own:
+            self.weights = weights  # the sizes are read again on them (Detector.refine)
         return {
             n: _cumsum_rows(d.gains(features, weights, self.grid[n]))
             for n, d in self.detectors.items()
@@ -192,6 +194,7 @@ class Bank:
                 best, against = _relative(change, before), "own past"
         if against == "population":
             best = _widened(best, self.zone_bounds[name])
+        best = det.refine(self.features, self.weights, self.grid[name], best, a, k)
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
 
     def at(self, name: str, k: int) -> WindowFit:

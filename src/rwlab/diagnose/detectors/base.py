@@ -146,6 +146,34 @@ class Detector(ABC):
         grid : numpy.ndarray, shape (G,)
         """
 
+    def refine(
+        self,
+        features: Features,
+        weights: dict[str, np.ndarray],
+        grid: np.ndarray,
+        fit: Fit,
+        a: int,
+        k: int,
+    ) -> Fit:
+        """The size and interval of ``fit`` (this detector's on samples [a, k)) read again
+        where its gains mix evidence that does not measure the size; as it is by default.
+
+        Parameters
+        ----------
+        features : Features
+        weights : dict of str to numpy.ndarray
+        grid : numpy.ndarray, shape (G,)
+        fit : Fit
+            The window's GLR fit.
+        a, k : int
+            The window's first and past-the-last samples.
+
+        Returns
+        -------
+        Fit
+        """
+        return fit
+
     @staticmethod
     def shortfall(
         features: Features,

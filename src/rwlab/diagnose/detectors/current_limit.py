@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from rwlab.diagnose.detectors.base import Detector
+from rwlab.diagnose.detectors.base import Detector, profile_fit
 from rwlab.diagnose.features import Features
 
 
@@ -32,6 +34,24 @@ class CurrentLimit(Detector):
     def grid(self, features: Features) -> np.ndarray:
         spec = features.scales.current_limit_a
         return spec * np.linspace(0.1, 1.0, 361)
+
+    def refine(self, features, weights, grid, fit, a, k):
+        """The clamp read off the flat top: where the fitted clamp binds in the window, the
+        level the current sits at (Huber's location, its profile interval). The reach a
+        clamp allows scales with the unit's own inertia/k_t, a few % off the reference's
+        c₀, and would pull the size by as much; the reading at the flat top does not."""
+        binding = self.shortfall(features, fit.size)[a:k, 0] != 0.0
+        w = weights["current_level"][a:k][binding]
+        if np.count_nonzero(w) < 3:
+            return fit
+        c3 = features.scales.current_model[3]
+        level = np.abs(features.current_a[a:k][binding] - c3)
+        # on a grid of its own over the readings (the location lies among them): the
+        # detector's grid is coarser than this interval
+        sizes = np.linspace(level.min(), level.max(), 201)
+        ll = self.level_cost(level[:, None] - sizes[None, :], w).sum(axis=0)
+        top = profile_fit(self.fault, self.unit, sizes, ll, np.ones(sizes.size, bool))
+        return replace(fit, size=top.size, ci95=top.ci95)
 
     def gains(self, features, weights, grid):
         c3 = features.scales.current_model[3]
