@@ -26,6 +26,7 @@ from rwlab.diagnose.features import (
     channel_mask,
     compute_features,
 )
+from rwlab.diagnose.noise import SPEED_EDGES, NoiseModel
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
@@ -294,6 +295,26 @@ def test_at_the_acceleration_limit_a_motor_reaches_its_share_of_the_capped_reque
     clamp = 0.4  # under c₀·α_limit + friction: the clamp sets the current
     q = Detector.shortfall(capped, clamp)[:, 0]
     assert np.allclose(q, d * (clamp - C[3]) / C[0] - friction_rpm_s - d * limit, atol=1e-9)
+
+
+def test_the_speed_readings_scatter_is_measured_per_speed_at_held_speeds():
+    """A reading ten times coarser under 600 rpm (as a Hall-timed one is) gets a factor
+    of about ten in those speed bins and about one above; never under one."""
+    records = []
+    for seed in range(6):
+        data, wheel = record(seed)
+        rng = np.random.default_rng(100 + seed)
+        slow = np.abs(data.u[:, 0]) < 600
+        y = data.y.copy()
+        y[:, 0] += np.where(slow, 10 * SIGMA_RPM * rng.standard_normal(data.N), 0.0)
+        noisy = IOData(data.u, y, TS, output_names=data.output_names)
+        records.append(compute_features(noisy, wheel, SCALES))
+    factor = np.asarray(NoiseModel.measure(records).speed_factor["speed"])
+    slow_bin = np.searchsorted(SPEED_EDGES, 450.0)
+    fast_bins = np.searchsorted(SPEED_EDGES, [1500.0, 2800.0])
+    assert 7 < factor[slow_bin] < 13, factor
+    assert np.all((factor[fast_bins] >= 1) & (factor[fast_bins] < 1.5)), factor
+    assert factor.min() >= 1
 
 
 def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():

@@ -3,7 +3,11 @@
 A healthy residual is not white: the identified model misses the wheel most
 where the commanded acceleration changes fast (a chirp's fast end, a PRBS
 step). The model measured here says, per residual channel, the σ of the
-healthy residual in bins of the demand's jerk |Δα_demand|/Ts (rpm/s²), and an
+healthy residual in bins of the demand's jerk |Δα_demand|/Ts (rpm/s²), a factor on
+it in bins of the model's speed (a Hall-timed speed reading is coarse where a
+revolution no longer fits in the firmware's window: measured on all three twins,
+the speed residual's σ 1–2.6 rpm under 600 rpm against 0.1–0.3 rpm above, where the
+jerk bins alone called a slow stretch a sensor bias), and an
 inflation κ: the variance of means of ``BLOCK_S`` of consecutive standardised
 residuals over 1/(their number), so a log-likelihood over correlated samples counts
 them as N/κ independent ones. Both are measured on healthy records
@@ -13,7 +17,7 @@ own for ``rwlab diagnose calibrate``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -40,6 +44,10 @@ BLOCK_S = 60.0
 # jerk bin edges, rpm/s²: spaced by ×5 between a held speed and a chirp's fast end
 JERK_EDGES = (1.0, 5.0, 25.0, 125.0, 625.0)
 MIN_SAMPLES = 30  # a bin with fewer healthy samples takes its neighbour's σ
+# |model speed| bin edges, rpm: ×2 apart from the slowest reading a Hall wheel gives to
+# its top speeds; where a wheel's reading turns coarse is measured, not assumed
+SPEED_READ = ("speed", "accel")  # the channels read off the speed sensor
+SPEED_EDGES = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0, 2560.0, 5120.0)
 
 
 def jerk(features: Features) -> np.ndarray:
@@ -57,9 +65,44 @@ def bins(features: Features) -> np.ndarray:
     return np.where(held, len(JERK_EDGES) + 1, np.searchsorted(JERK_EDGES, j))
 
 
+def _concat(parts: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def speed_bins(features: Features) -> np.ndarray:
+    """Each sample's speed bin: where its model speed's magnitude falls in
+    :data:`SPEED_EDGES`, shape (N,)."""
+    model = features.speed_rpm - features.speed_residual_rpm
+    return np.searchsorted(SPEED_EDGES, np.abs(model))
+
+
+def _binned_scale(
+    z: np.ndarray, where: np.ndarray, n_bins: int, exact_is_unknown: bool = False
+) -> np.ndarray:
+    """The MAD σ (×1.4826: σ for Gaussian samples, unmoved by a few outliers) of ``z`` in
+    each of ``n_bins`` bins; a bin of fewer than ``MIN_SAMPLES`` (or, with
+    ``exact_is_unknown``, of a MAD of 0) takes its nearest measured neighbour's."""
+    s = np.array(
+        [
+            1.4826 * float(np.median(np.abs(z[where == i])))
+            if np.count_nonzero(where == i) >= MIN_SAMPLES
+            else np.nan
+            for i in range(n_bins)
+        ]
+    )
+    if exact_is_unknown:
+        s[s == 0] = np.nan
+    if not np.isfinite(s).any():
+        return np.ones(n_bins)
+    near = np.flatnonzero(np.isfinite(s))
+    for i in np.flatnonzero(~np.isfinite(s)):
+        s[i] = s[near[np.argmin(np.abs(near - i))]]
+    return s
+
+
 @dataclass(frozen=True)
 class NoiseModel:
-    """σ per channel per jerk bin, and each channel's inflation.
+    """σ per channel per jerk bin and speed bin, and each channel's inflation.
 
     Attributes
     ----------
@@ -68,15 +111,22 @@ class NoiseModel:
         (:func:`bins`), in the channel's unit (A, rpm/s, rpm).
     inflation : dict of str to float
         κ per channel (≥ 1).
+    speed_factor : dict of str to tuple of float
+        Per channel, the factor on σ in each of ``len(SPEED_EDGES) + 1`` speed bins
+        (:func:`speed_bins`); a channel without one: 1 (files made before it).
     """
 
     sigma: dict[str, tuple[float, ...]]
     inflation: dict[str, float]
+    speed_factor: dict[str, tuple[float, ...]] = field(default_factory=dict)
 
     def weights(self, features: Features) -> dict[str, np.ndarray]:
         """1/(σ²κ) per sample and channel (0 where a sample is unusable), shape (N,) each;
-        and ``current_level``: the current's 1/σ² alone, for a level the reading must hold."""
+        ``speed_held`` and ``accel_held``: the same with the speed sensor's factor at held
+        speeds (:attr:`speed_factor`); ``current_level``: the current's 1/σ² alone, for a
+        level the reading must hold."""
         where = bins(features)  # the same bins the σ were measured in
+        speed = speed_bins(features)
         out = {}
         for name in CHANNELS:
             key = self.key(name, features.against_own)
@@ -84,6 +134,9 @@ class NoiseModel:
             out[name] = np.where(
                 channel_mask(features, name), 1.0 / (sigma**2 * self.inflation[key]), 0.0
             )
+            if key in self.speed_factor:  # at a held speed, the speed sensor's own scale
+                g = np.where(where == 0, np.asarray(self.speed_factor[key])[speed], 1.0)
+                out[f"{name}_held"] = out[name] / g**2
         # the current's level against a clamp: 1/σ² without κ, each sample its own evidence
         # (a reading over the clamp is the reading, not the model's slow misfit)
         key = self.key("current", features.against_own)
@@ -118,58 +171,54 @@ class NoiseModel:
         """
         sigma: dict[str, tuple[float, ...]] = {}
         inflation: dict[str, float] = {}
+        factor: dict[str, tuple[float, ...]] = {}
         own = [f.own() for f in records]
         for key, attr, name, group in (
             *((n, a, n, records) for n, a in CHANNELS.items()),
             *((f"{n}_own", CHANNELS[n], n, own) for n in ("current", "current_steady")),
         ):
-            values, where = [], []
             group = [f for f in group if channel_mask(f, name).any()]
-            for f in group:
-                ok = channel_mask(f, name)
-                r = getattr(f, attr)[ok]
-                values.append(r - np.median(r))
-                where.append(bins(f)[ok])
-            v = np.concatenate(values) if values else np.zeros(0)
-            b = np.concatenate(where) if where else np.zeros(0, dtype=int)
+            masks = [channel_mask(f, name) for f in group]
+            v = _concat(
+                [
+                    getattr(f, attr)[ok] - np.median(getattr(f, attr)[ok])
+                    for f, ok in zip(group, masks, strict=True)
+                ]
+            )
             if v.size < MIN_SAMPLES and key.endswith("_own"):
                 continue  # records too short for their own reference: the population's only
             if v.size < MIN_SAMPLES:
                 raise DataError(f"the noise model needs ≥ {MIN_SAMPLES} usable healthy samples")
-            per_bin = []
-            for i in range(len(JERK_EDGES) + 2):
-                x = v[b == i]
-                # MAD·1.4826: σ for Gaussian samples, unmoved by a few outliers
-                per_bin.append(
-                    1.4826 * float(np.median(np.abs(x))) if x.size >= MIN_SAMPLES else np.nan
-                )
-            s = np.array(per_bin)
-            for i in range(len(s)):  # a thin bin takes the nearest measured one's σ
-                if not np.isfinite(s[i]):
-                    near = np.flatnonzero(np.isfinite(s))
-                    s[i] = s[near[np.argmin(np.abs(near - i))]]
+            jerk_bin = _concat([bins(f)[ok] for f, ok in zip(group, masks, strict=True)])
+            s = _binned_scale(v, jerk_bin, len(JERK_EDGES) + 2)
             s[:-1] = np.maximum.accumulate(np.maximum(s[:-1], 1e-12))  # never less at more jerk
             sigma[key] = tuple(float(x) for x in s)
-            z = np.concatenate(
-                [
-                    (
-                        (getattr(f, attr) - np.median(getattr(f, attr)[channel_mask(f, name)]))
-                        / s[bins(f)]
-                    )[channel_mask(f, name)]
-                    for f in group
-                ]
-            )
+            scale = s[jerk_bin]
+            held = jerk_bin == 0
+            if name in SPEED_READ and np.count_nonzero(held) >= MIN_SAMPLES:
+                speed_bin = _concat([speed_bins(f)[ok] for f, ok in zip(group, masks, strict=True)])
+                # a MAD of 0 (readings of exactly 0 at rest, below what the sensor measures)
+                # says nothing of the misfit: such a bin takes its nearest measured one's
+                g = _binned_scale(
+                    v[held] / s[0], speed_bin[held], len(SPEED_EDGES) + 1, exact_is_unknown=True
+                )
+                # never finer than the held samples' σ: a bin of readings at rest (exactly 0,
+                # below what the sensor measures) has no scatter to speak of
+                factor[key] = tuple(float(x) for x in np.maximum(g, 1.0))
+            z = v / scale
             block = max(2, round(BLOCK_S / group[0].scales.Ts))
             n = z.size // block
             means = z[: n * block].reshape(n, block).mean(axis=1)
             inflation[key] = max(1.0, float(means.var() * block / max(z.var(), 1e-300)))
-        return cls(sigma, inflation)
+        return cls(sigma, inflation, factor)
 
     def to_dict(self) -> dict:
         return {
             "jerk_edges_rpm_s2": list(JERK_EDGES),
             "sigma": {k: list(v) for k, v in self.sigma.items()},
             "inflation": dict(self.inflation),
+            "speed_edges_rpm": list(SPEED_EDGES),
+            "speed_factor": {k: list(v) for k, v in self.speed_factor.items()},
         }
 
     @classmethod
@@ -177,4 +226,5 @@ class NoiseModel:
         return cls(
             {k: tuple(float(x) for x in v) for k, v in d["sigma"].items()},
             {k: float(v) for k, v in d["inflation"].items()},
+            {k: tuple(float(x) for x in v) for k, v in d.get("speed_factor", {}).items()},
         )

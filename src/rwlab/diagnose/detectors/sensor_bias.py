@@ -14,7 +14,9 @@ class SensorBias(Detector):
     acceleration residual is +kp·b. Both are read only at constant speed
     (measured and model |α| under ``STEADY_SHARE`` of the acceleration limit): in a speed change
     a weak motor, worn bearings or a clamp make the wheel lag, which a constant
-    offset would otherwise absorb."""
+    offset would otherwise absorb. Each held sample weighs as the speed it was read at
+    allows (:attr:`NoiseModel.speed_factor`): a Hall-timed reading is coarse at low
+    speed, where a slow healthy stretch otherwise reads as a bias."""
 
     fault = "speed_sensor_bias"
     unit = "rpm"
@@ -26,7 +28,8 @@ class SensorBias(Detector):
     def gains(self, features, weights, grid):
         n = features.N
         quiet = features.steady(STEADY_SHARE)
-        weights = {k: v * quiet for k, v in weights.items()}
+        # the held samples' σ by the speed the reading was taken at, where measured
+        weights = {k: weights.get(f"{k}_held", weights[k]) * quiet for k in ("speed", "accel")}
         p_speed = np.broadcast_to(grid[None, :], (n, grid.size))
         gain = self.channel_gain(features.speed_residual_rpm, weights["speed"], p_speed)
         kp = features.scales.loop_gain_per_s
