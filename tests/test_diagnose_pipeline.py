@@ -334,6 +334,13 @@ def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
     assert refined.ci95[0] <= clamp <= refined.ci95[1]
     assert refined.ci95[1] - refined.ci95[0] < 4 * 1.96 * SIGMA_A / np.sqrt(binding.sum())
     assert (refined.log_lr, refined.fault) == (glr.log_lr, glr.fault)  # the evidence is kept
+    # a reading quantised coarser than its noise: every binding sample reads the same step,
+    # and the interval is the step's width about it, not a point
+    lsb = 0.004
+    quantised = replace(f, current_a=np.round(f.current_a / lsb) * lsb)
+    coarse = detector.refine(quantised, weights, grid, glr, 0, f.N)
+    assert coarse.ci95[1] - coarse.ci95[0] >= lsb - 1e-12
+    assert coarse.ci95[0] <= clamp <= coarse.ci95[1]
 
 
 @pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])

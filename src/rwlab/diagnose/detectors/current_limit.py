@@ -51,7 +51,11 @@ class CurrentLimit(Detector):
         sizes = np.linspace(level.min(), level.max(), 201)
         ll = self.level_cost(level[:, None] - sizes[None, :], w).sum(axis=0)
         top = profile_fit(self.fault, self.unit, sizes, ll, np.ones(sizes.size, bool))
-        return replace(fit, size=top.size, ci95=top.ci95)
+        # a quantised reading places the level only within half its step either side
+        steps = np.diff(np.unique(np.abs(features.current_a[a:k])))
+        half = float(steps.min()) / 2 if steps.size else 0.0
+        ci95 = (min(top.ci95[0], top.size - half), max(top.ci95[1], top.size + half))
+        return replace(fit, size=top.size, ci95=ci95)
 
     def gains(self, features, weights, grid):
         c3 = features.scales.current_model[3]
