@@ -190,9 +190,22 @@ class Detector(ABC):
         integrator holds (anti-windup): the driver gives the current a healthy wheel needs
         for the limit, i = c₀·α_limit + friction current + c₃, clamped at ±L, and the wheel
         reaches c₀·α = F_k·(i − c₃) − F_f·friction current: short of the limit for a weak
-        motor or worn bearings, beyond it for a stronger motor. Each of ``clamp_a`` (L),
-        ``torque_factor`` (F_k) and ``friction_factor`` (F_f) is a scalar or a row of
-        candidate sizes, shape (G,).
+        motor or worn bearings, beyond it for a stronger motor.
+
+        Parameters
+        ----------
+        features : Features
+        clamp_a : float or numpy.ndarray, shape (G,)
+            The driver's current clamp L, A.
+        torque_factor : float or numpy.ndarray, shape (G,)
+            The motor's torque constant over the healthy one, F_k.
+        friction_factor : float or numpy.ndarray, shape (G,)
+            The bearings' friction over the healthy one, F_f.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, G)
+            Measured less demanded acceleration the limits make, rpm/s (0 where none binds).
         """
         c0, _, _, c3 = features.scales.current_model
         demand = features.demand_accel_rpm_s[:, None]
@@ -235,6 +248,20 @@ class Detector(ABC):
         sample the noise model misjudges (a slew's entry, a reversal) then adds at most
         ``HUBER_C``·|p|·√w to a window, not (r·p)·w: on healthy twin records single
         samples gave a weak motor a log-LR of 860 and so a threshold that blinded it.
+
+        Parameters
+        ----------
+        r : numpy.ndarray, shape (N,)
+            A channel's residuals.
+        w : numpy.ndarray, shape (N,)
+            Their weights 1/(σ²κ) (0: the sample is not read).
+        p : numpy.ndarray, shape (N, G) or broadcastable to it
+            The residual each candidate size predicts.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, G)
+            Each sample's log-likelihood gain of each size over the healthy wheel.
         """
         # a sample of weight 0, or whose row of predictions is all 0, gains exactly 0 (with
         # finite r, w and p): Huber's loss is evaluated on the other rows only (a steady-speed

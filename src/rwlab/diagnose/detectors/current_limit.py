@@ -25,7 +25,8 @@ class CurrentLimit(Detector):
     (``current_level``, :meth:`Detector.level_cost`): a weak motor at the acceleration
     limit falls as short as a clamp would, and only its current, over the clamp on
     every such sample, tells them apart. Sizes up to the specified clamp
-    (``model.json``), which is the healthy one."""
+    (``model.json``), which is the healthy one; the size and its interval are read off
+    the flat top (:meth:`refine`)."""
 
     fault = "current_limit"
     unit = "A"
@@ -36,10 +37,10 @@ class CurrentLimit(Detector):
         return spec * np.linspace(0.1, 1.0, 361)
 
     def refine(self, features, weights, grid, fit, a, k):
-        """The clamp read off the flat top: where the fitted clamp binds in the window, the
-        level the current sits at (Huber's location, its profile interval). The reach a
-        clamp allows scales with the unit's own inertia/k_t, a few % off the reference's
-        c₀, and would pull the size by as much; the reading at the flat top does not."""
+        # the clamp read off the flat top: where the fitted clamp binds in the window, the
+        # level the current sits at (Huber's location, its profile interval). The reach a
+        # clamp allows scales with the unit's own inertia/k_t, a few % off the reference's
+        # c₀, and would pull the size by as much; the reading at the flat top does not
         binding = self.shortfall(features, fit.size)[a:k, 0] != 0.0
         w = weights["current_level"][a:k][binding]
         if np.count_nonzero(w) < 3:
