@@ -19,6 +19,7 @@ from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
 from rwlab.diagnose.detectors.current_limit import CurrentLimit
+from rwlab.diagnose.detectors.frozen_reading import FrozenReading
 from rwlab.diagnose.features import (
     REFERENCE_LAG_S,
     STEADY_SHARE,
@@ -315,6 +316,24 @@ def test_the_speed_readings_scatter_is_measured_per_speed_at_held_speeds():
     assert 7 < factor[slow_bin] < 13, factor
     assert np.all((factor[fast_bins] >= 1) & (factor[fast_bins] < 1.5)), factor
     assert factor.min() >= 1
+
+
+def test_a_frozen_reading_counts_only_while_the_wheel_is_meant_to_move():
+    """A reading repeated through a held speed (as a Hall reading may be) leaves the run
+    at 0; frozen through a ramp, the run grows a sample per sample."""
+    data, wheel = record(0)
+    speed = data.u[:, 0]
+    held = np.flatnonzero(np.diff(speed) == 0)[5:35]  # inside the first hold
+    moving = np.flatnonzero(np.abs(np.diff(speed)) > 0)
+    ramps = np.split(moving, np.flatnonzero(np.diff(moving) > 1) + 1)
+    ramp = max(ramps, key=len)[10:40]  # inside the longest ramp
+    y = data.y.copy()
+    y[held, 0] = y[held[0], 0]
+    y[ramp, 0] = y[ramp[0], 0]
+    f = compute_features(IOData(data.u, y, TS, output_names=data.output_names), wheel, SCALES)
+    runs = FrozenReading.runs(f)
+    assert runs[held].max() == 0
+    assert runs[ramp[-1]] == len(ramp) - 1
 
 
 def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
