@@ -69,7 +69,8 @@ def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dic
     made to judge the weak motor's torque cap; ``w8``: units 9601-9702, made to judge the
     driver's acceleration cap in the fault models once; ``w9``: units 9801-9902, made to
     judge the clamp read off its flat top once; ``w10``: units 10001-10102, made to judge
-    the frozen reading counted while moving once), limits at 60-80 % of the
+    the frozen reading counted while moving once; ``w11``: units 10201-10302, made to
+    judge readings of 0 left out of the bias test once), limits at 60-80 % of the
     wheel's specified clamp ``current_limit_a`` (A)."""
     limit = current_limit_a
     faults = (
@@ -192,7 +193,7 @@ def main() -> None:
     specs = {**b.records("tune"), **held(), **held(7200, "fresh"), **wheel_set(limit)}
     specs |= wheel_set(limit, 9200, "w6") | wheel_set(limit, 9400, "w7")
     specs |= wheel_set(limit, 9600, "w8") | wheel_set(limit, 9800, "w9")
-    specs |= wheel_set(limit, 10000, "w10")
+    specs |= wheel_set(limit, 10000, "w10") | wheel_set(limit, 10200, "w11")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

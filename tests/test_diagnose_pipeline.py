@@ -20,6 +20,7 @@ from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
 from rwlab.diagnose.detectors.current_limit import CurrentLimit
 from rwlab.diagnose.detectors.frozen_reading import FrozenReading
+from rwlab.diagnose.detectors.sensor_bias import SensorBias
 from rwlab.diagnose.features import (
     REFERENCE_LAG_S,
     STEADY_SHARE,
@@ -316,6 +317,27 @@ def test_the_speed_readings_scatter_is_measured_per_speed_at_held_speeds():
     assert 7 < factor[slow_bin] < 13, factor
     assert np.all((factor[fast_bins] >= 1) & (factor[fast_bins] < 1.5)), factor
     assert factor.min() >= 1
+
+
+def test_a_reading_of_zero_is_no_evidence_of_a_bias(calibration):
+    """At rest a speed sensor reads exactly 0 below the speed it measures, while the model
+    may creep: those samples weigh nothing in the bias test; the same misfit read at a
+    held speed does."""
+    f = compute_features(*record(0), SCALES)
+    held = np.flatnonzero(f.steady(STEADY_SHARE) & f.usable)[:40]
+    misfit = f.speed_residual_rpm.copy()
+    misfit[held] = -2.0
+    detector = SensorBias()
+    grid = detector.grid(f)
+
+    def gains(reading):
+        speed = f.speed_rpm.copy()
+        speed[held] = reading
+        g = replace(f, speed_rpm=speed, speed_residual_rpm=misfit)
+        return detector.gains(g, calibration.noise.weights(g), grid)[held]
+
+    assert not gains(0.0).any()
+    assert gains(1000.0).any()
 
 
 def test_a_frozen_reading_counts_only_while_the_wheel_is_meant_to_move():

@@ -194,16 +194,17 @@ class NoiseModel:
             s[:-1] = np.maximum.accumulate(np.maximum(s[:-1], 1e-12))  # never less at more jerk
             sigma[key] = tuple(float(x) for x in s)
             scale = s[jerk_bin]
-            held = jerk_bin == 0
+            # a reading of exactly 0 is the sensor's floor (below the speed it measures), no
+            # measurement of the speed: the held readings' scatter is measured without them
+            read = _concat([f.speed_rpm[ok] for f, ok in zip(group, masks, strict=True)]) != 0
+            held = (jerk_bin == 0) & read
             if name in SPEED_READ and np.count_nonzero(held) >= MIN_SAMPLES:
                 speed_bin = _concat([speed_bins(f)[ok] for f, ok in zip(group, masks, strict=True)])
-                # a MAD of 0 (readings of exactly 0 at rest, below what the sensor measures)
-                # says nothing of the misfit: such a bin takes its nearest measured one's
+                # a bin without enough readings (or with a MAD of 0) takes its nearest
+                # measured one's; never finer than the held samples' σ
                 g = _binned_scale(
                     v[held] / s[0], speed_bin[held], len(SPEED_EDGES) + 1, exact_is_unknown=True
                 )
-                # never finer than the held samples' σ: a bin of readings at rest (exactly 0,
-                # below what the sensor measures) has no scatter to speak of
                 factor[key] = tuple(float(x) for x in np.maximum(g, 1.0))
             z = v / scale
             block = max(2, round(BLOCK_S / group[0].scales.Ts))

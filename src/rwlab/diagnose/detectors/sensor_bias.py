@@ -27,7 +27,8 @@ class SensorBias(Detector):
 
     def gains(self, features, weights, grid):
         n = features.N
-        quiet = features.steady(STEADY_SHARE)
+        # a reading of exactly 0 is the sensor's floor at rest, not a reading of the speed
+        quiet = features.steady(STEADY_SHARE) & (features.speed_rpm != 0)
         # the held samples' σ by the speed the reading was taken at, where measured
         weights = {k: weights.get(f"{k}_held", weights[k]) * quiet for k in ("speed", "accel")}
         p_speed = np.broadcast_to(grid[None, :], (n, grid.size))
