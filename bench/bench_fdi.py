@@ -70,7 +70,8 @@ def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dic
     driver's acceleration cap in the fault models once; ``w9``: units 9801-9902, made to
     judge the clamp read off its flat top once; ``w10``: units 10001-10102, made to judge
     the frozen reading counted while moving once; ``w11``: units 10201-10302, made to
-    judge readings of 0 left out of the bias test once), limits at 60-80 % of the
+    judge readings of 0 left out of the bias test once; ``w12``: units 10401-10502, made
+    to judge the one-sided rotor faults once), limits at 60-80 % of the
     wheel's specified clamp ``current_limit_a`` (A)."""
     limit = current_limit_a
     faults = (
@@ -194,6 +195,7 @@ def main() -> None:
     specs |= wheel_set(limit, 9200, "w6") | wheel_set(limit, 9400, "w7")
     specs |= wheel_set(limit, 9600, "w8") | wheel_set(limit, 9800, "w9")
     specs |= wheel_set(limit, 10000, "w10") | wheel_set(limit, 10200, "w11")
+    specs |= wheel_set(limit, 10400, "w12")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

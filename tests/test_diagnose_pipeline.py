@@ -146,6 +146,21 @@ def test_profile_interval_of_a_gaussian_is_textbook():
     assert fit.log_lr == pytest.approx(1.0**2 / (2 * 0.1**2), rel=1e-3)
 
 
+def test_a_one_sided_fault_fits_only_its_side_of_the_healthy_zone():
+    """ll peaked at 2 above a zone [0.8, 1.2]: a fault that raises the size finds it (the
+    textbook log-LR over the zone's edge); one that lowers it finds nothing there; a peak
+    at 0.5, below the zone, is the other way round."""
+    grid = np.linspace(0, 4, 40001)
+    zone = (grid >= 0.8) & (grid <= 1.2)
+    for peak, up, down in ((2.0, 0.8, 0.0), (0.5, 0.0, 0.3)):
+        ll = -((grid - peak) ** 2) / (2 * 0.1**2)
+        raised = profile_fit("x", "u", grid, ll, zone, worse=1)
+        lowered = profile_fit("x", "u", grid, ll, zone, worse=-1)
+        for fit, gap in ((raised, up), (lowered, down)):
+            assert fit.log_lr == pytest.approx(gap**2 / (2 * 0.1**2), rel=1e-3, abs=1e-9)
+    assert raised.size >= 0.8 and lowered.size == pytest.approx(0.5, abs=1e-3)
+
+
 @pytest.mark.parametrize(
     ("fault", "size", "unit"),
     [

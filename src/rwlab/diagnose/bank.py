@@ -177,7 +177,8 @@ class Bank:
         phi = self.dispersion[name]
         det = self.detectors[name]
         t = self.features.t_s
-        best = profile_fit(det.fault, det.unit, self.grid[name], ll, self.zone[name], phi)
+        grid, worse = self.grid[name], det.worse
+        best = profile_fit(det.fault, det.unit, grid, ll, self.zone[name], phi, worse)
         against = "population"
         if a >= self.past_min:
             cum = self.cum_own[name]
@@ -188,7 +189,7 @@ class Bank:
             drift = self.drift.get(key, self.drift[name])
             ok = self.grid[name][past >= past.max() - SUPPORT * phi_own]
             own = self._between(name, ok[0] - drift, ok[-1] + drift)
-            change = profile_fit(det.fault, det.unit, self.grid[name], ll_own, own, phi_own)
+            change = profile_fit(det.fault, det.unit, grid, ll_own, own, phi_own, worse)
             before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi_own)
             if change.log_lr > best.log_lr and _away(change.size, before.size, det.healthy_size):
                 best, against = _relative(change, before), "own past"

@@ -72,6 +72,7 @@ def profile_fit(
     ll: np.ndarray,
     healthy: np.ndarray,
     dispersion: float = 1.0,
+    worse: int = 0,
 ) -> Fit:
     """The GLR fit of one window from its log-likelihood over the grid.
 
@@ -88,16 +89,22 @@ def profile_fit(
         φ ≥ 1: the interval is the quasi-likelihood's, ll/φ (the model's misfit
         measured on healthy records); the log-LR stays the likelihood's, so the
         faults' log-LRs compare on one scale.
+    worse : {1, -1, 0}
+        The side of the zone a fault takes the size to (+1: up, −1: down, 0: either):
+        the sizes on the other side are no fault and are not fitted (a one-sided GLR).
 
     Returns
     -------
     Fit
     """
+    any_healthy = healthy.any()
+    if worse and any_healthy:
+        edge = grid[healthy].min() if worse > 0 else grid[healthy].max()
+        ll = np.where(worse * (grid - edge) >= 0, ll, -np.inf)
     # (array methods, not numpy's functions: the same reductions without their wrappers;
     # a calibration fits ~10⁴ windows)
     top_ll = float(ll.max())
     tied = (ll >= top_ll - 1e-9).nonzero()[0]  # a flat top (a clamp never reached): the
-    any_healthy = healthy.any()
     centre = float(grid[healthy].mean()) if any_healthy else float(grid[0])
     best = int(tied[np.abs(grid[tied] - centre).argmin()])  # size nearest the healthy
     inside = (ll >= ll[best] - HALF_CHI2_95 * dispersion).nonzero()[0]
@@ -122,6 +129,9 @@ class Detector(ABC):
     fault: ClassVar[str]
     unit: ClassVar[str]
     healthy_size: ClassVar[float]
+    # the side of the healthy zone the fault takes the size to (a fault makes a wheel
+    # worse): +1 up, −1 down, 0 either (:func:`profile_fit`)
+    worse: ClassVar[int] = 0
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

@@ -31,6 +31,7 @@ class CurrentLimit(Detector):
     fault = "current_limit"
     unit = "A"
     healthy_size = np.inf  # the specified clamp: grid's last point
+    worse = -1  # a lower clamp
 
     def grid(self, features: Features) -> np.ndarray:
         spec = features.scales.current_limit_a

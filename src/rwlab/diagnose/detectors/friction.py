@@ -20,6 +20,7 @@ class Friction(Detector):
     fault = "friction"
     unit = "factor"
     healthy_size = 1.0
+    worse = 1  # worn bearings: more friction
 
     def grid(self, features: Features) -> np.ndarray:
         return np.geomspace(0.25, 8.0, 801)

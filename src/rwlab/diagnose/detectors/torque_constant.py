@@ -18,6 +18,7 @@ class TorqueConstant(Detector):
     fault = "torque_constant"
     unit = "factor"
     healthy_size = 1.0
+    worse = -1  # a weaker motor
 
     def grid(self, features: Features) -> np.ndarray:
         return np.geomspace(0.1, 2.0, 801)
