@@ -188,9 +188,15 @@ def test_healthy_records_of_other_seeds_raise_no_alarm(calibration):
 
 
 def test_thresholds_fall_as_the_rate_asked_rises(calibration):
-    for name in MODEL_BASED:
-        hs = [calibration.threshold(name, r).log_lr for r in (1e-3, 1e-1, 10.0, 1000.0)]
-        assert all(a >= b for a, b in itertools.pairwise(hs))
+    few = replace(calibration, peaks={n: (9.0, 6.0, 4.0) for n in calibration.peaks})
+    for cal in (calibration, few):
+        for name in MODEL_BASED:
+            hs = [cal.threshold(name, r).log_lr for r in (1e-3, 1e-1, 1.0, 10.0, 1000.0)]
+            assert all(a >= b for a, b in itertools.pairwise(hs)), (name, hs)
+    # more alarms asked than the healthy statistic ever gave: its floor, and what it gives
+    asked = 100 / few.hours
+    floor = few.threshold("friction", asked)
+    assert floor.log_lr == HALF_CHI2_95 and floor.measured_per_hour == 3 / few.hours
     with pytest.raises(ConfigError):
         calibration.threshold("friction", 0.0)
 

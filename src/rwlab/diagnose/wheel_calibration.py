@@ -326,6 +326,10 @@ class DiagnosisCalibration:
         if m >= 1 and peaks.size > m:  # exceeded m times: the m-th largest peak's successor
             h = float(peaks[m])
             extrapolated = False
+        elif m >= 1:  # more alarms asked than the statistic ever rose above its floor: the
+            # floor, where every excursion counts (the rate measured there is the most it gives)
+            h = HALF_CHI2_95
+            extrapolated = False
         else:
             tail = peaks[: min(TAIL, peaks.size)]
             if tail.size >= MIN_TAIL:
