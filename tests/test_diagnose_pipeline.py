@@ -389,9 +389,8 @@ def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
     f = replace(f, current_a=np.where(binding, level, f.current_a))
     weights = {"current_level": np.full(f.N, SIGMA_A**-2)}
     detector = CurrentLimit()
-    grid = detector.grid(f)
     glr = Fit("current_limit", 0.245, (0.244, 0.246), 100.0, "A")
-    refined = detector.refine(f, weights, grid, glr, 0, f.N)
+    refined = detector.refine(f, weights, glr, 0, f.N)
     assert binding.sum() > 100
     assert refined.ci95[0] <= clamp <= refined.ci95[1]
     assert refined.ci95[1] - refined.ci95[0] < 4 * 1.96 * SIGMA_A / np.sqrt(binding.sum())
@@ -400,7 +399,7 @@ def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
     # and the interval is the step's width about it, not a point
     lsb = 0.004
     quantised = replace(f, current_a=np.round(f.current_a / lsb) * lsb)
-    coarse = detector.refine(quantised, weights, grid, glr, 0, f.N)
+    coarse = detector.refine(quantised, weights, glr, 0, f.N)
     assert coarse.ci95[1] - coarse.ci95[0] >= lsb - 1e-12
     assert coarse.ci95[0] <= clamp <= coarse.ci95[1]
 

@@ -136,12 +136,13 @@ class Bank:
         self.features = features
         self.detectors = {name: detector(name) for name in faults}
         self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
-        self.cum = self._cumulative(features, noise)
+        self.weights = noise.weights(features)  # the sizes are read again on them (refine)
+        self.cum = self._cumulative(features, self.weights)
         # the same gains against the record's own past (features.own()): a change of the
         # unit against itself, free of its misfit to the reference unit
         own = features.own()
         self.own_ready = np.isfinite(own.current_nuisance_a)  # type: ignore[arg-type]
-        self.cum_own = self._cumulative(own, noise)
+        self.cum_own = self._cumulative(own, noise.weights(own))
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
@@ -154,11 +155,10 @@ class Bank:
         self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
         self.past_min = round(PAST_MIN_S / Ts)
 
-    def _cumulative(self, features: Features, noise: NoiseModel) -> dict[str, np.ndarray]:
+    def _cumulative(
+        self, features: Features, weights: dict[str, np.ndarray]
+    ) -> dict[str, np.ndarray]:
         """Per detector, the cumulative per-sample gains, shape (N + 1, G)."""
-        weights = noise.weights(features)
-        if not features.against_own:
-            self.weights = weights  # the sizes are read again on them (Detector.refine)
         return {
             n: _cumsum_rows(d.gains(features, weights, self.grid[n]))
             for n, d in self.detectors.items()
@@ -190,12 +190,12 @@ class Bank:
             ok = self.grid[name][past >= past.max() - SUPPORT * phi_own]
             own = self._between(name, ok[0] - drift, ok[-1] + drift)
             change = profile_fit(det.fault, det.unit, grid, ll_own, own, phi_own, worse)
-            before = profile_fit(det.fault, det.unit, self.grid[name], past, own, phi_own)
+            before = profile_fit(det.fault, det.unit, grid, past, own, phi_own)
             if change.log_lr > best.log_lr and _away(change.size, before.size, det.healthy_size):
                 best, against = _relative(change, before), "own past"
         if against == "population":
             best = _widened(best, self.zone_bounds[name])
-        best = det.refine(self.features, self.weights, self.grid[name], best, a, k)
+        best = det.refine(self.features, self.weights, best, a, k)
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
 
     def at(self, name: str, k: int) -> WindowFit:

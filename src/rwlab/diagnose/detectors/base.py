@@ -160,7 +160,6 @@ class Detector(ABC):
         self,
         features: Features,
         weights: dict[str, np.ndarray],
-        grid: np.ndarray,
         fit: Fit,
         a: int,
         k: int,
@@ -172,7 +171,6 @@ class Detector(ABC):
         ----------
         features : Features
         weights : dict of str to numpy.ndarray
-        grid : numpy.ndarray, shape (G,)
         fit : Fit
             The window's GLR fit.
         a, k : int

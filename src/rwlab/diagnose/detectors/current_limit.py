@@ -37,7 +37,7 @@ class CurrentLimit(Detector):
         spec = features.scales.current_limit_a
         return spec * np.linspace(0.1, 1.0, 361)
 
-    def refine(self, features, weights, grid, fit, a, k):
+    def refine(self, features, weights, fit, a, k):
         # the clamp read off the flat top: where the fitted clamp binds in the window, the
         # level the current sits at (Huber's location, its profile interval). The reach a
         # clamp allows scales with the unit's own inertia/k_t, a few % off the reference's
