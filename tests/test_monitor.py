@@ -77,9 +77,9 @@ def test_monitor_page_shows_a_live_trace_that_updates(tmp_path, browser):
 def test_monitor_replays_a_finished_record(tmp_path, browser):
     record = tmp_path / "done.mcap"
     run_experiment(ExperimentConfig(signal="prbs", duration=60, Ts=0.5, telemetry_rate=20), record)
-    # 15 s of replay: a loaded CI machine has taken over 3 s from the page's session to its
-    # first drawn points, so a faster replay could arrive whole before the first look
-    server = serve_in_thread(record, replay=True, speed=4.0)
+    # 10 s of replay: a loaded CI machine has taken over 3 s from the page's session to its
+    # first drawn points, so a much faster replay could arrive whole before the first look
+    server = serve_in_thread(record, replay=True, speed=6.0)
     driver = browser()
     try:
         driver.get(server.url)
