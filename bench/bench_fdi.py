@@ -175,14 +175,20 @@ class Tally:
         )
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def record_arguments(description: str) -> argparse.ArgumentParser:
+    """A parser with the arguments every GLR bench takes: the records, the model, the wheel."""
+    p = argparse.ArgumentParser(description=description)
     p.add_argument("--cache", type=Path, required=True)
     p.add_argument("--model", type=Path, required=True)
     p.add_argument("--calibrate", nargs="+", required=True)
     p.add_argument("--judge", nargs="+", required=True)
-    p.add_argument("--rate", type=float, default=1e-3)
     p.add_argument("--wheel", default="rw90", help="the wheel model the records are made of")
+    return p
+
+
+def main() -> None:
+    p = record_arguments(__doc__.splitlines()[0])
+    p.add_argument("--rate", type=float, default=1e-3)
     p.add_argument("--make", action="store_true", help="simulate missing records")
     p.add_argument("--rules", action="store_true", help="also score the rule detectors")
     p.add_argument("--save-calibration", type=Path, help="write the calibration here")

@@ -17,13 +17,13 @@ where the judged hours hold less than one alarm at half the rate. Records are re
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+from bench_fdi import record_arguments
 from rwlab.diagnose.bank import Bank
 from rwlab.diagnose.detectors import MODEL_BASED
 from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
@@ -33,13 +33,8 @@ from rwlab.wheel import IdentifiedWheel
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--cache", type=Path, required=True)
-    p.add_argument("--model", type=Path, required=True)
-    p.add_argument("--calibrate", nargs="+", required=True)
-    p.add_argument("--judge", nargs="+", required=True)
+    p = record_arguments(__doc__.splitlines()[0])
     p.add_argument("--rates", nargs="+", type=float, default=[1.0, 10.0, 100.0])
-    p.add_argument("--wheel", default="rw90", help="for the table's title only")
     args = p.parse_args()
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
