@@ -178,28 +178,22 @@ class NoiseModel:
             *((f"{n}_own", CHANNELS[n], n, own) for n in ("current", "current_steady")),
         ):
             group = [f for f in group if channel_mask(f, name).any()]
-            masks = [channel_mask(f, name) for f in group]
-            v = _concat(
-                [
-                    getattr(f, attr)[ok] - np.median(getattr(f, attr)[ok])
-                    for f, ok in zip(group, masks, strict=True)
-                ]
-            )
+            pairs = [(f, channel_mask(f, name)) for f in group]
+            v = _concat([getattr(f, attr)[ok] - np.median(getattr(f, attr)[ok]) for f, ok in pairs])
             if v.size < MIN_SAMPLES and key.endswith("_own"):
                 continue  # records too short for their own reference: the population's only
             if v.size < MIN_SAMPLES:
                 raise DataError(f"the noise model needs ≥ {MIN_SAMPLES} usable healthy samples")
-            jerk_bin = _concat([bins(f)[ok] for f, ok in zip(group, masks, strict=True)])
+            jerk_bin = _concat([bins(f)[ok] for f, ok in pairs])
             s = _binned_scale(v, jerk_bin, len(JERK_EDGES) + 2)
             s[:-1] = np.maximum.accumulate(np.maximum(s[:-1], 1e-12))  # never less at more jerk
             sigma[key] = tuple(float(x) for x in s)
             scale = s[jerk_bin]
             # a reading of exactly 0 is the sensor's floor (below the speed it measures), no
             # measurement of the speed: the held readings' scatter is measured without them
-            read = _concat([f.speed_rpm[ok] for f, ok in zip(group, masks, strict=True)]) != 0
-            held = (jerk_bin == 0) & read
+            held = (jerk_bin == 0) & (_concat([f.speed_rpm[ok] for f, ok in pairs]) != 0)
             if name in SPEED_READ and np.count_nonzero(held) >= MIN_SAMPLES:
-                speed_bin = _concat([speed_bins(f)[ok] for f, ok in zip(group, masks, strict=True)])
+                speed_bin = _concat([speed_bins(f)[ok] for f, ok in pairs])
                 # a bin without enough readings (or with a MAD of 0) takes its nearest
                 # measured one's; never finer than the held samples' σ
                 g = _binned_scale(
