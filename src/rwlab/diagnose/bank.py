@@ -141,7 +141,7 @@ class Bank:
         # the same gains against the record's own past (features.own()): a change of the
         # unit against itself, free of its misfit to the reference unit
         own = features.own()
-        self.own_ready = np.isfinite(own.current_nuisance_a)  # type: ignore[arg-type]
+        self.own_ready = np.isfinite(own.current_nuisance_a[:, 0])  # type: ignore[index]
         self.cum_own = self._cumulative(own, noise.weights(own))
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
@@ -174,29 +174,48 @@ class Bank:
     def fit(self, name: str, a: int, k: int) -> WindowFit:
         """Detector ``name`` on samples [a, k): its GLR over the larger-supported healthy zone."""
         ll = self.cum[name][k] - self.cum[name][a]
-        phi = self.dispersion[name]
         det = self.detectors[name]
-        t = self.features.t_s
-        grid, worse = self.grid[name], det.worse
-        best = profile_fit(det.fault, det.unit, grid, ll, self.zone[name], phi, worse)
+        zone, phi = self.zone[name], self.dispersion[name]
+        best = profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
         against = "population"
         if a >= self.past_min:
-            cum = self.cum_own[name]
-            ll_own = cum[k] - cum[a]
-            past = cum[a] - cum[0]
-            key = f"{name}@own"
-            phi_own = self.dispersion.get(key, phi)
-            drift = self.drift.get(key, self.drift[name])
-            ok = self.grid[name][past >= past.max() - SUPPORT * phi_own]
-            own = self._between(name, ok[0] - drift, ok[-1] + drift)
-            change = profile_fit(det.fault, det.unit, grid, ll_own, own, phi_own, worse)
-            before = profile_fit(det.fault, det.unit, grid, past, own, phi_own)
-            if change.log_lr > best.log_lr and _away(change.size, before.size, det.healthy_size):
-                best, against = _relative(change, before), "own past"
+            change = self._against_own(name, a, k)
+            if change is not None and change.log_lr > best.log_lr:
+                best, against = change, "own past"
         if against == "population":
             best = _widened(best, self.zone_bounds[name])
         best = det.refine(self.features, self.weights, best, a, k)
+        t = self.features.t_s
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
+
+    def _against_own(self, name: str, a: int, k: int) -> Fit | None:
+        """Detector ``name`` on samples [a, k) against the record's own past [0, a): the
+        change's fit, relative to the past's, or None where it moves toward healthy.
+
+        The healthy zone is the past's own support, widened by the healthy drift. A
+        detector whose channel the own reference fits whole (``Detector.own_law``:
+        friction, read at constant speed, where the reference is the unit's fitted
+        law) is healthy at its healthy size, and the past's support only widens the
+        size's interval."""
+        det, grid = self.detectors[name], self.grid[name]
+        cum = self.cum_own[name]
+        ll, past = cum[k] - cum[a], cum[a] - cum[0]
+        phi = self.dispersion.get(f"{name}@own", self.dispersion[name])
+        drift = self.drift.get(f"{name}@own", self.drift[name])
+        if det.own_law:
+            h = det.healthy_size
+            zone = self._between(name, h - drift, h + drift)
+        else:
+            ok = grid[past >= past.max() - SUPPORT * phi]
+            zone = self._between(name, ok[0] - drift, ok[-1] + drift)
+        change = profile_fit(det.fault, det.unit, grid, ll, zone, phi, det.worse)
+        before = profile_fit(det.fault, det.unit, grid, past, zone, phi)
+        if det.own_law:  # the past's spread about the healthy size
+            lo, hi = before.ci95
+            before = replace(before, size=h, ci95=(lo / before.size * h, hi / before.size * h))
+        elif not _away(change.size, before.size, det.healthy_size):
+            return None
+        return _relative(change, before)
 
     def at(self, name: str, k: int) -> WindowFit:
         """The best window ending at sample k (exclusive) for detector ``name``."""

@@ -172,8 +172,9 @@ class Features:
     scales : WheelScales
     current_nuisance_a : numpy.ndarray or None
         The unit's own deviation from the reference's current balance at each sample,
-        fitted on the record's past older than ``REFERENCE_LAG_S``, A; NaN until that
-        past holds ``REFERENCE_MIN_S`` of usable samples (module docstring).
+        fitted on the record's past older than ``REFERENCE_LAG_S``, A, shape (N, 3): its
+        offset, viscous and Coulomb parts; NaN until that past holds
+        ``REFERENCE_MIN_S`` of usable samples (module docstring).
     against_own : bool
         The current residual is against the record's own past (:meth:`own`).
     """
@@ -203,11 +204,16 @@ class Features:
         nuisance = self.current_nuisance_a
         if nuisance is None:
             nuisance = current_nuisance(self)
-        ready = np.isfinite(nuisance)
+        ready = np.isfinite(nuisance[:, 0])
+        # the unit's own friction current: what a friction × F multiplies (a unit whose
+        # friction is twice the reference's draws twice the current for the same F)
+        friction = self.friction_current_a + nuisance[:, 1] + nuisance[:, 2]
+        friction = np.where(friction * self.friction_current_a > 0, friction, 0.0)
         return replace(
             self,
-            current_residual_a=np.where(ready, self.current_residual_a - nuisance, 0.0),
-            usable=self.usable & ready,
+            current_residual_a=np.where(ready, self.current_residual_a - nuisance.sum(1), 0.0),
+            friction_current_a=np.where(ready, friction, self.friction_current_a),
+            usable=self.usable & ready & past_covers(self),
             current_nuisance_a=nuisance,
             against_own=True,
         )
@@ -359,6 +365,29 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
     return ok
 
 
+def past_covers(features: Features) -> np.ndarray:
+    """Whether the own reference interpolates at each sample, bool, shape (N,): the
+    current channel's samples older than ``REFERENCE_LAG_S`` span its speed on its side
+    of zero. Beyond that span the fitted law extrapolates, and a unit's friction law is
+    not linear in speed (its Stribeck part), so a chirp growing into new speeds read a
+    healthy unit's friction ×3-7 against its own past (measured)."""
+    f = features
+    ok = channel_mask(f, "current_steady")
+    speed = np.abs(f.speed_rpm)
+    lag = round(REFERENCE_LAG_S / f.scales.Ts)
+    covered = np.zeros(f.N, dtype=bool)
+    if lag >= f.N:
+        return covered
+    for side in (1.0, -1.0):
+        past = ok & (np.sign(f.speed_rpm) == side)
+        lo = np.minimum.accumulate(np.where(past, speed, np.inf))[: f.N - lag]
+        hi = np.maximum.accumulate(np.where(past, speed, -np.inf))[: f.N - lag]
+        now = speed[lag:]
+        here = np.sign(f.speed_rpm[lag:]) == side
+        covered[lag:] |= here & (lo <= now) & (now <= hi)
+    return covered
+
+
 def current_nuisance(features: Features) -> np.ndarray:
     """The unit's own deviation from the reference current balance, per sample, A, shape (N,).
 
@@ -384,18 +413,18 @@ def current_nuisance(features: Features) -> np.ndarray:
     # the offset's column a tenth of the others: a past at one speed (offset and Coulomb
     # friction alike there) is read as friction, the deviation a unit has most
     X = np.column_stack([np.full(f.N, 0.1 * unit), c1 * f.speed_rpm, c2 * np.sign(f.speed_rpm)])
-    ok = channel_mask(f, "current")
+    ok = channel_mask(f, "current_steady")
     Xo = X * ok[:, None]
     A = np.cumsum(Xo[:, :, None] * X[:, None, :], axis=0)
     b = np.cumsum(Xo * f.current_residual_a[:, None], axis=0)
     count = np.cumsum(ok)
     lag = round(REFERENCE_LAG_S / f.scales.Ts)
     need = round(REFERENCE_MIN_S / f.scales.Ts)
-    out = np.full(f.N, np.nan)
+    out = np.full((f.N, 3), np.nan)
     for k in range(lag, f.N):
         j = k - lag
         if count[j] < need:
             continue
         theta = np.linalg.lstsq(A[j], b[j], rcond=1e-6)[0]
-        out[k] = X[k] @ theta
+        out[k] = X[k] * theta
     return out

@@ -177,6 +177,34 @@ def _excess(w: WindowFit, limits: dict[str, Threshold]) -> float:
     return w.fit.log_lr - limits[w.fit.fault].log_lr
 
 
+def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
+    """Refit event ``e``'s rivals on its window up to sample k and name it by the likeliest.
+
+    The rivals share a channel with ``e``'s first name and leave the other events'
+    channels alone, or explain another event's whole signature: one fault where two
+    events stand (a weak motor first read as friction at constant speed, then as a clamp
+    at the acceleration limit) absorbs that event when it is the likelier of the two."""
+    others = [x for x in events if x is not e]
+    rivals = [
+        n
+        for n in MODEL_BASED
+        if SIGNATURE[n] & SIGNATURE[e.first]
+        and all(not SIGNATURE[n] & _owned([x]) or SIGNATURE[n] >= _owned([x]) for x in others)
+    ]
+    t = float(bank.features.t_s[k - 1])
+    for w in sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits)):
+        covered = [x for x in others if SIGNATURE[w.fit.fault] & _owned([x])]
+        if any(x.fit.log_lr - limits[x.fault].log_lr >= _excess(w, limits) for x in covered):
+            continue
+        for x in covered:
+            events.remove(x)
+            e.relabelled.append((t, x.fault))
+        if w.fit.fault != e.fault:
+            e.relabelled.append((t, e.fault))
+        e.fit = w.fit
+        return
+
+
 def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     """Every candidate fault on its best window ending at k, most likely first."""
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w, limits))
@@ -208,21 +236,9 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     for k in bank.ends():
         if k > end:
             break
-        for e in events:  # follow each open event on its growing window
-            others = _owned(x for x in events if x is not e)
-            rivals = [
-                n
-                for n in MODEL_BASED
-                if SIGNATURE[n] & SIGNATURE[e.first] and not SIGNATURE[n] & others
-            ]
-            if e.first not in MODEL_BASED or not rivals:
-                continue
-            fits = sorted(
-                (bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits)
-            )
-            if fits[0].fit.fault != e.fault:
-                e.relabelled.append((float(features.t_s[k - 1]), e.fault))
-            e.fit = fits[0].fit
+        for e in list(events):  # follow each open event on its growing window
+            if e in events and e.first in MODEL_BASED:
+                _follow(e, events, bank, k, limits)
         owned = _owned(events)
         free = [n for n in MODEL_BASED if not SIGNATURE[n] & owned]
         crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]

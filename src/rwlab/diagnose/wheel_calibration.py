@@ -220,14 +220,14 @@ class DiagnosisCalibration:
                     profile_fit(name, "", grid, ll, zone, phi_own).ci95
                     for ll in t[name]["shortest@own"]
                 ]
-                moves_own += [abs(b - a) for a, b in itertools.pairwise(_mids(own))]
+                moves_own += _gaps(own)
             if known:
                 width = np.median([hi - lo for lo, hi in known])
                 mids = [(lo + hi) / 2 for lo, hi in known if hi - lo <= width]
                 lows, highs = lows + mids, highs + mids
             zones[name] = (float(min(lows)), float(max(highs)))
             drift[name] = float(max(moves))
-            drift[f"{name}@own"] = float(max(moves_own))
+            drift[f"{name}@own"] = float(np.quantile(moves_own, 0.9))
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
         peaks[STUCK] = []
         for f in records:

@@ -132,6 +132,9 @@ class Detector(ABC):
     # the side of the healthy zone the fault takes the size to (a fault makes a wheel
     # worse): +1 up, −1 down, 0 either (:func:`profile_fit`)
     worse: ClassVar[int] = 0
+    # the record's own reference (:meth:`Features.own`) fits the unit's whole law on this
+    # detector's channel: against it a healthy unit sits at the healthy size
+    own_law: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

@@ -21,6 +21,7 @@ class Friction(Detector):
     unit = "factor"
     healthy_size = 1.0
     worse = 1  # worn bearings: more friction
+    own_law = True  # at constant speed the own reference is the unit's friction law
 
     def grid(self, features: Features) -> np.ndarray:
         return np.geomspace(0.25, 8.0, 801)
