@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import types
 from dataclasses import replace
 
 import jsonschema
@@ -16,6 +17,7 @@ from hypothesis import strategies as st
 from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
+from rwlab.diagnose.bank import WindowFit
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
 from rwlab.diagnose.detectors.current_limit import CurrentLimit
@@ -27,9 +29,10 @@ from rwlab.diagnose.features import (
     WheelScales,
     channel_mask,
     compute_features,
+    past_covers,
 )
 from rwlab.diagnose.noise import SPEED_EDGES, NoiseModel
-from rwlab.diagnose.pipeline import run
+from rwlab.diagnose.pipeline import Event, _follow, run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
     excursion_peaks,
@@ -268,6 +271,31 @@ def test_the_own_reference_takes_out_a_units_friction_and_offset():
     assert abs(own.current_residual_a[steady].mean()) < 4 * SIGMA_A / math.sqrt(n)
     assert own.current_residual_a[steady].std() < 1.3 * SIGMA_A
     assert not own.usable[: round(REFERENCE_LAG_S / TS)].any()  # no reference yet
+    # what a friction × F multiplies against the own past: the unit's friction, not the
+    # reference's (a ×1.5 on this unit would otherwise size as 1 + 0.5·1.4 = 1.7)
+    ratio = own.friction_current_a[steady] / f.friction_current_a[steady]
+    assert np.median(ratio) == pytest.approx(1.4, abs=0.05)
+
+
+def test_the_own_reference_is_read_only_at_speeds_its_past_spans():
+    """The own law interpolates: past the lag, a sample at a speed the past held on its
+    side of zero is read against it; one faster than the past ever turned, or on the other
+    side of zero, is not (the law would extrapolate)."""
+    lag = round(REFERENCE_LAG_S / TS)
+    past = 1500.0 + 500.0 * np.sin(np.arange(lag + 200) * TS / 20.0)  # 1000-2000 rpm
+    later = np.repeat([1500.0, 3000.0, -1500.0], 100)
+    speed = np.concatenate([past, later])
+    n = len(speed)
+    current = C[1] * speed + C[2] * np.sign(speed) + C[0] * np.gradient(speed, TS)
+    y = np.column_stack([speed, current, np.zeros(n), np.zeros(n)])
+    names = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
+    f = compute_features(IOData(speed, y, TS, output_names=names), Replay(speed), SCALES)
+    covered = past_covers(f)
+    assert not covered[:lag].any()
+    at = len(past)
+    assert covered[at + 10 : at + 90].all()  # 1500 rpm: inside the past's span
+    assert not covered[at + 110 :].any()  # 3000 rpm, then -1500 rpm: never held before
+    assert not f.own().usable[at + 110 :].any()
 
 
 @pytest.mark.slow
@@ -283,6 +311,8 @@ def test_a_friction_change_on_a_unit_off_the_reference_is_named_friction():
     result = run(f, calibration)
     assert result.events and result.events[0].fault == "friction", result.verdict()
     assert result.events[0].t_s >= 600.0
+    fit = result.events[0].fit  # sized on the unit's friction: 1.5, not 1 + 0.5·1.3
+    assert fit.ci95[0] <= 1.5 <= fit.ci95[1] and abs(fit.size - 1.5) < abs(fit.size - 1.65)
 
 
 def test_a_weak_motor_or_more_friction_fall_short_only_where_the_clamp_binds():
@@ -419,3 +449,41 @@ def test_every_preset_ships_a_twin_calibration_with_its_provenance(wheel):
 def test_an_unshipped_wheel_has_no_twin_calibration():
     with pytest.raises(ConfigError, match="rwlab diagnose calibrate"):
         twin_calibration_file("gearbox-wheel")
+
+
+class FixedBank:
+    """A bank whose every window fits each fault at a fixed log-LR (``_follow``'s view)."""
+
+    def __init__(self, log_lr: dict[str, float]) -> None:
+        self.log_lr = log_lr
+        self.features = types.SimpleNamespace(t_s=np.arange(100.0))
+
+    def fit(self, name: str, a: int, k: int) -> WindowFit:
+        fit = Fit(name, 0.8, (0.7, 0.9), self.log_lr.get(name, 0.0), "factor")
+        return WindowFit(fit, float(a), float(k), "population")
+
+
+@pytest.mark.parametrize(("motor_log_lr", "one_event"), [(500.0, True), (25.0, False)])
+def test_one_fault_explaining_two_events_absorbs_the_less_likely_one(motor_log_lr, one_event):
+    """A weak motor first read as friction (current at constant speed), then as a clamp
+    (acceleration at the limit): once the motor, whose signature spans both, is likelier
+    beyond its threshold than the clamp event, the friction event is re-labelled and
+    absorbs the clamp's; while it is not, both events stand."""
+    limits = {n: types.SimpleNamespace(log_lr=10.0) for n in MODEL_BASED}
+    bank = FixedBank({"friction": 12.0, "torque_constant": motor_log_lr})
+    fits = [
+        Fit(n, 0.8, (0.7, 0.9), v, "factor")
+        for n, v in [("friction", 12.0), ("current_limit", 30.0)]
+    ]
+    events = [
+        Event(t_s=10.0 * i, onset_s=0.0, fit=f, detector=f.fault, threshold=10.0)
+        for i, f in enumerate(fits)
+    ]
+    friction, clamp = events
+    _follow(friction, events, bank, 50, limits)
+    if one_event:
+        assert events == [friction] and friction.fault == "torque_constant"
+        assert {was for _, was in friction.relabelled} == {"friction", "current_limit"}
+    else:
+        assert events == [friction, clamp] and friction.fault == "friction"
+        assert not friction.relabelled

@@ -23,7 +23,7 @@ import numpy as np
 
 from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
-from rwlab.diagnose.features import Features
+from rwlab.diagnose.features import REFERENCE_LAG_S, Features
 from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
 __all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit"]
@@ -154,6 +154,7 @@ class Bank:
         self.every = max(1, round(EVERY_S / Ts))
         self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
         self.past_min = round(PAST_MIN_S / Ts)
+        self.own_span = round(REFERENCE_LAG_S / Ts)
 
     def _cumulative(
         self, features: Features, weights: dict[str, np.ndarray]
@@ -199,6 +200,7 @@ class Bank:
         size's interval."""
         det, grid = self.detectors[name], self.grid[name]
         cum = self.cum_own[name]
+        k = min(k, a + self.own_span)  # later samples' reference holds the window's own
         ll, past = cum[k] - cum[a], cum[a] - cum[0]
         phi = self.dispersion.get(f"{name}@own", self.dispersion[name])
         drift = self.drift.get(f"{name}@own", self.drift[name])

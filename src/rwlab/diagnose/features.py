@@ -24,9 +24,12 @@ RW90 a unit's friction current is ±30 % of the reference's, several mA against
 ~4.5 mA of noise per sample). :meth:`Features.own` gives the same features
 against the record's *own* past: the current residual less the unit's
 deviation, ``current_nuisance_a``, fitted by least squares on the record's
-samples older than ``REFERENCE_LAG_S`` (the longest detection window), in the
-deviations a healthy unit has at constant speed: an offset and scales of its
-viscous and Coulomb friction currents (units differ in each). Its inertia/k_t is left to the
+constant-speed samples older than ``REFERENCE_LAG_S`` (the longest detection
+window), in the deviations a healthy unit has there: an offset and scales of its
+viscous and Coulomb friction currents (units differ in each). It is read only
+where that past spans the sample's speed (:func:`past_covers`: the law
+interpolates), and a friction × F multiplies the unit's own friction current
+(the reference's plus its fitted deviation). Its inertia/k_t is left to the
 detectors' own-past comparison (the size the past fits): a past of slow motion
 (a chirp's first minutes) does not determine it, and a least-squares scale
 fitted there is extrapolated wildly into the fast part (healthy chirps then
@@ -389,12 +392,13 @@ def past_covers(features: Features) -> np.ndarray:
 
 
 def current_nuisance(features: Features) -> np.ndarray:
-    """The unit's own deviation from the reference current balance, per sample, A, shape (N,).
+    """The unit's own deviation from the reference current balance, per sample, A, shape (N, 3).
 
     At sample k: the least-squares fit of the current residual on an offset and the
-    balance's viscous and Coulomb currents, over the current channel's
-    samples (:func:`channel_mask`) older than ``REFERENCE_LAG_S``,
-    evaluated at k; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
+    balance's viscous and Coulomb currents, over the current channel's constant-speed
+    samples (:func:`channel_mask`, ``"current_steady"``: where the current is the
+    friction's alone) older than ``REFERENCE_LAG_S``, evaluated at k, each of the three
+    parts a column; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
     past has not excited (no motion yet: the friction and the offset alike) takes the
     least-norm solution, i.e. the reference's value.
 
