@@ -271,9 +271,10 @@ def test_the_own_reference_takes_out_a_units_friction_and_offset():
     assert abs(own.current_residual_a[steady].mean()) < 4 * SIGMA_A / math.sqrt(n)
     assert own.current_residual_a[steady].std() < 1.3 * SIGMA_A
     assert not own.usable[: round(REFERENCE_LAG_S / TS)].any()  # no reference yet
-    # what a friction × F multiplies against the own past: the unit's friction, not the
-    # reference's (a ×1.5 on this unit would otherwise size as 1 + 0.5·1.4 = 1.7)
-    ratio = own.friction_current_a[steady] / f.friction_current_a[steady]
+    # what a friction × F multiplies against the unit's own friction law: its friction,
+    # not the reference's (a ×1.5 on this unit would otherwise size as 1 + 0.5·1.4 = 1.7)
+    law = f.own(law=True)
+    ratio = law.friction_current_a[steady] / f.friction_current_a[steady]
     assert np.median(ratio) == pytest.approx(1.4, abs=0.05)
 
 
@@ -295,7 +296,8 @@ def test_the_own_reference_is_read_only_at_speeds_its_past_spans():
     at = len(past)
     assert covered[at + 10 : at + 90].all()  # 1500 rpm: inside the past's span
     assert not covered[at + 110 :].any()  # 3000 rpm, then -1500 rpm: never held before
-    assert not f.own().usable[at + 110 :].any()
+    assert not f.own(law=True).usable[at + 110 :].any()
+    assert f.own().usable[at + 110 :].all()  # the offset's reference: every speed
 
 
 @pytest.mark.slow
@@ -487,3 +489,19 @@ def test_one_fault_explaining_two_events_absorbs_the_less_likely_one(motor_log_l
     else:
         assert events == [friction, clamp] and friction.fault == "friction"
         assert not friction.relabelled
+
+
+def test_against_its_own_law_friction_reads_the_current_alone():
+    """The own past is a reference for the current only: a shortfall of acceleration (a
+    clamp's) moves friction's gains against the population, never against the own law."""
+    f = features(5)
+    f = replace(f, demand_accel_rpm_s=np.full(f.N, SCALES.accel_limit_rpm_s))  # at the limit
+    short = replace(f, accel_residual_rpm_s=f.accel_residual_rpm_s - 50.0)
+    det, noise = detector("friction"), NoiseModel.measure([f])
+    grid = det.grid(f)
+
+    def gains(x):
+        return det.gains(x, noise.weights(x), grid)
+
+    assert np.array_equal(gains(f.own(law=True)), gains(short.own(law=True)))
+    assert not np.array_equal(gains(f), gains(short))

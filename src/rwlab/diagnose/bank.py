@@ -140,9 +140,14 @@ class Bank:
         self.cum = self._cumulative(features, self.weights)
         # the same gains against the record's own past (features.own()): a change of the
         # unit against itself, free of its misfit to the reference unit
-        own = features.own()
-        self.own_ready = np.isfinite(own.current_nuisance_a[:, 0])  # type: ignore[index]
-        self.cum_own = self._cumulative(own, noise.weights(own))
+        # (``Detector.own_law``: against the unit's friction law alone)
+        own = {law: features.own(law) for law in (False, True)}
+        weights = {law: noise.weights(f) for law, f in own.items()}
+        self.own_ready, self.cum_own = {}, {}
+        for n, d in self.detectors.items():
+            f = own[d.own_law]
+            self.own_ready[n] = np.isfinite(f.current_nuisance_a[:, 0])  # type: ignore[index]
+            self.cum_own[n] = _cumsum_rows(d.gains(f, weights[d.own_law], self.grid[n]))
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift

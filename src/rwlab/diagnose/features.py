@@ -24,16 +24,17 @@ RW90 a unit's friction current is ±30 % of the reference's, several mA against
 ~4.5 mA of noise per sample). :meth:`Features.own` gives the same features
 against the record's *own* past: the current residual less the unit's
 deviation, ``current_nuisance_a``, fitted by least squares on the record's
-constant-speed samples older than ``REFERENCE_LAG_S`` (the longest detection
-window), in the deviations a healthy unit has there: an offset and scales of its
-viscous and Coulomb friction currents (units differ in each). It is read only
-where that past spans the sample's speed (:func:`past_covers`: the law
-interpolates), and a friction × F multiplies the unit's own friction current
-(the reference's plus its fitted deviation). Its inertia/k_t is left to the
-detectors' own-past comparison (the size the past fits): a past of slow motion
-(a chirp's first minutes) does not determine it, and a least-squares scale
-fitted there is extrapolated wildly into the fast part (healthy chirps then
-gave log-LRs of 10⁵). A fault younger than the lag is a change against the
+samples older than ``REFERENCE_LAG_S`` (the longest detection window), in the
+deviations a healthy unit has: an offset and scales of its viscous and Coulomb
+friction currents (units differ in each). ``own(law=True)`` fits them on the
+constant-speed samples alone (the unit's friction law, what the friction
+detector reads), reads them only where that past spans the sample's speed
+(:func:`past_covers`: the law interpolates), and has a friction × F multiply the
+unit's own friction current (the reference's plus its fitted deviation). Its
+inertia/k_t is left to the detectors' own-past comparison (the size the past
+fits): a past of slow motion (a chirp's first minutes) does not determine it,
+and a least-squares scale fitted there is extrapolated wildly into the fast part
+(healthy chirps then gave log-LRs of 10⁵). A fault younger than the lag is a change against the
 unit itself.
 
 Every scale comes from the model file (sample time, acceleration and current
@@ -201,22 +202,36 @@ class Features:
     current_nuisance_a: np.ndarray | None = None
     against_own: bool = False
 
-    def own(self) -> Features:
+    def own(self, law: bool = False) -> Features:
         """The same features with the current residual against the record's own past
-        (samples whose own reference is not yet fitted are unusable)."""
-        nuisance = self.current_nuisance_a
+        (samples whose own reference is not yet fitted are unusable).
+
+        Parameters
+        ----------
+        law : bool
+            The unit's friction law instead (:func:`current_nuisance` on constant-speed
+            samples), read only where its past spans the speed (:func:`past_covers`), with
+            the unit's own friction current as what a friction × F multiplies (a unit whose
+            friction is twice the reference's draws twice the current for the same F).
+
+        Returns
+        -------
+        Features
+        """
+        nuisance = current_nuisance(self, steady=True) if law else self.current_nuisance_a
         if nuisance is None:
             nuisance = current_nuisance(self)
         ready = np.isfinite(nuisance[:, 0])
-        # the unit's own friction current: what a friction × F multiplies (a unit whose
-        # friction is twice the reference's draws twice the current for the same F)
-        friction = self.friction_current_a + nuisance[:, 1] + nuisance[:, 2]
-        friction = np.where(friction * self.friction_current_a > 0, friction, 0.0)
+        usable, friction = self.usable & ready, self.friction_current_a
+        if law:
+            usable = usable & past_covers(self)
+            unit = friction + nuisance[:, 1] + nuisance[:, 2]
+            friction = np.where(ready & (unit * friction > 0), unit, np.where(ready, 0.0, friction))
         return replace(
             self,
             current_residual_a=np.where(ready, self.current_residual_a - nuisance.sum(1), 0.0),
-            friction_current_a=np.where(ready, friction, self.friction_current_a),
-            usable=self.usable & ready & past_covers(self),
+            friction_current_a=friction,
+            usable=usable,
             current_nuisance_a=nuisance,
             against_own=True,
         )
@@ -391,20 +406,22 @@ def past_covers(features: Features) -> np.ndarray:
     return covered
 
 
-def current_nuisance(features: Features) -> np.ndarray:
+def current_nuisance(features: Features, steady: bool = False) -> np.ndarray:
     """The unit's own deviation from the reference current balance, per sample, A, shape (N, 3).
 
     At sample k: the least-squares fit of the current residual on an offset and the
-    balance's viscous and Coulomb currents, over the current channel's constant-speed
-    samples (:func:`channel_mask`, ``"current_steady"``: where the current is the
-    friction's alone) older than ``REFERENCE_LAG_S``, evaluated at k, each of the three
-    parts a column; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
+    balance's viscous and Coulomb currents, over the current channel's samples
+    (:func:`channel_mask`; with ``steady``, its constant-speed ones, where the current
+    is the friction's alone) older than ``REFERENCE_LAG_S``, evaluated at k, each of the
+    three parts a column; NaN until ``REFERENCE_MIN_S`` of such samples exist. A direction the
     past has not excited (no motion yet: the friction and the offset alike) takes the
     least-norm solution, i.e. the reference's value.
 
     Parameters
     ----------
     features : Features
+    steady : bool
+        Fit on the constant-speed samples only.
 
     Returns
     -------
@@ -417,7 +434,7 @@ def current_nuisance(features: Features) -> np.ndarray:
     # the offset's column a tenth of the others: a past at one speed (offset and Coulomb
     # friction alike there) is read as friction, the deviation a unit has most
     X = np.column_stack([np.full(f.N, 0.1 * unit), c1 * f.speed_rpm, c2 * np.sign(f.speed_rpm)])
-    ok = channel_mask(f, "current_steady")
+    ok = channel_mask(f, "current_steady" if steady else "current")
     Xo = X * ok[:, None]
     A = np.cumsum(Xo[:, :, None] * X[:, None, :], axis=0)
     b = np.cumsum(Xo * f.current_residual_a[:, None], axis=0)

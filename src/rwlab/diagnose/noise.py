@@ -172,10 +172,13 @@ class NoiseModel:
         sigma: dict[str, tuple[float, ...]] = {}
         inflation: dict[str, float] = {}
         factor: dict[str, tuple[float, ...]] = {}
-        own = [f.own() for f in records]
+        # against the own past: the current on every turning sample, and at constant
+        # speed against the unit's friction law (what each own detector reads)
+        own = {"current": [f.own() for f in records]}
+        own["current_steady"] = [f.own(law=True) for f in records]
         for key, attr, name, group in (
             *((n, a, n, records) for n, a in CHANNELS.items()),
-            *((f"{n}_own", CHANNELS[n], n, own) for n in ("current", "current_steady")),
+            *((f"{n}_own", CHANNELS[n], n, own[n]) for n in own),
         ):
             group = [f for f in group if channel_mask(f, name).any()]
             pairs = [(f, channel_mask(f, name)) for f in group]

@@ -49,7 +49,7 @@ from scipy.stats import chi2
 
 from rwlab._io import write_json
 from rwlab.diagnose.bank import Bank
-from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading
+from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
@@ -110,9 +110,10 @@ def excursion_peaks(stat: np.ndarray, floor: float = HALF_CHI2_95) -> list[float
     return peaks
 
 
-def _mids(intervals: list[tuple[float, float]]) -> list[float]:
-    """Each interval's middle."""
-    return [(lo + hi) / 2 for lo, hi in intervals]
+def _moves(intervals: list[tuple[float, float]]) -> list[float]:
+    """How far consecutive intervals' middles lie apart."""
+    mids = [(lo + hi) / 2 for lo, hi in intervals]
+    return [abs(b - a) for a, b in itertools.pairwise(mids)]
 
 
 def _gaps(intervals: list[tuple[float, float]]) -> list[float]:
@@ -211,6 +212,7 @@ class DiagnosisCalibration:
             lows, highs, moves, moves_own = [point[name]], [point[name]], [0.0], [0.0]
             known: list[tuple[float, float]] = []
             phi_own = dispersion.get(f"{name}@own", 1.0)
+            own_law = detector(name).own_law
             for t in tiles:
                 grid, zone = t[name]["grid"], t[name]["zone"]
                 sizes = [
@@ -225,14 +227,18 @@ class DiagnosisCalibration:
                     profile_fit(name, "", grid, ll, zone, phi_own).ci95
                     for ll in t[name]["shortest@own"]
                 ]
-                moves_own += _gaps(own)
+                # against the own law, how far the unit's size moves; against the past's
+                # support, how far its point estimate does (the support is an interval)
+                moves_own += _gaps(own) if own_law else _moves(own)
             if known:
                 width = np.median([hi - lo for lo, hi in known])
                 mids = [(lo + hi) / 2 for lo, hi in known if hi - lo <= width]
                 lows, highs = lows + mids, highs + mids
             zones[name] = (float(min(lows)), float(max(highs)))
             drift[name] = float(max(moves))
-            drift[f"{name}@own"] = float(np.quantile(moves_own, OWN_DRIFT_QUANTILE))
+            drift[f"{name}@own"] = float(
+                np.quantile(moves_own, OWN_DRIFT_QUANTILE) if own_law else max(moves_own)
+            )
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
         peaks[STUCK] = []
         for f in records:
@@ -267,8 +273,8 @@ class DiagnosisCalibration:
         against the reference and (``@own``) against the record's own past (the windows
         whose own reference is fitted on every sample only)."""
 
-        def fitted(a: int, b: int) -> bool:
-            return a >= bank.past_min and bool(bank.own_ready[a:b].all())
+        def fitted(name: str, a: int, b: int) -> bool:
+            return a >= bank.past_min and bool(bank.own_ready[name][a:b].all())
 
         out = {}
         for name in bank.detectors:
@@ -278,10 +284,14 @@ class DiagnosisCalibration:
                 "grid": bank.grid[name],
                 "zone": bank._between(name, point, point),
                 "longest": [cum[b] - cum[a] for a, b in bank.tiles()],
-                "longest@own": [cum_own[b] - cum_own[a] for a, b in bank.tiles() if fitted(a, b)],
+                "longest@own": [
+                    cum_own[b] - cum_own[a] for a, b in bank.tiles() if fitted(name, a, b)
+                ],
                 "shortest": [cum[b] - cum[a] for a, b in bank.tiles(shortest=True)],
                 "shortest@own": [
-                    cum_own[b] - cum_own[a] for a, b in bank.tiles(shortest=True) if fitted(a, b)
+                    cum_own[b] - cum_own[a]
+                    for a, b in bank.tiles(shortest=True)
+                    if fitted(name, a, b)
                 ],
             }
         return out

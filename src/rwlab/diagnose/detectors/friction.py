@@ -15,7 +15,10 @@ class Friction(Detector):
     k_t between units cannot pose as friction); the loop's integrator adds the
     friction's current until the driver's clamp binds, and then, or at the acceleration
     limit (where the capped request holds), the acceleration falls short
-    (:meth:`Detector.shortfall`)."""
+    (:meth:`Detector.shortfall`). Against the record's own past it reads the current
+    alone, against the unit's friction law (``Features.own(law=True)``): the own past
+    is a reference for the current only, and read on the acceleration with a healthy
+    zone of the own past's width, a clamp's shortfall passed for friction × 8."""
 
     fault = "friction"
     unit = "factor"
@@ -31,6 +34,8 @@ class Friction(Detector):
         p = (grid[None, :] - 1.0) * g[:, None]
         quiet = features.steady(STEADY_SHARE)
         gain = self.channel_gain(features.current_residual_a, weights["current_steady"] * quiet, p)
+        if features.against_own:  # the own past changes the current's reference alone
+            return gain
         clamp = features.scales.current_limit_a
         p_accel = self.shortfall(features, clamp, friction_factor=grid[None, :])
         return gain + self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p_accel)
