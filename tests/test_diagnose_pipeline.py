@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
-from rwlab.diagnose.bank import WindowFit
+from rwlab.diagnose.bank import WindowFit, _widened
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
 from rwlab.diagnose.detectors.current_limit import CurrentLimit
@@ -505,3 +505,12 @@ def test_against_its_own_law_friction_reads_the_current_alone():
 
     assert np.array_equal(gains(f.own(law=True)), gains(short.own(law=True)))
     assert not np.array_equal(gains(f), gains(short))
+
+
+def test_a_size_against_the_population_spans_the_units_own_wherever_it_sits():
+    """From power-up the fit is against the reference, and a healthy unit sits anywhere in
+    the zone u: friction F_ref on it is F_ref/u of its own, a bias b_ref is b_ref − u."""
+    factor = _widened(Fit("friction", 4.0, (3.6, 4.4), 10.0, "factor"), (0.6, 2.5))
+    assert factor.ci95 == pytest.approx((3.6 / 2.5, 4.4 / 0.6))
+    bias = _widened(Fit("speed_sensor_bias", 11.0, (10.0, 12.0), 10.0, "rpm"), (-2.0, 6.0))
+    assert bias.ci95 == pytest.approx((10.0 - 6.0, 12.0 + 2.0))

@@ -85,12 +85,14 @@ def _away(size: float, before: float, healthy: float) -> bool:
 
 
 def _widened(fit: Fit, zone: tuple[float, float]) -> Fit:
-    """A fault from power-up against the population: the interval also spans where a
-    healthy unit may sit (the zone about the nominal size), for a factor or a bias."""
+    """A fault from power-up against the population, as a size of the unit's own: the
+    fit is against the reference, and the unit sits anywhere in the healthy zone u, so
+    a factor F = F_ref/u and a bias b = b_ref − u (the zone about the nominal size)."""
+    lo, hi = fit.ci95
     if fit.unit == "factor":
-        return replace(fit, ci95=(fit.ci95[0] * min(zone[0], 1.0), fit.ci95[1] * max(zone[1], 1.0)))
+        return replace(fit, ci95=(lo / max(zone[1], 1.0), hi / min(zone[0], 1.0)))
     if fit.unit == "rpm":
-        return replace(fit, ci95=(fit.ci95[0] + min(zone[0], 0.0), fit.ci95[1] + max(zone[1], 0.0)))
+        return replace(fit, ci95=(lo - max(zone[1], 0.0), hi - min(zone[0], 0.0)))
     return fit
 
 
