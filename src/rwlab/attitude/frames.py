@@ -70,9 +70,14 @@ def dcm(q: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def xi(q: np.ndarray) -> np.ndarray:
     """Ξ(q), shape (4, 3): ``q̇ = ½ Ξ(q) ω``."""
+    # q₄ I + [e×] over −eᵀ, element by element: slices assigned from arrays compile numba's
+    # shape-checking error path, 3 s of a cold compile (measured) for twelve numbers
+    e1, e2, e3, q4 = q[0], q[1], q[2], q[3]
     out = np.empty((4, 3))
-    out[:3, :] = q[3] * np.eye(3) + skew(q[:3].copy())
-    out[3, :] = -q[:3]
+    out[0, 0], out[0, 1], out[0, 2] = q4, -e3, e2
+    out[1, 0], out[1, 1], out[1, 2] = e3, q4, -e1
+    out[2, 0], out[2, 1], out[2, 2] = -e2, e1, q4
+    out[3, 0], out[3, 1], out[3, 2] = -e1, -e2, -e3
     return out
 
 
