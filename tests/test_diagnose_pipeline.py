@@ -32,9 +32,10 @@ from rwlab.diagnose.features import (
     past_covers,
 )
 from rwlab.diagnose.noise import SPEED_EDGES, NoiseModel
-from rwlab.diagnose.pipeline import Event, _follow, run
+from rwlab.diagnose.pipeline import Event, Result, _follow, run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
+    Threshold,
     excursion_peaks,
     garwood,
     twin_calibration_file,
@@ -514,3 +515,21 @@ def test_a_size_against_the_population_spans_the_units_own_wherever_it_sits():
     assert factor.ci95 == pytest.approx((3.6 / 2.5, 4.4 / 0.6))
     bias = _widened(Fit("speed_sensor_bias", 11.0, (10.0, 12.0), 10.0, "rpm"), (-2.0, 6.0))
     assert bias.ci95 == pytest.approx((10.0 - 6.0, 12.0 + 2.0))
+
+
+def test_an_alarm_the_record_no_longer_supports_is_said_so_not_called_a_fault():
+    """An event whose fit from its onset to the record's end is back under its threshold
+    (a noise excursion) is listed as not confirmed, and the verdict does not call it a
+    fault; one still beyond it is the verdict's fault."""
+    limits = {n: Threshold(10.0, 1e-3, 0.0, (0.0, 1.8), True) for n in MODEL_BASED}
+
+    def result(log_lr: float):
+        fit = Fit("speed_sensor_bias", 0.0, (-0.5, 0.25), log_lr, "rpm")
+        event = Event(t_s=199.5, onset_s=150.0, fit=fit, detector=fit.fault, threshold=10.0)
+        return Result([event], limits, 600.0, 1e-3)
+
+    faded, held = result(0.0), result(40.0)
+    assert not faded.confirmed(faded.events[0]) and held.confirmed(held.events[0])
+    assert faded.verdict().startswith("healthy;") and "not confirmed" in faded.verdict()
+    assert held.verdict().startswith("speed_sensor_bias") and "not confirmed" not in held.verdict()
+    assert faded.to_dict()["events"][0]["confirmed"] is False

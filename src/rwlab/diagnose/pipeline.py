@@ -118,7 +118,7 @@ class Result:
         return {
             "format": "rwlab.FdiDiagnosis/1",
             "verdict": self.verdict(),
-            "events": [e.to_dict() for e in self.events],
+            "events": [e.to_dict() | {"confirmed": self.confirmed(e)} for e in self.events],
             "duration_s": self.duration_s,
             "false_alarms_per_hour_per_detector": self.per_hour,
             "calibration": calibration,
@@ -137,20 +137,34 @@ class Result:
         """The faults named, in alarm order."""
         return [e.fault for e in self.events]
 
+    def confirmed(self, event: Event) -> bool:
+        """Whether the record still supports an alarm at its end: the named fault's fit on
+        the window from its onset to the record's end is beyond its threshold (a noise
+        excursion's support fades as the window grows; a fault's grows). The telemetry
+        tests' alarms (a frozen reading, lost frames) stand."""
+        limit = self.thresholds.get(event.fault)
+        return event.fault not in MODEL_BASED or limit is None or event.fit.log_lr > limit.log_lr
+
     def verdict(self) -> str:
-        """One line: healthy, or each fault with its size, interval and alarm time."""
+        """One line: healthy, or each confirmed fault with its size, interval and alarm
+        time, then the alarms the record no longer supports."""
         if not self.events:
             return f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
-        parts = []
+        parts, faded = [], []
         for e in self.events:
             f = e.fit
+            if not self.confirmed(e):
+                faded.append(f"{f.fault} at {e.t_s:g} s")
+                continue
             size = (
                 ""
                 if math.isnan(f.size)
                 else f" {f.size:.3g} {f.unit} [{f.ci95[0]:.3g}, {f.ci95[1]:.3g}]"
             )
             parts.append(f"{f.fault}{size} from {e.t_s:g} s")
-        return "; ".join(parts)
+        if faded:
+            parts.append("not confirmed by the record's end: " + ", ".join(faded))
+        return "; ".join(parts) if len(parts) > 1 or not faded else "healthy; " + parts[0]
 
 
 def _onset(bank: Bank, fault: str, k: int) -> int:

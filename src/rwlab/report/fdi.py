@@ -67,6 +67,7 @@ def fdi_page(
                     e.runner_up,
                     e.runner_up_log_lr,
                     ", ".join(f"{was} until {t:g} s" for t, was in e.relabelled),
+                    "yes" if result.confirmed(e) else "no",
                 ]
             )
         page.table(
@@ -80,6 +81,7 @@ def fdi_page(
                 "runner-up",
                 "ln LR over runner-up",
                 "re-labelled from",
+                "confirmed at the end",
             ],
             rows,
             table_id="alarms",
