@@ -34,8 +34,8 @@ unit's own friction current (the reference's plus its fitted deviation). Its
 inertia/k_t is left to the detectors' own-past comparison (the size the past
 fits): a past of slow motion (a chirp's first minutes) does not determine it,
 and a least-squares scale fitted there is extrapolated wildly into the fast part
-(healthy chirps then gave log-LRs of 10⁵). A fault younger than the lag is a change against the
-unit itself.
+(healthy chirps then gave log-LRs of 10⁵). A fault younger than the lag is a
+change against the unit itself.
 
 Every scale comes from the model file (sample time, acceleration and current
 limits, the loop's gain where the grey box identified it): no wheel's numbers
@@ -226,7 +226,7 @@ class Features:
         if law:
             usable = usable & past_covers(self)
             unit = friction + nuisance[:, 1] + nuisance[:, 2]
-            friction = np.where(ready & (unit * friction > 0), unit, np.where(ready, 0.0, friction))
+            friction = np.where(ready, np.where(unit * friction > 0, unit, 0.0), friction)
         return replace(
             self,
             current_residual_a=np.where(ready, self.current_residual_a - nuisance.sum(1), 0.0),

@@ -150,7 +150,7 @@ class Result:
         time, then the alarms the record no longer supports."""
         if not self.events:
             return f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
-        parts, faded = [], []
+        found, faded = [], []
         for e in self.events:
             f = e.fit
             if not self.confirmed(e):
@@ -161,10 +161,11 @@ class Result:
                 if math.isnan(f.size)
                 else f" {f.size:.3g} {f.unit} [{f.ci95[0]:.3g}, {f.ci95[1]:.3g}]"
             )
-            parts.append(f"{f.fault}{size} from {e.t_s:g} s")
+            found.append(f"{f.fault}{size} from {e.t_s:g} s")
+        line = "; ".join(found) if found else "healthy"
         if faded:
-            parts.append("not confirmed by the record's end: " + ", ".join(faded))
-        return "; ".join(parts) if len(parts) > 1 or not faded else "healthy; " + parts[0]
+            line += "; not confirmed by the record's end: " + ", ".join(faded)
+        return line
 
 
 def _onset(bank: Bank, fault: str, k: int) -> int:
