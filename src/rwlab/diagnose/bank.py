@@ -69,7 +69,7 @@ def _relative(fit: Fit, before: Fit) -> Fit:
             ci95=(float(np.exp(mid - half)), float(np.exp(mid + half))),
         )
     if fit.unit == "rpm":
-        half = np.hypot(fit.ci95[1] - fit.ci95[0], before.ci95[1] - before.ci95[0]) / 2
+        half = float(np.hypot(fit.ci95[1] - fit.ci95[0], before.ci95[1] - before.ci95[0])) / 2
         mid = fit.size - before.size
         return replace(fit, size=mid, ci95=(mid - half, mid + half))
     return fit
