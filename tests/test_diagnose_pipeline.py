@@ -466,12 +466,17 @@ class FixedBank:
         return WindowFit(fit, float(a), float(k), "population")
 
 
-@pytest.mark.parametrize(("motor_log_lr", "one_event"), [(500.0, True), (25.0, False)])
-def test_one_fault_explaining_two_events_absorbs_the_less_likely_one(motor_log_lr, one_event):
-    """A weak motor first read as friction (current at constant speed), then as a clamp
-    (acceleration at the limit): once the motor, whose signature spans both, is likelier
-    beyond its threshold than the clamp event, the friction event is re-labelled and
-    absorbs the clamp's; while it is not, both events stand."""
+@pytest.mark.parametrize(
+    ("motor_log_lr", "one_event"), [(500.0, True), (31.0, False), (25.0, False)]
+)
+def test_one_fault_explaining_two_events_absorbs_them_when_likelier_than_both(
+    motor_log_lr, one_event
+):
+    """A weak motor first read as friction (current at constant speed, excess 2 over its
+    threshold), then as a clamp (acceleration at the limit, excess 20): once the motor,
+    whose signature spans both, is likelier beyond its threshold than the two faults
+    together (excess > 22), the friction event is re-labelled and absorbs the clamp's;
+    while it is not (21: likelier than either alone), both events stand."""
     limits = {n: types.SimpleNamespace(log_lr=10.0) for n in MODEL_BASED}
     bank = FixedBank({"friction": 12.0, "torque_constant": motor_log_lr})
     fits = [
@@ -533,3 +538,18 @@ def test_an_alarm_the_record_no_longer_supports_is_said_so_not_called_a_fault():
     assert faded.verdict().startswith("healthy;") and "not confirmed" in faded.verdict()
     assert held.verdict().startswith("speed_sensor_bias") and "not confirmed" not in held.verdict()
     assert faded.to_dict()["events"][0]["confirmed"] is False
+
+
+def test_an_event_whose_rivals_all_stand_aside_is_refitted_as_it_stands():
+    """A friction event beside one named a weak motor (which holds the current too): its
+    only rival, the motor, would absorb the other event without being likelier than both,
+    so the event keeps its name, refitted on its window up to now (not its alarm's fit)."""
+    limits = {n: Threshold(10.0, 1e-3, 0.0, (0.0, 1.8), True) for n in MODEL_BASED}
+    bank = FixedBank({"friction": 12.0, "torque_constant": 15.0})
+    stale = Fit("friction", 0.8, (0.7, 0.9), 99.0, "factor")
+    motor = Fit("torque_constant", 0.8, (0.7, 0.9), 60.0, "factor")
+    e = Event(t_s=0.0, onset_s=0.0, fit=stale, detector="friction", threshold=10.0)
+    x = Event(t_s=10.0, onset_s=0.0, fit=motor, detector="torque_constant", threshold=10.0)
+    events = [e, x]
+    _follow(e, events, bank, 50, limits)
+    assert events == [e, x] and e.fault == "friction" and e.fit.log_lr == 12.0

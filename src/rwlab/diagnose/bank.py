@@ -203,17 +203,18 @@ class Bank:
         The healthy zone is the past's own support, widened by the healthy drift. A
         detector whose channel the own reference fits whole (``Detector.own_law``:
         friction, read at constant speed, where the reference is the unit's fitted
-        law) is healthy at its healthy size, and the past's support only widens the
-        size's interval."""
+        law) is healthy at its healthy size alone (a point null: what a healthy unit's
+        law drifts within a record its thresholds carry, measured on healthy records),
+        and the past's support only widens the size's interval."""
         det, grid = self.detectors[name], self.grid[name]
         cum = self.cum_own[name]
         k = min(k, a + self.own_span)  # later samples' reference holds the window's own
         ll, past = cum[k] - cum[a], cum[a] - cum[0]
         phi = self.dispersion.get(f"{name}@own", self.dispersion[name])
         drift = self.drift.get(f"{name}@own", self.drift[name])
+        h = det.healthy_size
         if det.own_law:
-            h = det.healthy_size
-            zone = self._between(name, h - drift, h + drift)
+            zone = self._between(name, h, h)
         else:
             ok = grid[past >= past.max() - SUPPORT * phi]
             zone = self._between(name, ok[0] - drift, ok[-1] + drift)

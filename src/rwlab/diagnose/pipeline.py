@@ -198,26 +198,44 @@ def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
     The rivals share a channel with ``e``'s first name and leave the other events'
     channels alone, or explain another event's whole signature: one fault where two
     events stand (a weak motor first read as friction at constant speed, then as a clamp
-    at the acceleration limit) absorbs that event when it is the likelier of the two."""
+    at the acceleration limit) absorbs those events when it is likelier than the two
+    faults together (their excesses over their thresholds add: their channels are
+    disjoint; an event under its threshold adds none). With no rival left, ``e``'s
+    fault is refitted on its window as it stands."""
     others = [x for x in events if x is not e]
+
+    def covered(n: str) -> list[Event]:
+        return [x for x in others if SIGNATURE[n] & _owned([x])]
+
     rivals = [
         n
         for n in MODEL_BASED
         if SIGNATURE[n] & SIGNATURE[e.first]
-        and all(not SIGNATURE[n] & _owned([x]) or SIGNATURE[n] >= _owned([x]) for x in others)
+        and all(SIGNATURE[n] >= _owned([x]) for x in covered(n))
     ]
+    fits = sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits))
+    alone = [w for w in fits if not covered(w.fit.fault)]
+    best = alone[0] if alone else bank.fit(e.fault, e.start, k)
     t = float(bank.features.t_s[k - 1])
-    for w in sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits)):
-        covered = [x for x in others if SIGNATURE[w.fit.fault] & _owned([x])]
-        if any(x.fit.log_lr - limits[x.fault].log_lr >= _excess(w, limits) for x in covered):
-            continue
-        for x in covered:
-            events.remove(x)
-            e.relabelled.append((t, x.fault))
-        if w.fit.fault != e.fault:
-            e.relabelled.append((t, e.fault))
-        e.fit = w.fit
-        return
+    for w in fits:
+        # an event no longer beyond its threshold adds nothing (it would not stand alone)
+        two = max(_excess(best, limits), 0.0) + sum(
+            max(_excess_of(x, limits), 0.0) for x in covered(w.fit.fault)
+        )
+        if covered(w.fit.fault) and _excess(w, limits) > two:
+            for x in covered(w.fit.fault):
+                events.remove(x)
+                e.relabelled.append((t, x.fault))
+            best = w
+            break
+    if best.fit.fault != e.fault:
+        e.relabelled.append((t, e.fault))
+    e.fit = best.fit
+
+
+def _excess_of(e: Event, limits: dict[str, Threshold]) -> float:
+    """An event's log-LR at its last refit beyond its fault's threshold."""
+    return e.fit.log_lr - limits[e.fault].log_lr
 
 
 def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:

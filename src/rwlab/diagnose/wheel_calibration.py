@@ -12,9 +12,8 @@ everything the pipeline decides with:
   widens nothing), the windows back-to-back at the decisions' shortest length;
 - per fault, the *drift*: the largest gap between consecutive such windows'
   intervals (0 where they overlap) against the population, and against the
-  record's own past the gap that ``OWN_DRIFT_QUANTILE`` of them stay within (the own
-  law of a record's first minutes is fitted on little, and its one worst gap set
-  the RW-0.01's friction drift at 0.5, blind to a ×1.5);
+  record's own past the largest move of their middles (a detector against the
+  unit's own law, ``Detector.own_law``, reads none: its healthy size is a point);
 - per fault, the peaks of its statistic's excursions above χ²₁(0.95)/2 on every
   record (restarted detectors: each excursion is one false alarm). A rate r per
   hour maps to the threshold exceeded r·hours times; below one such peak per
@@ -49,7 +48,7 @@ from scipy.stats import chi2
 
 from rwlab._io import write_json
 from rwlab.diagnose.bank import Bank
-from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading, detector
+from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
@@ -61,9 +60,6 @@ FORMAT = "rwlab.DiagnosisCalibration/1"
 STUCK = "speed_sensor_stuck"
 MIN_TAIL = 5  # peaks needed to fit the tail's scale
 TAIL = 20  # the largest peaks the tail is fitted to
-# a design choice, not a measurement: the healthy drift against the own past is the gap
-# nine in ten consecutive windows stay within (module docstring)
-OWN_DRIFT_QUANTILE = 0.9
 
 
 @dataclass(frozen=True)
@@ -212,7 +208,6 @@ class DiagnosisCalibration:
             lows, highs, moves, moves_own = [point[name]], [point[name]], [0.0], [0.0]
             known: list[tuple[float, float]] = []
             phi_own = dispersion.get(f"{name}@own", 1.0)
-            own_law = detector(name).own_law
             for t in tiles:
                 grid, zone = t[name]["grid"], t[name]["zone"]
                 sizes = [
@@ -227,18 +222,14 @@ class DiagnosisCalibration:
                     profile_fit(name, "", grid, ll, zone, phi_own).ci95
                     for ll in t[name]["shortest@own"]
                 ]
-                # against the own law, how far the unit's size moves; against the past's
-                # support, how far its point estimate does (the support is an interval)
-                moves_own += _gaps(own) if own_law else _moves(own)
+                moves_own += _moves(own)
             if known:
                 width = np.median([hi - lo for lo, hi in known])
                 mids = [(lo + hi) / 2 for lo, hi in known if hi - lo <= width]
                 lows, highs = lows + mids, highs + mids
             zones[name] = (float(min(lows)), float(max(highs)))
             drift[name] = float(max(moves))
-            drift[f"{name}@own"] = float(
-                np.quantile(moves_own, OWN_DRIFT_QUANTILE) if own_law else max(moves_own)
-            )
+            drift[f"{name}@own"] = float(max(moves_own))
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
         peaks[STUCK] = []
         for f in records:
