@@ -184,12 +184,12 @@ def _owned(events) -> frozenset[str]:
     return out
 
 
-def _excess(w: WindowFit, limits: dict[str, Threshold]) -> float:
+def _excess(fit: Fit, limits: dict[str, Threshold]) -> float:
     """A fit's log-LR beyond what healthy records reach at the rate asked: the model's
     misfit on a healthy wheel differs between fault models (a clamp model fits the
     back-EMF limit of a healthy wheel at high speed), so the raw log-LRs of two fault
     models compare only beyond their own healthy level."""
-    return w.fit.log_lr - limits[w.fit.fault].log_lr
+    return fit.log_lr - limits[fit.fault].log_lr
 
 
 def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
@@ -213,16 +213,16 @@ def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
         if SIGNATURE[n] & SIGNATURE[e.first]
         and all(SIGNATURE[n] >= _owned([x]) for x in covered(n))
     ]
-    fits = sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w, limits))
+    fits = sorted((bank.fit(n, e.start, k) for n in rivals), key=lambda w: -_excess(w.fit, limits))
     alone = [w for w in fits if not covered(w.fit.fault)]
     best = alone[0] if alone else bank.fit(e.fault, e.start, k)
     t = float(bank.features.t_s[k - 1])
     for w in fits:
         # an event no longer beyond its threshold adds nothing (it would not stand alone)
-        two = max(_excess(best, limits), 0.0) + sum(
-            max(_excess_of(x, limits), 0.0) for x in covered(w.fit.fault)
+        two = max(_excess(best.fit, limits), 0.0) + sum(
+            max(_excess(x.fit, limits), 0.0) for x in covered(w.fit.fault)
         )
-        if covered(w.fit.fault) and _excess(w, limits) > two:
+        if covered(w.fit.fault) and _excess(w.fit, limits) > two:
             for x in covered(w.fit.fault):
                 events.remove(x)
                 e.relabelled.append((t, x.fault))
@@ -233,14 +233,9 @@ def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
     e.fit = best.fit
 
 
-def _excess_of(e: Event, limits: dict[str, Threshold]) -> float:
-    """An event's log-LR at its last refit beyond its fault's threshold."""
-    return e.fit.log_lr - limits[e.fault].log_lr
-
-
 def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     """Every candidate fault on its best window ending at k, most likely first."""
-    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w, limits))
+    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
 
 
 def run(features: Features, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> Result:
@@ -291,7 +286,7 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
                 runner_up=None if runner is None else runner.fit.fault,
                 runner_up_log_lr=None
                 if runner is None
-                else _excess(best, limits) - _excess(runner, limits),
+                else _excess(best.fit, limits) - _excess(runner.fit, limits),
                 start=start,
             )
         )
