@@ -211,11 +211,11 @@ class Bank:
         k = min(k, a + self.own_span)  # later samples' reference holds the window's own
         ll, past = cum[k] - cum[a], cum[a] - cum[0]
         phi = self.dispersion.get(f"{name}@own", self.dispersion[name])
-        drift = self.drift.get(f"{name}@own", self.drift[name])
         h = det.healthy_size
         if det.own_law:
             zone = self._between(name, h, h)
         else:
+            drift = self.drift.get(f"{name}@own", self.drift[name])
             ok = grid[past >= past.max() - SUPPORT * phi]
             zone = self._between(name, ok[0] - drift, ok[-1] + drift)
         change = profile_fit(det.fault, det.unit, grid, ll, zone, phi, det.worse)
