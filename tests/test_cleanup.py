@@ -102,14 +102,8 @@ COMMANDS = {
 }
 
 
-@pytest.mark.parametrize(
-    "command",
-    [
-        "identify",
-        pytest.param("simulate", marks=pytest.mark.slow),
-        pytest.param("hil", marks=pytest.mark.slow),
-    ],
-)
+@pytest.mark.slow  # a whole run in another process, killed, then run again
+@pytest.mark.parametrize("command", ["identify", "simulate", "hil"])
 def test_after_kill_9_the_next_run_leaves_nothing_stale(tmp_path, command):
     out = tmp_path / "out"
     args = [sys.executable, "-m", "rwlab.cli", *COMMANDS[command], "--out", str(out)]

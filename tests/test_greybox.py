@@ -78,6 +78,7 @@ def test_greybox_recovers_the_units_physics_and_its_loop(grey, unit_a):
     assert all(v > 0 and math.isfinite(v) for v in model.std.values())
 
 
+@pytest.mark.slow  # two grey-box fits on a 20-minute twin record, twice
 @pytest.mark.parametrize("stiction", [False, True])
 def test_slow_reversals_cannot_tell_stiction_from_its_absence(stiction):
     # a ±600 rpm square wave at 20 rpm/s dwells at rest on every reversal. The raw fit
