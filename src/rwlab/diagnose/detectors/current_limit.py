@@ -42,7 +42,7 @@ class CurrentLimit(Detector):
         # level the current sits at (Huber's location, its profile interval). The reach a
         # clamp allows scales with the unit's own inertia/k_t, a few % off the reference's
         # c₀, and would pull the size by as much; the reading at the flat top does not
-        binding = self.shortfall(features, fit.size)[a:k, 0] != 0.0
+        binding = _held(self.shortfall(features, fit.size) != 0.0)[a:k, 0]
         w = weights["current_level"][a:k][binding]
         if np.count_nonzero(w) < 3:
             return fit
@@ -62,11 +62,20 @@ class CurrentLimit(Detector):
     def gains(self, features, weights, grid):
         c3 = features.scales.current_model[3]
         p = self.shortfall(features, grid[None, :])
-        binding = p != 0.0
         level = np.abs(features.current_a - c3)[:, None] - grid[None, :]
         # where it binds the clamp holds the current at L (a flat top); elsewhere it allows
         # any current up to L: a shortfall of acceleration with the current below L is not
         # the clamp's, and a current over L never is
-        miss = np.where(binding, level, np.maximum(level, 0.0))
+        miss = np.where(_held(p != 0.0), level, np.maximum(level, 0.0))
         beyond = self.level_cost(miss, weights["current_level"])
         return self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p) + beyond
+
+
+def _held(binding: np.ndarray) -> np.ndarray:
+    """The samples (N, G) a clamp holds the current at its level for the whole interval:
+    binding, and binding at the next sample too. At a binding run's last sample the slew
+    ends within the interval and the reading has already left the flat top (on clamped
+    twins: 0.10 A read against a 0.175 A clamp, ~7 of log-likelihood per slew)."""
+    held = binding.copy()
+    held[:-1] &= binding[1:]
+    return held
