@@ -31,7 +31,7 @@ from rwlab.diagnose.features import (
     compute_features,
     past_covers,
 )
-from rwlab.diagnose.noise import SPEED_EDGES, NoiseModel
+from rwlab.diagnose.noise import JERK_EDGES, SPEED_EDGES, NoiseModel, bins, speed_bins
 from rwlab.diagnose.pipeline import Event, Result, _follow, run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
@@ -435,6 +435,53 @@ def test_a_clamp_is_sized_at_its_flat_top_whatever_the_reach_said():
     coarse = detector.refine(quantised, weights, glr, 0, f.N)
     assert coarse.ci95[1] - coarse.ci95[0] >= lsb - 1e-12
     assert coarse.ci95[0] <= clamp <= coarse.ci95[1]
+
+
+def test_a_slew_that_ends_within_a_sample_does_not_refute_its_clamp():
+    """Where a clamped slew ends inside a sample's interval, the reading has already left
+    the flat top: it may read under the clamp there (never over it) at no cost, so the
+    clamp's likelihood is the one of a record whose slews end on the sample."""
+    clamp, rng = 0.25, np.random.default_rng(3)
+    f = compute_features(*record(0), SCALES)
+    binding = Detector.shortfall(f, clamp)[:, 0] != 0
+    last = binding & ~np.append(
+        binding[1:], True
+    )  # each binding run's last (the record's end: none)
+    noise = SIGMA_A * rng.standard_normal(f.N)
+    noise[last] = -np.abs(noise[last])  # the reading there under the clamp in both records
+    level = np.sign(f.demand_accel_rpm_s) * (clamp + noise)
+    on_top = replace(f, current_a=np.where(binding, level, f.current_a))
+    left = replace(on_top, current_a=np.where(last, 0.4 * level, on_top.current_a))
+    weights = {"accel": np.full(f.N, 1.0), "current_level": np.full(f.N, SIGMA_A**-2)}
+    detector = CurrentLimit()
+    grid = np.array([clamp])
+    assert last.sum() >= 5
+    kept, costed = (detector.gains(g, weights, grid).sum() for g in (on_top, left))
+    assert costed == pytest.approx(kept, abs=1e-6)
+    over = replace(on_top, current_a=np.where(last, 1.5 * level, on_top.current_a))
+    assert detector.gains(over, weights, grid).sum() < kept - 100  # over the clamp never
+
+
+def test_no_motion_sample_weighs_more_than_the_speed_reading_allows_at_its_speed():
+    """A slew through a speed the sensor reads coarsely (30 times coarser under 600 rpm
+    here) weighs in the acceleration channel no more than a hold at that speed does; the
+    bias test's held weights keep the hold's scale in the hold's bin alone."""
+    f = compute_features(*record(0), SCALES)
+    g = np.array([30.0 if edge <= 640.0 else 1.0 for edge in (*SPEED_EDGES, np.inf)])
+    sigma = (0.05, *([0.5] * (len(JERK_EDGES) + 1)))  # a hold's σ, a slew's ten times it
+    names = ("current", "accel", "speed", "current_steady")
+    noise = NoiseModel(
+        dict.fromkeys(names, sigma),
+        dict.fromkeys(names, 1.0),
+        {"accel": tuple(g), "speed": tuple(g)},
+    )
+    w = noise.weights(f)
+    usable, slew, slow = w["accel"] > 0, bins(f) != 0, g[speed_bins(f)] > 1
+    assert (usable & slew & slow).any() and (usable & slew & ~slow).any()
+    assert np.allclose(w["accel"][usable & slow], 1 / 1.5**2)  # 0.05 × 30, a slew or a hold
+    assert np.allclose(w["accel"][usable & slew & ~slow], 1 / 0.5**2)
+    assert np.allclose(w["accel_held"][usable & slew], 1 / 0.5**2)
+    assert np.allclose(w["accel_held"][usable & ~slew & ~slow], 1 / 0.05**2)
 
 
 @pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])

@@ -131,12 +131,17 @@ class NoiseModel:
         for name in CHANNELS:
             key = self.key(name, features.against_own)
             sigma = np.asarray(self.sigma[key])[where]
-            out[name] = np.where(
-                channel_mask(features, name), 1.0 / (sigma**2 * self.inflation[key]), 0.0
-            )
-            if key in self.speed_factor:  # at a held speed, the speed sensor's own scale
-                g = np.where(where == 0, np.asarray(self.speed_factor[key])[speed], 1.0)
-                out[f"{name}_held"] = out[name] / g**2
+            mask, kappa = channel_mask(features, name), self.inflation[key]
+            out[name] = np.where(mask, 1.0 / (sigma**2 * kappa), 0.0)
+            if key in self.speed_factor:
+                g = np.asarray(self.speed_factor[key])[speed]
+                # at a held speed, the speed sensor's own scale (the bias test's weights)
+                out[f"{name}_held"] = out[name] / np.where(where == 0, g, 1.0) ** 2
+                # the motion's tests: the reading's scatter at the sample's speed is a floor
+                # in every bin (a slew through a speed the Hall sensor reads coarsely, its
+                # zero crossing, is no finer than a hold there)
+                read = self.sigma[key][0] * g
+                out[name] = np.where(mask, 1.0 / (np.maximum(sigma, read) ** 2 * kappa), 0.0)
         # the current's level against a clamp: 1/σ² without κ, each sample its own evidence
         # (a reading over the clamp is the reading, not the model's slow misfit)
         key = self.key("current", features.against_own)
