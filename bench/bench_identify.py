@@ -1,7 +1,7 @@
 """Wall time of ``rwlab identify`` against ``rwlab ident arx`` on one record, and of ``rwlab demo``.
 
 Run:  python bench/bench_identify.py [--record FILE.mcap] [--repeats 5] [--quick]
-          [--baseline SRC] [--no-demo | --demo-only] [--demo-repeats 3]
+          [--baseline SRC] [--no-demo | --demo-only] [--demo-repeats N]
 
 Makes a 25-minute PRBS record of the RW90 twin (simulated clock, seed 3) unless
 ``--record`` names one, then runs, ``--repeats`` times and back to back (so a busy
@@ -102,7 +102,7 @@ def bench_identify(record: Path, repeats: int, baseline: Path | None, out: Path)
 
 
 def bench_demo(quick: bool, out: Path, repeats: int = 1, baseline: Path | None = None) -> None:
-    args = ["demo", "--out", str(out / "demo"), "--force", *(["--quick"] if quick else [])]
+    args = ["demo", "--out", str(out / "demo"), *(["--quick"] if quick else [])]
     trees = {"demo": SRC} | ({"demo (baseline)": baseline} if baseline is not None else {})
     # a fresh numba cache per tree: the first run compiles every kernel
     envs = {n: {"NUMBA_CACHE_DIR": str(out / f"numba-cache-{i}")} for i, n in enumerate(trees)}

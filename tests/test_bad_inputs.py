@@ -608,6 +608,18 @@ def cases() -> list[tuple[str, list[str]]]:
             ["hil", "--scenario", "geo-comsat", "--duration", "5", "--protocol", "rwlab", *out],
         ),
     ]
+    # a new user's first hour (issue 45, second look)
+    c += [
+        ("export --out without a format's name", ["export", "{D}/rec.mcap", "--out", "{O}"]),
+        (
+            "experiment --Ts 500 --signal multisine",
+            ["experiment", "--Ts", "500", "--signal", "multisine", "--out", "{O}.mcap"],
+        ),
+        (
+            "experiment --Ts 500 over NSP (a serial port, closed on the refusal)",
+            ["experiment", "--Ts", "500", "--protocol", "nsp", "--out", "{O}.mcap"],
+        ),
+    ]
     return c
 
 

@@ -460,6 +460,9 @@ def test_a_slew_that_ends_within_a_sample_does_not_refute_its_clamp():
     assert costed == pytest.approx(kept, abs=1e-6)
     over = replace(on_top, current_a=np.where(last, 1.5 * level, on_top.current_a))
     assert detector.gains(over, weights, grid).sum() < kept - 100  # over the clamp never
+    inside = binding & ~last  # within a run the reading holds the flat top: under it costs
+    under = replace(on_top, current_a=np.where(inside, 0.4 * level, on_top.current_a))
+    assert detector.gains(under, weights, grid).sum() < kept - 100
 
 
 def test_no_motion_sample_weighs_more_than_the_speed_reading_allows_at_its_speed():
@@ -470,18 +473,20 @@ def test_no_motion_sample_weighs_more_than_the_speed_reading_allows_at_its_speed
     g = np.array([30.0 if edge <= 640.0 else 1.0 for edge in (*SPEED_EDGES, np.inf)])
     sigma = (0.05, *([0.5] * (len(JERK_EDGES) + 1)))  # a hold's σ, a slew's ten times it
     names = ("current", "accel", "speed", "current_steady")
+    kappa = 2.0  # the inflation divides every weight, floored or not
     noise = NoiseModel(
         dict.fromkeys(names, sigma),
-        dict.fromkeys(names, 1.0),
+        dict.fromkeys(names, kappa),
         {"accel": tuple(g), "speed": tuple(g)},
     )
     w = noise.weights(f)
     usable, slew, slow = w["accel"] > 0, bins(f) != 0, g[speed_bins(f)] > 1
     assert (usable & slew & slow).any() and (usable & slew & ~slow).any()
-    assert np.allclose(w["accel"][usable & slow], 1 / 1.5**2)  # 0.05 × 30, a slew or a hold
-    assert np.allclose(w["accel"][usable & slew & ~slow], 1 / 0.5**2)
-    assert np.allclose(w["accel_held"][usable & slew], 1 / 0.5**2)
-    assert np.allclose(w["accel_held"][usable & ~slew & ~slow], 1 / 0.05**2)
+    # 0.05 × 30 at a slow speed, a slew or a hold
+    assert np.allclose(w["accel"][usable & slow], 1 / (1.5**2 * kappa))
+    assert np.allclose(w["accel"][usable & slew & ~slow], 1 / (0.5**2 * kappa))
+    assert np.allclose(w["accel_held"][usable & slew], 1 / (0.5**2 * kappa))
+    assert np.allclose(w["accel_held"][usable & ~slew & ~slow], 1 / (0.05**2 * kappa))
 
 
 @pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6", "rw-0.01"])

@@ -80,6 +80,36 @@ def _child_ended_on_leaving():
         os.waitpid(pid, 0)
 
 
+@needs_fork
+def test_a_child_does_not_keep_the_output_locked_when_this_process_is_killed(tmp_path):
+    """A child drawing dies with its parent: the folder's lock goes at once (a child left
+    running held it, and a rerun was refused)."""
+    lock = tmp_path / "out.lock"
+    code = (
+        "import os, sys, time; from rwlab._io import lock_exclusive; "
+        "from rwlab._forked import Forked; "
+        f"fd = lock_exclusive(__import__('pathlib').Path({str(lock)!r}), RuntimeError()); "
+        "child = Forked(lambda: time.sleep(60)); "
+        "print(child._child[0], flush=True); time.sleep(60)"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 5.0
+    while True:
+        try:
+            from rwlab._io import lock_exclusive
+
+            os.close(lock_exclusive(lock, BlockingIOError()))
+            break
+        except BlockingIOError:
+            if time.monotonic() > deadline:
+                os.kill(child, 9)
+                raise AssertionError("the killed parent's child keeps the lock") from None
+            time.sleep(0.05)
+
+
 def _figures(n: int) -> list:
     figs = []
     for i in range(n):

@@ -188,8 +188,11 @@ def test_compare_takes_python_control_models(first_order):
     gc, gd, data = first_order
     assert rwlab.compare(gd, data).fit_percent == pytest.approx(100, abs=1e-6)
     assert rwlab.compare(control.ss(gd), data).fit_percent == pytest.approx(100, abs=1e-6)
-    with pytest.warns(RwlabWarning, match="discretised by zero-order hold at the data's Ts = 0.1"):
+    with pytest.warns(
+        RwlabWarning, match="discretised by zero-order hold at the data's Ts = 0.1"
+    ) as caught:
         assert rwlab.compare(gc, data).fit_percent == pytest.approx(100, abs=1e-6)
+    assert caught[0].filename == __file__  # the warning points at the caller's line
     with pytest.raises(ModelError, match=r"dt = 0\.2 s and the data at Ts = 0\.1 s"):
         rwlab.compare(control.sample_system(gc, 0.2, "zoh"), data)
     with pytest.raises(ModelError, match="not str"):

@@ -127,7 +127,6 @@ def run_demo(
     out: str | os.PathLike,
     cfg: DemoConfig = DemoConfig(),
     *,
-    force: bool = False,
     echo=print,
     progress=None,
 ) -> dict:
@@ -136,7 +135,7 @@ def run_demo(
     ``echo(text)`` reports each stage; ``progress(label, n)`` returns a context
     manager with ``update(k)`` for the long stages (a click progress bar in the CLI).
     ``out`` is written whole when the demo succeeds, or not at all; a previous
-    demo there is replaced then (``force`` also replaces a previous output).
+    demo there is replaced then, and a folder holding anything else is refused.
 
     Parameters
     ----------
@@ -144,8 +143,6 @@ def run_demo(
         The output folder.
     cfg : DemoConfig
         Durations and options.
-    force : bool
-        Replace a folder that is not a previous demo's.
     echo : callable
         Prints each stage.
     progress : callable, optional
@@ -159,7 +156,7 @@ def run_demo(
     from rwlab._io import output_folder
 
     out = Path(out)
-    with output_folder(out, DEMO_FILES, force=force, replace_previous=True, what="demo") as stage:
+    with output_folder(out, DEMO_FILES, replace_previous=True, what="demo") as stage:
         summary = _run(stage, cfg, echo, progress)
     echo(f"[done] {out / 'index.html'} ({summary['elapsed_s']} s)")
     return summary
@@ -312,13 +309,18 @@ def _run_side_by_side(out: Path, cfg: DemoConfig, echo, t_start: float) -> dict:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
+    from rwlab._forked import die_with_parent
+
     experiments = _experiments(cfg)
     # fork: the workers start with rwlab imported; none of them uses a thread it inherits
     context = multiprocessing.get_context("fork")
     # one worker per core, the PRBS first (the study waits for it) and the HIL next (the
     # longest of the rest): more workers than cores would share the PRBS's core
     workers = min(len(experiments) + 1, os.cpu_count() or 2)
-    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+    # a worker dies with this process: it holds a copy of the output folder's lock
+    with ProcessPoolExecutor(
+        workers, mp_context=context, initializer=die_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         try:
             jobs = {}
             for name, title, exp in sorted(experiments, key=lambda e: e[0] != "prbs"):

@@ -15,12 +15,12 @@ from rwlab.cli.attitude import single_thread_blas
 @click.option("--realtime", is_flag=True, help="Run the experiments on the wall clock (slow).")
 @click.option("--monitor", is_flag=True, help="Serve the live monitor during the experiments.")
 @click.option("--quick", is_flag=True, help="Shortened records and runs (a quick look).")
-@click.option("--force", is_flag=True, help="Overwrite a previous demo in --out.")
 @_friendly_errors
-def demo(out, realtime, monitor, quick, force):
+def demo(out, realtime, monitor, quick):
     """The whole system: test a simulated wheel, identify it, fly it on a GEO satellite.
 
-    Writes OUT/index.html (start here) and OUT/summary.json.
+    Writes OUT/index.html (start here) and OUT/summary.json; a previous demo in OUT is
+    replaced when this one succeeds, a folder holding anything else is refused.
     """
     import dataclasses
 
@@ -36,9 +36,7 @@ def demo(out, realtime, monitor, quick, force):
 
     try:
         with _stop_signals():
-            summary = run_demo(
-                out, cfg, force=force, echo=lambda t: click.echo(t, err=True), progress=progress
-            )
+            summary = run_demo(out, cfg, echo=lambda t: click.echo(t, err=True), progress=progress)
     except KeyboardInterrupt as exc:
         why = exc.args[0] if exc.args else "Ctrl-C"
         click.echo(

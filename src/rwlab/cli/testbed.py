@@ -224,15 +224,18 @@ def _timing_line(t: dict) -> str:
     return text
 
 
+EXPORT_FORMATS = ("csv", "parquet", "mat", "asc", "blf")
+
+
 @main.command("export")
 @click.argument("record", type=click.Path(dir_okay=False))
 @click.option(
     "--format",
     "fmt",
-    type=click.Choice(["csv", "parquet", "mat", "asc", "blf"]),
-    required=True,
+    type=click.Choice(EXPORT_FORMATS),
     help="csv, parquet, mat: sampled signals; asc, blf: the raw CAN frames of a record made "
-    "with --raw-frames (Vector logs, python-can's writers).",
+    "with --raw-frames (Vector logs, python-can's writers). Default: the one --out's "
+    "name ends with.",
 )
 @click.option("--out", type=click.Path(dir_okay=False), required=True)
 @click.option("--Ts", "Ts", type=POSITIVE, help="Sample time, s (default: the record's).")
@@ -264,6 +267,13 @@ def export(record, fmt, out, Ts, max_gap, node, satellite, force):
     from rwlab.testbed import load_record
 
     path = Path(out)
+    if fmt is None:
+        fmt = path.suffix.lower().lstrip(".")
+        if fmt not in EXPORT_FORMATS:
+            raise ConfigError(
+                f"--out {out} names no format ({', '.join(EXPORT_FORMATS)}); end its name "
+                "with one or pass --format"
+            )
     if path.suffix and path.suffix.lower() != f".{fmt}":
         raise ConfigError(
             f"--format {fmt} contradicts --out {out} (a {path.suffix} name); "

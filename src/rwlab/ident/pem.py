@@ -322,7 +322,8 @@ def _finish(
     if reason == MAX_ITER:
         warnings.warn(
             f"{method.split()[0]}: stopped after {iterations} iterations without converging; "
-            "the model may not be the optimum (raise max_iter, or check orders and data)",
+            "the model may not be the optimum (raise the iteration limit: max_iter, "
+            "`rwlab ident ... --max-iter`; or check orders and data)",
             RwlabWarning,
             stacklevel=3,
         )

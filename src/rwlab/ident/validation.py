@@ -197,7 +197,7 @@ def _from_control(model, data: IOData):
             f"a continuous-time model: discretised by zero-order hold at the data's "
             f"Ts = {data.Ts:g} s (MATLAB's compare does the same)",
             RwlabWarning,
-            stacklevel=3,
+            stacklevel=4,  # the caller of compare()
         )
         model = control.sample_system(model, data.Ts, method="zoh")
     elif model.dt is not True and not math.isclose(model.dt, data.Ts, rel_tol=1e-9):

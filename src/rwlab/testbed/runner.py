@@ -39,6 +39,7 @@ from rwlab.wheel.bus import open_bus, open_transport, transport_names
 from rwlab.wheel.client import Implausible
 from rwlab.wheel.faults import ScheduledFault, parse_fault
 from rwlab.wheel.link import get_protocol
+from rwlab.wheel.node import WATCHDOG_S
 from rwlab.wheel.protocol import Telemetry, dbc_sha256
 from rwlab.wheel.serial import open_pty
 
@@ -540,6 +541,12 @@ def run_experiment(
     nominal = cfg.nominal_wheel(params)
     params = cfg.wheel_params(params)
     cfg.check_limits(params)
+    if cfg.interface == "virtual" and cfg.Ts >= WATCHDOG_S:  # it would idle between commands
+        raise ConfigError(
+            f"Ts = {cfg.Ts:g} s is not shorter than the simulated wheel's command "
+            f"watchdog ({WATCHDOG_S:g} s): the wheel would idle between commands; "
+            f"choose Ts < {WATCHDOG_S:g} s"
+        )
     command = make_signal(cfg, params)
     # before the clock starts (loading delays no command) and before the record opens
     detector = _live_detector(cfg)
@@ -603,12 +610,6 @@ def run_experiment(
                 seed=cfg.seed,
                 protocol=cfg.protocol,
             )
-            if node.watchdog and cfg.Ts >= node.watchdog:  # it would idle between commands
-                raise ConfigError(
-                    f"Ts = {cfg.Ts:g} s is not shorter than the simulated wheel's command "
-                    f"watchdog ({node.watchdog:g} s): the wheel would idle between commands; "
-                    f"choose Ts < {node.watchdog:g} s"
-                )
             if realtime:
                 node.start()
         client = WheelClient(
@@ -626,7 +627,7 @@ def run_experiment(
             node.stop()
         for bus in (node_bus, host_bus):
             if bus is not None:
-                bus.shutdown()
+                _close(bus)
         raise
     if cfg.raw_frames:
         client.frame_listener = lambda t, frame_id, data, direction: writer.write(

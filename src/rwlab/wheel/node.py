@@ -36,6 +36,8 @@ from rwlab.wheel.faults import ScheduledFault
 from rwlab.wheel.link import get_protocol
 from rwlab.wheel.physics import RW90, Fault, Mode, WheelParams, WheelPhysics
 
+WATCHDOG_S = 1.0  # the simulated wheel's command watchdog, s (a design choice)
+
 __all__ = ["FaultInjection", "WheelNode"]
 
 
@@ -115,7 +117,7 @@ class WheelNode:
         clock: WallClock | SimClock | None = None,
         telemetry_rate: float = 100.0,
         latency: float = 0.02,
-        watchdog: float = 1.0,
+        watchdog: float = WATCHDOG_S,
         physics_dt: float = 1e-3,
         faults: FaultInjection | None = None,
         seed: int = 0,
