@@ -186,6 +186,12 @@ def record_arguments(description: str) -> argparse.ArgumentParser:
     return p
 
 
+def record_features(path: Path, wheel: IdentifiedWheel, scales: WheelScales):
+    """The diagnosis features of one cached record against the identified ``wheel``."""
+    data = load_record(path, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+    return compute_features(data, wheel, scales)
+
+
 def main() -> None:
     p = record_arguments(__doc__.splitlines()[0])
     p.add_argument("--rate", type=float, default=1e-3)
@@ -215,8 +221,7 @@ def main() -> None:
         return args.cache / f"{name}.mcap"
 
     def features(name):
-        data = load_record(path(name), scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
-        return compute_features(data, wheel, scales)
+        return record_features(path(name), wheel, scales)
 
     cal = DiagnosisCalibration.measure(
         [features(n) for n in args.calibrate], sources=args.calibrate, origin=args.origin

@@ -30,10 +30,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_fdi import record_arguments
-from rwlab.diagnose.features import RECORD_OUTPUTS, STEADY_SHARE, WheelScales, compute_features
+from bench_fdi import record_arguments, record_features
+from rwlab.diagnose.features import STEADY_SHARE, WheelScales
 from rwlab.diagnose.noise import NoiseModel
-from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
 WINDOWS_S = (60.0, 150.0, 300.0)
@@ -120,10 +119,7 @@ def main() -> None:
     wheel = IdentifiedWheel.from_json(args.model)
 
     def features(name: str):
-        data = load_record(
-            args.cache / f"{name}.mcap", scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf
-        )
-        return compute_features(data, wheel, scales)
+        return record_features(args.cache / f"{name}.mcap", wheel, scales)
 
     healthy = [features(n) for n in args.calibrate]
     noise = NoiseModel.measure(healthy)

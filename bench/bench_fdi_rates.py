@@ -23,12 +23,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_fdi import record_arguments
+from bench_fdi import record_arguments, record_features
 from rwlab.diagnose.bank import Bank
 from rwlab.diagnose.detectors import MODEL_BASED
-from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
+from rwlab.diagnose.features import WheelScales
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, excursion_peaks, garwood
-from rwlab.testbed import load_record
 from rwlab.wheel import IdentifiedWheel
 
 
@@ -40,10 +39,7 @@ def main() -> None:
     wheel = IdentifiedWheel.from_json(args.model)
 
     def features(name: str):
-        data = load_record(
-            args.cache / f"{name}.mcap", scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf
-        )
-        return compute_features(data, wheel, scales)
+        return record_features(args.cache / f"{name}.mcap", wheel, scales)
 
     cal = DiagnosisCalibration.measure([features(n) for n in args.calibrate])
     peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
