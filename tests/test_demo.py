@@ -95,3 +95,18 @@ def test_the_console_says_which_controller_is_the_ideal_bound(demo_dir):
     lines = (demo_dir.parent / "console.txt").read_text().splitlines()
     flagged = [line.split()[0] for line in lines if "the ideal bound" in line]
     assert flagged == ["lqr"]  # the only one fed the true state; the LQGs fly on sensors
+
+
+def test_the_demos_model_diagnoses_its_own_records(demo_dir, tmp_path):
+    # the model carries the healthy reference of the record it was identified on, as
+    # rwlab identify's does, so the README's next step (diagnose) takes it: the demo's own
+    # healthy PRBS record is healthy against it
+    model = demo_dir / "identification" / "model.json"
+    assert "healthy_reference" in json.loads(model.read_text())
+    out = tmp_path / "diag"
+    record = demo_dir / "records" / "prbs.mcap"
+    result = CliRunner().invoke(
+        main, ["diagnose", str(record), "--model", str(model), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "diagnosis.json").read_text())["alarms"] == []

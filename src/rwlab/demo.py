@@ -223,8 +223,9 @@ def _identify_and_fly(out: Path, cfg: DemoConfig, echo) -> tuple:
     from rwlab.testbed import load_record
 
     echo("[identify] paper A's study on the PRBS record")
-    study = identification_study(load_record(out / "records" / "prbs.mcap"))
-    model = demo_model(study)
+    record = out / "records" / "prbs.mcap"
+    study = identification_study(load_record(record))
+    model = demo_model(study, record)
     write_study(study, model, out / "identification", force=True)
     chosen = study.to_dict()["chosen"]
     echo(f"[identify] chosen {chosen['structure']}, validation fit {chosen['fit_percent']:.2f} %")
@@ -244,22 +245,29 @@ def _identify_and_fly(out: Path, cfg: DemoConfig, echo) -> tuple:
     return study, comparison
 
 
-def demo_model(study) -> dict:
+def demo_model(study, record: Path | None = None) -> dict:
     """``model.json`` of the demo's study, as ``rwlab identify`` writes it: with the wheel
     model the record names (its spec, hash and limits, so that a scenario whose wheels it
-    cannot replace refuses it) and the record's driver limits as its saturations.
+    cannot replace refuses it), the record's driver limits as its saturations and, given
+    the record, the healthy reference ``rwlab diagnose`` compares later records with.
 
     Parameters
     ----------
     study : StudyResult
         The study of a testbed record.
+    record : pathlib.Path, optional
+        That record (``.mcap``): the healthy reference is measured on it.
 
     Returns
     -------
     dict
         ``model.json``'s content (schema ``model``).
     """
+    from rwlab.diagnose import healthy_reference
+    from rwlab.diagnose.features import RECORD_OUTPUTS
     from rwlab.ident.study import physical_model
+    from rwlab.testbed import load_record
+    from rwlab.wheel import IdentifiedWheel
     from rwlab.wheelspec import WheelSpec
 
     source = study.data.source
@@ -273,9 +281,14 @@ def demo_model(study) -> dict:
             "speed_limit_rpm": float(driver["max_speed_rpm"]),
             "accel_limit_rpm_s": float(driver["max_accel_rpm_s"]),
         }
-    return physical_model(
+    model = physical_model(
         study, saturation_source="the record's driver settings", wheel_spec=spec, **limits
     )
+    if record is not None:
+        data = load_record(record, study.data.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+        wheel = IdentifiedWheel.from_info(model, source=str(record))
+        model["healthy_reference"] = healthy_reference(data, wheel, source=data.name).to_dict()
+    return model
 
 
 def _side_by_side(cfg: DemoConfig) -> bool:

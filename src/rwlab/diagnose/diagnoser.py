@@ -675,6 +675,10 @@ class Diagnoser:
             if "friction" in values and self._detectors["friction_change"].add_sample(t_s, *sample):
                 new += self._fire(t_s, "friction_change")
             for name, value in values.items():
+                # a test the reference holds no statistics for (an identification record
+                # with under four slews through zero has none for the slew test) is off
+                if name not in self._detectors:
+                    continue
                 allowance = self._friction_allowance if name == "friction" else 0.0
                 if not self._detectors[name].add(t_s, value, allowance):
                     continue
