@@ -378,13 +378,15 @@ def _reference_data(file: str, record, Ts: float):
     read from ``file``) at the study's ``Ts``, or why there is none."""
     import numpy as np
 
+    from rwlab.diagnose.features import RECORD_OUTPUTS
     from rwlab.testbed.load import load_record
 
     if Path(file).suffix.lower() != ".mcap":
         return NOT_A_RECORD
-    outputs = ("speed", "current", "age", "lost")
     try:
-        return load_record(file if record is None else record, Ts, outputs=outputs, max_gap=np.inf)
+        return load_record(
+            file if record is None else record, Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf
+        )
     except RwlabError as exc:
         return _message(exc)
 
