@@ -211,7 +211,8 @@ def main() -> None:
     specs |= wheel_set(limit, 10800, "w14") | wheel_set(limit, 11000, "w15")
     specs |= wheel_set(limit, 11200, "w16") | wheel_set(limit, 11400, "w17")
     specs |= wheel_set(limit, 11600, "w18") | wheel_set(limit, 11800, "w19")
-    specs |= wheel_set(limit, 12000, "w20")
+    specs |= wheel_set(limit, 12000, "w20") | wheel_set(limit, 12200, "w21")
+    specs |= wheel_set(limit, 12400, "w22")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
