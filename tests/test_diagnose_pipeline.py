@@ -297,7 +297,9 @@ def test_the_own_reference_is_read_only_at_speeds_its_past_spans():
     at = len(past)
     assert covered[at + 10 : at + 90].all()  # 1500 rpm: inside the past's span
     assert not covered[at + 110 :].any()  # 3000 rpm, then -1500 rpm: never held before
-    assert not f.own(law=True).usable[at + 110 :].any()
+    law = f.own(law=True)
+    assert not channel_mask(law, "current")[at + 110 :].any()
+    assert law.usable[at + 110 :].all()  # the law gates the current channel alone
     assert f.own().usable[at + 110 :].all()  # the offset's reference: every speed
 
 
@@ -605,3 +607,60 @@ def test_an_event_whose_rivals_all_stand_aside_is_refitted_as_it_stands():
     events = [e, x]
     _follow(e, events, bank, 50, limits)
     assert events == [e, x] and e.fault == "friction" and e.fit.log_lr == 12.0
+
+
+def triangle_record(seed: int, n: int = 2400, size: float = 1.0, unit_friction: float = 1.3):
+    """(IOData, wheel) of a wheel slewing between ±2000 rpm at its acceleration limit,
+    never at constant speed (a chirp's fast part): the driver feeds the reference's
+    friction forward, so a unit of ``unit_friction`` × it, and friction × ``size`` from
+    the middle sample on, reach the limit short by their friction's excess."""
+    rng = np.random.default_rng(seed)
+    L, c0 = SCALES.accel_limit_rpm_s, C[0]
+    speed, w, up = np.zeros(n), -1900.0, True
+    for k in range(n):
+        up = (up and w < 2000.0) or w <= -2000.0
+        law = C[1] * w + C[2] * np.sign(w)
+        f = unit_friction * (size if k >= n // 2 else 1.0)
+        w += ((1 if up else -1) * L - (f - 1.0) * law / c0) * TS
+        speed[k] = w
+    accel = np.concatenate([[0.0], np.diff(speed) / TS])
+    current = c0 * np.sign(accel) * L + C[1] * speed + C[2] * np.sign(speed)
+    current = current + SIGMA_A * rng.standard_normal(n)
+    reported = speed + SIGMA_RPM * rng.standard_normal(n)
+    y = np.column_stack([reported, current, np.zeros(n), np.zeros(n)])
+    names = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
+    return IOData(speed, y, TS, output_names=names), Replay(speed)
+
+
+def test_the_units_own_reach_at_the_limit_is_its_reference():
+    """A unit dragging 1.3 × the reference's friction reaches the limit short by its
+    excess: its own reference at the limit reads δ = 1 − 1.3 from the past alone, and
+    the reach less its reference is the noise."""
+    from rwlab.diagnose.features import at_limit, limit_reach
+
+    f = compute_features(*triangle_record(0), SCALES).own(law=True)
+    reach, x, s = limit_reach(f)
+    delta, beta = f.limit_reference.T
+    lag = round(150.0 / TS)
+    assert not np.isfinite(delta[:lag]).any()  # the past only
+    at = at_limit(f) & np.isfinite(delta)
+    assert at.sum() > 300
+    assert np.allclose(delta[at], -0.3, atol=0.02)
+    noise = np.sqrt(2) * SIGMA_RPM / TS  # a difference of two readings, rpm/s
+    assert np.std(reach[at]) > 2 * noise
+    assert np.std((reach - delta * x - beta * s)[at]) < 1.1 * noise
+
+
+def test_friction_at_the_limit_is_named_against_the_units_own_past():
+    """Never at constant speed, on a unit of 1.3 × the reference's friction (a chirp's
+    fast part): friction × 1.7 from mid-record is read at the acceleration limit against
+    the unit's own reach, named and sized; the healthy records of such units raise none."""
+    slews = [compute_features(*triangle_record(s), SCALES) for s in range(4)]
+    holds = [features(s) for s in range(2)]  # the steady channels' noise
+    calibration = DiagnosisCalibration.measure(slews + holds, origin="synthetic")
+    healthy = run(compute_features(*triangle_record(10), SCALES), calibration)
+    assert not healthy.events, healthy.verdict()
+    result = run(compute_features(*triangle_record(11, size=1.7), SCALES), calibration)
+    assert result.events and result.events[0].fault == "friction", result.verdict()
+    fit = result.events[0].fit
+    assert result.events[0].t_s >= 600.0 and fit.ci95[0] <= 1.7 <= fit.ci95[1]

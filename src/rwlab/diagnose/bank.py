@@ -23,7 +23,7 @@ import numpy as np
 
 from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
-from rwlab.diagnose.features import REFERENCE_LAG_S, Features
+from rwlab.diagnose.features import LIMIT_REFERENCE_LAG_S, REFERENCE_LAG_S, Features
 from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
 __all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit"]
@@ -145,11 +145,14 @@ class Bank:
         # (``Detector.own_law``: against the unit's friction law alone)
         own = {law: features.own(law) for law in (False, True)}
         weights = {law: noise.weights(f) for law, f in own.items()}
-        self.own_ready, self.cum_own = {}, {}
+        self.own_ready, self.cum_own, self.cum_limit = {}, {}, {}
         for n, d in self.detectors.items():
             f = own[d.own_law]
             self.own_ready[n] = np.isfinite(f.current_nuisance_a[:, 0])  # type: ignore[index]
             self.cum_own[n] = _cumsum_rows(d.gains(f, weights[d.own_law], self.grid[n]))
+            limit = d.limit_gains(f, weights[d.own_law], self.grid[n])
+            if limit is not None:
+                self.cum_limit[n] = _cumsum_rows(limit)
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
@@ -162,6 +165,7 @@ class Bank:
         self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
         self.past_min = round(PAST_MIN_S / Ts)
         self.own_span = round(REFERENCE_LAG_S / Ts)
+        self.limit_span = round(LIMIT_REFERENCE_LAG_S / Ts)
 
     def _cumulative(
         self, features: Features, weights: dict[str, np.ndarray]
@@ -207,9 +211,7 @@ class Bank:
         law drifts within a record its thresholds carry, measured on healthy records),
         and the past's support only widens the size's interval."""
         det, grid = self.detectors[name], self.grid[name]
-        cum = self.cum_own[name]
-        k = min(k, a + self.own_span)  # later samples' reference holds the window's own
-        ll, past = cum[k] - cum[a], cum[a] - cum[0]
+        ll, past = self.own_gain(name, a, k), self.own_gain(name, 0, a, capped=False)
         phi = self.dispersion.get(f"{name}@own", self.dispersion[name])
         h = det.healthy_size
         if det.own_law:
@@ -226,6 +228,17 @@ class Bank:
         elif not _away(change.size, before.size, det.healthy_size):
             return None
         return _relative(change, before)
+
+    def own_gain(self, name: str, a: int, k: int, capped: bool = True) -> np.ndarray:
+        """Detector ``name``'s log-likelihood over its grid on samples [a, k) against the
+        record's own past, shape (G,); ``capped``: each channel's samples up to its
+        reference's lag after a only (later samples' reference holds the window's own)."""
+        out = np.zeros(len(self.grid[name]))
+        for cum, span in ((self.cum_own, self.own_span), (self.cum_limit, self.limit_span)):
+            if name in cum:
+                end = min(k, a + span) if capped else k
+                out = out + cum[name][end] - cum[name][a]
+        return out
 
     def at(self, name: str, k: int) -> WindowFit:
         """The best window ending at sample k (exclusive) for detector ``name``."""

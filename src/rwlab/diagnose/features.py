@@ -69,6 +69,7 @@ RECORD_OUTPUTS = ("speed", "current", "age", "lost")
 # holds this long of the current channel's samples
 REFERENCE_LAG_S = 300.0
 REFERENCE_MIN_S = 60.0
+LIMIT_REFERENCE_LAG_S = 150.0
 # a twentieth of the acceleration limit: "constant speed" (the model's own lag is then a
 # fraction of an rpm, and the inertia's current a few % of the clamp)
 STEADY_SHARE = 0.05
@@ -179,6 +180,12 @@ class Features:
         fitted on the record's past older than ``REFERENCE_LAG_S``, A, shape (N, 3): its
         offset, viscous and Coulomb parts; NaN until that past holds
         ``REFERENCE_MIN_S`` of usable samples (module docstring).
+    limit_reference : numpy.ndarray or None
+        With ``own(law=True)``: the unit's own reach at the acceleration limit
+        (:func:`limit_reference`), (δ, β), shape (N, 2); NaN where not fitted.
+    current_ready : numpy.ndarray of bool or None
+        With ``own(law=True)``: where the current channel's own law is fitted and
+        interpolates (the other channels keep ``usable``); None: everywhere.
     against_own : bool
         The current residual is against the record's own past (:meth:`own`).
     """
@@ -200,6 +207,8 @@ class Features:
     lost_frames: np.ndarray
     scales: WheelScales
     current_nuisance_a: np.ndarray | None = None
+    limit_reference: np.ndarray | None = None
+    current_ready: np.ndarray | None = None
     against_own: bool = False
 
     def own(self, law: bool = False) -> Features:
@@ -223,16 +232,20 @@ class Features:
             nuisance = current_nuisance(self)
         ready = np.isfinite(nuisance[:, 0])
         usable, friction = self.usable & ready, self.friction_current_a
-        if law:
-            usable = usable & past_covers(self)
+        limit = current_ready = None
+        if law:  # the law gates the current alone: the limit's reach has its own reference
+            usable, current_ready = self.usable, ready & past_covers(self)
             unit = friction + nuisance[:, 1] + nuisance[:, 2]
             friction = np.where(ready, np.where(unit * friction > 0, unit, 0.0), friction)
+            limit = limit_reference(self)
         return replace(
             self,
             current_residual_a=np.where(ready, self.current_residual_a - nuisance.sum(1), 0.0),
             friction_current_a=friction,
             usable=usable,
             current_nuisance_a=nuisance,
+            limit_reference=limit,
+            current_ready=current_ready,
             against_own=True,
         )
 
@@ -375,6 +388,8 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
     """
     ok = features.usable & ~features.repeated
     if name.startswith("current"):
+        if features.current_ready is not None:
+            ok = ok & features.current_ready
         w = features.speed_rpm
         before = np.concatenate([w[:1], w[:-1]])
         ok = ok & (w != 0) & (np.sign(w) == np.sign(before))
@@ -404,6 +419,93 @@ def past_covers(features: Features) -> np.ndarray:
         here = np.sign(f.speed_rpm[lag:]) == side
         covered[lag:] |= here & (lo <= now) & (now <= hi)
     return covered
+
+
+def at_limit(features: Features) -> np.ndarray:
+    """The samples read at the acceleration limit, bool, shape (N,): fresh, the loop
+    demanding its limit (:attr:`Features.saturated`), turning one way through the sample
+    (through a reversal the bearing's friction is static, not its law).
+
+    Parameters
+    ----------
+    features : Features
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    w = features.speed_rpm
+    before = np.concatenate([w[:1], w[:-1]])
+    turning = (w != 0) & (np.sign(w) == np.sign(before))
+    return features.usable & ~features.repeated & features.saturated & turning
+
+
+def limit_reach(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the acceleration limit's reach is read on, shape (N,) each.
+
+    Parameters
+    ----------
+    features : Features
+
+    Returns
+    -------
+    reach : numpy.ndarray
+        Measured acceleration less the limit in the demand's direction, rpm/s.
+    x : numpy.ndarray
+        The reference's friction law (c₁ω + c₂ sign ω)/c₀, rpm/s.
+    s : numpy.ndarray
+        The demand's direction, ±1.
+    """
+    f = features
+    c0, c1, c2, _ = f.scales.current_model
+    s = np.sign(f.demand_accel_rpm_s)
+    reach = f.accel_rpm_s - s * f.scales.accel_limit_rpm_s
+    return reach, (c1 * f.speed_rpm + c2 * np.sign(f.speed_rpm)) / c0, s
+
+
+def limit_reference(features: Features) -> np.ndarray:
+    """The unit's own reach at the acceleration limit, (δ, β) per sample, shape (N, 2).
+
+    At the limit the driver's friction feed-forward is the model's, so a unit whose
+    bearings drag u × the reference's reaches it short by (u − 1)·x (:func:`limit_reach`;
+    x changes sign where a slew passes through zero), δ = 1 − u; and the whole slew's
+    reach sits β·s off the limit in the demand's direction s (the unit's inertia and
+    torque constant, the identified model's own limit). At sample k, (δ, β) is the
+    least-squares fit of the reach on (x, s) over the samples :func:`at_limit` older
+    than ``LIMIT_REFERENCE_LAG_S``; NaN until ``REFERENCE_MIN_S`` of such samples exist
+    and the past has pushed toward and away from zero (else x and s are one). A chirp's
+    fast part holds the wheel at its limit and never at constant speed: there this is
+    the only reference for a friction change against the unit itself.
+
+    Parameters
+    ----------
+    features : Features
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    f = features
+    reach, x, s = limit_reach(f)
+    ok = at_limit(f)
+    X = np.column_stack([x, s])
+    Xo = X * ok[:, None]
+    A = np.cumsum(Xo[:, :, None] * X[:, None, :], axis=0)
+    b = np.cumsum(Xo * reach[:, None], axis=0)
+    count = np.cumsum(ok)
+    lag = round(LIMIT_REFERENCE_LAG_S / f.scales.Ts)
+    out = np.full((f.N, 2), np.nan)
+    if lag >= f.N:
+        return out
+    A, b, count = A[: f.N - lag], b[: f.N - lag], count[: f.N - lag]
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] ** 2
+    # both directions held: x's part not along s is at least a tenth of it
+    ready = (count >= round(REFERENCE_MIN_S / f.scales.Ts)) & (det > 0.1 * A[:, 0, 0] * A[:, 1, 1])
+    det = np.where(ready, det, 1.0)
+    delta = (A[:, 1, 1] * b[:, 0] - A[:, 0, 1] * b[:, 1]) / det
+    beta = (A[:, 0, 0] * b[:, 1] - A[:, 0, 1] * b[:, 0]) / det
+    out[lag:] = np.where(ready[:, None], np.column_stack([delta, beta]), np.nan)
+    return out
 
 
 def current_nuisance(features: Features, steady: bool = False) -> np.ndarray:

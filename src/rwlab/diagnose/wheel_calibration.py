@@ -269,18 +269,18 @@ class DiagnosisCalibration:
 
         out = {}
         for name in bank.detectors:
-            cum, cum_own = bank.cum[name], bank.cum_own[name]
+            cum = bank.cum[name]
             point = bank.zone_bounds[name][0]
             out[name] = {
                 "grid": bank.grid[name],
                 "zone": bank._between(name, point, point),
                 "longest": [cum[b] - cum[a] for a, b in bank.tiles()],
                 "longest@own": [
-                    cum_own[b] - cum_own[a] for a, b in bank.tiles() if fitted(name, a, b)
+                    bank.own_gain(name, a, b) for a, b in bank.tiles() if fitted(name, a, b)
                 ],
                 "shortest": [cum[b] - cum[a] for a, b in bank.tiles(shortest=True)],
                 "shortest@own": [
-                    cum_own[b] - cum_own[a]
+                    bank.own_gain(name, a, b)
                     for a, b in bank.tiles(shortest=True)
                     if fitted(name, a, b)
                 ],
@@ -342,7 +342,9 @@ class DiagnosisCalibration:
                 u, scale, m = float(tail[-1]), float(np.mean(tail - tail[-1])), tail.size
             else:  # the GLR's own tail: P(log-LR > h) ∝ exp(−h)
                 u, scale, m = HALF_CHI2_95, 1.0, max(peaks.size, 1)
-            h = u + max(scale, 1e-6) * math.log(m / max(wanted, 1e-300))
+            # never a lighter tail than the GLR's own (scale 1): a few peaks just over the
+            # floor say little of the rare ones, which one channel of the statistic may hold
+            h = u + max(scale, 1.0) * math.log(m / max(wanted, 1e-300))
             h = max(h, float(peaks[0]) if peaks.size else HALF_CHI2_95)
             extrapolated = True
         n = int(np.sum(peaks > h))

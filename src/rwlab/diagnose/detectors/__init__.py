@@ -14,7 +14,7 @@ MODEL_BASED = ("friction", "torque_constant", "current_limit", "speed_sensor_bia
 # rows): two faults whose channels overlap compete for one event; two on disjoint
 # channels can both be present
 SIGNATURE = {
-    "friction": frozenset({"current"}),
+    "friction": frozenset({"current", "accel"}),
     "torque_constant": frozenset({"current", "accel"}),
     "current_limit": frozenset({"accel"}),
     "speed_sensor_bias": frozenset({"speed"}),

@@ -159,6 +159,23 @@ class Detector(ABC):
         grid : numpy.ndarray, shape (G,)
         """
 
+    def limit_gains(
+        self, features: Features, weights: dict[str, np.ndarray], grid: np.ndarray
+    ) -> np.ndarray | None:
+        """Against the record's own past, the per-sample gains read at the acceleration
+        limit against the unit's own reach there (``Features.limit_reference``,
+        whose reference lags ``LIMIT_REFERENCE_LAG_S``), shape (N, G); None (the
+        default): the detector reads none.
+
+        Parameters
+        ----------
+        features : Features
+            Against the own past (``Features.own(law=True)``).
+        weights : dict of str to numpy.ndarray
+        grid : numpy.ndarray, shape (G,)
+        """
+        return None
+
     def refine(
         self,
         features: Features,

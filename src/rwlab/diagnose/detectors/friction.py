@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rwlab.diagnose.detectors.base import Detector
-from rwlab.diagnose.features import STEADY_SHARE, Features
+from rwlab.diagnose.features import STEADY_SHARE, Features, at_limit, limit_reach
 
 
 class Friction(Detector):
@@ -18,7 +18,11 @@ class Friction(Detector):
     (:meth:`Detector.shortfall`). Against the record's own past it reads the current
     alone, against the unit's friction law (``Features.own(law=True)``): the own past
     is a reference for the current only, and read on the acceleration with a healthy
-    zone of the own past's width, a clamp's shortfall passed for friction × 8."""
+    zone of the own past's width, a clamp's shortfall passed for friction × 8. At the
+    acceleration limit, where a chirp's fast part holds the wheel and never at constant
+    speed, it reads the reach against the unit's own (:meth:`limit_gains`,
+    ``Features.limit_reference``): friction × F falls short by (F − 1) × the unit's
+    friction."""
 
     fault = "friction"
     unit = "factor"
@@ -39,3 +43,14 @@ class Friction(Detector):
         clamp = features.scales.current_limit_a
         p_accel = self.shortfall(features, clamp, friction_factor=grid[None, :])
         return gain + self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p_accel)
+
+    def limit_gains(self, features, weights, grid):
+        ref = features.limit_reference
+        if ref is None:
+            return None
+        ready = at_limit(features) & np.isfinite(ref[:, 0])
+        delta, beta = np.where(ready[:, None], ref, 0.0).T
+        reach, x, s = limit_reach(features)
+        r = reach - delta * x - beta * s  # the unit's own reach taken out
+        p = (1.0 - grid[None, :]) * ((1.0 - delta) * x)[:, None]  # × the unit's friction
+        return self.channel_gain(r, weights["accel"] * ready, p)
