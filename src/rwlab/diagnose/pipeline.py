@@ -252,6 +252,7 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     -------
     Result
     """
+    features = calibration.applied(features)
     bank = Bank(
         features, calibration.noise, calibration.zones, calibration.drift, calibration.dispersion
     )
