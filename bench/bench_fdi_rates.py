@@ -47,7 +47,7 @@ def main() -> None:
     for name in args.judge:
         f = features(name)
         hours += f.N * scales.Ts / 3600
-        bank = Bank(cal.applied(f), cal.noise, cal.zones, cal.drift, cal.dispersion)
+        bank = Bank(f, cal.noise, cal.zones, cal.drift, cal.dispersion)
         for detector, stat in bank.statistics().items():
             peaks[detector] += excursion_peaks(stat)
     print(

@@ -664,36 +664,3 @@ def test_friction_at_the_limit_is_named_against_the_units_own_past():
     assert result.events and result.events[0].fault == "friction", result.verdict()
     fit = result.events[0].fit
     assert result.events[0].t_s >= 600.0 and fit.ci95[0] <= 1.7 <= fit.ci95[1]
-
-
-def test_the_calibration_fits_the_friction_law_the_records_hold():
-    """A model file whose balance splits the friction wrongly (what a two-level PRBS
-    leaves: the right current at 2000 rpm, none of it viscous): the calibration fits the
-    law its healthy records hold at every speed, and reads every record against it."""
-    from rwlab.diagnose.features import fit_friction_law
-
-    wrong = WheelScales(TS, 300.0, 0.7, (C[0], 0.0, C[2] + 2000.0 * C[1], C[3]))
-    records = [compute_features(*record(s), wrong) for s in range(3)]
-    c1, c2, c3 = fit_friction_law(records)
-    assert c1 == pytest.approx(C[1], rel=0.05) and c2 == pytest.approx(C[2], rel=0.05)
-    assert abs(c3) < 1e-3
-    cal = DiagnosisCalibration.measure(records, origin="synthetic")
-    assert cal.friction_law == pytest.approx((c1, c2, c3))
-    f = compute_features(*record(7), wrong)
-    steady = channel_mask(f, "current_steady")
-    at_3000 = steady & (np.abs(f.speed_rpm - 3000.0) < 2.0)
-    # against the file's law the 3000-rpm holds miss C[1]·1000 (2.5 mA); against the fit, not
-    assert abs(np.median(f.current_residual_a[at_3000])) > 2e-3
-    assert abs(np.median(cal.applied(f).current_residual_a[at_3000])) < 5e-4
-
-
-def test_a_friction_law_needs_several_speeds_each_way():
-    one_speed = np.full(400, 1500.0)
-    names = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
-    current = C[1] * one_speed + C[2]
-    y = np.column_stack([one_speed, current, np.zeros(400), np.zeros(400)])
-    f = compute_features(IOData(one_speed, y, TS, output_names=names), Replay(one_speed), SCALES)
-    from rwlab.diagnose.features import fit_friction_law
-
-    with pytest.raises(DataError, match="several speeds"):
-        fit_friction_law([f])

@@ -60,7 +60,6 @@ __all__ = [
     "channel_mask",
     "compute_features",
     "current_nuisance",
-    "fit_friction_law",
 ]
 
 # what load_record must give the diagnosis (its default is the speed alone)
@@ -249,36 +248,6 @@ class Features:
             current_ready=current_ready,
             against_own=True,
         )
-
-    def with_friction_law(self, law: tuple[float, float, float]) -> Features:
-        """The same record against another friction law and current offset.
-
-        Parameters
-        ----------
-        law : tuple of 3 float
-            c₁ (A per rpm), c₂ (A), c₃ (A) of the current balance (module docstring);
-            c₀ stays the model's.
-
-        Returns
-        -------
-        Features
-        """
-        c0 = self.scales.current_model[0]
-        c1, c2, c3 = law
-        friction = c1 * self.speed_rpm + c2 * np.sign(self.speed_rpm)
-        drive = c0 * self.accel_rpm_s + friction
-        out = replace(
-            self,
-            scales=replace(self.scales, current_model=(c0, c1, c2, c3)),
-            friction_current_a=friction,
-            drive_current_a=drive,
-            current_residual_a=self.current_a - drive - c3,
-            current_nuisance_a=None,
-            limit_reference=None,
-            current_ready=None,
-            against_own=False,
-        )
-        return replace(out, current_nuisance_a=current_nuisance(out))
 
     @property
     def N(self) -> int:
@@ -537,49 +506,6 @@ def limit_reference(features: Features) -> np.ndarray:
     beta = (A[:, 0, 0] * b[:, 1] - A[:, 0, 1] * b[:, 0]) / det
     out[lag:] = np.where(ready[:, None], np.column_stack([delta, beta]), np.nan)
     return out
-
-
-def fit_friction_law(records: list[Features]) -> tuple[float, float, float]:
-    """The friction law and current offset (c₁, c₂, c₃) that healthy records hold, A per
-    rpm, A, A: least squares of the current less the inertia's c₀·α on c₁ω + c₂ sign ω
-    + c₃ over their constant-speed samples (:func:`channel_mask` ``current_steady``).
-
-    The identified model's balance is fitted on its identification record, whose speeds a
-    two-level PRBS confines to ±its amplitude: there ω and sign ω are one regressor, and
-    the split between viscous and Coulomb friction is not determined (measured on the
-    NRWA-T6 twin: c₁ = −1.2·10⁻⁵ A/rpm, a friction falling with speed; 7.1·10⁻⁶ fitted
-    on 3 h of PRBS, chirps, multisines and steps, 9.8·10⁻⁶ the twin's). A friction × F
-    scales this law, so its shape decides the size read at every speed.
-
-    Parameters
-    ----------
-    records : list of Features
-
-    Returns
-    -------
-    tuple of 3 float
-
-    Raises
-    ------
-    DataError
-        Fewer than 3 constant-speed samples, or no speeds on both sides of zero or at two
-        speeds (the law is not determined).
-    """
-    rows, target = [], []
-    for f in records:
-        ok = channel_mask(f, "current_steady")
-        w = f.speed_rpm[ok]
-        rows.append(np.column_stack([w, np.sign(w), np.ones(w.size)]))
-        target.append(f.current_a[ok] - f.scales.current_model[0] * f.accel_rpm_s[ok])
-    X, y = np.vstack(rows), np.concatenate(target)
-    if len(y) < 3 or np.linalg.matrix_rank(X / np.maximum(np.abs(X).max(0), 1e-300)) < 3:
-        raise DataError(
-            "the healthy records hold too few constant-speed samples, or speeds of one "
-            "sign or one magnitude only, to fit the friction law: calibrate on records "
-            "that hold several speeds each way (steps, PRBS and chirps)"
-        )
-    c1, c2, c3 = np.linalg.lstsq(X, y, rcond=None)[0]
-    return float(c1), float(c2), float(c3)
 
 
 def current_nuisance(features: Features, steady: bool = False) -> np.ndarray:

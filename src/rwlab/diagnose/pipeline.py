@@ -252,7 +252,6 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     -------
     Result
     """
-    features = calibration.applied(features)
     bank = Bank(
         features, calibration.noise, calibration.zones, calibration.drift, calibration.dispersion
     )

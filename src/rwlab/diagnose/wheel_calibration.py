@@ -4,10 +4,6 @@
 (the lab's own wheel, or the twin's units for the shipped file) and measures
 everything the pipeline decides with:
 
-- the friction law and current offset the records hold
-  (:func:`~rwlab.diagnose.features.fit_friction_law`: the identified model's is
-  fitted on a two-level PRBS, which does not split viscous from Coulomb friction),
-  against which every record is then read (:meth:`DiagnosisCalibration.applied`);
 - the noise model (:class:`~rwlab.diagnose.noise.NoiseModel`);
 - per model-based fault, the *population zone*: the narrowest interval that
   every healthy window's profile-likelihood 95 % interval of the fault's size
@@ -54,7 +50,7 @@ from rwlab._io import write_json
 from rwlab.diagnose.bank import Bank
 from rwlab.diagnose.detectors import MODEL_BASED, FrozenReading
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
-from rwlab.diagnose.features import Features, fit_friction_law
+from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
 from rwlab.errors import ConfigError, DataError, FileFormatError
 
@@ -64,7 +60,6 @@ FORMAT = "rwlab.DiagnosisCalibration/1"
 STUCK = "speed_sensor_stuck"
 MIN_TAIL = 5  # peaks needed to fit the tail's scale
 TAIL = 20  # the largest peaks the tail is fitted to
-LAW_KEYS = ("a_per_rpm", "a_coulomb", "a_offset")  # the friction law's c₁, c₂, c₃ in the file
 
 
 @dataclass(frozen=True)
@@ -146,10 +141,6 @@ class DiagnosisCalibration:
         One line: whose wheel, which records.
     records : int
         How many healthy records it was measured on.
-    friction_law : tuple of 3 float or None
-        The current balance's c₁ (A/rpm), c₂ (A) and c₃ (A) the records hold
-        (:func:`~rwlab.diagnose.features.fit_friction_law`), which the pipeline reads the
-        records against in place of the model file's; None: the model file's.
     """
 
     Ts: float
@@ -164,22 +155,6 @@ class DiagnosisCalibration:
     sources: tuple[str, ...] = ()
     origin: str = ""
     records: int = field(default=0)
-    friction_law: tuple[float, float, float] | None = None
-
-    def applied(self, features: Features) -> Features:
-        """A record's features against this calibration's friction law (as measured).
-
-        Parameters
-        ----------
-        features : Features
-
-        Returns
-        -------
-        Features
-        """
-        if self.friction_law is None:
-            return features
-        return features.with_friction_law(self.friction_law)
 
     @classmethod
     def measure(
@@ -209,8 +184,6 @@ class DiagnosisCalibration:
         Ts = records[0].scales.Ts
         if any(not math.isclose(f.scales.Ts, Ts) for f in records):
             raise ConfigError("a calibration's records must share one sample time")
-        law = fit_friction_law(records)
-        records = [f.with_friction_law(law) for f in records]
         noise = NoiseModel.measure(records)
         point = {n: cls._healthy_point(n, records[0]) for n in MODEL_BASED}
         none = dict.fromkeys(MODEL_BASED, 0.0)
@@ -282,7 +255,6 @@ class DiagnosisCalibration:
             sources=tuple(str(s) for s in sources),
             origin=origin,
             records=len(records),
-            friction_law=law,
         )
 
     @staticmethod
@@ -394,9 +366,6 @@ class DiagnosisCalibration:
             "peaks": {k: list(v) for k, v in self.peaks.items()},
             "repeat_probability": self.repeat_probability,
             "lost_per_sample": self.lost_per_sample,
-            "friction_law": None
-            if self.friction_law is None
-            else dict(zip(LAW_KEYS, self.friction_law, strict=True)),
         }
 
     @classmethod
@@ -421,9 +390,6 @@ class DiagnosisCalibration:
                 sources=tuple(d.get("sources", ())),
                 origin=str(d.get("origin", "")),
                 records=int(d.get("records", 0)),
-                friction_law=None
-                if d.get("friction_law") is None
-                else tuple(float(d["friction_law"][k]) for k in LAW_KEYS),  # type: ignore[arg-type]
             )
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FileFormatError(f"{source}: bad diagnosis calibration ({exc!r})") from None
