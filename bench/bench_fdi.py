@@ -101,6 +101,17 @@ def wheel_set(current_limit_a: float, first: int = 9000, tag: str = "w5") -> dic
     return out
 
 
+def healthy_set(first: int, tag: str, count: int) -> dict[str, tuple]:
+    """name → spec of ``count`` healthy 20-min records on units ``first``+1..., the four
+    signals in turn as the calibration's (``hr``: units 13001-13024, made to judge the
+    rates on request on the calibration's signal mix)."""
+    out = {}
+    for i in range(count):
+        u = first + 1 + i
+        out[f"{tag}_h{i}"] = (u, 93000 + u, b.SIGNALS[i % 4], 1200, (), "", None)
+    return out
+
+
 def make(cache: Path, name: str, spec: tuple, wheel: str) -> Path:
     """Simulate one record of ``wheel`` into the cache (kept: made once)."""
     path = cache / f"{name}.mcap"
@@ -212,7 +223,7 @@ def main() -> None:
     specs |= wheel_set(limit, 11200, "w16") | wheel_set(limit, 11400, "w17")
     specs |= wheel_set(limit, 11600, "w18") | wheel_set(limit, 11800, "w19")
     specs |= wheel_set(limit, 12000, "w20") | wheel_set(limit, 12200, "w21")
-    specs |= wheel_set(limit, 12400, "w22")
+    specs |= wheel_set(limit, 12400, "w22") | healthy_set(13000, "hr", 24)
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
