@@ -205,6 +205,17 @@ def test_thresholds_fall_as_the_rate_asked_rises(calibration):
         calibration.threshold("friction", 0.0)
 
 
+def test_an_extrapolated_tail_is_never_lighter_than_the_glrs_own(calibration):
+    """Twenty peaks crowded just over the floor (an exponential of scale 0.19 fits them)
+    say little of the rare ones: a rate far below them is extrapolated at the GLR's own
+    unit scale, h = u + ln(m / (rate·hours)), u the twentieth peak."""
+    crowded = tuple(2.0 + 0.02 * i for i in range(20))[::-1]
+    cal = replace(calibration, peaks={n: crowded for n in calibration.peaks}, hours=3.0)
+    t = cal.threshold("friction", 1e-3)
+    assert t.extrapolated
+    assert t.log_lr == pytest.approx(2.0 + math.log(20 / (1e-3 * 3.0)))
+
+
 def test_calibration_file_round_trips(calibration, tmp_path):
     path = calibration.save(tmp_path / "calibration.json")
     again = DiagnosisCalibration.load(path)

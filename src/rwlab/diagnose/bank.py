@@ -231,8 +231,22 @@ class Bank:
 
     def own_gain(self, name: str, a: int, k: int, capped: bool = True) -> np.ndarray:
         """Detector ``name``'s log-likelihood over its grid on samples [a, k) against the
-        record's own past, shape (G,); ``capped``: each channel's samples up to its
-        reference's lag after a only (later samples' reference holds the window's own)."""
+        record's own past.
+
+        Parameters
+        ----------
+        name : str
+            A model-based detector's fault.
+        a, k : int
+            The window's first and past-the-last samples.
+        capped : bool
+            Each channel's samples up to its reference's lag after a only (later
+            samples' reference holds the window's own).
+
+        Returns
+        -------
+        numpy.ndarray, shape (G,)
+        """
         out = np.zeros(len(self.grid[name]))
         for cum, span in ((self.cum_own, self.own_span), (self.cum_limit, self.limit_span)):
             if name in cum:

@@ -19,7 +19,8 @@ everything the pipeline decides with:
   hour maps to the threshold exceeded r·hours times; below one such peak per
   record-hour the tail is extrapolated as an exponential fitted to the largest
   peaks (peaks over threshold; with under ``MIN_TAIL`` peaks the GLR's own
-  tail, 2·log-LR ~ χ²₁, i.e. a unit scale), and the threshold says so;
+  tail, 2·log-LR ~ χ²₁, i.e. a unit scale, which is also the lightest tail a fit
+  may give), and the threshold says so;
 - the telemetry's repeat probability of a non-zero speed reading (Laplace's
   rule) and frames lost per sample (Jeffreys): the stuck and dropout tests.
 

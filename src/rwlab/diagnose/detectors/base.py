@@ -173,6 +173,10 @@ class Detector(ABC):
             Against the own past (``Features.own(law=True)``).
         weights : dict of str to numpy.ndarray
         grid : numpy.ndarray, shape (G,)
+
+        Returns
+        -------
+        numpy.ndarray or None
         """
         return None
 
