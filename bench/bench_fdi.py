@@ -224,6 +224,7 @@ def main() -> None:
     specs |= wheel_set(limit, 11600, "w18") | wheel_set(limit, 11800, "w19")
     specs |= wheel_set(limit, 12000, "w20") | wheel_set(limit, 12200, "w21")
     specs |= wheel_set(limit, 12400, "w22") | healthy_set(13000, "hr", 24)
+    specs |= wheel_set(limit, 12600, "w23") | wheel_set(limit, 12800, "w24")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
