@@ -69,6 +69,9 @@ RECORD_OUTPUTS = ("speed", "current", "age", "lost")
 # holds this long of the current channel's samples
 REFERENCE_LAG_S = 300.0
 REFERENCE_MIN_S = 60.0
+# design choice: the reach at the acceleration limit is referenced half as far back (a
+# signal that reaches the limit late, a chirp's fast part, has little past there); a
+# window reads its samples only that far from its start (Bank.own_gain)
 LIMIT_REFERENCE_LAG_S = 150.0
 # a twentieth of the acceleration limit: "constant speed" (the model's own lag is then a
 # fraction of an rpm, and the inertia's current a few % of the clamp)
