@@ -669,6 +669,9 @@ def test_friction_at_the_limit_is_named_against_the_units_own_past():
     slews = [compute_features(*triangle_record(s), SCALES) for s in range(4)]
     holds = [features(s) for s in range(2)]  # the steady channels' noise
     calibration = DiagnosisCalibration.measure(slews + holds, origin="synthetic")
+    # the reach's own scatter is measured for its weights: the difference of two readings
+    sigma = calibration.noise.sigma["limit_own"][0]
+    assert sigma == pytest.approx(np.sqrt(2) * SIGMA_RPM / TS, rel=0.15)
     healthy = run(compute_features(*triangle_record(10), SCALES), calibration)
     assert not healthy.events, healthy.verdict()
     result = run(compute_features(*triangle_record(11, size=1.7), SCALES), calibration)

@@ -466,6 +466,30 @@ def limit_reach(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return reach, (c1 * f.speed_rpm + c2 * np.sign(f.speed_rpm)) / c0, s
 
 
+def own_limit_residual(features: Features) -> tuple[np.ndarray, np.ndarray]:
+    """The reach at the acceleration limit less the unit's own (:func:`limit_reference`),
+    rpm/s, and where it is read, bool, shape (N,) each.
+
+    Parameters
+    ----------
+    features : Features
+        Against the own past (``Features.own(law=True)``).
+
+    Returns
+    -------
+    residual : numpy.ndarray
+        0 where not read.
+    read : numpy.ndarray of bool
+    """
+    ref = features.limit_reference
+    if ref is None:
+        ref = limit_reference(features)
+    read = at_limit(features) & np.isfinite(ref[:, 0])
+    delta, beta = np.where(read[:, None], ref, 0.0).T
+    reach, x, s = limit_reach(features)
+    return np.where(read, reach - delta * x - beta * s, 0.0), read
+
+
 def limit_reference(features: Features) -> np.ndarray:
     """The unit's own reach at the acceleration limit, (δ, β) per sample, shape (N, 2).
 

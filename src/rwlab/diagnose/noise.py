@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rwlab.diagnose.features import Features, channel_mask
+from rwlab.diagnose.features import Features, channel_mask, own_limit_residual
 from rwlab.errors import DataError
 
 __all__ = ["CHANNELS", "NoiseModel"]
@@ -47,6 +47,9 @@ MIN_SAMPLES = 30  # a bin with fewer healthy samples takes its neighbour's σ
 # |model speed| bin edges, rpm: ×2 apart from the slowest reading a Hall wheel gives to
 # its top speeds; where a wheel's reading turns coarse is measured, not assumed
 SPEED_READ = ("speed", "accel")  # the channels read off the speed sensor
+# the entry of the reach at the acceleration limit against the unit's own
+# (features.own_limit_residual): one σ, its own scatter, not the acceleration channel's
+LIMIT = "limit_own"
 SPEED_EDGES = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0, 2560.0, 5120.0)
 
 
@@ -100,6 +103,17 @@ def _binned_scale(
     return s
 
 
+def _inflation(z: np.ndarray, Ts: float) -> float:
+    """κ of standardised residuals z: the variance of their ``BLOCK_S`` means over white
+    noise's (≥ 1)."""
+    block = max(2, round(BLOCK_S / Ts))
+    n = z.size // block
+    if n == 0:
+        return 1.0
+    means = z[: n * block].reshape(n, block).mean(axis=1)
+    return max(1.0, float(means.var() * block / max(z.var(), 1e-300)))
+
+
 @dataclass(frozen=True)
 class NoiseModel:
     """σ per channel per jerk bin and speed bin, and each channel's inflation.
@@ -142,6 +156,11 @@ class NoiseModel:
                 # zero crossing, is no finer than a hold there)
                 read = self.sigma[key][0] * g
                 out[name] = np.where(mask, 1.0 / (np.maximum(sigma, read) ** 2 * kappa), 0.0)
+        if LIMIT in self.sigma:  # the reach at the limit against the unit's own
+            read = features.usable & ~features.repeated
+            out["limit"] = np.where(
+                read, 1.0 / (self.sigma[LIMIT][0] ** 2 * self.inflation[LIMIT]), 0.0
+            )
         # the current's level against a clamp: 1/σ² without κ, each sample its own evidence
         # (a reading over the clamp is the reading, not the model's slow misfit)
         key = self.key("current", features.against_own)
@@ -208,11 +227,17 @@ class NoiseModel:
                     v[held] / s[0], speed_bin[held], len(SPEED_EDGES) + 1, exact_is_unknown=True
                 )
                 factor[key] = tuple(float(x) for x in np.maximum(g, 1.0))
-            z = v / scale
-            block = max(2, round(BLOCK_S / group[0].scales.Ts))
-            n = z.size // block
-            means = z[: n * block].reshape(n, block).mean(axis=1)
-            inflation[key] = max(1.0, float(means.var() * block / max(z.var(), 1e-300)))
+            inflation[key] = _inflation(v / scale, group[0].scales.Ts)
+        v = _concat(
+            [
+                r[read] - np.median(r[read])
+                for r, read in map(own_limit_residual, own["current_steady"])
+                if read.any()
+            ]
+        )
+        if v.size >= MIN_SAMPLES:  # else the reach is weighed as the acceleration channel
+            sigma[LIMIT] = (1.4826 * float(np.median(np.abs(v))),)
+            inflation[LIMIT] = _inflation(v / sigma[LIMIT][0], own["current_steady"][0].scales.Ts)
         return cls(sigma, inflation, factor)
 
     def to_dict(self) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rwlab.diagnose.detectors.base import Detector
-from rwlab.diagnose.features import STEADY_SHARE, Features, at_limit, limit_reach
+from rwlab.diagnose.features import STEADY_SHARE, Features, limit_reach, own_limit_residual
 
 
 class Friction(Detector):
@@ -45,12 +45,10 @@ class Friction(Detector):
         return gain + self.channel_gain(features.accel_residual_rpm_s, weights["accel"], p_accel)
 
     def limit_gains(self, features, weights, grid):
-        ref = features.limit_reference
-        if ref is None:
+        if features.limit_reference is None:
             return None
-        ready = at_limit(features) & np.isfinite(ref[:, 0])
-        delta, beta = np.where(ready[:, None], ref, 0.0).T
-        reach, x, s = limit_reach(features)
-        r = reach - delta * x - beta * s  # the unit's own reach taken out
+        r, read = own_limit_residual(features)
+        delta = np.where(read, features.limit_reference[:, 0], 0.0)
+        _, x, _ = limit_reach(features)
         p = (1.0 - grid[None, :]) * ((1.0 - delta) * x)[:, None]  # × the unit's friction
-        return self.channel_gain(r, weights["accel"] * ready, p)
+        return self.channel_gain(r, weights.get("limit", weights["accel"]) * read, p)
