@@ -47,10 +47,10 @@ MIN_SAMPLES = 30  # a bin with fewer healthy samples takes its neighbour's σ
 # |model speed| bin edges, rpm: ×2 apart from the slowest reading a Hall wheel gives to
 # its top speeds; where a wheel's reading turns coarse is measured, not assumed
 SPEED_READ = ("speed", "accel")  # the channels read off the speed sensor
+SPEED_EDGES = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0, 2560.0, 5120.0)
 # the entry of the reach at the acceleration limit against the unit's own
 # (features.own_limit_residual): one σ, its own scatter, not the acceleration channel's
 LIMIT = "limit_own"
-SPEED_EDGES = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0, 2560.0, 5120.0)
 
 
 def jerk(features: Features) -> np.ndarray:
@@ -122,7 +122,8 @@ class NoiseModel:
     ----------
     sigma : dict of str to tuple of float
         Per channel (:data:`CHANNELS`), σ in each of ``len(JERK_EDGES) + 2`` bins
-        (:func:`bins`), in the channel's unit (A, rpm/s, rpm).
+        (:func:`bins`), in the channel's unit (A, rpm/s, rpm); :data:`LIMIT`: one σ of
+        the reach at the acceleration limit against the unit's own, rpm/s.
     inflation : dict of str to float
         κ per channel (≥ 1).
     speed_factor : dict of str to tuple of float
