@@ -393,12 +393,17 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
     if name.startswith("current"):
         if features.current_ready is not None:
             ok = ok & features.current_ready
-        w = features.speed_rpm
-        before = np.concatenate([w[:1], w[:-1]])
-        ok = ok & (w != 0) & (np.sign(w) == np.sign(before))
+        ok = ok & _turning(features)
     if name == "current_steady":
         ok = ok & features.steady(STEADY_SHARE)
     return ok
+
+
+def _turning(features: Features) -> np.ndarray:
+    """A non-zero reading that kept its direction over the sample, bool, shape (N,)."""
+    w = features.speed_rpm
+    before = np.concatenate([w[:1], w[:-1]])
+    return (w != 0) & (np.sign(w) == np.sign(before))
 
 
 def past_covers(features: Features) -> np.ndarray:
@@ -437,10 +442,7 @@ def at_limit(features: Features) -> np.ndarray:
     -------
     numpy.ndarray
     """
-    w = features.speed_rpm
-    before = np.concatenate([w[:1], w[:-1]])
-    turning = (w != 0) & (np.sign(w) == np.sign(before))
-    return features.usable & ~features.repeated & features.saturated & turning
+    return features.usable & ~features.repeated & features.saturated & _turning(features)
 
 
 def limit_reach(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
