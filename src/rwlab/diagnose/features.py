@@ -73,6 +73,10 @@ REFERENCE_MIN_S = 60.0
 # signal that reaches the limit late, a chirp's fast part, has little past there); a
 # window reads its samples only that far from its start (Bank.own_gain)
 LIMIT_REFERENCE_LAG_S = 150.0
+# textbook, not tuned: at three Stribeck speeds the Stribeck excess is e⁻⁹ of itself, so
+# outside that band (or three times the slowest reading) a wheel's friction is its
+# Coulomb and viscous law
+STICTION_BAND = 3.0
 # a twentieth of the acceleration limit: "constant speed" (the model's own lag is then a
 # fraction of an rpm, and the inertia's current a few % of the clamp)
 STEADY_SHARE = 0.05
@@ -97,6 +101,10 @@ class WheelScales:
         model's (``rwlab identify`` fits the grey box only with ``--nonlinear-models``;
         the two differed by 1.2 % on a 25-minute twin PRBS), else 0 (the catch-up term
         is then left out).
+    stiction_band_rpm : float
+        Under this speed the bearing's law is breakaway, not the balance's Coulomb and
+        viscous law: the current and the reach are not read there (0: read down to the
+        slowest reading).
     """
 
     Ts: float
@@ -104,6 +112,7 @@ class WheelScales:
     current_limit_a: float
     current_model: tuple[float, float, float, float]
     loop_gain_per_s: float = 0.0
+    stiction_band_rpm: float = 0.0
 
     @classmethod
     def from_model_file(cls, path) -> WheelScales:
@@ -149,6 +158,41 @@ class WheelScales:
             ),
         )
 
+    @classmethod
+    def from_params(cls, params, Ts: float) -> WheelScales:
+        """The scales of a wheel model's parameters (a twin's, or a datasheet's), for
+        acceleration-mode records: the driver's feed-forward is this model's current
+        balance, so it is the healthy reference (c₃ = 0: no sense offset).
+
+        Parameters
+        ----------
+        params : WheelParams
+            The wheel model.
+        Ts : float
+            Sample time of the records, s.
+
+        Returns
+        -------
+        WheelScales
+            With the stiction band :data:`STICTION_BAND` × the Stribeck speed or the
+            slowest reading, whichever is larger.
+        """
+        rad = math.pi / 30  # rad/s per rpm
+        kt = params.torque_constant
+        stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
+        return cls(
+            Ts=float(Ts),
+            accel_limit_rpm_s=float(params.max_accel_rpm_s),
+            current_limit_a=float(params.current_limit),
+            current_model=(
+                params.inertia * rad / kt,
+                params.viscous_friction * rad / kt,
+                params.coulomb_friction / kt,
+                0.0,
+            ),
+            stiction_band_rpm=STICTION_BAND * max(stribeck, params.min_measurable_rpm),
+        )
+
 
 @dataclass(frozen=True)
 class Features:
@@ -191,6 +235,11 @@ class Features:
         interpolates (the other channels keep ``usable``); None: everywhere.
     against_own : bool
         The current residual is against the record's own past (:meth:`own`).
+    open_loop : bool
+        An acceleration-mode record: the driver feeds its model's current forward at
+        every sample, as the speed loop does at its acceleration limit, so every sample
+        is read as :attr:`saturated`; no speed reference (the speed residual is 0: a
+        sensor bias is not observable).
     """
 
     t_s: np.ndarray
@@ -213,6 +262,7 @@ class Features:
     limit_reference: np.ndarray | None = None
     current_ready: np.ndarray | None = None
     against_own: bool = False
+    open_loop: bool = False
 
     def own(self, law: bool = False) -> Features:
         """The same features with the current residual against the record's own past
@@ -271,6 +321,8 @@ class Features:
         just under the limit while the wheel is still ramping into it, and its misfit
         there is the slew's, not a quiet sample's (a healthy PRBS's slew entry otherwise
         gave one sample a log-LR of 860 for a weak motor)."""
+        if self.open_loop:
+            return np.ones(self.N, dtype=bool)
         limit = self.scales.accel_limit_rpm_s
         return np.abs(self.demand_accel_rpm_s) >= limit * (1 - STEADY_SHARE)
 
@@ -282,8 +334,11 @@ def _columns(data: IOData, Ts: float) -> dict[str, np.ndarray]:
             f"the data are sampled at {data.Ts:g} s, the model at {Ts:g} s: load the record "
             f"on the model's grid, load_record(path, {Ts:g}, outputs={RECORD_OUTPUTS!r})"
         )
-    if data.nu != 1 or (data.input_units and data.input_units[0] == "rpm/s"):
-        raise DataError("diagnosis needs one input, the speed command in rpm (a speed-mode record)")
+    if data.nu != 1:
+        raise DataError(
+            "diagnosis needs one input: the speed command in rpm, or the acceleration "
+            "command in rpm/s"
+        )
     names = list(data.output_names)
     for needed in ("speed_rpm", "current_a"):
         if needed not in names:
@@ -297,7 +352,7 @@ def _columns(data: IOData, Ts: float) -> dict[str, np.ndarray]:
     out.setdefault("telemetry_age_s", np.zeros(data.N))
     out.setdefault("lost_frames", np.zeros(data.N))
     u = np.asarray(data.u[:, 0], dtype=float)
-    out["held_rpm"] = np.concatenate([u[:1], u[:-1]])  # in force over the last interval
+    out["held"] = np.concatenate([u[:1], u[:-1]])  # in force over the last interval
     return out
 
 
@@ -307,10 +362,12 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
     Parameters
     ----------
     data : IOData
-        u = speed command (rpm); outputs ``speed_rpm``, ``current_a`` and, where the
-        record has them, ``telemetry_age_s`` and ``lost_frames``, at the model's Ts.
-    wheel : IdentifiedWheel
-        The identified model (reset and stepped here; the caller's copy is reused).
+        u = speed command (rpm), or acceleration command (rpm/s: an acceleration-mode
+        record, ``Features.open_loop``); outputs ``speed_rpm``, ``current_a`` and, where
+        the record has them, ``telemetry_age_s`` and ``lost_frames``, at the model's Ts.
+    wheel : IdentifiedWheel or None
+        The identified model (reset and stepped here; the caller's copy is reused);
+        unused for an acceleration-mode record.
     scales : WheelScales
 
     Returns
@@ -320,28 +377,29 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
     Raises
     ------
     DataError
-        Another sample time, no speed or current, an acceleration-mode record,
-        non-finite values.
+        Another sample time, no speed or current, more than one input, non-finite values.
     """
     Ts = scales.Ts
     col = _columns(data, Ts)
     speed, current = col["speed_rpm"], col["current_a"]
-    wheel.reset(float(speed[0]))
-    model = np.empty(data.N)
-    model[0] = speed[0]
-    for k in range(1, data.N):
-        model[k] = wheel.step(float(col["held_rpm"][k]))
     accel = np.concatenate([[0.0], np.diff(speed) / Ts])
-    model_accel = np.concatenate([[0.0], np.diff(model) / Ts])
+    limit = scales.accel_limit_rpm_s
+    open_loop = bool(data.input_units) and data.input_units[0] == "rpm/s"
+    if open_loop:  # the driver's acceleration is the command, clipped: no speed model
+        model, model_accel = speed, np.clip(col["held"], -limit, limit)
+        demand = model_accel
+    else:
+        wheel.reset(float(speed[0]))
+        model = np.empty(data.N)
+        model[0] = speed[0]
+        for k in range(1, data.N):
+            model[k] = wheel.step(float(col["held"][k]))
+        model_accel = np.concatenate([[0.0], np.diff(model) / Ts])
+        lag = np.concatenate([[0.0], (model - speed)[:-1]])  # the loop acts on the last error
+        demand = np.clip(model_accel + scales.loop_gain_per_s * lag, -limit, limit)
     c0, c1, c2, c3 = scales.current_model
     friction = c1 * speed + c2 * np.sign(speed)
     drive = c0 * accel + friction
-    lag = np.concatenate([[0.0], (model - speed)[:-1]])  # the loop acts on last sample's error
-    demand = np.clip(
-        model_accel + scales.loop_gain_per_s * lag,
-        -scales.accel_limit_rpm_s,
-        scales.accel_limit_rpm_s,
-    )
     fresh = col["telemetry_age_s"] < Ts
     usable = fresh & np.concatenate([[False], fresh[:-1]])
     repeated = np.concatenate([[False], (np.diff(speed) == 0) & (speed[1:] != 0)])
@@ -364,6 +422,7 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
         repeated=repeated,
         lost_frames=lost,
         scales=scales,
+        open_loop=open_loop,
     )
     return replace(out, current_nuisance_a=current_nuisance(out))
 
@@ -390,6 +449,8 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
         bool, shape (N,): True where the channel is read.
     """
     ok = features.usable & ~features.repeated
+    if name == "speed" and features.open_loop:  # no speed reference
+        return np.zeros(features.N, dtype=bool)
     if name.startswith("current"):
         if features.current_ready is not None:
             ok = ok & features.current_ready
@@ -400,10 +461,12 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
 
 
 def _turning(features: Features) -> np.ndarray:
-    """A non-zero reading that kept its direction over the sample, bool, shape (N,)."""
+    """A non-zero reading out of the stiction band that kept its direction over the
+    sample, bool, shape (N,)."""
     w = features.speed_rpm
     before = np.concatenate([w[:1], w[:-1]])
-    return (w != 0) & (np.sign(w) == np.sign(before))
+    fast = np.abs(w) >= features.scales.stiction_band_rpm
+    return (w != 0) & fast & (np.sign(w) == np.sign(before))
 
 
 def past_covers(features: Features) -> np.ndarray:

@@ -145,6 +145,9 @@ class NoiseModel:
         out = {}
         for name in CHANNELS:
             key = self.key(name, features.against_own)
+            if key not in self.sigma:  # a channel no calibration record reads
+                out[name] = np.zeros(features.N)
+                continue
             sigma = np.asarray(self.sigma[key])[where]
             mask, kappa = channel_mask(features, name), self.inflation[key]
             out[name] = np.where(mask, 1.0 / (sigma**2 * kappa), 0.0)
@@ -206,6 +209,8 @@ class NoiseModel:
             *((f"{n}_own", CHANNELS[n], n, own[n]) for n in own),
         ):
             group = [f for f in group if channel_mask(f, name).any()]
+            if not group:  # no record reads it (the speed of acceleration-mode records)
+                continue
             pairs = [(f, channel_mask(f, name)) for f in group]
             v = _concat([getattr(f, attr)[ok] - np.median(getattr(f, attr)[ok]) for f, ok in pairs])
             if v.size < MIN_SAMPLES and key.endswith("_own"):

@@ -64,6 +64,7 @@ import numpy as np
 from scipy.stats import norm
 
 from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
+from rwlab.diagnose.features import STICTION_BAND
 from rwlab.errors import ConfigError
 from rwlab.hil.probe import Half, Probe
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
@@ -85,7 +86,6 @@ CLIP = 4.0  # standardised residuals enter the CUSUM clipped to ±CLIP σ
 MIN_NAMING_S = 2.0  # the excursion's samples that name a fault: at least this many seconds
 FOLLOW_MAX = -0.3  # residual ∝ −command beyond this share: the wheel does not follow
 CURRENT_SHARE = 0.5  # delivered current below this share of the requested one: clamped
-STICTION_BAND = 3.0  # × the Stribeck speed (or the Hall dead zone): breakaway rules inside
 PROBE_SHARE = 0.9  # the probe's push, × the rated acceleration: a clamp costing more is seen
 PROBE_S = 1.0  # the push lasts this long, s, and the way back as long
 PROBE_EVERY_S = 60.0  # a probe starts every this many seconds of flight (the first at this)
