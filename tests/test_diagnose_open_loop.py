@@ -11,13 +11,9 @@ import numpy as np
 import pytest
 
 from rwlab.data import IOData
-from rwlab.diagnose.features import (
-    STICTION_BAND,
-    WheelScales,
-    channel_mask,
-    compute_features,
-)
+from rwlab.diagnose.features import WheelScales, channel_mask, compute_features
 from rwlab.diagnose.pipeline import run
+from rwlab.diagnose.scales import STICTION_BAND
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.wheel.physics import WheelParams
 

@@ -64,7 +64,7 @@ import numpy as np
 from scipy.stats import norm
 
 from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
-from rwlab.diagnose.features import STICTION_BAND
+from rwlab.diagnose.scales import STICTION_BAND
 from rwlab.errors import ConfigError
 from rwlab.hil.probe import Half, Probe
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
