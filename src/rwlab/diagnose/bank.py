@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
-from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, profile_fit
 from rwlab.diagnose.features import LIMIT_REFERENCE_LAG_S, REFERENCE_LAG_S, Features
 from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
@@ -124,6 +124,11 @@ class Bank:
         they carry the model's misfit). 1 if absent.
     faults : sequence of str
         The model-based detectors to run.
+    before : Bank, optional
+        The same detectors on the record's first samples, as it was growing (a live
+        diagnosis): its gains are kept and only the new samples' computed (a sample's gains
+        depend on its past and, for a clamp's flat top, its next sample: the earlier
+        bank's last sample is computed again).
     """
 
     def __init__(
@@ -134,25 +139,49 @@ class Bank:
         drift,
         dispersion=None,
         faults=MODEL_BASED,
+        before: Bank | None = None,
     ) -> None:
         self.features = features
         self.detectors = {name: detector(name) for name in faults}
         self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
         self.weights = noise.weights(features)  # the sizes are read again on them (refine)
-        self.cum = self._cumulative(features, self.weights)
+        start = 0 if before is None else max(before.features.N - 1, 0)
+        self.cum = self._grown(
+            before and before.cum,
+            start,
+            features,
+            self.weights,
+            lambda d, f, w, g: d.gains(f, w, g),
+        )
         # the same gains against the record's own past (features.own()): a change of the
         # unit against itself, free of its misfit to the reference unit
         # (``Detector.own_law``: against the unit's friction law alone)
         own = {law: features.own(law) for law in (False, True)}
         weights = {law: noise.weights(f) for law, f in own.items()}
         self.own_ready, self.cum_own, self.cum_limit = {}, {}, {}
-        for n, d in self.detectors.items():
-            f = own[d.own_law]
-            self.own_ready[n] = np.isfinite(f.current_nuisance_a[:, 0])  # type: ignore[index]
-            self.cum_own[n] = _cumsum_rows(d.gains(f, weights[d.own_law], self.grid[n]))
-            limit = d.limit_gains(f, weights[d.own_law], self.grid[n])
-            if limit is not None:
-                self.cum_limit[n] = _cumsum_rows(limit)
+        for law in (False, True):
+            names = [n for n, d in self.detectors.items() if d.own_law == law]
+            self.cum_own |= self._grown(
+                before and before.cum_own,
+                start,
+                own[law],
+                weights[law],
+                lambda d, f, w, g: d.gains(f, w, g),
+                names,
+            )
+            limited = [
+                n for n in names if type(self.detectors[n]).limit_gains is not Detector.limit_gains
+            ]
+            self.cum_limit |= self._grown(
+                before and before.cum_limit,
+                start,
+                own[law],
+                weights[law],
+                lambda d, f, w, g: d.limit_gains(f, w, g),
+                limited,
+            )
+            for n in names:
+                self.own_ready[n] = np.isfinite(own[law].current_nuisance_a[:, 0])  # type: ignore[index]
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
@@ -167,14 +196,23 @@ class Bank:
         self.own_span = round(REFERENCE_LAG_S / Ts)
         self.limit_span = round(LIMIT_REFERENCE_LAG_S / Ts)
 
-    def _cumulative(
-        self, features: Features, weights: dict[str, np.ndarray]
-    ) -> dict[str, np.ndarray]:
-        """Per detector, the cumulative per-sample gains, shape (N + 1, G)."""
-        return {
-            n: _cumsum_rows(d.gains(features, weights, self.grid[n]))
-            for n, d in self.detectors.items()
-        }
+    def _grown(self, before, start: int, features: Features, weights, gains, names=None):
+        """Per detector in ``names`` (all by default), the cumulative per-sample ``gains``,
+        shape (N + 1, G): ``before``'s up to sample ``start``, the rest computed on the
+        samples from ``start`` with the one before as their past."""
+        names = list(self.detectors) if names is None else names
+        if start == 0 or before is None:
+            return {
+                n: _cumsum_rows(gains(self.detectors[n], features, weights, self.grid[n]))
+                for n in names
+            }
+        f = features.rows(start - 1)
+        w = {k: v[start - 1 :] for k, v in weights.items()}
+        out = {}
+        for n in names:
+            new = _cumsum_rows(gains(self.detectors[n], f, w, self.grid[n])[1:])
+            out[n] = np.concatenate([before[n][: start + 1], before[n][start] + new[1:]])
+        return out
 
     def _between(self, name: str, lo: float, hi: float) -> np.ndarray:
         g = self.grid[name]

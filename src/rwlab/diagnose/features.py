@@ -192,6 +192,19 @@ class Features:
         """Number of samples."""
         return len(self.t_s)
 
+    def rows(self, start: int) -> Features:
+        """The samples from ``start`` on, every per-sample array sliced (a sample's features
+        depend on its past only, so these are the record's own from there)."""
+        n = self.N
+        return replace(
+            self,
+            **{
+                name: value[start:]
+                for name, value in vars(self).items()
+                if isinstance(value, np.ndarray) and value.shape[:1] == (n,)
+            },
+        )
+
     def steady(self, share: float) -> np.ndarray:
         """Constant speed, bool, shape (N,): the model's and the measured acceleration both
         within ``share`` of the acceleration limit (a wheel that lags the model, as a weak
@@ -521,10 +534,10 @@ def current_nuisance(features: Features, steady: bool = False) -> np.ndarray:
     lag = round(REFERENCE_LAG_S / f.scales.Ts)
     need = round(REFERENCE_MIN_S / f.scales.Ts)
     out = np.full((f.N, 3), np.nan)
-    for k in range(lag, f.N):
-        j = k - lag
-        if count[j] < need:
-            continue
-        theta = np.linalg.lstsq(A[j], b[j], rcond=1e-6)[0]
-        out[k] = X[k] * theta
+    ready = np.flatnonzero(count[: max(f.N - lag, 0)] >= need)  # past ends j = k − lag
+    if ready.size:
+        # least squares, least norm, as lstsq's (singular values under 1e-6 of the largest
+        # are zero), stacked over the samples
+        theta = np.einsum("kij,kj->ki", np.linalg.pinv(A[ready], rcond=1e-6), b[ready])
+        out[ready + lag] = X[ready + lag] * theta
     return out

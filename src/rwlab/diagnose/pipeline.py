@@ -29,7 +29,7 @@ from rwlab.diagnose.detectors import MODEL_BASED, SIGNATURE, Fit, FrozenReading,
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, Threshold
 
-__all__ = ["Event", "Result", "run"]
+__all__ = ["Event", "Live", "Result", "run"]
 
 
 @dataclass
@@ -238,6 +238,102 @@ def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
 
 
+class Live:
+    """The pipeline on a growing record (a wheel's telemetry in flight): each
+    :meth:`update` takes the record so far and decides at the decision times new since
+    the last one, as :func:`run` would on the whole record (a sample's features depend on
+    its past only; the bank keeps the gains it has, :class:`~rwlab.diagnose.bank.Bank`'s
+    ``before``).
+
+    Parameters
+    ----------
+    calibration : DiagnosisCalibration
+    per_hour : float
+        False alarms per hour asked of each detector.
+
+    Attributes
+    ----------
+    events : list of Event
+        Every event so far, in alarm order (their names and sizes follow the record).
+    limits : dict of str to Threshold
+        Each detector's threshold at the rate asked.
+    """
+
+    def __init__(self, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> None:
+        self.calibration, self.per_hour = calibration, per_hour
+        names = (*MODEL_BASED, "speed_sensor_stuck")
+        self.limits = {n: calibration.threshold(n, per_hour) for n in names}
+        self.events: list[Event] = []
+        self._bank: Bank | None = None
+        self._done = 0  # the last decision time taken (exclusive sample index)
+        self._telemetry_named: set[str] = set()
+
+    def update(self, features: Features) -> list[Event]:
+        """Decide on the record so far.
+
+        Parameters
+        ----------
+        features : Features
+            The whole record so far (the samples of earlier updates and new ones).
+
+        Returns
+        -------
+        list of Event
+            The events opened by this update, in alarm order.
+        """
+        cal, limits = self.calibration, self.limits
+        bank = self._bank = Bank(
+            features, cal.noise, cal.zones, cal.drift, cal.dispersion, before=self._bank
+        )
+        events, new = self.events, []
+        stuck = FrozenReading().first_alarm(features, limits["speed_sensor_stuck"].log_lr)
+        end = features.N if stuck is None else stuck[0]  # a frozen reading blinds the models
+        for k in bank.ends():
+            if k <= self._done:
+                continue
+            if k > end:
+                break
+            self._done = k
+            for e in list(events):  # follow each open event on its growing window
+                if e in events and e.first in MODEL_BASED:
+                    _follow(e, events, bank, k, limits)
+            free = [n for n in MODEL_BASED if not SIGNATURE[n] & _owned(events)]
+            crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]
+            if crossed:
+                new.append(self._open(bank, k, free, crossed))
+                events.append(new[-1])
+        dropout = LostFrames().first_alarm(features, cal.lost_per_sample, self.per_hour)
+        for found in (stuck, dropout):
+            if found is not None and found[1].fault not in self._telemetry_named:
+                self._telemetry_named.add(found[1].fault)
+                k, fit = found
+                t = float(features.t_s[k])
+                new.append(Event(t, t, fit, fit.fault, fit.log_lr))
+                events.append(new[-1])
+        return new
+
+    def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
+        """The event a crossing at sample k opens: named by the likeliest fault."""
+        limits = self.limits
+        ranked = _isolate(bank, k, free, limits)
+        best = ranked[0]
+        runner = ranked[1] if len(ranked) > 1 else None
+        start = _onset(bank, best.fit.fault, k)
+        t = bank.features.t_s
+        return Event(
+            t_s=float(t[k - 1]),
+            onset_s=float(t[start]),
+            fit=best.fit,
+            detector=crossed[0],
+            threshold=limits[crossed[0]].log_lr,
+            runner_up=None if runner is None else runner.fit.fault,
+            runner_up_log_lr=None
+            if runner is None
+            else _excess(best.fit, limits) - _excess(runner.fit, limits),
+            start=start,
+        )
+
+
 def run(features: Features, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> Result:
     """Diagnose one record (module docstring).
 
@@ -252,54 +348,7 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     -------
     Result
     """
-    bank = Bank(
-        features, calibration.noise, calibration.zones, calibration.drift, calibration.dispersion
-    )
-    limits = {n: calibration.threshold(n, per_hour) for n in MODEL_BASED}
-    Ts = features.scales.Ts
-    events: list[Event] = []
-    limits["speed_sensor_stuck"] = calibration.threshold("speed_sensor_stuck", per_hour)
-    stuck = FrozenReading().first_alarm(features, limits["speed_sensor_stuck"].log_lr)
-    end = features.N if stuck is None else stuck[0]  # a frozen reading blinds the model tests
-    for k in bank.ends():
-        if k > end:
-            break
-        for e in list(events):  # follow each open event on its growing window
-            if e in events and e.first in MODEL_BASED:
-                _follow(e, events, bank, k, limits)
-        owned = _owned(events)
-        free = [n for n in MODEL_BASED if not SIGNATURE[n] & owned]
-        crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]
-        if not crossed:
-            continue
-        ranked = _isolate(bank, k, free, limits)
-        best = ranked[0]
-        runner = ranked[1] if len(ranked) > 1 else None
-        start = _onset(bank, best.fit.fault, k)
-        events.append(
-            Event(
-                t_s=float(features.t_s[k - 1]),
-                onset_s=float(features.t_s[start]),
-                fit=best.fit,
-                detector=crossed[0],
-                threshold=limits[crossed[0]].log_lr,
-                runner_up=None if runner is None else runner.fit.fault,
-                runner_up_log_lr=None
-                if runner is None
-                else _excess(best.fit, limits) - _excess(runner.fit, limits),
-                start=start,
-            )
-        )
-    if stuck is not None:
-        k, fit = stuck
-        events.append(
-            Event(float(features.t_s[k]), float(features.t_s[k]), fit, fit.fault, fit.log_lr)
-        )
-    dropout = LostFrames().first_alarm(features, calibration.lost_per_sample, per_hour)
-    if dropout is not None:
-        k, fit = dropout
-        events.append(
-            Event(float(features.t_s[k]), float(features.t_s[k]), fit, fit.fault, fit.log_lr)
-        )
-    events.sort(key=lambda e: e.t_s)
-    return Result(events, limits, features.N * Ts, per_hour)
+    live = Live(calibration, per_hour)
+    live.update(features)
+    events = sorted(live.events, key=lambda e: e.t_s)
+    return Result(events, live.limits, features.N * features.scales.Ts, per_hour)
