@@ -9,11 +9,10 @@ healthy record; every ``--judge`` flight (``SEED/FAULT``, FAULT as ``rwlab hil
 --fault``, empty: healthy) is diagnosed wheel by wheel with that calibration, after the
 flight. The flights keep the health check's excitation (the null-space dither and the
 capacity probes) but its own tests are muted, so that no alarm idles the faulty wheel
-and the pipeline sees the whole fault; the pipeline does not run in flight yet. A wheel's
-telemetry is read in blocks of the pipeline's 0.5 s: the mean command and current over
-the block, the speed at its end (:func:`wheel_record`). The CubeSat's three orthogonal
-wheels have no null space to excite: the RW-0.01 is not flown here. A benchmark, not a
-test.
+and the pipeline sees the whole fault (``rwlab hil`` runs the same pipeline in flight,
+:mod:`rwlab.hil.live`; a wheel's telemetry is read as it feeds it, :func:`wheel_record`).
+The CubeSat's three orthogonal wheels have no null space to excite: the RW-0.01 is not
+flown here. A benchmark, not a test.
 """
 
 from __future__ import annotations
@@ -35,11 +34,15 @@ from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_feature
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.errors import RwlabWarning
+from rwlab.hil.live import SAMPLE_S, sampled
 from rwlab.testbed import load_record
 
 SCENARIO = {"rw90": "geo-smallsat-pyramid", "nrwa-t6": "geo-comsat"}
-TS = 0.5  # the pipeline's sample time, s (the flights' control period is 0.1 s)
 DURATION_S = 1400.0
+# design choice: a decision window of 10 s beside the bank's, so a dead motor crosses at
+# the first decision after it (5 s), as the loop's pointing needs (60-s windows: 15 s,
+# 0.12 deg of a 0.1-deg requirement)
+QUICK_S = 10.0
 # the flight's own tests muted, the excitation kept (run in a child: the patch stays there)
 MUTED = (
     "import sys, rwlab.hil.health as h; h.TrackingTest.update = lambda self, *a, **k: None; "
@@ -59,23 +62,13 @@ def fly(cache: Path, wheel: str, seed: int, fault: str = "") -> Path:
     return out
 
 
-def wheel_record(path: Path, node: int, scales: WheelScales) -> IOData:
-    """One wheel's flight telemetry in blocks of ``scales.Ts`` from the flight's start:
-    the mean command in force over each block, the mean current over it, the speed and
-    the lost-frame count at its end, the oldest telemetry age in it."""
+def wheel_record(path: Path, node: int) -> IOData:
+    """One wheel's flight telemetry on the live diagnosis's grid from the flight's start
+    (:func:`rwlab.hil.live.sampled`: what ``rwlab hil`` feeds its pipeline)."""
     data = load_record(path, None, node=node, outputs=RECORD_OUTPUTS, max_gap=np.inf)
     t = data.tstart + data.Ts * np.arange(data.N)
     first = int(np.searchsorted(t, -1e-9))
-    m = round(scales.Ts / data.Ts)
-    u, y = data.u[first:, 0], data.y[first:]
-    ends = m * np.arange((len(u) - 1) // m + 1)
-    command = np.array([u[i : i + m].mean() for i in ends])
-    current = np.array([y[max(0, i - m + 1) : i + 1, 1].mean() for i in ends])
-    age = np.array([y[max(0, i - m + 1) : i + 1, 2].max() for i in ends])
-    out = np.column_stack([y[ends, 0], current, age, y[ends, 3]])
-    return IOData(
-        command[:, None], out, scales.Ts, output_names=data.output_names, input_units=["rpm/s"]
-    )
+    return sampled(data.u[first:-1, 0], data.y[first:, :3], round(SAMPLE_S / data.Ts))
 
 
 def main() -> None:
@@ -85,19 +78,30 @@ def main() -> None:
     p.add_argument("--calibrate", type=int, nargs="+", required=True)
     p.add_argument("--judge", nargs="+", required=True)
     p.add_argument("--rate", type=float, default=1e-3)
+    p.add_argument("--save-calibration", type=Path, help="write the calibration here")
     args = p.parse_args()
     warnings.simplefilter("ignore", RwlabWarning)
     args.cache.mkdir(parents=True, exist_ok=True)
     params = physics_params(load_scenario(SCENARIO[args.wheel]))
-    scales = WheelScales.from_params(params, TS)
+    scales = WheelScales.from_params(params, SAMPLE_S)
     healthy = [
         compute_features(
-            wheel_record(fly(args.cache, args.wheel, s) / "record.mcap", n, scales), None, scales
+            wheel_record(fly(args.cache, args.wheel, s) / "record.mcap", n), None, scales
         )
         for s in args.calibrate
         for n in (1, 2, 3, 4)
     ]
-    cal = DiagnosisCalibration.measure(healthy, origin=f"hil seeds {args.calibrate}")
+    flights = ", ".join(str(s) for s in args.calibrate)
+    origin = (
+        f"{len(healthy)} wheels of healthy rwlab hil flights of {SCENARIO[args.wheel]} "
+        f"({DURATION_S:g} s, seeds {flights}; bench/bench_fdi_hil.py)"
+    )
+    names = [f"seed {s} node {n}" for s in args.calibrate for n in (1, 2, 3, 4)]
+    cal = DiagnosisCalibration.measure(
+        healthy, sources=names, origin=origin, quick_window_s=QUICK_S
+    )
+    if args.save_calibration:
+        cal.save(args.save_calibration)
     limits = {n: round(cal.threshold(n, args.rate).log_lr, 1) for n in MODEL_BASED}
     print(f"{args.wheel}: calibrated on {cal.hours:.2f} wheel-hours, thresholds {limits}")
     print(f"{'flight':<32} {'node':>4}  first alarm")
@@ -106,7 +110,7 @@ def main() -> None:
         out = fly(args.cache, args.wheel, int(seed), fault)
         onset = float(fault.rpartition("@")[2]) if fault else None
         for node in (1, 2, 3, 4):
-            data = wheel_record(out / "record.mcap", node, scales)
+            data = wheel_record(out / "record.mcap", node)
             result = run(compute_features(data, None, scales), cal, args.rate)
             alarm = "none"
             if result.events:

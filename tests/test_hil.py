@@ -477,22 +477,27 @@ def test_under_the_health_check_the_block_tests_stay_out_of_the_way(tmp_path):
 
 @pytest.mark.slow  # a flight of minutes over the bus
 def test_the_console_ends_with_the_health_checks_account(tmp_path):
-    """How many windows and probes each flight tested and the verdict, on the console and
-    in metrics.json; a flight shorter than the calibration says it tested nothing."""
+    """How many decisions and probes each flight tested and the verdict, on the console and
+    in metrics.json: the GLR pipeline decides every 5 s on every wheel from the start (its
+    calibration was measured before the flight); the probes wait for the wheel's own
+    healthy ones."""
     args = ["hil", "--scenario", "geo-smallsat-pyramid", "--no-reference", "--channel"]
     a = [_channel(), "--duration", "260", "--calibration", "100", "--out", str(tmp_path / "a")]
     res = CliRunner().invoke(main, [*args, *a])
     assert res.exit_code == 0, res.output
     m = json.loads((tmp_path / "a" / "metrics.json").read_text())
-    windows = sum(m["health_check"]["windows_tested"].values())
+    pipeline = m["health_check"]["pipeline"]
+    assert "healthy rwlab hil flights of geo-smallsat-pyramid" in pipeline["calibration"]
+    decisions = sum(pipeline["decisions"].values())
     probes = sum(m["health_check"]["probes_tested"].values())
-    assert windows > 4 * 100 and probes == 4  # 4 wheels; probes at 60-180 s their healthy ones
-    line = f"health check: {windows} tracking windows and {probes} capacity probes tested"
+    assert decisions == 4 * (260 // 5) and probes == 4  # probes at 60-180 s the healthy ones
+    assert sum(m["health_check"]["windows_tested"].values()) == 0  # no tracking CUSUM
+    line = f"health check: {decisions} pipeline decisions and {probes} capacity probes tested"
     assert f"{line} on 4 wheels: no alarm" in res.output
     res = CliRunner().invoke(
         main, [*args, _channel(), "--duration", "50", "--out", str(tmp_path / "b")]
     )
-    assert "still calibrating at the end (300 s): nothing tested" in res.output
+    assert "health check: 40 pipeline decisions and 0 capacity probes tested" in res.output
     res = CliRunner().invoke(  # three orthogonal wheels, no bias: nothing watches them
         main,
         [

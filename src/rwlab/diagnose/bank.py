@@ -124,6 +124,10 @@ class Bank:
         they carry the model's misfit). 1 if absent.
     faults : sequence of str
         The model-based detectors to run.
+    quick_s : float, optional
+        A window shorter than ``WINDOWS_S``'s for the decisions (a large fault, a dead
+        motor, crosses at once where the shortest window still holds mostly healthy
+        samples); its thresholds come from a calibration measured with it.
     before : Bank, optional
         The same detectors on the record's first samples, as it was growing (a live
         diagnosis): its gains are kept and only the new samples' computed (a sample's gains
@@ -139,6 +143,7 @@ class Bank:
         drift,
         dispersion=None,
         faults=MODEL_BASED,
+        quick_s: float | None = None,
         before: Bank | None = None,
     ) -> None:
         self.features = features
@@ -192,6 +197,8 @@ class Bank:
         Ts = features.scales.Ts
         self.every = max(1, round(EVERY_S / Ts))
         self.windows = tuple(max(2, round(w / Ts)) for w in WINDOWS_S)
+        quick = () if quick_s is None else (max(2, round(quick_s / Ts)),)
+        self.decision_windows = quick + self.windows
         self.past_min = round(PAST_MIN_S / Ts)
         self.own_span = round(REFERENCE_LAG_S / Ts)
         self.limit_span = round(LIMIT_REFERENCE_LAG_S / Ts)
@@ -294,7 +301,11 @@ class Bank:
 
     def at(self, name: str, k: int) -> WindowFit:
         """The best window ending at sample k (exclusive) for detector ``name``."""
-        fits = [self.fit(name, max(0, k - w), k) for w in self.windows if k - max(0, k - w) >= 2]
+        fits = [
+            self.fit(name, max(0, k - w), k)
+            for w in self.decision_windows
+            if k - max(0, k - w) >= 2
+        ]
         return max(fits, key=lambda f: f.fit.log_lr)
 
     def tiles(self, shortest: bool = False) -> list[tuple[int, int]]:

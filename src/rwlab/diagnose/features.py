@@ -326,8 +326,9 @@ def compute_features(data: IOData, wheel, scales: WheelScales) -> Features:
 
 
 def channel_mask(features: Features, name: str) -> np.ndarray:
-    """The samples a channel is read on, bool, shape (N,): fresh, not a repeated reading;
-    for the current channel also a turning wheel that kept its direction over the sample.
+    """The samples a channel is read on, bool, shape (N,): fresh, not a repeated reading,
+    out of the stiction band (``WheelScales.stiction_band_rpm``); for the current channel
+    also a turning wheel that kept its direction over the sample.
     At rest (a zero reading: below what the sensor measures) and through a reversal the
     bearing's friction is static, anywhere within its breakaway band, and the loop's
     integrator holds whatever current it last needed: the current there says nothing of
@@ -347,6 +348,8 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
         bool, shape (N,): True where the channel is read.
     """
     ok = features.usable & ~features.repeated
+    # under the stiction band the bearing's law is breakaway, not the model's
+    ok &= np.abs(features.speed_rpm) >= features.scales.stiction_band_rpm
     if name == "speed" and features.open_loop:  # no speed reference
         return np.zeros(features.N, dtype=bool)
     if name.startswith("current"):

@@ -257,6 +257,8 @@ class Live:
         Every event so far, in alarm order (their names and sizes follow the record).
     limits : dict of str to Threshold
         Each detector's threshold at the rate asked.
+    decisions : int
+        Decision times taken so far.
     """
 
     def __init__(self, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> None:
@@ -266,6 +268,7 @@ class Live:
         self.events: list[Event] = []
         self._bank: Bank | None = None
         self._done = 0  # the last decision time taken (exclusive sample index)
+        self.decisions = 0  # decision times taken
         self._telemetry_named: set[str] = set()
 
     def update(self, features: Features) -> list[Event]:
@@ -283,7 +286,13 @@ class Live:
         """
         cal, limits = self.calibration, self.limits
         bank = self._bank = Bank(
-            features, cal.noise, cal.zones, cal.drift, cal.dispersion, before=self._bank
+            features,
+            cal.noise,
+            cal.zones,
+            cal.drift,
+            cal.dispersion,
+            quick_s=cal.quick_window_s,
+            before=self._bank,
         )
         events, new = self.events, []
         stuck = FrozenReading().first_alarm(features, limits["speed_sensor_stuck"].log_lr)
@@ -294,6 +303,7 @@ class Live:
             if k > end:
                 break
             self._done = k
+            self.decisions += 1
             for e in list(events):  # follow each open event on its growing window
                 if e in events and e.first in MODEL_BASED:
                     _follow(e, events, bank, k, limits)

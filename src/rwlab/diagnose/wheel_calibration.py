@@ -142,6 +142,9 @@ class DiagnosisCalibration:
         One line: whose wheel, which records.
     records : int
         How many healthy records it was measured on.
+    quick_window_s : float or None
+        The decisions' short window, s (:class:`~rwlab.diagnose.bank.Bank`'s ``quick_s``),
+        its thresholds measured with it; None: none.
     """
 
     Ts: float
@@ -156,10 +159,16 @@ class DiagnosisCalibration:
     sources: tuple[str, ...] = ()
     origin: str = ""
     records: int = field(default=0)
+    quick_window_s: float | None = None
 
     @classmethod
     def measure(
-        cls, records: list[Features], *, sources=(), origin: str = ""
+        cls,
+        records: list[Features],
+        *,
+        sources=(),
+        origin: str = "",
+        quick_window_s: float | None = None,
     ) -> DiagnosisCalibration:
         """Measure a calibration on healthy records' features (one wheel model, one Ts).
 
@@ -170,6 +179,8 @@ class DiagnosisCalibration:
         sources : sequence of str
             Their names, kept in the file.
         origin : str
+        quick_window_s : float, optional
+            A short decision window, s (:class:`~rwlab.diagnose.bank.Bank`'s ``quick_s``).
 
         Returns
         -------
@@ -234,7 +245,7 @@ class DiagnosisCalibration:
         peaks: dict[str, list[float]] = {n: [] for n in MODEL_BASED}
         peaks[STUCK] = []
         for f in records:
-            bank = Bank(f, noise, zones, drift, dispersion)
+            bank = Bank(f, noise, zones, drift, dispersion, quick_s=quick_window_s)
             for name, stat in bank.statistics().items():
                 peaks[name] += excursion_peaks(stat)
             runs = FrozenReading.runs(f)
@@ -256,6 +267,7 @@ class DiagnosisCalibration:
             sources=tuple(str(s) for s in sources),
             origin=origin,
             records=len(records),
+            quick_window_s=quick_window_s,
         )
 
     @staticmethod
@@ -367,7 +379,7 @@ class DiagnosisCalibration:
             "peaks": {k: list(v) for k, v in self.peaks.items()},
             "repeat_probability": self.repeat_probability,
             "lost_per_sample": self.lost_per_sample,
-        }
+        } | ({} if self.quick_window_s is None else {"quick_window_s": self.quick_window_s})
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "calibration") -> DiagnosisCalibration:
@@ -391,6 +403,9 @@ class DiagnosisCalibration:
                 sources=tuple(d.get("sources", ())),
                 origin=str(d.get("origin", "")),
                 records=int(d.get("records", 0)),
+                quick_window_s=(
+                    None if d.get("quick_window_s") is None else float(d["quick_window_s"])
+                ),
             )
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FileFormatError(f"{source}: bad diagnosis calibration ({exc!r})") from None

@@ -362,6 +362,10 @@ class TrackingTest:
         The residual's window, s (a whole number of control periods).
     probe_every_s : float, optional
         How often a capacity probe comes, s (None: no probes).
+    tracking : bool
+        Run the command-tracking CUSUM (False: ``rwlab hil``'s GLR pipeline watches the
+        wheel, :mod:`rwlab.hil.live`; the residual's healthy spread is still measured and
+        the probes still judged).
     """
 
     def __init__(
@@ -372,7 +376,9 @@ class TrackingTest:
         false_alarms_per_hour: float,
         window_s: float = WINDOW_S,
         probe_every_s: float | None = None,
+        tracking: bool = True,
     ) -> None:
+        self.tracking = tracking
         self.every = max(1, round(window_s / dt))
         self.dt, self.window_s, self.params = dt, self.every * dt, params
         self.calibration_windows = max(30, math.ceil(calibration_s / self.window_s))
@@ -494,6 +500,8 @@ class TrackingTest:
                 # while the attitude is acquired) must not blunt every probe after it
                 mad = float(np.median(np.abs(values - np.median(values))))
                 self.robust_sigma = max(1.4826 * mad, floor)
+            return None
+        if not self.tracking:
             return None
         before = self.cusum.statistic
         self.windows_tested += 1

@@ -46,6 +46,7 @@ from rwlab.attitude.control import (
 from rwlab.attitude.scenario import Scenario, load_scenario
 from rwlab.attitude.sim import SimResult, relative_rate
 from rwlab.attitude.wheels import physics_params
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.errors import ConfigError, HilStopped, RwlabError, WheelFault  # HilStopped: re-export
 from rwlab.hil.bench import WheelBank
 from rwlab.hil.health import (
@@ -61,6 +62,7 @@ from rwlab.hil.health import (
     null_vector,
     stiction_band_rpm,
 )
+from rwlab.hil.live import PipelineWatch, hil_calibration_file
 from rwlab.hil.satellite import Satellite
 from rwlab.hil.telemetry import BLOCK_S, DropoutTest
 from rwlab.wheel import protocol as proto
@@ -858,6 +860,13 @@ class _Loop:
         self._recalibrate_when_still = False
         self.diagnosis_off: dict[int, str] = {}
         self._coasting: dict[int, _CoastDown] = {}  # idled wheels whose coast-down names them
+        # the GLR pipeline on each wheel's telemetry (rwlab.hil.live), where the wheel model
+        # has a calibration measured in the loop; restarted on the wheels left once an
+        # idled wheel is at rest (the others absorb its coast-down: another regime)
+        self.pipeline: DiagnosisCalibration | None = None
+        self.watches: dict[int, PipelineWatch] = {}
+        self._watched: list[tuple[int, PipelineWatch]] = []  # every pipeline run, for the account
+        self._restart_watches = False
         self._first_fault_s = min((f.t_s for _, f in cfg.faults), default=math.inf)
         self.max_error_from_fault = 0.0
         for c in bank.clients:
@@ -926,6 +935,10 @@ class _Loop:
         rule_tests = self.diagnosis and not self.health
         diag = self.diag = self._diagnosers(self.nodes) if rule_tests else {}
         if self.health:
+            path = hil_calibration_file(sc.wheels.wheel_spec.name)
+            if path is not None:
+                self.pipeline = DiagnosisCalibration.load(path)
+                self.watches = self._watches(self.nodes, 0.0)
             self.dither = NullSpaceDither(
                 sc.wheel_matrix,
                 bank.params.inertia,
@@ -938,6 +951,7 @@ class _Loop:
                     cfg.calibration_s,
                     cfg.false_alarms_per_hour,
                     probe_every_s=PROBE_EVERY_S,
+                    tracking=self.pipeline is None,
                 )
                 for n in self.nodes
             }
@@ -946,7 +960,11 @@ class _Loop:
                 "health_check",
                 f"null-space excitation ±{DITHER_RPM_S:g} rpm/s over {DITHER_PERIOD_S:g} s, "
                 f"a {PROBE_SHARE:.0%} capacity probe every {PROBE_EVERY_S:g} s; "
-                f"command-tracking tests calibrate over {cfg.calibration_s:g} s",
+                + (
+                    f"the GLR pipeline watches each wheel ({self.pipeline.origin})"
+                    if self.pipeline is not None
+                    else f"command-tracking tests calibrate over {cfg.calibration_s:g} s"
+                ),
                 t0,
             )
         every = round(cfg.diagnosis_period_s / sc.run.dt)
@@ -987,6 +1005,8 @@ class _Loop:
             self._watch_telemetry(sat.t, wake)
             if self._coasting:
                 self._name_by_coast_down(readings, sat.t, wake)
+            if self.watches or self._restart_watches:
+                self._watch(readings, self._cmd[-1], sat.t, wake)
             if self.tracking:
                 self._track(readings, self._cmd[-1], probe, wake)
                 if self.dither is not None and any(t.wants_probe for t in self.tracking.values()):
@@ -1078,6 +1098,45 @@ class _Loop:
             for a in alarms:
                 self._wheel_failed(r.node, a.kind, f"{a.detector} detector", now)
 
+    def _watches(self, nodes, t: float) -> dict[int, PipelineWatch]:
+        """A fresh pipeline per node from flight time ``t``."""
+        assert self.pipeline is not None
+        p, cfg = self.bank.params, self.cfg
+        out = {
+            n: PipelineWatch(self.pipeline, p, self.sc.run.dt, cfg.false_alarms_per_hour, t)
+            for n in nodes
+        }
+        self._watched += out.items()
+        return out
+
+    def _watch(self, readings, cmd_rpm_s, t: float, now: float) -> None:
+        """Every watched wheel's pipeline, each control period (``t``: flight time). An
+        alarm idles the wheel; a rotor fault's name is then its coast-down's (a lost torque
+        and an added drag look alike on the dither's small accelerations until a probe
+        tells them apart, which an idled wheel no longer gets)."""
+        if self._restart_watches:
+            if any(r.speed_rpm != 0 for r in readings if not self.bank.active[r.node]):
+                return
+            self._restart_watches = False
+            left = [n for n in self.nodes if self.bank.active[n]]
+            self.watches = self._watches(left, t)
+            self.event("diagnosis_restart", f"the idled wheel is at rest: nodes {left}", now)
+        for i, r in enumerate(readings):
+            watch = self.watches.get(r.node)
+            if watch is None or not self.bank.active[r.node]:
+                continue
+            events = watch.update(cmd_rpm_s[i], r.speed_rpm, r.current_a, r.age_s)
+            if not events:
+                continue
+            e = events[0]
+            del self.watches[r.node]
+            self.tracking.pop(r.node, None)
+            size = "" if math.isnan(e.fit.size) else f" {e.fit.size:.3g} {e.fit.unit}"
+            how = f"GLR {e.detector} log-LR {e.fit.log_lr:.3g} > {e.threshold:.3g}: {e.fault}{size}"
+            self._wheel_failed(r.node, e.fault, how, now)
+            if e.fault in COAST_NAMES and not self.bank.active[r.node]:
+                self._coasting[r.node] = _CoastDown(self.wheel_faults[-1], self.sat.t)
+
     def _track(self, readings, cmd_rpm_s, probe: int, now: float) -> None:
         """Every active wheel's command-tracking test, each control period (``probe``:
         the capacity probe's phase over it)."""
@@ -1088,6 +1147,7 @@ class _Loop:
             found = test.update(cmd_rpm_s[i], r.speed_rpm, r.current_a, probe)
             if found is not None:
                 del self.tracking[r.node]  # an alarm is latched: the wheel is no longer tested
+                self.watches.pop(r.node, None)
                 label, _, named = found.test.partition(", ")  # the statistic is the test's
                 how = f"{label} {found.statistic:.3g} > {found.threshold:.3g}"
                 how += f", {named}" if named else ""
@@ -1147,7 +1207,8 @@ class _Loop:
 
     def health_summary(self) -> dict | None:
         """Each tested wheel's calibrated healthy spread of the tracking residual, rpm/s,
-        and its healthy probes (:meth:`TrackingTest.healthy_probe_summary`)."""
+        its healthy probes (:meth:`TrackingTest.healthy_probe_summary`) and, where the GLR
+        pipeline watched the wheels, its calibration and decision times per wheel."""
         if not self.health:
             return None
         return {
@@ -1160,6 +1221,16 @@ class _Loop:
             "healthy_probes": {str(n): t.healthy_probe_summary() for n, t in self.tracked.items()},
             "windows_tested": {str(n): t.windows_tested for n, t in self.tracked.items()},
             "probes_tested": {str(n): t.probes_tested for n, t in self.tracked.items()},
+            # the GLR pipeline's decision times per wheel (None: the tracking test watched)
+            "pipeline": None
+            if self.pipeline is None
+            else {
+                "calibration": self.pipeline.origin,
+                "decisions": {
+                    str(n): sum(w.live.decisions for m, w in self._watched if m == n)
+                    for n in self.tracked
+                },
+            },
         }
 
     def _wheel_failed(
@@ -1204,7 +1275,9 @@ class _Loop:
                 str(n) for n, a in zip(self.nodes, active, strict=True) if a
             )
             self.event("reallocate", f"node {node}: {entry['action']}", t)
-            if self.diag:  # the others now absorb its coast-down: a regime of its own
+            if self.watches:  # the others now absorb its coast-down: a regime of its own
+                self._restart_watches = True
+            if self.diag:
                 self._recalibrate_when_still = True
                 self.event(
                     "diagnosis_paused",

@@ -1,0 +1,164 @@
+"""A wheel's live diagnosis in the loop: the :mod:`rwlab.diagnose` pipeline on its telemetry.
+
+In the loop a wheel flies in acceleration mode: its driver feeds its model's current
+forward (:attr:`rwlab.diagnose.features.Features.open_loop`), the regime the pipeline's
+fault models describe at the speed loop's acceleration limit. Each control period adds
+the command sent and the telemetry read back; every pipeline sample (``scales.Ts``, a
+whole number of control periods) is the mean command in force over it, the mean current
+over it and the speed at its end, as ``rwlab export --node`` would give them block by
+block. Every decision time (:data:`rwlab.diagnose.bank.EVERY_S`) the record so far goes
+through :class:`rwlab.diagnose.pipeline.Live`, which decides at the new decision times
+only. The calibration is measured on healthy flights of the same wheel model with the
+same excitation (:func:`hil_calibration_file`); lost frames are the dropout test's
+(:mod:`rwlab.hil.telemetry`), not read here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rwlab.data import IOData
+from rwlab.diagnose.bank import EVERY_S
+from rwlab.diagnose.features import compute_features
+from rwlab.diagnose.pipeline import Event, Live
+from rwlab.diagnose.scales import WheelScales
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
+from rwlab.errors import ConfigError
+from rwlab.wheel.physics import WheelParams
+
+__all__ = ["SAMPLE_S", "PipelineWatch", "hil_calibration_file", "sampled"]
+
+SAMPLE_S = 0.5  # the pipeline's sample time in flight, s (a block of control periods)
+_OUTPUTS = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
+
+
+def hil_calibration_file(wheel: str) -> Path | None:
+    """The package's calibration for a wheel preset in the loop, or None where none is
+    shipped (measured on healthy ``rwlab hil`` flights of the preset's redundant scenario;
+    its ``origin`` says which).
+
+    Parameters
+    ----------
+    wheel : str
+        A wheel preset's name (``rwlab wheel models``).
+
+    Returns
+    -------
+    pathlib.Path or None
+    """
+    path = Path(__file__).with_name(f"hil_calibration_{wheel}.json")
+    return path if path.is_file() else None
+
+
+class PipelineWatch:
+    """One wheel's pipeline in flight (module docstring).
+
+    Parameters
+    ----------
+    calibration : DiagnosisCalibration
+        Measured at ``SAMPLE_S`` on healthy flights of this wheel model.
+    params : WheelParams
+        The wheel model (its driver's feed-forward is the healthy reference).
+    dt : float
+        The control period, s.
+    per_hour : float
+        False alarms per hour asked of each detector.
+    t0_s : float
+        Flight time of the first reading, s.
+
+    Raises
+    ------
+    ConfigError
+        A calibration of another sample time, or a control period that does not divide it.
+    """
+
+    def __init__(
+        self,
+        calibration: DiagnosisCalibration,
+        params: WheelParams,
+        dt: float,
+        per_hour: float,
+        t0_s: float = 0.0,
+    ) -> None:
+        periods = SAMPLE_S / dt
+        if abs(periods - round(periods)) > 1e-9 or not np.isclose(calibration.Ts, SAMPLE_S):
+            raise ConfigError(
+                f"the live diagnosis samples every {SAMPLE_S:g} s: it needs a control period "
+                f"that divides it (got {dt:g} s) and a calibration at it (got {calibration.Ts:g} s)"
+            )
+        self.scales = WheelScales.from_params(params, SAMPLE_S)
+        self.periods = round(periods)
+        self.live = Live(calibration, per_hour)
+        self.t0_s = t0_s
+        self._every = round(EVERY_S / dt)  # control periods between updates
+        self._commands: list[float] = []  # rpm/s, one per control period
+        self._readings: list[tuple[float, float, float]] = []  # speed, current, age
+
+    def update(
+        self, command_rpm_s: float, speed_rpm: float, current_a: float, age_s: float
+    ) -> list[Event]:
+        """One control period: the command sent, then the reading it gave.
+
+        Parameters
+        ----------
+        command_rpm_s : float
+            The acceleration commanded over the period, rpm/s.
+        speed_rpm, current_a, age_s : float
+            The telemetry read at the period's end: speed (rpm), current (A), age (s).
+
+        Returns
+        -------
+        list of Event
+            The events a decision at this period opened (empty between decisions).
+        """
+        if not self._readings:  # the reading before the first command
+            self._readings.append((speed_rpm, current_a, age_s))
+        self._commands.append(command_rpm_s)
+        self._readings.append((speed_rpm, current_a, age_s))
+        if len(self._commands) % self._every:
+            return []
+        data = self.record()
+        return [] if data.N < 2 else self.live.update(compute_features(data, None, self.scales))
+
+    def record(self) -> IOData:
+        """The record so far on the pipeline's grid (:func:`sampled`), tstart ``t0_s``."""
+        return sampled(self._commands, self._readings, self.periods, self.t0_s)
+
+
+def sampled(commands, readings, periods: int, t0_s: float = 0.0) -> IOData:
+    """A wheel's control periods as the pipeline's samples, each ``periods`` long: the
+    mean command in force over the sample, the mean current over it, the speed at its
+    end, the oldest telemetry in it (the samples whose commands are complete).
+
+    Parameters
+    ----------
+    commands : sequence of float, shape (K,)
+        The acceleration commanded at each control period, rpm/s.
+    readings : array-like, shape (K + 1, 3) or more rows
+        Speed (rpm), current (A) and telemetry age (s) read at each period's start (the
+        row after a command: what it gave).
+    periods : int
+        Control periods per sample.
+    t0_s : float
+        Time of the first reading, s.
+
+    Returns
+    -------
+    IOData
+        u: the command (rpm/s); outputs speed, current, age and lost frames (0: the
+        dropout test's), at ``periods`` × the control period.
+    """
+    m = periods
+    n = len(commands) // m
+    cmd = np.asarray(commands[: n * m], dtype=float).reshape(n, m).mean(axis=1)
+    read = np.asarray(readings[: n * m + 1], dtype=float)
+    ends = m * np.arange(n)
+    blocks = np.clip(ends[:, None] + np.arange(1 - m, 1)[None, :], 0, None)
+    y = np.column_stack(
+        [read[ends, 0], read[blocks, 1].mean(axis=1), read[blocks, 2].max(axis=1), np.zeros(n)]
+    )
+    return IOData(
+        cmd[:, None], y, SAMPLE_S, output_names=_OUTPUTS, input_units=["rpm/s"], tstart=t0_s
+    )
