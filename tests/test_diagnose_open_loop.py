@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from rwlab.data import IOData
+from rwlab.diagnose.bank import Bank
 from rwlab.diagnose.features import WheelScales, channel_mask, compute_features
-from rwlab.diagnose.pipeline import run
+from rwlab.diagnose.pipeline import Live, run
 from rwlab.diagnose.scales import STICTION_BAND
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.wheel.physics import WheelParams
@@ -143,3 +144,27 @@ def test_the_scales_of_a_wheel_model_are_its_feed_forward():
     assert s.current_model[1] * 1000 + s.current_model[2] == pytest.approx(torque / kt)
     assert s.accel_limit_rpm_s == params.max_accel_rpm_s
     assert s.current_limit_a == params.current_limit
+
+
+def test_a_growing_record_is_decided_as_the_whole_record(calibration):
+    """``Live`` on the record as it grows (an update every 10 samples) opens the events
+    ``run`` opens on the whole record, at the same times, named and sized alike; the bank
+    it grows holds the batch bank's gains to round-off."""
+    data = record(12, "friction", 2.0)
+    whole = compute_features(data, None, SCALES)
+    live = Live(calibration)
+    for n in [*range(20, data.N, 10), data.N]:
+        live.update(compute_features(data[:n], None, SCALES))
+    batch = run(whole, calibration)
+    assert [(e.t_s, e.first, e.fault) for e in live.events] == [
+        (e.t_s, e.first, e.fault) for e in batch.events
+    ]
+    assert live.events and live.events[0].fault == "friction"
+    assert live.events[0].fit.size == pytest.approx(batch.events[0].fit.size, rel=1e-9)
+    grown = live._bank
+    bank = Bank(whole, calibration.noise, calibration.zones, calibration.drift)
+    for name in bank.cum:
+        scale = np.max(np.abs(bank.cum[name]))
+        assert np.max(np.abs(grown.cum[name] - bank.cum[name])) <= 1e-9 * scale
+        assert np.max(np.abs(grown.cum_own[name] - bank.cum_own[name])) <= 1e-9 * max(scale, 1)
+    assert live.decisions == len(bank.ends())

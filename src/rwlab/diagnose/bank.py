@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from rwlab.diagnose.detectors import MODEL_BASED, Fit, detector
-from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, profile_fit
+from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import LIMIT_REFERENCE_LAG_S, REFERENCE_LAG_S, Features
 from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
@@ -151,42 +151,27 @@ class Bank:
         self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
         self.weights = noise.weights(features)  # the sizes are read again on them (refine)
         start = 0 if before is None else max(before.features.N - 1, 0)
-        self.cum = self._grown(
-            before and before.cum,
-            start,
-            features,
-            self.weights,
-            lambda d, f, w, g: d.gains(f, w, g),
+        self.cum: dict[str, np.ndarray] = self._grown(
+            None if before is None else before.cum, start, features, self.weights
         )
         # the same gains against the record's own past (features.own()): a change of the
         # unit against itself, free of its misfit to the reference unit
         # (``Detector.own_law``: against the unit's friction law alone)
         own = {law: features.own(law) for law in (False, True)}
         weights = {law: noise.weights(f) for law, f in own.items()}
-        self.own_ready, self.cum_own, self.cum_limit = {}, {}, {}
+        self.own_ready: dict[str, np.ndarray] = {}
+        self.cum_own: dict[str, np.ndarray] = {}
+        self.cum_limit: dict[str, np.ndarray] = {}
         for law in (False, True):
             names = [n for n, d in self.detectors.items() if d.own_law == law]
-            self.cum_own |= self._grown(
-                before and before.cum_own,
-                start,
-                own[law],
-                weights[law],
-                lambda d, f, w, g: d.gains(f, w, g),
-                names,
-            )
-            limited = [
-                n for n in names if type(self.detectors[n]).limit_gains is not Detector.limit_gains
-            ]
+            f, w = own[law], weights[law]
+            self.cum_own |= self._grown(before and before.cum_own, start, f, w, names)
+            limited = [n for n in names if self.detectors[n].reads_limit]
             self.cum_limit |= self._grown(
-                before and before.cum_limit,
-                start,
-                own[law],
-                weights[law],
-                lambda d, f, w, g: d.limit_gains(f, w, g),
-                limited,
+                before and before.cum_limit, start, f, w, limited, limit=True
             )
             for n in names:
-                self.own_ready[n] = np.isfinite(own[law].current_nuisance_a[:, 0])  # type: ignore[index]
+                self.own_ready[n] = np.isfinite(f.current_nuisance_a[:, 0])  # type: ignore[index]
         self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
@@ -203,21 +188,28 @@ class Bank:
         self.own_span = round(REFERENCE_LAG_S / Ts)
         self.limit_span = round(LIMIT_REFERENCE_LAG_S / Ts)
 
-    def _grown(self, before, start: int, features: Features, weights, gains, names=None):
-        """Per detector in ``names`` (all by default), the cumulative per-sample ``gains``,
-        shape (N + 1, G): ``before``'s up to sample ``start``, the rest computed on the
-        samples from ``start`` with the one before as their past."""
+    def _grown(
+        self, before, start: int, features: Features, weights, names=None, limit: bool = False
+    ) -> dict[str, np.ndarray]:
+        """Per detector in ``names`` (all by default), the cumulative per-sample gains (with
+        ``limit``: those read at the acceleration limit), shape (N + 1, G): ``before``'s up
+        to sample ``start``, the rest computed on the samples from ``start`` with the one
+        before as their past."""
         names = list(self.detectors) if names is None else names
+
+        def gains(n: str, f: Features, w) -> np.ndarray:
+            d = self.detectors[n]
+            out = d.limit_gains(f, w, self.grid[n]) if limit else d.gains(f, w, self.grid[n])
+            assert out is not None  # reads_limit: the detector has limit gains
+            return out
+
         if start == 0 or before is None:
-            return {
-                n: _cumsum_rows(gains(self.detectors[n], features, weights, self.grid[n]))
-                for n in names
-            }
+            return {n: _cumsum_rows(gains(n, features, weights)) for n in names}
         f = features.rows(start - 1)
         w = {k: v[start - 1 :] for k, v in weights.items()}
         out = {}
         for n in names:
-            new = _cumsum_rows(gains(self.detectors[n], f, w, self.grid[n])[1:])
+            new = _cumsum_rows(gains(n, f, w)[1:])
             out[n] = np.concatenate([before[n][: start + 1], before[n][start] + new[1:]])
         return out
 

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -196,14 +197,12 @@ class Features:
         """The samples from ``start`` on, every per-sample array sliced (a sample's features
         depend on its past only, so these are the record's own from there)."""
         n = self.N
-        return replace(
-            self,
-            **{
-                name: value[start:]
-                for name, value in vars(self).items()
-                if isinstance(value, np.ndarray) and value.shape[:1] == (n,)
-            },
-        )
+        sliced: dict[str, Any] = {
+            name: value[start:]
+            for name, value in vars(self).items()
+            if isinstance(value, np.ndarray) and value.shape[:1] == (n,)
+        }
+        return replace(self, **sliced)
 
     def steady(self, share: float) -> np.ndarray:
         """Constant speed, bool, shape (N,): the model's and the measured acceleration both

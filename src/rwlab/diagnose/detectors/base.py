@@ -135,6 +135,8 @@ class Detector(ABC):
     # the record's own reference (:meth:`Features.own`) fits the unit's whole law on this
     # detector's channel: against it a healthy unit sits at the healthy size
     own_law: ClassVar[bool] = False
+    # the detector reads the reach at the acceleration limit (:meth:`limit_gains`)
+    reads_limit: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

@@ -29,6 +29,7 @@ class Friction(Detector):
     healthy_size = 1.0
     worse = 1  # worn bearings: more friction
     own_law = True  # at constant speed the own reference is the unit's friction law
+    reads_limit = True
 
     def grid(self, features: Features) -> np.ndarray:
         return np.geomspace(0.25, 8.0, 801)

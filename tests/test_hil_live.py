@@ -1,0 +1,46 @@
+"""``rwlab hil``'s live diagnosis: a wheel's control periods as the pipeline's samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
+from rwlab.errors import ConfigError
+from rwlab.hil.live import SAMPLE_S, PipelineWatch, hil_calibration_file, sampled
+from rwlab.wheel.physics import WheelParams
+
+
+def test_samples_are_block_means_of_the_commands_and_currents_and_end_speeds():
+    commands = np.arange(1.0, 11.0)  # two samples of 5 periods
+    readings = np.column_stack([10 * np.arange(11.0), np.arange(11.0), np.zeros(11)])
+    readings[3, 2] = 0.4  # one stale reading in the second sample's current block
+    data = sampled(commands, readings, 5, t0_s=100.0)
+    assert data.N == 2 and data.Ts == SAMPLE_S and data.tstart == 100.0
+    assert tuple(data.input_units) == ("rpm/s",)
+    np.testing.assert_array_equal(data.u[:, 0], [3.0, 8.0])  # in force over the sample
+    np.testing.assert_array_equal(data.y[:, 0], [0.0, 50.0])  # the speed at its start
+    # the current over the periods up to the sample (the first: its own reading)
+    np.testing.assert_array_equal(data.y[:, 1], [0.0, 3.0])
+    np.testing.assert_array_equal(data.y[:, 2], [0.0, 0.0])
+    data = sampled(commands[:9], readings, 5)
+    assert data.N == 1  # the second sample's commands are not complete
+
+
+def test_a_stale_reading_marks_its_sample():
+    readings = np.column_stack([np.zeros(11), np.zeros(11), np.zeros(11)])
+    readings[8, 2] = 0.7
+    data = sampled(np.zeros(10), readings, 5)
+    assert data.y[1, 2] == 0.0
+    data = sampled(np.zeros(15), np.vstack([readings, np.zeros((5, 3))]), 5)
+    assert data.y[2, 2] == 0.7  # periods 6-10 lead to the sample at period 10
+
+
+def test_the_watch_refuses_a_calibration_or_period_it_cannot_sample_at():
+    path = hil_calibration_file("rw90")
+    assert path is not None
+    cal = DiagnosisCalibration.load(path)
+    assert cal.Ts == SAMPLE_S and cal.quick_window_s is not None
+    with pytest.raises(ConfigError, match="divides"):
+        PipelineWatch(cal, WheelParams(), 0.3, 1e-3)
+    assert hil_calibration_file("no-such-wheel") is None
