@@ -14,7 +14,7 @@ from rwlab.wheel.physics import WheelParams
 def test_samples_are_block_means_of_the_commands_and_currents_and_end_speeds():
     commands = np.arange(1.0, 11.0)  # two samples of 5 periods
     readings = np.column_stack([10 * np.arange(11.0), np.arange(11.0), np.zeros(11)])
-    readings[3, 2] = 0.4  # one stale reading in the second sample's current block
+    readings[3, 2] = 0.4  # a stale reading over (0, 5]: the second sample's
     data = sampled(commands, readings, 5, t0_s=100.0)
     assert data.N == 2 and data.Ts == SAMPLE_S and data.tstart == 100.0
     assert tuple(data.input_units) == ("rpm/s",)
@@ -22,7 +22,7 @@ def test_samples_are_block_means_of_the_commands_and_currents_and_end_speeds():
     np.testing.assert_array_equal(data.y[:, 0], [0.0, 50.0])  # the speed at its start
     # the current over the periods up to the sample (the first: its own reading)
     np.testing.assert_array_equal(data.y[:, 1], [0.0, 3.0])
-    np.testing.assert_array_equal(data.y[:, 2], [0.0, 0.0])
+    np.testing.assert_array_equal(data.y[:, 2], [0.0, 0.4])
     data = sampled(commands[:9], readings, 5)
     assert data.N == 1  # the second sample's commands are not complete
 
