@@ -107,6 +107,43 @@ def _cumsum_rows(gains: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Cumulative:
+    """One detector's cumulative gains, row k the sum over samples [0, k) (row 0 is 0),
+    kept from row ``first`` on in a buffer a growing record extends in place and that
+    drops the rows no window reaches any more. Hand-written: numpy has no growable array,
+    and copying a live record's whole history at every decision grew as its square."""
+
+    def __init__(self, rows: np.ndarray) -> None:
+        self.buf, self.first, self.n = rows, 0, rows.shape[0]
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        i = k - self.first
+        if 0 <= i < self.n:
+            return self.buf[i]
+        if k == 0:
+            return np.zeros(self.buf.shape[1])
+        raise IndexError(f"row {k} is no longer kept (rows {self.first}-{self.first + self.n - 1})")
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The rows kept, shape (n, G), from row ``first``."""
+        return self.buf[: self.n]
+
+    def extend(self, start: int, new: np.ndarray, keep_from: int) -> None:
+        """Rows ``start + 1`` on become ``new`` (cumulative from row ``start``'s value); rows
+        before ``keep_from`` (at most ``start``) may be dropped."""
+        kept = start + 1 - self.first
+        if kept + new.shape[0] > self.buf.shape[0]:  # full: drop the old rows, grow if need be
+            drop = max(0, min(keep_from, start) - self.first)
+            kept -= drop
+            size = max(self.buf.shape[0], 2 * (kept + new.shape[0]))
+            buf = np.empty((size, self.buf.shape[1])) if size > self.buf.shape[0] else self.buf
+            buf[:kept] = self.buf[drop : drop + kept].copy()
+            self.buf, self.first = buf, self.first + drop
+        self.buf[kept : kept + new.shape[0]] = new
+        self.n = kept + new.shape[0]
+
+
 class Bank:
     """The model-based detectors' cumulative gains over one record.
 
@@ -132,7 +169,11 @@ class Bank:
         The same detectors on the record's first samples, as it was growing (a live
         diagnosis): its gains are kept and only the new samples' computed (a sample's gains
         depend on its past and, for a clamp's flat top, its next sample: the earlier
-        bank's last sample is computed again).
+        bank's last sample is computed again). Its storage is taken over: ``before`` is
+        not to be used after.
+    keep_from : int
+        With ``before``: the first sample any later window or event reads (earlier
+        cumulative rows may be dropped).
     """
 
     def __init__(
@@ -145,13 +186,15 @@ class Bank:
         faults=MODEL_BASED,
         quick_s: float | None = None,
         before: Bank | None = None,
+        keep_from: int = 0,
     ) -> None:
         self.features = features
+        self.keep_from = keep_from
         self.detectors = {name: detector(name) for name in faults}
         self.grid = {n: d.grid(features) for n, d in self.detectors.items()}
         self.weights = noise.weights(features)  # the sizes are read again on them (refine)
         start = 0 if before is None else max(before.features.N - 1, 0)
-        self.cum: dict[str, np.ndarray] = self._grown(
+        self.cum: dict[str, _Cumulative] = self._grown(
             None if before is None else before.cum, start, features, self.weights
         )
         # the same gains against the record's own past (features.own()): a change of the
@@ -160,8 +203,8 @@ class Bank:
         own = {law: features.own(law) for law in (False, True)}
         weights = {law: noise.weights(f) for law, f in own.items()}
         self.own_ready: dict[str, np.ndarray] = {}
-        self.cum_own: dict[str, np.ndarray] = {}
-        self.cum_limit: dict[str, np.ndarray] = {}
+        self.cum_own: dict[str, _Cumulative] = {}
+        self.cum_limit: dict[str, _Cumulative] = {}
         for law in (False, True):
             names = [n for n, d in self.detectors.items() if d.own_law == law]
             f, w = own[law], weights[law]
@@ -190,10 +233,10 @@ class Bank:
 
     def _grown(
         self, before, start: int, features: Features, weights, names=None, limit: bool = False
-    ) -> dict[str, np.ndarray]:
+    ) -> dict[str, _Cumulative]:
         """Per detector in ``names`` (all by default), the cumulative per-sample gains (with
-        ``limit``: those read at the acceleration limit), shape (N + 1, G): ``before``'s up
-        to sample ``start``, the rest computed on the samples from ``start`` with the one
+        ``limit``: those read at the acceleration limit), rows 0 to N: ``before``'s up to
+        sample ``start``, the rest computed on the samples from ``start`` with the one
         before as their past."""
         names = list(self.detectors) if names is None else names
 
@@ -204,14 +247,13 @@ class Bank:
             return out
 
         if start == 0 or before is None:
-            return {n: _cumsum_rows(gains(n, features, weights)) for n in names}
+            return {n: _Cumulative(_cumsum_rows(gains(n, features, weights))) for n in names}
         f = features.rows(start - 1)
         w = {k: v[start - 1 :] for k, v in weights.items()}
-        out = {}
         for n in names:
             new = _cumsum_rows(gains(n, f, w)[1:])
-            out[n] = np.concatenate([before[n][: start + 1], before[n][start] + new[1:]])
-        return out
+            before[n].extend(start, before[n][start] + new[1:], self.keep_from)
+        return {n: before[n] for n in names}
 
     def _between(self, name: str, lo: float, hi: float) -> np.ndarray:
         g = self.grid[name]

@@ -285,6 +285,11 @@ class Live:
             The events opened by this update, in alarm order.
         """
         cal, limits = self.calibration, self.limits
+        # what a later decision reads: its longest window back from the last decision,
+        # and each open event's window from its onset
+        old = self._bank
+        keep = [0 if old is None else self._done - old.windows[-1] - old.every]
+        keep += [e.start for e in self.events]
         bank = self._bank = Bank(
             features,
             cal.noise,
@@ -293,6 +298,7 @@ class Live:
             cal.dispersion,
             quick_s=cal.quick_window_s,
             before=self._bank,
+            keep_from=max(0, min(keep)),
         )
         events, new = self.events, []
         stuck = FrozenReading().first_alarm(features, limits["speed_sensor_stuck"].log_lr)

@@ -1132,7 +1132,10 @@ class _Loop:
             del self.watches[r.node]
             self.tracking.pop(r.node, None)
             size = "" if math.isnan(e.fit.size) else f" {e.fit.size:.3g} {e.fit.unit}"
-            how = f"GLR {e.detector} log-LR {e.fit.log_lr:.3g} > {e.threshold:.3g}: {e.fault}{size}"
+            how = (
+                f"GLR pipeline: {e.detector} over {e.threshold:.3g}, named {e.fault}{size} "
+                f"(log-LR {e.fit.log_lr:.3g}, runner-up {e.runner_up})"
+            )
             self._wheel_failed(r.node, e.fault, how, now)
             if e.fault in COAST_NAMES and not self.bank.active[r.node]:
                 self._coasting[r.node] = _CoastDown(self.wheel_faults[-1], self.sat.t)
