@@ -263,7 +263,19 @@ class Bank:
         return mask
 
     def fit(self, name: str, a: int, k: int) -> WindowFit:
-        """Detector ``name`` on samples [a, k): its GLR over the larger-supported healthy zone."""
+        """Detector ``name`` on samples [a, k): its GLR over the larger-supported healthy zone.
+
+        Parameters
+        ----------
+        name : str
+            A model-based detector's fault.
+        a, k : int
+            The window's first and past-the-last samples.
+
+        Returns
+        -------
+        WindowFit
+        """
         ll = self.cum[name][k] - self.cum[name][a]
         det = self.detectors[name]
         zone, phi = self.zone[name], self.dispersion[name]
@@ -334,7 +346,20 @@ class Bank:
         return out
 
     def at(self, name: str, k: int) -> WindowFit:
-        """The best window ending at sample k (exclusive) for detector ``name``."""
+        """The best window ending at sample k (exclusive) for detector ``name``.
+
+        Parameters
+        ----------
+        name : str
+            A model-based detector's fault.
+        k : int
+            The decision's past-the-last sample.
+
+        Returns
+        -------
+        WindowFit
+            The window of the largest log-LR among the decision windows.
+        """
         fits = [
             self.fit(name, max(0, k - w), k)
             for w in self.decision_windows

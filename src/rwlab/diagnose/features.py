@@ -195,7 +195,17 @@ class Features:
 
     def rows(self, start: int) -> Features:
         """The samples from ``start`` on, every per-sample array sliced (a sample's features
-        depend on its past only, so these are the record's own from there)."""
+        depend on its past only, so these are the record's own from there).
+
+        Parameters
+        ----------
+        start : int
+            The first sample kept.
+
+        Returns
+        -------
+        Features
+        """
         n = self.N
         sliced: dict[str, Any] = {
             name: value[start:]

@@ -10,12 +10,30 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["STICTION_BAND", "WheelScales"]
+__all__ = ["STICTION_BAND", "WheelScales", "stiction_band_rpm"]
 
 # textbook, not tuned: at three Stribeck speeds the Stribeck excess is e⁻⁹ of itself, so
 # outside that band (or three times the slowest reading) a wheel's friction is its
 # Coulomb and viscous law
 STICTION_BAND = 3.0
+
+
+def stiction_band_rpm(params) -> float:
+    """The speed under which the wheel's healthy friction law is breakaway.
+
+    Parameters
+    ----------
+    params : WheelParams
+        The wheel model.
+
+    Returns
+    -------
+    float
+        :data:`STICTION_BAND` × its Stribeck speed or the speed sensor's dead zone,
+        whichever is larger, rpm (a magnitude).
+    """
+    stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
+    return STICTION_BAND * max(stribeck, params.min_measurable_rpm)
 
 
 @dataclass(frozen=True)
@@ -115,7 +133,6 @@ class WheelScales:
         """
         rad = math.pi / 30  # rad/s per rpm
         kt = params.torque_constant
-        stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
         return cls(
             Ts=float(Ts),
             accel_limit_rpm_s=float(params.max_accel_rpm_s),
@@ -126,5 +143,5 @@ class WheelScales:
                 params.coulomb_friction / kt,
                 0.0,
             ),
-            stiction_band_rpm=STICTION_BAND * max(stribeck, params.min_measurable_rpm),
+            stiction_band_rpm=stiction_band_rpm(params),
         )

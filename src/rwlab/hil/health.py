@@ -20,7 +20,8 @@ dither's share the wheel did not follow (a motor without torque), the current
 the drive delivered against the one its own feed-forward asked for (a clamped
 current), or a drag that does not depend on the command (friction).
 
-A window in which the wheel's reading comes within :data:`STICTION_BAND` ×
+A window in which the wheel's reading comes within
+:data:`~rwlab.diagnose.scales.STICTION_BAND` ×
 its Stribeck speed of zero (or of the Hall sensor's dead zone, where it reads
 0) is not tested: there the healthy law is breakaway — the wheel sticks at
 zero until its motor torque beats the static friction, which its drive's
@@ -64,7 +65,7 @@ import numpy as np
 from scipy.stats import norm
 
 from rwlab.diagnose.detect import Cusum, arl_to_samples, cusum_threshold
-from rwlab.diagnose.scales import STICTION_BAND
+from rwlab.diagnose.scales import stiction_band_rpm
 from rwlab.errors import ConfigError
 from rwlab.hil.probe import Half, Probe
 from rwlab.wheel.physics import WheelParams, rpm_to_rad_s
@@ -122,24 +123,6 @@ def nominal_friction_nm(params: WheelParams, speed_rpm: float) -> float:
     w = rpm_to_rad_s(speed_rpm)
     coulomb = params.coulomb_friction * math.copysign(1.0, w) * (abs(w) > 1e-9)
     return params.viscous_friction * w + coulomb
-
-
-def stiction_band_rpm(params: WheelParams) -> float:
-    """The speed under which the wheel's healthy friction law is breakaway.
-
-    Parameters
-    ----------
-    params : WheelParams
-        The wheel model.
-
-    Returns
-    -------
-    float
-        :data:`STICTION_BAND` × its Stribeck speed or the speed sensor's dead zone,
-        whichever is larger, rpm (a magnitude).
-    """
-    stribeck = params.stribeck_speed_rpm if params.stiction else 0.0
-    return STICTION_BAND * max(stribeck, params.min_measurable_rpm)
 
 
 def null_vector(G: np.ndarray) -> np.ndarray | None:
@@ -363,9 +346,8 @@ class TrackingTest:
     probe_every_s : float, optional
         How often a capacity probe comes, s (None: no probes).
     tracking : bool
-        Run the command-tracking CUSUM (False: ``rwlab hil``'s GLR pipeline watches the
-        wheel, :mod:`rwlab.hil.live`; the residual's healthy spread is still measured and
-        the probes still judged).
+        Run the command-tracking CUSUM (False: the GLR pipeline watches the wheel,
+        :mod:`rwlab.hil.live`; the spread is still measured, the probes still judged).
     """
 
     def __init__(
@@ -378,9 +360,9 @@ class TrackingTest:
         probe_every_s: float | None = None,
         tracking: bool = True,
     ) -> None:
-        self.tracking = tracking
         self.every = max(1, round(window_s / dt))
         self.dt, self.window_s, self.params = dt, self.every * dt, params
+        self.tracking = tracking
         self.calibration_windows = max(30, math.ceil(calibration_s / self.window_s))
         rate = false_alarms_per_hour / (1 if probe_every_s is None else 2)
         self.cusum = Cusum(cusum_threshold(arl_to_samples(rate, self.window_s)), clip=CLIP)
@@ -501,7 +483,7 @@ class TrackingTest:
                 mad = float(np.median(np.abs(values - np.median(values))))
                 self.robust_sigma = max(1.4826 * mad, floor)
             return None
-        if not self.tracking:
+        if not self.tracking:  # the GLR pipeline watches this wheel
             return None
         before = self.cusum.statistic
         self.windows_tested += 1
