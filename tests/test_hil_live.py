@@ -44,3 +44,25 @@ def test_the_watch_refuses_a_calibration_or_period_it_cannot_sample_at():
     with pytest.raises(ConfigError, match="divides"):
         PipelineWatch(cal, WheelParams(), 0.3, 1e-3)
     assert hil_calibration_file("no-such-wheel") is None
+
+
+@pytest.mark.parametrize("wheel", ["rw90", "nrwa-t6"])
+def test_the_presets_in_the_loop_ship_a_calibration_with_its_provenance(wheel):
+    """Shipped as package data, valid against its schema, measured at the watch's sample
+    time with its short window, on healthy flights of the preset's pyramid."""
+    import json
+    import tomllib
+
+    from jsonschema import Draft202012Validator
+
+    from rwlab.schemas import schema
+
+    path = hil_calibration_file(wheel)
+    assert path is not None
+    Draft202012Validator(schema("diagnosis_calibration")).validate(json.loads(path.read_text()))
+    cal = DiagnosisCalibration.load(path)
+    assert cal.Ts == SAMPLE_S and cal.quick_window_s == 5.0 and cal.records == 12
+    assert "healthy rwlab hil flights" in cal.origin and "bench_fdi_hil.py" in cal.origin
+    root = path.parents[3]
+    data = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert "hil/*.json" in data["package-data"]["rwlab"]

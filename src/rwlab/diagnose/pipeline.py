@@ -289,7 +289,7 @@ class Live:
         # and each open event's window from its onset
         old = self._bank
         keep = [0 if old is None else self._done - old.windows[-1] - old.every]
-        keep += [e.start for e in self.events]
+        keep += [e.start for e in self.events if e.first in MODEL_BASED]
         bank = self._bank = Bank(
             features,
             cal.noise,
@@ -297,7 +297,7 @@ class Live:
             cal.drift,
             cal.dispersion,
             quick_s=cal.quick_window_s,
-            before=self._bank,
+            before=old,
             keep_from=max(0, min(keep)),
         )
         events, new = self.events, []
