@@ -371,12 +371,10 @@ def channel_mask(features: Features, name: str) -> np.ndarray:
 
 
 def _turning(features: Features) -> np.ndarray:
-    """A non-zero reading out of the stiction band that kept its direction over the
-    sample, bool, shape (N,)."""
+    """A non-zero reading that kept its direction over the sample, bool, shape (N,)."""
     w = features.speed_rpm
     before = np.concatenate([w[:1], w[:-1]])
-    fast = np.abs(w) >= features.scales.stiction_band_rpm
-    return (w != 0) & fast & (np.sign(w) == np.sign(before))
+    return (w != 0) & (np.sign(w) == np.sign(before))
 
 
 def past_covers(features: Features) -> np.ndarray:
@@ -403,9 +401,10 @@ def past_covers(features: Features) -> np.ndarray:
 
 
 def at_limit(features: Features) -> np.ndarray:
-    """The samples read at the acceleration limit, bool, shape (N,): fresh, the loop
-    demanding its limit (:attr:`Features.saturated`), turning one way through the sample
-    (through a reversal the bearing's friction is static, not its law).
+    """The samples read at the acceleration limit, bool, shape (N,): the acceleration
+    channel's (:func:`channel_mask`), the loop demanding its limit
+    (:attr:`Features.saturated`), turning one way through the sample (through a reversal
+    the bearing's friction is static, not its law).
 
     Parameters
     ----------
@@ -415,7 +414,7 @@ def at_limit(features: Features) -> np.ndarray:
     -------
     numpy.ndarray
     """
-    return features.usable & ~features.repeated & features.saturated & _turning(features)
+    return channel_mask(features, "accel") & features.saturated & _turning(features)
 
 
 def limit_reach(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
