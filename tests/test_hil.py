@@ -493,7 +493,9 @@ def test_the_console_ends_with_the_health_checks_account(tmp_path):
     assert decisions == 4 * (260 // 5) and probes == 4  # probes at 60-180 s the healthy ones
     assert sum(m["health_check"]["windows_tested"].values()) == 0  # no tracking CUSUM
     line = f"health check: {decisions} pipeline decisions and {probes} capacity probes tested"
-    assert f"{line} on 4 wheels: no alarm" in res.output
+    [account] = [s for s in res.output.splitlines() if s.startswith("health check:")]
+    assert account.startswith(f"{line} on 4 wheels (GLR pipeline, calibrated on 12 wheels of")
+    assert account.endswith("): no alarm")
     res = CliRunner().invoke(
         main, [*args, _channel(), "--duration", "50", "--out", str(tmp_path / "b")]
     )

@@ -66,3 +66,17 @@ def test_the_presets_in_the_loop_ship_a_calibration_with_its_provenance(wheel):
     root = path.parents[3]
     data = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert "hil/*.json" in data["package-data"]["rwlab"]
+
+
+def test_only_the_presets_own_spec_takes_its_calibration():
+    """A unit's spec edited from a preset's file keeps the preset's name, not its numbers:
+    it flies under the tracking test, not the preset's calibration."""
+    from dataclasses import replace
+
+    from rwlab.wheelspec import WheelSpec
+
+    preset = WheelSpec.load("rw90")
+    assert hil_calibration_file(preset) == hil_calibration_file("rw90") is not None
+    edited = replace(preset, coulomb_friction_nm=1.25 * preset.coulomb_friction_nm)
+    assert edited.name == "rw90" and hil_calibration_file(edited) is None
+    assert hil_calibration_file(WheelSpec.load("rw-0.01")) is None  # none shipped

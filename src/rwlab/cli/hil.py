@@ -226,15 +226,17 @@ def hil(
     if health is not None:
         windows, probes = (sum(health[k].values()) for k in ("windows_tested", "probes_tested"))
         tested, pipeline = "tracking windows", health.get("pipeline")
+        how = "command-tracking test: no in-loop calibration for this wheel model"
         if pipeline is not None:
             windows, tested = sum(pipeline["decisions"].values()), "pipeline decisions"
+            how = f"GLR pipeline, calibrated on {pipeline['calibration']}"
         failed = sorted({str(f["node"]) for f in m["wheel_faults"] if f["named_kind"] != dropout})
         verdict = f"alarm on wheel {', '.join(failed)}" if failed else "no alarm"
         if not (windows or probes or failed):
             verdict = f"still calibrating at the end ({calibration:g} s): nothing tested"
         click.echo(
             f"health check: {windows} {tested} and {probes} capacity probes tested "
-            f"on {len(health['windows_tested'])} wheels: {verdict}"
+            f"on {len(health['windows_tested'])} wheels ({how}): {verdict}"
         )
     telemetry = m["telemetry_check"]
     dropped = sorted({str(f["node"]) for f in m["wheel_faults"] if f["named_kind"] == dropout})

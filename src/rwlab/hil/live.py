@@ -27,6 +27,7 @@ from rwlab.diagnose.scales import WheelScales
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.errors import ConfigError
 from rwlab.wheel.physics import WheelParams
+from rwlab.wheelspec import WheelSpec
 
 __all__ = ["SAMPLE_S", "PipelineWatch", "hil_calibration_file", "sampled"]
 
@@ -34,22 +35,29 @@ SAMPLE_S = 0.5  # the pipeline's sample time in flight, s (a block of control pe
 _OUTPUTS = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
 
 
-def hil_calibration_file(wheel: str) -> Path | None:
+def hil_calibration_file(wheel: str | WheelSpec) -> Path | None:
     """The package's calibration for a wheel preset in the loop, or None where none is
     shipped (measured on healthy ``rwlab hil`` flights of the preset's redundant scenario;
     its ``origin`` says which).
 
     Parameters
     ----------
-    wheel : str
-        A wheel preset's name (``rwlab wheel models``).
+    wheel : str or WheelSpec
+        A wheel preset's name (``rwlab wheel models``), or a wheel spec: only the preset's
+        own (the same hash) has it; a unit's spec edited from a preset's keeps its name but
+        not its numbers.
 
     Returns
     -------
     pathlib.Path or None
     """
-    path = Path(__file__).with_name(f"hil_calibration_{wheel}.json")
-    return path if path.is_file() else None
+    name = wheel if isinstance(wheel, str) else wheel.name
+    path = Path(__file__).with_name(f"hil_calibration_{name}.json")
+    if not path.is_file():
+        return None
+    if isinstance(wheel, WheelSpec) and wheel.hash != WheelSpec.load(name).hash:
+        return None
+    return path
 
 
 class PipelineWatch:

@@ -935,7 +935,7 @@ class _Loop:
         rule_tests = self.diagnosis and not self.health
         diag = self.diag = self._diagnosers(self.nodes) if rule_tests else {}
         if self.health:
-            path = hil_calibration_file(sc.wheels.wheel_spec.name)
+            path = hil_calibration_file(sc.wheels.wheel_spec)
             if path is not None:
                 self.pipeline = DiagnosisCalibration.load(path)
                 self.watches = self._watches(self.nodes, 0.0)
@@ -1133,8 +1133,9 @@ class _Loop:
             self.tracking.pop(r.node, None)
             size = "" if math.isnan(e.fit.size) else f" {e.fit.size:.3g} {e.fit.unit}"
             how = (
-                f"GLR pipeline: {e.detector} over {e.threshold:.3g}, named {e.fault}{size} "
-                f"(log-LR {e.fit.log_lr:.3g}, runner-up {e.runner_up})"
+                f"GLR pipeline: the {e.detector} statistic crossed {e.threshold:.3g}; the "
+                f"likeliest fault {e.fault}{size}, log-LR {e.fit.log_lr:.3g} over healthy, "
+                f"runner-up {e.runner_up}"
             )
             self._wheel_failed(r.node, e.fault, how, now)
             if e.fault in COAST_NAMES and not self.bank.active[r.node]:
