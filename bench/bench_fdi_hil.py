@@ -8,9 +8,10 @@ Each ``--calibrate`` seed is a healthy flight of the preset's redundant scenario
 healthy record; every ``--judge`` flight (``SEED/FAULT``, FAULT as ``rwlab hil
 --fault``, empty: healthy) is diagnosed wheel by wheel with that calibration, after the
 flight. The flights keep the health check's excitation (the null-space dither and the
-capacity probes) but its own tests are muted, so that no alarm idles the faulty wheel
-and the pipeline sees the whole fault (``rwlab hil`` runs the same pipeline in flight,
-:mod:`rwlab.hil.live`; a wheel's telemetry is read as it feeds it, :func:`wheel_record`).
+capacity probes) but its own tests (pipeline included) are muted, so that no alarm
+idles the faulty wheel and the pipeline sees the whole fault (``rwlab hil`` runs the
+same pipeline in flight, :mod:`rwlab.hil.live`; a wheel's telemetry is read as it feeds
+it: :func:`rwlab.hil.live.flight_features`).
 The CubeSat's three orthogonal wheels have no null space to excite: the RW-0.01 is not
 flown here. A benchmark, not a test.
 """
@@ -26,27 +27,20 @@ from pathlib import Path
 
 import numpy as np
 
-from rwlab.attitude.scenario import load_scenario
-from rwlab.attitude.wheels import physics_params
-from rwlab.data import IOData
 from rwlab.diagnose.detectors import MODEL_BASED
-from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
 from rwlab.diagnose.pipeline import run
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 from rwlab.errors import RwlabWarning
-from rwlab.hil.live import SAMPLE_S, sampled
-from rwlab.testbed import load_record
+from rwlab.hil.live import QUICK_S, flight_features
 
 SCENARIO = {"rw90": "geo-smallsat-pyramid", "nrwa-t6": "geo-comsat"}
 DURATION_S = 1400.0
-# design choice: a decision window of 5 s beside the bank's, so that a large fault (a
-# dead motor, friction x 4) crosses at the first decision after it, as the loop's
-# pointing needs (shortest 60 s: a dead motor at +15 s cost 0.123 deg; 10 s: friction x 4
-# on the RW90 at +10 s cost 0.118 deg of the 0.1-deg requirement)
-QUICK_S = 5.0
-# the flight's own tests muted, the excitation kept (run in a child: the patch stays there)
+# the flight's own tests (its pipeline, the tracking test and the probes) muted, the
+# excitation kept (run in a child: the patch stays there)
 MUTED = (
-    "import sys, rwlab.hil.health as h; h.TrackingTest.update = lambda self, *a, **k: None; "
+    "import sys, rwlab.hil.health as h, rwlab.hil.live as live; "
+    "h.TrackingTest.update = lambda self, *a, **k: None; "
+    "live.PipelineWatch.update = lambda self, *a, **k: []; "
     "from rwlab.cli import main; sys.exit(main())"
 )
 
@@ -63,15 +57,6 @@ def fly(cache: Path, wheel: str, seed: int, fault: str = "") -> Path:
     return out
 
 
-def wheel_record(path: Path, node: int) -> IOData:
-    """One wheel's flight telemetry on the live diagnosis's grid from the flight's start
-    (:func:`rwlab.hil.live.sampled`: what ``rwlab hil`` feeds its pipeline)."""
-    data = load_record(path, None, node=node, outputs=RECORD_OUTPUTS, max_gap=np.inf)
-    t = data.tstart + data.Ts * np.arange(data.N)
-    first = int(np.searchsorted(t, -1e-9))
-    return sampled(data.u[first:-1, 0], data.y[first:, :3], round(SAMPLE_S / data.Ts))
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--wheel", choices=sorted(SCENARIO), required=True)
@@ -83,14 +68,10 @@ def main() -> None:
     args = p.parse_args()
     warnings.simplefilter("ignore", RwlabWarning)
     args.cache.mkdir(parents=True, exist_ok=True)
-    params = physics_params(load_scenario(SCENARIO[args.wheel]))
-    scales = WheelScales.from_params(params, SAMPLE_S)
     healthy = [
-        compute_features(
-            wheel_record(fly(args.cache, args.wheel, s) / "record.mcap", n), None, scales
-        )
+        f
         for s in args.calibrate
-        for n in (1, 2, 3, 4)
+        for f in flight_features(fly(args.cache, args.wheel, s) / "record.mcap")
     ]
     flights = ", ".join(str(s) for s in args.calibrate)
     origin = (
@@ -110,9 +91,8 @@ def main() -> None:
         seed, _, fault = spec.partition("/")
         out = fly(args.cache, args.wheel, int(seed), fault)
         onset = float(fault.rpartition("@")[2]) if fault else None
-        for node in (1, 2, 3, 4):
-            data = wheel_record(out / "record.mcap", node)
-            result = run(compute_features(data, None, scales), cal, args.rate)
+        for node, features in enumerate(flight_features(out / "record.mcap"), start=1):
+            result = run(features, cal, args.rate)
             alarm = "none"
             if result.events:
                 e = result.events[0]

@@ -15,23 +15,36 @@ same excitation (:func:`hil_calibration_file`); lost frames are the dropout test
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from rwlab.data import IOData
 from rwlab.diagnose.bank import EVERY_S
-from rwlab.diagnose.features import compute_features
+from rwlab.diagnose.features import Features, compute_features
 from rwlab.diagnose.pipeline import Event, Live
 from rwlab.diagnose.scales import WheelScales
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
-from rwlab.errors import ConfigError
+from rwlab.errors import ConfigError, DataError
 from rwlab.wheel.physics import WheelParams
 from rwlab.wheelspec import WheelSpec
 
-__all__ = ["SAMPLE_S", "PipelineWatch", "hil_calibration_file", "sampled"]
+__all__ = [
+    "QUICK_S",
+    "SAMPLE_S",
+    "PipelineWatch",
+    "flight_features",
+    "hil_calibration_file",
+    "sampled",
+]
 
 SAMPLE_S = 0.5  # the pipeline's sample time in flight, s (a block of control periods)
+# design choice: a decision window of 5 s beside the bank's, so that a large fault (a
+# dead motor, friction x 4) crosses at the first decision after it, as the loop's
+# pointing needs (shortest 60 s: a dead motor at +15 s cost 0.123 deg; 10 s: friction x 4
+# on the RW90 at +10 s cost 0.118 deg of the 0.1-deg requirement)
+QUICK_S = 5.0
 _OUTPUTS = ["speed_rpm", "current_a", "telemetry_age_s", "lost_frames"]
 
 
@@ -186,3 +199,46 @@ def sampled(commands, readings, periods: int, t0_s: float = 0.0) -> IOData:
     return IOData(
         cmd[:, None], y, SAMPLE_S, output_names=_OUTPUTS, input_units=["rpm/s"], tstart=t0_s
     )
+
+
+def flight_features(path: str | os.PathLike) -> list[Features]:
+    """Every wheel's features of a healthy ``rwlab hil`` record, as its pipeline read them
+    in flight (:func:`sampled` of its telemetry from flight time 0, against the record's
+    wheel model): what a calibration in the loop is measured on.
+
+    Parameters
+    ----------
+    path : path-like
+        The flight's ``record.mcap``.
+
+    Returns
+    -------
+    list of Features
+        One per wheel node.
+
+    Raises
+    ------
+    DataError
+        Not an ``rwlab hil`` record, or one with an alarm (not a healthy flight).
+    """
+    from rwlab.diagnose.features import RECORD_OUTPUTS
+    from rwlab.testbed import load_record
+    from rwlab.testbed.record import read_record
+
+    record = read_record(path)
+    config = record.metadata.get("config", {})
+    if record.metadata.get("kind") != "rwlab.hil/1" or "wheel_params" not in config:
+        raise DataError(f"{path}: not an rwlab hil record (a flight's record.mcap)")
+    alarms = [e["message"] for e in record.topic("/event") if e["kind"] == "alarm"]
+    if alarms:
+        raise DataError(f"{path}: not a healthy flight ({alarms[0]}); calibrate on healthy ones")
+    scales = WheelScales.from_params(WheelParams(**config["wheel_params"]), SAMPLE_S)
+    out = []
+    for node in config["nodes"]:
+        data = load_record(path, None, node=node, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+        t = data.tstart + data.Ts * np.arange(data.N)
+        first = int(np.searchsorted(t, -1e-9))
+        periods = round(SAMPLE_S / data.Ts)
+        wheel = sampled(data.u[first:-1, 0], data.y[first:, :3], periods)
+        out.append(compute_features(wheel, None, scales))
+    return out
