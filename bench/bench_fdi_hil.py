@@ -71,7 +71,7 @@ def main() -> None:
     healthy = [
         f
         for s in args.calibrate
-        for f in flight_features(fly(args.cache, args.wheel, s) / "record.mcap")
+        for f in flight_features(fly(args.cache, args.wheel, s) / "record.mcap").values()
     ]
     flights = ", ".join(str(s) for s in args.calibrate)
     origin = (
@@ -91,7 +91,7 @@ def main() -> None:
         seed, _, fault = spec.partition("/")
         out = fly(args.cache, args.wheel, int(seed), fault)
         onset = float(fault.rpartition("@")[2]) if fault else None
-        for node, features in enumerate(flight_features(out / "record.mcap"), start=1):
+        for node, features in flight_features(out / "record.mcap").items():
             result = run(features, cal, args.rate)
             alarm = "none"
             if result.events:

@@ -80,3 +80,46 @@ def test_only_the_presets_own_spec_takes_its_calibration():
     edited = replace(preset, coulomb_friction_nm=1.25 * preset.coulomb_friction_nm)
     assert edited.name == "rw90" and hil_calibration_file(edited) is None
     assert hil_calibration_file(WheelSpec.load("rw-0.01")) is None  # none shipped
+
+
+@pytest.mark.slow  # three flights of minutes over the virtual bus
+def test_a_lab_calibrates_the_pipeline_on_its_own_wheels_flights(tmp_path):
+    """A unit's own spec (the RW90's file, renamed) has no shipped calibration and
+    flies under the tracking test; calibrated on two of its own healthy flights
+    (``rwlab diagnose calibrate --in-loop``), ``--diagnosis-calibration`` puts the pipeline
+    on its wheels, and friction × 4 is named on the faulty wheel."""
+    import json
+    import re
+
+    from click.testing import CliRunner
+
+    from rwlab.cli import main
+
+    spec = CliRunner().invoke(main, ["wheel", "models", "rw90"]).output
+    spec = re.sub(r'(?m)^name = "rw90"', 'name = "lab-unit-7"', spec)
+    (tmp_path / "unit.toml").write_text(spec)
+    base = ["hil", "--scenario", "geo-smallsat-pyramid", "--wheel", str(tmp_path / "unit.toml")]
+    base += ["--no-reference", "--duration", "400"]
+
+    def fly(name: str, *extra: str) -> str:
+        res = CliRunner().invoke(
+            main, [*base, "--channel", f"hil-live-{name}", "--out", str(tmp_path / name), *extra]
+        )
+        assert res.exit_code == 0, res.output
+        return res.output
+
+    assert "(command-tracking test: no in-loop calibration" in fly("h1", "--seed", "1")
+    fly("h2", "--seed", "2")
+    cal = tmp_path / "cal.json"
+    records = [str(tmp_path / h / "record.mcap") for h in ("h1", "h2")]
+    res = CliRunner().invoke(
+        main, ["diagnose", "calibrate", *records, "--in-loop", "--out", str(cal)]
+    )
+    assert res.exit_code == 0, res.output
+    assert json.loads(cal.read_text())["records"] == 8  # two flights, four wheels each
+    fault = ["--fault", "2:friction=4@250", "--diagnosis-calibration", str(cal)]
+    out = fly("f", "--seed", "3", *fault)
+    assert "(GLR pipeline, calibrated on" in out
+    [alarm] = json.loads((tmp_path / "f" / "metrics.json").read_text())["wheel_faults"]
+    assert alarm["node"] == 2 and alarm["named_kind"] == "friction"
+    assert alarm["detector"].startswith("GLR pipeline") and alarm["detected_s"] - 250 <= 10

@@ -94,23 +94,48 @@ def diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) -
 @diagnose_group.command("calibrate")
 @click.argument("records", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option(
-    "--model", "model_file", type=click.Path(dir_okay=False), required=True, help="model.json."
+    "--model",
+    "model_file",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="model.json (the bench's speed-mode records).",
+)
+@click.option(
+    "--in-loop",
+    is_flag=True,
+    help="The records are healthy rwlab hil flights (record.mcap): every wheel of each, read "
+    "as its pipeline reads it in flight, against the record's wheel model; use the file "
+    "with rwlab hil --diagnosis-calibration.",
 )
 @click.option(
     "--out", type=click.Path(dir_okay=False), required=True, help="The calibration.json to write."
 )
 @click.option("--origin", default="", help="One line on whose wheel and which records.")
 @_friendly_errors
-def calibrate_cmd(records, model_file, out, origin):
+def calibrate_cmd(records, model_file, in_loop, out, origin):
     """Measure the diagnosis's noise model, healthy zones and thresholds on a wheel's
     own healthy records (2-4 h of its normal test signals), each threshold with the
-    false-alarm rate measured at it; use it with rwlab diagnose RECORD --calibration."""
+    false-alarm rate measured at it; use it with rwlab diagnose RECORD --calibration
+    (or, --in-loop, with rwlab hil --diagnosis-calibration)."""
     from rwlab.diagnose.detectors import MODEL_BASED
     from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 
-    features = [_fdi_features(Path(r), model_file) for r in records]
-    names = [Path(r).name for r in records]
-    calibration = DiagnosisCalibration.measure(features, sources=names, origin=origin)
+    quick = None
+    if in_loop:
+        from rwlab.hil.live import QUICK_S, flight_features
+
+        wheels = {(r, n): f for r in records for n, f in flight_features(r).items()}
+        features = list(wheels.values())
+        names = [f"{r} node {n}" for r, n in wheels]
+        quick = QUICK_S
+    elif model_file is None:
+        raise click.UsageError("--model is needed (or --in-loop for rwlab hil flights)")
+    else:
+        features = [_fdi_features(Path(r), model_file) for r in records]
+        names = [Path(r).name for r in records]
+    calibration = DiagnosisCalibration.measure(
+        features, sources=names, origin=origin, quick_window_s=quick
+    )
     if calibration.hours < MIN_HOURS:
         warnings.warn(
             f"{calibration.hours:.2g} h of healthy records: thresholds for rates under "

@@ -121,6 +121,14 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     "the diagnosis [default: on with the diagnosis on a redundant set].",
 )
 @click.option(
+    "--diagnosis-calibration",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="A calibration.json measured on the wheels' own healthy flights (rwlab diagnose "
+    "calibrate RECORDS... --in-loop): the health check's GLR pipeline decides with it "
+    "[default: the preset's shipped one, where the wheel is a preset's own].",
+)
+@click.option(
     "--steady-after",
     type=Number(0, 1e9),
     default=None,

@@ -201,7 +201,7 @@ def sampled(commands, readings, periods: int, t0_s: float = 0.0) -> IOData:
     )
 
 
-def flight_features(path: str | os.PathLike) -> list[Features]:
+def flight_features(path: str | os.PathLike) -> dict[int, Features]:
     """Every wheel's features of a healthy ``rwlab hil`` record, as its pipeline read them
     in flight (:func:`sampled` of its telemetry from flight time 0, against the record's
     wheel model): what a calibration in the loop is measured on.
@@ -213,8 +213,8 @@ def flight_features(path: str | os.PathLike) -> list[Features]:
 
     Returns
     -------
-    list of Features
-        One per wheel node.
+    dict of int to Features
+        Per wheel node.
 
     Raises
     ------
@@ -233,12 +233,12 @@ def flight_features(path: str | os.PathLike) -> list[Features]:
     if alarms:
         raise DataError(f"{path}: not a healthy flight ({alarms[0]}); calibrate on healthy ones")
     scales = WheelScales.from_params(WheelParams(**config["wheel_params"]), SAMPLE_S)
-    out = []
+    out = {}
     for node in config["nodes"]:
         data = load_record(path, None, node=node, outputs=RECORD_OUTPUTS, max_gap=np.inf)
         t = data.tstart + data.Ts * np.arange(data.N)
         first = int(np.searchsorted(t, -1e-9))
         periods = round(SAMPLE_S / data.Ts)
         wheel = sampled(data.u[first:-1, 0], data.y[first:, :3], periods)
-        out.append(compute_features(wheel, None, scales))
+        out[node] = compute_features(wheel, None, scales)
     return out

@@ -164,6 +164,11 @@ class HilConfig:
         reads 0 below ``min_measurable_rpm``) flips its drive's friction feed-forward
         with a sign the reading cannot show, which the current test takes for a fault
         (measured: a false alarm within 300 s on the orthogonal smallsat).
+    diagnosis_calibration : str, optional
+        A calibration file measured on the wheels' own healthy flights (``rwlab diagnose
+        calibrate RECORDS... --in-loop``): the health check's GLR pipeline
+        (:mod:`rwlab.hil.live`) decides with it; by default the preset's shipped one where
+        the wheel is a preset's own, else the command-tracking test.
     health_check : bool, optional
         The null-space excitation, its capacity probes and every wheel's
         command-tracking test (:mod:`rwlab.hil.health`). Default: on with the diagnosis
@@ -207,6 +212,7 @@ class HilConfig:
     wheel_bias_rpm: float | None = None
     diagnosis: bool | None = None
     health_check: bool | None = None
+    diagnosis_calibration: str | None = None
     diagnosis_period_s: float = 0.5
     calibration_s: float = 300.0
     false_alarms_per_hour: float = 1e-3
@@ -935,7 +941,7 @@ class _Loop:
         rule_tests = self.diagnosis and not self.health
         diag = self.diag = self._diagnosers(self.nodes) if rule_tests else {}
         if self.health:
-            path = hil_calibration_file(sc.wheels.wheel_spec)
+            path = cfg.diagnosis_calibration or hil_calibration_file(sc.wheels.wheel_spec)
             if path is not None:
                 self.pipeline = DiagnosisCalibration.load(path)
                 self.watches = self._watches(self.nodes, 0.0)
