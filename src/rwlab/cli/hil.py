@@ -111,7 +111,9 @@ def _nodes(text: str | None) -> tuple[int, ...] | None:
     "--diagnosis/--no-diagnosis",
     default=None,
     help="Live diagnosis of every wheel [default: on with --wheel-bias-rpm, whose wheels "
-    "never hover at zero speed where the current test false-alarms].",
+    "never hover at zero speed where the current test false-alarms]; on a redundant set "
+    "the health check is the diagnosis (the GLR pipeline or the command-tracking test), "
+    "elsewhere the rwlab diagnose block tests.",
 )
 @click.option(
     "--health-check/--no-health-check",
