@@ -27,6 +27,7 @@ from rwlab.diagnose.features import (
     REFERENCE_LAG_S,
     STEADY_SHARE,
     WheelScales,
+    _least_norm_solve,
     channel_mask,
     compute_features,
     past_covers,
@@ -89,12 +90,13 @@ def record(
     onset: int = 1200,
     unit_friction: float = 1.0,
     unit_offset_a: float = 0.0,
+    speed: np.ndarray | None = None,
 ):
     """(IOData, wheel) of a healthy wheel, with ``fault`` of ``size`` from sample ``onset``;
     ``unit_friction`` and ``unit_offset_a``: another unit's friction (× the reference's)
-    and current offset (A)."""
+    and current offset (A); ``speed``: the wheel's speed, rpm (default :func:`profile`)."""
     rng = np.random.default_rng(seed)
-    speed = profile(n)
+    speed = profile(n) if speed is None else speed
     accel = np.concatenate([[0.0], np.diff(speed) / TS])
     friction = unit_friction * (C[1] * speed + C[2] * np.sign(speed))
     after = np.arange(n) >= onset
@@ -288,6 +290,56 @@ def test_the_own_reference_takes_out_a_units_friction_and_offset():
     law = f.own(law=True)
     ratio = law.friction_current_a[steady] / f.friction_current_a[steady]
     assert np.median(ratio) == pytest.approx(1.4, abs=0.05)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(0, 2**32 - 1),
+    st.integers(1, 3),
+    st.floats(1e-3, 1e3),
+)
+def test_the_stacked_least_norm_solve_is_lstsqs(seed, rank, scale):
+    """Symmetric positive semi-definite 3 × 3 systems of every rank, and near-singular ones:
+    the same solution as numpy's lstsq with its cutoff (rcond 1e-6), system by system."""
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((8, 20, rank)) @ rng.standard_normal((8, rank, 3))
+    X[4:, :, 2] = X[4:, :, 1] + 1e-5 * rng.standard_normal((4, 20))  # nearly collinear
+    A = scale * np.einsum("kni,knj->kij", X, X)
+    b = np.einsum("kij,kj->ki", A, rng.standard_normal((8, 3)))
+    got = _least_norm_solve(A, b)
+    for k in range(8):
+        want = np.linalg.lstsq(A[k], b[k], rcond=1e-6)[0]
+        assert np.allclose(A[k] @ got[k], A[k] @ want, rtol=1e-6, atol=1e-9 * scale)
+        assert np.linalg.norm(got[k]) <= np.linalg.norm(want) * (1 + 1e-5) + 1e-12
+
+
+def test_a_growing_record_reuses_its_own_references_past_fits_unchanged():
+    """The features of a record grown in flight (each from the last's) equal those of the
+    whole record computed at once, own references included: a sample's fit reads its past
+    only, so the fits kept from the shorter record are the longer one's."""
+    # ten minutes one way (a past where the offset and the Coulomb friction are alike), then
+    # the other way, faster (the friction current's scale grows)
+    ramp = np.linspace(0.0, 1000.0, 20)
+    speed = np.concatenate([ramp, np.full(1200, 1000.0), 1000.0 - 3 * ramp, np.full(760, -2000.0)])
+    speed = np.concatenate([speed, -2000.0 + profile(3000 - speed.size)])
+    data, wheel = record(4, n=3000, unit_friction=1.3, unit_offset_a=0.004, speed=speed)
+    whole = compute_features(data, wheel, SCALES)
+    grown = None
+    for n in (1400, 1500, 2200, 3000):
+        part = IOData(data.u[:n], data.y[:n], TS, output_names=data.output_names)
+        grown = compute_features(part, wheel, SCALES, grown)
+    assert grown is not None and set(grown.past_fits) == {False}
+    for law in (False, True):
+        assert np.array_equal(
+            grown.own(law).current_nuisance_a, whole.own(law).current_nuisance_a, equal_nan=True
+        )
+    # a record that is not the same past is fitted afresh, not from the other's fits
+    other, _ = record(5, n=3000)
+    assert not np.array_equal(
+        compute_features(other, wheel, SCALES, whole).current_nuisance_a,
+        whole.current_nuisance_a,
+        equal_nan=True,
+    )
 
 
 def test_the_own_reference_is_read_only_at_speeds_its_past_spans():

@@ -120,6 +120,7 @@ class PipelineWatch:
         self._commands = np.empty(1024)
         self._readings = np.empty((1025, 3))
         self._n = 0  # control periods so far
+        self._features: Features | None = None  # the last update's
 
     def update(
         self, command_rpm_s: float, speed_rpm: float, current_a: float, age_s: float
@@ -150,7 +151,10 @@ class PipelineWatch:
         if self._n % self._every:
             return []
         data = self.record()
-        return [] if data.N < 2 else self.live.update(compute_features(data, None, self.scales))
+        if data.N < 2:
+            return []
+        self._features = compute_features(data, None, self.scales, self._features)
+        return self.live.update(self._features)
 
     def record(self) -> IOData:
         """The record so far on the pipeline's grid.
