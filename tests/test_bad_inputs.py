@@ -102,9 +102,18 @@ def _rw90_spec_text() -> str:
     return WheelSpec.load("rw90").to_toml()
 
 
+def _rw90_wheel() -> dict:
+    """model.json's ``wheel`` entry of the RW90 preset (rwlab diagnose then takes the
+    preset's twin calibration)."""
+    from rwlab.wheelspec import WheelSpec
+
+    spec = WheelSpec.load("rw90")
+    return {**spec.limits(), "spec": spec.to_dict()}
+
+
 FILES = {
-    # models
-    "refmodel.json": _model(healthy_reference=REFERENCE),
+    # models: the diagnose cases fail for their own reason, not for a model of no preset
+    "refmodel.json": _model(healthy_reference=REFERENCE, wheel=_rw90_wheel()),
     "binary.json": bytes(range(256)) * 4,
     "list.json": "[1, 2, 3]",
     "abc.json": _model(**{"model.A": "abc"}),

@@ -109,4 +109,4 @@ def test_the_demos_model_diagnoses_its_own_records(demo_dir, tmp_path):
         main, ["diagnose", str(record), "--model", str(model), "--out", str(out)]
     )
     assert result.exit_code == 0, result.output
-    assert json.loads((out / "diagnosis.json").read_text())["alarms"] == []
+    assert json.loads((out / "fdi.json").read_text())["events"] == []

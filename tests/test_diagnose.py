@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from rwlab.cli import main
 from rwlab.diagnose import HealthyReference, diagnose
 from rwlab.diagnose.detect import Cusum, RunTest, cusum_threshold, run_length
+from rwlab.diagnose.detectors import MODEL_BASED
 from rwlab.errors import ConfigError
 from rwlab.testbed import ExperimentConfig, load_record, read_record, run_experiment
 from rwlab.wheel import RW90, Mode, WheelPhysics
@@ -289,10 +290,10 @@ def test_a_fault_free_two_hour_record_raises_no_alarm(tmp_path, model_file):
         main, ["diagnose", str(path), "--model", str(model_file), "--out", str(tmp_path / "d")]
     )
     assert result.exit_code == 0, result.output
-    report = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
-    assert report["alarms"] == []
-    assert set(report["thresholds"]) >= {"friction", "motor", "speed", "lag", "stuck", "dropout"}
-    assert (tmp_path / "d" / "report.html").read_text().count("<figure") == 2
+    report = json.loads((tmp_path / "d" / "fdi.json").read_text())
+    assert report["events"] == [] and report["verdict"].startswith("healthy")
+    assert set(report["thresholds"]) >= {*MODEL_BASED, "speed_sensor_stuck"}
+    assert "twin_calibration_rw90.json" in report["calibration"]  # the preset's default
 
 
 def test_live_alarms_are_the_offline_alarms(tmp_path, model_file):
@@ -424,7 +425,7 @@ def test_a_rate_a_detector_cannot_deliver_is_warned_about(tmp_path, model_file):
     path = tmp_path / "healthy.mcap"
     run_experiment(ExperimentConfig(duration=60, seed=5), path)
     out = tmp_path / "d"
-    args = ["diagnose", str(path), "--model", str(model_file), "--out", str(out)]
+    args = ["diagnose", str(path), "--model", str(model_file), "--out", str(out), "--rules"]
     result = CliRunner().invoke(main, [*args, "--false-alarms", "100"])
     assert result.exit_code == 0, result.output
     assert "warning: " in result.output and "/h" in result.output

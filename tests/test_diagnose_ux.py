@@ -115,8 +115,9 @@ def test_identify_says_it_stored_a_healthy_reference(identified):
 def test_a_twenty_second_record_says_what_it_could_not_test(tmp_path, model_file):
     run_experiment(ExperimentConfig(duration=20, seed=4), tmp_path / "short.mcap")
     result = _cli(
-        "diagnose", tmp_path / "short.mcap", "--model", model_file, "--out", tmp_path / "d"
-    )
+        "diagnose", tmp_path / "short.mcap", "--model", model_file, "--out", tmp_path / "d",
+        "--rules",
+    )  # fmt: skip
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
     # truth: the speed and hold tests take a command held ≥ 30 s, which 20 s cannot hold;
@@ -147,7 +148,8 @@ def test_the_exit_status_says_whether_a_fault_was_found_and_the_sizes_are_printe
     console gives the sizes alarm or not, and the interval holds the injected factor."""
     faults = () if factor == 1.0 else (f"friction={factor}@0",)
     run_experiment(ExperimentConfig(duration=600, seed=21, faults=faults), tmp_path / "r.mcap")
-    result = _cli("diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d")
+    args = ("--model", model_file, "--out", tmp_path / "d", "--rules")
+    result = _cli("diagnose", tmp_path / "r.mcap", *args)
     assert result.exit_code == status, result.output
     assert ("alarm at" in result.output) == bool(status)
     assert (tmp_path / "d" / "diagnosis.json").exists()  # written either way
@@ -163,7 +165,8 @@ def test_the_estimates_are_the_records_latest_minutes_not_a_quiet_tests(tmp_path
     estimate takes the record's latest 10 minutes: all after the onset."""
     cfg = ExperimentConfig(duration=1200, seed=2, unit=6, faults=("speed_sensor_bias=30@600",))
     run_experiment(cfg, tmp_path / "r.mcap")
-    result = _cli("diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d")
+    args = ("--model", model_file, "--out", tmp_path / "d", "--rules")
+    result = _cli("diagnose", tmp_path / "r.mcap", *args)
     assert result.exit_code == 1, result.output
     size, low, high = _printed_estimate(result.output, "speed_sensor_bias")
     assert low <= 30.0 <= high and size == pytest.approx(30.0, abs=1.5)
@@ -220,7 +223,8 @@ def test_a_truncated_record_is_diagnosed_with_a_warning(tmp_path, model_file):
     cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     refused = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
     assert refused.exit_code == 2 and "ends in the middle of a record" in refused.output
-    result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d", "--salvage")
+    args = ("--model", model_file, "--out", tmp_path / "d", "--salvage", "--rules")
+    result = _cli("diagnose", cut, *args)
     assert result.exit_code == 0, result.output
     assert "salvaged" in result.output
     page = (tmp_path / "d" / "report.html").read_text()
@@ -235,7 +239,7 @@ def test_a_record_cut_to_one_sample_is_diagnosed_without_numpy_warnings(tmp_path
     run_experiment(ExperimentConfig(duration=0.5, seed=7), cut)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+        result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d", "--rules")
     assert result.exit_code == 0, result.output
     assert "Mean of empty slice" not in result.output
     page = (tmp_path / "d" / "report.html").read_text()
@@ -288,7 +292,7 @@ def test_the_trend_shows_each_records_size_alarm_or_not(tmp_path, model_file):
         faults = () if factor == 1.0 else (f"friction={factor}@0",)
         cfg = ExperimentConfig(duration=900, seed=30, unit=5, faults=faults)
         run_experiment(cfg, folder / f"{'cba'[week]}_week{week}.mcap")  # names against time
-    result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d")
+    result = _cli("diagnose", folder, "--model", model_file, "--out", tmp_path / "d", "--rules")
     rows = [line for line in result.output.splitlines() if "_week" in line[:8]]
     alarmed = any("no alarm" not in row for row in rows)
     assert result.exit_code == int(alarmed), result.output  # 1 when any record alarmed
@@ -323,3 +327,51 @@ def test_the_twin_calibration_of_the_models_preset_is_written_and_read(tmp_path,
     from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 
     assert DiagnosisCalibration.load(out).hours >= 2.0
+
+
+# -- the GLR pipeline by default ------------------------------------------------------------
+
+
+def test_a_preset_models_record_takes_the_presets_twin_calibration(tmp_path, model_file):
+    """Without --calibration the pipeline runs on the twin calibration of the model's wheel
+    preset; the verdict comes first and a healthy record raises no alarm (exit 0)."""
+    run_experiment(ExperimentConfig(duration=300, seed=41), tmp_path / "r.mcap")
+    result = _cli("diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("healthy: no alarm in 300")
+    fdi = json.loads((tmp_path / "d" / "fdi.json").read_text())
+    assert fdi["calibration"].endswith("twin_calibration_rw90.json")
+    assert fdi["events"] == []
+    # with no alarm every fault's size is estimated: the wheel's own, near the reference's
+    assert set(fdi["estimates"]) == {
+        "friction",
+        "torque_constant",
+        "current_limit",
+        "speed_sensor_bias",
+    }
+    lo, hi = fdi["estimates"]["torque_constant"]["ci95"]
+    assert 0.9 < lo <= fdi["estimates"]["torque_constant"]["size"] <= hi < 1.1
+
+
+def test_a_model_of_another_wheel_is_told_to_calibrate_on_its_own_records(tmp_path, model_file):
+    """A unit's own spec (an RW90 whose clamp is 0.6 A): the twins' thresholds are not its
+    own; the error says how to calibrate, or to run the rule detectors."""
+    from dataclasses import replace
+
+    from rwlab.wheelspec import WheelSpec
+
+    info = json.loads(model_file.read_text())
+    spec = replace(WheelSpec.load("rw90"), current_limit_a=0.6)
+    info["wheel"] = {**spec.limits(), "spec": spec.to_dict()}
+    unit = tmp_path / "unit.json"
+    unit.write_text(json.dumps(info))
+    run_experiment(ExperimentConfig(duration=30, seed=42), tmp_path / "r.mcap")
+    result = _cli("diagnose", tmp_path / "r.mcap", "--model", unit, "--out", tmp_path / "d")
+    assert result.exit_code == 2
+    assert "rwlab diagnose calibrate" in result.output and "--rules" in result.output
+    assert not (tmp_path / "d").exists()
+    both = _cli(
+        "diagnose", tmp_path / "r.mcap", "--model", model_file, "--out", tmp_path / "d",
+        "--rules", "--calibration", model_file,
+    )  # fmt: skip
+    assert both.exit_code == 2 and "--rules takes no --calibration" in both.output

@@ -93,8 +93,11 @@ def test_montecarlo_writes_a_valid_budget(tmp_path):
 def test_diagnose_writes_a_valid_diagnosis(study_out, tmp_path):
     run_experiment(ExperimentConfig(duration=300, seed=2), tmp_path / "r.mcap")
     _rwlab("diagnose", tmp_path / "r.mcap", "--model", study_out / "model.json",
-           "--out", tmp_path / "d")  # fmt: skip
+           "--out", tmp_path / "d", "--rules")  # fmt: skip
     _valid(tmp_path / "d" / "diagnosis.json", "diagnosis")
+    _rwlab("diagnose", tmp_path / "r.mcap", "--model", study_out / "model.json",
+           "--out", tmp_path / "g")  # fmt: skip
+    _valid(tmp_path / "g" / "fdi.json", "fdi_diagnosis")
 
 
 @pytest.mark.slow

@@ -43,35 +43,52 @@ def identify(file: str | os.PathLike, out: str | os.PathLike, **options: Any):
     return run(file, out, **options)
 
 
-def diagnose(record: str | os.PathLike, model: str | os.PathLike, **options: Any):
-    """Detect, name and size wheel faults in a record with an identified model.
+def diagnose(
+    record: str | os.PathLike,
+    model: str | os.PathLike,
+    *,
+    calibration: str | os.PathLike | None = None,
+    false_alarms_per_hour: float = 1e-3,
+):
+    """Detect, name and size wheel faults in a record with an identified model: the GLR
+    pipeline (:mod:`rwlab.diagnose.pipeline`), as ``rwlab diagnose``.
 
     Parameters
     ----------
     record : str or os.PathLike
-        A testbed record (``.mcap``).
+        A speed-mode testbed record (``.mcap``).
     model : str or os.PathLike
         The ``model.json`` ``rwlab identify`` wrote (with its healthy reference).
-    **options
-        As :func:`rwlab.diagnose.diagnose` (``false_alarms_per_hour`` …).
+    calibration : str or os.PathLike, optional
+        A ``calibration.json`` of ``rwlab diagnose calibrate`` (the wheel's own healthy
+        records); default: the twin calibration of the model's wheel preset
+        (:func:`rwlab.diagnose.wheel_calibration.model_calibration_file`).
+    false_alarms_per_hour : float
+        Asked of each detector.
 
     Returns
     -------
-    Diagnosis
-        The alarms, fault sizes and what each test decided on.
+    Result
+        The verdict, each event (fault, size, 95 % interval, runner-up) and the estimates.
+
+    Raises
+    ------
+    ConfigError
+        No calibration given for a model of no preset's own spec.
     """
     import numpy as np
 
-    from rwlab.diagnose import HealthyReference
-    from rwlab.diagnose import diagnose as run
+    from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
+    from rwlab.diagnose.pipeline import run
+    from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, model_calibration_file
     from rwlab.testbed import load_record
     from rwlab.wheel import IdentifiedWheel
 
     wheel = IdentifiedWheel.from_json(model)
-    reference = HealthyReference.from_model_file(model)
-    outputs = ("speed", "current", "age", "lost")
-    data = load_record(record, wheel.Ts, outputs=outputs, max_gap=np.inf)
-    return run(data, wheel, reference, **options)
+    scales = WheelScales.from_model_file(model)
+    cal = DiagnosisCalibration.load(calibration or model_calibration_file(model))
+    data = load_record(record, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+    return run(compute_features(data, wheel, scales), cal, false_alarms_per_hour)
 
 
 def simulate(

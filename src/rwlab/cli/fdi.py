@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from rwlab.cli._common import _friendly_errors, _output, _wrote, main
-from rwlab.errors import RwlabError, RwlabWarning
+from rwlab.errors import ConfigError, DataError, RwlabError, RwlabWarning
 
 MIN_HOURS = 2.0  # issue 42: a lab calibrates on 2-4 h of its wheel's normal test signals
 
@@ -44,51 +44,129 @@ def named_for_record(exc: RwlabError, record: Path) -> RwlabError:
         return RwlabError(f"{record}: {exc}")
 
 
-def _fdi_features(record: Path, model_file):
-    """A record's features for the GLR pipeline, an error naming the record."""
+def _fdi_features(record: Path, wheel, scales):
+    """A record's features for the GLR pipeline and the record (decoded once,
+    :func:`rwlab.testbed.read_record`), an error naming the record."""
     import numpy as np
 
-    from rwlab.diagnose.features import RECORD_OUTPUTS, WheelScales, compute_features
-    from rwlab.testbed import load_record
-    from rwlab.wheel import IdentifiedWheel
+    from rwlab.diagnose.features import RECORD_OUTPUTS, compute_features
+    from rwlab.testbed import load_record, read_record
 
-    scales = WheelScales.from_model_file(model_file)
-    wheel = IdentifiedWheel.from_json(model_file)
     try:
-        data = load_record(record, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
-        return compute_features(data, wheel, scales)
+        rec = read_record(record)
+        data = load_record(rec, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
+        if data.input_units and data.input_units[0] == "rpm/s":
+            raise DataError(
+                "an acceleration-mode record: rwlab diagnose reads speed-mode test records "
+                "against model.json; record the test in speed mode (rwlab hil diagnoses its "
+                "acceleration-mode wheels in flight)"
+            )
+        return compute_features(data, wheel, scales), rec
     except RwlabError as exc:
         if str(record) in str(exc) or record.name in str(exc):
             raise
         raise named_for_record(exc, record) from exc
 
 
-def diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) -> None:
-    """``rwlab diagnose RECORD --calibration FILE``: the GLR pipeline into OUT/fdi.json."""
+def _model(model_file):
+    """The identified wheel and its scales from ``model.json`` (its errors first)."""
+    from rwlab.diagnose.features import WheelScales
+    from rwlab.wheel import IdentifiedWheel
+
+    return IdentifiedWheel.from_json(model_file), WheelScales.from_model_file(model_file)
+
+
+def _alarm_line(e) -> str:
+    runner = (
+        "" if e.runner_up is None else f"; runner-up {e.runner_up}, ln LR {e.runner_up_log_lr:.3g}"
+    )
+    return f"alarm at {e.t_s:g} s: {e.fault} ({e.detector} crossed{runner})"
+
+
+def _diagnose_one(record: Path, into: Path, model, calibration, calibration_file, rate):
+    """One record through the pipeline into the folder ``into`` (fdi.json, report.html);
+    the result and the record."""
     from rwlab._io import write_json
     from rwlab.diagnose.pipeline import run
-    from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
     from rwlab.report.fdi import fdi_page
 
-    calibration = DiagnosisCalibration.load(calibration_file)
-    result = run(_fdi_features(record, model_file), calibration, rate)
-    files = ("fdi.json", "report.html")
-    with _output(out, files, force, "diagnosis") as stage:
-        write_json(stage / "fdi.json", result.to_dict(calibration_file))
-        fdi_page(result, calibration, calibration_file, title=record.name).save(
-            stage / "report.html"
+    features, rec = _fdi_features(record, *model)
+    result = run(features, calibration, rate)
+    into.mkdir(parents=True, exist_ok=True)
+    write_json(into / "fdi.json", result.to_dict(str(calibration_file)))
+    fdi_page(result, calibration, calibration_file, title=record.name).save(into / "report.html")
+    return result, rec
+
+
+def diagnose_fdi(record: Path, model_file, calibration_file, out, rate, force) -> None:
+    """``rwlab diagnose RECORD``: the GLR pipeline into OUT/fdi.json and OUT/report.html
+    (with ``calibration_file`` None, the model's preset's:
+    :func:`rwlab.diagnose.wheel_calibration.model_calibration_file`);
+    a folder of records into OUT/<record>/ each, and their trend."""
+    from rwlab.report.diagnosis import write_trend
+
+    records = [record]
+    if record.is_dir():
+        records = sorted(
+            p
+            for p in record.iterdir()
+            if p.suffix == ".mcap" and not p.name.endswith(".partial.mcap")
         )
-    click.echo(result.verdict())
-    for e in result.events:
-        runner = (
-            ""
-            if e.runner_up is None
-            else f"; runner-up {e.runner_up}, ln LR {e.runner_up_log_lr:.3g}"
-        )
-        click.echo(f"alarm at {e.t_s:g} s: {e.fault} ({e.detector} crossed{runner})")
+        if not records:
+            raise ConfigError(f"{record}: no records (.mcap) in the folder")
+        files = [p.stem for p in records] + ["trend.json", "trend.html"]
+    else:
+        files = ["fdi.json", "report.html"]
+    lines, points, results = [], [], []
+    with _output(out, files, force, "diagnosis") as stage:  # the lock before any work
+        model = _model(model_file)
+        calibration, calibration_file = _calibration(calibration_file, model_file)
+        for path in records:
+            into = stage / path.stem if record.is_dir() else stage
+            result, rec = _diagnose_one(path, into, model, calibration, calibration_file, rate)
+            start = rec.metadata.get("start_utc", "")
+            results.append(result)
+            points.append(_trend_point(path.name, start, result))
+            lines.append((start, f"{path.name:<32} {result.verdict()}"))
+        if record.is_dir():
+            files = list(write_trend(points, stage))
+    if record.is_dir():
+        for _, line in sorted(lines, key=lambda row: row[0]):  # start-time order, as the trend
+            click.echo(line)
+    else:
+        click.echo(results[0].verdict())
+        for e in results[0].events:
+            click.echo(_alarm_line(e))
     click.echo(_wrote(out, files))
-    if result.events:
+    if any(r.events for r in results):
         sys.exit(EXIT_ALARM)
+
+
+def _calibration(calibration_file, model_file):
+    """The calibration given, else the model's preset's; and its path."""
+    from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, model_calibration_file
+
+    path = calibration_file or model_calibration_file(model_file)
+    return DiagnosisCalibration.load(path), path
+
+
+def _trend_point(record: str, start_utc: str, result) -> dict:
+    """One record's line of the trend (:func:`rwlab.report.diagnosis.write_trend`)."""
+    faults = {
+        e.fault: {
+            "magnitude": e.fit.size,
+            "unit": e.fit.unit,
+            "ci95": list(e.fit.ci95),
+            "t_s": e.t_s,
+        }
+        for e in result.events
+        if result.confirmed(e)
+    }
+    estimates = {
+        n: {"magnitude": f.size, "ci95": list(f.ci95), "unit": f.unit}
+        for n, f in result.estimates.items()
+    }
+    return {"record": record, "start_utc": start_utc, "faults": faults, "estimates": estimates}
 
 
 @diagnose_group.command("calibrate")
@@ -131,7 +209,8 @@ def calibrate_cmd(records, model_file, in_loop, out, origin):
     elif model_file is None:
         raise click.UsageError("--model is needed (or --in-loop for rwlab hil flights)")
     else:
-        features = [_fdi_features(Path(r), model_file) for r in records]
+        model = _model(model_file)
+        features = [_fdi_features(Path(r), *model)[0] for r in records]
         names = [Path(r).name for r in records]
     calibration = DiagnosisCalibration.measure(
         features, sources=names, origin=origin, quick_window_s=quick

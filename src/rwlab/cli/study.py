@@ -192,33 +192,46 @@ def _rate_unit(study: dict) -> str:
     "--calibration",
     "calibration_file",
     type=click.Path(dir_okay=False, exists=True),
-    help="A calibration.json from rwlab diagnose calibrate: run the GLR pipeline "
-    "(rwlab.diagnose.pipeline) with it and write OUT/fdi.json instead.",
+    help="A calibration.json from rwlab diagnose calibrate (the wheel's own healthy "
+    "records); default: the shipped twin calibration of the model's wheel preset.",
+)
+@click.option(
+    "--rules",
+    is_flag=True,
+    help="Run the rule detectors instead (thresholds measured on the RW90 twin's units; "
+    "OUT/diagnosis.json).",
 )
 @click.option("--force", is_flag=True, help="Overwrite the outputs in --out.")
 @_salvage_option
 @_friendly_errors
-def diagnose_cmd(record, model_file, out, false_alarms_per_hour, force, calibration_file=None):
+def diagnose_cmd(
+    record, model_file, out, false_alarms_per_hour, force, calibration_file=None, rules=False
+):
     """Detect, name and size wheel faults in a record with an identified model.
 
-    The detectors compare the record, from its first sample, with the healthy
-    reference that rwlab identify stored in model.json. Writes
-    OUT/diagnosis.json (alarms with fault sizes and 95 % intervals, thresholds,
-    what each test decided on, residual statistics) and OUT/report.html; says
-    which tests had nothing to decide on and warns about faults no test could
-    see (a record too short): "no alarm" means only as much as was tested.
-    Exit status 1 when any record raised an alarm, 0 when none did, 2 on an error.
+    The GLR pipeline (rwlab.diagnose.pipeline) compares the record with the
+    healthy reference that rwlab identify stored in model.json, its thresholds
+    from --calibration (rwlab diagnose calibrate on the wheel's own healthy
+    records) or, for a model of a wheel preset, the preset's shipped twin
+    calibration. Writes OUT/fdi.json (the verdict, each alarm with the fault
+    named, its size and 95 % interval and the runner-up, the thresholds with
+    their measured rates) and OUT/report.html. Exit status 1 when any record
+    raised an alarm, 0 when none did, 2 on an error.
 
     RECORD may be a folder of records of one wheel: each is diagnosed into
     OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
     record's friction, torque-constant and bias estimates, alarm or not (in the
     order of their start times). OUT appears whole or not at all.
+
+    --rules runs the earlier rule detectors into OUT/diagnosis.json instead.
     """
     from rwlab.diagnose import HealthyReference
     from rwlab.wheel import IdentifiedWheel
 
     _check_folder(out)
-    if calibration_file is not None:
+    if rules and calibration_file is not None:
+        raise click.UsageError("--rules takes no --calibration (its thresholds are its own)")
+    if not rules:
         diagnose_fdi(Path(record), model_file, calibration_file, out, false_alarms_per_hour, force)
         return
     wheel = IdentifiedWheel.from_json(model_file)

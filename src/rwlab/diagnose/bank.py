@@ -276,11 +276,8 @@ class Bank:
         -------
         WindowFit
         """
-        ll = self.cum[name][k] - self.cum[name][a]
         det = self.detectors[name]
-        zone, phi = self.zone[name], self.dispersion[name]
-        best = profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
-        against = "population"
+        best, against = self._population(name, a, k), "population"
         if a >= self.past_min:
             change = self._against_own(name, a, k)
             if change is not None and change.log_lr > best.log_lr:
@@ -290,6 +287,33 @@ class Bank:
         best = det.refine(self.features, self.weights, best, a, k)
         t = self.features.t_s
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
+
+    def _population(self, name: str, a: int, k: int) -> Fit:
+        """Detector ``name`` on samples [a, k) against the population zone (not widened)."""
+        det = self.detectors[name]
+        ll = self.cum[name][k] - self.cum[name][a]
+        zone, phi = self.zone[name], self.dispersion[name]
+        return profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
+
+    def estimate(self, name: str) -> Fit:
+        """Detector ``name``'s size over the record's last longest window against the
+        reference, alarm or not (a wear trend over a wheel's records), its interval the
+        record's noise alone (a unit's own offset from the reference moves each of its
+        records alike).
+
+        Parameters
+        ----------
+        name : str
+            A model-based detector's fault.
+
+        Returns
+        -------
+        Fit
+        """
+        k = self.features.N
+        a = max(0, k - self.windows[-1])
+        best = self._population(name, a, k)
+        return self.detectors[name].refine(self.features, self.weights, best, a, k)
 
     def _against_own(self, name: str, a: int, k: int) -> Fit | None:
         """Detector ``name`` on samples [a, k) against the record's own past [0, a): the

@@ -295,7 +295,8 @@ def compute_features(
     Raises
     ------
     DataError
-        Another sample time, no speed or current, more than one input, non-finite values.
+        Another sample time, no speed or current, more than one input, non-finite values,
+        a speed-mode record commanded at another period than the model's.
     """
     Ts = scales.Ts
     col = _columns(data, Ts)
@@ -307,6 +308,15 @@ def compute_features(
         model, model_accel = speed, np.clip(col["held"], -limit, limit)
         demand = model_accel
     else:
+        issued = data.source.get("Ts")  # a testbed record's command period, s
+        if isinstance(issued, (int, float)) and not math.isclose(issued, Ts, rel_tol=1e-6):
+            # a chirp commanded every 0.1 s, sampled at the model's 0.5 s, is not the command
+            # the wheel was given: the model lags it (healthy chirps read as a clamp)
+            raise DataError(
+                f"the record's commands came every {issued:g} s and the model runs at "
+                f"{Ts:g} s: the model cannot follow the command the wheel was given; record "
+                f"the test at --Ts {Ts:g}, or identify a model at {issued:g} s"
+            )
         wheel.reset(float(speed[0]))
         model = np.empty(data.N)
         model[0] = speed[0]

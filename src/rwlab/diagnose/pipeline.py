@@ -28,6 +28,7 @@ from rwlab.diagnose.bank import Bank, WindowFit
 from rwlab.diagnose.detectors import MODEL_BASED, SIGNATURE, Fit, FrozenReading, LostFrames
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, Threshold
+from rwlab.errors import ConfigError
 
 __all__ = ["Event", "Live", "Result", "run"]
 
@@ -106,12 +107,16 @@ class Result:
     duration_s : float
     per_hour : float
         The false-alarm rate asked, per detector.
+    estimates : dict of str to Fit
+        Each model-based fault's size over the record's last 5 minutes against the
+        reference, alarm or not (:meth:`Live.estimates`): a wear trend's point.
     """
 
     events: list[Event]
     thresholds: dict[str, Threshold]
     duration_s: float
     per_hour: float
+    estimates: dict[str, Fit] = field(default_factory=dict)
 
     def to_dict(self, calibration: str = "") -> dict:
         """The JSON form (``rwlab.FdiDiagnosis/1``): the verdict first."""
@@ -130,6 +135,10 @@ class Result:
                     "extrapolated": t.extrapolated,
                 }
                 for name, t in self.thresholds.items()
+            },
+            "estimates": {
+                name: {"size": f.size, "ci95": list(f.ci95), "unit": f.unit}
+                for name, f in self.estimates.items()
             },
         }
 
@@ -285,6 +294,12 @@ class Live:
             The events opened by this update, in alarm order.
         """
         cal, limits = self.calibration, self.limits
+        if not math.isclose(features.scales.Ts, cal.Ts, rel_tol=1e-6):
+            raise ConfigError(
+                f"the calibration was measured at Ts = {cal.Ts:g} s, the record is at "
+                f"{features.scales.Ts:g} s: calibrate on records at the model's Ts "
+                "(rwlab diagnose calibrate RECORDS... --model model.json --out calibration.json)"
+            )
         # what a later decision reads: its longest window back from the last decision,
         # and each open event's window from its onset
         old = self._bank
@@ -328,6 +343,22 @@ class Live:
                 events.append(new[-1])
         return new
 
+    def estimates(self) -> dict[str, Fit]:
+        """Each model-based fault's size over the record's last longest window against
+        the reference (:meth:`~rwlab.diagnose.bank.Bank.estimate`), alarm or not. Each is
+        the size were that fault the only one: after an alarm, only the faults named have
+        one (a weak motor's record fits friction ×8 too); after a frozen reading none
+        does (each reads the speed).
+
+        Returns
+        -------
+        dict of str to Fit
+        """
+        if self._bank is None or "speed_sensor_stuck" in self._telemetry_named:
+            return {}
+        named = {e.fault for e in self.events} & set(MODEL_BASED)
+        return {n: self._bank.estimate(n) for n in (named or MODEL_BASED)}
+
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
         limits = self.limits
@@ -367,4 +398,5 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     live = Live(calibration, per_hour)
     live.update(features)
     events = sorted(live.events, key=lambda e: e.t_s)
-    return Result(events, live.limits, features.N * features.scales.Ts, per_hour)
+    duration_s = features.N * features.scales.Ts
+    return Result(events, live.limits, duration_s, per_hour, live.estimates())

@@ -55,7 +55,13 @@ from rwlab.diagnose.features import Features
 from rwlab.diagnose.noise import NoiseModel
 from rwlab.errors import ConfigError, DataError, FileFormatError
 
-__all__ = ["FORMAT", "DiagnosisCalibration", "Threshold", "twin_calibration_file"]
+__all__ = [
+    "FORMAT",
+    "DiagnosisCalibration",
+    "Threshold",
+    "model_calibration_file",
+    "twin_calibration_file",
+]
 
 FORMAT = "rwlab.DiagnosisCalibration/1"
 STUCK = "speed_sensor_stuck"
@@ -456,3 +462,38 @@ def twin_calibration_file(wheel: str) -> Path:
             "--model model.json --out calibration.json"
         )
     return path
+
+
+def model_calibration_file(model_file: str | os.PathLike) -> Path:
+    """The twin calibration of a ``model.json``'s wheel preset (``rwlab diagnose`` without
+    ``--calibration``): only for a model of a preset's own spec (the same hash).
+
+    Parameters
+    ----------
+    model_file : path-like
+        A ``model.json`` written by ``rwlab identify``.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ConfigError
+        A model of another wheel, or of no wheel spec: it needs the lab's own calibration.
+    """
+    from rwlab.ident.model_file import WheelModelFile
+    from rwlab.wheelspec import WheelSpec
+    from rwlab.wheelspec.files import preset_names
+
+    spec = WheelModelFile.load(model_file).wheel_spec
+    if spec is None or spec.name not in preset_names() or spec != WheelSpec.load(spec.name):
+        wheel = "no wheel spec" if spec is None else f"the wheel {spec.name!r}, not a preset's own"
+        raise ConfigError(
+            f"{model_file} is a model of {wheel}: the shipped calibrations are measured on "
+            f"the presets' twins ({', '.join(preset_names())}). Calibrate on this wheel's "
+            "healthy records (rwlab diagnose calibrate RECORDS... --model model.json --out "
+            "calibration.json) and pass --calibration calibration.json, or run the rule "
+            "detectors with --rules"
+        )
+    return twin_calibration_file(spec.name)
