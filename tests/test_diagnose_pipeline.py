@@ -329,6 +329,7 @@ def test_a_growing_record_reuses_its_own_references_past_fits_unchanged():
         part = IOData(data.u[:n], data.y[:n], TS, output_names=data.output_names)
         grown = compute_features(part, wheel, SCALES, grown)
     assert grown is not None and set(grown.past_fits) == {False}
+    assert np.array_equal(grown.model_rpm, whole.model_rpm)  # the model run on, not again
     for law in (False, True):
         assert np.array_equal(
             grown.own(law).current_nuisance_a, whole.own(law).current_nuisance_a, equal_nan=True

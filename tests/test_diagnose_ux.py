@@ -375,3 +375,27 @@ def test_a_model_of_another_wheel_is_told_to_calibrate_on_its_own_records(tmp_pa
         "--rules", "--calibration", model_file,
     )  # fmt: skip
     assert both.exit_code == 2 and "--rules takes no --calibration" in both.output
+
+
+def test_live_diagnosis_of_another_wheel_takes_its_own_calibration(tmp_path, model_file):
+    """rwlab experiment --model of a unit's own spec: refused before any work without a
+    calibration, run with --diagnosis-calibration (here the preset's file, written out)."""
+    from dataclasses import replace
+
+    from rwlab.wheelspec import WheelSpec
+
+    info = json.loads(model_file.read_text())
+    spec = replace(WheelSpec.load("rw90"), current_limit_a=0.6)
+    info["wheel"] = {**spec.limits(), "spec": spec.to_dict()}
+    unit = tmp_path / "unit.json"
+    unit.write_text(json.dumps(info))
+    run = ("experiment", "--duration", 60, "--seed", 3, "--model", unit)
+    refused = _cli(*run, "--out", tmp_path / "a.mcap")
+    assert refused.exit_code == 2 and "rwlab diagnose calibrate" in refused.output
+    assert not (tmp_path / "a.mcap").exists()
+    cal = tmp_path / "cal.json"
+    written = _cli("diagnose", "twin-calibration", "--model", model_file, "--out", cal)
+    assert written.exit_code == 0, written.output
+    result = _cli(*run, "--diagnosis-calibration", cal, "--out", tmp_path / "b.mcap")
+    assert result.exit_code == 0, result.output
+    assert "live diagnosis: no alarm" in result.output

@@ -122,8 +122,14 @@ class _ExperimentCommand(click.Command):
 @click.option(
     "--model",
     type=click.Path(dir_okay=False),
-    help="model.json: run the fault detector live; each alarm is printed as it comes and "
-    "recorded as an event.",
+    help="model.json: run the diagnosis live (the GLR pipeline, as rwlab diagnose); each "
+    "alarm is printed as it comes and recorded as an event.",
+)
+@click.option(
+    "--diagnosis-calibration",
+    type=click.Path(dir_okay=False, exists=True),
+    help="The live diagnosis's calibration.json (rwlab diagnose calibrate); default: the "
+    "twin calibration of the model's wheel preset.",
 )
 @click.option("--monitor", is_flag=True, help="Serve the live monitor while the experiment runs.")
 @click.option(

@@ -44,6 +44,7 @@ are written here.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -131,6 +132,9 @@ class Features:
         the past ending at each sample, shape (M, 3), NaN rows where none is; kept so a
         longer record of the same samples (:func:`compute_features`'s ``before``) fits
         only its new pasts.
+    model_end : IdentifiedWheel or None
+        A copy of the model after the last sample (speed mode): a longer record of the
+        same samples runs it on from there.
     """
 
     t_s: np.ndarray
@@ -155,6 +159,7 @@ class Features:
     against_own: bool = False
     open_loop: bool = False
     past_fits: dict[bool, np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+    model_end: Any = field(default=None, compare=False, repr=False)
 
     def own(self, law: bool = False) -> Features:
         """The same features with the current residual against the record's own past
@@ -218,7 +223,7 @@ class Features:
             for name, value in vars(self).items()
             if isinstance(value, np.ndarray) and value.shape[:1] == (n,)
         }
-        return replace(self, **sliced, past_fits={})
+        return replace(self, **sliced, past_fits={}, model_end=None)
 
     def steady(self, share: float) -> np.ndarray:
         """Constant speed, bool, shape (N,): the model's and the measured acceleration both
@@ -285,8 +290,9 @@ def compute_features(
         unused for an acceleration-mode record.
     scales : WheelScales
     before : Features, optional
-        The features of this record's first samples (a growing record in flight): the
-        own reference's past fits are reused where their samples are the same.
+        The features of this record's first samples (a record growing as it is recorded):
+        the model runs on from its end and the own reference's past fits are reused
+        (ignored unless its times, speeds and currents are this record's first).
 
     Returns
     -------
@@ -301,12 +307,14 @@ def compute_features(
     Ts = scales.Ts
     col = _columns(data, Ts)
     speed, current = col["speed_rpm"], col["current_a"]
+    if before is not None and not _extends(before, data.tstart, speed, current, scales):
+        before = None
     accel = np.concatenate([[0.0], np.diff(speed) / Ts])
     limit = scales.accel_limit_rpm_s
     open_loop = bool(data.input_units) and data.input_units[0] == "rpm/s"
     if open_loop:  # the driver's acceleration is the command, clipped: no speed model
         model, model_accel = speed, np.clip(col["held"], -limit, limit)
-        demand = model_accel
+        demand, model_end = model_accel, None
     else:
         issued = data.source.get("Ts")  # a testbed record's command period, s
         if isinstance(issued, (int, float)) and not math.isclose(issued, Ts, rel_tol=1e-6):
@@ -317,11 +325,16 @@ def compute_features(
                 f"{Ts:g} s: the model cannot follow the command the wheel was given; record "
                 f"the test at --Ts {Ts:g}, or identify a model at {issued:g} s"
             )
-        wheel.reset(float(speed[0]))
         model = np.empty(data.N)
-        model[0] = speed[0]
-        for k in range(1, data.N):
+        if before is not None and before.model_end is not None:  # run on from its end
+            wheel, done = copy.deepcopy(before.model_end), before.N
+            model[:done] = before.model_rpm
+        else:
+            wheel.reset(float(speed[0]))
+            model[0], done = speed[0], 1
+        for k in range(done, data.N):
             model[k] = wheel.step(float(col["held"][k]))
+        model_end = copy.deepcopy(wheel)
         model_accel = np.concatenate([[0.0], np.diff(model) / Ts])
         lag = np.concatenate([[0.0], (model - speed)[:-1]])  # the loop acts on the last error
         demand = np.clip(model_accel + scales.loop_gain_per_s * lag, -limit, limit)
@@ -351,22 +364,23 @@ def compute_features(
         lost_frames=lost,
         scales=scales,
         open_loop=open_loop,
+        model_end=model_end,
     )
-    if before is not None and _begins(out, before):
+    if before is not None:
         out.past_fits.update(before.past_fits)
     return replace(out, current_nuisance_a=current_nuisance(out))
 
 
-def _begins(features: Features, before: Features) -> bool:
-    """Whether ``before`` holds the first samples of ``features``' record."""
+def _extends(before: Features, t0_s: float, speed, current, scales: WheelScales) -> bool:
+    """Whether ``before`` holds the first samples of a record (its first time, speeds and
+    currents, the same scales)."""
     n = before.N
     return (
-        n <= features.N
-        and before.scales == features.scales
-        and np.array_equal(before.t_s, features.t_s[:n])
-        and np.array_equal(before.speed_rpm, features.speed_rpm[:n])
-        and np.array_equal(before.current_a, features.current_a[:n])
-        and np.array_equal(before.usable, features.usable[:n])
+        n <= len(speed)
+        and before.scales == scales
+        and math.isclose(float(before.t_s[0]), t0_s, rel_tol=0.0, abs_tol=1e-9)
+        and np.array_equal(before.speed_rpm, speed[:n])
+        and np.array_equal(before.current_a, current[:n])
     )
 
 

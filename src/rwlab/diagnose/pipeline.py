@@ -294,12 +294,7 @@ class Live:
             The events opened by this update, in alarm order.
         """
         cal, limits = self.calibration, self.limits
-        if not math.isclose(features.scales.Ts, cal.Ts, rel_tol=1e-6):
-            raise ConfigError(
-                f"the calibration was measured at Ts = {cal.Ts:g} s, the record is at "
-                f"{features.scales.Ts:g} s: calibrate on records at the model's Ts "
-                "(rwlab diagnose calibrate RECORDS... --model model.json --out calibration.json)"
-            )
+        self.check_sample_time(features.scales.Ts)
         # what a later decision reads: its longest window back from the last decision,
         # and each open event's window from its onset
         old = self._bank
@@ -342,6 +337,25 @@ class Live:
                 new.append(Event(t, t, fit, fit.fault, fit.log_lr))
                 events.append(new[-1])
         return new
+
+    def check_sample_time(self, Ts: float) -> None:
+        """Refuse records at another sample time than the calibration's.
+
+        Parameters
+        ----------
+        Ts : float
+            The records' sample time, s.
+
+        Raises
+        ------
+        ConfigError
+        """
+        if not math.isclose(Ts, self.calibration.Ts, rel_tol=1e-6):
+            raise ConfigError(
+                f"the calibration was measured at Ts = {self.calibration.Ts:g} s, the record "
+                f"is at {Ts:g} s: calibrate on records at the model's Ts (rwlab diagnose "
+                "calibrate RECORDS... --model model.json --out calibration.json)"
+            )
 
     def estimates(self) -> dict[str, Fit]:
         """Each model-based fault's size over the record's last longest window against

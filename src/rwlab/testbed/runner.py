@@ -113,9 +113,12 @@ class ExperimentConfig:
         Unit seed of the simulated wheel: another RW90 drawn within its tolerances
         (:meth:`rwlab.wheel.WheelParams.for_unit`); None is the nominal wheel.
     model : str
-        ``model.json`` of an identified wheel: run the fault detector live
-        (:class:`rwlab.diagnose.Diagnoser`, speed mode at the model's Ts) and record
-        each alarm as an ``alarm`` event.
+        ``model.json`` of an identified wheel: run the diagnosis live
+        (:class:`rwlab.diagnose.watch.RecordWatch`, the GLR pipeline; speed mode at the
+        model's Ts) and record each alarm as an ``alarm`` event.
+    diagnosis_calibration : str
+        The live diagnosis's ``calibration.json`` (``rwlab diagnose calibrate``); default:
+        the twin calibration of the model's wheel preset.
     late_tolerance : float, optional
         Seconds a command may go out late before the run counts a timing fault
         (default: 10 % of Ts, at least 1 ms, at most Ts). The lateness
@@ -144,6 +147,7 @@ class ExperimentConfig:
     raw_frames: bool = False
     faults: tuple[str, ...] = ()
     model: str | None = None
+    diagnosis_calibration: str | None = None
     wheel: str = "rw90"
     unit: int | None = None
     protocol: str = "auto"
@@ -180,6 +184,7 @@ class ExperimentConfig:
             "channel": ((str, type(None)), "a string"),
             "file": ((str, type(None)), "a string"),
             "model": ((str, type(None)), "a path to model.json"),
+            "diagnosis_calibration": ((str, type(None)), "a path to calibration.json"),
             "protocol": (str, "a wheel protocol name"),
             "f1": ((*number, type(None)), "a number of Hz"),
             "wheel": (str, "a wheel model name, a wheel spec or a wheel TOML file"),
@@ -648,10 +653,9 @@ def run_experiment(
                 fault = faults.pop(0)
                 writer.event(t0 + fault.t_s, "fault_injected", str(fault))
             if detector is not None and client.latest is not None:
-                held = command[k - 1] if k else command[0]
                 for alarm in detector.update(
                     k * cfg.Ts,
-                    float(held),
+                    float(value),
                     client.latest.speed_rpm,
                     client.latest.current,
                     clock.now() - client.latest_time,
@@ -736,29 +740,30 @@ def _dropped_text(client: WheelClient) -> str:
 
 
 def _live_detector(cfg: ExperimentConfig):
-    """The fault detector for ``cfg.model``, or None."""
+    """The live diagnosis for ``cfg.model``, or None."""
     if cfg.model is None:
         return None
-    from rwlab.diagnose import Diagnoser, HealthyReference
-    from rwlab.wheel.identified import IdentifiedWheel
+    from rwlab.diagnose.watch import RecordWatch
 
-    wheel = IdentifiedWheel.from_json(cfg.model)
-    if cfg.mode != "speed" or not math.isclose(wheel.Ts, cfg.Ts, rel_tol=1e-6):
+    watch = RecordWatch(cfg.model, cfg.diagnosis_calibration)
+    if cfg.mode != "speed" or not math.isclose(watch.scales.Ts, cfg.Ts, rel_tol=1e-6):
         raise ConfigError(
-            f"live diagnosis needs speed mode at the model's Ts = {wheel.Ts:g} s "
+            f"live diagnosis needs speed mode at the model's Ts = {watch.scales.Ts:g} s "
             f"(the experiment: {cfg.mode} mode, Ts = {cfg.Ts:g} s)"
         )
-    return Diagnoser(wheel, HealthyReference.from_model_file(cfg.model))
+    return watch
 
 
-def _alarm_text(alarm) -> str:
-    size = ""
-    if alarm.magnitude is not None:
-        ci = "" if alarm.ci is None else f" [{alarm.ci[0]:.4g}, {alarm.ci[1]:.4g}]"
-        size = f" {alarm.magnitude:.4g}{ci} {alarm.unit}"
+def _alarm_text(event) -> str:
+    """An alarm's line: the fault, its size and interval, what crossed, the runner-up."""
+    f = event.fit
+    size = (
+        "" if math.isnan(f.size) else f" {f.size:.4g} [{f.ci95[0]:.4g}, {f.ci95[1]:.4g}] {f.unit}"
+    )
+    runner = "" if event.runner_up is None else f"; runner-up {event.runner_up}"
     return (
-        f"{alarm.kind} at {alarm.t_s:.1f} s ({alarm.detector} test, statistic "
-        f"{alarm.statistic:.3g} > {alarm.threshold:.3g}){size}"
+        f"{f.fault} at {event.t_s:.1f} s{size} ({event.detector} crossed, log-LR "
+        f"{event.fit.log_lr:.3g} > {event.threshold:.3g}{runner})"
     )
 
 
