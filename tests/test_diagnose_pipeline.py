@@ -150,6 +150,12 @@ def test_profile_interval_of_a_gaussian_is_textbook():
     half = math.sqrt(2 * HALF_CHI2_95) * 0.1
     assert fit.ci95 == pytest.approx((2 - half, 2 + half), abs=2e-4)
     assert fit.log_lr == pytest.approx(1.0**2 / (2 * 0.1**2), rel=1e-3)
+    # on a grid ten times coarser than the interval the bounds fall between grid points
+    coarse = np.linspace(0, 4, 11)  # step 0.4
+    fit = profile_fit("x", "u", coarse, -((coarse - 2.0) ** 2) / (2 * 0.1**2), coarse <= 1.0)
+    lo, hi = fit.ci95
+    assert lo < 2.0 < hi and hi - lo < 0.8  # not the point 2 alone, nor past its neighbours
+    assert lo == pytest.approx(2.0 - 0.4 * HALF_CHI2_95 / 8.0)  # linear between the points
 
 
 def test_a_one_sided_fault_fits_only_its_side_of_the_healthy_zone():
@@ -264,8 +270,23 @@ def test_the_page_gives_the_verdict_before_the_alarms(calibration, tmp_path):
     result = run(features(100, fault="speed_sensor_bias", size=12.0), calibration)
     text = fdi_page(result, calibration, path, title="rec").render()
     verdict = text.index("speed_sensor_bias")
-    assert verdict < text.index('id="alarms"') < text.index('id="thresholds"')
+    assert verdict < text.index('id="alarms"') < text.index('id="estimates"')
+    assert text.index('id="estimates"') < text.index('id="thresholds"')
     assert path.resolve().as_uri() in text and "synthetic" in text
+    # after the alarm only the fault named is estimated (each size presumes its fault alone)
+    assert list(result.estimates) == ["speed_sensor_bias"]
+
+
+def test_a_healthy_records_estimates_hold_the_reference_units_sizes(calibration):
+    """A healthy record of the reference unit: every fault's estimate over the last 5
+    minutes, and each interval holds the healthy size (factors 1, no bias)."""
+    result = run(features(102), calibration)
+    assert not result.events
+    est = result.estimates
+    assert set(est) == set(MODEL_BASED)
+    for name in ("friction", "torque_constant"):
+        assert est[name].ci95[0] <= 1.0 <= est[name].ci95[1], est[name]
+    assert est["speed_sensor_bias"].ci95[0] <= 0.0 <= est["speed_sensor_bias"].ci95[1]
 
 
 def test_the_own_reference_takes_out_a_units_friction_and_offset():

@@ -399,3 +399,17 @@ def test_live_diagnosis_of_another_wheel_takes_its_own_calibration(tmp_path, mod
     result = _cli(*run, "--diagnosis-calibration", cal, "--out", tmp_path / "b.mcap")
     assert result.exit_code == 0, result.output
     assert "live diagnosis: no alarm" in result.output
+
+
+def test_a_salvaged_record_says_so_on_the_pipelines_page(tmp_path, model_file):
+    path = tmp_path / "r.mcap"
+    run_experiment(ExperimentConfig(duration=120, seed=7), path)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    refused = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d")
+    assert refused.exit_code == 2 and "ends in the middle of a record" in refused.output
+    result = _cli("diagnose", cut, "--model", model_file, "--out", tmp_path / "d", "--salvage")
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "d" / "report.html").read_text()
+    assert "the record was salvaged" in page
+    assert page.index("the record was salvaged") < page.index('id="alarms"')

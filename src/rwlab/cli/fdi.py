@@ -3,6 +3,7 @@ pipeline (:mod:`rwlab.diagnose.pipeline`) from the command line."""
 
 from __future__ import annotations
 
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -91,10 +92,16 @@ def _diagnose_one(record: Path, into: Path, model, calibration, calibration_file
     from rwlab.report.fdi import fdi_page
 
     features, rec = _fdi_features(record, *model)
+    note = None if rec.complete else f"the record is truncated ({rec.problem})"
+    if rec.damage is not None:  # read_record said so already, on the console
+        note = f"the record was salvaged: {rec.damage.text()}; diagnosed up to the damage"
+    elif note:
+        warnings.warn(f"{record}: {note}: diagnosed up to where it stops", RwlabWarning, 2)
     result = run(features, calibration, rate)
     into.mkdir(parents=True, exist_ok=True)
     write_json(into / "fdi.json", result.to_dict(str(calibration_file)))
-    fdi_page(result, calibration, calibration_file, title=record.name).save(into / "report.html")
+    page = fdi_page(result, calibration, calibration_file, title=record.name, record_note=note)
+    page.save(into / "report.html")
     return result, rec
 
 
@@ -160,7 +167,7 @@ def _trend_point(record: str, start_utc: str, result) -> dict:
             "t_s": e.t_s,
         }
         for e in result.events
-        if result.confirmed(e)
+        if result.confirmed(e) and not math.isnan(e.fit.size)  # a frozen reading has no size
     }
     estimates = {
         n: {"magnitude": f.size, "ci95": list(f.ci95), "unit": f.unit}

@@ -24,6 +24,7 @@ def fdi_page(
     calibration_path: str | os.PathLike,
     *,
     title: str,
+    record_note: str | None = None,
 ) -> Page:
     """The page a lab engineer reads in ten seconds.
 
@@ -36,15 +37,19 @@ def fdi_page(
     calibration_path : path-like
         Its file (linked from the provenance line).
     title : str
+    record_note : str, optional
+        What is wrong with the record (truncated, salvaged), shown under the verdict.
 
     Returns
     -------
     Page
-        Verdict, alarm table, evidence (thresholds with their measured rates).
+        Verdict, alarm table, estimates, evidence (thresholds with their measured rates).
     """
     page = Page(title)
     page.heading("Verdict", "verdict")
     page.html(f'<p class="verdict"><strong>{html.escape(result.verdict())}</strong></p>')
+    if record_note:
+        page.html(f'<p class="note">{html.escape(record_note)}</p>')
     link = Path(calibration_path).resolve().as_uri()
     provenance = (
         f"Calibrated on {calibration.records} healthy records, {calibration.hours:.3g} h"
@@ -88,6 +93,23 @@ def fdi_page(
         )
     else:
         page.text("No alarm.")
+    if result.estimates:
+        page.heading("Estimates", "estimates")
+        page.text(
+            "Each fault's size over the record's last 5 minutes against the reference, alarm "
+            "or not (a wheel's records side by side show wear below the thresholds); each "
+            "presumes its fault alone, so after an alarm only the faults named are given. The "
+            "intervals are the record's noise: a unit's own offset from the reference moves "
+            "every record of it alike."
+        )
+        page.table(
+            ["fault", "size", "95 % interval", "unit", "ln LR over healthy"],
+            [
+                [name, f.size, _interval(f.ci95), f.unit, f.log_lr]
+                for name, f in result.estimates.items()
+            ],
+            table_id="estimates",
+        )
     page.heading("Evidence", "evidence")
     page.text(
         f"Each detector's threshold on its log-likelihood ratio for "

@@ -107,16 +107,29 @@ def profile_fit(
     tied = (ll >= top_ll - 1e-9).nonzero()[0]  # a flat top (a clamp never reached): the
     centre = float(grid[healthy].mean()) if any_healthy else float(grid[0])
     best = int(tied[np.abs(grid[tied] - centre).argmin()])  # size nearest the healthy
-    inside = (ll >= ll[best] - HALF_CHI2_95 * dispersion).nonzero()[0]
+    cut = ll[best] - HALF_CHI2_95 * dispersion
+    inside = (ll >= cut).nonzero()[0]
     top = float(ll[best])
     zone = float(ll[healthy].max()) if any_healthy else 0.0
     return Fit(
         fault,
         float(grid[best]),
-        (float(grid[inside[0]]), float(grid[inside[-1]])),
+        (_crossing(grid, ll, cut, inside[0], -1), _crossing(grid, ll, cut, inside[-1], 1)),
         max(0.0, top - zone),
         unit,
     )
+
+
+def _crossing(grid: np.ndarray, ll: np.ndarray, cut: float, i: int, step: int) -> float:
+    """Where the log-likelihood falls to ``cut`` between grid point i (inside) and its
+    neighbour on the ``step`` side, linearly interpolated (a window that pins the size
+    within one grid step otherwise gave an interval of zero width); the grid's edge where
+    the likelihood never falls that far."""
+    j = i + step
+    if not 0 <= j < len(grid) or not np.isfinite(ll[j]):
+        return float(grid[i])
+    share = (ll[i] - cut) / (ll[i] - ll[j])
+    return float(grid[i] + share * (grid[j] - grid[i]))
 
 
 class Detector(ABC):
