@@ -267,26 +267,27 @@ def test_the_page_gives_the_verdict_before_the_alarms(calibration, tmp_path):
     from rwlab.report.fdi import fdi_page
 
     path = calibration.save(tmp_path / "calibration.json")
-    result = run(features(100, fault="speed_sensor_bias", size=12.0), calibration)
+    f = features(100, fault="speed_sensor_bias", size=12.0)
+    result = run(f, calibration)
     text = fdi_page(result, calibration, path, title="rec").render()
     verdict = text.index("speed_sensor_bias")
-    assert verdict < text.index('id="alarms"') < text.index('id="estimates"')
-    assert text.index('id="estimates"') < text.index('id="thresholds"')
+    assert verdict < text.index('id="alarms"') < text.index('id="thresholds"')
     assert path.resolve().as_uri() in text and "synthetic" in text
-    # after the alarm only the fault named is estimated (each size presumes its fault alone)
-    assert list(result.estimates) == ["speed_sensor_bias"]
+    with_figure = fdi_page(result, calibration, path, title="rec", features=f).render()
+    assert 'id="fig-residuals"' in with_figure and 'id="fig-residuals"' not in text
 
 
-def test_a_healthy_records_estimates_hold_the_reference_units_sizes(calibration):
-    """A healthy record of the reference unit: every fault's estimate over the last 5
-    minutes, and each interval holds the healthy size (factors 1, no bias)."""
-    result = run(features(102), calibration)
-    assert not result.events
-    est = result.estimates
-    assert set(est) == set(MODEL_BASED)
-    for name in ("friction", "torque_constant"):
-        assert est[name].ci95[0] <= 1.0 <= est[name].ci95[1], est[name]
-    assert est["speed_sensor_bias"].ci95[0] <= 0.0 <= est["speed_sensor_bias"].ci95[1]
+def test_a_record_too_short_to_tell_a_fault_says_so(calibration):
+    """Six seconds of a ramp from rest: no constant speed, so friction cannot be told from
+    healthy, and the verdict says it was not seen (the whole healthy record sees every
+    fault)."""
+    data, wheel = record(103, n=12)
+    short = run(compute_features(data, wheel, SCALES), calibration)
+    assert "friction" in short.unseen
+    assert not short.events and short.unseen
+    assert "not seen" in short.verdict() and short.unseen[0] in short.verdict()
+    whole = run(features(103), calibration)
+    assert not whole.events and whole.unseen == [] and "not seen" not in whole.verdict()
 
 
 def test_the_own_reference_takes_out_a_units_friction_and_offset():

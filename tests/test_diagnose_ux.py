@@ -342,15 +342,9 @@ def test_a_preset_models_record_takes_the_presets_twin_calibration(tmp_path, mod
     fdi = json.loads((tmp_path / "d" / "fdi.json").read_text())
     assert fdi["calibration"].endswith("twin_calibration_rw90.json")
     assert fdi["events"] == []
-    # with no alarm every fault's size is estimated: the wheel's own, near the reference's
-    assert set(fdi["estimates"]) == {
-        "friction",
-        "torque_constant",
-        "current_limit",
-        "speed_sensor_bias",
-    }
-    lo, hi = fdi["estimates"]["torque_constant"]["ci95"]
-    assert 0.9 < lo <= fdi["estimates"]["torque_constant"]["size"] <= hi < 1.1
+    assert fdi["unseen"] == []  # five minutes of PRBS: every fault could have been seen
+    page = (tmp_path / "d" / "report.html").read_text()
+    assert 'id="fig-residuals"' in page  # the README's figure of the diagnosis
 
 
 def test_a_model_of_another_wheel_is_told_to_calibrate_on_its_own_records(tmp_path, model_file):
@@ -378,18 +372,21 @@ def test_a_model_of_another_wheel_is_told_to_calibrate_on_its_own_records(tmp_pa
 
 
 def test_live_diagnosis_of_another_wheel_takes_its_own_calibration(tmp_path, model_file):
-    """rwlab experiment --model of a unit's own spec: refused before any work without a
-    calibration, run with --diagnosis-calibration (here the preset's file, written out)."""
+    """rwlab experiment --model of a lab's own wheel (its spec file: an RW90 whose clamp is
+    0.6 A): refused before any work without a calibration, run with
+    --diagnosis-calibration (here the preset's file, written out)."""
     from dataclasses import replace
 
     from rwlab.wheelspec import WheelSpec
 
     info = json.loads(model_file.read_text())
-    spec = replace(WheelSpec.load("rw90"), current_limit_a=0.6)
+    spec = replace(WheelSpec.load("rw90"), name="lab-unit", current_limit_a=0.6)
     info["wheel"] = {**spec.limits(), "spec": spec.to_dict()}
     unit = tmp_path / "unit.json"
     unit.write_text(json.dumps(info))
-    run = ("experiment", "--duration", 60, "--seed", 3, "--model", unit)
+    (tmp_path / "unit.toml").write_text(spec.to_toml())
+    run = ("experiment", "--wheel", tmp_path / "unit.toml", "--duration", 60, "--seed", 3,
+           "--model", unit)  # fmt: skip
     refused = _cli(*run, "--out", tmp_path / "a.mcap")
     assert refused.exit_code == 2 and "rwlab diagnose calibrate" in refused.output
     assert not (tmp_path / "a.mcap").exists()
@@ -413,3 +410,46 @@ def test_a_salvaged_record_says_so_on_the_pipelines_page(tmp_path, model_file):
     page = (tmp_path / "d" / "report.html").read_text()
     assert "the record was salvaged" in page
     assert page.index("the record was salvaged") < page.index('id="alarms"')
+
+
+def test_a_twenty_second_record_says_what_the_pipeline_could_not_see(tmp_path, model_file):
+    """No alarm on 20 s of PRBS is no evidence of a healthy bearing: the verdict says which
+    faults the record cannot tell from healthy (their intervals span nearly the whole grid)."""
+    run_experiment(ExperimentConfig(duration=20, seed=4), tmp_path / "short.mcap")
+    result = _cli(
+        "diagnose", tmp_path / "short.mcap", "--model", model_file, "--out", tmp_path / "d"
+    )
+    assert result.exit_code == 0, result.output
+    assert "healthy: no alarm in 20" in result.output and "not seen" in result.output
+    assert "friction" in json.loads((tmp_path / "d" / "fdi.json").read_text())["unseen"]
+
+
+def test_a_record_of_another_wheel_is_refused_not_diagnosed(tmp_path, model_file):
+    """An NRWA-T6 record against the RW90's model read as a weak motor (a new user's trial):
+    the record's wheel and the model's differ, and both the diagnosis and the live
+    diagnosis say so before any work."""
+    run_experiment(ExperimentConfig(wheel="nrwa-t6", duration=30, seed=3), tmp_path / "t6.mcap")
+    result = _cli("diagnose", tmp_path / "t6.mcap", "--model", model_file, "--out", tmp_path / "d")
+    assert result.exit_code == 2 and "'nrwa-t6'" in result.output and "'rw90'" in result.output
+    assert not (tmp_path / "d").exists()
+    live = _cli("experiment", "--wheel", "nrwa-t6", "--duration", 30, "--model", model_file,
+                "--out", tmp_path / "live.mcap")  # fmt: skip
+    assert live.exit_code == 2 and "'rw90'" in live.output
+    assert not (tmp_path / "live.mcap").exists()
+    alone = _cli("experiment", "--duration", 30, "--diagnosis-calibration", model_file,
+                 "--out", tmp_path / "x.mcap")  # fmt: skip
+    assert alone.exit_code == 2 and "needs model" in alone.output
+
+
+def test_calibration_takes_healthy_records_only_and_keeps_an_existing_file(tmp_path, model_file):
+    """A record with an injected fault would teach the thresholds the fault as health
+    (friction ×3 then read healthy: a new user's trial); an existing calibration is not
+    overwritten without --force."""
+    faulty = tmp_path / "f.mcap"
+    run_experiment(ExperimentConfig(duration=30, seed=3, faults=("friction=3@10",)), faulty)
+    out = tmp_path / "c.json"
+    result = _cli("diagnose", "calibrate", faulty, "--model", model_file, "--out", out)
+    assert result.exit_code == 2 and "friction=3@10" in result.output and not out.exists()
+    out.write_text("{}")
+    again = _cli("diagnose", "calibrate", faulty, "--model", model_file, "--out", out)
+    assert again.exit_code == 2 and "--force" in again.output and out.read_text() == "{}"

@@ -69,7 +69,8 @@ def diagnose(
     Returns
     -------
     Result
-        The verdict, each event (fault, size, 95 % interval, runner-up) and the estimates.
+        The verdict, each event (fault, size, 95 % interval, runner-up) and the faults
+        the record cannot tell from healthy.
 
     Raises
     ------

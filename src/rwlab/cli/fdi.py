@@ -45,16 +45,25 @@ def named_for_record(exc: RwlabError, record: Path) -> RwlabError:
         return RwlabError(f"{record}: {exc}")
 
 
-def _fdi_features(record: Path, wheel, scales):
+def _fdi_features(record: Path, wheel, scales, spec=None):
     """A record's features for the GLR pipeline and the record (decoded once,
-    :func:`rwlab.testbed.read_record`), an error naming the record."""
+    :func:`rwlab.testbed.read_record`), an error naming the record; a record of another
+    wheel than the model's ``spec`` (where both say) is refused."""
     import numpy as np
 
     from rwlab.diagnose.features import RECORD_OUTPUTS, compute_features
     from rwlab.testbed import load_record, read_record
+    from rwlab.wheelspec import WheelSpec
 
     try:
         rec = read_record(record)
+        own = rec.metadata.get("wheel_spec")
+        if spec is not None and isinstance(own, dict) and WheelSpec.from_dict(own) != spec:
+            raise DataError(
+                f"a record of the wheel {own.get('name')!r} and a model of {spec.name!r} "
+                "(another spec): diagnose a wheel's records with a model identified on that "
+                "wheel (rwlab identify on one of its healthy records)"
+            )
         data = load_record(rec, scales.Ts, outputs=RECORD_OUTPUTS, max_gap=np.inf)
         if data.input_units and data.input_units[0] == "rpm/s":
             raise DataError(
@@ -70,18 +79,27 @@ def _fdi_features(record: Path, wheel, scales):
 
 
 def _model(model_file):
-    """The identified wheel and its scales from ``model.json`` (its errors first)."""
+    """The identified wheel, its scales and its wheel spec (or None) from ``model.json``
+    (its errors first)."""
     from rwlab.diagnose.features import WheelScales
+    from rwlab.ident.model_file import WheelModelFile
     from rwlab.wheel import IdentifiedWheel
 
-    return IdentifiedWheel.from_json(model_file), WheelScales.from_model_file(model_file)
+    wheel = IdentifiedWheel.from_json(model_file)
+    scales = WheelScales.from_model_file(model_file)
+    return wheel, scales, WheelModelFile.load(model_file).wheel_spec
 
 
 def _alarm_line(e) -> str:
+    """An alarm's console line: the fault named at the alarm (and what re-labelled it),
+    the detector that crossed, the runner-up at the alarm."""
     runner = (
         "" if e.runner_up is None else f"; runner-up {e.runner_up}, ln LR {e.runner_up_log_lr:.3g}"
     )
-    return f"alarm at {e.t_s:g} s: {e.fault} ({e.detector} crossed{runner})"
+    named = e.first
+    if e.relabelled:
+        named += f", re-labelled {e.fault} at {e.relabelled[-1][0]:g} s"
+    return f"alarm at {e.t_s:g} s: {named} ({e.detector} crossed{runner})"
 
 
 def _diagnose_one(record: Path, into: Path, model, calibration, calibration_file, rate):
@@ -100,7 +118,14 @@ def _diagnose_one(record: Path, into: Path, model, calibration, calibration_file
     result = run(features, calibration, rate)
     into.mkdir(parents=True, exist_ok=True)
     write_json(into / "fdi.json", result.to_dict(str(calibration_file)))
-    page = fdi_page(result, calibration, calibration_file, title=record.name, record_note=note)
+    page = fdi_page(
+        result,
+        calibration,
+        calibration_file,
+        title=record.name,
+        record_note=note,
+        features=features,
+    )
     page.save(into / "report.html")
     return result, rec
 
@@ -169,11 +194,19 @@ def _trend_point(record: str, start_utc: str, result) -> dict:
         for e in result.events
         if result.confirmed(e) and not math.isnan(e.fit.size)  # a frozen reading has no size
     }
-    estimates = {
-        n: {"magnitude": f.size, "ci95": list(f.ci95), "unit": f.unit}
-        for n, f in result.estimates.items()
-    }
-    return {"record": record, "start_utc": start_utc, "faults": faults, "estimates": estimates}
+    return {"record": record, "start_utc": start_utc, "faults": faults, "estimates": {}}
+
+
+def _healthy(record: Path, features, rec):
+    """A calibration record's features; refused where the record says a fault was
+    injected (a calibration on it would take the fault for the wheel's health)."""
+    injected = [e["message"] for e in rec.topic("/event") if e["kind"] == "fault_injected"]
+    if injected:
+        raise DataError(
+            f"{record}: a fault was injected ({', '.join(injected)}): calibrate on the "
+            "wheel's healthy records only"
+        )
+    return features
 
 
 @diagnose_group.command("calibrate")
@@ -196,8 +229,9 @@ def _trend_point(record: str, start_utc: str, result) -> dict:
     "--out", type=click.Path(dir_okay=False), required=True, help="The calibration.json to write."
 )
 @click.option("--origin", default="", help="One line on whose wheel and which records.")
+@click.option("--force", is_flag=True, help="Overwrite --out if it exists.")
 @_friendly_errors
-def calibrate_cmd(records, model_file, in_loop, out, origin):
+def calibrate_cmd(records, model_file, in_loop, out, origin, force):
     """Measure the diagnosis's noise model, healthy zones and thresholds on a wheel's
     own healthy records (2-4 h of its normal test signals), each threshold with the
     false-alarm rate measured at it; use it with rwlab diagnose RECORD --calibration
@@ -205,6 +239,8 @@ def calibrate_cmd(records, model_file, in_loop, out, origin):
     from rwlab.diagnose.detectors import MODEL_BASED
     from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
 
+    if Path(out).exists() and not force:
+        raise FileExistsError(f"{out} exists; pass --force to overwrite it")
     quick = None
     if in_loop:
         from rwlab.hil.live import QUICK_S, flight_features
@@ -217,7 +253,7 @@ def calibrate_cmd(records, model_file, in_loop, out, origin):
         raise click.UsageError("--model is needed (or --in-loop for rwlab hil flights)")
     else:
         model = _model(model_file)
-        features = [_fdi_features(Path(r), *model)[0] for r in records]
+        features = [_healthy(Path(r), *_fdi_features(Path(r), *model)) for r in records]
         names = [Path(r).name for r in records]
     calibration = DiagnosisCalibration.measure(
         features, sources=names, origin=origin, quick_window_s=quick

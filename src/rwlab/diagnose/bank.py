@@ -307,26 +307,6 @@ class Bank:
         zone, phi = self.zone[name], self.dispersion[name]
         return profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
 
-    def estimate(self, name: str) -> Fit:
-        """Detector ``name``'s size over the record's last longest window against the
-        reference, alarm or not (a wear trend over a wheel's records), its interval the
-        record's noise alone (a unit's own offset from the reference moves each of its
-        records alike).
-
-        Parameters
-        ----------
-        name : str
-            A model-based detector's fault.
-
-        Returns
-        -------
-        Fit
-        """
-        k = self.features.N
-        a = max(0, k - self.windows[-1])
-        best = self._population(name, a, k)
-        return self.detectors[name].refine(self.features, self.weights, best, a, k)
-
     def _against_own(self, name: str, a: int, k: int) -> Fit | None:
         """Detector ``name`` on samples [a, k) against the record's own past [0, a): the
         change's fit, relative to the past's, or None where it moves toward healthy.

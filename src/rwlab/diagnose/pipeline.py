@@ -24,8 +24,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from rwlab.diagnose.bank import Bank, WindowFit
 from rwlab.diagnose.detectors import MODEL_BASED, SIGNATURE, Fit, FrozenReading, LostFrames
+from rwlab.diagnose.detectors.base import profile_fit
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, Threshold
 from rwlab.errors import ConfigError
@@ -107,16 +110,20 @@ class Result:
     duration_s : float
     per_hour : float
         The false-alarm rate asked, per detector.
-    estimates : dict of str to Fit
-        Each model-based fault's size over the record's last 5 minutes against the
-        reference, alarm or not (:meth:`Live.estimates`): a wear trend's point.
+    unseen : list of str
+        The model-based faults the record cannot tell from healthy (:meth:`Live.unseen`):
+        "no alarm" says nothing of them.
+    statistics : dict of str to list of (float, float)
+        Each detector's (decision time s, log-LR) at the decisions it was evaluated at
+        (a fault named is followed, not tested again).
     """
 
     events: list[Event]
     thresholds: dict[str, Threshold]
     duration_s: float
     per_hour: float
-    estimates: dict[str, Fit] = field(default_factory=dict)
+    unseen: list[str] = field(default_factory=list)
+    statistics: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
 
     def to_dict(self, calibration: str = "") -> dict:
         """The JSON form (``rwlab.FdiDiagnosis/1``): the verdict first."""
@@ -136,10 +143,7 @@ class Result:
                 }
                 for name, t in self.thresholds.items()
             },
-            "estimates": {
-                name: {"size": f.size, "ci95": list(f.ci95), "unit": f.unit}
-                for name, f in self.estimates.items()
-            },
+            "unseen": list(self.unseen),
         }
 
     def faults(self) -> list[str]:
@@ -157,8 +161,10 @@ class Result:
     def verdict(self) -> str:
         """One line: healthy, or each confirmed fault with its size, interval and alarm
         time, then the alarms the record no longer supports."""
+        blind = f"; not seen (the record cannot tell them from healthy): {', '.join(self.unseen)}"
         if not self.events:
-            return f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
+            line = f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
+            return line + (blind if self.unseen else "")
         found, faded = [], []
         for e in self.events:
             f = e.fit
@@ -247,6 +253,11 @@ def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
 
 
+# design choice: a fault whose 95 % interval on the whole record spans this share of its
+# detector's grid is "not seen" (the record excludes only the grid's very ends)
+UNSEEN_SHARE = 0.9
+
+
 class Live:
     """The pipeline on a growing record (a wheel's telemetry in flight): each
     :meth:`update` takes the record so far and decides at the decision times new since
@@ -268,6 +279,8 @@ class Live:
         Each detector's threshold at the rate asked.
     decisions : int
         Decision times taken so far.
+    statistics : dict of str to list of (float, float)
+        Each free detector's (decision time s, log-LR) at each decision.
     """
 
     def __init__(self, calibration: DiagnosisCalibration, per_hour: float = 1e-3) -> None:
@@ -279,6 +292,7 @@ class Live:
         self._done = 0  # the last decision time taken (exclusive sample index)
         self.decisions = 0  # decision times taken
         self._telemetry_named: set[str] = set()
+        self.statistics: dict[str, list[tuple[float, float]]] = {}
 
     def update(self, features: Features) -> list[Event]:
         """Decide on the record so far.
@@ -324,7 +338,10 @@ class Live:
                 if e in events and e.first in MODEL_BASED:
                     _follow(e, events, bank, k, limits)
             free = [n for n in MODEL_BASED if not SIGNATURE[n] & _owned(events)]
-            crossed = [n for n in free if bank.at(n, k).fit.log_lr > limits[n].log_lr]
+            fits = {n: bank.at(n, k).fit for n in free}
+            for n, fit in fits.items():
+                self.statistics.setdefault(n, []).append((float(features.t_s[k - 1]), fit.log_lr))
+            crossed = [n for n in free if fits[n].log_lr > limits[n].log_lr]
             if crossed:
                 new.append(self._open(bank, k, free, crossed))
                 events.append(new[-1])
@@ -357,21 +374,30 @@ class Live:
                 "calibrate RECORDS... --model model.json --out calibration.json)"
             )
 
-    def estimates(self) -> dict[str, Fit]:
-        """Each model-based fault's size over the record's last longest window against
-        the reference (:meth:`~rwlab.diagnose.bank.Bank.estimate`), alarm or not. Each is
-        the size were that fault the only one: after an alarm, only the faults named have
-        one (a weak motor's record fits friction ×8 too); after a frozen reading none
-        does (each reads the speed).
+    def unseen(self) -> list[str]:
+        """The model-based faults the record so far cannot tell from healthy: the 95 %
+        interval of the size on the whole record spans ``UNSEEN_SHARE`` of the detector's
+        grid or more (on a log scale for factors and amperes): only sizes at the grid's
+        very ends are excluded (20 s of PRBS: friction 0.25-7.5 on a 0.25-8 grid, a clamp
+        0.09-0.7 A on the RW90's 0.07-0.7 A).
 
         Returns
         -------
-        dict of str to Fit
+        list of str
         """
-        if self._bank is None or "speed_sensor_stuck" in self._telemetry_named:
-            return {}
-        named = {e.fault for e in self.events} & set(MODEL_BASED)
-        return {n: self._bank.estimate(n) for n in (named or MODEL_BASED)}
+        bank = self._bank
+        if bank is None:
+            return list(MODEL_BASED)
+        out = []
+        for n in MODEL_BASED:
+            det, grid = bank.detectors[n], bank.grid[n]
+            ll = bank.cum[n][bank.features.N] - bank.cum[n][0]
+            ci = profile_fit(n, det.unit, grid, ll, bank.zone[n], bank.dispersion[n]).ci95
+            scale = np.log if det.unit != "rpm" else np.asarray
+            span = np.diff(scale(np.array(ci))) / np.diff(scale(grid[[0, -1]]))
+            if span[0] >= UNSEEN_SHARE:
+                out.append(n)
+        return out
 
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
@@ -413,4 +439,4 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     live.update(features)
     events = sorted(live.events, key=lambda e: e.t_s)
     duration_s = features.N * features.scales.Ts
-    return Result(events, live.limits, duration_s, per_hour, live.estimates())
+    return Result(events, live.limits, duration_s, per_hour, live.unseen(), live.statistics)

@@ -58,6 +58,7 @@ class RecordWatch:
         self._n = 0
         self._t0_s = 0.0
         self._features: Features | None = None
+        self._named: dict[int, str] = {}  # each event's name as last reported
 
     def update(
         self,
@@ -84,7 +85,8 @@ class RecordWatch:
         Returns
         -------
         list of Event
-            The events a decision at this sample opened (empty between decisions).
+            The events a decision at this sample opened or re-labelled (a better-supported
+            fault: ``Event.relabelled``), empty between decisions.
         """
         if self._n == 0:
             self._t0_s = t_s
@@ -106,4 +108,7 @@ class RecordWatch:
             output_units=["rpm", "A", "s", ""],
         )
         self._features = compute_features(data, self.wheel, self.scales, self._features)
-        return self.live.update(self._features)
+        self.live.update(self._features)
+        changed = [e for e in self.live.events if self._named.get(id(e)) != e.fault]
+        self._named.update({id(e): e.fault for e in changed})
+        return changed

@@ -493,7 +493,8 @@ def model_calibration_file(model_file: str | os.PathLike) -> Path:
             f"{model_file} is a model of {wheel}: the shipped calibrations are measured on "
             f"the presets' twins ({', '.join(preset_names())}). Calibrate on this wheel's "
             "healthy records (rwlab diagnose calibrate RECORDS... --model model.json --out "
-            "calibration.json) and pass --calibration calibration.json, or run the rule "
-            "detectors with --rules"
+            "calibration.json) and give it (rwlab diagnose --calibration, rwlab experiment "
+            "--diagnosis-calibration, calibration= in Python), or run the rule detectors "
+            "(rwlab diagnose --rules)"
         )
     return twin_calibration_file(spec.name)

@@ -319,16 +319,23 @@ def write_trend(points: list[dict], out_dir: str | os.PathLike, *, force: bool =
     text = json.dumps({"format": TREND_FORMAT, "records": points}, indent=2)
     atomic_write_bytes(targets["trend.json"], lambda tmp: tmp.write_text(text))
     page = Page("Fault trend")
-    page.text(
-        "Each record of the wheel diagnosed against the same healthy reference, in record "
-        "order: its friction and torque-constant factors and speed bias estimated from the "
-        "tests' latest 10 minutes whether or not a test alarmed (slow wear below the "
-        "thresholds shows here first), with 95 % intervals of the record's noise; circled "
-        "red: a record in which that fault was named. The intervals leave out the "
-        "reference unit's own difference from this wheel, which shifts every record alike "
-        "where they run the same test signal (speeds held elsewhere weigh the unit's "
-        "friction law differently)."
-    )
+    if not any(p["estimates"] for p in points):  # the GLR pipeline's: the faults named
+        page.text(
+            "Each record of the wheel diagnosed against the same healthy reference, in "
+            "record order, with the faults the pipeline named and their sizes (no size is "
+            "estimated below an alarm)."
+        )
+    else:
+        page.text(
+            "Each record of the wheel diagnosed against the same healthy reference, in record "
+            "order: its friction and torque-constant factors and speed bias estimated from the "
+            "tests' latest 10 minutes whether or not a test alarmed (slow wear below the "
+            "thresholds shows here first), with 95 % intervals of the record's noise; circled "
+            "red: a record in which that fault was named. The intervals leave out the "
+            "reference unit's own difference from this wheel, which shifts every record alike "
+            "where they run the same test signal (speeds held elsewhere weigh the unit's "
+            "friction law differently)."
+        )
     kinds = [k for k in ("friction", "torque_constant", "speed_sensor_bias")
              if any(k in p["estimates"] for p in points)]  # fmt: skip
     if kinds:

@@ -7,9 +7,10 @@ import math
 import os
 from pathlib import Path
 
+from rwlab.diagnose.features import Features
 from rwlab.diagnose.pipeline import Result
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration
-from rwlab.report.html import Page
+from rwlab.report.html import Page, figure
 
 __all__ = ["fdi_page"]
 
@@ -25,6 +26,7 @@ def fdi_page(
     *,
     title: str,
     record_note: str | None = None,
+    features: Features | None = None,
 ) -> Page:
     """The page a lab engineer reads in ten seconds.
 
@@ -39,11 +41,14 @@ def fdi_page(
     title : str
     record_note : str, optional
         What is wrong with the record (truncated, salvaged), shown under the verdict.
+    features : Features, optional
+        The record's features: the residuals and each detector's statistic are plotted.
 
     Returns
     -------
     Page
-        Verdict, alarm table, estimates, evidence (thresholds with their measured rates).
+        Verdict, alarm table, the residuals and statistics (with ``features``), evidence
+        (thresholds with their measured rates).
     """
     page = Page(title)
     page.heading("Verdict", "verdict")
@@ -93,23 +98,8 @@ def fdi_page(
         )
     else:
         page.text("No alarm.")
-    if result.estimates:
-        page.heading("Estimates", "estimates")
-        page.text(
-            "Each fault's size over the record's last 5 minutes against the reference, alarm "
-            "or not (a wheel's records side by side show wear below the thresholds); each "
-            "presumes its fault alone, so after an alarm only the faults named are given. The "
-            "intervals are the record's noise: a unit's own offset from the reference moves "
-            "every record of it alike."
-        )
-        page.table(
-            ["fault", "size", "95 % interval", "unit", "ln LR over healthy"],
-            [
-                [name, f.size, _interval(f.ci95), f.unit, f.log_lr]
-                for name, f in result.estimates.items()
-            ],
-            table_id="estimates",
-        )
+    if features is not None:
+        _residuals_figure(page, result, features)
     page.heading("Evidence", "evidence")
     page.text(
         f"Each detector's threshold on its log-likelihood ratio for "
@@ -126,3 +116,37 @@ def fdi_page(
         table_id="thresholds",
     )
     return page
+
+
+def _residuals_figure(page: Page, result: Result, features: Features) -> None:
+    """The three residual channels and each detector's statistic over its threshold."""
+    f = features
+    fig, axes = figure(9, 8.0, 4, 1, sharex=True)
+    channels = (
+        (f.speed_residual_rpm, "speed [rpm]"),
+        (f.accel_residual_rpm_s, "acceleration [rpm/s]"),
+        (f.current_residual_a, "current [A]"),
+    )
+    for ax, (values, label) in zip(axes, channels, strict=False):
+        ax.plot(f.t_s, values, lw=0.6)
+        ax.set_ylabel(label, fontsize=8)
+    for name, points in result.statistics.items():
+        t, log_lr = zip(*points, strict=True)
+        ratio = [max(v / result.thresholds[name].log_lr, 0.01) for v in log_lr]
+        axes[3].semilogy(t, ratio, lw=0.8, label=name)
+    axes[3].axhline(1.0, color="k", ls=":", lw=0.8)
+    axes[3].set_ylim(bottom=0.01)
+    axes[3].set_ylabel("log-LR / threshold", fontsize=8)
+    axes[3].legend(loc="upper left", fontsize=7, ncol=2)
+    for ax in axes:
+        for e in result.events:
+            ax.axvline(e.t_s, color="r", ls="--", lw=0.8)
+    axes[-1].set_xlabel("time [s]")
+    page.figure(
+        fig,
+        "fig-residuals",
+        "Measured minus modelled speed and acceleration (the identified model and its loop's "
+        "demand) and measured minus the reference's current balance; below, each detector's "
+        "statistic over its threshold at each decision (a fault named is followed, no longer "
+        "tested); red dashes: alarms.",
+    )

@@ -204,6 +204,8 @@ class ExperimentConfig:
             or not (math.isfinite(tol) and tol > 0)
         ):
             raise ConfigError(f"late_tolerance must be a positive number of seconds, got {tol!r}")
+        if self.diagnosis_calibration is not None and self.model is None:
+            raise ConfigError("diagnosis_calibration is the live diagnosis's: it needs model")
         self.wheel_params()  # a bad preset or unit fails here, before any work
         if not 0 <= self.node_id <= 15:
             raise ConfigError(f"node_id must be an integer 0..15, got {self.node_id}")
@@ -744,7 +746,15 @@ def _live_detector(cfg: ExperimentConfig):
     if cfg.model is None:
         return None
     from rwlab.diagnose.watch import RecordWatch
+    from rwlab.ident.model_file import WheelModelFile
 
+    spec = WheelModelFile.load(cfg.model).wheel_spec
+    if spec is not None and spec != cfg.nominal_wheel().spec():
+        raise ConfigError(
+            f"--model is a model of the wheel {spec.name!r}, the experiment runs "
+            f"{cfg.wheel!r} (another spec): live diagnosis needs a model of the wheel it "
+            "watches (rwlab identify on one of its healthy records)"
+        )
     watch = RecordWatch(cfg.model, cfg.diagnosis_calibration)
     if cfg.mode != "speed" or not math.isclose(watch.scales.Ts, cfg.Ts, rel_tol=1e-6):
         raise ConfigError(
@@ -755,11 +765,15 @@ def _live_detector(cfg: ExperimentConfig):
 
 
 def _alarm_text(event) -> str:
-    """An alarm's line: the fault, its size and interval, what crossed, the runner-up."""
+    """An alarm's line: the fault, its size and interval, what crossed, the runner-up; or
+    its re-labelling by a better-supported fault."""
     f = event.fit
     size = (
         "" if math.isnan(f.size) else f" {f.size:.4g} [{f.ci95[0]:.4g}, {f.ci95[1]:.4g}] {f.unit}"
     )
+    if event.relabelled:
+        t, was = event.relabelled[-1]
+        return f"{f.fault} at {event.t_s:.1f} s{size} (re-labelled from {was} at {t:.1f} s)"
     runner = "" if event.runner_up is None else f"; runner-up {event.runner_up}"
     return (
         f"{f.fault} at {event.t_s:.1f} s{size} ({event.detector} crossed, log-LR "
