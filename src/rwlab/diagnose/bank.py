@@ -215,7 +215,7 @@ class Bank:
             )
             for n in names:
                 self.own_ready[n] = np.isfinite(f.current_nuisance_a[:, 0])  # type: ignore[index]
-        self.zone = {n: self._hull(n, *zones[n]) for n in self.detectors}
+        self.zone = {n: self._between(n, *zones[n]) for n in self.detectors}
         self.zone_bounds = {n: (float(zones[n][0]), float(zones[n][1])) for n in self.detectors}
         self.drift = drift
         self.dispersion = {n: (dispersion or {}).get(n, 1.0) for n in self.detectors}
@@ -260,18 +260,6 @@ class Bank:
         mask = (g >= lo) & (g <= hi)
         if not mask.any():  # a zone between grid points holds the nearest one
             mask[np.argmin(np.abs(g - 0.5 * (lo + hi)))] = True
-        return mask
-
-    def _hull(self, name: str, lo: float, hi: float) -> np.ndarray:
-        """The grid points of [lo, hi] rounded outward to the grid: a zone measured from
-        intervals that end between grid points (:func:`profile_fit`) keeps the points those
-        intervals reach into (rounded inward, a healthy in-loop clamp's zone lost its lowest
-        point, and healthy wheels read a 0.06-A clamp after a reallocation)."""
-        g = self.grid[name]
-        first = max(int(np.searchsorted(g, lo, side="right")) - 1, 0)
-        last = min(int(np.searchsorted(g, hi, side="left")), len(g) - 1)
-        mask = np.zeros(len(g), dtype=bool)
-        mask[first : last + 1] = True
         return mask
 
     def fit(self, name: str, a: int, k: int) -> WindowFit:

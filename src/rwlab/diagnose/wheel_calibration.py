@@ -229,7 +229,7 @@ class DiagnosisCalibration:
             for t in tiles:
                 grid, zone = t[name]["grid"], t[name]["zone"]
                 sizes = [
-                    profile_fit(name, "", grid, ll, zone, dispersion[name]).ci95
+                    _held(grid, profile_fit(name, "", grid, ll, zone, dispersion[name]).ci95)
                     for ll in t[name]["shortest"]
                 ]
                 lows += [hi for _, hi in sizes]
@@ -237,7 +237,7 @@ class DiagnosisCalibration:
                 known += sizes
                 moves += _gaps(sizes)
                 own = [
-                    profile_fit(name, "", grid, ll, zone, phi_own).ci95
+                    _held(grid, profile_fit(name, "", grid, ll, zone, phi_own).ci95)
                     for ll in t[name]["shortest@own"]
                 ]
                 moves_own += _moves(own)
@@ -431,6 +431,15 @@ class DiagnosisCalibration:
         if self.hours <= 0:
             raise DataError("an empty calibration cannot be saved")
         return write_json(path, self.to_dict())
+
+
+def _held(grid: np.ndarray, ci: tuple[float, float]) -> tuple[float, float]:
+    """The grid points an interval holds, its first and last: zones and drifts are measured
+    on the grid the detectors decide on (an interval's end between two grid points would
+    drop the point it reaches into: a healthy in-loop clamp zone lost its lowest point, and
+    healthy wheels read a 0.06-A clamp after a reallocation)."""
+    inside = grid[(grid >= ci[0]) & (grid <= ci[1])]  # the fit's own size at least
+    return float(inside[0]), float(inside[-1])
 
 
 def twin_calibration_file(wheel: str) -> Path:
