@@ -276,8 +276,11 @@ class Bank:
         -------
         WindowFit
         """
+        ll = self.cum[name][k] - self.cum[name][a]
         det = self.detectors[name]
-        best, against = self._population(name, a, k), "population"
+        zone, phi = self.zone[name], self.dispersion[name]
+        best = profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
+        against = "population"
         if a >= self.past_min:
             change = self._against_own(name, a, k)
             if change is not None and change.log_lr > best.log_lr:
@@ -287,13 +290,6 @@ class Bank:
         best = det.refine(self.features, self.weights, best, a, k)
         t = self.features.t_s
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)
-
-    def _population(self, name: str, a: int, k: int) -> Fit:
-        """Detector ``name`` on samples [a, k) against the population zone (not widened)."""
-        det = self.detectors[name]
-        ll = self.cum[name][k] - self.cum[name][a]
-        zone, phi = self.zone[name], self.dispersion[name]
-        return profile_fit(det.fault, det.unit, self.grid[name], ll, zone, phi, det.worse)
 
     def _against_own(self, name: str, a: int, k: int) -> Fit | None:
         """Detector ``name`` on samples [a, k) against the record's own past [0, a): the

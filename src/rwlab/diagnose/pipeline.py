@@ -161,10 +161,12 @@ class Result:
     def verdict(self) -> str:
         """One line: healthy, or each confirmed fault with its size, interval and alarm
         time, then the alarms the record no longer supports."""
-        blind = f"; not seen (the record cannot tell them from healthy): {', '.join(self.unseen)}"
         if not self.events:
             line = f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
-            return line + (blind if self.unseen else "")
+            if self.unseen:
+                line += "; not seen (the record cannot tell them from healthy): "
+                line += ", ".join(self.unseen)
+            return line
         found, faded = [], []
         for e in self.events:
             f = e.fit
