@@ -27,12 +27,12 @@ from rwlab.diagnose.features import (
     REFERENCE_LAG_S,
     STEADY_SHARE,
     WheelScales,
-    _least_norm_solve,
     channel_mask,
     compute_features,
     past_covers,
 )
 from rwlab.diagnose.noise import JERK_EDGES, SPEED_EDGES, NoiseModel, bins, speed_bins
+from rwlab.diagnose.past_fits import least_norm_solve
 from rwlab.diagnose.pipeline import Event, Result, _follow, run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
@@ -328,7 +328,7 @@ def test_the_stacked_least_norm_solve_is_lstsqs(seed, rank, scale):
     X[4:, :, 2] = X[4:, :, 1] + 1e-5 * rng.standard_normal((4, 20))  # nearly collinear
     A = scale * np.einsum("kni,knj->kij", X, X)
     b = np.einsum("kij,kj->ki", A, rng.standard_normal((8, 3)))
-    got = _least_norm_solve(A, b)
+    got = least_norm_solve(A, b)
     for k in range(8):
         want = np.linalg.lstsq(A[k], b[k], rcond=1e-6)[0]
         assert np.allclose(A[k] @ got[k], A[k] @ want, rtol=1e-6, atol=1e-9 * scale)

@@ -52,8 +52,9 @@ from typing import Any
 import numpy as np
 
 from rwlab.data import IOData
+from rwlab.diagnose.columns import RECORD_OUTPUTS, check_command_period, record_columns
+from rwlab.diagnose.past_fits import fit_every_past
 from rwlab.diagnose.scales import WheelScales
-from rwlab.errors import DataError
 
 __all__ = [
     "RECORD_OUTPUTS",
@@ -65,8 +66,6 @@ __all__ = [
     "current_nuisance",
 ]
 
-# what load_record must give the diagnosis (its default is the speed alone)
-RECORD_OUTPUTS = ("speed", "current", "age", "lost")
 # design choices, not measurements: the own reference is fitted on samples older than the
 # longest detection window (5 min, the longest delay the lab accepts), and only once it
 # holds this long of the current channel's samples
@@ -245,35 +244,6 @@ class Features:
         return np.abs(self.demand_accel_rpm_s) >= limit * (1 - STEADY_SHARE)
 
 
-def _columns(data: IOData, Ts: float) -> dict[str, np.ndarray]:
-    """The record's columns, checked: a clear error for what the diagnosis cannot use."""
-    if not math.isclose(data.Ts, Ts, rel_tol=1e-6):
-        raise DataError(
-            f"the data are sampled at {data.Ts:g} s, the model at {Ts:g} s: load the record "
-            f"on the model's grid, load_record(path, {Ts:g}, outputs={RECORD_OUTPUTS!r})"
-        )
-    if data.nu != 1:
-        raise DataError(
-            "diagnosis needs one input: the speed command in rpm, or the acceleration "
-            "command in rpm/s"
-        )
-    names = list(data.output_names)
-    for needed in ("speed_rpm", "current_a"):
-        if needed not in names:
-            raise DataError(
-                f"diagnosis needs a {needed} output, got {names}: load the record with "
-                f"load_record(path, {Ts:g}, outputs={RECORD_OUTPUTS!r})"
-            )
-    out = {name: np.array(data.y[:, names.index(name)], dtype=float) for name in names}
-    if not (np.isfinite(out["speed_rpm"]).all() and np.isfinite(out["current_a"]).all()):
-        raise DataError("the record's speed or current holds NaN or Inf: no sample can be judged")
-    out.setdefault("telemetry_age_s", np.zeros(data.N))
-    out.setdefault("lost_frames", np.zeros(data.N))
-    u = np.asarray(data.u[:, 0], dtype=float)
-    out["held"] = np.concatenate([u[:1], u[:-1]])  # in force over the last interval
-    return out
-
-
 def compute_features(
     data: IOData, wheel, scales: WheelScales, before: Features | None = None
 ) -> Features:
@@ -305,7 +275,7 @@ def compute_features(
         a speed-mode record commanded at another period than the model's.
     """
     Ts = scales.Ts
-    col = _columns(data, Ts)
+    col = record_columns(data, Ts)
     speed, current = col["speed_rpm"], col["current_a"]
     if before is not None and not _extends(before, data.tstart, speed, current, scales):
         before = None
@@ -316,15 +286,7 @@ def compute_features(
         model, model_accel = speed, np.clip(col["held"], -limit, limit)
         demand, model_end = model_accel, None
     else:
-        issued = data.source.get("Ts")  # a testbed record's command period, s
-        if isinstance(issued, (int, float)) and not math.isclose(issued, Ts, rel_tol=1e-6):
-            # a chirp commanded every 0.1 s, sampled at the model's 0.5 s, is not the command
-            # the wheel was given: the model lags it (healthy chirps read as a clamp)
-            raise DataError(
-                f"the record's commands came every {issued:g} s and the model runs at "
-                f"{Ts:g} s: the model cannot follow the command the wheel was given; record "
-                f"the test at --Ts {Ts:g}, or identify a model at {issued:g} s"
-            )
+        check_command_period(data, Ts)
         model = np.empty(data.N)
         if before is not None and before.model_end is not None:  # run on from its end
             wheel, done = copy.deepcopy(before.model_end), before.N
@@ -591,66 +553,16 @@ def current_nuisance(features: Features, steady: bool = False) -> np.ndarray:
     ok = channel_mask(f, "current_steady" if steady else "current")
     lag = round(REFERENCE_LAG_S / f.scales.Ts)
     pasts = max(f.N - lag, 0)  # the pasts, ending at j = k − lag
-    known = f.past_fits.get(steady) if f.current_ready is None else None
-    done = 0 if known is None else min(len(known), pasts)
-    theta = np.full((pasts, 3), np.nan)
-    theta[:done] = known[:done] if known is not None else theta[:0]
-    Xo = X[:pasts] * ok[:pasts, None]
-    A = np.cumsum(Xo[:, :, None] * X[:pasts, None, :], axis=0)
-    b = np.cumsum(Xo * f.current_residual_a[:pasts, None], axis=0)
-    need = round(REFERENCE_MIN_S / f.scales.Ts)
-    new = done + np.flatnonzero(np.cumsum(ok[:pasts])[done:] >= need)
-    if new.size:
-        # the offset's column scaled by the past's own unit: A = D A₁ D, b = D b₁
-        scale = np.ones((new.size, 3))
-        scale[:, 0] = unit[new]
-        fitted = _least_norm_solve(A[new] * scale[:, :, None] * scale[:, None, :], b[new] * scale)
-        theta[new] = fitted * scale  # coefficients of X's unscaled columns
+    theta = fit_every_past(
+        X[:pasts],
+        f.current_residual_a[:pasts],
+        ok[:pasts],
+        round(REFERENCE_MIN_S / f.scales.Ts),
+        unit[:pasts],
+        f.past_fits.get(steady) if f.current_ready is None else None,
+    )
     if f.current_ready is None:
         f.past_fits[steady] = theta
     out = np.full((f.N, 3), np.nan)
     out[lag:] = X[lag:] * theta
-    return out
-
-
-def _least_norm_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Least squares, least norm, of stacked symmetric positive semi-definite 3 × 3
-    systems, as lstsq's (singular values under 1e-6 of the largest are zero).
-
-    Written here because numpy's lstsq does not stack. The well-conditioned systems
-    (det > 1e-6 trace³, so the smallest eigenvalue is over 1e-6 of the largest) by their
-    adjugate; the others by eigenvalues (A's are its singular values). The adjugate is
-    6× faster than ``eigh`` and, on the 2-h records a flight diagnoses every 5 s, was half of
-    an update.
-
-    Parameters
-    ----------
-    A : numpy.ndarray
-        shape (K, 3, 3).
-    b : numpy.ndarray
-        shape (K, 3).
-
-    Returns
-    -------
-    numpy.ndarray
-        shape (K, 3).
-    """
-    a00, a11, a22 = A[:, 0, 0], A[:, 1, 1], A[:, 2, 2]
-    a01, a02, a12 = A[:, 0, 1], A[:, 0, 2], A[:, 1, 2]
-    adj = np.empty_like(A)
-    adj[:, 0, 0] = a11 * a22 - a12 * a12
-    adj[:, 0, 1] = adj[:, 1, 0] = a02 * a12 - a01 * a22
-    adj[:, 0, 2] = adj[:, 2, 0] = a01 * a12 - a11 * a02
-    adj[:, 1, 1] = a00 * a22 - a02 * a02
-    adj[:, 1, 2] = adj[:, 2, 1] = a01 * a02 - a00 * a12
-    adj[:, 2, 2] = a00 * a11 - a01 * a01
-    det = np.einsum("kj,kj->k", A[:, 0], adj[:, :, 0])
-    regular = det > 1e-6 * (a00 + a11 + a22) ** 3
-    out = np.einsum("kij,kj->ki", adj, b) / np.where(regular, det, 1.0)[:, None]
-    if not regular.all():
-        lam, V = np.linalg.eigh(A[~regular])
-        keep = lam > 1e-6 * lam[:, -1:]
-        inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-        Vb = np.einsum("kji,kj->ki", V, b[~regular])
-        out[~regular] = np.einsum("kij,kj,kj->ki", V, inv, Vb)
     return out
