@@ -271,9 +271,12 @@ def calibrate_cmd(records, model_file, in_loop, out, origin, force):
     for fault in (*MODEL_BASED, "speed_sensor_stuck"):
         t = calibration.threshold(fault, 1.0)
         lo, hi = t.ci95_per_hour
+        default = calibration.threshold(fault, 1e-3)  # rwlab diagnose's --false-alarms
         click.echo(
             f"{fault}: at 1/h threshold {t.log_lr:.3g}, measured {t.measured_per_hour:.3g}/h "
-            f"[{lo:.3g}, {hi:.3g}]{' (extrapolated)' if t.extrapolated else ''}"
+            f"[{lo:.3g}, {hi:.3g}]{' (extrapolated)' if t.extrapolated else ''}; at the "
+            f"default 1e-3/h {default.log_lr:.3g}"
+            + (" (extrapolated)" if default.extrapolated else "")
         )
     click.echo(f"wrote {out}")
 
