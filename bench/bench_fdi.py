@@ -225,6 +225,8 @@ def main() -> None:
     specs |= wheel_set(limit, 12000, "w20") | wheel_set(limit, 12200, "w21")
     specs |= wheel_set(limit, 12400, "w22") | healthy_set(13000, "hr", 24)
     specs |= wheel_set(limit, 12600, "w23") | wheel_set(limit, 12800, "w24")
+    # made at stop 61 to judge the pipeline as rwlab diagnose's default once
+    specs |= wheel_set(limit, 13400, "w25") | wheel_set(limit, 13600, "w26")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 
