@@ -218,12 +218,17 @@ def diagnose_cmd(
     their measured rates) and OUT/report.html. Exit status 1 when any record
     raised an alarm, 0 when none did, 2 on an error.
 
-    RECORD may be a folder of records of one wheel: each is diagnosed into
-    OUT/<record name>/, and OUT/trend.json and OUT/trend.html follow each
-    record's friction, torque-constant and bias estimates, alarm or not (in the
-    order of their start times). OUT appears whole or not at all.
+    The verdict names the faults the record cannot tell from healthy: "no alarm"
+    says nothing of them.
 
-    --rules runs the earlier rule detectors into OUT/diagnosis.json instead.
+    RECORD may be a folder of records of one wheel: each is diagnosed into
+    OUT/<record name>/, and OUT/trend.json and OUT/trend.html list the faults
+    named in each (in the order of their start times). OUT appears whole or not
+    at all.
+
+    --rules runs the earlier rule detectors into OUT/diagnosis.json instead
+    (their trend also follows each record's friction, torque-constant and bias
+    estimates, alarm or not).
     """
     from rwlab.diagnose import HealthyReference
     from rwlab.wheel import IdentifiedWheel
