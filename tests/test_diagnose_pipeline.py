@@ -155,7 +155,7 @@ def test_profile_interval_of_a_gaussian_is_textbook():
     fit = profile_fit("x", "u", coarse, -((coarse - 2.0) ** 2) / (2 * 0.1**2), coarse <= 1.0)
     lo, hi = fit.ci95
     assert lo < 2.0 < hi and hi - lo < 0.8  # not the point 2 alone, nor past its neighbours
-    assert lo == pytest.approx(2.0 - 0.4 * HALF_CHI2_95 / 8.0)  # linear between the points
+    assert (lo, hi) == pytest.approx((2 - half, 2 + half))  # exact for a quadratic profile
 
 
 def test_a_one_sided_fault_fits_only_its_side_of_the_healthy_zone():

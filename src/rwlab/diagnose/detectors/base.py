@@ -22,6 +22,7 @@ faults compare by likelihood: that is the isolation
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
@@ -114,21 +115,27 @@ def profile_fit(
     return Fit(
         fault,
         float(grid[best]),
-        (_crossing(grid, ll, cut, inside[0], -1), _crossing(grid, ll, cut, inside[-1], 1)),
+        (
+            _crossing(grid, ll, top, cut, inside[0], -1),
+            _crossing(grid, ll, top, cut, inside[-1], 1),
+        ),
         max(0.0, top - zone),
         unit,
     )
 
 
-def _crossing(grid: np.ndarray, ll: np.ndarray, cut: float, i: int, step: int) -> float:
+def _crossing(grid: np.ndarray, ll: np.ndarray, top: float, cut: float, i: int, step: int) -> float:
     """Where the log-likelihood falls to ``cut`` between grid point i (inside) and its
-    neighbour on the ``step`` side, linearly interpolated (a window that pins the size
-    within one grid step otherwise gave an interval of zero width); the grid's edge where
-    the likelihood never falls that far."""
+    neighbour on the ``step`` side: the signed root √(2(top − ll)) interpolated linearly,
+    exact for a quadratic profile (ll itself, interpolated, put the end inside the true one,
+    up to 7× too narrow where a window pins the size within one grid step; before, the grid
+    point, a zero-width interval); the grid's edge where the likelihood never falls that
+    far."""
     j = i + step
     if not 0 <= j < len(grid) or not np.isfinite(ll[j]):
         return float(grid[i])
-    share = (ll[i] - cut) / (ll[i] - ll[j])
+    root_i, root_j, root_cut = (math.sqrt(2.0 * max(top - v, 0.0)) for v in (ll[i], ll[j], cut))
+    share = (root_cut - root_i) / (root_j - root_i)
     return float(grid[i] + share * (grid[j] - grid[i]))
 
 
