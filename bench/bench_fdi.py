@@ -249,12 +249,15 @@ def main() -> None:
     for name in args.judge:
         _, _, signal, duration, _, text, onset = specs[name]
         res = run(features(name), cal, args.rate)
+        # scored at the alarm, as the rule detectors are (the name and fit then; the
+        # record's end, where the event was followed and perhaps re-labelled, after "end:")
         alarms = [
             (
                 e.t_s,
-                e.fault,
-                None if math.isnan(e.fit.size) else e.fit.ci95,
-                f"{e.fit.size:.3g} {None if math.isnan(e.fit.size) else e.fit.ci95}",
+                e.first,
+                None if math.isnan(e.at_alarm.size) else e.at_alarm.ci95,
+                f"{e.at_alarm.size:.3g} {None if math.isnan(e.at_alarm.size) else e.at_alarm.ci95}"
+                + (f" (end: {e.fault} {e.fit.size:.3g})" if e.fit is not e.at_alarm else ""),
             )
             for e in res.events
         ]

@@ -60,6 +60,10 @@ class Event:
         (time s, earlier name) for each re-labelling.
     start : int
         Sample index where the window that raised it starts.
+    first : str
+        The fault named at the alarm (set from ``fit``).
+    at_alarm : Fit
+        The fit at the alarm (``fit`` follows the record).
     """
 
     t_s: float
@@ -74,6 +78,7 @@ class Event:
 
     def __post_init__(self) -> None:
         self.first = self.fit.fault  # the name at the alarm
+        self.at_alarm = self.fit  # the fit at the alarm (``fit`` follows the record)
 
     @property
     def fault(self) -> str:
