@@ -122,4 +122,5 @@ def test_a_lab_calibrates_the_pipeline_on_its_own_wheels_flights(tmp_path):
     assert "(GLR pipeline, calibrated on" in out
     [alarm] = json.loads((tmp_path / "f" / "metrics.json").read_text())["wheel_faults"]
     assert alarm["node"] == 2 and alarm["named_kind"] == "friction"
-    assert alarm["detector"].startswith("GLR pipeline") and alarm["detected_s"] - 250 <= 10
+    # within three decisions of the onset: the crossing, its confirmation, one spare
+    assert alarm["detector"].startswith("GLR pipeline") and alarm["detected_s"] - 250 <= 15

@@ -93,9 +93,9 @@ def _model(model_file):
 def _alarm_line(e) -> str:
     """An alarm's console line: the fault named at the alarm (and what re-labelled it),
     the detector that crossed, the runner-up at the alarm."""
-    runner = (
-        "" if e.runner_up is None else f"; runner-up {e.runner_up}, ln LR {e.runner_up_log_lr:.3g}"
-    )
+    runner = "" if e.runner_up is None else f"; runner-up {e.runner_up}"
+    if e.runner_up_log_lr is not None:
+        runner += f", ln LR {e.runner_up_log_lr:.3g}"
     named = e.first
     if e.relabelled:
         named += f", re-labelled {e.fault} at {e.relabelled[-1][0]:g} s"

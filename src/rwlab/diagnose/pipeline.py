@@ -260,6 +260,12 @@ def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
 
 
+# design choice: an alarm once a threshold has been crossed at this many consecutive
+# decisions, the fault then named by its likeliest model on the window from its onset (as
+# an open event is followed): at a first crossing a clamp, a weak motor and a drag were
+# often named one for another and re-labelled at the next decision
+# (docs/workflows/diagnosis-glr.md, "Named at the alarm")
+CONFIRM_DECISIONS = 2
 # design choice: a fault whose 95 % interval on the whole record spans this share of its
 # detector's grid is "not seen" (the record excludes only the grid's very ends)
 UNSEEN_SHARE = 0.9
@@ -300,6 +306,7 @@ class Live:
         self.decisions = 0  # decision times taken
         self._telemetry_named: set[str] = set()
         self.statistics: dict[str, list[tuple[float, float]]] = {}
+        self._crossings = 0  # consecutive decisions with a threshold crossed
 
     def update(self, features: Features) -> list[Event]:
         """Decide on the record so far.
@@ -349,9 +356,17 @@ class Live:
             for n, fit in fits.items():
                 self.statistics.setdefault(n, []).append((float(features.t_s[k - 1]), fit.log_lr))
             crossed = [n for n in free if fits[n].log_lr > limits[n].log_lr]
-            if crossed:
-                new.append(self._open(bank, k, free, crossed))
-                events.append(new[-1])
+            self._crossings = self._crossings + 1 if crossed else 0
+            if self._crossings >= CONFIRM_DECISIONS:  # held: named on its onset's window
+                e = self._open(bank, k, free, crossed)
+                events.append(e)
+                named = e.fault
+                _follow(e, events, bank, k, limits)
+                if e.fault != named:  # its name at the alarm; the decision windows' is second
+                    e.relabelled.remove((float(bank.features.t_s[k - 1]), named))
+                    e.first, e.runner_up, e.runner_up_log_lr = e.fault, named, None
+                new.append(e)
+                self._crossings = 0
         dropout = LostFrames().first_alarm(features, cal.lost_per_sample, self.per_hour)
         for found in (stuck, dropout):
             if found is not None and found[1].fault not in self._telemetry_named:
