@@ -492,11 +492,10 @@ def model_calibration_file(model_file: str | os.PathLike) -> Path:
         A model of another wheel, or of no wheel spec: it needs the lab's own calibration.
     """
     from rwlab.ident.model_file import WheelModelFile
-    from rwlab.wheelspec import WheelSpec
     from rwlab.wheelspec.files import preset_names
 
     spec = WheelModelFile.load(model_file).wheel_spec
-    if spec is None or spec.name not in preset_names() or spec != WheelSpec.load(spec.name):
+    if spec is None or not spec.is_preset():
         wheel = "no wheel spec" if spec is None else f"the wheel {spec.name!r}, not a preset's own"
         raise ConfigError(
             f"{model_file} is a model of {wheel}: the shipped calibrations are measured on "

@@ -68,7 +68,7 @@ def hil_calibration_file(wheel: str | WheelSpec) -> Path | None:
     path = Path(__file__).with_name(f"hil_calibration_{name}.json")
     if not path.is_file():
         return None
-    if isinstance(wheel, WheelSpec) and wheel.hash != WheelSpec.load(name).hash:
+    if isinstance(wheel, WheelSpec) and not wheel.is_preset():
         return None
     return path
 

@@ -389,6 +389,16 @@ class WheelSpec:
         text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
+    def is_preset(self) -> bool:
+        """Whether this is a shipped preset's own spec: its name and the same hash (a unit's
+        spec edited from a preset's keeps the name, not the numbers).
+
+        Returns
+        -------
+        bool
+        """
+        return self.name in files.preset_names() and self.hash == self.load(self.name).hash
+
     def limits(self) -> dict[str, Any]:
         """The headline limits, as ``rwlab wheel models --json`` lists them.
 
