@@ -227,6 +227,8 @@ def main() -> None:
     specs |= wheel_set(limit, 12600, "w23") | wheel_set(limit, 12800, "w24")
     # made at stop 61 to judge the pipeline as rwlab diagnose's default once
     specs |= wheel_set(limit, 13400, "w25") | wheel_set(limit, 13600, "w26")
+    # made at stop 62 to judge, once, an alarm's onset and size re-read for its name
+    specs |= wheel_set(limit, 13800, "w27")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

@@ -313,6 +313,8 @@ def test_live_alarms_are_the_offline_alarms(tmp_path, model_file, faults, seed, 
     live = [e["message"] for e in read_record(path).topic("/event") if e["kind"] == "alarm"]
     offline = rwlab.diagnose(path, model_file).events  # the GLR pipeline on the record
     assert named <= {e.first for e in offline} and offline[0].first in named  # at the alarm
+    # the size at the alarm is the named fault's (the weak motor's was the clamp's fit)
+    assert all(e.at_alarm.fault == e.first for e in offline)
     # the same alarms at the same times, named alike (the live line sizes the fault at the
     # alarm; the record's event follows it to the record's end), and each re-labelling
     alarms = [m for m in live if "re-labelled" not in m]

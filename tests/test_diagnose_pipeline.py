@@ -192,6 +192,26 @@ def test_a_fault_is_named_and_sized_with_an_interval_holding_it(calibration, fau
     assert first.runner_up in MODEL_BASED and first.runner_up_log_lr >= 0
 
 
+def test_the_size_at_the_alarm_is_the_named_faults(calibration, monkeypatch):
+    """Decision windows that rank a rival first (a clamp read for a weak motor) open the
+    event; it is named on its onset's window, and its size then is that fault's fit, not
+    the rival's."""
+    import rwlab.diagnose.pipeline as pipeline
+
+    def rival_first(bank, k, names, limits):
+        ranked = pipeline._isolate.__wrapped__(bank, k, names, limits)
+        return sorted(ranked, key=lambda w: w.fit.fault != "current_limit")
+
+    rival_first.__wrapped__ = pipeline._isolate
+    monkeypatch.setattr(pipeline, "_isolate", rival_first)
+    result = run(features(100, fault="torque_constant", size=0.85), calibration)
+    first = result.events[0]
+    assert first.first == "torque_constant" and first.runner_up == "current_limit"
+    assert first.at_alarm.fault == "torque_constant"
+    assert first.at_alarm.ci95[0] <= 0.85 <= first.at_alarm.ci95[1]
+    assert first.to_dict()["at_alarm"]["fault"] == "torque_constant"
+
+
 def test_healthy_records_of_other_seeds_raise_no_alarm(calibration):
     for seed in (200, 201):
         result = run(features(seed), calibration)

@@ -91,12 +91,14 @@ def _model(model_file):
 
 
 def _alarm_line(e) -> str:
-    """An alarm's console line: the fault named at the alarm (and what re-labelled it),
-    the detector that crossed, the runner-up at the alarm."""
+    """An alarm's console line: the fault named at the alarm and its size then (and what
+    re-labelled it), the detector that crossed, the runner-up at the alarm."""
     runner = "" if e.runner_up is None else f"; runner-up {e.runner_up}"
     if e.runner_up_log_lr is not None:
         runner += f", ln LR {e.runner_up_log_lr:.3g}"
-    named = e.first
+    named, a = e.first, e.at_alarm
+    if not math.isnan(a.size):
+        named += f" {a.size:.3g} [{a.ci95[0]:.3g}, {a.ci95[1]:.3g}] {a.unit}"
     if e.relabelled:
         named += f", re-labelled {e.fault} at {e.relabelled[-1][0]:g} s"
     return f"alarm at {e.t_s:g} s: {named} ({e.detector} crossed{runner})"

@@ -63,7 +63,7 @@ class Event:
     first : str
         The fault named at the alarm (set from ``fit``).
     at_alarm : Fit
-        The fit at the alarm (``fit`` follows the record).
+        The fit at the alarm, of the fault named then (``fit`` follows the record).
     """
 
     t_s: float
@@ -86,7 +86,7 @@ class Event:
         return self.fit.fault
 
     def to_dict(self) -> dict:
-        f = self.fit
+        f, a = self.fit, self.at_alarm
         return {
             "t_s": self.t_s,
             "onset_s": self.onset_s,
@@ -100,6 +100,11 @@ class Event:
             "runner_up": self.runner_up,
             "runner_up_log_lr": self.runner_up_log_lr,
             "relabelled": [{"t_s": t, "was": was} for t, was in self.relabelled],
+            "at_alarm": {
+                "fault": self.first,
+                "size": None if math.isnan(a.size) else a.size,
+                "ci95": None if math.isnan(a.ci95[0]) else list(a.ci95),
+            },
         }
 
 
@@ -365,6 +370,11 @@ class Live:
                 if e.fault != named:  # its name at the alarm; the decision windows' is second
                     e.relabelled.remove((float(bank.features.t_s[k - 1]), named))
                     e.first, e.runner_up, e.runner_up_log_lr = e.fault, named, None
+                    # its onset is this fault's, not the decision windows' winner's
+                    e.start = _onset(bank, e.fault, k)
+                    e.onset_s = float(features.t_s[e.start])
+                    e.fit = bank.fit(e.fault, e.start, k).fit
+                e.at_alarm = e.fit  # the fit on its onset's window, as named
                 new.append(e)
                 self._crossings = 0
         dropout = LostFrames().first_alarm(features, cal.lost_per_sample, self.per_hour)
