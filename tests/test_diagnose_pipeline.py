@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from jsonschema import Draft202012Validator
 
 from rwlab.data import IOData
-from rwlab.diagnose.bank import WindowFit, _widened
+from rwlab.diagnose.bank import WindowFit, widened
 from rwlab.diagnose.detectors import MODEL_BASED, REGISTRY, SIGNATURE, detector
 from rwlab.diagnose.detectors.base import HALF_CHI2_95, Detector, Fit, profile_fit
 from rwlab.diagnose.detectors.current_limit import CurrentLimit
@@ -33,7 +33,7 @@ from rwlab.diagnose.features import (
 )
 from rwlab.diagnose.noise import JERK_EDGES, SPEED_EDGES, NoiseModel, bins, speed_bins
 from rwlab.diagnose.past_fits import least_norm_solve
-from rwlab.diagnose.pipeline import Event, Result, _follow, run
+from rwlab.diagnose.pipeline import Event, Live, Result, _follow, run
 from rwlab.diagnose.wheel_calibration import (
     DiagnosisCalibration,
     Threshold,
@@ -194,22 +194,44 @@ def test_a_fault_is_named_and_sized_with_an_interval_holding_it(calibration, fau
 
 def test_the_size_at_the_alarm_is_the_named_faults(calibration, monkeypatch):
     """Decision windows that rank a rival first (a clamp read for a weak motor) open the
-    event; it is named on its onset's window, and its size then is that fault's fit, not
-    the rival's."""
+    event; it is named on its onset's window, and its size then is that fault's fit on
+    an onset found for it, not the rival's."""
     import rwlab.diagnose.pipeline as pipeline
 
-    def rival_first(bank, k, names, limits):
-        ranked = pipeline._isolate.__wrapped__(bank, k, names, limits)
-        return sorted(ranked, key=lambda w: w.fit.fault != "current_limit")
+    isolate = pipeline._isolate
 
-    rival_first.__wrapped__ = pipeline._isolate
+    def rival_first(bank, k, names, limits):
+        return sorted(isolate(bank, k, names, limits), key=lambda w: w.fit.fault != "current_limit")
+
     monkeypatch.setattr(pipeline, "_isolate", rival_first)
     result = run(features(100, fault="torque_constant", size=0.85), calibration)
     first = result.events[0]
     assert first.first == "torque_constant" and first.runner_up == "current_limit"
-    assert first.at_alarm.fault == "torque_constant"
+    assert first.at_alarm.fault == "torque_constant" and first.at_alarm.unit == "factor"
     assert first.at_alarm.ci95[0] <= 0.85 <= first.at_alarm.ci95[1]
-    assert first.to_dict()["at_alarm"]["fault"] == "torque_constant"
+    assert abs(first.onset_s - 600.0) <= 15.0  # the weak motor's onset (sample 1200)
+    alarm = first.to_dict()["at_alarm"]
+    assert (alarm["size"], alarm["unit"]) == (first.at_alarm.size, "factor")
+
+
+@pytest.mark.parametrize("fault", ["friction", "torque_constant"])
+def test_a_fault_past_the_size_a_healthy_record_would_show_is_shown(calibration, fault):
+    """The sizes a healthy record would have shown from its start: a fault from power-up
+    one and a half times as far from healthy as the bound on any unit is found, one half
+    as far as the reference unit's bound is not (this record is of the reference unit;
+    another seed, the fault injected here: truth independent of the bounds)."""
+    healthy = run(features(110), calibration)
+    live = Live(calibration)
+    live.update(features(110))
+    side = 1 if fault == "friction" else 0
+    any_unit = healthy.detectable[fault][side]
+    reference = live.detectable(unit_spread=False)[fault][side]
+    assert abs(reference - 1.0) < abs(any_unit - 1.0) and fault not in healthy.unseen
+    assert f"{fault} {('below', 'above')[side]} ×{any_unit:.3g}" in healthy.verdict()
+    for bound, share, shown in ((any_unit, 1.5, True), (reference, 0.5, False)):
+        size = 1.0 + share * (bound - 1.0)
+        result = run(features(111, fault=fault, size=size, onset=0), calibration)
+        assert (fault in result.faults()) is shown, (share, size, result.verdict())
 
 
 def test_healthy_records_of_other_seeds_raise_no_alarm(calibration):
@@ -676,9 +698,9 @@ def test_against_its_own_law_friction_reads_the_current_alone():
 def test_a_size_against_the_population_spans_the_units_own_wherever_it_sits():
     """From power-up the fit is against the reference, and a healthy unit sits anywhere in
     the zone u: friction F_ref on it is F_ref/u of its own, a bias b_ref is b_ref − u."""
-    factor = _widened(Fit("friction", 4.0, (3.6, 4.4), 10.0, "factor"), (0.6, 2.5))
+    factor = widened(Fit("friction", 4.0, (3.6, 4.4), 10.0, "factor"), (0.6, 2.5))
     assert factor.ci95 == pytest.approx((3.6 / 2.5, 4.4 / 0.6))
-    bias = _widened(Fit("speed_sensor_bias", 11.0, (10.0, 12.0), 10.0, "rpm"), (-2.0, 6.0))
+    bias = widened(Fit("speed_sensor_bias", 11.0, (10.0, 12.0), 10.0, "rpm"), (-2.0, 6.0))
     assert bias.ci95 == pytest.approx((10.0 - 6.0, 12.0 + 2.0))
 
 

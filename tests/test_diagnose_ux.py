@@ -405,14 +405,17 @@ def test_live_diagnosis_of_another_wheel_takes_its_own_calibration(tmp_path, mod
 
 def test_a_twenty_second_record_says_what_the_pipeline_could_not_see(tmp_path, model_file):
     """No alarm on 20 s of PRBS is no evidence of a healthy bearing: the verdict says which
-    faults the record cannot tell from healthy (their intervals span nearly the whole grid)."""
+    faults the record cannot tell from healthy and how large the others must have been to
+    show (friction: beyond the largest size its grid holds, ×8)."""
     run_experiment(ExperimentConfig(duration=20, seed=4), tmp_path / "short.mcap")
     result = _cli(
         "diagnose", tmp_path / "short.mcap", "--model", model_file, "--out", tmp_path / "d"
     )
     assert result.exit_code == 0, result.output
     assert "healthy: no alarm in 20" in result.output and "not seen" in result.output
-    assert "friction" in json.loads((tmp_path / "d" / "fdi.json").read_text())["unseen"]
+    report = json.loads((tmp_path / "d" / "fdi.json").read_text())
+    assert report["unseen"] and report["detectable"]["friction"]["above"] > 8.0
+    assert f"friction above ×{report['detectable']['friction']['above']:.3g}" in result.output
 
 
 def test_a_record_of_another_wheel_is_refused_not_diagnosed(tmp_path, model_file):

@@ -26,7 +26,7 @@ from rwlab.diagnose.detectors.base import HALF_CHI2_95, profile_fit
 from rwlab.diagnose.features import LIMIT_REFERENCE_LAG_S, REFERENCE_LAG_S, Features
 from rwlab.diagnose.noise import BLOCK_S, NoiseModel
 
-__all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit"]
+__all__ = ["EVERY_S", "WINDOWS_S", "Bank", "WindowFit", "widened"]
 
 # design choices, not measurements: a decision every 5 s; onsets 1, 2.5 and 5 min
 # back (5 min is the longest detection delay the lab accepts)
@@ -84,7 +84,7 @@ def _away(size: float, before: float, healthy: float) -> bool:
     return abs(size - healthy) > abs(before - healthy)
 
 
-def _widened(fit: Fit, zone: tuple[float, float]) -> Fit:
+def widened(fit: Fit, zone: tuple[float, float]) -> Fit:
     """A fault from power-up against the population, as a size of the unit's own: the
     fit is against the reference, and the unit sits anywhere in the healthy zone u, so
     a factor F = F_ref/u and a bias b = b_ref − u (the zone about the nominal size)."""
@@ -286,7 +286,7 @@ class Bank:
             if change is not None and change.log_lr > best.log_lr:
                 best, against = change, "own past"
         if against == "population":
-            best = _widened(best, self.zone_bounds[name])
+            best = widened(best, self.zone_bounds[name])
         best = det.refine(self.features, self.weights, best, a, k)
         t = self.features.t_s
         return WindowFit(best, float(t[a]), float(t[k - 1]), against)

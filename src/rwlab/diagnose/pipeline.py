@@ -26,9 +26,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rwlab.diagnose.bank import Bank, WindowFit
-from rwlab.diagnose.detectors import MODEL_BASED, SIGNATURE, Fit, FrozenReading, LostFrames
-from rwlab.diagnose.detectors.base import profile_fit
+from rwlab.diagnose.bank import Bank, WindowFit, widened
+from rwlab.diagnose.detectors import (
+    MODEL_BASED,
+    REGISTRY,
+    SIGNATURE,
+    Fit,
+    FrozenReading,
+    LostFrames,
+)
+from rwlab.diagnose.detectors.base import crossing
 from rwlab.diagnose.features import Features
 from rwlab.diagnose.wheel_calibration import DiagnosisCalibration, Threshold
 from rwlab.errors import ConfigError
@@ -104,6 +111,7 @@ class Event:
                 "fault": self.first,
                 "size": None if math.isnan(a.size) else a.size,
                 "ci95": None if math.isnan(a.ci95[0]) else list(a.ci95),
+                "unit": a.unit,
             },
         }
 
@@ -126,6 +134,9 @@ class Result:
     statistics : dict of str to list of (float, float)
         Each detector's (decision time s, log-LR) at the decisions it was evaluated at
         (a fault named is followed, not tested again).
+    detectable : dict of str to (float, float)
+        Per model-based fault, the smallest sizes below and above the healthy ones the
+        record would have shown from its start (:meth:`Live.detectable`; NaN: none).
     """
 
     events: list[Event]
@@ -134,6 +145,7 @@ class Result:
     per_hour: float
     unseen: list[str] = field(default_factory=list)
     statistics: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
+    detectable: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def to_dict(self, calibration: str = "") -> dict:
         """The JSON form (``rwlab.FdiDiagnosis/1``): the verdict first."""
@@ -154,6 +166,10 @@ class Result:
                 for name, t in self.thresholds.items()
             },
             "unseen": list(self.unseen),
+            "detectable": {
+                n: {"below": _number(lo), "above": _number(hi)}
+                for n, (lo, hi) in self.detectable.items()
+            },
         }
 
     def faults(self) -> list[str]:
@@ -173,6 +189,12 @@ class Result:
         time, then the alarms the record no longer supports."""
         if not self.events:
             line = f"healthy: no alarm in {self.duration_s:g} s at {self.per_hour:g} false alarms/h"
+            seen = [_beyond(n, *sizes) for n, sizes in self.detectable.items()]
+            seen = [text for text in seen if text]
+            if seen:
+                line += "; from its start, on any healthy unit, it would have shown " + ", ".join(
+                    seen
+                )
             if self.unseen:
                 line += "; not seen (the record cannot tell them from healthy): "
                 line += ", ".join(self.unseen)
@@ -193,6 +215,23 @@ class Result:
         if faded:
             line += "; not confirmed by the record's end: " + ", ".join(faded)
         return line
+
+
+def _beyond(fault: str, below: float, above: float) -> str:
+    """'friction above ×1.9', 'current_limit below 0.45 A', 'bias below -3 or above 4 rpm';
+    empty where neither side is seen."""
+    unit = REGISTRY[fault].unit
+
+    def size(x: float) -> str:
+        return f"×{x:.3g}" if unit == "factor" else f"{x:.3g} {unit}"
+
+    sides = [f"{word} {size(x)}" for word, x in (("below", below), ("above", above)) if x == x]
+    return f"{fault} {' or '.join(sides)}" if sides else ""
+
+
+def _number(x: float) -> float | None:
+    """JSON's number: None for NaN."""
+    return None if math.isnan(x) else x
 
 
 def _onset(bank: Bank, fault: str, k: int) -> int:
@@ -260,6 +299,34 @@ def _follow(e: Event, events: list[Event], bank: Bank, k: int, limits) -> None:
     e.fit = best.fit
 
 
+def _detectable(
+    grid: np.ndarray, ll: np.ndarray, threshold: float, zone: tuple[float, float]
+) -> tuple[float, float]:
+    """The sizes beyond which a fault on these samples would cross ``threshold``: (below,
+    above) the healthy ``zone``, NaN where no size of the grid does.
+
+    The residuals are linear in a fault's size (Gaussian about a small fault): had a fault
+    of size θ been there, the window's profile log-likelihood would peak at θ with the
+    curvature it has now, and its log-LR would be the profile's drop over θ's distance to
+    the zone. So the distance at which the observed profile falls ``threshold`` below its
+    top, on each side, is how far beyond the zone a fault must lie to be seen.
+    """
+    top = int(ll.argmax())
+    cut = float(ll[top]) - threshold
+    out = []
+    for side, edge in ((-1, zone[0]), (1, zone[1])):
+        below_cut = np.nonzero(ll < cut)[0]
+        beyond = below_cut[below_cut > top] if side > 0 else below_cut[below_cut < top]
+        if not beyond.size:
+            out.append(math.nan)
+            continue
+        j = int(beyond.min() if side > 0 else beyond.max())
+        reach = abs(crossing(grid, ll, float(ll[top]), cut, j - side, side) - grid[top])
+        size = edge + side * reach
+        out.append(float(size) if grid[0] <= size <= grid[-1] else math.nan)
+    return out[0], out[1]
+
+
 def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     """Every candidate fault on its best window ending at k, most likely first."""
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
@@ -271,9 +338,6 @@ def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
 # often named one for another and re-labelled at the next decision
 # (docs/workflows/diagnosis-glr.md, "Named at the alarm")
 CONFIRM_DECISIONS = 2
-# design choice: a fault whose 95 % interval on the whole record spans this share of its
-# detector's grid is "not seen" (the record excludes only the grid's very ends)
-UNSEEN_SHARE = 0.9
 
 
 class Live:
@@ -406,30 +470,56 @@ class Live:
                 "calibrate RECORDS... --model model.json --out calibration.json)"
             )
 
+    def detectable(self, unit_spread: bool = True) -> dict[str, tuple[float, float]]:
+        """Per model-based fault, the smallest sizes the record so far would have shown
+        had the fault been there from its start: (below, above) the healthy sizes, NaN
+        on a side no size of the grid reaches or the fault never takes
+        (:attr:`Detector.worse`); the smallest over the record's back-to-back longest
+        windows (:meth:`~rwlab.diagnose.bank.Bank.tiles`, the whole record if shorter),
+        against the population, as a fault from power-up is decided.
+
+        Parameters
+        ----------
+        unit_spread : bool
+            Sizes of the unit's own, wherever it sits in the healthy units' spread
+            (:func:`~rwlab.diagnose.bank.widened`: friction × F shows on a unit at the
+            spread's low end only when F × that end is past the bound); False: sizes on
+            the reference unit's scale, as the detector's grid.
+
+        Returns
+        -------
+        dict of str to (float, float)
+        """
+        bank = self._bank
+        if bank is None:
+            return {n: (math.nan, math.nan) for n in MODEL_BASED}
+        out = {}
+        for n in MODEL_BASED:
+            det, grid, zone = bank.detectors[n], bank.grid[n], bank.zone_bounds[n]
+            lo, hi = math.nan, math.nan
+            for a, k in bank.tiles() or [(0, bank.features.N)]:
+                if a < bank.keep_from:  # a live bank's rows no window reads any more
+                    continue
+                ll = bank.cum[n][k] - bank.cum[n][a]
+                sizes = _detectable(grid, ll, self.limits[n].log_lr, zone)
+                lo, hi = float(np.fmax(lo, sizes[0])), float(np.fmin(hi, sizes[1]))
+            if unit_spread:
+                lo, hi = widened(Fit(n, math.nan, (lo, hi), 0.0, det.unit), zone).ci95
+            out[n] = (lo if det.worse <= 0 else math.nan, hi if det.worse >= 0 else math.nan)
+        return out
+
     def unseen(self) -> list[str]:
-        """The model-based faults the record so far cannot tell from healthy: the 95 %
-        interval of the size on the whole record spans ``UNSEEN_SHARE`` of the detector's
-        grid or more (on a log scale for factors and amperes): only sizes at the grid's
-        very ends are excluded (20 s of PRBS: friction 0.25-7.5 on a 0.25-8 grid, a clamp
-        0.09-0.7 A on the RW90's 0.07-0.7 A).
+        """The model-based faults the record so far cannot tell from healthy: no size of
+        the detector's grid would have crossed its threshold (:meth:`detectable`; 20 s of
+        the RW90's PRBS: a weak motor).
 
         Returns
         -------
         list of str
         """
-        bank = self._bank
-        if bank is None:
-            return list(MODEL_BASED)
-        out = []
-        for n in MODEL_BASED:
-            det, grid = bank.detectors[n], bank.grid[n]
-            ll = bank.cum[n][bank.features.N] - bank.cum[n][0]
-            ci = profile_fit(n, det.unit, grid, ll, bank.zone[n], bank.dispersion[n]).ci95
-            scale = np.log if det.unit != "rpm" else np.asarray
-            span = np.diff(scale(np.array(ci))) / np.diff(scale(grid[[0, -1]]))
-            if span[0] >= UNSEEN_SHARE:
-                out.append(n)
-        return out
+        return [
+            n for n, sizes in self.detectable(unit_spread=False).items() if np.isnan(sizes).all()
+        ]
 
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
@@ -471,4 +561,12 @@ def run(features: Features, calibration: DiagnosisCalibration, per_hour: float =
     live.update(features)
     events = sorted(live.events, key=lambda e: e.t_s)
     duration_s = features.N * features.scales.Ts
-    return Result(events, live.limits, duration_s, per_hour, live.unseen(), live.statistics)
+    return Result(
+        events,
+        live.limits,
+        duration_s,
+        per_hour,
+        live.unseen(),
+        live.statistics,
+        live.detectable(),
+    )

@@ -33,7 +33,7 @@ from scipy.stats import chi2
 from rwlab.diagnose.features import Features
 from rwlab.errors import ConfigError
 
-__all__ = ["REGISTRY", "Detector", "Fit", "detector", "profile_fit"]
+__all__ = ["REGISTRY", "Detector", "Fit", "crossing", "detector", "profile_fit"]
 
 HALF_CHI2_95 = float(chi2.ppf(0.95, 1)) / 2  # 1.92: the profile likelihood's 95 % drop
 # Huber's constant for 95 % efficiency at the normal (Huber 1964; textbook, not tuned)
@@ -116,15 +116,15 @@ def profile_fit(
         fault,
         float(grid[best]),
         (
-            _crossing(grid, ll, top, cut, inside[0], -1),
-            _crossing(grid, ll, top, cut, inside[-1], 1),
+            crossing(grid, ll, top, cut, inside[0], -1),
+            crossing(grid, ll, top, cut, inside[-1], 1),
         ),
         max(0.0, top - zone),
         unit,
     )
 
 
-def _crossing(grid: np.ndarray, ll: np.ndarray, top: float, cut: float, i: int, step: int) -> float:
+def crossing(grid: np.ndarray, ll: np.ndarray, top: float, cut: float, i: int, step: int) -> float:
     """Where the log-likelihood falls to ``cut`` between grid point i (inside) and its
     neighbour on the ``step`` side: the signed root √(2(top − ll)) interpolated linearly,
     exact for a quadratic profile (ll itself, interpolated, put the end inside the true one,
