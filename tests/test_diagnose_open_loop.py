@@ -161,6 +161,10 @@ def test_a_growing_record_is_decided_as_the_whole_record(calibration):
     ]
     assert live.events and live.events[0].fault == "friction"
     assert live.events[0].fit.size == pytest.approx(batch.events[0].fit.size, rel=1e-9)
+    # each alarm's onset and its size then, as the whole record's
+    assert [e.onset_s for e in live.events] == [e.onset_s for e in batch.events]
+    sizes = [e.at_alarm.size for e in batch.events]
+    assert [e.at_alarm.size for e in live.events] == pytest.approx(sizes, rel=1e-9, nan_ok=True)
     grown = live._bank
     bank = Bank(whole, calibration.noise, calibration.zones, calibration.drift)
     for name in bank.cum:  # the rows the live bank still keeps: its last windows'

@@ -87,7 +87,20 @@ def _away(size: float, before: float, healthy: float) -> bool:
 def widened(fit: Fit, zone: tuple[float, float]) -> Fit:
     """A fault from power-up against the population, as a size of the unit's own: the
     fit is against the reference, and the unit sits anywhere in the healthy zone u, so
-    a factor F = F_ref/u and a bias b = b_ref − u (the zone about the nominal size)."""
+    a factor F = F_ref/u and a bias b = b_ref − u (the zone about the nominal size).
+
+    Parameters
+    ----------
+    fit : Fit
+        A fit against the population (the reference unit's scale).
+    zone : tuple of 2 float
+        The healthy units' sizes [lo, hi], in ``fit.unit``.
+
+    Returns
+    -------
+    Fit
+        ``fit`` with its interval widened (a clamp's, in A, as it is).
+    """
     lo, hi = fit.ci95
     if fit.unit == "factor":
         return replace(fit, ci95=(lo / max(zone[1], 1.0), hi / min(zone[0], 1.0)))

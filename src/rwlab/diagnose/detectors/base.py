@@ -130,7 +130,28 @@ def crossing(grid: np.ndarray, ll: np.ndarray, top: float, cut: float, i: int, s
     exact for a quadratic profile (ll itself, interpolated, put the end inside the true one,
     up to 7× too narrow where a window pins the size within one grid step; before, the grid
     point, a zero-width interval); the grid's edge where the likelihood never falls that
-    far."""
+    far.
+
+    Parameters
+    ----------
+    grid : numpy.ndarray, shape (G,)
+        Candidate sizes, increasing.
+    ll : numpy.ndarray, shape (G,)
+        Log-likelihood over the grid.
+    top : float
+        The profile's top, ll's largest value.
+    cut : float
+        The level whose crossing is sought (≤ ``top``).
+    i : int
+        A grid index where ll ≥ ``cut``.
+    step : {1, -1}
+        The side to look on.
+
+    Returns
+    -------
+    float
+        The size where ll crosses ``cut``, in the grid's unit.
+    """
     j = i + step
     if not 0 <= j < len(grid) or not np.isfinite(ll[j]):
         return float(grid[i])
