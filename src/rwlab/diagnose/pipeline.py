@@ -98,7 +98,7 @@ class Event:
             "t_s": self.t_s,
             "onset_s": self.onset_s,
             "fault": f.fault,
-            "size": None if math.isnan(f.size) else f.size,
+            "size": _number(f.size),
             "ci95": None if math.isnan(f.ci95[0]) else list(f.ci95),
             "unit": f.unit,
             "log_lr": f.log_lr,
@@ -109,7 +109,7 @@ class Event:
             "relabelled": [{"t_s": t, "was": was} for t, was in self.relabelled],
             "at_alarm": {
                 "fault": self.first,
-                "size": None if math.isnan(a.size) else a.size,
+                "size": _number(a.size),
                 "ci95": None if math.isnan(a.ci95[0]) else list(a.ci95),
                 "unit": a.unit,
             },
@@ -225,7 +225,8 @@ def _beyond(fault: str, below: float, above: float) -> str:
     def size(x: float) -> str:
         return f"×{x:.3g}" if unit == "factor" else f"{x:.3g} {unit}"
 
-    sides = [f"{word} {size(x)}" for word, x in (("below", below), ("above", above)) if x == x]
+    pairs = (("below", below), ("above", above))
+    sides = [f"{word} {size(x)}" for word, x in pairs if not math.isnan(x)]
     return f"{fault} {' or '.join(sides)}" if sides else ""
 
 
@@ -315,8 +316,8 @@ def _detectable(
     cut = float(ll[top]) - threshold
     out = []
     for side, edge in ((-1, zone[0]), (1, zone[1])):
-        below_cut = np.nonzero(ll < cut)[0]
-        beyond = below_cut[below_cut > top] if side > 0 else below_cut[below_cut < top]
+        under = np.nonzero(ll < cut)[0]
+        beyond = under[under > top] if side > 0 else under[under < top]
         if not beyond.size:
             out.append(math.nan)
             continue
