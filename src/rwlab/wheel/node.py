@@ -342,6 +342,10 @@ class WheelNode:
             raise ConfigError("a node on a SimClock runs when the clock advances; do not start it")
         if self._thread is None:
             self._stop.clear()
+            # the first step loads the twin's compiled kernels (~1 s): before it answers,
+            # so a client's first request is not lost to a timeout (python-canopen's SDO
+            # client waits 0.3 s)
+            self._poll_once()
             self._thread = threading.Thread(
                 target=self._run,
                 args=(poll_period,),
@@ -353,12 +357,15 @@ class WheelNode:
 
     def _run(self, poll_period: float) -> None:
         while not self._stop.is_set():
-            try:
-                self.poll(self.clock.now())
-            except Exception as exc:  # stray traffic or a transport hiccup: count, run on
-                self.errors += 1
-                self.last_error = f"{type(exc).__name__}: {exc}"
+            self._poll_once()
             self._stop.wait(poll_period)
+
+    def _poll_once(self) -> None:
+        try:
+            self.poll(self.clock.now())
+        except Exception as exc:  # stray traffic or a transport hiccup: count, run on
+            self.errors += 1
+            self.last_error = f"{type(exc).__name__}: {exc}"
 
     def stop(self) -> None:
         """Stop the thread (if any) and detach from a SimClock."""
