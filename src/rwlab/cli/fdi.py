@@ -96,9 +96,7 @@ def _alarm_line(e) -> str:
     runner = "" if e.runner_up is None else f"; runner-up {e.runner_up}"
     if e.runner_up_log_lr is not None:
         runner += f", ln LR {e.runner_up_log_lr:.3g}"
-    named, a = e.first, e.at_alarm
-    if not math.isnan(a.size):
-        named += f" {a.size:.3g} [{a.ci95[0]:.3g}, {a.ci95[1]:.3g}] {a.unit}"
+    named = f"{e.first} {e.at_alarm.size_text()}".rstrip()
     if e.relabelled:
         named += f", re-labelled {e.fault} at {e.relabelled[-1][0]:g} s"
     return f"alarm at {e.t_s:g} s: {named} ({e.detector} crossed{runner})"

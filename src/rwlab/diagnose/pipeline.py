@@ -60,9 +60,10 @@ class Event:
     threshold : float
         That threshold (log-LR).
     runner_up : str or None
-        The next most likely fault at the alarm.
+        The next most likely fault at the alarm, fitted on the same window (from the
+        onset).
     runner_up_log_lr : float or None
-        ln(L(named) / L(runner-up)) at the alarm.
+        ln(L(named) / L(runner-up)) on that window, each beyond its threshold.
     relabelled : list of (float, str)
         (time s, earlier name) for each re-labelling.
     start : int
@@ -205,12 +206,7 @@ class Result:
             if not self.confirmed(e):
                 faded.append(f"{f.fault} at {e.t_s:g} s")
                 continue
-            size = (
-                ""
-                if math.isnan(f.size)
-                else f" {f.size:.3g} {f.unit} [{f.ci95[0]:.3g}, {f.ci95[1]:.3g}]"
-            )
-            found.append(f"{f.fault}{size} from {e.t_s:g} s")
+            found.append(f"{f.fault} {f.size_text()} from {e.t_s:g} s".replace("  ", " "))
         line = "; ".join(found) if found else "healthy"
         if faded:
             line += "; not confirmed by the record's end: " + ", ".join(faded)
@@ -328,6 +324,16 @@ def _detectable(
     return out[0], out[1]
 
 
+def _runner_up(e: Event, bank: Bank, k: int, limits) -> tuple[str | None, float | None]:
+    """The likeliest other fault on event ``e``'s window (from its onset to sample k), and
+    the log-LR of ``e``'s fault over it, each beyond its threshold."""
+    rivals = [bank.fit(n, e.start, k).fit for n in MODEL_BASED if n != e.fault]
+    if not rivals:
+        return None, None
+    runner = max(rivals, key=lambda f: _excess(f, limits))
+    return runner.fault, _excess(e.fit, limits) - _excess(runner, limits)
+
+
 def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
     """Every candidate fault on its best window ending at k, most likely first."""
     return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
@@ -432,14 +438,15 @@ class Live:
                 events.append(e)
                 named = e.fault
                 _follow(e, events, bank, k, limits)
-                if e.fault != named:  # its name at the alarm; the decision windows' is second
+                if e.fault != named:  # its name at the alarm, not the decision windows'
                     e.relabelled.remove((float(bank.features.t_s[k - 1]), named))
-                    e.first, e.runner_up, e.runner_up_log_lr = e.fault, named, None
+                    e.first = e.fault
                     # its onset is this fault's, not the decision windows' winner's
                     e.start = _onset(bank, e.fault, k)
                     e.onset_s = float(features.t_s[e.start])
                     e.fit = bank.fit(e.fault, e.start, k).fit
                 e.at_alarm = e.fit  # the fit on its onset's window, as named
+                e.runner_up, e.runner_up_log_lr = _runner_up(e, bank, k, limits)
                 new.append(e)
                 self._crossings = 0
         dropout = LostFrames().first_alarm(features, cal.lost_per_sample, self.per_hour)
@@ -525,9 +532,7 @@ class Live:
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
         limits = self.limits
-        ranked = _isolate(bank, k, free, limits)
-        best = ranked[0]
-        runner = ranked[1] if len(ranked) > 1 else None
+        best = _isolate(bank, k, free, limits)[0]
         start = _onset(bank, best.fit.fault, k)
         t = bank.features.t_s
         return Event(
@@ -536,10 +541,6 @@ class Live:
             fit=best.fit,
             detector=crossed[0],
             threshold=limits[crossed[0]].log_lr,
-            runner_up=None if runner is None else runner.fit.fault,
-            runner_up_log_lr=None
-            if runner is None
-            else _excess(best.fit, limits) - _excess(runner.fit, limits),
             start=start,
         )
 

@@ -1137,10 +1137,10 @@ class _Loop:
             e = events[0]
             del self.watches[r.node]
             self.tracking.pop(r.node, None)
-            size = "" if math.isnan(e.fit.size) else f" {e.fit.size:.3g} {e.fit.unit}"
+            named = f"{e.fault} {e.fit.size_text()}".rstrip()
             how = (
                 f"GLR pipeline: the {e.detector} statistic crossed {e.threshold:.3g}; the "
-                f"likeliest fault {e.fault}{size}, log-LR {e.fit.log_lr:.3g} over healthy, "
+                f"likeliest fault {named}, log-LR {e.fit.log_lr:.3g} over healthy, "
                 f"runner-up {e.runner_up}"
             )
             self._wheel_failed(r.node, e.fault, how, now)

@@ -768,15 +768,13 @@ def _alarm_text(event) -> str:
     """An alarm's line: the fault, its size and interval, what crossed, the runner-up; or
     its re-labelling by a better-supported fault."""
     f = event.fit
-    size = (
-        "" if math.isnan(f.size) else f" {f.size:.4g} [{f.ci95[0]:.4g}, {f.ci95[1]:.4g}] {f.unit}"
-    )
+    named = f"{f.fault} at {event.t_s:.1f} s {f.size_text()}".rstrip()
     if event.relabelled:
         t, was = event.relabelled[-1]
-        return f"{f.fault} at {event.t_s:.1f} s{size} (re-labelled from {was} at {t:.1f} s)"
+        return f"{named} (re-labelled from {was} at {t:.1f} s)"
     runner = "" if event.runner_up is None else f"; runner-up {event.runner_up}"
     return (
-        f"{f.fault} at {event.t_s:.1f} s{size} ({event.detector} crossed, log-LR "
+        f"{named} ({event.detector} crossed, log-LR "
         f"{event.fit.log_lr:.3g} > {event.threshold:.3g}{runner})"
     )
 

@@ -65,6 +65,15 @@ class Fit:
     log_lr: float
     unit: str
 
+    def size_text(self) -> str:
+        """The size and its interval as a line shows them: '×2.01 [1.89, 2.15]',
+        '0.49 A [0.45, 0.52]'; empty for a fault with no size (a frozen reading)."""
+        if math.isnan(self.size):
+            return ""
+        (lo, hi), x = self.ci95, "×" if self.unit == "factor" else ""
+        unit = "" if x else f" {self.unit}"
+        return f"{x}{self.size:.3g}{unit} [{lo:.3g}, {hi:.3g}]"
+
 
 def profile_fit(
     fault: str,
