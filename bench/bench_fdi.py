@@ -229,6 +229,8 @@ def main() -> None:
     specs |= wheel_set(limit, 13400, "w25") | wheel_set(limit, 13600, "w26")
     # made at stop 62 to judge, once, an alarm's onset and size re-read for its name
     specs |= wheel_set(limit, 13800, "w27")
+    # made at stop 63 to judge, once, the clamp's binding test without rounding
+    specs |= wheel_set(limit, 14000, "w28")
     scales = WheelScales.from_model_file(args.model)
     wheel = IdentifiedWheel.from_json(args.model)
 

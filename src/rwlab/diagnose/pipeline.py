@@ -334,9 +334,15 @@ def _runner_up(e: Event, bank: Bank, k: int, limits) -> tuple[str | None, float 
     return runner.fault, _excess(e.fit, limits) - _excess(runner, limits)
 
 
-def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
-    """Every candidate fault on its best window ending at k, most likely first."""
-    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
+def _isolate(bank: Bank, k: int, names, limits) -> list[tuple[int, WindowFit]]:
+    """Every candidate fault fitted from its own likeliest onset to sample k, most likely
+    first: (onset sample, fit). The GLR maximised over the change time as well as the size
+    (Willsky & Jones 1976): on the decision windows' fixed lengths a fault that acts on
+    every sample (a drag) is diluted by the healthy samples before its onset, and one
+    that acts on a few (a clamp in one push) is not, so a fixed window names the second."""
+    onsets = [(_onset(bank, n, k), n) for n in names]
+    fits = [(a, bank.fit(n, a, k)) for a, n in onsets]
+    return sorted(fits, key=lambda x: -_excess(x[1].fit, limits))
 
 
 # design choice: an alarm once a threshold has been crossed at this many consecutive
@@ -532,8 +538,7 @@ class Live:
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
         limits = self.limits
-        best = _isolate(bank, k, free, limits)[0]
-        start = _onset(bank, best.fit.fault, k)
+        start, best = _isolate(bank, k, free, limits)[0]
         t = bank.features.t_s
         return Event(
             t_s=float(t[k - 1]),

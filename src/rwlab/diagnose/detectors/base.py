@@ -300,8 +300,13 @@ class Detector(ABC):
         reach = (d * torque * clamp - c3 - friction) / c0
         below = np.where(d * demand > d * reach, reach - demand, 0.0)
         healthy = features.friction_current_a[:, None]
-        current = np.clip(c0 * demand + healthy + c3, -clamp, clamp)
-        at_limit = (torque * (current - c3) - friction) / c0 - demand
+        asked = c0 * demand + healthy  # the current a healthy wheel needs, less c₃
+        cut = np.clip(asked + c3, -clamp, clamp) - c3 - asked  # what the clamp takes off it
+        # (torque·(asked + cut) − friction)/c₀ − demand, written so that it is exactly 0
+        # where neither factor differs from 1 and the clamp cuts nothing: the clamp's test
+        # of where it binds (``!= 0``) read rounding (~1e-13 rpm/s) as binding on every
+        # sample of an acceleration-mode record
+        at_limit = ((torque - 1.0) * asked + (healthy - friction) + torque * cut) / c0
         return np.where(features.saturated[:, None], at_limit, below)
 
     @staticmethod
