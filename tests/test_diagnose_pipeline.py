@@ -201,8 +201,7 @@ def test_the_size_at_the_alarm_is_the_named_faults(calibration, monkeypatch):
     isolate = pipeline._isolate
 
     def rival_first(bank, k, names, limits):
-        ranked = isolate(bank, k, names, limits)
-        return sorted(ranked, key=lambda x: x[1].fit.fault != "current_limit")
+        return sorted(isolate(bank, k, names, limits), key=lambda w: w.fit.fault != "current_limit")
 
     monkeypatch.setattr(pipeline, "_isolate", rival_first)
     result = run(features(100, fault="torque_constant", size=0.85), calibration)

@@ -9,8 +9,9 @@ calibration (:mod:`~rwlab.diagnose.wheel_calibration`) and a false-alarm rate:
 2. isolation: when any statistic crosses its threshold, every fault model is
    fitted on the same samples and the largest log-likelihood ratio beyond that
    model's healthy level (its threshold: a fault model's misfit on a healthy
-   wheel is measured, not assumed) names the fault; the runner-up and its
-   log-likelihood ratio to the winner on that scale are kept;
+   wheel is measured, not assumed) names the fault, then again on the window from
+   its onset; the runner-up on that window and its log-likelihood ratio to the
+   winner on that scale are kept;
 3. the event then follows the record: its window grows from its onset, the
    faults that share its signature channel (:data:`SIGNATURE`) are refitted on
    it, and one that becomes better supported re-labels the event (the history
@@ -234,9 +235,16 @@ def _number(x: float) -> float | None:
 def _onset(bank: Bank, fault: str, k: int) -> int:
     """The change time's maximum-likelihood estimate: the window start, on the decision
     grid within the longest window before k, whose fit of ``fault`` has the largest log-LR
-    (a window reaching back before the onset mixes healthy samples in and fits worse)."""
-    starts = range(max(0, k - bank.windows[-1]), k - 1, bank.every)
-    return max(starts, key=lambda a: bank.fit(fault, a, k).fit.log_lr)
+    (a window reaching back before the onset mixes healthy samples in and fits worse).
+
+    Of starts that tie, the latest: a fault whose model predicts no residual on most
+    samples (a clamp between the pushes it cuts) fits every start before its first
+    effect equally, and the earliest would measure its rivals, named on this window,
+    over healthy samples that dilute them (a drag read as a clamp in one push)."""
+    starts = np.arange(max(0, k - bank.windows[-1]), k - 1, bank.every)
+    ll = np.array([bank.fit(fault, int(a), k).fit.log_lr for a in starts])
+    tied = np.isclose(ll, ll.max(), rtol=1e-9, atol=1e-6)
+    return int(starts[np.nonzero(tied)[0][-1]])
 
 
 def _owned(events) -> frozenset[str]:
@@ -334,15 +342,9 @@ def _runner_up(e: Event, bank: Bank, k: int, limits) -> tuple[str | None, float 
     return runner.fault, _excess(e.fit, limits) - _excess(runner, limits)
 
 
-def _isolate(bank: Bank, k: int, names, limits) -> list[tuple[int, WindowFit]]:
-    """Every candidate fault fitted from its own likeliest onset to sample k, most likely
-    first: (onset sample, fit). The GLR maximised over the change time as well as the size
-    (Willsky & Jones 1976): on the decision windows' fixed lengths a fault that acts on
-    every sample (a drag) is diluted by the healthy samples before its onset, and one
-    that acts on a few (a clamp in one push) is not, so a fixed window names the second."""
-    onsets = [(_onset(bank, n, k), n) for n in names]
-    fits = [(a, bank.fit(n, a, k)) for a, n in onsets]
-    return sorted(fits, key=lambda x: -_excess(x[1].fit, limits))
+def _isolate(bank: Bank, k: int, names, limits) -> list[WindowFit]:
+    """Every candidate fault on its best window ending at k, most likely first."""
+    return sorted((bank.at(n, k) for n in names), key=lambda w: -_excess(w.fit, limits))
 
 
 # design choice: an alarm once a threshold has been crossed at this many consecutive
@@ -538,7 +540,8 @@ class Live:
     def _open(self, bank: Bank, k: int, free: list[str], crossed: list[str]) -> Event:
         """The event a crossing at sample k opens: named by the likeliest fault."""
         limits = self.limits
-        start, best = _isolate(bank, k, free, limits)[0]
+        best = _isolate(bank, k, free, limits)[0]
+        start = _onset(bank, best.fit.fault, k)
         t = bank.features.t_s
         return Event(
             t_s=float(t[k - 1]),
