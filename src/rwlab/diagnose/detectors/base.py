@@ -66,8 +66,14 @@ class Fit:
     unit: str
 
     def size_text(self) -> str:
-        """The size and its interval as a line shows them: '×2.01 [1.89, 2.15]',
-        '0.49 A [0.45, 0.52]'; empty for a fault with no size (a frozen reading)."""
+        """The size and its interval as a console line shows them.
+
+        Returns
+        -------
+        str
+            '×2.01 [1.89, 2.15]' for a factor, '0.49 A [0.45, 0.52]' for a size in a
+            unit; empty for a fault with no size (a frozen reading).
+        """
         if math.isnan(self.size):
             return ""
         (lo, hi), x = self.ci95, "×" if self.unit == "factor" else ""
