@@ -190,6 +190,7 @@ def test_a_fault_is_named_and_sized_with_an_interval_holding_it(calibration, fau
     assert first.fit.unit == unit
     assert first.fit.ci95[0] <= size <= first.fit.ci95[1]
     assert first.runner_up in MODEL_BASED and first.runner_up_log_lr >= 0
+    assert f"{fault} {first.fit.size_text()} from {first.t_s:g} s" in result.verdict()
 
 
 def test_the_size_at_the_alarm_is_the_named_faults(calibration, monkeypatch):

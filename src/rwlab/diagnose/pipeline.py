@@ -207,7 +207,7 @@ class Result:
             if not self.confirmed(e):
                 faded.append(f"{f.fault} at {e.t_s:g} s")
                 continue
-            found.append(f"{f.fault} {f.size_text()} from {e.t_s:g} s".replace("  ", " "))
+            found.append(" ".join(filter(None, (f.fault, f.size_text(), f"from {e.t_s:g} s"))))
         line = "; ".join(found) if found else "healthy"
         if faded:
             line += "; not confirmed by the record's end: " + ", ".join(faded)
