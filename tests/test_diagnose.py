@@ -304,10 +304,15 @@ def test_a_fault_free_two_hour_record_raises_no_alarm(tmp_path, model_file):
         # acceleration limit draws (0.58 A), re-labelled friction 25 s later; the RW90's
         # healthy clamp zone, measured down to 0.547 A while rounding made samples look
         # clamped, had hidden it. Named right by the record's end.
-        (("friction=2@200", "speed_sensor_stuck@400"), 2, {"friction", "speed_sensor_stuck"}, 0),
+        (
+            ("friction=2@200", "speed_sensor_stuck@400"),
+            2,
+            {"friction", "speed_sensor_stuck"},
+            False,
+        ),
         # a weak motor a first crossing had named a clamp (a new user's live run): named on
         # its onset's window once the crossing holds
-        (("torque_constant=0.8@300",), 0, {"torque_constant"}, 1),
+        (("torque_constant=0.8@300",), 0, {"torque_constant"}, True),
     ],
 )
 def test_live_alarms_are_the_offline_alarms(tmp_path, model_file, faults, seed, named, at_alarm):
